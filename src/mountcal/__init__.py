@@ -1,0 +1,39 @@
+"""mountcal: how an accelerometer or IMU is mounted in a vehicle, with honest uncertainties.
+
+Conventions (MODEL.md §1–2; the only code that converts angles is :mod:`mountcal.conventions`):
+
+- Sensor frame ``s``: the accelerometer axes as logged, right-handed, SI units (m/s², rad/s, s).
+- Vehicle frame ``v``: ISO 8855, x forward, y left, z up.
+- ``rot_vs`` maps sensor to vehicle coordinates, ``acc_v = rot_vs.apply(acc_s)``, and
+  ``rot_vs = Rz(yaw) · Ry(pitch) · Rx(roll)`` (intrinsic z-y'-x''; the paper's φ, θ, γ).
+- An accelerometer at rest reads +g along "up".
+- Heading β: from the slope's uphill direction to the vehicle's x axis, counter-clockwise from above.
+
+Names carry frames and units: ``acc_s`` (sensor-frame specific force, m/s²), ``rot_vs``,
+``slope_deg``, ``t_s``. Angles in results are degrees; every estimate carries its 1σ.
+
+Pipeline: stop table (:mod:`mountcal.stoptable`) → fit (:mod:`mountcal.calibrate`, with
+:mod:`mountcal.estimate`) → result (:mod:`mountcal.result`) → apply (:mod:`mountcal.rotate`);
+:mod:`mountcal.simulate` is the shared truth generator.
+"""
+
+from mountcal.calibrate import Options, calibrate
+from mountcal.result import Calibration
+from mountcal.rotate import acc_to_sensor, acc_to_vehicle, frame_to_sensor, frame_to_vehicle
+from mountcal.simulate import simulate_preset, simulate_stops
+from mountcal.stoptable import StopTable, read_stop_table, stop_table_from_frame
+
+__all__ = [
+    "Calibration",
+    "Options",
+    "StopTable",
+    "acc_to_sensor",
+    "acc_to_vehicle",
+    "calibrate",
+    "frame_to_sensor",
+    "frame_to_vehicle",
+    "read_stop_table",
+    "simulate_preset",
+    "simulate_stops",
+    "stop_table_from_frame",
+]

@@ -1,0 +1,178 @@
+"""The ``mountcal`` command line: a thin shell over the library. Each command returns an exit code."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mountcal.calibrate import Options, calibrate
+from mountcal.errors import InputError, MountcalError
+from mountcal.result import Calibration
+from mountcal.simulate import PRESETS, simulate_stops
+from mountcal.stoptable import read_stop_table, write_stop_table
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the console script."""
+    parser = _parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args))
+    except MountcalError as err:
+        print(f"mountcal: error: {err}", file=sys.stderr)
+        return err.exit_code
+    except BrokenPipeError:  # output piped into `head` and the like
+        sys.stderr.close()
+        return 0
+    except KeyboardInterrupt:
+        print("mountcal: interrupted; no output was written", file=sys.stderr)
+        return 130
+
+
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    """``mountcal calibrate STOPS``: estimate the mounting and write the result JSON."""
+    if args.output is not None and Path(args.output).resolve() == Path(args.input).resolve():
+        raise InputError(
+            str(args.output),
+            "an output path other than the input",
+            "the input file itself",
+            "Choose another -o path; mountcal never overwrites its input.",
+        )
+    table = read_stop_table(args.input, unit=args.unit, headings=args.headings)
+    options = Options(
+        method=args.method, model=args.model, gravity_mps2=args.gravity, max_yaw_sigma_deg=args.max_yaw_sigma
+    )
+    cal = calibrate(table, options)
+    print(summary(cal))
+    if args.output is not None:
+        cal.save(args.output)
+        print(f"wrote {args.output}")
+    return 0
+
+
+def cmd_simulate(args: argparse.Namespace) -> int:
+    """``mountcal simulate``: write a simulated stop table (and its truth) from a preset."""
+    params: dict[str, Any] = dict(PRESETS[args.preset])
+    for key in ("roll_deg", "pitch_deg", "yaw_deg", "slope_deg", "noise_g"):
+        if getattr(args, key) is not None:
+            params[key] = getattr(args, key)
+    if args.bias_mg is not None:
+        params["bias_mps2"] = np.array(args.bias_mg) * 1e-3 * 9.80665
+    table, truth = simulate_stops(
+        headings=args.headings, heading_offset_deg=args.heading_offset, seed=args.seed, **params
+    )
+    write_stop_table(table, args.output)
+    roll, pitch, yaw = truth.angles_deg
+    print(
+        f"simulated {len(table)} stops ({args.preset}, seed {args.seed}): roll {roll:g}°, pitch {pitch:g}°, "
+        f"yaw {yaw:g}°, slope {truth.slope_deg:g}°, bias {np.round(truth.bias_mps2, 4).tolist()} m/s²"
+    )
+    print(f"wrote {args.output}")
+    if args.truth is not None:
+        Path(args.truth).write_text(
+            json.dumps(
+                {
+                    "roll_deg": roll,
+                    "pitch_deg": pitch,
+                    "yaw_deg": yaw,
+                    "slope_deg": truth.slope_deg,
+                    "bias_mps2": truth.bias_mps2.tolist(),
+                    "g_mps2": truth.g_mps2,
+                },
+                indent=2,
+            )
+            + "\n",
+            encoding="utf-8",
+        )
+    return 0
+
+
+def summary(cal: Calibration) -> str:
+    """A readable summary: angles ± 1σ, slope, model, residual, what could not be determined."""
+
+    def pm(value: float | None, sigma: float | None, unit: str = "°", fmt: str = ".3f") -> str:
+        if value is None:
+            return "not determined"
+        return f"{value:{fmt}}{unit} ± {sigma:{fmt}}{unit}" if sigma is not None else f"{value:{fmt}}{unit}"
+
+    sel = cal.model_selection
+    how = (
+        "fixed by --model"
+        if sel.get("mode") == "fixed"
+        else (f"chosen by {sel['test'].split(' (')[0]}, p = {sel['p_value']:.3g}" if "p_value" in sel else "auto")
+    )
+    lines = [
+        f"mountcal — {cal.method} method, model: {', '.join(cal.model)} ({how if cal.method == 'full' else 'paper'})",
+        f"  roll   {pm(cal.roll_deg, cal.roll_sigma_deg)}",
+        f"  pitch  {pm(cal.pitch_deg, cal.pitch_sigma_deg)}",
+        f"  yaw    {pm(cal.yaw_deg, cal.yaw_sigma_deg)}",
+        f"  slope  {pm(cal.slope_deg, cal.slope_sigma_deg)}",
+    ]
+    if cal.bias_mps2 is not None and cal.bias_sigma_mps2 is not None:
+        b = ", ".join(f"{v:+.4f} ± {s:.4f}" for v, s in zip(cal.bias_mps2, cal.bias_sigma_mps2, strict=True))
+        lines.append(f"  bias   ({b}) m/s² (sensor x, y, z)")
+    fit = cal.fit
+    chi = f", χ² = {fit['chi2']:.1f} on {fit['dof']} dof" if "chi2" in fit else ""
+    if fit.get("p_value") is not None:
+        chi += f" (p = {fit['p_value']:.2g})"
+    lines.append(f"  residual RMS {cal.residual_rms_mps2:.4g} m/s²{chi}")
+    lines.append(f"  gravity {cal.gravity_mps2:.5f} m/s² ({cal.gravity_source})")
+    if cal.yaw_reason:
+        lines.append(f"  yaw not determined: {cal.yaw_reason}")
+    if cal.slope_deg is None:
+        lines.append("  slope not determined (see notes)")
+    lines += [f"  note: {n}" for n in cal.notes]
+    lines.append("  (uncertainties are 1σ)")
+    return "\n".join(lines)
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="mountcal", description=__doc__)
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    cal = sub.add_parser("calibrate", help="estimate the mounting from a stop table (CSV or Parquet)")
+    cal.add_argument("input", metavar="STOPS", help="stop table: beta_deg, ax, ay, az [, sx, sy, sz, n, ...]")
+    cal.add_argument("--method", choices=("full", "paper"), default="full")
+    cal.add_argument("--model", default="auto", help="auto (default), rotation,slope or rotation,slope,bias")
+    cal.add_argument("--unit", choices=("mps2", "g"), default="mps2", help="unit of ax, ay, az (default m/s²)")
+    cal.add_argument(
+        "--headings",
+        choices=("uphill", "relative", "none"),
+        default="uphill",
+        help="beta_deg is from the uphill direction (default), relative (unknown offset), or ignored",
+    )
+    cal.add_argument(
+        "--gravity",
+        type=float,
+        default=None,
+        help="local gravity in m/s² (default: from lat_deg/alt_m when the table has them, else 9.80665)",
+    )
+    cal.add_argument("--max-yaw-sigma", type=float, default=5.0, help="report yaw only below this 1σ (deg)")
+    cal.add_argument("-o", "--output", default=None, help="result JSON to write")
+    cal.set_defaults(func=cmd_calibrate)
+
+    sim = sub.add_parser("simulate", help="write a simulated stop table")
+    sim.add_argument("--preset", choices=tuple(PRESETS), default="zhang2011")
+    sim.add_argument("--roll", dest="roll_deg", type=float)
+    sim.add_argument("--pitch", dest="pitch_deg", type=float)
+    sim.add_argument("--yaw", dest="yaw_deg", type=float)
+    sim.add_argument("--slope", dest="slope_deg", type=float)
+    sim.add_argument("--noise-g", dest="noise_g", type=float, help="1σ noise of each stop mean, in g")
+    sim.add_argument("--bias-mg", type=float, nargs=3, metavar=("BX", "BY", "BZ"), help="constant bias in mg")
+    sim.add_argument("--headings", choices=("uphill", "relative", "none"), default="uphill")
+    sim.add_argument("--heading-offset", type=float, default=0.0, help="common offset added to β (deg)")
+    sim.add_argument("--seed", type=int, default=0)
+    sim.add_argument("--truth", default=None, help="also write the truth as JSON")
+    sim.add_argument("-o", "--output", required=True)
+    sim.set_defaults(func=cmd_simulate)
+    return parser
+
+
+if __name__ == "__main__":
+    sys.exit(main())

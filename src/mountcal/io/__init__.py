@@ -1,0 +1,1 @@
+"""Logs in: the only package that imports format libraries (can, cantools, mcap, asammdf)."""

@@ -1,0 +1,85 @@
+"""Time-stamped samples, the value every reader returns.
+
+All arrays are float64 in SI units; vectors are in the sensor frame ``s`` (right-handed, after the
+reader's axis mapping, which is recorded in ``axis_map``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Channel:
+    """A scalar auxiliary signal on its own clock (temperature, speed, heading, position)."""
+
+    t_s: FloatArray  # shape (m,), seconds on the log's clock
+    value: FloatArray  # shape (m,), in the unit named by the channel key
+
+
+@dataclass(frozen=True)
+class Samples:
+    """Accelerometer (and gyro) samples of one log, sensor frame, SI units.
+
+    Attributes
+    ----------
+    t_s : ndarray, shape (n,)
+        Sample times in seconds on the log's clock, non-decreasing.
+    acc_s : ndarray, shape (n, 3)
+        Specific force in m/s², sensor frame.
+    gyro_s : ndarray, shape (n, 3), or None
+        Angular rate in rad/s, sensor frame, when the log has one.
+    channels : dict of str to Channel
+        Optional auxiliary signals, keyed by a name that carries the unit:
+        ``temperature_c``, ``speed_mps``, ``heading_deg``, ``lat_deg``, ``lon_deg``, ``alt_m``.
+    source : str
+        The file the samples came from.
+    axis_map : str
+        How the device's axes were mapped to the right-handed sensor frame (``"x,y,z"`` when as-is).
+    dropped : dict of str to int
+        Frames or messages the reader discarded, counted by reason.
+    """
+
+    t_s: FloatArray
+    acc_s: FloatArray
+    gyro_s: FloatArray | None = None
+    channels: dict[str, Channel] = field(default_factory=dict)
+    source: str = ""
+    axis_map: str = "x,y,z"
+    dropped: dict[str, int] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        n = self.t_s.shape[0]
+        if self.t_s.shape != (n,) or self.acc_s.shape != (n, 3):
+            raise ValueError(f"t_s must be (n,) and acc_s (n, 3); got {self.t_s.shape}, {self.acc_s.shape}")
+        if self.gyro_s is not None and self.gyro_s.shape != (n, 3):
+            raise ValueError(f"gyro_s must be (n, 3); got {self.gyro_s.shape}")
+
+    def __len__(self) -> int:
+        return int(self.t_s.shape[0])
+
+
+@dataclass(frozen=True)
+class Stream:
+    """One stream of a log as `mountcal inspect` lists it: a topic, or a CAN message."""
+
+    name: str  # topic name, or CAN message name (or hex id when no DBC names it)
+    kind: str  # message type / schema name, or "can" with the channel
+    count: int
+    rate_hz: float
+    fields: tuple[str, ...] = ()  # signal or field names, where known
+
+
+@dataclass(frozen=True)
+class LogSummary:
+    """What a log holds (the output of `mountcal inspect`)."""
+
+    source: str
+    format: str  # "mcap", "blf", "asc", "log", "trc", "csv", "mf4", "parquet"
+    duration_s: float
+    streams: tuple[Stream, ...]

@@ -1,0 +1,188 @@
+"""The calibration result: a versioned value, saved as JSON, refused on load when unknown.
+
+Computing a calibration (:mod:`mountcal.calibrate`) is separate from applying it
+(:mod:`mountcal.rotate`). The JSON states its conventions, units and provenance.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from mountcal.atomic import atomic_path
+from mountcal.conventions import CONVENTIONS, FloatArray
+from mountcal.errors import InputError
+
+FORMAT = "mountcal.calibration"
+FORMAT_VERSION = 1
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """A mounting calibration with its uncertainty.
+
+    Angles in degrees, accelerations in m/s², uncertainties 1σ. ``yaw_deg`` and its σ are None
+    when the data cannot determine yaw; ``yaw_reason`` then says why. ``slope_deg`` likewise.
+    """
+
+    method: str
+    model: tuple[str, ...]
+    rot_vs: Rotation
+    roll_deg: float
+    pitch_deg: float
+    yaw_deg: float | None
+    roll_sigma_deg: float
+    pitch_sigma_deg: float
+    yaw_sigma_deg: float | None
+    yaw_reason: str | None
+    slope_deg: float | None
+    slope_sigma_deg: float | None
+    rotation_sigma_deg: tuple[float | None, float | None, float | None]  # about vehicle x, y, z
+    bias_mps2: FloatArray | None
+    bias_sigma_mps2: FloatArray | None
+    gravity_mps2: float
+    gravity_source: str
+    residual_rms_mps2: float
+    residual_s: FloatArray  # shape (n, 3), per-stop residual, m/s², sensor frame
+    fit: dict[str, Any]
+    observability: dict[str, Any]
+    model_selection: dict[str, Any]
+    provenance: dict[str, Any]
+    notes: tuple[str, ...] = field(default=())
+
+    @property
+    def yaw_determined(self) -> bool:
+        return self.yaw_deg is not None
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON document (plain types)."""
+        return {
+            "format": FORMAT,
+            "format_version": FORMAT_VERSION,
+            "conventions": CONVENTIONS,
+            "provenance": self.provenance,
+            "method": self.method,
+            "model": list(self.model),
+            "mounting": {"roll_deg": self.roll_deg, "pitch_deg": self.pitch_deg, "yaw_deg": self.yaw_deg},
+            "uncertainty": {
+                "level": "1 sigma",
+                "roll_deg": self.roll_sigma_deg,
+                "pitch_deg": self.pitch_sigma_deg,
+                "yaw_deg": self.yaw_sigma_deg,
+                "slope_deg": self.slope_sigma_deg,
+                "bias_mps2": _list(self.bias_sigma_mps2),
+                "rotation_about_vehicle_xyz_deg": list(self.rotation_sigma_deg),
+            },
+            "yaw": {"determined": self.yaw_determined, "reason": self.yaw_reason},
+            "rotation": {
+                "quaternion_xyzw": self.rot_vs.as_quat().tolist(),
+                "matrix_vs": self.rot_vs.as_matrix().tolist(),
+            },
+            "slope_deg": self.slope_deg,
+            "bias_mps2": _list(self.bias_mps2),
+            "gravity": {"value_mps2": self.gravity_mps2, "source": self.gravity_source},
+            "residual_rms_mps2": self.residual_rms_mps2,
+            "fit": self.fit,
+            "observability": self.observability,
+            "model_selection": self.model_selection,
+            "stops": {"n": int(self.residual_s.shape[0]), "residual_s_mps2": self.residual_s.tolist()},
+            "notes": list(self.notes),
+        }
+
+    def save(self, path: str | Path) -> None:
+        """Write the JSON file atomically."""
+        text = json.dumps(self.to_dict(), indent=2, allow_nan=False)
+        with atomic_path(path) as tmp:
+            tmp.write_text(text + "\n", encoding="utf-8")
+
+    @classmethod
+    def from_dict(cls, doc: dict[str, Any], where: str = "<dict>") -> Calibration:
+        """Rebuild a calibration from its JSON document; unknown formats or versions are refused."""
+        if doc.get("format") != FORMAT:
+            raise InputError(
+                where,
+                f"a {FORMAT} JSON document",
+                f"format {doc.get('format')!r}",
+                "Pass a file written by `mountcal calibrate`.",
+            )
+        if doc.get("format_version") != FORMAT_VERSION:
+            raise InputError(
+                where,
+                f"format_version {FORMAT_VERSION}",
+                f"format_version {doc.get('format_version')!r}",
+                "Re-run `mountcal calibrate` with this version of mountcal, or upgrade mountcal.",
+            )
+        try:
+            unc, mount = doc["uncertainty"], doc["mounting"]
+            return cls(
+                method=doc["method"],
+                model=tuple(doc["model"]),
+                rot_vs=Rotation.from_quat(doc["rotation"]["quaternion_xyzw"]),
+                roll_deg=mount["roll_deg"],
+                pitch_deg=mount["pitch_deg"],
+                yaw_deg=mount["yaw_deg"],
+                roll_sigma_deg=unc["roll_deg"],
+                pitch_sigma_deg=unc["pitch_deg"],
+                yaw_sigma_deg=unc["yaw_deg"],
+                yaw_reason=doc["yaw"]["reason"],
+                slope_deg=doc["slope_deg"],
+                slope_sigma_deg=unc["slope_deg"],
+                rotation_sigma_deg=tuple(unc["rotation_about_vehicle_xyz_deg"]),
+                bias_mps2=_array(doc["bias_mps2"]),
+                bias_sigma_mps2=_array(unc["bias_mps2"]),
+                gravity_mps2=doc["gravity"]["value_mps2"],
+                gravity_source=doc["gravity"]["source"],
+                residual_rms_mps2=doc["residual_rms_mps2"],
+                residual_s=np.asarray(doc["stops"]["residual_s_mps2"], dtype=float).reshape(-1, 3),
+                fit=doc["fit"],
+                observability=doc["observability"],
+                model_selection=doc["model_selection"],
+                provenance=doc["provenance"],
+                notes=tuple(doc.get("notes", ())),
+            )
+        except (KeyError, TypeError, ValueError) as err:
+            raise InputError(
+                where,
+                "a complete calibration document",
+                f"a missing or malformed field ({err})",
+                "Re-create it with `mountcal calibrate`.",
+            ) from err
+
+    @classmethod
+    def load(cls, path: str | Path) -> Calibration:
+        """Read a calibration JSON file."""
+        path = Path(path)
+        try:
+            doc = json.loads(path.read_text(encoding="utf-8"))
+        except OSError as err:
+            raise InputError(
+                str(path),
+                "a readable calibration JSON file",
+                f"an error opening it ({err.strerror})",
+                "Check the path.",
+            ) from err
+        except json.JSONDecodeError as err:
+            raise InputError(
+                str(path),
+                "a calibration JSON file",
+                f"invalid JSON ({err})",
+                "Pass a file written by `mountcal calibrate`.",
+            ) from err
+        if not isinstance(doc, dict):
+            raise InputError(
+                str(path), "a JSON object", type(doc).__name__, "Pass a file written by `mountcal calibrate`."
+            )
+        return cls.from_dict(doc, where=str(path))
+
+
+def _list(a: FloatArray | None) -> list[float] | None:
+    return None if a is None else [float(x) for x in a]
+
+
+def _array(a: list[float] | None) -> FloatArray | None:
+    return None if a is None else np.asarray(a, dtype=float)

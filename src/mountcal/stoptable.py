@@ -1,0 +1,263 @@
+"""The stop table: one row per static stop, the input of every estimator.
+
+On disk it is CSV or Parquet with the columns named in :data:`COLUMNS`; in memory a
+:class:`StopTable` of SI arrays. Reading validates everything a fit needs and says what is wrong.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+import pandas as pd
+
+from mountcal.conventions import G_N, FloatArray
+from mountcal.errors import InputError, NotEnoughInformation
+
+# Column names of the stop table file.
+BETA = "beta_deg"
+ACC = ("ax", "ay", "az")
+STD = ("sx", "sy", "sz")
+COUNT = "n"
+TEMPERATURE = "temperature_c"
+TIME = "t_s"
+SITE = "site"
+LAT = "lat_deg"
+ALT = "alt_m"
+REQUIRED = ACC
+OPTIONAL = (BETA, *STD, COUNT, TEMPERATURE, TIME, SITE, LAT, ALT)
+COLUMNS = (BETA, *ACC, *STD, COUNT, TEMPERATURE, TIME, SITE, LAT, ALT)
+
+Headings = Literal["uphill", "relative", "none"]
+Unit = Literal["mps2", "g"]
+MIN_STOPS = 3
+GRAVITY_BAND = (0.7, 1.3)  # a static reading outside this fraction of g is not gravity
+
+
+@dataclass(frozen=True)
+class StopTable:
+    """Static stops of one parking session, in SI units and the sensor frame.
+
+    Attributes
+    ----------
+    acc_s : ndarray, shape (n, 3)
+        Mean specific force of each stop, m/s², sensor frame.
+    beta_rad : ndarray, shape (n,), or None
+        Heading of each stop in radians; None when unknown.
+    headings : {"uphill", "relative", "none"}
+        "uphill": β is measured from the slope's uphill direction (MODEL.md §2), so yaw is
+        observable; "relative": β has an unknown common offset, so yaw is not; "none": no β.
+    cov_s : ndarray, shape (n, 3, 3), or None
+        Covariance of each stop mean, (m/s²)², when the table gives sample spreads and counts.
+    temperature_c, t_s, lat_deg, alt_m : ndarray, shape (n,), or None
+    site : ndarray of str, shape (n,), or None
+    source : str
+        Where the table came from; ``sha256`` is the hash of that file's bytes.
+    """
+
+    acc_s: FloatArray
+    beta_rad: FloatArray | None = None
+    headings: Headings = "uphill"
+    cov_s: FloatArray | None = None
+    temperature_c: FloatArray | None = None
+    t_s: FloatArray | None = None
+    site: np.ndarray | None = None
+    lat_deg: FloatArray | None = None
+    alt_m: FloatArray | None = None
+    source: str = "<memory>"
+    sha256: str = ""
+    notes: tuple[str, ...] = field(default=())
+
+    def __post_init__(self) -> None:
+        if self.beta_rad is None and self.headings != "none":
+            object.__setattr__(self, "headings", "none")
+
+    def __len__(self) -> int:
+        return int(self.acc_s.shape[0])
+
+    def subset(self, keep: np.ndarray) -> StopTable:
+        """The table restricted to the rows where ``keep`` is true (or to the given indices)."""
+
+        def pick(a: np.ndarray | None) -> np.ndarray | None:
+            return None if a is None else a[keep]
+
+        return replace(
+            self,
+            acc_s=self.acc_s[keep],
+            beta_rad=pick(self.beta_rad),
+            cov_s=pick(self.cov_s),
+            temperature_c=pick(self.temperature_c),
+            t_s=pick(self.t_s),
+            site=pick(self.site),
+            lat_deg=pick(self.lat_deg),
+            alt_m=pick(self.alt_m),
+        )
+
+    def to_frame(self) -> pd.DataFrame:
+        """The table as a DataFrame with the file's column names (m/s², degrees)."""
+        df = pd.DataFrame(self.acc_s, columns=list(ACC))
+        if self.beta_rad is not None:
+            df.insert(0, BETA, np.degrees(self.beta_rad))
+        if self.cov_s is not None:
+            for k, name in enumerate(STD):
+                df[name] = np.sqrt(self.cov_s[:, k, k])  # std of the mean, written with n = 1
+            df[COUNT] = 1
+        for name, values in (
+            (TEMPERATURE, self.temperature_c),
+            (TIME, self.t_s),
+            (SITE, self.site),
+            (LAT, self.lat_deg),
+            (ALT, self.alt_m),
+        ):
+            if values is not None:
+                df[name] = values
+        return df
+
+
+def read_stop_table(path: str | Path, unit: Unit = "mps2", headings: Headings = "uphill") -> StopTable:
+    """Read and validate a stop table file (CSV, or Parquet by its ``.parquet`` suffix).
+
+    Parameters
+    ----------
+    path : str or Path
+    unit : {"mps2", "g"}
+        Unit of ``ax, ay, az`` (and ``sx, sy, sz``) in the file.
+    headings : {"uphill", "relative", "none"}
+        What ``beta_deg`` is measured from; ignored when the file has no ``beta_deg``.
+    """
+    path = Path(path)
+    where = str(path)
+    try:
+        raw = path.read_bytes()
+    except OSError as err:
+        raise InputError(
+            where, "a readable stop table file", f"an error opening it ({err.strerror})", "Check the path."
+        ) from err
+    try:
+        if path.suffix.lower() in (".parquet", ".pq"):
+            df = pd.read_parquet(path)
+        else:
+            df = pd.read_csv(path, comment="#", skipinitialspace=True)
+    except Exception as err:  # pandas/pyarrow raise many types for malformed files
+        raise InputError(
+            where,
+            "a CSV or Parquet stop table",
+            f"a file that does not parse ({err})",
+            "Write one row per stop with columns beta_deg, ax, ay, az.",
+        ) from err
+    table = stop_table_from_frame(df, unit=unit, headings=headings, source=where)
+    return replace(table, sha256=hashlib.sha256(raw).hexdigest())
+
+
+def stop_table_from_frame(
+    df: pd.DataFrame, unit: Unit = "mps2", headings: Headings = "uphill", source: str = "<DataFrame>"
+) -> StopTable:
+    """Validate a DataFrame with the stop-table columns and convert it to a :class:`StopTable`."""
+    df = df.rename(columns=lambda c: str(c).strip())
+    missing = [c for c in REQUIRED if c not in df.columns]
+    if missing:
+        raise InputError(
+            source,
+            f"columns {', '.join(REQUIRED)} (and optionally {', '.join(OPTIONAL)})",
+            f"no column {', '.join(missing)}; the columns are {', '.join(map(str, df.columns))}",
+            "Rename the columns or write the stop table with `mountcal stops`.",
+        )
+    if len(df) < MIN_STOPS:
+        raise NotEnoughInformation(
+            f"{source}: expected at least {MIN_STOPS} stops, found {len(df)}. "
+            "Park at more headings (12 evenly spread is the paper's protocol)."
+        )
+    scale = G_N if unit == "g" else 1.0
+    acc = _numeric(df, list(ACC), source) * scale
+    _check_gravity(acc, unit, source)
+
+    beta = None
+    if BETA in df.columns and headings != "none":
+        beta = np.radians(_numeric(df, [BETA], source)[:, 0])
+    cov = None
+    if all(c in df.columns for c in STD):
+        std = _numeric(df, list(STD), source) * scale
+        count = _numeric(df, [COUNT], source)[:, 0] if COUNT in df.columns else np.ones(len(df))
+        if np.any(std <= 0) or np.any(count < 1):
+            bad = np.flatnonzero(np.any(std <= 0, axis=1) | (count < 1))
+            raise InputError(
+                source,
+                "sample standard deviations sx, sy, sz > 0 and counts n ≥ 1",
+                f"non-positive values in rows {_rows(bad)}",
+                "Fix those rows, or drop the sx, sy, sz, n columns to estimate the noise.",
+            )
+        cov = np.zeros((len(df), 3, 3))
+        cov[:, [0, 1, 2], [0, 1, 2]] = std**2 / count[:, None]
+
+    def optional(name: str) -> FloatArray | None:
+        return _numeric(df, [name], source)[:, 0] if name in df.columns else None
+
+    return StopTable(
+        acc_s=acc,
+        beta_rad=beta,
+        headings=headings if beta is not None else "none",
+        cov_s=cov,
+        temperature_c=optional(TEMPERATURE),
+        t_s=optional(TIME),
+        site=df[SITE].astype(str).to_numpy() if SITE in df.columns else None,
+        lat_deg=optional(LAT),
+        alt_m=optional(ALT),
+        source=source,
+    )
+
+
+def write_stop_table(table: StopTable, path: str | Path) -> None:
+    """Write a stop table as CSV or Parquet (by suffix), atomically."""
+    from mountcal.atomic import atomic_path
+
+    path = Path(path)
+    df = table.to_frame()
+    with atomic_path(path) as tmp:
+        if path.suffix.lower() in (".parquet", ".pq"):
+            df.to_parquet(tmp, index=False)
+        else:
+            df.to_csv(tmp, index=False, float_format="%.10g")
+
+
+def _numeric(df: pd.DataFrame, cols: list[str], source: str) -> FloatArray:
+    values = df[cols].apply(pd.to_numeric, errors="coerce").to_numpy(dtype=float)
+    bad = ~np.isfinite(values)
+    if bad.any():
+        rows, cs = np.nonzero(bad)
+        found = ", ".join(f"row {r + 1} column {cols[c]}" for r, c in list(zip(rows, cs, strict=True))[:5])
+        more = f" and {bad.sum() - 5} more" if bad.sum() > 5 else ""
+        raise InputError(
+            source,
+            f"finite numbers in {', '.join(cols)}",
+            f"missing or non-numeric values at {found}{more}",
+            "Fill or remove those rows; mountcal does not guess missing stops.",
+        )
+    return values
+
+
+def _check_gravity(acc: FloatArray, unit: Unit, source: str) -> None:
+    mag = np.linalg.norm(acc, axis=1)
+    lo, hi = GRAVITY_BAND
+    bad = np.flatnonzero((mag < lo * G_N) | (mag > hi * G_N))
+    if bad.size == 0:
+        return
+    shown = "m/s²" if unit == "mps2" else "g"
+    scale = 1.0 if unit == "mps2" else G_N
+    found = ", ".join(f"row {i + 1}: |a| = {mag[i] / scale:.4g} {shown}" for i in bad[:5])
+    hint = (
+        "Check the unit: add --unit g if the table is in g."
+        if unit == "mps2"
+        else ("Check the unit: drop --unit g if the table is in m/s².")
+    )
+    if np.median(mag) / scale < 2.0 and unit == "mps2":
+        hint = "The magnitudes look like g: add --unit g."
+    elif np.median(mag) / scale > 5.0 and unit == "g":
+        hint = "The magnitudes look like m/s²: drop --unit g."
+    raise InputError(source, f"static readings of magnitude near gravity ({lo:g}–{hi:g} g)", found, hint)
+
+
+def _rows(idx: np.ndarray) -> str:
+    return ", ".join(str(i + 1) for i in idx[:10]) + (" …" if idx.size > 10 else "")
