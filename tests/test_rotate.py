@@ -38,7 +38,7 @@ def test_stops_rotate_onto_the_vehicle_frame_specific_force(biased) -> None:  # 
 def test_sensor_vehicle_sensor_is_the_identity(seed: int) -> None:
     table, _ = simulate_preset("zhang2011", seed=0)
     cal = calibrate(table, Options(model="rotation,slope,bias"))
-    acc = [*np.random.default_rng(seed).normal(0, 3, size=(50, 3)), 0, 0, G_N]
+    acc = np.random.default_rng(seed).normal(0, 3, size=(50, 3)) + np.array([0, 0, G_N])
     np.testing.assert_allclose(acc_to_sensor(acc_to_vehicle(acc, cal), cal), acc, rtol=0, atol=1e-12)
     np.testing.assert_allclose(rate_to_sensor(rate_to_vehicle(acc, cal), cal), acc, rtol=0, atol=1e-12)
 
