@@ -169,3 +169,95 @@ def random_bias(magnitude_mps2: float, rng: np.random.Generator) -> FloatArray:
     """A bias vector of the given magnitude in a uniformly random direction."""
     v = rng.normal(size=3)
     return magnitude_mps2 * v / np.linalg.norm(v)
+
+
+@dataclass(frozen=True)
+class ParkingLog:
+    """A simulated parking session as a time series: what a logger records, plus its protocol."""
+
+    t_s: FloatArray  # shape (n,)
+    acc_s: FloatArray  # shape (n, 3), m/s², sensor frame
+    gyro_s: FloatArray  # shape (n, 3), rad/s, sensor frame
+    speed_mps: FloatArray  # shape (n,)
+    heading_deg: FloatArray  # shape (n,), compass (clockwise from north)
+    temperature_c: FloatArray  # shape (n,)
+    protocol: list[tuple[float, float, float]]  # (t_start_s, t_end_s, beta_deg) of each stop
+    uphill_azimuth_deg: float
+    truth: Truth
+
+
+def simulate_parking_log(
+    roll_deg: float = 5.0,
+    pitch_deg: float = 6.0,
+    yaw_deg: float = 7.0,
+    *,
+    slope_deg: float = 5.0,
+    beta_deg: tuple[float, ...] = tuple(range(0, 360, 30)),
+    stop_s: float = 40.0,
+    drive_s: float = 20.0,
+    rate_hz: float = 100.0,
+    noise_mps2: float = 0.05,
+    gyro_noise_rad_s: float = 0.002,
+    bias_mps2: FloatArray | None = None,
+    uphill_azimuth_deg: float = 30.0,
+    g_mps2: float = G_N,
+    seed: int | np.random.Generator | None = None,
+) -> ParkingLog:
+    """A parking session on one slope: stops at the headings β, driven between with turns.
+
+    Between stops the vehicle launches, turns to the next heading and brakes (peak speed
+    ≈ 6 m/s); the specific force then adds the longitudinal acceleration and the centripetal
+    one (``v · ω``). Engine-idle vibration is white noise of ``noise_mps2`` on every sample.
+    """
+    rng = np.random.default_rng(seed)
+    rot = rot_vs_from_angles(*np.radians([roll_deg, pitch_deg, yaw_deg]))
+    bias = np.zeros(3) if bias_mps2 is None else np.asarray(bias_mps2, dtype=float)
+    dt = 1.0 / rate_hz
+    betas = np.asarray(beta_deg, dtype=float)
+    pieces_t, pieces_beta, pieces_v, pieces_acc_long = [], [], [], []
+    protocol = []
+    t0 = 0.0
+    for i, b in enumerate(betas):
+        n_stop = int(stop_s * rate_hz)
+        tt = t0 + np.arange(n_stop) * dt
+        pieces_t.append(tt)
+        pieces_beta.append(np.full(n_stop, b))
+        pieces_v.append(np.zeros(n_stop))
+        pieces_acc_long.append(np.zeros(n_stop))
+        protocol.append((float(tt[0]), float(tt[-1]), float(b)))
+        t0 = tt[-1] + dt
+        if i + 1 < betas.size:
+            n_drive = int(drive_s * rate_hz)
+            tau = np.arange(n_drive) / n_drive
+            turn = ((betas[i + 1] - b + 180.0) % 360.0) - 180.0 + 360.0  # a full loop plus the change
+            v_peak = 6.0
+            v = v_peak * np.sin(np.pi * tau) ** 2
+            pieces_t.append(t0 + np.arange(n_drive) * dt)
+            pieces_beta.append(b + turn * (tau - np.sin(2 * np.pi * tau) / (2 * np.pi)))
+            pieces_v.append(v)
+            pieces_acc_long.append(v_peak * np.pi / drive_s * np.sin(2 * np.pi * tau))
+            t0 = pieces_t[-1][-1] + dt
+    t = np.concatenate(pieces_t)
+    beta = np.concatenate(pieces_beta)
+    v = np.concatenate(pieces_v)
+    a_long = np.concatenate(pieces_acc_long)
+    omega_z = np.gradient(np.radians(beta), t)  # β counter-clockwise, as the yaw rate
+    f_v = specific_force_v(np.radians(slope_deg), np.radians(beta), g_mps2)
+    f_v[:, 0] += a_long
+    f_v[:, 1] += v * omega_z
+    acc = rot.inv().apply(f_v) + bias + rng.normal(0.0, noise_mps2, size=f_v.shape)
+    gyro_v = np.column_stack([np.zeros_like(omega_z), np.zeros_like(omega_z), omega_z])
+    gyro = rot.inv().apply(gyro_v) + rng.normal(0.0, gyro_noise_rad_s, size=f_v.shape)
+    temperature = 25.0 + 5.0 * t / t[-1] + rng.normal(0.0, 0.05, size=t.size)
+    truth = Truth(rot_vs=rot, slope_deg=slope_deg, beta_deg=betas, g_mps2=g_mps2, bias_mps2=bias)
+    return ParkingLog(
+        t_s=t,
+        acc_s=acc,
+        gyro_s=gyro,
+        speed_mps=v,
+        heading_deg=(uphill_azimuth_deg - beta) % 360.0,
+        temperature_c=temperature,
+        protocol=protocol,
+        uphill_azimuth_deg=uphill_azimuth_deg,
+        truth=truth,
+    )

@@ -1,0 +1,82 @@
+"""Stop detection on simulated parking logs: the stops, their headings, and the calibration they give."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mountcal.calibrate import calibrate
+from mountcal.io.samples import Channel, Samples
+from mountcal.simulate import ParkingLog, simulate_parking_log
+from mountcal.stops import StopDetection, beta_from_heading, detect_stops, stop_frame
+from mountcal.stoptable import stop_table_from_frame
+
+
+@pytest.fixture(scope="module")
+def log() -> ParkingLog:
+    return simulate_parking_log(seed=3)
+
+
+def samples_of(log: ParkingLog, speed: bool = True, gyro: bool = True) -> Samples:
+    channels = {"heading_deg": Channel(log.t_s, log.heading_deg), "temperature_c": Channel(log.t_s, log.temperature_c)}
+    if speed:
+        channels["speed_mps"] = Channel(log.t_s, log.speed_mps)
+    return Samples(log.t_s, log.acc_s, log.gyro_s if gyro else None, channels)
+
+
+@pytest.mark.parametrize(("speed", "gyro"), [(True, True), (False, True), (False, False)])
+def test_every_parked_period_is_found_inside_its_protocol_interval(log: ParkingLog, speed: bool, gyro: bool) -> None:
+    stops = detect_stops(samples_of(log, speed, gyro))
+    assert len(stops) == len(log.protocol)
+    for stop, (lo, hi, _) in zip(stops, log.protocol, strict=True):
+        assert lo <= stop.t_start_s < stop.t_end_s <= hi
+        assert stop.duration_s > 0.8 * (hi - lo - 2 * StopDetection().trim_s)
+
+
+def test_headings_from_the_log_and_the_uphill_azimuth_give_beta(log: ParkingLog) -> None:
+    stops = detect_stops(samples_of(log))
+    heading = np.array([s.channels["heading_deg"] for s in stops])
+    beta = beta_from_heading(heading, log.uphill_azimuth_deg)
+    diff = (beta - log.truth.beta_deg + 180.0) % 360.0 - 180.0
+    np.testing.assert_allclose(diff, 0.0, atol=1e-9)
+
+
+def test_detected_stops_calibrate_to_the_truth_within_sigma(log: ParkingLog) -> None:
+    stops = detect_stops(samples_of(log))
+    heading = np.array([s.channels["heading_deg"] for s in stops])
+    table = stop_table_from_frame(stop_frame(stops, beta_from_heading(heading, log.uphill_azimuth_deg)))
+    cal = calibrate(table)
+    roll, pitch, yaw = log.truth.angles_deg
+    assert abs(cal.roll_deg - roll) < 4 * cal.roll_sigma_deg
+    assert abs(cal.pitch_deg - pitch) < 4 * cal.pitch_sigma_deg
+    assert cal.yaw_deg is not None and abs(cal.yaw_deg - yaw) < 4 * cal.yaw_sigma_deg  # type: ignore[operator]
+
+
+def test_stop_noise_is_the_noise_of_the_mean(log: ParkingLog) -> None:
+    stops = detect_stops(samples_of(log))
+    sigma_mean = np.sqrt(np.array([np.diag(s.acc_cov_mean_s) for s in stops]))
+    expected = 0.05 / np.sqrt(np.array([s.n for s in stops]))[:, None]
+    ratio = sigma_mean / expected
+    assert 0.7 < np.median(ratio) < 1.3  # batch means: 10 batches, so ±25 % per stop
+
+
+def test_a_quantised_signal_that_does_not_dither_keeps_its_quantisation_floor() -> None:
+    t = np.arange(6000) / 100.0
+    acc = np.tile([0.125 * 3, 0.0, 0.125 * 78], (t.size, 1))
+    acc[::500, 2] += 0.125  # z toggles to the next level now and then; x and y never move
+    stops = detect_stops(Samples(t, acc))
+    assert len(stops) == 1
+    np.testing.assert_allclose(np.sqrt(np.diag(stops[0].acc_cov_mean_s)), 0.125 / np.sqrt(12), rtol=1e-9)
+
+
+def test_protocol_windows_select_the_stops(log: ParkingLog) -> None:
+    windows = [(lo, hi) for lo, hi, _ in log.protocol[::2]]
+    stops = detect_stops(samples_of(log), windows=windows)
+    assert len(stops) == len(windows)
+    assert all(lo <= s.t_start_s and s.t_end_s <= hi for s, (lo, hi) in zip(stops, windows, strict=True))
+
+
+def test_driving_only_gives_no_stop(log: ParkingLog) -> None:
+    moving = log.speed_mps > 0.5
+    s = Samples(log.t_s[moving], log.acc_s[moving], log.gyro_s[moving])
+    assert detect_stops(s) == []
