@@ -39,7 +39,8 @@ WITH_BIAS: tuple[str, ...] = ("rotation", "slope", "bias")
 MODELS = {"rotation,slope": BASE, "rotation,slope,bias": WITH_BIAS}
 MIN_DISTINCT_HEADINGS = 3
 MAX_BIAS_TILT_SIGMA_DEG = 5.0  # beyond this a bias cannot be told from a tilt (level ground)
-NULL_TOL = 1e-8  # relative eigenvalue below which a Fisher direction counts as unobservable
+NULL_TOL = 1e-8
+BAD_FIT_P = 1e-3  # a χ² this improbable means the model misses an effect  # relative eigenvalue below which a Fisher direction counts as unobservable
 
 
 @dataclass(frozen=True)
@@ -176,6 +177,11 @@ def _result_from_fit(
     yaw_reason = _yaw_reason(table, s_yaw, f, opts)
     if yaw_reason is not None:
         yaw_out, s_yaw = None, None
+    if f.noise_known and f.dof > 0 and stats.chi2.sf(f.chi2, f.dof) < BAD_FIT_P:
+        notes.append(
+            f"the model does not explain these stops: χ² = {f.chi2:.1f} on {f.dof} dof "
+            f"(p = {stats.chi2.sf(f.chi2, f.dof):.2g}); the σ above assume it does and are too small"
+        )
     if abs(pitch) > GIMBAL_LOCK_PITCH_DEG:
         notes.append(
             f"pitch {pitch:.2f}° is within {90 - GIMBAL_LOCK_PITCH_DEG:g}° of ±90°: roll and yaw are not separately "

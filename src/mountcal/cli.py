@@ -10,12 +10,16 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pandas as pd
 
+from mountcal.atomic import atomic_path
 from mountcal.calibrate import Options, calibrate
 from mountcal.errors import InputError, MountcalError
+from mountcal.io.logs import LogOptions, inspect_log, read_log
 from mountcal.result import Calibration
 from mountcal.simulate import PRESETS, simulate_stops
-from mountcal.stoptable import read_stop_table, write_stop_table
+from mountcal.stops import StopDetection, StopTableFromLog, read_protocol, tabulate
+from mountcal.stoptable import read_stop_table, stop_table_from_frame, write_stop_table
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -36,15 +40,20 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
-    """``mountcal calibrate STOPS``: estimate the mounting and write the result JSON."""
-    if args.output is not None and Path(args.output).resolve() == Path(args.input).resolve():
+    """``mountcal calibrate STOPS|LOG…``: estimate the mounting and write the result JSON."""
+    inputs = [Path(p) for p in args.input]
+    if args.output is not None and any(Path(args.output).resolve() == p.resolve() for p in inputs):
         raise InputError(
             str(args.output),
             "an output path other than the input",
             "the input file itself",
             "Choose another -o path; mountcal never overwrites its input.",
         )
-    table = read_stop_table(args.input, unit=args.unit, headings=args.headings)
+    if len(inputs) == 1 and _is_stop_table(inputs[0], args):
+        table = read_stop_table(inputs[0], unit=args.unit, headings=args.headings)
+    else:
+        found = _stops_from_log(args)
+        table = stop_table_from_frame(found.frame, headings=found.headings, source=" + ".join(map(str, inputs)))  # type: ignore[arg-type]
     options = Options(
         method=args.method, model=args.model, gravity_mps2=args.gravity, max_yaw_sigma_deg=args.max_yaw_sigma
     )
@@ -54,6 +63,65 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         cal.save(args.output)
         print(f"wrote {args.output}")
     return 0
+
+
+def cmd_stops(args: argparse.Namespace) -> int:
+    """``mountcal stops LOG…``: detect the parked periods and write the stop table."""
+    if any(Path(args.output).resolve() == Path(p).resolve() for p in args.input):
+        raise InputError(
+            str(args.output),
+            "an output path other than the input",
+            "the input file itself",
+            "Choose another -o path; mountcal never overwrites its input.",
+        )
+    found = _stops_from_log(args)
+    with atomic_path(args.output) as tmp:
+        if Path(args.output).suffix.lower() in (".parquet", ".pq"):
+            found.frame.to_parquet(tmp, index=False)
+        else:
+            found.frame.to_csv(tmp, index=False, float_format="%.10g")
+    print(f"wrote {args.output} ({len(found.frame)} stops; headings: {found.heading_source})")
+    return 0
+
+
+def cmd_inspect(args: argparse.Namespace) -> int:
+    """``mountcal inspect LOG``: list what the log holds."""
+    info = inspect_log(args.input, LogOptions(dbc=args.dbc))
+    print(f"{info.source}: {info.format}, {info.duration_s:.1f} s")
+    for st in info.streams:
+        fields = f"  [{', '.join(st.fields)}]" if st.fields else ""
+        print(f"  {st.name:<32} {st.kind:<28} {st.count:>9} msgs {st.rate_hz:>9.2f} Hz{fields}")
+    return 0
+
+
+def _is_stop_table(path: Path, args: argparse.Namespace) -> bool:
+    if path.suffix.lower() not in (".csv", ".parquet", ".pq") or getattr(args, "dbc", None):
+        return False
+    try:
+        cols = set(
+            pd.read_parquet(path).columns
+            if path.suffix.lower() != ".csv"
+            else pd.read_csv(path, nrows=0, comment="#", skipinitialspace=True).columns
+        )
+    except Exception:  # unreadable: let the stop-table reader say why
+        return True
+    return bool(cols & {"beta_deg", "n", "sx"}) or "t_s" not in cols
+
+
+def _stops_from_log(args: argparse.Namespace) -> StopTableFromLog:
+    samples = read_log(
+        args.input, LogOptions(dbc=args.dbc, mapping=args.mapping, channel=args.channel, topic=args.topic)
+    )
+    cfg = StopDetection(max_acc_std_mps2=args.max_acc_std, min_duration_s=args.min_stop_s)
+    protocol = read_protocol(args.protocol) if args.protocol else None
+    found = tabulate(samples, cfg, protocol, args.uphill_azimuth_deg)
+    dropped = ", ".join(f"{k}: {v}" for k, v in samples.dropped.items())
+    print(f"read {len(samples)} samples from {len(args.input)} file(s)" + (f"; dropped {dropped}" if dropped else ""))
+    print(
+        f"found {len(found.frame)} stops; headings: {found.heading_source}"
+        + (f"; {found.unmatched_protocol_rows} protocol rows without a stop" if found.unmatched_protocol_rows else "")
+    )
+    return found
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
@@ -132,12 +200,37 @@ def summary(cal: Calibration) -> str:
     return "\n".join(lines)
 
 
+def _log_arguments(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("logs")
+    g.add_argument("--dbc", default=None, help="DBC to decode a CAN log")
+    g.add_argument("--mapping", default=None, help="TOML naming the accelerometer signals (CAN)")
+    g.add_argument("--channel", type=int, default=None, help="CAN channel of the IMU")
+    g.add_argument("--topic", default=None, help="IMU topic (MCAP)")
+    g.add_argument("--protocol", default=None, help="protocol sheet CSV: t_start_s, t_end_s, beta_deg")
+    g.add_argument(
+        "--uphill-azimuth-deg",
+        type=float,
+        default=None,
+        help="compass azimuth of the slope's uphill direction, with a heading signal in the log",
+    )
+    g.add_argument(
+        "--max-acc-std",
+        type=float,
+        default=StopDetection.max_acc_std_mps2,
+        help="stillness: moving std of each axis below this (m/s²)",
+    )
+    g.add_argument("--min-stop-s", type=float, default=StopDetection.min_duration_s, help="shortest stop (s)")
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="mountcal", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
 
-    cal = sub.add_parser("calibrate", help="estimate the mounting from a stop table (CSV or Parquet)")
-    cal.add_argument("input", metavar="STOPS", help="stop table: beta_deg, ax, ay, az [, sx, sy, sz, n, ...]")
+    cal = sub.add_parser("calibrate", help="estimate the mounting from a stop table or a log")
+    cal.add_argument(
+        "input", nargs="+", metavar="STOPS|LOG", help="stop table (beta_deg, ax, ay, az, ...) or log file(s)"
+    )
+    _log_arguments(cal)
     cal.add_argument("--method", choices=("full", "paper"), default="full")
     cal.add_argument("--model", default="auto", help="auto (default), rotation,slope or rotation,slope,bias")
     cal.add_argument("--unit", choices=("mps2", "g"), default="mps2", help="unit of ax, ay, az (default m/s²)")
@@ -156,6 +249,17 @@ def _parser() -> argparse.ArgumentParser:
     cal.add_argument("--max-yaw-sigma", type=float, default=5.0, help="report yaw only below this 1σ (deg)")
     cal.add_argument("-o", "--output", default=None, help="result JSON to write")
     cal.set_defaults(func=cmd_calibrate)
+
+    stp = sub.add_parser("stops", help="detect the parked periods of a log and write the stop table")
+    stp.add_argument("input", nargs="+", metavar="LOG", help="log file(s); splits of one log are joined")
+    _log_arguments(stp)
+    stp.add_argument("-o", "--output", required=True, help="stop table to write (CSV or .parquet)")
+    stp.set_defaults(func=cmd_stops)
+
+    ins = sub.add_parser("inspect", help="list what a log holds")
+    ins.add_argument("input", metavar="LOG")
+    ins.add_argument("--dbc", default=None, help="DBC naming the CAN messages")
+    ins.set_defaults(func=cmd_inspect)
 
     sim = sub.add_parser("simulate", help="write a simulated stop table")
     sim.add_argument("--preset", choices=tuple(PRESETS), default="zhang2011")

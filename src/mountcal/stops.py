@@ -150,7 +150,7 @@ def _stop_stats(samples: Samples, sel: slice) -> Stop:
         if key == "heading_deg":
             z = np.exp(1j * np.radians(v)).mean()
             channels[key] = float(np.degrees(np.angle(z)) % 360.0)
-            heading_std = float(np.degrees(np.sqrt(max(-2.0 * np.log(max(abs(z), 1e-12)), 0.0))))
+            heading_std = abs(float(np.degrees(np.sqrt(max(-2.0 * np.log(min(max(abs(z), 1e-12), 1.0)), 0.0)))))
         else:
             channels[key] = float(np.mean(v))
     return Stop(float(t[0]), float(t[-1]), n, mean, cov, channels, heading_std)
@@ -205,3 +205,84 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     """[start, stop) index pairs of the true runs of a boolean mask."""
     d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
     return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist(), strict=True))
+
+
+@dataclass(frozen=True)
+class StopTableFromLog:
+    """The stop table of a log and how its headings were found."""
+
+    frame: pd.DataFrame
+    headings: str  # "uphill", "relative" or "none"
+    heading_source: str
+    unmatched_protocol_rows: int = 0
+
+
+def read_protocol(path: str) -> pd.DataFrame:
+    """A protocol sheet: CSV ``t_start_s, t_end_s, beta_deg`` (times on the log's clock)."""
+    from mountcal.errors import InputError
+
+    try:
+        df = pd.read_csv(path, comment="#", skipinitialspace=True)
+    except (OSError, ValueError) as err:
+        raise InputError(
+            path,
+            "a protocol sheet CSV (t_start_s, t_end_s, beta_deg)",
+            f"an unreadable file ({err})",
+            "Check the path and the format.",
+        ) from err
+    missing = [c for c in ("t_start_s", "t_end_s", "beta_deg") if c not in df.columns]
+    values = None if missing else df[["t_start_s", "t_end_s", "beta_deg"]].apply(pd.to_numeric, errors="coerce")
+    if missing or values is None or not np.all(np.isfinite(values.to_numpy())):
+        raise InputError(
+            path,
+            "columns t_start_s, t_end_s, beta_deg with numbers in every row",
+            f"missing columns {missing}" if missing else "empty or non-numeric cells",
+            "Write one row per stop.",
+        )
+    return values
+
+
+def tabulate(
+    samples: Samples,
+    cfg: StopDetection | None = None,
+    protocol: pd.DataFrame | None = None,
+    uphill_azimuth_deg: float | None = None,
+) -> StopTableFromLog:
+    """Detect the stops of a log and attach their headings β.
+
+    β comes from the protocol sheet when given; else from the log's heading channel and the
+    slope's uphill azimuth; a heading channel alone gives relative headings; nothing gives none.
+    """
+    where = samples.source or "log"
+    if protocol is not None:
+        windows = list(zip(protocol["t_start_s"], protocol["t_end_s"], strict=True))
+        stops = detect_stops(samples, cfg, windows=windows)
+        kept = [i for i, (lo, hi) in enumerate(windows) if any(lo <= s.t_start_s and s.t_end_s <= hi for s in stops)]
+        if not stops:
+            raise NotEnoughInformation(
+                f"{where}: no parked period found inside any protocol interval. Check that "
+                "the sheet's times are on the log's clock, or relax the stop thresholds."
+            )
+        beta = protocol["beta_deg"].to_numpy()[kept]
+        return StopTableFromLog(stop_frame(stops, beta), "uphill", "protocol sheet", len(windows) - len(kept))
+    stops = detect_stops(samples, cfg)
+    if not stops:
+        raise NotEnoughInformation(
+            f"{where}: no parked period found (no still run ≥ "
+            f"{(cfg or StopDetection()).min_duration_s:g} s). Relax --min-stop-s or the "
+            "stillness thresholds, or check that the log holds parked periods."
+        )
+    heading = np.array([s.channels.get("heading_deg", np.nan) for s in stops])
+    if np.all(np.isfinite(heading)):
+        if uphill_azimuth_deg is not None:
+            return StopTableFromLog(
+                stop_frame(stops, beta_from_heading(heading, uphill_azimuth_deg)),
+                "uphill",
+                f"heading channel with uphill azimuth {uphill_azimuth_deg:g}°",
+            )
+        return StopTableFromLog(
+            stop_frame(stops, beta_from_heading(heading, 0.0)),
+            "relative",
+            "heading channel without the uphill azimuth (relative)",
+        )
+    return StopTableFromLog(stop_frame(stops), "none", "none")

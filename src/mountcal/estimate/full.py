@@ -154,6 +154,8 @@ def fit(
     state, iterations = _levenberg_marquardt(model, state, max_iter)
     if table.headings == "none" and state.slope_rad < 0:  # α < 0 is α > 0 with every β turned by π
         state = replace(state, slope_rad=-state.slope_rad, beta_rad=state.beta_rad + np.pi)
+    if table.headings == "relative" and state.slope_rad < 0:  # ... or with the unknown offset turned by π
+        state = replace(state, slope_rad=-state.slope_rad, rot_vs=Rotation.from_euler("z", np.pi) * state.rot_vs)
     r = model.residual(state)
     jac = model.jacobian(state)
     fisher = jac.T @ jac

@@ -1,0 +1,175 @@
+"""One entry point for every log format: pick the reader by the file, join split logs.
+
+- ``.mcap``: :mod:`mountcal.io.mcap_log` (ROS 2 Imu, CDR or JSON).
+- CAN logs (``.blf .asc .log .trc .mf4 .mdf``, and ``.csv`` when a DBC is given):
+  :mod:`mountcal.io.can_log`, decoded with the DBC.
+- Sample tables (``.csv``/``.parquet`` with ``t_s, ax, ay, az`` and optionally ``gx, gy, gz``
+  in rad/s, ``speed_mps``, ``heading_deg``, ``temperature_c``, ``lat_deg``, ``alt_m``).
+
+A log split over several files (a logger's 10-minute MF4 splits) is read file by file and joined
+in time order.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from mountcal.errors import InputError
+from mountcal.io.samples import Channel, LogSummary, Samples
+
+CAN_SUFFIXES = {".blf", ".asc", ".log", ".trc", ".mf4", ".mdf"}
+TABLE_CHANNELS = ("speed_mps", "heading_deg", "temperature_c", "lat_deg", "lon_deg", "alt_m")
+
+
+@dataclass(frozen=True)
+class LogOptions:
+    """How to read a log: the DBC and mapping for CAN, the topic for MCAP."""
+
+    dbc: str | None = None
+    mapping: str | None = None
+    channel: int | None = None
+    topic: str | None = None
+
+
+def read_log(paths: str | Path | Sequence[str | Path], options: LogOptions | None = None) -> Samples:
+    """Samples of one log (one file, or several splits joined in time order)."""
+    opts = options or LogOptions()
+    files = [Path(p) for p in ([paths] if isinstance(paths, str | Path) else paths)]
+    if not files:
+        raise InputError("LOG", "at least one log file", "none", "Name the log file(s).")
+    parts = [_read_one(f, opts) for f in files]
+    return parts[0] if len(parts) == 1 else join(parts)
+
+
+def inspect_log(path: str | Path, options: LogOptions | None = None) -> LogSummary:
+    """What a log holds: topics or messages, signals, rates, duration."""
+    opts = options or LogOptions()
+    path = Path(path)
+    kind = _kind(path, opts)
+    if kind == "mcap":
+        from mountcal.io.mcap_log import inspect_mcap
+
+        return inspect_mcap(path)
+    if kind == "can":
+        from mountcal.io.can_log import inspect_can
+
+        return inspect_can(path, opts.dbc)
+    s = read_table_samples(path)
+    from mountcal.io.samples import Stream
+
+    dur = float(s.t_s[-1] - s.t_s[0]) if len(s) > 1 else 0.0
+    rate = (len(s) - 1) / dur if dur > 0 else 0.0
+    fields = ("ax", "ay", "az", *(("gx", "gy", "gz") if s.gyro_s is not None else ()), *s.channels)
+    return LogSummary(
+        str(path), path.suffix.lstrip(".").lower(), dur, (Stream("samples", "table", len(s), rate, fields),)
+    )
+
+
+def read_table_samples(path: Path) -> Samples:
+    """A CSV or Parquet table of samples: ``t_s, ax, ay, az`` in s and m/s²."""
+    try:
+        df = pd.read_parquet(path) if path.suffix.lower() in (".parquet", ".pq") else pd.read_csv(path)
+    except FileNotFoundError as err:
+        raise InputError(str(path), "a readable sample table", "no such file", "Check the path.") from err
+    except Exception as err:  # pandas raises many types for malformed files
+        raise InputError(
+            str(path),
+            "a CSV or Parquet sample table",
+            f"a file that does not parse ({err})",
+            "Write columns t_s, ax, ay, az (s, m/s²).",
+        ) from err
+    missing = [c for c in ("t_s", "ax", "ay", "az") if c not in df.columns]
+    if missing:
+        raise InputError(
+            str(path),
+            "columns t_s, ax, ay, az",
+            f"no {', '.join(missing)}",
+            "Rename the columns; a CAN log in CSV needs --dbc.",
+        )
+    values = df[["t_s", "ax", "ay", "az"]].to_numpy(dtype=float)
+    ok = np.all(np.isfinite(values), axis=1)
+    gyro = df[["gx", "gy", "gz"]].to_numpy(dtype=float) if {"gx", "gy", "gz"} <= set(df.columns) else None
+    if gyro is not None:
+        ok &= np.all(np.isfinite(gyro), axis=1)
+    dropped = {"non-finite sample rows": int((~ok).sum())} if not ok.all() else {}
+    order = np.argsort(values[ok, 0], kind="stable")
+    channels = {}
+    for name in TABLE_CHANNELS:
+        if name in df.columns:
+            v = df[name].to_numpy(dtype=float)
+            good = np.isfinite(v) & np.isfinite(df["t_s"].to_numpy(dtype=float))
+            channels[name] = Channel(df["t_s"].to_numpy(dtype=float)[good], v[good])
+    return Samples(
+        values[ok, 0][order],
+        values[ok, 1:][order],
+        None if gyro is None else gyro[ok][order],
+        channels,
+        source=str(path),
+        dropped=dropped,
+    )
+
+
+def join(parts: Sequence[Samples]) -> Samples:
+    """Samples of several files in time order, with channels and drop counts merged."""
+    parts = sorted(parts, key=lambda s: float(s.t_s[0]) if len(s) else np.inf)
+    gyro = None
+    if all(p.gyro_s is not None for p in parts):
+        gyro = np.concatenate([p.gyro_s for p in parts if p.gyro_s is not None])
+    channels = {}
+    for key in {k for p in parts for k in p.channels}:
+        chs = [p.channels[key] for p in parts if key in p.channels]
+        channels[key] = Channel(np.concatenate([c.t_s for c in chs]), np.concatenate([c.value for c in chs]))
+    dropped: Counter[str] = Counter()
+    for p in parts:
+        dropped.update(p.dropped)
+    return Samples(
+        np.concatenate([p.t_s for p in parts]),
+        np.concatenate([p.acc_s for p in parts]),
+        gyro,
+        channels,
+        source=" + ".join(p.source for p in parts),
+        axis_map=parts[0].axis_map,
+        dropped=dict(dropped),
+    )
+
+
+def _kind(path: Path, opts: LogOptions) -> str:
+    suffix = path.suffix.lower()
+    if suffix == ".mcap":
+        return "mcap"
+    if suffix in CAN_SUFFIXES or (suffix == ".csv" and opts.dbc is not None):
+        if opts.dbc is None:
+            raise InputError(
+                str(path),
+                "a DBC to decode this CAN log",
+                "no --dbc",
+                "Pass --dbc FILE (and --mapping FILE when the signals are not named plainly).",
+            )
+        return "can"
+    if suffix in (".csv", ".parquet", ".pq"):
+        return "table"
+    raise InputError(
+        str(path),
+        "an MCAP, CAN (BLF, ASC, log, TRC, CSV, MF4) or CSV/Parquet log",
+        f"a file ending in {suffix or '(nothing)'}",
+        "Convert it, or name it by its format.",
+    )
+
+
+def _read_one(path: Path, opts: LogOptions) -> Samples:
+    kind = _kind(path, opts)
+    if kind == "mcap":
+        from mountcal.io.mcap_log import read_mcap
+
+        return read_mcap(path, topic=opts.topic)
+    if kind == "can":
+        from mountcal.io.can_log import read_can
+
+        return read_can(path, opts.dbc, mapping=opts.mapping, channel=opts.channel)
+    return read_table_samples(path)
