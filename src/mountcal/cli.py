@@ -15,11 +15,12 @@ import pandas as pd
 from mountcal.atomic import atomic_path
 from mountcal.calibrate import Options, calibrate
 from mountcal.errors import InputError, MountcalError
-from mountcal.io.logs import LogOptions, inspect_log, read_log
+from mountcal.io.logs import LogOptions, inspect_log
+from mountcal.pipeline import LogJob, calibrate_log, describe, stops_of_log
 from mountcal.result import Calibration
 from mountcal.simulate import PRESETS, simulate_stops
-from mountcal.stops import StopDetection, StopTableFromLog, read_protocol, tabulate
-from mountcal.stoptable import read_stop_table, stop_table_from_frame, write_stop_table
+from mountcal.stops import StopDetection
+from mountcal.stoptable import read_stop_table, write_stop_table
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -49,15 +50,15 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             "the input file itself",
             "Choose another -o path; mountcal never overwrites its input.",
         )
-    if len(inputs) == 1 and _is_stop_table(inputs[0], args):
-        table = read_stop_table(inputs[0], unit=args.unit, headings=args.headings)
-    else:
-        found = _stops_from_log(args)
-        table = stop_table_from_frame(found.frame, headings=found.headings, source=" + ".join(map(str, inputs)))  # type: ignore[arg-type]
     options = Options(
         method=args.method, model=args.model, gravity_mps2=args.gravity, max_yaw_sigma_deg=args.max_yaw_sigma
     )
-    cal = calibrate(table, options)
+    if len(inputs) == 1 and _is_stop_table(inputs[0], args):
+        cal = calibrate(read_stop_table(inputs[0], unit=args.unit, headings=args.headings), options)
+    else:
+        done = calibrate_log(_job(args, options))
+        print("\n".join(describe(done.samples, done.stops, len(inputs))))
+        cal = done.calibration
     print(summary(cal))
     if args.output is not None:
         cal.save(args.output)
@@ -74,7 +75,8 @@ def cmd_stops(args: argparse.Namespace) -> int:
             "the input file itself",
             "Choose another -o path; mountcal never overwrites its input.",
         )
-    found = _stops_from_log(args)
+    samples, found = stops_of_log(_job(args))
+    print("\n".join(describe(samples, found, len(args.input))))
     with atomic_path(args.output) as tmp:
         if Path(args.output).suffix.lower() in (".parquet", ".pq"):
             found.frame.to_parquet(tmp, index=False)
@@ -108,96 +110,15 @@ def _is_stop_table(path: Path, args: argparse.Namespace) -> bool:
     return bool(cols & {"beta_deg", "n", "sx"}) or "t_s" not in cols
 
 
-def _stops_from_log(args: argparse.Namespace) -> StopTableFromLog:
-    samples = read_log(
-        args.input, LogOptions(dbc=args.dbc, mapping=args.mapping, channel=args.channel, topic=args.topic)
+def _job(args: argparse.Namespace, options: Options | None = None) -> LogJob:
+    return LogJob(
+        paths=tuple(args.input),
+        log=LogOptions(dbc=args.dbc, mapping=args.mapping, channel=args.channel, topic=args.topic),
+        detection=StopDetection(max_acc_std_mps2=args.max_acc_std, min_duration_s=args.min_stop_s),
+        protocol=args.protocol,
+        uphill_azimuth_deg=args.uphill_azimuth_deg,
+        options=options or Options(),
     )
-    cfg = StopDetection(max_acc_std_mps2=args.max_acc_std, min_duration_s=args.min_stop_s)
-    protocol = read_protocol(args.protocol) if args.protocol else None
-    found = tabulate(samples, cfg, protocol, args.uphill_azimuth_deg)
-    dropped = ", ".join(f"{k}: {v}" for k, v in samples.dropped.items())
-    print(f"read {len(samples)} samples from {len(args.input)} file(s)" + (f"; dropped {dropped}" if dropped else ""))
-    print(
-        f"found {len(found.frame)} stops; headings: {found.heading_source}"
-        + (f"; {found.unmatched_protocol_rows} protocol rows without a stop" if found.unmatched_protocol_rows else "")
-    )
-    return found
-
-
-def cmd_simulate(args: argparse.Namespace) -> int:
-    """``mountcal simulate``: write a simulated stop table (and its truth) from a preset."""
-    params: dict[str, Any] = dict(PRESETS[args.preset])
-    for key in ("roll_deg", "pitch_deg", "yaw_deg", "slope_deg", "noise_g"):
-        if getattr(args, key) is not None:
-            params[key] = getattr(args, key)
-    if args.bias_mg is not None:
-        params["bias_mps2"] = np.array(args.bias_mg) * 1e-3 * 9.80665
-    table, truth = simulate_stops(
-        headings=args.headings, heading_offset_deg=args.heading_offset, seed=args.seed, **params
-    )
-    write_stop_table(table, args.output)
-    roll, pitch, yaw = truth.angles_deg
-    print(
-        f"simulated {len(table)} stops ({args.preset}, seed {args.seed}): roll {roll:g}°, pitch {pitch:g}°, "
-        f"yaw {yaw:g}°, slope {truth.slope_deg:g}°, bias {np.round(truth.bias_mps2, 4).tolist()} m/s²"
-    )
-    print(f"wrote {args.output}")
-    if args.truth is not None:
-        Path(args.truth).write_text(
-            json.dumps(
-                {
-                    "roll_deg": roll,
-                    "pitch_deg": pitch,
-                    "yaw_deg": yaw,
-                    "slope_deg": truth.slope_deg,
-                    "bias_mps2": truth.bias_mps2.tolist(),
-                    "g_mps2": truth.g_mps2,
-                },
-                indent=2,
-            )
-            + "\n",
-            encoding="utf-8",
-        )
-    return 0
-
-
-def summary(cal: Calibration) -> str:
-    """A readable summary: angles ± 1σ, slope, model, residual, what could not be determined."""
-
-    def pm(value: float | None, sigma: float | None, unit: str = "°", fmt: str = ".3f") -> str:
-        if value is None:
-            return "not determined"
-        return f"{value:{fmt}}{unit} ± {sigma:{fmt}}{unit}" if sigma is not None else f"{value:{fmt}}{unit}"
-
-    sel = cal.model_selection
-    how = (
-        "fixed by --model"
-        if sel.get("mode") == "fixed"
-        else (f"chosen by {sel['test'].split(' (')[0]}, p = {sel['p_value']:.3g}" if "p_value" in sel else "auto")
-    )
-    lines = [
-        f"mountcal — {cal.method} method, model: {', '.join(cal.model)} ({how if cal.method == 'full' else 'paper'})",
-        f"  roll   {pm(cal.roll_deg, cal.roll_sigma_deg)}",
-        f"  pitch  {pm(cal.pitch_deg, cal.pitch_sigma_deg)}",
-        f"  yaw    {pm(cal.yaw_deg, cal.yaw_sigma_deg)}",
-        f"  slope  {pm(cal.slope_deg, cal.slope_sigma_deg)}",
-    ]
-    if cal.bias_mps2 is not None and cal.bias_sigma_mps2 is not None:
-        b = ", ".join(f"{v:+.4f} ± {s:.4f}" for v, s in zip(cal.bias_mps2, cal.bias_sigma_mps2, strict=True))
-        lines.append(f"  bias   ({b}) m/s² (sensor x, y, z)")
-    fit = cal.fit
-    chi = f", χ² = {fit['chi2']:.1f} on {fit['dof']} dof" if "chi2" in fit else ""
-    if fit.get("p_value") is not None:
-        chi += f" (p = {fit['p_value']:.2g})"
-    lines.append(f"  residual RMS {cal.residual_rms_mps2:.4g} m/s²{chi}")
-    lines.append(f"  gravity {cal.gravity_mps2:.5f} m/s² ({cal.gravity_source})")
-    if cal.yaw_reason:
-        lines.append(f"  yaw not determined: {cal.yaw_reason}")
-    if cal.slope_deg is None:
-        lines.append("  slope not determined (see notes)")
-    lines += [f"  note: {n}" for n in cal.notes]
-    lines.append("  (uncertainties are 1σ)")
-    return "\n".join(lines)
 
 
 def _log_arguments(p: argparse.ArgumentParser) -> None:
