@@ -121,6 +121,82 @@ def _job(args: argparse.Namespace, options: Options | None = None) -> LogJob:
     )
 
 
+def cmd_simulate(args: argparse.Namespace) -> int:
+    """``mountcal simulate``: write a simulated stop table (and its truth) from a preset."""
+    params: dict[str, Any] = dict(PRESETS[args.preset])
+    for key in ("roll_deg", "pitch_deg", "yaw_deg", "slope_deg", "noise_g"):
+        if getattr(args, key) is not None:
+            params[key] = getattr(args, key)
+    if args.bias_mg is not None:
+        params["bias_mps2"] = np.array(args.bias_mg) * 1e-3 * 9.80665
+    table, truth = simulate_stops(
+        headings=args.headings, heading_offset_deg=args.heading_offset, seed=args.seed, **params
+    )
+    write_stop_table(table, args.output)
+    roll, pitch, yaw = truth.angles_deg
+    print(
+        f"simulated {len(table)} stops ({args.preset}, seed {args.seed}): roll {roll:g}°, pitch {pitch:g}°, "
+        f"yaw {yaw:g}°, slope {truth.slope_deg:g}°, bias {np.round(truth.bias_mps2, 4).tolist()} m/s²"
+    )
+    print(f"wrote {args.output}")
+    if args.truth is not None:
+        Path(args.truth).write_text(
+            json.dumps(
+                {
+                    "roll_deg": roll,
+                    "pitch_deg": pitch,
+                    "yaw_deg": yaw,
+                    "slope_deg": truth.slope_deg,
+                    "bias_mps2": truth.bias_mps2.tolist(),
+                    "g_mps2": truth.g_mps2,
+                },
+                indent=2,
+            )
+            + "\n",
+            encoding="utf-8",
+        )
+    return 0
+
+
+def summary(cal: Calibration) -> str:
+    """A readable summary: angles ± 1σ, slope, model, residual, what could not be determined."""
+
+    def pm(value: float | None, sigma: float | None, unit: str = "°", fmt: str = ".3f") -> str:
+        if value is None:
+            return "not determined"
+        return f"{value:{fmt}}{unit} ± {sigma:{fmt}}{unit}" if sigma is not None else f"{value:{fmt}}{unit}"
+
+    sel = cal.model_selection
+    how = (
+        "fixed by --model"
+        if sel.get("mode") == "fixed"
+        else (f"chosen by {sel['test'].split(' (')[0]}, p = {sel['p_value']:.3g}" if "p_value" in sel else "auto")
+    )
+    lines = [
+        f"mountcal — {cal.method} method, model: {', '.join(cal.model)} ({how if cal.method == 'full' else 'paper'})",
+        f"  roll   {pm(cal.roll_deg, cal.roll_sigma_deg)}",
+        f"  pitch  {pm(cal.pitch_deg, cal.pitch_sigma_deg)}",
+        f"  yaw    {pm(cal.yaw_deg, cal.yaw_sigma_deg)}",
+        f"  slope  {pm(cal.slope_deg, cal.slope_sigma_deg)}",
+    ]
+    if cal.bias_mps2 is not None and cal.bias_sigma_mps2 is not None:
+        b = ", ".join(f"{v:+.4f} ± {s:.4f}" for v, s in zip(cal.bias_mps2, cal.bias_sigma_mps2, strict=True))
+        lines.append(f"  bias   ({b}) m/s² (sensor x, y, z)")
+    fit = cal.fit
+    chi = f", χ² = {fit['chi2']:.1f} on {fit['dof']} dof" if "chi2" in fit else ""
+    if fit.get("p_value") is not None:
+        chi += f" (p = {fit['p_value']:.2g})"
+    lines.append(f"  residual RMS {cal.residual_rms_mps2:.4g} m/s²{chi}")
+    lines.append(f"  gravity {cal.gravity_mps2:.5f} m/s² ({cal.gravity_source})")
+    if cal.yaw_reason:
+        lines.append(f"  yaw not determined: {cal.yaw_reason}")
+    if cal.slope_deg is None:
+        lines.append("  slope not determined (see notes)")
+    lines += [f"  note: {n}" for n in cal.notes]
+    lines.append("  (uncertainties are 1σ)")
+    return "\n".join(lines)
+
+
 def _log_arguments(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("logs")
     g.add_argument("--dbc", default=None, help="DBC to decode a CAN log")
