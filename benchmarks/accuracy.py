@@ -18,7 +18,8 @@ import numpy as np
 
 from mountcal.calibrate import BASE, WITH_BIAS, Options, calibrate
 from mountcal.conventions import G_N
-from mountcal.estimate import full
+from mountcal.estimate import bound
+from mountcal.estimate.bound import true_state
 from mountcal.simulate import ZHANG2011, random_bias, simulate_preset
 
 QUANTITIES = ("roll", "pitch", "yaw", "slope")
@@ -29,18 +30,11 @@ def crb_deg(terms: tuple[str, ...]) -> dict[str, float]:
     """The Cramér–Rao bound at the truth with the true stop noise (no estimation involved)."""
     table, truth = simulate_preset("zhang2011", seed=0)
     sigma = ZHANG2011["noise_g"] * G_N  # type: ignore[operator]
-    cov = np.broadcast_to(np.eye(3) * sigma**2, (len(table), 3, 3)).copy()
-    table = replace(table, cov_s=cov)
-    state = full.State(truth.rot_vs, np.radians(truth.slope_deg), truth.bias_mps2, np.zeros(0))
-    info, _names = full.information(table, state, terms, truth.g_mps2)
-    c = np.linalg.inv(info)
-    # Near this orientation Euler errors equal δ errors to first order except for the small
-    # coupling handled by calibrate's gradients; use the same mapping for exactness.
-    from mountcal.calibrate import _euler_gradients
-
-    grads = _euler_gradients(truth.rot_vs, 3)
-    sig = [np.degrees(np.sqrt(g @ c[:3, :3] @ g)) for g in grads]
-    return {"roll": sig[0], "pitch": sig[1], "yaw": sig[2], "slope": float(np.degrees(np.sqrt(c[3, 3])))}
+    table = replace(table, cov_s=np.broadcast_to(np.eye(3) * sigma**2, (len(table), 3, 3)).copy())
+    state = true_state(truth.rot_vs, truth.slope_deg, truth.g_mps2)
+    crb = bound.crb_deg(table, state, terms, truth.g_mps2)
+    assert crb is not None
+    return {q: float(crb[f"{q}_deg"]) for q in QUANTITIES}  # type: ignore[arg-type]
 
 
 def run(runs: int, with_bias: bool, seed: int) -> dict[str, dict[str, np.ndarray]]:

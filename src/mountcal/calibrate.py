@@ -18,7 +18,6 @@ from typing import Any, Literal
 
 import numpy as np
 from scipy import stats
-from scipy.spatial.transform import Rotation
 
 from mountcal.conventions import (
     G_N,
@@ -27,8 +26,10 @@ from mountcal.conventions import (
     angles_from_rot_vs,
     normal_gravity,
 )
+from mountcal.effects import Loop, Step, close_the_loop, effect_values
 from mountcal.errors import InputError, NotEnoughInformation
 from mountcal.estimate import full, paper
+from mountcal.estimate.bound import crb_deg, euler_gradients
 from mountcal.estimate.geometry import span_ratio
 from mountcal.result import Calibration
 from mountcal.stoptable import StopTable
@@ -36,11 +37,9 @@ from mountcal.stoptable import StopTable
 Method = Literal["full", "paper"]
 BASE: tuple[str, ...] = ("rotation", "slope")
 WITH_BIAS: tuple[str, ...] = ("rotation", "slope", "bias")
-MODELS = {"rotation,slope": BASE, "rotation,slope,bias": WITH_BIAS}
 MIN_DISTINCT_HEADINGS = 3
-MAX_BIAS_TILT_SIGMA_DEG = 5.0  # beyond this a bias cannot be told from a tilt (level ground)
+GIVEN = "given by the user"
 NULL_TOL = 1e-8
-BAD_FIT_P = 1e-3  # a χ² this improbable means the model misses an effect  # relative eigenvalue below which a Fisher direction counts as unobservable
 
 
 @dataclass(frozen=True)
@@ -67,13 +66,19 @@ def calibrate(table: StopTable, options: Options | None = None) -> Calibration:
 
 
 def parse_model(spec: str) -> tuple[str, ...] | None:
-    """``"auto"`` → None; ``"rotation,slope[,bias]"`` → the terms."""
-    key = ",".join(t.strip() for t in spec.split(","))
-    if key == "auto":
+    """``"auto"`` → None; a comma list of terms, starting ``rotation,slope``, → the terms."""
+    terms = tuple(t.strip() for t in spec.split(",") if t.strip())
+    if terms == ("auto",):
         return None
-    if key not in MODELS:
-        raise InputError("--model", f"auto or one of {', '.join(MODELS)}", repr(spec), "Pick one of those.")
-    return MODELS[key]
+    unknown = [t for t in terms if t not in full.TERMS]
+    if terms[:2] != BASE or unknown or len(set(terms)) != len(terms):
+        raise InputError(
+            "--model",
+            f"auto, or rotation,slope followed by any of {', '.join(full.TERMS[2:])}",
+            repr(spec),
+            "For example --model rotation,slope,bias.",
+        )
+    return terms
 
 
 # --- the full estimator -------------------------------------------------------------------------
@@ -81,128 +86,61 @@ def parse_model(spec: str) -> tuple[str, ...] | None:
 
 def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibration:
     fixed = parse_model(opts.model)
-    start = full.initial_state(table, g)
-    base = full.fit(table, BASE, g, start)
-    selection: dict[str, Any] = {"mode": "fixed" if fixed else "auto", "candidates": [_summary(base)]}
-    chosen = base
-    if fixed == WITH_BIAS:
-        chosen = full.fit(table, WITH_BIAS, g, base.state)
-        selection["candidates"].append(_summary(chosen))
-    elif fixed is None:
-        chosen = _select_bias(table, g, base, opts.selection_alpha, selection)
-    selection["chosen"] = list(chosen.terms)
-    return _result_from_fit(table, chosen, g, g_source, opts, selection)
-
-
-def _select_bias(table: StopTable, g: float, base: full.Fit, alpha: float, selection: dict[str, Any]) -> full.Fit:
-    """Nested-model test: rotation,slope against rotation,slope,bias."""
-    if base.dof - 3 < 1:
-        selection["test"] = "not enough stops to test for a bias (needs 3n > parameters + 3)"
-        return base
-    tilt_sigma = _bias_model_tilt_sigma_deg(table, base, g)
-    if tilt_sigma > MAX_BIAS_TILT_SIGMA_DEG:
-        selection["test"] = (
-            f"bias not separable from tilt: with a bias the tilt 1σ would be {tilt_sigma:.3g}° "
-            f"at slope {np.degrees(base.state.slope_rad):.3g}° (limit {MAX_BIAS_TILT_SIGMA_DEG:g}°); "
-            "park on a steeper slope to estimate a bias"
-        )
-        return base
-    biased = full.fit(table, WITH_BIAS, g, base.state)
-    selection["candidates"].append(_summary(biased))
-    if base.noise_known:
-        statistic = base.chi2 - biased.chi2
-        p_value = float(stats.chi2.sf(statistic, 3))
-        test = "likelihood-ratio test (χ², 3 dof; stop covariances known)"
-    else:
-        statistic = ((base.chi2 - biased.chi2) / 3.0) / (biased.chi2 / biased.dof)
-        p_value = float(stats.f.sf(statistic, 3, biased.dof))
-        test = f"F-test (3, {biased.dof} dof; stop noise estimated from the residuals)"
-    selection.update(test=test, statistic=float(statistic), p_value=p_value, alpha=alpha)
-    return biased if p_value < alpha else base
-
-
-def _bias_model_tilt_sigma_deg(table: StopTable, base: full.Fit, g: float) -> float:
-    """The larger tilt 1σ (deg) a bias fit would have at the base fit's point (its CRB)."""
-    info, _ = full.information(table, base.state, WITH_BIAS, g)
-    cov = np.linalg.pinv(info) * base.noise_scale**2
-    return float(np.degrees(np.sqrt(max(cov[0, 0], cov[1, 1]))))
-
-
-def _summary(f: full.Fit) -> dict[str, Any]:
-    p = len(f.names)
-    n_obs = f.dof + p
-    s2 = 1.0 if f.noise_known else f.chi2 / max(f.dof, 1)
-    return {
-        "terms": list(f.terms),
-        "chi2": f.chi2,
-        "dof": f.dof,
-        "residual_rms_mps2": float(np.sqrt(np.mean(f.residual_s**2))),
-        "aic": float(f.chi2 / s2 + 2 * p) if f.noise_known else float(n_obs * np.log(f.chi2 / n_obs) + 2 * p),
-    }
-
-
-def _result_from_fit(
-    table: StopTable, f: full.Fit, g: float, g_source: str, opts: Options, selection: dict[str, Any]
-) -> Calibration:
-    names = list(f.names)
-    k = 3 if "rot_z" in names else 2
-    cov_rot = f.cov[:k, :k]
-    grads = _euler_gradients(f.state.rot_vs, k)  # rows roll, pitch, yaw over δ
-    null = _null_space(f.fisher)
-    notes: list[str] = []
-    if "not separable" in str(selection.get("test", "")):
-        notes.append(
-            "a constant accelerometer bias cannot be told from a tilt on this slope: if the sensor has a "
-            "bias b, roll and pitch are off by up to b/g (20 mg → 1.1°) beyond their σ (MODEL.md §4)"
-        )
-
-    def sigma(grad: FloatArray, idx: slice | list[int]) -> float | None:
-        c = np.zeros(len(names))
-        c[idx] = grad
-        if null.size and np.linalg.norm(null.T @ c) > 1e-6 * np.linalg.norm(c):
-            return None
-        return float(np.sqrt(max(float(c @ f.cov @ c), 0.0)))
-
-    roll, pitch, yaw = (float(np.degrees(a)) for a in angles_from_rot_vs(f.state.rot_vs))
-    s_roll = sigma(grads[0], slice(0, k))
-    s_pitch = sigma(grads[1], slice(0, k))
-    if s_roll is None or s_pitch is None:
+    from_position = g_source.startswith("WGS 84")
+    loop = close_the_loop(
+        table,
+        g,
+        gravity_known=from_position or g_source == GIVEN,
+        alpha=opts.selection_alpha,
+        fixed=fixed,
+        g_prior=G_N if from_position else None,
+    )
+    final = loop.final
+    f = final.fit
+    angles = _angles(final.table, f, opts)
+    if angles["roll_sigma_deg"] is None or angles["pitch_sigma_deg"] is None:
         raise NotEnoughInformation(
             f"{table.source}: roll and pitch are not determined by these stops with the model "
             f"{', '.join(f.terms)} (the Fisher information is singular). On level ground a bias cannot be "
             "told from a tilt: park on a slope, or fit without a bias (--model rotation,slope)."
         )
-    yaw_out: float | None = yaw
-    s_yaw = sigma(grads[2], slice(0, k)) if k == 3 else None
-    yaw_reason = _yaw_reason(table, s_yaw, f, opts)
-    if yaw_reason is not None:
-        yaw_out, s_yaw = None, None
-    if f.noise_known and f.dof > 0 and stats.chi2.sf(f.chi2, f.dof) < BAD_FIT_P:
+    notes: list[str] = []
+    if any(d["effect"] == "bias" and ("separable" in d["why"] or "confounded" in d["why"]) for d in loop.declined):
         notes.append(
-            f"the model does not explain these stops: χ² = {f.chi2:.1f} on {f.dof} dof "
-            f"(p = {stats.chi2.sf(f.chi2, f.dof):.2g}); the σ above assume it does and are too small"
+            "a constant accelerometer bias cannot be told from a tilt with these stops: if the sensor has a "
+            "bias b, roll and pitch are off by up to b/g (20 mg → 1.1°) beyond their σ (MODEL.md §4)"
         )
+    birge = 1.0
+    if loop.unexplained:
+        if f.noise_known and f.dof > 0:
+            birge = max(1.0, float(np.sqrt(f.chi2 / f.dof)))
+        notes.append(
+            "the best model leaves structure unexplained ("
+            + "; ".join(f"{u.what}: {u.size}" for u in loop.unexplained)
+            + f"); the σ are widened ×{birge:.2f} (Birge ratio) and the result is not confident"
+        )
+    pitch = angles["pitch_deg"]
     if abs(pitch) > GIMBAL_LOCK_PITCH_DEG:
         notes.append(
             f"pitch {pitch:.2f}° is within {90 - GIMBAL_LOCK_PITCH_DEG:g}° of ±90°: roll and yaw are not separately "
             "meaningful there; use the rotation (quaternion) and the uncertainty about the vehicle axes."
         )
+    model = list(f.terms)
+    if from_position and "gravity" not in model:
+        model.append("gravity")
+    if final.excluded:
+        model.append("outlier")
 
-    i_slope = names.index("slope")
-    slope = float(np.degrees(f.state.slope_rad))
-    s_slope = sigma(np.ones(1), [i_slope])
+    def widened(x: float | None) -> float | None:
+        return None if x is None else x * birge
+
+    k = 3 if "rot_z" in f.names else 2
+    rot_sigma = np.degrees(np.sqrt(np.clip(np.diag(f.cov[:k, :k]), 0, None))) * birge
     bias = bias_sigma = None
     if "bias" in f.terms:
-        i_b = names.index("bias_x")
+        i_b = f.names.index("bias_x")
         bias = f.state.bias_s.copy()
-        bias_sigma = np.sqrt(np.diag(f.cov)[i_b : i_b + 3])
-    rot_sigma = np.degrees(np.sqrt(np.clip(np.diag(cov_rot), 0, None)))
-    rotation_sigma = (
-        float(rot_sigma[0]),
-        float(rot_sigma[1]),
-        float(rot_sigma[2]) if yaw_out is not None else None,
-    )
-
+        bias_sigma = np.sqrt(np.diag(f.cov)[i_b : i_b + 3]) * birge
     fit_info = {
         "chi2": f.chi2,
         "dof": f.dof,
@@ -211,33 +149,128 @@ def _result_from_fit(
         "noise_scale_mps2": None if f.noise_known else f.noise_scale,
         "iterations": f.iterations,
         "headings": table.headings,
+        "excluded_stops": [i + 1 for i in final.excluded],
+        "birge_ratio": birge,
+    }
+    selection = {
+        "mode": "fixed" if fixed else "auto",
+        "alpha": opts.selection_alpha,
+        "chosen": model,
+        "steps": [s.added for s in loop.steps],
+        "declined": loop.declined,
     }
     return Calibration(
         method="full",
-        model=f.terms,
+        model=tuple(model),
         rot_vs=f.state.rot_vs,
-        roll_deg=roll,
+        roll_deg=angles["roll_deg"],
         pitch_deg=pitch,
-        yaw_deg=yaw_out,
-        roll_sigma_deg=float(np.degrees(s_roll)),
-        pitch_sigma_deg=float(np.degrees(s_pitch)),
-        yaw_sigma_deg=None if s_yaw is None else float(np.degrees(s_yaw)),
-        yaw_reason=yaw_reason,
-        slope_deg=slope,
-        slope_sigma_deg=None if s_slope is None else float(np.degrees(s_slope)),
-        rotation_sigma_deg=rotation_sigma,
+        yaw_deg=angles["yaw_deg"],
+        roll_sigma_deg=angles["roll_sigma_deg"] * birge,
+        pitch_sigma_deg=angles["pitch_sigma_deg"] * birge,
+        yaw_sigma_deg=widened(angles["yaw_sigma_deg"]),
+        yaw_reason=angles["yaw_reason"],
+        slope_deg=angles["slope_deg"],
+        slope_sigma_deg=widened(angles["slope_sigma_deg"]),
+        rotation_sigma_deg=(
+            float(rot_sigma[0]),
+            float(rot_sigma[1]),
+            float(rot_sigma[2]) if angles["yaw_deg"] is not None else None,
+        ),
         bias_mps2=bias,
         bias_sigma_mps2=bias_sigma,
-        gravity_mps2=g,
-        gravity_source=g_source,
+        gravity_mps2=f.state.g_mps2,
+        gravity_source="fitted to the stops" if "gravity" in f.terms else g_source,
         residual_rms_mps2=float(np.sqrt(np.mean(f.residual_s**2))),
-        residual_s=f.residual_s,
+        residual_s=_all_residuals(table, final),
         fit=fit_info,
-        observability=_observability(table, f, g),
+        observability=_observability(final.table, f, g),
         model_selection=selection,
-        provenance=_provenance(table, "full", f.terms),
+        provenance=_provenance(table, "full", tuple(model)),
         notes=tuple(notes),
+        model_steps=_steps(loop, opts),
+        unexplained=[u.to_dict() for u in loop.unexplained],
+        diagnostics=[d.to_dict() for d in loop.findings],
+        effects=effect_values(f),
+        confident=not loop.unexplained,
     )
+
+
+def _angles(table: StopTable, f: full.Fit, opts: Options) -> dict[str, Any]:
+    """Roll, pitch, yaw, slope in degrees with 1σ (None where the data cannot determine them)."""
+    k = 3 if "rot_z" in f.names else 2
+    grads = euler_gradients(f.state.rot_vs, k)  # rows roll, pitch, yaw over δ
+    null = _null_space(f.fisher)
+
+    def sigma(grad: FloatArray, idx: slice | list[int]) -> float | None:
+        c = np.zeros(len(f.names))
+        c[idx] = grad
+        if null.size and np.linalg.norm(null.T @ c) > 1e-6 * np.linalg.norm(c):
+            return None
+        return float(np.degrees(np.sqrt(max(float(c @ f.cov @ c), 0.0))))
+
+    roll, pitch, yaw = (float(np.degrees(a)) for a in angles_from_rot_vs(f.state.rot_vs))
+    s_yaw = sigma(grads[2], slice(0, k)) if k == 3 else None
+    yaw_reason = _yaw_reason(table, None if s_yaw is None else np.radians(s_yaw), f, opts)
+    slope_names = [i for i, n in enumerate(f.names) if n.startswith("slope")]
+    single = len(slope_names) == 1
+    return {
+        "roll_deg": roll,
+        "roll_sigma_deg": sigma(grads[0], slice(0, k)),
+        "pitch_deg": pitch,
+        "pitch_sigma_deg": sigma(grads[1], slice(0, k)),
+        "yaw_deg": None if yaw_reason else yaw,
+        "yaw_sigma_deg": None if yaw_reason else s_yaw,
+        "yaw_reason": yaw_reason,
+        "slope_deg": float(np.degrees(f.state.slope_rad[0])) if single else None,
+        "slope_sigma_deg": sigma(np.ones(1), slope_names) if single else None,
+    }
+
+
+def _steps(loop: Loop, opts: Options) -> list[dict[str, Any]]:
+    """The before/after table: each model step with its fit quality, angles ± σ and what moved."""
+    out: list[dict[str, Any]] = []
+    prev: dict[str, Any] | None = None
+    for step in loop.steps:
+        f = step.fit
+        a = _angles(step.table, f, opts)
+        moved = None
+        if prev is not None:
+            moved = {
+                key: (None if a[key] is None or prev[key] is None else float(a[key] - prev[key]))
+                for key in ("roll_deg", "pitch_deg", "yaw_deg", "slope_deg")
+            }
+        out.append(
+            {
+                "added": step.added,
+                "reason": step.reason,
+                "terms": list(f.terms),
+                "excluded_stops": [i + 1 for i in step.excluded],
+                "gravity_mps2": f.state.g_mps2,
+                "chi2": f.chi2,
+                "dof": f.dof,
+                "residual_rms_mps2": float(np.sqrt(np.mean(f.residual_s**2))),
+                "loo_rms_mps2": step.loo_rms_mps2,
+                "angles": a,
+                "moved": moved,
+                "effects": effect_values(f),
+            }
+        )
+        prev = a
+    return out
+
+
+def _all_residuals(table: StopTable, step: Step) -> FloatArray:
+    """Residual of every stop of the table (excluded ones predicted by the final model; NaN if not)."""
+    if not step.excluded:
+        return step.fit.residual_s
+    out = np.full((len(table), 3), np.nan)
+    keep = np.setdiff1d(np.arange(len(table)), step.excluded)
+    out[keep] = step.fit.residual_s
+    if table.headings != "none":
+        pred = full.StaticModel(table, step.fit.terms, step.fit.state.g_mps2).predict(step.fit.state)
+        out[list(step.excluded)] = table.acc_s[list(step.excluded)] - pred[list(step.excluded)]
+    return out
 
 
 def _yaw_reason(table: StopTable, s_yaw: float | None, f: full.Fit, opts: Options) -> str | None:
@@ -248,7 +281,7 @@ def _yaw_reason(table: StopTable, s_yaw: float | None, f: full.Fit, opts: Option
             "headings are relative (an unknown common offset from the uphill direction): "
             "yaw and that offset cannot be separated"
         )
-    slope = np.degrees(f.state.slope_rad)
+    slope = np.degrees(f.state.slope_rad[0])
     if s_yaw is None:
         return f"slope {slope:.3g}° gives no information on yaw (level ground)"
     if np.degrees(s_yaw) > opts.max_yaw_sigma_deg:
@@ -263,23 +296,7 @@ def _observability(table: StopTable, f: full.Fit, g: float) -> dict[str, Any]:
     scale = np.sqrt(np.clip(np.diag(f.fisher), 1e-300, None))
     eig = np.linalg.eigvalsh(f.fisher / np.outer(scale, scale))
     rank = int(np.sum(eig > NULL_TOL * eig.max()))
-    crb: dict[str, Any] = {}
-    for terms in (BASE, WITH_BIAS):
-        info, names = full.information(table, f.state, terms, g)
-        try:
-            cov = np.linalg.inv(info) * f.noise_scale**2
-        except np.linalg.LinAlgError:
-            crb[",".join(terms)] = None
-            continue
-        k = 3 if "rot_z" in names else 2
-        grads = _euler_gradients(f.state.rot_vs, k)
-        sig = [float(np.degrees(np.sqrt(max(c @ cov[:k, :k] @ c, 0.0)))) for c in grads]
-        crb[",".join(terms)] = {
-            "roll_deg": sig[0],
-            "pitch_deg": sig[1],
-            "yaw_deg": sig[2] if k == 3 else None,
-            "slope_deg": float(np.degrees(np.sqrt(cov[k, k]))),
-        }
+    crb = {",".join(t): crb_deg(table, f.state, t, g, f.noise_scale) for t in dict.fromkeys((BASE, WITH_BIAS, f.terms))}
     return {
         "parameters": list(f.names),
         "n_parameters": len(f.names),
@@ -289,18 +306,6 @@ def _observability(table: StopTable, f: full.Fit, g: float) -> dict[str, Any]:
         "crb_note": "Cramér–Rao bounds for this stop set at the fitted point, per model"
         + ("" if f.noise_known else ", with the noise σ estimated from the residuals"),
     }
-
-
-def _euler_gradients(rot: Rotation, k: int, h: float = 1e-7) -> FloatArray:
-    """∂(roll, pitch, yaw)/∂δ for a left perturbation δ about the vehicle axes; shape (3, k)."""
-    grads = np.zeros((3, k))
-    for j in range(k):
-        d = np.zeros(3)
-        d[j] = h
-        up = np.array(angles_from_rot_vs(Rotation.from_rotvec(d) * rot))
-        down = np.array(angles_from_rot_vs(Rotation.from_rotvec(-d) * rot))
-        grads[:, j] = np.angle(np.exp(1j * (up - down))) / (2 * h)
-    return grads
 
 
 def _null_space(fisher: FloatArray) -> FloatArray:
@@ -391,7 +396,7 @@ def _check_geometry(table: StopTable) -> None:
 
 def _gravity(table: StopTable, given: float | None) -> tuple[float, str]:
     if given is not None:
-        return float(given), "given by the user"
+        return float(given), GIVEN
     if table.lat_deg is not None and np.all(np.isfinite(table.lat_deg)):
         lat = float(np.mean(table.lat_deg))
         alt = float(np.mean(table.alt_m)) if table.alt_m is not None else 0.0

@@ -167,11 +167,7 @@ def summary(cal: Calibration) -> str:
         return f"{value:{fmt}}{unit} ± {sigma:{fmt}}{unit}" if sigma is not None else f"{value:{fmt}}{unit}"
 
     sel = cal.model_selection
-    how = (
-        "fixed by --model"
-        if sel.get("mode") == "fixed"
-        else (f"chosen by {sel['test'].split(' (')[0]}, p = {sel['p_value']:.3g}" if "p_value" in sel else "auto")
-    )
+    how = "fixed by --model" if sel.get("mode") == "fixed" else "auto: " + " → ".join(sel.get("steps", []))
     lines = [
         f"mountcal — {cal.method} method, model: {', '.join(cal.model)} ({how if cal.method == 'full' else 'paper'})",
         f"  roll   {pm(cal.roll_deg, cal.roll_sigma_deg)}",

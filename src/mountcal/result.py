@@ -54,6 +54,11 @@ class Calibration:
     model_selection: dict[str, Any]
     provenance: dict[str, Any]
     notes: tuple[str, ...] = field(default=())
+    model_steps: list[dict[str, Any]] = field(default_factory=list)  # the before/after table of the loop
+    unexplained: list[dict[str, Any]] = field(default_factory=list)  # structure the model leaves
+    diagnostics: list[dict[str, Any]] = field(default_factory=list)  # every residual test of the final model
+    effects: dict[str, Any] = field(default_factory=dict)  # fitted effect values ± σ
+    confident: bool = True  # False when the residual shows structure the model does not explain
 
     @property
     def yaw_determined(self) -> bool:
@@ -90,7 +95,15 @@ class Calibration:
             "fit": self.fit,
             "observability": self.observability,
             "model_selection": self.model_selection,
-            "stops": {"n": int(self.residual_s.shape[0]), "residual_s_mps2": self.residual_s.tolist()},
+            "stops": {
+                "n": int(self.residual_s.shape[0]),
+                "residual_s_mps2": [[float(v) if np.isfinite(v) else None for v in row] for row in self.residual_s],
+            },
+            "effects": self.effects,
+            "model_steps": self.model_steps,
+            "unexplained": self.unexplained,
+            "confident": self.confident,
+            "diagnostics": self.diagnostics,
             "notes": list(self.notes),
         }
 
@@ -138,12 +151,19 @@ class Calibration:
                 gravity_mps2=doc["gravity"]["value_mps2"],
                 gravity_source=doc["gravity"]["source"],
                 residual_rms_mps2=doc["residual_rms_mps2"],
-                residual_s=np.asarray(doc["stops"]["residual_s_mps2"], dtype=float).reshape(-1, 3),
+                residual_s=np.array(
+                    [[np.nan if v is None else v for v in row] for row in doc["stops"]["residual_s_mps2"]], dtype=float
+                ).reshape(-1, 3),
                 fit=doc["fit"],
                 observability=doc["observability"],
                 model_selection=doc["model_selection"],
                 provenance=doc["provenance"],
                 notes=tuple(doc.get("notes", ())),
+                model_steps=list(doc.get("model_steps", [])),
+                unexplained=list(doc.get("unexplained", [])),
+                diagnostics=list(doc.get("diagnostics", [])),
+                effects=dict(doc.get("effects", {})),
+                confident=bool(doc.get("confident", True)),
             )
         except (KeyError, TypeError, ValueError) as err:
             raise InputError(

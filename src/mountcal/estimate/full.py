@@ -1,11 +1,18 @@
-"""Maximum-likelihood fit of the static model on SO(3) (MODEL.md §2, §4, §5).
+"""Maximum-likelihood fit of the static model on SO(3) (MODEL.md §2, §4–6).
 
-Model: ``a_s,i = R_vsᵀ f_v(α, β_i; g) + b + n_i`` with n_i ~ N(0, Σ_i). The rotation is updated
-by a left perturbation in the vehicle frame, ``R ← exp([δ]×) R``, so δ = (δx, δy, δz) are small
-rotations about the vehicle's x, y and z axes; δz is a pure change of yaw, which lets us fix yaw
-exactly when the headings cannot determine it. scipy's least-squares solvers have no notion of a
-manifold retraction, so the Levenberg–Marquardt loop is written here (a few lines, exact
-Jacobians, re-linearised at every step).
+Model, with the optional effects of MODEL.md §6 (each a *term*)::
+
+    a_s,i = (I + E) · R_vsᵀ · f_v(α_site(i), β_i; g) + b + k · (T_i − T̄) + n_i,   n_i ~ N(0, Σ_i)
+
+terms: ``rotation`` and ``slope`` (always), ``site_slope`` (one α per site), ``bias`` (b),
+``temperature`` (k, bias drift per °C), ``gravity`` (g fitted), ``scale`` (E, symmetric: three
+scale errors and three cross-axis couplings; its antisymmetric part is a rotation).
+
+The rotation is updated by a left perturbation in the vehicle frame, ``R ← exp([δ]×) R``, so
+δ = (δx, δy, δz) are small rotations about the vehicle's x, y and z axes; δz is a pure change of
+yaw, which lets us fix yaw exactly when the headings cannot determine it. scipy's least-squares
+solvers have no manifold retraction, so the Levenberg–Marquardt loop is written here (a few lines,
+exact Jacobians, re-linearised at every step).
 """
 
 from __future__ import annotations
@@ -15,22 +22,32 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from mountcal.conventions import FloatArray, skew, specific_force_v
+from mountcal.conventions import FloatArray, skew
 from mountcal.errors import FitFailed
 from mountcal.estimate.geometry import in_plane_azimuth, level_rotation, phase_yaw, plane_normal, with_yaw
 from mountcal.stoptable import StopTable
 
-TERMS = ("rotation", "slope", "bias")
+TERMS = ("rotation", "slope", "site_slope", "bias", "temperature", "gravity", "scale")
+SCALE_NAMES = ("scale_xx", "scale_yy", "scale_zz", "cross_xy", "cross_xz", "cross_yz")
 
 
 @dataclass(frozen=True)
 class State:
-    """A point of the parameter space."""
+    """A point of the parameter space (units in the names; sensor frame for vectors)."""
 
     rot_vs: Rotation
-    slope_rad: float
-    bias_s: FloatArray  # shape (3,), m/s², sensor frame
+    slope_rad: FloatArray  # shape (n_sites,): one α, or one per site
+    bias_s: FloatArray  # shape (3,), m/s²
     beta_rad: FloatArray  # shape (n,), fitted only when the headings are unknown
+    temp_coeff_s: FloatArray  # shape (3,), m/s² per °C
+    g_mps2: float
+    scale_e: FloatArray  # shape (6,): E_xx, E_yy, E_zz, E_xy, E_xz, E_yz
+
+    @property
+    def scale_matrix(self) -> FloatArray:
+        """I + E, shape (3, 3)."""
+        e = self.scale_e
+        return np.eye(3) + np.array([[e[0], e[3], e[4]], [e[3], e[1], e[5]], [e[4], e[5], e[2]]])
 
 
 @dataclass(frozen=True)
@@ -38,8 +55,8 @@ class Fit:
     """The outcome of one maximum-likelihood fit.
 
     ``cov`` is the covariance of the parameter vector named by ``names`` (δ in radians about the
-    vehicle axes, α in radians, b in m/s², β in radians), already scaled by ``noise_scale²`` when
-    the stop noise had to be estimated from the residuals.
+    vehicle axes, α in radians, b in m/s², k in m/s²/°C, g in m/s², E unitless, β in radians),
+    scaled by ``noise_scale²`` when the stop noise had to be estimated from the residuals.
     """
 
     state: State
@@ -54,23 +71,43 @@ class Fit:
     residual_s: FloatArray  # shape (n, 3), m/s²
     iterations: int
 
+    def value(self, name: str) -> float:
+        """A fitted scalar by parameter name (as in ``names``)."""
+        return float(_flat(self.state, self.names)[self.names.index(name)])
+
+    def sigma(self, name: str) -> float:
+        i = self.names.index(name)
+        return float(np.sqrt(max(self.cov[i, i], 0.0)))
+
 
 class StaticModel:
     """Residuals and Jacobians of the static model for one stop table and a set of terms."""
 
     def __init__(self, table: StopTable, terms: tuple[str, ...], g_mps2: float) -> None:
+        unknown = set(terms) - set(TERMS)
+        if unknown:
+            raise ValueError(f"unknown terms {sorted(unknown)}")
         self.table, self.terms, self.g = table, terms, g_mps2
+        n = len(table)
         self.fit_yaw = table.headings != "none"
         self.fit_beta = table.headings == "none"
-        n = len(table)
+        self.site_index, self.sites = site_index(table) if "site_slope" in terms else (np.zeros(n, int), ["all"])
+        t = table.temperature_c
+        self.dtemp = (t - t.mean()) if ("temperature" in terms and t is not None) else np.zeros(n)
         if table.cov_s is not None:
-            chol = np.linalg.cholesky(table.cov_s)
-            self.whiten = np.linalg.inv(chol)  # e' = C⁻¹ e has unit covariance
+            self.whiten = np.linalg.inv(np.linalg.cholesky(table.cov_s))  # e' = C⁻¹ e has unit covariance
         else:
             self.whiten = np.broadcast_to(np.eye(3), (n, 3, 3))
-        names = ["rot_x", "rot_y"] + (["rot_z"] if self.fit_yaw else []) + ["slope"]
+        names = ["rot_x", "rot_y"] + (["rot_z"] if self.fit_yaw else [])
+        names += ["slope"] if len(self.sites) == 1 else [f"slope_{s}" for s in self.sites]
         if "bias" in terms:
             names += ["bias_x", "bias_y", "bias_z"]
+        if "temperature" in terms:
+            names += ["temp_x", "temp_y", "temp_z"]
+        if "gravity" in terms:
+            names += ["gravity"]
+        if "scale" in terms:
+            names += list(SCALE_NAMES)
         if self.fit_beta:
             names += [f"beta_{i}" for i in range(n)]
         self.names = tuple(names)
@@ -78,9 +115,16 @@ class StaticModel:
     def beta(self, state: State) -> FloatArray:
         return state.beta_rad if self.fit_beta else self.table.beta_rad  # type: ignore[return-value]
 
+    def _parts(self, state: State) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Per-stop slope α_i, f_v,i and u_i = Rᵀ f_v,i."""
+        alpha = state.slope_rad[self.site_index]
+        beta = self.beta(state)
+        f_v = _force(alpha, beta, state.g_mps2)
+        return alpha, f_v, state.rot_vs.inv().apply(f_v)
+
     def predict(self, state: State) -> FloatArray:
-        f_v = specific_force_v(state.slope_rad, self.beta(state), self.g)
-        return state.rot_vs.inv().apply(f_v) + state.bias_s
+        _, _, u = self._parts(state)
+        return u @ state.scale_matrix.T + state.bias_s + np.outer(self.dtemp, state.temp_coeff_s)
 
     def residual(self, state: State) -> FloatArray:
         """Whitened residual, shape (3n,)."""
@@ -90,21 +134,32 @@ class StaticModel:
     def jacobian(self, state: State) -> FloatArray:
         """Jacobian of the whitened residual, shape (3n, p), at δ = 0."""
         n = len(self.table)
-        beta, a = self.beta(state), state.slope_rad
-        f_v = specific_force_v(a, beta, self.g)
-        rt = state.rot_vs.inv().as_matrix()
-        cols = [rt @ skew(f_v)]  # ∂(Rᵀ f)/∂δ = Rᵀ [f]×, shape (n, 3, 3)
+        alpha, f_v, u = self._parts(state)
+        beta, g = self.beta(state), state.g_mps2
+        pm = state.scale_matrix
+        prt = pm @ state.rot_vs.inv().as_matrix()  # (I + E) Rᵀ
+        blocks = [prt @ skew(f_v)]  # ∂(Rᵀ f)/∂δ = Rᵀ [f]×
         if not self.fit_yaw:
-            cols[0] = cols[0][:, :, :2]
-        df_da = self.g * np.column_stack([np.cos(a) * np.cos(beta), -np.cos(a) * np.sin(beta), -np.full(n, np.sin(a))])
-        cols.append((df_da @ rt.T)[:, :, None])
+            blocks[0] = blocks[0][:, :, :2]
+        df_da = g * np.column_stack([np.cos(alpha) * np.cos(beta), -np.cos(alpha) * np.sin(beta), -np.sin(alpha)])
+        da = np.zeros((n, 3, len(self.sites)))
+        da[np.arange(n), :, self.site_index] = df_da @ prt.T
+        blocks.append(da)
         if "bias" in self.terms:
-            cols.append(np.broadcast_to(np.eye(3), (n, 3, 3)))
-        blocks = np.concatenate(cols, axis=2)  # (n, 3, p_global)
-        jac = -np.einsum("nij,njk->nik", self.whiten, blocks).reshape(3 * n, -1)
+            blocks.append(np.broadcast_to(np.eye(3), (n, 3, 3)))
+        if "temperature" in self.terms:
+            blocks.append(self.dtemp[:, None, None] * np.eye(3))
+        if "gravity" in self.terms:
+            blocks.append(((f_v / g) @ prt.T)[:, :, None])
+        if "scale" in self.terms:
+            z = np.zeros(n)
+            ux, uy, uz = u.T
+            cols = [(ux, z, z), (z, uy, z), (z, z, uz), (uy, ux, z), (uz, z, ux), (z, uz, uy)]
+            blocks.append(np.stack([np.column_stack(c) for c in cols], axis=2))
+        jac = -np.einsum("nij,njk->nik", self.whiten, np.concatenate(blocks, axis=2)).reshape(3 * n, -1)
         if self.fit_beta:
-            df_db = self.g * np.sin(a) * np.column_stack([-np.sin(beta), -np.cos(beta), np.zeros(n)])
-            local = -np.einsum("nij,nj->ni", self.whiten, df_db @ rt.T)  # (n, 3)
+            df_db = g * np.sin(alpha)[:, None] * np.column_stack([-np.sin(beta), -np.cos(beta), np.zeros(n)])
+            local = -np.einsum("nij,nj->ni", self.whiten, df_db @ prt.T)
             jb = np.zeros((3 * n, n))
             jb[np.arange(3 * n), np.repeat(np.arange(n), 3)] = local.ravel()
             jac = np.hstack([jac, jb])
@@ -116,14 +171,28 @@ class StaticModel:
         delta[:k] = step[:k]
         i = k
         rot = Rotation.from_rotvec(delta) * state.rot_vs
-        slope = state.slope_rad + step[i]
-        i += 1
-        bias = state.bias_s
+        m = len(self.sites)
+        slope = state.slope_rad + step[i : i + m]
+        i += m
+        bias, temp, g, scale = state.bias_s, state.temp_coeff_s, state.g_mps2, state.scale_e
         if "bias" in self.terms:
-            bias = bias + step[i : i + 3]
-            i += 3
+            bias, i = bias + step[i : i + 3], i + 3
+        if "temperature" in self.terms:
+            temp, i = temp + step[i : i + 3], i + 3
+        if "gravity" in self.terms:
+            g, i = g + float(step[i]), i + 1
+        if "scale" in self.terms:
+            scale, i = scale + step[i : i + 6], i + 6
         beta = state.beta_rad + step[i:] if self.fit_beta else state.beta_rad
-        return State(rot, float(slope), bias, beta)
+        return State(rot, slope, bias, beta, temp, g, scale)
+
+
+def site_index(table: StopTable) -> tuple[np.ndarray, list[str]]:
+    """Index of each stop's site, and the site names (one site when the table has none)."""
+    if table.site is None:
+        return np.zeros(len(table), dtype=int), ["all"]
+    names, idx = np.unique(table.site.astype(str), return_inverse=True)
+    return idx, [str(s) for s in names]
 
 
 def initial_state(table: StopTable, g_mps2: float) -> State:
@@ -140,7 +209,23 @@ def initial_state(table: StopTable, g_mps2: float) -> State:
     up = acc @ normal
     radius = np.linalg.norm(acc - np.outer(up, normal), axis=1).mean()
     slope = max(float(np.arctan2(radius, up.mean())), 1e-3)  # sin α = 0 would hide yaw and β
-    return State(rot, slope, np.zeros(3), beta)
+    return State(rot, np.array([slope]), np.zeros(3), beta, np.zeros(3), g_mps2, np.zeros(6))
+
+
+def adapt(state: State, table: StopTable, terms: tuple[str, ...], g_mps2: float) -> State:
+    """A start for ``terms`` from a fit of other terms: unused effects zeroed, slopes per site."""
+    n_sites = len(site_index(table)[1]) if "site_slope" in terms else 1
+    slope = state.slope_rad
+    if slope.size != n_sites:
+        slope = np.full(n_sites, float(np.mean(slope)))
+    return replace(
+        state,
+        slope_rad=slope,
+        bias_s=state.bias_s if "bias" in terms else np.zeros(3),
+        temp_coeff_s=state.temp_coeff_s if "temperature" in terms else np.zeros(3),
+        g_mps2=state.g_mps2 if "gravity" in terms else g_mps2,
+        scale_e=state.scale_e if "scale" in terms else np.zeros(6),
+    )
 
 
 def fit(
@@ -148,14 +233,9 @@ def fit(
 ) -> Fit:
     """Maximum-likelihood estimate of the given terms (``rotation`` and ``slope`` always)."""
     model = StaticModel(table, terms, g_mps2)
-    state = start if start is not None else initial_state(table, g_mps2)
-    if "bias" not in terms:
-        state = replace(state, bias_s=np.zeros(3))
+    state = adapt(start if start is not None else initial_state(table, g_mps2), table, terms, g_mps2)
     state, iterations = _levenberg_marquardt(model, state, max_iter)
-    if table.headings == "none" and state.slope_rad < 0:  # α < 0 is α > 0 with every β turned by π
-        state = replace(state, slope_rad=-state.slope_rad, beta_rad=state.beta_rad + np.pi)
-    if table.headings == "relative" and state.slope_rad < 0:  # ... or with the unknown offset turned by π
-        state = replace(state, slope_rad=-state.slope_rad, rot_vs=Rotation.from_euler("z", np.pi) * state.rot_vs)
+    state = _canonical(state, table)
     r = model.residual(state)
     jac = model.jacobian(state)
     fisher = jac.T @ jac
@@ -163,12 +243,11 @@ def fit(
     dof = r.size - len(model.names)
     noise_known = table.cov_s is not None
     scale2 = 1.0 if noise_known else (chi2 / dof if dof > 0 else np.nan)
-    cov = _inverse(fisher) * scale2
     return Fit(
         state=state,
         terms=terms,
         names=model.names,
-        cov=cov,
+        cov=_inverse(fisher) * scale2,
         fisher=fisher,
         chi2=chi2,
         dof=dof,
@@ -186,8 +265,46 @@ def information(
     model = StaticModel(table, terms, g_mps2)
     if table.headings == "none" and state.beta_rad.size != len(table):
         raise ValueError("state must carry fitted headings when the table has none")
-    jac = model.jacobian(state)
+    jac = model.jacobian(adapt(state, table, terms, g_mps2))
     return jac.T @ jac, model.names
+
+
+def _canonical(state: State, table: StopTable) -> State:
+    """α ≥ 0: a negative slope is the same plane seen from the other side."""
+    if state.slope_rad.size == 1 and state.slope_rad[0] < 0:
+        if table.headings == "none":  # ... with every β turned by π
+            return replace(state, slope_rad=-state.slope_rad, beta_rad=state.beta_rad + np.pi)
+        if table.headings == "relative":  # ... or with the unknown heading offset turned by π
+            return replace(state, slope_rad=-state.slope_rad, rot_vs=Rotation.from_euler("z", np.pi) * state.rot_vs)
+    return state
+
+
+def _force(alpha: FloatArray, beta: FloatArray, g: float) -> FloatArray:
+    """f_v for per-stop slopes α_i, shape (n, 3) (MODEL.md §2)."""
+    sa, ca = np.sin(alpha), np.cos(alpha)
+    return g * np.column_stack([sa * np.cos(beta), -sa * np.sin(beta), ca])
+
+
+def _flat(state: State, names: tuple[str, ...]) -> FloatArray:
+    """Parameter values in the order of ``names`` (δ as zero: the state is the reference)."""
+    out = []
+    slopes = iter(state.slope_rad)
+    for name in names:
+        if name.startswith("rot_"):
+            out.append(0.0)
+        elif name.startswith("slope"):
+            out.append(float(next(slopes)))
+        elif name.startswith("bias_"):
+            out.append(float(state.bias_s["xyz".index(name[-1])]))
+        elif name.startswith("temp_"):
+            out.append(float(state.temp_coeff_s["xyz".index(name[-1])]))
+        elif name == "gravity":
+            out.append(state.g_mps2)
+        elif name in SCALE_NAMES:
+            out.append(float(state.scale_e[SCALE_NAMES.index(name)]))
+        else:  # beta_i
+            out.append(float(state.beta_rad[int(name.split("_")[1])]))
+    return np.array(out)
 
 
 def _levenberg_marquardt(model: StaticModel, state: State, max_iter: int) -> tuple[State, int]:

@@ -1,0 +1,302 @@
+"""Closing the loop: from a residual to the effect the model lacks, and back (MODEL.md §6).
+
+Starting from the base model (rotation, slope), each round tries every effect the table can
+support — ``bias``, ``temperature`` (needs temperatures), ``gravity`` (fitted only when no
+position gives it), ``site_slope`` (needs sites), ``scale`` (scale and cross-axis) — and the
+exclusion of the one stop the others predict worst (``outlier``). An effect is a candidate only
+when the data can separate it: its Fisher information must be full rank with the terms already in
+the model, and the tilt must stay determined; otherwise it is reported as confounded. The most
+significant candidate (likelihood ratio, or F-test when the noise is estimated; Bonferroni over
+the candidates) is added when it passes at ``alpha`` *and* improves the held-out (leave-one-stop-
+out) prediction. What the final model still leaves in the residual is reported as unexplained.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy import stats
+
+from mountcal.diagnose import Finding, analyse, leave_one_out
+from mountcal.estimate import full
+from mountcal.stoptable import StopTable
+
+BASE: tuple[str, ...] = ("rotation", "slope")
+NULL_TOL = 1e-10  # relative eigenvalue of the normalised Fisher information counted as zero
+MAX_TILT_SIGMA_DEG = 5.0  # an effect that would leave the tilt this uncertain is not separable
+MIN_TEMPERATURE_SPAN_C = 2.0
+MAX_ROUNDS = 6
+EARTH_GRAVITY_MPS2 = (9.77, 9.835)  # normal gravity: 9.780 (equator) to 9.832 (poles) at sea level, less with height
+
+
+@dataclass(frozen=True)
+class Step:
+    """One model of the loop: its terms, the stops it leaves out, its fit and why it was taken."""
+
+    added: str
+    reason: str
+    terms: tuple[str, ...]
+    excluded: tuple[int, ...]
+    table: StopTable
+    fit: full.Fit
+    loo_rms_mps2: float | None = None
+
+
+@dataclass(frozen=True)
+class Loop:
+    """The sequence of models, the candidates turned down, and the final residual analysis."""
+
+    steps: list[Step]
+    declined: list[dict[str, Any]]
+    findings: list[Finding]
+    unexplained: list[Finding] = field(default_factory=list)
+
+    @property
+    def final(self) -> Step:
+        return self.steps[-1]
+
+
+def candidates(table: StopTable, terms: tuple[str, ...], gravity_known: bool) -> list[str]:
+    """Effects the table's columns allow that are not yet in the model."""
+    out = ["bias", "scale"]
+    if table.temperature_c is not None and np.ptp(table.temperature_c) >= MIN_TEMPERATURE_SPAN_C:
+        out.append("temperature")
+    if not gravity_known:
+        out.append("gravity")
+    if table.site is not None and np.unique(table.site).size > 1:
+        out.append("site_slope")
+    return [c for c in out if c not in terms]
+
+
+def close_the_loop(
+    table: StopTable,
+    g_mps2: float,
+    gravity_known: bool,
+    alpha: float = 0.01,
+    fixed: tuple[str, ...] | None = None,
+    g_prior: float | None = None,
+) -> Loop:
+    """Run the loop (or, with ``fixed`` terms, just the base and the fixed model).
+
+    ``g_prior``: the gravity assumed before the stops' position gave ``g_mps2`` (a first step
+    then shows what local gravity changes).
+    """
+    steps = []
+    if g_prior is not None:
+        naive = full.fit(table, BASE, g_prior)
+        steps.append(
+            Step("start", f"the paper's model with standard gravity {g_prior:.5f} m/s²", BASE, (), table, naive)
+        )
+        base = full.fit(table, BASE, g_mps2, naive.state)
+        steps.append(
+            Step(
+                "gravity",
+                f"local gravity {g_mps2:.5f} m/s² (WGS 84 normal gravity at the stops' position)",
+                BASE,
+                (),
+                table,
+                base,
+            )
+        )
+    else:
+        base = full.fit(table, BASE, g_mps2)
+        steps.append(Step("start", "the paper's model: rotation and slope", BASE, (), table, base))
+    declined: list[dict[str, Any]] = []
+    if fixed is not None:
+        if fixed != BASE:
+            f = full.fit(table, fixed, g_mps2, base.state)
+            steps.append(Step("fixed", "terms fixed by --model", fixed, (), table, f))
+        return _finish(steps, declined)
+    for _ in range(MAX_ROUNDS):
+        step = _next_step(steps[-1], table, g_mps2, gravity_known, alpha, declined)
+        if step is None:
+            break
+        steps.append(step)
+    return _finish(steps, declined)
+
+
+def _finish(steps: list[Step], declined: list[dict[str, Any]]) -> Loop:
+    last = steps[-1]
+    findings = analyse(last.table, last.fit)
+    return Loop(steps, declined, findings, [f for f in findings if f.significant])
+
+
+def _next_step(
+    cur: Step, table: StopTable, g: float, gravity_known: bool, alpha: float, declined: list[dict[str, Any]]
+) -> Step | None:
+    options: list[tuple[float, Step]] = []
+    names = candidates(cur.table, cur.terms, gravity_known)
+    k = len(names) + 1  # the outlier test is one more candidate
+    for name in names:
+        terms = (*cur.terms, name)
+        problem = _inseparable(cur, terms, g)
+        if problem:
+            _decline(declined, name, problem, len(cur.excluded))
+            continue
+        if cur.fit.dof - _extra(cur.table, name) < 1:
+            _decline(declined, name, "not enough stops to test it", len(cur.excluded))
+            continue
+        try:
+            f = full.fit(cur.table, terms, g, cur.fit.state)
+        except Exception as err:  # a candidate that does not converge is not taken
+            _decline(declined, name, f"its fit failed ({err})", len(cur.excluded))
+            continue
+        if name == "gravity" and not (EARTH_GRAVITY_MPS2[0] <= f.state.g_mps2 <= EARTH_GRAVITY_MPS2[1]):
+            _decline(declined, name, f"the fitted g = {f.state.g_mps2:.4f} m/s² is outside Earth's range "
+                     f"{EARTH_GRAVITY_MPS2[0]}–{EARTH_GRAVITY_MPS2[1]} m/s²: the offset is not gravity (a vertical "
+                     "bias or a scale error?)", len(cur.excluded))
+            continue
+        logp, test = _lrt(cur.fit, f)
+        options.append(
+            (logp + np.log(k), Step(name, f"{test}, p = {np.exp(logp):.3g}", terms, cur.excluded, cur.table, f))
+        )
+    outlier = _outlier(cur, table, g, k)
+    if outlier is not None:
+        options.append(outlier)
+    if not options:
+        return None
+    options.sort(key=lambda o: o[0])
+    logp_adj, best = options[0]
+    if logp_adj >= np.log(alpha):
+        for lp, s in options:
+            _decline(
+                declined,
+                s.added,
+                f"not significant: {s.reason} (Bonferroni-adjusted p = {min(np.exp(lp), 1.0):.3g} ≥ {alpha:g})",
+                len(cur.excluded),
+            )
+        return None
+    if best.added != "outlier":
+        cur_loo, new_loo = _loo_rms(cur), _loo_rms(best)
+        if not (new_loo < cur_loo):
+            _decline(
+                declined,
+                best.added,
+                f"significant ({best.reason}) but it does not improve the held-out "
+                f"prediction ({new_loo * 1e3:.3g} vs {cur_loo * 1e3:.3g} mm/s²)",
+                len(cur.excluded),
+            )
+            return None
+        return Step(best.added, best.reason, best.terms, best.excluded, best.table, best.fit, new_loo)
+    return best
+
+
+def _outlier(cur: Step, table: StopTable, g: float, k: int) -> tuple[float, Step] | None:
+    n = len(cur.table)
+    if n - 1 < 4 or cur.fit.dof - 3 < 1:
+        return None
+    d2, press = leave_one_out(cur.table, cur.fit)
+    if not np.any(np.isfinite(d2)):
+        return None
+    i = int(np.nanargmax(d2))
+    logp = float(stats.chi2.logsf(d2[i], 3)) + np.log(n)  # the worst of n stops
+    original = [j for j in range(len(table)) if j not in cur.excluded][i]
+    keep = np.ones(n, dtype=bool)
+    keep[i] = False
+    sub = cur.table.subset(keep)
+    start = cur.fit.state if cur.fit.state.beta_rad.size == 0 else _without_beta(cur.fit.state, i)
+    f = full.fit(sub, cur.terms, g, start)
+    beta = "" if table.beta_rad is None else f", β = {np.degrees(table.beta_rad[original]) % 360:.0f}°"
+    reason = (
+        f"stop {original + 1}{beta} is not predicted by the others: held-out miss {press[i] * 1e3:.3g} mm/s², "
+        f"χ²(3) = {d2[i]:.1f}, p = {min(np.exp(logp), 1.0):.3g} (worst of {n})"
+    )
+    step = Step("outlier", reason, cur.terms, (*cur.excluded, original), sub, f)
+    return logp + np.log(k), step
+
+
+def _without_beta(state: full.State, i: int) -> full.State:
+    from dataclasses import replace
+
+    return replace(state, beta_rad=np.delete(state.beta_rad, i))
+
+
+def _lrt(small: full.Fit, big: full.Fit) -> tuple[float, str]:
+    extra = len(big.names) - len(small.names)
+    if small.noise_known:
+        stat = max(small.chi2 - big.chi2, 0.0)
+        return float(stats.chi2.logsf(stat, extra)), f"likelihood ratio χ²({extra}) = {stat:.1f}"
+    f_stat = ((small.chi2 - big.chi2) / extra) / (big.chi2 / max(big.dof, 1))
+    return float(stats.f.logsf(max(f_stat, 0.0), extra, max(big.dof, 1))), f"F({extra}, {big.dof}) = {f_stat:.2f}"
+
+
+def _inseparable(cur: Step, terms: tuple[str, ...], g: float) -> str | None:
+    """Why the data cannot separate the new term from the model, or None when they can."""
+    info, names = full.information(cur.table, cur.fit.state, terms, g)
+    scale = np.sqrt(np.clip(np.diag(info), 1e-300, None))
+    eig, vec = np.linalg.eigh(info / np.outer(scale, scale))
+    null = vec[:, eig < NULL_TOL * eig.max()]
+    if null.size:
+        groups = sorted({_group(names[j]) for j in np.flatnonzero(np.abs(null).max(axis=1) > 0.1)})
+        return f"confounded with {', '.join(g for g in groups if g != terms[-1]) or 'itself'} in these stops"
+    cov = np.linalg.inv(info) * cur.fit.noise_scale**2
+    tilt = float(np.degrees(np.sqrt(max(cov[0, 0], cov[1, 1]))))
+    if tilt > MAX_TILT_SIGMA_DEG:
+        return f"not separable from the tilt: with it the tilt 1σ would be {tilt:.3g}°"
+    return None
+
+
+def _group(name: str) -> str:
+    for prefix, group in (
+        ("rot_", "rotation"),
+        ("slope", "slope"),
+        ("bias_", "bias"),
+        ("temp_", "temperature"),
+        ("gravity", "gravity"),
+        ("scale_", "scale"),
+        ("cross_", "scale"),
+        ("beta_", "headings"),
+    ):
+        if name.startswith(prefix):
+            return group
+    return name
+
+
+def _extra(table: StopTable, name: str) -> int:
+    if name == "site_slope":
+        return len(np.unique(table.site)) - 1 if table.site is not None else 0
+    return {"bias": 3, "temperature": 3, "gravity": 1, "scale": 6}.get(name, 0)
+
+
+def _loo_rms(step: Step) -> float:
+    _, press = leave_one_out(step.table, step.fit)
+    return float(np.sqrt(np.nanmean(press**2)))
+
+
+def _decline(declined: list[dict[str, Any]], effect: str, why: str, round_: int) -> None:
+    declined.append({"effect": effect, "why": why})
+
+
+def effect_values(fit: full.Fit) -> dict[str, Any]:
+    """The fitted values ± 1σ of every effect term of a fit (JSON-ready)."""
+    out: dict[str, Any] = {}
+
+    def vec(prefix: str) -> tuple[list[float], list[float]]:
+        idx = [fit.names.index(f"{prefix}{a}") for a in "xyz"]
+        vals = {"bias_": fit.state.bias_s, "temp_": fit.state.temp_coeff_s}[prefix]
+        return [float(v) for v in vals], [float(np.sqrt(max(fit.cov[i, i], 0.0))) for i in idx]
+
+    if "bias" in fit.terms:
+        v, s = vec("bias_")
+        out["bias_mps2"] = {"value": v, "sigma": s}
+    if "temperature" in fit.terms:
+        v, s = vec("temp_")
+        out["temperature_mps2_per_c"] = {"value": v, "sigma": s}
+    if "gravity" in fit.terms:
+        out["gravity_mps2"] = {"value": fit.state.g_mps2, "sigma": fit.sigma("gravity")}
+    if "scale" in fit.terms:
+        out["scale"] = {
+            n: {"value": float(fit.state.scale_e[i]), "sigma": fit.sigma(n)} for i, n in enumerate(full.SCALE_NAMES)
+        }
+    if "site_slope" in fit.terms:
+        out["site_slope_deg"] = {
+            n.removeprefix("slope_"): {
+                "value": float(np.degrees(fit.value(n))),
+                "sigma": float(np.degrees(fit.sigma(n))),
+            }
+            for n in fit.names
+            if n.startswith("slope_")
+        }
+    return out

@@ -1,0 +1,66 @@
+"""Cramér–Rao bounds of the angles for a stop set and a model (MODEL.md §5)."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from mountcal.conventions import FloatArray, angles_from_rot_vs
+from mountcal.estimate import full
+from mountcal.stoptable import StopTable
+
+
+def euler_gradients(rot: Rotation, k: int, h: float = 1e-7) -> FloatArray:
+    """∂(roll, pitch, yaw)/∂δ for a left perturbation δ about the vehicle axes; shape (3, k)."""
+    grads = np.zeros((3, k))
+    for j in range(k):
+        d = np.zeros(3)
+        d[j] = h
+        up = np.array(angles_from_rot_vs(Rotation.from_rotvec(d) * rot))
+        down = np.array(angles_from_rot_vs(Rotation.from_rotvec(-d) * rot))
+        grads[:, j] = np.angle(np.exp(1j * (up - down))) / (2 * h)
+    return grads
+
+
+def crb_deg(
+    table: StopTable, state: full.State, terms: tuple[str, ...], g_mps2: float, noise_scale: float = 1.0
+) -> dict[str, float | None] | None:
+    """1σ bounds of roll, pitch, yaw and slope (degrees) at ``state``; None when singular.
+
+    The table's stop covariances (times ``noise_scale²``) are the noise model.
+    """
+    info, names = full.information(table, state, terms, g_mps2)
+    try:
+        cov = np.linalg.inv(info) * noise_scale**2
+    except np.linalg.LinAlgError:
+        return None
+    k = 3 if "rot_z" in names else 2
+    grads = euler_gradients(state.rot_vs, k)
+    sig = [float(np.degrees(np.sqrt(max(c @ cov[:k, :k] @ c, 0.0)))) for c in grads]
+    slopes = [i for i, n in enumerate(names) if n.startswith("slope")]
+    return {
+        "roll_deg": sig[0],
+        "pitch_deg": sig[1],
+        "yaw_deg": sig[2] if k == 3 else None,
+        "slope_deg": float(np.degrees(np.sqrt(cov[slopes[0], slopes[0]]))) if len(slopes) == 1 else None,
+    }
+
+
+def true_state(
+    rot_vs: Rotation,
+    slope_deg: float,
+    g_mps2: float,
+    bias_mps2: FloatArray | None = None,
+    temp_coeff: FloatArray | None = None,
+    scale_e: FloatArray | None = None,
+) -> full.State:
+    """A parameter-space point from true values (for bounds at the truth)."""
+    return full.State(
+        rot_vs,
+        np.array([np.radians(slope_deg)]),
+        np.zeros(3) if bias_mps2 is None else np.asarray(bias_mps2, dtype=float),
+        np.zeros(0),
+        np.zeros(3) if temp_coeff is None else np.asarray(temp_coeff, dtype=float),
+        g_mps2,
+        np.zeros(6) if scale_e is None else np.asarray(scale_e, dtype=float),
+    )
