@@ -129,8 +129,15 @@ def _next_step(
     options: list[tuple[float, Step]] = []
     names = candidates(cur.table, cur.terms, gravity_known)
     k = len(names) + 1  # the outlier test is one more candidate
+    bias_separable = "bias" in cur.terms or ("bias" in names and _inseparable(cur, (*cur.terms, "bias"), g) is None)
     for name in names:
         terms = (*cur.terms, name)
+        if name == "temperature" and "bias" not in terms:
+            terms = (*cur.terms, "bias", name)  # a bias that drifts with temperature has an offset too
+        if name == "gravity" and bias_separable:
+            _decline(declined, name, "with the position unknown, an offset of |a| from standard gravity is a "
+                     "vertical bias as far as these stops can tell: the bias term covers it", len(cur.excluded))
+            continue
         problem = _inseparable(cur, terms, g)
         if problem:
             _decline(declined, name, problem, len(cur.excluded))
@@ -187,6 +194,8 @@ def _outlier(cur: Step, table: StopTable, g: float, k: int) -> tuple[float, Step
     n = len(cur.table)
     if n - 1 < 4 or cur.fit.dof - 3 < 1:
         return None
+    if len(cur.excluded) >= max(1, len(table) // 10):
+        return None  # more misfits than that is structure, not a few bad stops: leave it to the diagnostics
     d2, press = leave_one_out(cur.table, cur.fit)
     if not np.any(np.isfinite(d2)):
         return None
@@ -257,7 +266,7 @@ def _group(name: str) -> str:
 def _extra(table: StopTable, name: str) -> int:
     if name == "site_slope":
         return len(np.unique(table.site)) - 1 if table.site is not None else 0
-    return {"bias": 3, "temperature": 3, "gravity": 1, "scale": 6}.get(name, 0)
+    return {"bias": 3, "temperature": 6, "gravity": 1, "scale": 6}.get(name, 0)
 
 
 def _loo_rms(step: Step) -> float:
