@@ -21,7 +21,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from mountcal.calibrate import calibrate
-from mountcal.conventions import G_N, normal_gravity
+from mountcal.conventions import G_N
 from mountcal.estimate import bound
 from mountcal.simulate import ZHANG2011, Truth, random_bias, simulate_stops
 from mountcal.stoptable import StopTable
@@ -48,8 +48,11 @@ def _scale(rng: np.random.Generator) -> dict[str, object]:
 
 
 def _temperature(rng: np.random.Generator) -> dict[str, object]:
-    return {"temperature_c": np.linspace(20.0, 40.0, 12), "temp_coeff_mps2_per_c": random_bias(0.5 * MG, rng),
-            "temp_ref_c": 20.0}
+    return {
+        "temperature_c": np.linspace(20.0, 40.0, 12),
+        "temp_coeff_mps2_per_c": random_bias(0.5 * MG, rng),
+        "temp_ref_c": 20.0,
+    }
 
 
 def _disturbed(rng: np.random.Generator) -> dict[str, object]:
@@ -73,10 +76,15 @@ SCENARIOS = [
     Scenario("no effect", "", lambda rng: {}, ("rotation", "slope")),
     Scenario("bias 20 mg", "bias", lambda rng: {"bias_mps2": random_bias(20 * MG, rng)}, ("rotation", "slope", "bias")),
     Scenario("scale 2 %, cross-axis 1 %", "scale", _scale, ("rotation", "slope", "scale")),
-    Scenario("temperature 0.5 mg/°C over 20 °C", "temperature", _temperature,
-             ("rotation", "slope", "bias", "temperature")),
-    Scenario("gravity 9.780, position known", "gravity", lambda rng: {"g_mps2": 9.780, "lat_deg": 0.0, "alt_m": 0.0},
-             ("rotation", "slope")),
+    Scenario(
+        "temperature 0.5 mg/°C over 20 °C", "temperature", _temperature, ("rotation", "slope", "bias", "temperature")
+    ),
+    Scenario(
+        "gravity 9.780, position known",
+        "gravity",
+        lambda rng: {"g_mps2": 9.780, "lat_deg": 0.0, "alt_m": 0.0},
+        ("rotation", "slope"),
+    ),
     Scenario("one stop disturbed by 50 mg", "outlier", _disturbed, ("rotation", "slope")),
     Scenario("outside the library: bias drifting with time", None, _time_drift, ("rotation", "slope")),
     Scenario("outside the library: each stop on its own surface (0.3° tilt)", None, _surfaces, ("rotation", "slope")),
@@ -102,10 +110,16 @@ def true_bound(s: Scenario, table: StopTable, truth: Truth, params: dict[str, ob
         bad = np.flatnonzero(np.any(truth.disturbance_mps2 != 0, axis=1))  # type: ignore[arg-type]
         exact = exact.subset(np.setdiff1d(np.arange(len(table)), bad))
     e = truth.scale_matrix - np.eye(3)
-    state = bound.true_state(truth.rot_vs, truth.slope_deg, truth.g_mps2, truth.bias_mps2 +
-                             truth.temp_coeff_mps2_per_c * (np.mean(table.temperature_c) - truth.temp_ref_c
-                                                            if table.temperature_c is not None else 0.0),
-                             truth.temp_coeff_mps2_per_c, np.array([e[0, 0], e[1, 1], e[2, 2], e[0, 1], e[0, 2], e[1, 2]]))
+    state = bound.true_state(
+        truth.rot_vs,
+        truth.slope_deg,
+        truth.g_mps2,
+        truth.bias_mps2
+        + truth.temp_coeff_mps2_per_c
+        * (np.mean(table.temperature_c) - truth.temp_ref_c if table.temperature_c is not None else 0.0),
+        truth.temp_coeff_mps2_per_c,
+        np.array([e[0, 0], e[1, 1], e[2, 2], e[0, 1], e[0, 2], e[1, 2]]),
+    )
     crb = bound.crb_deg(exact, state, s.true_terms, truth.g_mps2)
     return crb or {f"{a}_deg": None for a in (*ANGLES, "slope")}
 
@@ -131,9 +145,15 @@ def run(s: Scenario, runs: int, seed: int) -> dict[str, object]:
         confident += cal.confident
         if crb is None:
             crb = true_bound(s, table, truth, params)
-    return {"found": found / runs, "flagged": flagged / runs, "confident": confident / runs,
-            "before": np.sqrt(np.mean(before**2, axis=0)), "after": np.sqrt(np.mean(after**2, axis=0)),
-            "coverage": covered.mean(axis=0), "crb": crb}
+    return {
+        "found": found / runs,
+        "flagged": flagged / runs,
+        "confident": confident / runs,
+        "before": np.sqrt(np.mean(before**2, axis=0)),
+        "after": np.sqrt(np.mean(after**2, axis=0)),
+        "coverage": covered.mean(axis=0),
+        "crb": crb,
+    }
 
 
 def main() -> None:
@@ -144,10 +164,13 @@ def main() -> None:
     ap.add_argument("--only", default=None, help="run the scenarios whose name contains this")
     args = ap.parse_args()
     t0 = time.perf_counter()
-    lines = [f"{args.runs} runs per scenario, seed {args.seed}. Angles: roll / pitch / yaw, RMS error in degrees.", "",
-             "| scenario | expected term found | unexplained flagged | confident | RMS before (base model) | "
-             "RMS after (chosen model) | CRB of the true model | after / CRB | 95 % coverage after |",
-             "|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        f"{args.runs} runs per scenario, seed {args.seed}. Angles: roll / pitch / yaw, RMS error in degrees.",
+        "",
+        "| scenario | expected term found | unexplained flagged | confident | RMS before (base model) | "
+        "RMS after (chosen model) | CRB of the true model | after / CRB | 95 % coverage after |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
     for i, s in enumerate(SCENARIOS):
         if args.only and args.only not in s.name:
             continue
@@ -155,13 +178,18 @@ def main() -> None:
         crb = res["crb"]
         bound_v = np.array([np.nan if crb[f"{a}_deg"] is None else crb[f"{a}_deg"] for a in ANGLES])  # type: ignore[index]
         fmt = lambda v: " / ".join(f"{x:.3f}" for x in v)  # noqa: E731
-        found = "—" if s.expect is None else ("nothing added: " if s.expect == "" else f"`{s.expect}`: ") + \
-            f"{res['found']:.1%}"
+        found = (
+            "—"
+            if s.expect is None
+            else ("nothing added: " if s.expect == "" else f"`{s.expect}`: ") + f"{res['found']:.1%}"
+        )
         ratio = res["after"] / bound_v  # type: ignore[operator]
-        lines.append(f"| {s.name} | {found} | {res['flagged']:.1%} | {res['confident']:.1%} | {fmt(res['before'])} | "
-                     f"{fmt(res['after'])} | {fmt(bound_v) if np.all(np.isfinite(bound_v)) else 'singular'} | "
-                     f"{fmt(ratio) if np.all(np.isfinite(ratio)) else '—'} | "
-                     f"{' / '.join(f'{c:.0%}' for c in res['coverage'])} |")  # type: ignore[union-attr]
+        lines.append(
+            f"| {s.name} | {found} | {res['flagged']:.1%} | {res['confident']:.1%} | {fmt(res['before'])} | "
+            f"{fmt(res['after'])} | {fmt(bound_v) if np.all(np.isfinite(bound_v)) else 'singular'} | "
+            f"{fmt(ratio) if np.all(np.isfinite(ratio)) else '—'} | "
+            f"{' / '.join(f'{c:.0%}' for c in res['coverage'])} |"
+        )  # type: ignore[union-attr]
         print(lines[-1], flush=True)
     text = "\n".join(lines) + f"\n\n_{time.perf_counter() - t0:.0f} s._\n"
     if args.markdown:
