@@ -50,7 +50,7 @@ class Options:
     model: str = "auto"
     gravity_mps2: float | None = None
     max_yaw_sigma_deg: float = 5.0
-    selection_alpha: float = 0.01
+    selection_alpha: float = 0.001
 
 
 def calibrate(table: StopTable, options: Options | None = None) -> Calibration:

@@ -13,11 +13,12 @@ out) prediction. What the final model still leaves in the residual is reported a
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
-from scipy import stats
+from scipy import optimize, stats
+from scipy.spatial.transform import Rotation
 
 from mountcal.diagnose import Finding, analyse, leave_one_out
 from mountcal.estimate import full
@@ -28,6 +29,7 @@ NULL_TOL = 1e-10  # relative eigenvalue of the normalised Fisher information cou
 MAX_TILT_SIGMA_DEG = 5.0  # an effect that would leave the tilt this uncertain is not separable
 MIN_TEMPERATURE_SPAN_C = 2.0
 MAX_ROUNDS = 6
+SAME_PLACE_M = 30.0  # stops farther apart than this may stand on different surfaces
 EARTH_GRAVITY_MPS2 = (9.77, 9.835)  # normal gravity: 9.780 (equator) to 9.832 (poles) at sea level, less with height
 
 
@@ -67,7 +69,20 @@ def candidates(table: StopTable, terms: tuple[str, ...], gravity_known: bool) ->
         out.append("gravity")
     if table.site is not None and np.unique(table.site).size > 1:
         out.append("site_slope")
+    if table.cov_s is not None and _moved(table):
+        out.append("surface")
     return [c for c in out if c not in terms]
+
+
+def _moved(table: StopTable) -> bool:
+    """Were the stops made at different places (so possibly on different surfaces)?"""
+    if table.site is not None and np.unique(table.site).size > 1:
+        return True
+    if table.lat_deg is None or table.lon_deg is None:
+        return False
+    north = np.radians(table.lat_deg) * 6.371e6
+    east = np.radians(table.lon_deg) * 6.371e6 * np.cos(np.radians(np.mean(table.lat_deg)))
+    return bool(max(np.ptp(north), np.ptp(east)) > SAME_PLACE_M)
 
 
 def close_the_loop(
@@ -135,8 +150,18 @@ def _next_step(
         if name == "temperature" and "bias" not in terms:
             terms = (*cur.terms, "bias", name)  # a bias that drifts with temperature has an offset too
         if name == "gravity" and bias_separable:
-            _decline(declined, name, "with the position unknown, an offset of |a| from standard gravity is a "
-                     "vertical bias as far as these stops can tell: the bias term covers it", len(cur.excluded))
+            _decline(
+                declined,
+                name,
+                "with the position unknown, an offset of |a| from standard gravity is a "
+                "vertical bias as far as these stops can tell: the bias term covers it",
+                len(cur.excluded),
+            )
+            continue
+        if name == "surface":
+            option = _surface(cur, g, k)
+            if option is not None:
+                options.append(option)
             continue
         problem = _inseparable(cur, terms, g)
         if problem:
@@ -151,9 +176,14 @@ def _next_step(
             _decline(declined, name, f"its fit failed ({err})", len(cur.excluded))
             continue
         if name == "gravity" and not (EARTH_GRAVITY_MPS2[0] <= f.state.g_mps2 <= EARTH_GRAVITY_MPS2[1]):
-            _decline(declined, name, f"the fitted g = {f.state.g_mps2:.4f} m/s² is outside Earth's range "
-                     f"{EARTH_GRAVITY_MPS2[0]}–{EARTH_GRAVITY_MPS2[1]} m/s²: the offset is not gravity (a vertical "
-                     "bias or a scale error?)", len(cur.excluded))
+            _decline(
+                declined,
+                name,
+                f"the fitted g = {f.state.g_mps2:.4f} m/s² is outside Earth's range "
+                f"{EARTH_GRAVITY_MPS2[0]}–{EARTH_GRAVITY_MPS2[1]} m/s²: the offset is not gravity (a vertical "
+                "bias or a scale error?)",
+                len(cur.excluded),
+            )
             continue
         logp, test = _lrt(cur.fit, f)
         options.append(
@@ -175,7 +205,7 @@ def _next_step(
                 len(cur.excluded),
             )
         return None
-    if best.added != "outlier":
+    if best.added not in ("outlier", "surface"):  # those change the noise model, not the prediction
         cur_loo, new_loo = _loo_rms(cur), _loo_rms(best)
         if not (new_loo < cur_loo):
             _decline(
@@ -213,6 +243,52 @@ def _outlier(cur: Step, table: StopTable, g: float, k: int) -> tuple[float, Step
         f"χ²(3) = {d2[i]:.1f}, p = {min(np.exp(logp), 1.0):.3g} (worst of {n})"
     )
     step = Step("outlier", reason, cur.terms, (*cur.excluded, original), sub, f)
+    return logp + np.log(k), step
+
+
+def with_surface(table: StopTable, rot_vs: Rotation, sigma_rad: float, g: float) -> StopTable:
+    """The table with each stop's covariance widened by a random road tilt of ``sigma_rad`` (1σ per axis).
+
+    A tilt δ of the surface about the vehicle's x and y axes moves f_v by g·(δ × e_z): horizontal in
+    the vehicle frame, so the extra covariance is ``(g σ)² Rᵀ diag(1, 1, 0) R`` in the sensor frame.
+    """
+    rm = rot_vs.as_matrix()
+    extra = (g * sigma_rad) ** 2 * rm.T @ np.diag([1.0, 1.0, 0.0]) @ rm
+    return replace(table, cov_s=table.cov_s + extra)  # type: ignore[operator]
+
+
+def _neg2loglik(table: StopTable, fit: full.Fit) -> float:
+    return fit.chi2 + float(np.sum(np.linalg.slogdet(table.cov_s)[1]))  # type: ignore[arg-type]
+
+
+def _surface(cur: Step, g: float, k: int) -> tuple[float, Step] | None:
+    """A random road tilt per stop (stops on different surfaces): its σ by maximum likelihood."""
+    if cur.table.cov_s is None or cur.fit.dof < 2:
+        return None
+    base = cur.table
+    rot = cur.fit.state.rot_vs
+
+    def cost(log_sigma: float) -> tuple[float, StopTable, full.Fit]:
+        table = with_surface(base, rot, float(np.exp(log_sigma)), g)
+        f = full.fit(table, cur.terms, g, cur.fit.state)
+        return _neg2loglik(table, f), table, f
+
+    res = optimize.minimize_scalar(
+        lambda x: cost(x)[0], bounds=(np.log(1e-5), np.log(0.2)), method="bounded", options={"xatol": 0.01}
+    )
+    value, table, f = cost(float(res.x))
+    h = 0.05
+    curvature = (cost(res.x + h)[0] - 2 * value + cost(res.x - h)[0]) / h**2
+    stat = max(_neg2loglik(base, cur.fit) - value, 0.0)
+    logp = float(stats.chi2.logsf(stat, 1))
+    sigma = float(np.exp(res.x))
+    rel = float(np.sqrt(2.0 / curvature)) if curvature > 0 else float("nan")
+    reason = (
+        f"stops on different surfaces: a random road tilt of {np.degrees(sigma):.3g}° (1σ, ±{rel:.0%}) per stop; "
+        f"likelihood ratio χ²(1) = {stat:.1f}, p = {np.exp(logp):.3g}"
+    )
+    terms = (*cur.terms, "surface")
+    step = Step("surface", reason, terms, cur.excluded, table, replace(f, terms=terms))
     return logp + np.log(k), step
 
 
@@ -266,7 +342,7 @@ def _group(name: str) -> str:
 def _extra(table: StopTable, name: str) -> int:
     if name == "site_slope":
         return len(np.unique(table.site)) - 1 if table.site is not None else 0
-    return {"bias": 3, "temperature": 6, "gravity": 1, "scale": 6}.get(name, 0)
+    return {"bias": 3, "temperature": 6, "gravity": 1, "scale": 6, "surface": 1}.get(name, 0)
 
 
 def _loo_rms(step: Step) -> float:

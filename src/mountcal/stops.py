@@ -27,9 +27,10 @@ class StopDetection:
 
     window_s: float = 2.0
     max_acc_std_mps2: float = 0.12
+    max_acc_std_with_speed_mps2: float = 0.3  # with a speed signal, stillness rests on it; idle vibration is allowed
     max_gyro_rad_s: float = 0.02
     max_speed_mps: float = 0.3
-    min_duration_s: float = 15.0
+    min_duration_s: float = 8.0
     trim_s: float = 2.0
 
 
@@ -57,11 +58,13 @@ def still_mask(samples: Samples, cfg: StopDetection) -> np.ndarray:
         return np.zeros(len(samples), dtype=bool)
     rate = 1.0 / float(np.median(np.diff(t)))
     w = max(round(cfg.window_s * rate), 3)
-    still = _moving_std(acc, w).max(axis=1) < cfg.max_acc_std_mps2
+    speed = samples.channels.get("speed_mps")
+    has_speed = speed is not None and speed.t_s.size > 0
+    max_std = cfg.max_acc_std_with_speed_mps2 if has_speed else cfg.max_acc_std_mps2
+    still = _moving_std(acc, w).max(axis=1) < max_std
     if samples.gyro_s is not None:
         still &= _moving_mean(np.linalg.norm(samples.gyro_s, axis=1), w) < cfg.max_gyro_rad_s
-    speed = samples.channels.get("speed_mps")
-    if speed is not None and speed.t_s.size:
+    if speed is not None and has_speed:
         still &= np.abs(_hold(speed, t)) <= cfg.max_speed_mps
     return still
 

@@ -26,10 +26,11 @@ TEMPERATURE = "temperature_c"
 TIME = "t_s"
 SITE = "site"
 LAT = "lat_deg"
+LON = "lon_deg"
 ALT = "alt_m"
 REQUIRED = ACC
-OPTIONAL = (BETA, *STD, COUNT, TEMPERATURE, TIME, SITE, LAT, ALT)
-COLUMNS = (BETA, *ACC, *STD, COUNT, TEMPERATURE, TIME, SITE, LAT, ALT)
+OPTIONAL = (BETA, *STD, COUNT, TEMPERATURE, TIME, SITE, LAT, LON, ALT)
+COLUMNS = (BETA, *ACC, *STD, COUNT, TEMPERATURE, TIME, SITE, LAT, LON, ALT)
 
 Headings = Literal["uphill", "relative", "none"]
 Unit = Literal["mps2", "g"]
@@ -52,7 +53,7 @@ class StopTable:
         observable; "relative": β has an unknown common offset, so yaw is not; "none": no β.
     cov_s : ndarray, shape (n, 3, 3), or None
         Covariance of each stop mean, (m/s²)², when the table gives sample spreads and counts.
-    temperature_c, t_s, lat_deg, alt_m : ndarray, shape (n,), or None
+    temperature_c, t_s, lat_deg, lon_deg, alt_m : ndarray, shape (n,), or None
     site : ndarray of str, shape (n,), or None
     source : str
         Where the table came from; ``sha256`` is the hash of that file's bytes.
@@ -67,6 +68,7 @@ class StopTable:
     site: np.ndarray | None = None
     lat_deg: FloatArray | None = None
     alt_m: FloatArray | None = None
+    lon_deg: FloatArray | None = None
     source: str = "<memory>"
     sha256: str = ""
     notes: tuple[str, ...] = field(default=())
@@ -94,6 +96,7 @@ class StopTable:
             site=pick(self.site),
             lat_deg=pick(self.lat_deg),
             alt_m=pick(self.alt_m),
+            lon_deg=pick(self.lon_deg),
         )
 
     def to_frame(self) -> pd.DataFrame:
@@ -110,6 +113,7 @@ class StopTable:
             (TIME, self.t_s),
             (SITE, self.site),
             (LAT, self.lat_deg),
+            (LON, self.lon_deg),
             (ALT, self.alt_m),
         ):
             if values is not None:
@@ -205,6 +209,7 @@ def stop_table_from_frame(
         site=df[SITE].astype(str).to_numpy() if SITE in df.columns else None,
         lat_deg=optional(LAT),
         alt_m=optional(ALT),
+        lon_deg=optional(LON),
         source=source,
     )
 

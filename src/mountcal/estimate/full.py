@@ -27,7 +27,8 @@ from mountcal.errors import FitFailed
 from mountcal.estimate.geometry import in_plane_azimuth, level_rotation, phase_yaw, plane_normal, with_yaw
 from mountcal.stoptable import StopTable
 
-TERMS = ("rotation", "slope", "site_slope", "bias", "temperature", "gravity", "scale")
+# "surface" (a random road tilt per stop) lives in the stop covariances, not in the mean model.
+TERMS = ("rotation", "slope", "site_slope", "bias", "temperature", "gravity", "scale", "surface")
 SCALE_NAMES = ("scale_xx", "scale_yy", "scale_zz", "cross_xy", "cross_xz", "cross_yz")
 
 

@@ -1,0 +1,980 @@
+"""Accelerometer (and gyro) samples from a CAN log and a DBC: the signal mapping and the readers.
+
+A *mapping* says which DBC signals hold the accelerometer axes, the optional gyro axes and the
+auxiliary channels, in which units, on which channel, and how the device's axes map to the
+right-handed sensor frame. It is a small TOML file (or the equivalent dict)::
+
+    channel = 2                    # optional: CAN channel, python-can numbering
+    axes = "x,y,z"                 # optional: sensor axis i = signed device axis, e.g. "-y,x,z"
+    allow_left_handed = false      # optional: true or a reason, to accept a reflection
+    valid = ["gnss_imu.ImuValid"]  # optional: frames whose validity signal is 0 are dropped
+
+    [signals]                      # message.signal; the message by name or by id ("0x9")
+    ax = "gnss_imu.AccelerationX"
+    ay = "gnss_imu.AccelerationY"
+    az = "gnss_imu.AccelerationZ"
+    gx = "gnss_imu.AngularRateX"   # optional gx, gy, gz
+    gy = "gnss_imu.AngularRateY"
+    gz = "gnss_imu.AngularRateZ"
+    speed = "gnss_speed.Speed"     # optional: temperature, speed, heading, latitude, longitude, altitude
+    heading = "gnss_attitude.Heading"
+
+    [units]                        # optional: overrides the DBC's units
+    accel = "m/s^2"                # m/s^2 or g
+    gyro = "deg/s"                 # deg/s or rad/s
+
+Without a mapping (or without its ``[signals]`` table) the signals are detected from their names
+when the DBC and the log make the choice unambiguous: one message with AccelerationX/Y/Z, AccX..,
+AX/AY/AZ or Accel_Longitudinal/Lateral/Vertical, or one such signal per axis across messages. A
+message name the DBC defines twice (CANedge's gnss.dbc) resolves to the one present in the log.
+Gyro axes and the auxiliary channels (Speed, Heading, Latitude, ...; a temperature only from the
+accelerometer's own message) are added when they are as unambiguous; the log is read an extra time
+only when the DBC alone leaves a choice. Without ``valid``, 1-bit signals whose name contains
+"valid" in a used message are the validity flags.
+
+Axes in different messages (Bosch MM5.10: AY1 in 0x70, AX1 in 0x80, AZ in 0x576) are aligned on
+the clock of the message carrying ``ax``: each of its frames takes, from every other message, the
+frame nearest in time (the earlier one on a tie) if it lies within one period of that message (the
+median interval of its first 1000 frames); rows without such a partner are dropped and counted.
+
+Output is float64 SI in the sensor frame, as :class:`~mountcal.io.samples.Samples` states; the
+auxiliary channels are ``temperature_c``, ``speed_mps``, ``heading_deg`` (compass, as the DBC
+gives it), ``lat_deg``, ``lon_deg``, ``alt_m``, each on its own message's clock. ``dropped`` counts
+frames of the selected messages that were unusable: too short, flagged invalid, non-finite, or
+without a partner in time. Frames of other messages or channels are simply not selected.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import tomllib
+from collections import Counter
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from mountcal.errors import InputError
+from mountcal.io.can_frames import CanFrames, iter_frames, log_format
+from mountcal.io.dbc import decode, load_dbc, payload_bytes, raw_values
+from mountcal.io.samples import Channel, FloatArray, LogSummary, Samples, Stream
+
+G_N = 9.80665  # standard gravity, m/s², for signals in g
+ACCEL_ROLES = ("ax", "ay", "az")
+GYRO_ROLES = ("gx", "gy", "gz")
+AUX_KEYS = {
+    "temperature": "temperature_c",
+    "speed": "speed_mps",
+    "heading": "heading_deg",
+    "latitude": "lat_deg",
+    "longitude": "lon_deg",
+    "altitude": "alt_m",
+}
+_PERIOD_FRAMES = 1000  # frames used to measure a message's period
+_FRAMES_PER_CHUNK = 100_000  # frames decoded at a time by read_can (≈ 9 MB)
+
+# unit spellings (lower case, spaces removed, ² → ^2, ° → deg) → (scale, offset) to SI
+_UNITS: dict[str, dict[str, tuple[float, float]]] = {
+    "accel": {
+        **dict.fromkeys(("m/s^2", "m/s2", "m/s/s", "ms^-2", "ms-2", "mps2", "m/sec^2", "m/sec2"), (1.0, 0.0)),
+        **dict.fromkeys(("g", "gn", "g0"), (G_N, 0.0)),
+        "mg": (G_N / 1000.0, 0.0),
+    },
+    "gyro": {
+        **dict.fromkeys(("deg/s", "degs^-1", "dps", "degree/s", "degrees/s", "deg/sec"), (math.pi / 180.0, 0.0)),
+        **dict.fromkeys(("rad/s", "rads^-1", "rad/sec"), (1.0, 0.0)),
+        "mrad/s": (1e-3, 0.0),
+    },
+    "speed": {
+        **dict.fromkeys(("m/s", "mps", "m/sec"), (1.0, 0.0)),
+        **dict.fromkeys(("km/h", "kmh", "kph", "km/hr"), (1.0 / 3.6, 0.0)),
+        "mph": (0.44704, 0.0),
+        **dict.fromkeys(("kn", "kt", "knot", "knots"), (1852.0 / 3600.0, 0.0)),
+    },
+    "angle": {
+        **dict.fromkeys(("deg", "degree", "degrees"), (1.0, 0.0)),
+        **dict.fromkeys(("rad", "radian", "radians"), (180.0 / math.pi, 0.0)),
+    },
+    "length": {"m": (1.0, 0.0), "km": (1000.0, 0.0), "ft": (0.3048, 0.0)},
+    "temperature": {
+        **dict.fromkeys(("degc", "c", "celsius", "degreec", "degreesc"), (1.0, 0.0)),
+        "k": (1.0, -273.15),
+        **dict.fromkeys(("degf", "f", "fahrenheit"), (5.0 / 9.0, -32.0 * 5.0 / 9.0)),
+    },
+}
+_UNIT_KIND = {
+    "ax": "accel",
+    "ay": "accel",
+    "az": "accel",
+    "gx": "gyro",
+    "gy": "gyro",
+    "gz": "gyro",
+    "temperature": "temperature",
+    "speed": "speed",
+    "heading": "angle",
+    "latitude": "angle",
+    "longitude": "angle",
+    "altitude": "length",
+}
+_UNIT_HINT = {
+    "accel": "m/s^2 or g",
+    "gyro": "deg/s or rad/s",
+    "speed": "m/s, km/h, mph or kn",
+    "angle": "deg or rad",
+    "length": "m, km or ft",
+    "temperature": "degC, K or degF",
+}
+
+# signal-name patterns, matched against the lower-case name without separators and trailing digits
+_ACC = "(?:a|acc|accel|acceleration|linacc|linearaccel|linearacceleration)"
+_RATE = "(?:g|w|gyr|gyro|gyrorate|rate|angrate|angularrate|angularvelocity|omega)"
+_NAME_PATTERNS = {
+    "ax": rf"{_ACC}(?:x|long|longitudinal)|(?:long|longitudinal){_ACC}",
+    "ay": rf"{_ACC}(?:y|lat|lateral)|(?:lat|lateral){_ACC}",
+    "az": rf"{_ACC}(?:z|vert|vertical)|(?:vert|vertical){_ACC}",
+    "gx": rf"{_RATE}(?:x|roll)|(?:x|roll){_RATE}",
+    "gy": rf"{_RATE}(?:y|pitch)|(?:y|pitch){_RATE}",
+    "gz": rf"{_RATE}(?:z|yaw)|(?:z|yaw){_RATE}",
+    "temperature": "(?:imu|sensor|internal)?temp(?:erature)?",
+    "speed": "(?:vehicle|veh|gnss|gps|ground)?speed|speedoverground|sog",
+    "heading": "(?:gnss|gps)?heading|course|courseoverground|cog",
+    "latitude": "(?:gnss|gps|pos)?lat(?:itude)?",
+    "longitude": "(?:gnss|gps|pos)?lon(?:gitude)?",
+    "altitude": "(?:gnss|gps|pos)?alt(?:itude)?",
+}
+_MAPPING_KEYS = {"channel", "axes", "allow_left_handed", "valid", "signals", "units"}
+_UNIT_KEYS = {"accel", "gyro", *AUX_KEYS}
+
+
+# ---------------------------------------------------------------------------------------------
+# Public API
+
+
+def read_can(
+    path: str | Path,
+    dbc: str | Path | Any,
+    *,
+    mapping: str | Path | Mapping[str, Any] | None = None,
+    channel: int | None = None,
+) -> Samples:
+    """Read the accelerometer (and gyro) samples of a CAN log.
+
+    Parameters
+    ----------
+    path : str or Path
+        A BLF, ASC, candump ``.log``, TRC, CSV or MF4 log. It is only read.
+    dbc : str, Path or cantools Database
+        The DBC describing the bus.
+    mapping : str, Path or dict, optional
+        A mapping TOML file, or its content as a dict (see the module docstring). Signals are
+        auto-detected when it is omitted or has no ``[signals]``.
+    channel : int, optional
+        The CAN channel (python-can numbering); overrides the mapping's.
+
+    Returns
+    -------
+    Samples
+        ``acc_s`` (n, 3) in m/s², ``gyro_s`` (n, 3) in rad/s when mapped, auxiliary channels,
+        ``axis_map`` and ``dropped`` counts.
+
+    Raises
+    ------
+    InputError
+        Unreadable or empty log, wrong DBC, missing message or signal, bad mapping or unit.
+    """
+    path = Path(path)
+    plan = _plan(path, dbc, mapping, channel)
+    return _concat(list(_pieces(path, plan, _FRAMES_PER_CHUNK)), plan, str(path))
+
+
+def iter_can(
+    path: str | Path,
+    dbc: str | Path | Any,
+    *,
+    mapping: str | Path | Mapping[str, Any] | None = None,
+    channel: int | None = None,
+    max_samples: int = 100_000,
+) -> Iterator[Samples]:
+    """Stream the samples of a CAN log in chunks of at most ``max_samples`` rows.
+
+    Memory is bounded by the chunk size. Concatenating the chunks (times, vectors, auxiliary
+    channels, summed ``dropped``) gives exactly what :func:`read_can` returns. Parameters as there.
+
+    Yields
+    ------
+    Samples
+        Consecutive chunks; each carries the auxiliary samples and drop counts of its stretch.
+    """
+    if max_samples < 1:
+        raise ValueError(f"max_samples must be >= 1; got {max_samples}")
+    path = Path(path)
+    plan = _plan(path, dbc, mapping, channel)
+    pending: list[Samples] = []
+    count = 0
+    for piece in _pieces(path, plan, max(2 * max_samples, 1000)):
+        pending.append(piece)
+        count += len(piece)
+        while count >= max_samples:
+            joined = _concat(pending, plan, str(path))
+            head, rest = _split(joined, max_samples)
+            yield head
+            pending, count = [rest], len(rest)
+    if pending and (count or any(p.channels or p.dropped for p in pending)):
+        yield _concat(pending, plan, str(path))
+
+
+def inspect_can(path: str | Path, dbc: str | Path | Any | None = None) -> LogSummary:
+    """What a CAN log holds: one stream per (channel, message) with count, rate and signals.
+
+    Parameters
+    ----------
+    path : str or Path
+        A CAN log in any supported format.
+    dbc : str, Path or cantools Database, optional
+        Names the messages and lists their signals; without it messages are named by hex id.
+
+    Returns
+    -------
+    LogSummary
+        Streams sorted by channel and id; ``kind`` is ``"can<channel>"`` (``"can"`` without one).
+    """
+    path = Path(path)
+    fmt = log_format(path)
+    db = _database(dbc) if dbc is not None else None
+    stats = _id_stats(path)
+    streams = []
+    for (chan, ident, ext), (count, first, last) in sorted(stats.items()):
+        message = _message_by_id(db, ident, ext) if db is not None else None
+        name = message.name if message is not None else _hex_id(ident, ext)
+        fields = tuple(s.name for s in message.signals) if message is not None else ()
+        rate = (count - 1) / (last - first) if last > first else 0.0
+        streams.append(Stream(name, "can" if chan < 0 else f"can{chan}", count, rate, fields))
+    if stats:
+        duration = max(v[2] for v in stats.values()) - min(v[1] for v in stats.values())
+    else:
+        duration = 0.0
+    return LogSummary(str(path), fmt, float(duration), tuple(streams))
+
+
+# ---------------------------------------------------------------------------------------------
+# The plan: what to read and how to convert it
+
+
+@dataclass(frozen=True)
+class _Ref:
+    """One mapped signal of one DBC message."""
+
+    message: Any
+    signal: str
+
+    @property
+    def label(self) -> str:
+        return f"{self.message.name}.{self.signal}"
+
+
+@dataclass
+class _Source:
+    """A message (and multiplexer value set) whose frames carry some of the mapped signals."""
+
+    message: Any
+    mux: tuple[int, ...] | None
+    signals: list[str] = field(default_factory=list)
+    valid: list[str] = field(default_factory=list)
+    channels: set[int] = field(default_factory=set)
+
+    @property
+    def key(self) -> tuple[int, bool]:
+        return int(self.message.frame_id), bool(self.message.is_extended_frame)
+
+    @property
+    def name(self) -> str:
+        mux = "" if self.mux is None else f"[mux {'/'.join(map(str, self.mux))}]"
+        return f"{self.message.name}{mux}"
+
+
+@dataclass
+class _Plan:
+    where: str  # the log and the DBC, for messages
+    db: Any
+    imu: list[_Source]  # sources of the accel/gyro signals; imu[0] carries ax and sets the clock
+    columns: list[tuple[int, str, float]]  # per output column: (source index, signal, scale to SI)
+    has_gyro: bool
+    aux: dict[str, tuple[_Source, str, float, float]]  # channel key → source, signal, scale, offset
+    aux_required: set[str]
+    axes: NDArray[np.float64]  # (3, 3): sensor axis i = axes[i] · device axes
+    axis_map: str
+    channel: int | None
+
+    def ids(self) -> list[int]:
+        sources = self.imu + [a[0] for a in self.aux.values()]
+        return sorted({s.key[0] for s in sources})
+
+
+def _database(dbc: str | Path | Any) -> Any:
+    return load_dbc(dbc) if isinstance(dbc, str | Path) else dbc
+
+
+def _plan(
+    path: Path, dbc: str | Path | Any, mapping: str | Path | Mapping[str, Any] | None, channel: int | None
+) -> _Plan:
+    log_format(path)
+    if not path.is_file():
+        raise InputError(str(path), "a CAN log file", "no such file", "Check the path.")
+    db = _database(dbc)
+    dbc_name = str(dbc) if isinstance(dbc, str | Path) else "the DBC"
+    spec = _mapping_dict(mapping)
+    if channel is None and spec.get("channel") is not None:
+        channel = _int_setting(spec["channel"], "channel")
+    where = f"{path} with {dbc_name}"
+    present = _Presence(path, channel, db)
+    signals = spec.get("signals") or _detect(db, present, where)
+    refs = {role: _resolve(db, text, role, present, where) for role, text in signals.items()}
+    units = spec.get("units", {})
+    explicit = "signals" in spec and bool(spec["signals"])
+    return _build_plan(where, db, refs, units, spec, channel, explicit, present)
+
+
+def _mapping_dict(mapping: str | Path | Mapping[str, Any] | None) -> dict[str, Any]:
+    """The mapping as a dict, checked for unknown keys."""
+    if mapping is None:
+        return {}
+    where = "the mapping"
+    if isinstance(mapping, str | Path):
+        where = str(mapping)
+        try:
+            with Path(mapping).open("rb") as f:
+                spec = tomllib.load(f)
+        except OSError as err:
+            raise InputError(where, "a mapping TOML file", f"an unreadable path ({err})", "Check the path.") from err
+        except tomllib.TOMLDecodeError as err:
+            raise InputError(where, "valid TOML", f"a syntax error ({err})", "Fix the mapping file.") from err
+    else:
+        spec = dict(mapping)
+    _check_keys(spec, _MAPPING_KEYS, where, "")
+    signals = spec.get("signals", {})
+    if not isinstance(signals, Mapping):
+        raise InputError(where, "a [signals] table", f"{signals!r}", 'Write `[signals]` then `ax = "msg.sig"`.')
+    _check_keys(signals, {*ACCEL_ROLES, *GYRO_ROLES, *AUX_KEYS}, where, "signals.")
+    if signals and not set(ACCEL_ROLES) <= set(signals):
+        missing = ", ".join(r for r in ACCEL_ROLES if r not in signals)
+        raise InputError(where, "signals ax, ay and az", f"no {missing}", "Map all three accelerometer axes.")
+    gyro = [r for r in GYRO_ROLES if r in signals]
+    if gyro and len(gyro) < 3:
+        raise InputError(where, "all of gx, gy, gz or none", "only " + ", ".join(gyro), "Map three or none.")
+    _check_keys(spec.get("units", {}), _UNIT_KEYS, where, "units.")
+    return spec
+
+
+def _check_keys(table: Mapping[str, Any], allowed: set[str], where: str, prefix: str) -> None:
+    unknown = sorted(set(table) - allowed)
+    if unknown:
+        raise InputError(
+            where,
+            "keys among " + ", ".join(prefix + k for k in sorted(allowed)),
+            "unknown " + ", ".join(prefix + k for k in unknown),
+            "Check the spelling against the mapping format in mountcal.io.can_log.",
+        )
+
+
+def _int_setting(value: Any, name: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise InputError("the mapping", f"an integer {name}", repr(value), f"Write e.g. `{name} = 2`.")
+    return value
+
+
+class _Presence:
+    """Which (id, extended) pairs of the DBC occur in the log on the channel; one pass, on first use."""
+
+    def __init__(self, path: Path, channel: int | None, db: Any) -> None:
+        self.path, self.channel, self.db = path, channel, db
+        self._keys: set[tuple[int, bool]] | None = None
+
+    def filter(self, messages: list[Any]) -> list[Any]:
+        """The messages among ``messages`` that occur in the log."""
+        if self._keys is None:
+            ids = sorted({int(m.frame_id) for m in self.db.messages})
+            self._keys = set()
+            for frames in iter_frames(self.path, ids=ids, channel=self.channel, max_frames=1 << 18):
+                pairs = np.unique(frames.arbitration_id.astype(np.int64) * 2 + frames.is_extended)
+                self._keys.update((int(p) // 2, bool(p % 2)) for p in pairs)
+        return [m for m in messages if (int(m.frame_id), bool(m.is_extended_frame)) in self._keys]
+
+
+def _normalise(name: str) -> str:
+    return re.sub(r"\d+$", "", re.sub(r"[^a-z0-9]", "", name.lower()))
+
+
+def _matches(role: str, signal_name: str) -> bool:
+    return re.fullmatch(_NAME_PATTERNS[role], _normalise(signal_name)) is not None
+
+
+def _detect(db: Any, present: _Presence, where: str) -> dict[str, str]:
+    """Signals for ax..az (required), gx..gz and the auxiliary channels, found by name."""
+    accel = _detect_triple(db, ACCEL_ROLES, present, [])
+    if accel is None:
+        mismatch = _log_mismatch(present.path, db, where, present.channel, [])
+        if mismatch is not None:
+            raise mismatch
+        hits = [(m, s.name) for m in db.messages for s in m.signals if _matches_any(s.name, ACCEL_ROLES)]
+        logged = present.filter(list({id(m): m for m, _ in hits}.values())) if hits else []
+        absent = " (not in the log)" if present.channel is None else f" (not on channel {present.channel})"
+        names = [
+            f"{m.name}.{sig} [{_hex_id(m.frame_id, m.is_extended_frame)}]" + ("" if m in logged else absent)
+            for m, sig in hits
+        ]
+        raise InputError(
+            where,
+            "one unambiguous set of accelerometer signals (AccelerationX/Y/Z, AccX.., AX/AY/AZ, "
+            "Accel_Longitudinal/Lateral/Vertical) in messages present in the log",
+            "candidates " + (", ".join(names) if names else "none"),
+            "Write a mapping naming ax, ay, az as message.signal (see mountcal.io.can_log)"
+            + ("." if present.channel is None else ", or check the channel."),
+        )
+    found = {role: f"0x{m.frame_id:X}.{sig}" for role, (m, sig) in accel.items()}
+    accel_messages = [m for m, _ in accel.values()]
+    gyro = _detect_triple(db, GYRO_ROLES, present, accel_messages)
+    if gyro is not None:
+        found.update({role: f"0x{m.frame_id:X}.{sig}" for role, (m, sig) in gyro.items()})
+    for role in AUX_KEYS:
+        # a temperature is the IMU's only when it sits in the IMU's own message (not a tyre or a battery)
+        messages = accel_messages if role == "temperature" else db.messages
+        hits = [(m, s.name) for m in messages for s in m.signals if _matches(role, s.name) and not s.multiplexer_ids]
+        if len(hits) > 1:
+            present_messages = present.filter([m for m, _ in hits])
+            hits = [h for h in hits if h[0] in present_messages]
+        if len(hits) == 1:
+            found[role] = f"0x{hits[0][0].frame_id:X}.{hits[0][1]}"
+    return found
+
+
+def _matches_any(name: str, roles: Sequence[str]) -> bool:
+    return any(_matches(role, name) for role in roles)
+
+
+def _detect_triple(
+    db: Any, roles: Sequence[str], present: _Presence, prefer: list[Any]
+) -> dict[str, tuple[Any, str]] | None:
+    """One message with all three roles, else one signal per role across messages; None if unclear.
+
+    The log is consulted (one extra pass) only when the DBC alone leaves a choice.
+    """
+    per_message: dict[Any, dict[str, list[str]]] = {}
+    for m in db.messages:
+        hits = {role: [s.name for s in m.signals if _matches(role, s.name)] for role in roles}
+        if any(hits.values()):
+            per_message[m] = hits
+    counts = [sum(len(hits[r]) for hits in per_message.values()) for r in roles]
+    if min(counts, default=0) == 0:
+        return None  # some axis has no candidate at all: the log cannot help
+    candidates = list(per_message) if max(counts) == 1 else present.filter(list(per_message))
+    return _choose_triple(per_message, candidates, roles, prefer)
+
+
+def _choose_triple(
+    per_message: dict[Any, dict[str, list[str]]], candidates: list[Any], roles: Sequence[str], prefer: list[Any]
+) -> dict[str, tuple[Any, str]] | None:
+    whole = [m for m in candidates if all(len(per_message[m][r]) == 1 for r in roles)]
+    if len(whole) > 1 and prefer:
+        whole = [m for m in whole if m in prefer] or whole
+    if len(whole) == 1:
+        return {r: (whole[0], per_message[whole[0]][r][0]) for r in roles}
+    if whole:
+        return None
+    chosen: dict[str, tuple[Any, str]] = {}
+    for role in roles:
+        pairs = [(m, s) for m in candidates for s in per_message[m][role]]
+        if len(pairs) != 1:
+            return None
+        chosen[role] = pairs[0]
+    return chosen
+
+
+def _message_refs(db: Any, text: str) -> list[Any]:
+    """Messages named ``text``: a name (possibly defined twice) or an id, hex 0x.. or decimal."""
+    by_name = [m for m in db.messages if m.name == text]
+    if by_name:
+        return by_name
+    try:
+        ident = int(text, 0)
+    except ValueError:
+        return []
+    return [m for m in db.messages if int(m.frame_id) == ident]
+
+
+def _resolve(db: Any, text: Any, role: str, present: _Presence, where: str) -> _Ref:
+    """A ``message.signal`` string as a DBC message and signal name."""
+    if not isinstance(text, str) or "." not in text:
+        raise InputError(
+            where, f'signals.{role} as "message.signal"', repr(text), 'E.g. ax = "gnss_imu.AccelerationX".'
+        )
+    message_text, signal = text.split(".", 1)
+    messages = _message_refs(db, message_text)
+    if not messages:
+        known = ", ".join(sorted({m.name for m in db.messages})[:40])
+        raise InputError(
+            where, f"a DBC message {message_text!r} for {role}", f"none; the DBC has {known}", "Fix the mapping."
+        )
+    messages = [m for m in messages if any(s.name == signal for s in m.signals)] or messages
+    if not any(s.name == signal for s in messages[0].signals):
+        names = ", ".join(s.name for s in messages[0].signals)
+        raise InputError(
+            where,
+            f"signal {signal!r} in message {messages[0].name} for {role}",
+            f"only {names}",
+            "Fix the signal name in the mapping (names are case-sensitive).",
+        )
+    if len(messages) > 1:
+        logged = present.filter(messages)
+        mismatch = None if logged else _log_mismatch(present.path, db, where, present.channel, messages)
+        if mismatch is not None:
+            raise mismatch
+        messages = logged or messages
+        if len(messages) > 1:
+            ids = ", ".join(f"0x{m.frame_id:X}" for m in messages)
+            raise InputError(
+                where,
+                f"one message named {message_text!r} in the log",
+                f"several with that name ({ids})",
+                'Name the message by its id in the mapping, e.g. "0x9.AccelerationX".',
+            )
+    return _Ref(messages[0], signal)
+
+
+def _unit_scale(ref: _Ref, role: str, units: Mapping[str, Any], where: str) -> tuple[float, float]:
+    """Scale and offset from the signal's unit (the mapping's, else the DBC's) to SI."""
+    kind = _UNIT_KIND[role]
+    key = "accel" if kind == "accel" else "gyro" if kind == "gyro" else role
+    given = units.get(key)
+    unit = str(given) if given is not None else str(ref.message.get_signal_by_name(ref.signal).unit or "")
+    norm = unit.strip().lower().replace(" ", "").replace("²", "^2").replace("°", "deg")
+    if norm in _UNITS[kind]:
+        return _UNITS[kind][norm]
+    source = "the mapping's units." + key if given is not None else f"the DBC unit of {ref.label}"
+    raise InputError(
+        where,
+        f"{'an acceleration' if kind == 'accel' else 'a ' + kind} unit ({_UNIT_HINT[kind]}) for {role}",
+        f"{unit!r} ({source})",
+        f"Check the mapping; if the DBC's unit is missing or wrong, set units.{key} in the mapping.",
+    )
+
+
+def _build_plan(
+    where: str,
+    db: Any,
+    refs: dict[str, _Ref],
+    units: Mapping[str, Any],
+    spec: Mapping[str, Any],
+    channel: int | None,
+    explicit: bool,
+    present: _Presence,
+) -> _Plan:
+    has_gyro = all(r in refs for r in GYRO_ROLES)
+    sources: list[_Source] = []
+    columns = []
+    for role in ACCEL_ROLES + (GYRO_ROLES if has_gyro else ()):
+        ref = refs[role]
+        source = _source_for(sources, ref)
+        source.signals.append(ref.signal)
+        columns.append((sources.index(source), ref.signal, _unit_scale(ref, role, units, where)[0]))
+    aux: dict[str, tuple[_Source, str, float, float]] = {}
+    for role, key in AUX_KEYS.items():
+        if role in refs:
+            try:
+                scale, offset = _unit_scale(refs[role], role, units, where)
+            except InputError:
+                if explicit:
+                    raise
+                continue  # an auto-detected optional channel with an unknown unit is left out
+            source = _Source(refs[role].message, _mux_of(refs[role]), [refs[role].signal])
+            aux[key] = (source, refs[role].signal, scale, offset)
+    _assign_validity(sources + [a[0] for a in aux.values()], spec.get("valid"), db, where, present)
+    axes, axis_map = _axes(spec.get("axes", "x,y,z"), spec.get("allow_left_handed", False))
+    aux_required = {AUX_KEYS[r] for r in refs if r in AUX_KEYS} if explicit else set()
+    return _Plan(where, db, sources, columns, has_gyro, aux, aux_required, axes, axis_map, channel)
+
+
+def _mux_of(ref: _Ref) -> tuple[int, ...] | None:
+    ids = ref.message.get_signal_by_name(ref.signal).multiplexer_ids
+    return tuple(sorted(ids)) if ids else None
+
+
+def _source_for(sources: list[_Source], ref: _Ref) -> _Source:
+    mux = _mux_of(ref)
+    for source in sources:
+        if source.message is ref.message and source.mux == mux:
+            return source
+    sources.append(_Source(ref.message, mux))
+    return sources[-1]
+
+
+def _assign_validity(sources: list[_Source], valid: Any, db: Any, where: str, present: _Presence) -> None:
+    """Validity signals per source: the mapping's list, else 1-bit signals named like *valid*."""
+    if valid is None:
+        for source in sources:
+            source.valid = [
+                s.name
+                for s in source.message.signals
+                if "valid" in s.name.lower() and s.length == 1 and not s.multiplexer_ids
+            ]
+        return
+    if isinstance(valid, str):
+        valid = [valid]
+    if not isinstance(valid, list):
+        raise InputError(
+            where, 'valid as a list of "message.signal"', repr(valid), 'E.g. valid = ["gnss_imu.ImuValid"].'
+        )
+    for text in valid:
+        ref = _resolve(db, text, "valid", present, where)
+        targets = [s for s in sources if s.message is ref.message]
+        if not targets:
+            raise InputError(
+                where,
+                f"validity signal {text!r} in a message the mapping uses",
+                "a message that carries none of the mapped signals",
+                "Remove it from `valid` or map a signal of that message.",
+            )
+        for source in targets:
+            source.valid.append(ref.signal)
+
+
+def _axes(text: Any, allow: Any) -> tuple[NDArray[np.float64], str]:
+    """The signed permutation "-y,x,z" as a matrix (row i: device components of sensor axis i)."""
+    tokens = [t.strip().lower() for t in str(text).split(",")]
+    parsed = [re.fullmatch(r"([+-]?)([xyz])", t) for t in tokens]
+    letters = [m.group(2) for m in parsed if m]
+    if len(tokens) != 3 or not all(parsed) or sorted(letters) != ["x", "y", "z"]:
+        raise InputError(
+            "the mapping",
+            'axes as a signed permutation of x, y, z such as "-y,x,z"',
+            repr(text),
+            "List, for sensor axes x, y, z in turn, the device axis (with its sign) that points along it.",
+        )
+    matrix = np.zeros((3, 3))
+    for row, match in enumerate(parsed):
+        assert match is not None
+        matrix[row, "xyz".index(match.group(2))] = -1.0 if match.group(1) == "-" else 1.0
+    canonical = ",".join(t.lstrip("+") for t in tokens)
+    if np.linalg.det(matrix) > 0:
+        return matrix, canonical
+    if allow is False or allow is None or allow == "":
+        raise InputError(
+            "the mapping",
+            "axes that keep the frame right-handed (an even number of swaps and sign flips)",
+            f"{canonical!r}, a reflection that makes it left-handed",
+            'Flip one more sign, or set allow_left_handed = "<reason>" if the device itself is left-handed.',
+        )
+    reason = allow if isinstance(allow, str) else "by the mapping"
+    return matrix, f"{canonical} (reflection allowed: {reason})"
+
+
+# ---------------------------------------------------------------------------------------------
+# Streaming: frames → decoded, validated source samples → aligned rows
+
+
+def _pieces(path: Path, plan: _Plan, frames_per_chunk: int) -> Iterator[Samples]:
+    """Samples pieces, one per chunk of frames, then the final flush; raises on missing data."""
+    aligner = _Aligner([len(s.signals) for s in plan.imu], [s.name for s in plan.imu])
+    seen = Counter[str]()  # frames selected per source, before validation
+    dropped_total = Counter[str]()
+    rows_total = 0
+    for frames in iter_frames(path, ids=plan.ids(), channel=plan.channel, max_frames=frames_per_chunk):
+        dropped = Counter[str]()
+        for k, source in enumerate(plan.imu):
+            t_s, values = _take(frames, source, plan, dropped, seen)
+            aligner.add(k, t_s, values)
+        channels = _aux_piece(frames, plan, dropped, seen)
+        t_s, rows = aligner.emit(final=False, dropped=dropped)
+        rows_total += t_s.shape[0]
+        dropped_total.update(dropped)
+        yield _to_samples(t_s, rows, channels, dropped, plan, str(path))
+    dropped = Counter[str]()
+    t_s, rows = aligner.emit(final=True, dropped=dropped)
+    dropped_total.update(dropped)
+    _check_found(path, plan, seen, rows_total + t_s.shape[0], dropped_total)
+    yield _to_samples(t_s, rows, {}, dropped, plan, str(path))
+
+
+def _select(frames: CanFrames, source: _Source, plan: _Plan) -> CanFrames:
+    ident, ext = source.key
+    chosen = frames.take((frames.arbitration_id == ident) & (frames.is_extended == ext))
+    if len(chosen):
+        low, high = int(chosen.channel.min()), int(chosen.channel.max())
+        source.channels.update((low, high) if low == high or high - low == 1 else np.unique(chosen.channel).tolist())
+        if plan.channel is None and len(source.channels) > 1:
+            found = ", ".join(map(str, sorted(source.channels)))
+            raise InputError(
+                plan.where,
+                f"message {source.message.name} on one CAN channel",
+                f"it on channels {found}",
+                "Choose one with `channel=` (or `channel = N` in the mapping).",
+            )
+    return chosen
+
+
+def _take(
+    frames: CanFrames, source: _Source, plan: _Plan, dropped: Counter[str], seen: Counter[str]
+) -> tuple[FloatArray, NDArray[np.float64]]:
+    """Times (m,) and values (m, k) of one source's usable frames; the unusable ones counted."""
+    chosen = _select(frames, source, plan)
+    if source.mux is not None:
+        signal = source.message.get_signal_by_name(source.signals[0])
+        mux = source.message.get_signal_by_name(signal.multiplexer_signal)
+        chosen = chosen.take(np.isin(raw_values(chosen.data, mux), np.asarray(source.mux, np.uint64)))
+    seen[source.name] += len(chosen)
+    name = source.message.name
+    short = chosen.dlc < payload_bytes(source.message, source.signals + source.valid)
+    _count(dropped, f"{name}: frame shorter than the DBC layout", short)
+    chosen = chosen.take(~short)
+    decoded = decode(chosen, source.message, source.signals + source.valid)
+    keep = np.ones(len(chosen), np.bool_)
+    if source.valid:
+        invalid = (np.stack([decoded[v] for v in source.valid]) == 0).any(axis=0)
+        _count(dropped, f"{name}: {' or '.join(source.valid)} == 0", invalid)
+        keep &= ~invalid
+    values = np.stack([decoded[s] for s in source.signals], axis=1)
+    finite = np.isfinite(values).all(axis=1)
+    _count(dropped, f"{name}: non-finite value", keep & ~finite)
+    keep &= finite
+    return chosen.t_s[keep], values[keep]
+
+
+def _count(dropped: Counter[str], reason: str, rows: NDArray[np.bool_]) -> None:
+    """Add the rows flagged in ``rows`` to the drop counts (no entry for none)."""
+    n = int(rows.sum())
+    if n:
+        dropped[reason] += n
+
+
+def _aux_piece(frames: CanFrames, plan: _Plan, dropped: Counter[str], seen: Counter[str]) -> dict[str, Channel]:
+    channels = {}
+    for key, (source, signal, scale, offset) in plan.aux.items():
+        t_s, values = _take(frames, source, plan, dropped, seen)
+        if t_s.shape[0]:
+            channels[key] = Channel(t_s, values[:, source.signals.index(signal)] * scale + offset)
+    return channels
+
+
+class _Aligner:
+    """Nearest-in-time alignment of several sources onto the clock of source 0, streamed.
+
+    A row of source 0 at time t is emitted once every other source k holds a sample later than
+    t + period_k (or the stream has ended), so the chunking never changes the result.
+    """
+
+    def __init__(self, widths: list[int], names: list[str]) -> None:
+        self.names = names
+        self.t: list[FloatArray] = [np.empty(0) for _ in widths]
+        self.v: list[NDArray[np.float64]] = [np.empty((0, w)) for w in widths]
+        self.period: list[float | None] = [None] * len(widths)
+
+    def add(self, k: int, t_s: FloatArray, values: NDArray[np.float64]) -> None:
+        if not t_s.shape[0]:
+            return
+        t, v = np.concatenate([self.t[k], t_s]), np.concatenate([self.v[k], values])
+        if (np.diff(t) < 0).any():  # keep each source in time order
+            order = np.argsort(t, kind="stable")
+            t, v = t[order], v[order]
+        self.t[k], self.v[k] = t, v
+
+    def emit(self, *, final: bool, dropped: Counter[str]) -> tuple[FloatArray, list[NDArray[np.float64]]]:
+        """Rows of source 0 whose partners are settled: times (n,) and per-source values (n, w_k)."""
+        if len(self.t) == 1:
+            n = self.t[0].shape[0]
+        elif self._periods_known(final):
+            n = self._settled(final)
+        else:  # partners' periods not measured yet: hold everything
+            return np.empty(0), [np.empty((0, v.shape[1])) for v in self.v]
+        t_out, values, keep = self.t[0][:n], [self.v[0][:n]], np.ones(n, np.bool_)
+        periods = [p or 0.0 for p in self.period]
+        for k in range(1, len(self.t)):
+            index, ok = _nearest(self.t[k], t_out, periods[k])
+            keep &= ok
+            values.append(self.v[k][index] if ok.any() else np.zeros((n, self.v[k].shape[1])))
+        _count(dropped, f"{self.names[0]}: no frame of {', '.join(self.names[1:])} within one period", ~keep)
+        self._trim(n, periods)
+        return t_out[keep], [v[keep] for v in values]
+
+    def _periods_known(self, final: bool) -> bool:
+        """Measure each partner's period from its first frames, once there are enough of them."""
+        for k in range(1, len(self.t)):
+            if self.period[k] is None and (final or self.t[k].shape[0] >= _PERIOD_FRAMES):
+                dt = np.diff(self.t[k][:_PERIOD_FRAMES])
+                self.period[k] = float(np.median(dt)) if dt.shape[0] else 0.0
+        return all(p is not None for p in self.period[1:])
+
+    def _settled(self, final: bool) -> int:
+        """How many rows of source 0 have all their candidate partners in hand."""
+        if final:
+            return int(self.t[0].shape[0])
+        limits = [
+            float(self.t[k][-1]) - (self.period[k] or 0.0) if self.t[k].shape[0] else -np.inf
+            for k in range(1, len(self.t))
+        ]
+        return int(np.searchsorted(self.t[0], min(limits), side="left"))
+
+    def _trim(self, n: int, periods: list[float]) -> None:
+        """Forget emitted rows, and partner samples too early for any row still to come."""
+        ref_t = self.t[0]
+        lower = ref_t[n] if n < ref_t.shape[0] else (ref_t[n - 1] if n else -np.inf)
+        self.t[0], self.v[0] = ref_t[n:], self.v[0][n:]
+        for k in range(1, len(self.t)):
+            first = int(np.searchsorted(self.t[k], lower - periods[k], side="left"))
+            self.t[k], self.v[k] = self.t[k][first:], self.v[k][first:]
+
+
+def _nearest(t_k: FloatArray, t_ref: FloatArray, tolerance: float) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
+    """Index of the sample of ``t_k`` nearest each ``t_ref`` (earlier on ties) and whether it is
+    within ``tolerance``."""
+    if not t_k.shape[0]:
+        return np.zeros(t_ref.shape[0], np.int64), np.zeros(t_ref.shape[0], np.bool_)
+    after = np.clip(np.searchsorted(t_k, t_ref, side="left"), 0, t_k.shape[0] - 1)
+    before = np.clip(after - 1, 0, None)
+    use_before = np.abs(t_ref - t_k[before]) <= np.abs(t_k[after] - t_ref)
+    index = np.where(use_before, before, after)
+    return index, np.abs(t_k[index] - t_ref) <= tolerance
+
+
+def _to_samples(
+    t_s: FloatArray,
+    rows: list[NDArray[np.float64]],
+    channels: dict[str, Channel],
+    dropped: Counter[str],
+    plan: _Plan,
+    source: str,
+) -> Samples:
+    """Scaled device-axis columns, rotated by the axis map, as one Samples piece."""
+    device = np.empty((t_s.shape[0], 6 if plan.has_gyro else 3))
+    for column, (k, signal, scale) in enumerate(plan.columns):
+        device[:, column] = rows[k][:, plan.imu[k].signals.index(signal)] * scale
+    acc_s = device[:, :3] @ plan.axes.T
+    gyro_s = device[:, 3:] @ plan.axes.T if plan.has_gyro else None
+    return Samples(np.asarray(t_s, np.float64), acc_s, gyro_s, channels, source, plan.axis_map, dict(dropped))
+
+
+def _concat(pieces: list[Samples], plan: _Plan, source: str) -> Samples:
+    """One Samples from consecutive pieces: rows, auxiliary samples and drop counts joined."""
+    t_s = np.concatenate([p.t_s for p in pieces]) if pieces else np.empty(0)
+    acc_s = np.concatenate([p.acc_s for p in pieces]) if pieces else np.empty((0, 3))
+    gyro_s = np.concatenate([p.gyro_s for p in pieces if p.gyro_s is not None]) if plan.has_gyro else None
+    channels = {}
+    for key in AUX_KEYS.values():
+        parts = [p.channels[key] for p in pieces if key in p.channels]
+        if parts:
+            channels[key] = Channel(np.concatenate([c.t_s for c in parts]), np.concatenate([c.value for c in parts]))
+    dropped = Counter[str]()
+    for p in pieces:
+        dropped.update(p.dropped)
+    return Samples(t_s, acc_s, gyro_s, channels, source, plan.axis_map, dict(dropped))
+
+
+def _split(samples: Samples, n: int) -> tuple[Samples, Samples]:
+    """The first n rows (with every auxiliary sample and drop count so far) and the rest."""
+    head = Samples(
+        samples.t_s[:n],
+        samples.acc_s[:n],
+        None if samples.gyro_s is None else samples.gyro_s[:n],
+        samples.channels,
+        samples.source,
+        samples.axis_map,
+        samples.dropped,
+    )
+    rest = Samples(
+        samples.t_s[n:],
+        samples.acc_s[n:],
+        None if samples.gyro_s is None else samples.gyro_s[n:],
+        {},
+        samples.source,
+        samples.axis_map,
+        {},
+    )
+    return head, rest
+
+
+# ---------------------------------------------------------------------------------------------
+# Errors that need a look at the whole log
+
+
+def _check_found(path: Path, plan: _Plan, seen: Counter[str], total_rows: int, dropped: Counter[str]) -> None:
+    """Raise when the log lacks the mapped messages, or none of their samples survived."""
+    missing_aux = sorted(k for k in plan.aux_required if not seen[plan.aux[k][0].name])
+    silent = [s for s in plan.imu if not seen[s.name]]
+    if not silent and not missing_aux and total_rows:
+        return
+    wanted = [s.message for s in silent] + [plan.aux[k][0].message for k in missing_aux]
+    mismatch = _log_mismatch(path, plan.db, plan.where, plan.channel, wanted)
+    if mismatch is not None:
+        raise mismatch
+    raise InputError(
+        plan.where,
+        "usable accelerometer samples",
+        "every row dropped (" + ", ".join(f"{k}: {v}" for k, v in dropped.items()) + ")",
+        "Check the validity flags and the DBC layout against the log.",
+    )
+
+
+def _log_mismatch(path: Path, db: Any, where: str, channel: int | None, wanted: list[Any]) -> InputError | None:
+    """The error for an empty log, a log the DBC does not describe, or one lacking ``wanted``."""
+    stats = _id_stats(path)
+    if not stats:
+        return InputError(str(path), "CAN frames", "an empty log (no data frames)", "Check the logger's output.")
+    counts = Counter[tuple[int, bool]]()
+    for (_, ident, ext), (count, _, _) in stats.items():
+        counts[(ident, ext)] += count
+    log_ids = _id_list([key for key, _ in counts.most_common()])
+    dbc_ids = {(int(m.frame_id), bool(m.is_extended_frame)) for m in db.messages}
+    if not set(counts) & dbc_ids:
+        return InputError(
+            where,
+            "frames of messages of the DBC (ids " + _id_list(sorted(dbc_ids)) + ")",
+            "no frame of any of them; the log has ids " + log_ids,
+            "Use the DBC that describes this bus (29-bit ids print with 8 hex digits).",
+        )
+    if not wanted:
+        return None
+    names = ", ".join(f"{m.name} ({_hex_id(int(m.frame_id), bool(m.is_extended_frame))})" for m in wanted)
+    on = "" if channel is None else f" on channel {channel}"
+    channels = sorted({c for (c, _, _) in stats})
+    return InputError(
+        where,
+        f"frames of {names}{on}",
+        f"none; the log has ids {log_ids} on channels {channels}",
+        "Check the mapping, the channel and that the logger recorded this message.",
+    )
+
+
+def _id_list(keys: Sequence[tuple[int, bool]], limit: int = 20) -> str:
+    text = ", ".join(_hex_id(i, e) for i, e in keys[:limit])
+    return text + (f" and {len(keys) - limit} more" if len(keys) > limit else "")
+
+
+def _hex_id(ident: int, extended: bool) -> str:
+    return f"0x{ident:08X}" if extended else f"0x{ident:03X}"
+
+
+def _message_by_id(db: Any, ident: int, extended: bool) -> Any:
+    for m in db.messages:
+        if int(m.frame_id) == ident and bool(m.is_extended_frame) == extended:
+            return m
+    return None
+
+
+def _id_stats(path: Path) -> dict[tuple[int, int, bool], tuple[int, float, float]]:
+    """Per (channel, id, extended): frame count, first and last time, in one streamed pass."""
+    stats: dict[tuple[int, int, bool], tuple[int, float, float]] = {}
+    for frames in iter_frames(path, max_frames=1 << 18):
+        key = (frames.channel * (1 << 33)) + frames.arbitration_id.astype(np.int64) * 2 + frames.is_extended
+        uniq, first, counts = np.unique(key, return_index=True, return_counts=True)
+        last = len(key) - 1 - np.unique(key[::-1], return_index=True)[1]
+        for u, f, c, la in zip(uniq, first, counts, last, strict=True):
+            chan, rest = int(u) // (1 << 33), int(u) % (1 << 33)
+            k = (chan, rest // 2, bool(rest % 2))
+            n0, t0, _ = stats.get(k, (0, float(frames.t_s[f]), 0.0))
+            stats[k] = (n0 + int(c), t0, float(frames.t_s[la]))
+    return stats
+
+
+__all__ = ["inspect_can", "iter_can", "read_can"]
