@@ -29,6 +29,7 @@ NULL_TOL = 1e-10  # relative eigenvalue of the normalised Fisher information cou
 MAX_TILT_SIGMA_DEG = 5.0  # an effect that would leave the tilt this uncertain is not separable
 MIN_TEMPERATURE_SPAN_C = 2.0
 MAX_ROUNDS = 6
+MAX_SURFACE_TILT_DEG = 3.0  # roads and car parks: cross slopes and grades of a few degrees at most
 SAME_PLACE_M = 30.0  # stops farther apart than this may stand on different surfaces
 EARTH_GRAVITY_MPS2 = (9.77, 9.835)  # normal gravity: 9.780 (equator) to 9.832 (poles) at sea level, less with height
 
@@ -78,10 +79,14 @@ def _moved(table: StopTable) -> bool:
     """Were the stops made at different places (so possibly on different surfaces)?"""
     if table.site is not None and np.unique(table.site).size > 1:
         return True
-    if table.lat_deg is None or table.lon_deg is None:
+    if table.lat_deg is None:
         return False
     north = np.radians(table.lat_deg) * 6.371e6
-    east = np.radians(table.lon_deg) * 6.371e6 * np.cos(np.radians(np.mean(table.lat_deg)))
+    east = (
+        np.radians(table.lon_deg) * 6.371e6 * np.cos(np.radians(np.mean(table.lat_deg)))
+        if table.lon_deg is not None
+        else np.zeros(len(table))
+    )
     return bool(max(np.ptp(north), np.ptp(east)) > SAME_PLACE_M)
 
 
@@ -273,8 +278,9 @@ def _surface(cur: Step, g: float, k: int) -> tuple[float, Step] | None:
         f = full.fit(table, cur.terms, g, cur.fit.state)
         return _neg2loglik(table, f), table, f
 
+    upper = float(np.log(np.radians(MAX_SURFACE_TILT_DEG)))
     res = optimize.minimize_scalar(
-        lambda x: cost(x)[0], bounds=(np.log(1e-5), np.log(0.2)), method="bounded", options={"xatol": 0.01}
+        lambda x: cost(x)[0], bounds=(np.log(1e-5), upper), method="bounded", options={"xatol": 0.01}
     )
     value, table, f = cost(float(res.x))
     h = 0.05
@@ -282,6 +288,8 @@ def _surface(cur: Step, g: float, k: int) -> tuple[float, Step] | None:
     stat = max(_neg2loglik(base, cur.fit) - value, 0.0)
     logp = float(stats.chi2.logsf(stat, 1))
     sigma = float(np.exp(res.x))
+    if res.x > upper - 0.05:
+        return None  # the scatter needs more tilt than roads have: not this effect
     rel = float(np.sqrt(2.0 / curvature)) if curvature > 0 else float("nan")
     reason = (
         f"stops on different surfaces: a random road tilt of {np.degrees(sigma):.3g}° (1σ, ±{rel:.0%}) per stop; "

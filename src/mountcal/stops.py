@@ -121,15 +121,10 @@ def stop_frame(stops: list[Stop], beta_deg: FloatArray | None = None) -> pd.Data
     df["n"] = n
     df["t_s"] = [s.t_start_s for s in stops]
     df["duration_s"] = [s.duration_s for s in stops]
-    for key, col in (
-        ("temperature_c", "temperature_c"),
-        ("lat_deg", "lat_deg"),
-        ("alt_m", "alt_m"),
-        ("heading_deg", "heading_deg"),
-    ):
+    for key in ("temperature_c", "lat_deg", "lon_deg", "alt_m", "heading_deg"):
         values = [s.channels.get(key, np.nan) for s in stops]
         if np.any(np.isfinite(values)):
-            df[col] = values
+            df[key] = values
     return df
 
 
