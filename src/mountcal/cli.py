@@ -81,7 +81,7 @@ def cmd_stops(args: argparse.Namespace) -> int:
         if Path(args.output).suffix.lower() in (".parquet", ".pq"):
             found.frame.to_parquet(tmp, index=False)
         else:
-            found.frame.to_csv(tmp, index=False, float_format="%.10g")
+            found.frame.to_csv(tmp, index=False, float_format="%.15g")
     print(f"wrote {args.output} ({len(found.frame)} stops; headings: {found.heading_source})")
     return 0
 
@@ -93,6 +93,75 @@ def cmd_inspect(args: argparse.Namespace) -> int:
     for st in info.streams:
         fields = f"  [{', '.join(st.fields)}]" if st.fields else ""
         print(f"  {st.name:<32} {st.kind:<28} {st.count:>9} msgs {st.rate_hz:>9.2f} Hz{fields}")
+    return 0
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    """``mountcal report RESULT.json [--stops STOPS]``: a self-contained HTML report of a calibration."""
+    try:
+        from mountcal.report import render  # matplotlib is needed by this command only
+    except ImportError as err:
+        raise InputError(
+            "mountcal report",
+            "matplotlib installed",
+            f"it missing ({err})",
+            "Install it: pip install 'mountcal[report]'.",
+        ) from err
+    result = Path(args.result)
+    output = Path(args.output) if args.output is not None else result.with_suffix(".html")
+    inputs = [result] + ([Path(args.stops)] if args.stops else [])
+    if any(output.resolve() == p.resolve() for p in inputs):
+        raise InputError(
+            str(output),
+            "an output path other than the inputs",
+            "an input file itself",
+            "Choose another -o path; mountcal never overwrites its input.",
+        )
+    cal = Calibration.load(result)  # validates format and version
+    doc = json.loads(result.read_text(encoding="utf-8"))  # the whole document: entries Calibration may not keep
+    table = None
+    if args.stops:
+        headings = cal.fit.get("headings")
+        table = read_stop_table(
+            args.stops, unit=args.unit, headings=headings if headings in ("uphill", "relative", "none") else "uphill"
+        )
+    html = render(doc, table, image_format=args.figures)
+    with atomic_path(output) as tmp:
+        tmp.write_text(html, encoding="utf-8")
+    shown = html.count("<figure>")
+    print(f"wrote {output} ({shown} figures{'' if table is not None else '; pass --stops for the 3-D stop figure'})")
+    return 0
+
+
+def cmd_fleet(args: argparse.Namespace) -> int:
+    """``mountcal fleet INPUTS… -o fleet.parquet``: calibrate many logs of many vehicles, resumably."""
+    from mountcal.fleet import FleetOptions, JobDefaults, collect_jobs, outputs_of, run_fleet, summary_lines
+
+    defaults = JobDefaults(
+        log=LogOptions(dbc=args.dbc, mapping=args.mapping, channel=args.channel, topic=args.topic),
+        detection=StopDetection(max_acc_std_mps2=args.max_acc_std, min_duration_s=args.min_stop_s),
+        uphill_azimuth_deg=args.uphill_azimuth_deg,
+        options=Options(method=args.method, model=args.model, max_yaw_sigma_deg=args.max_yaw_sigma),
+        headings=args.headings,
+    )
+    jobs = collect_jobs(args.input, defaults, exclude=outputs_of(args.output))
+    options = FleetOptions(
+        workers=args.workers,
+        scheduler=args.scheduler,
+        retry_failed=args.retry_failed,
+        progress=not args.quiet,
+        floor_deg=args.floor_deg,
+    )
+    try:
+        result = run_fleet(jobs, args.output, options)
+    except KeyboardInterrupt:
+        print(
+            f"mountcal: interrupted; the logs finished so far are kept in {outputs_of(args.output)[2]}: "
+            "run the same command again to resume",
+            file=sys.stderr,
+        )
+        return 130
+    print("\n".join(summary_lines(result)))
     return 0
 
 
@@ -122,13 +191,75 @@ def _job(args: argparse.Namespace, options: Options | None = None) -> LogJob:
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
-    """``mountcal simulate``: write a simulated stop table (and its truth) from a preset."""
+    """``mountcal simulate``: write a simulated stop table, or (``--log``) a parking session as logs."""
     params: dict[str, Any] = dict(PRESETS[args.preset])
     for key in ("roll_deg", "pitch_deg", "yaw_deg", "slope_deg", "noise_g"):
         if getattr(args, key) is not None:
             params[key] = getattr(args, key)
     if args.bias_mg is not None:
         params["bias_mps2"] = np.array(args.bias_mg) * 1e-3 * 9.80665
+    if args.log:
+        from mountcal.conventions import G_N, normal_gravity
+        from mountcal.io import export
+        from mountcal.simulate import simulate_parking_log
+
+        outputs = [Path(p).resolve() for p in [*args.log, args.protocol, args.truth] if p is not None]
+        clash = len(set(outputs)) < len(outputs) or (args.dbc is not None and Path(args.dbc).resolve() in outputs)
+        if args.output is not None or clash:
+            raise InputError(
+                "mountcal simulate --log",
+                "distinct output paths other than the --dbc, and no -o (which writes a stop table)",
+                "-o" if args.output is not None else "a path named twice, or the DBC named as an output",
+                "Name each log, the protocol sheet and the truth once; mountcal never overwrites its input.",
+            )
+        formats = [export.check_log_path(p, args.dbc) for p in args.log]
+        if args.protocol is not None and "asc" in formats and len(formats) > 1:
+            raise InputError(
+                "mountcal simulate --log",
+                "logs sharing one clock for the one --protocol sheet",
+                "an ASC log (python-can reads it from its first frame) among others",
+                "Write the ASC log by itself, with its own --protocol.",
+            )
+        fix = None if args.fix is None else (float(args.fix[0]), float(args.fix[1]), float(args.fix[2]))
+        session = {k: getattr(args, k) for k in ("stop_s", "drive_s", "rate_hz") if getattr(args, k) is not None}
+        log = simulate_parking_log(
+            params["roll_deg"],
+            params["pitch_deg"],
+            params["yaw_deg"],
+            slope_deg=params["slope_deg"],
+            beta_deg=tuple(params["beta_deg"]),
+            bias_mps2=params.get("bias_mps2"),
+            g_mps2=G_N if fix is None else normal_gravity(fix[0], fix[2]),
+            seed=args.seed,
+            **session,
+        )
+        start = export.START_TIME_S if args.start_time is None else args.start_time
+        roll, pitch, yaw = log.truth.angles_deg
+        print(
+            f"simulated a parking session ({len(log.protocol)} stops, {log.t_s[-1] - log.t_s[0]:.0f} s, "
+            f"{log.t_s.size} samples; seed {args.seed}): roll {roll:g}°, pitch {pitch:g}°, yaw {yaw:g}°, "
+            f"slope {log.truth.slope_deg:g}°, g {log.truth.g_mps2:.5f} m/s²"
+        )
+        for path in args.log:
+            done = export.write_log(path, log, dbc_path=args.dbc, with_fix=fix, start_time_s=start)
+            counts = ", ".join(f"{k} {v}" for k, v in done.messages.items())
+            print(f"wrote {path} ({done.format}: {counts})")
+            for what, tally in (("saturated at the DBC range", done.saturated), ("not written", done.skipped)):
+                if tally:
+                    print(f"  {what}: " + ", ".join(f"{k} {v}" for k, v in tally.items()))
+        if args.protocol is not None:
+            export.write_protocol(args.protocol, log, start_time_s=done.start_time_s)
+            print(f"wrote {args.protocol} (protocol sheet on the log's clock, start {done.start_time_s:.6f} s)")
+        if args.truth is not None:
+            truth_doc = export.session_truth(log, start_time_s=start, with_fix=fix) | {"seed": args.seed}
+            with atomic_path(args.truth) as tmp:
+                tmp.write_text(json.dumps(truth_doc, indent=2) + "\n", encoding="utf-8")
+            print(f"wrote {args.truth}")
+        return 0
+    if args.output is None:
+        raise InputError(
+            "mountcal simulate", "-o STOPS.csv (a stop table) or --log LOG", "neither", "Name what to write."
+        )
     table, truth = simulate_stops(
         headings=args.headings, heading_offset_deg=args.heading_offset, seed=args.seed, **params
     )
@@ -254,7 +385,7 @@ def _parser() -> argparse.ArgumentParser:
     ins.add_argument("--dbc", default=None, help="DBC naming the CAN messages")
     ins.set_defaults(func=cmd_inspect)
 
-    sim = sub.add_parser("simulate", help="write a simulated stop table")
+    sim = sub.add_parser("simulate", help="write a simulated stop table, or (--log) a parking session as logs")
     sim.add_argument("--preset", choices=tuple(PRESETS), default="zhang2011")
     sim.add_argument("--roll", dest="roll_deg", type=float)
     sim.add_argument("--pitch", dest="pitch_deg", type=float)
@@ -266,8 +397,59 @@ def _parser() -> argparse.ArgumentParser:
     sim.add_argument("--heading-offset", type=float, default=0.0, help="common offset added to β (deg)")
     sim.add_argument("--seed", type=int, default=0)
     sim.add_argument("--truth", default=None, help="also write the truth as JSON")
-    sim.add_argument("-o", "--output", required=True)
+    sim.add_argument("-o", "--output", default=None, help="stop table to write (CSV or .parquet)")
+    lg = sim.add_argument_group("parking session as logs (--noise-g and --headings apply to stop tables only)")
+    lg.add_argument(
+        "--log", nargs="+", default=None, metavar="LOG", help="logs to write: .mcap, .blf, .mf4, .asc, .log, .trc, .csv"
+    )
+    lg.add_argument("--protocol", default=None, help="also write the protocol sheet (t_start_s, t_end_s, beta_deg)")
+    lg.add_argument("--dbc", default=None, help="DBC to encode CAN logs (data/imu_mm5_10.dbc: Bosch MM5.10)")
+    lg.add_argument(
+        "--fix", type=float, nargs=3, metavar=("LAT", "LON", "ALT"), help="site position logged (deg, deg, m)"
+    )
+    lg.add_argument("--start-time", type=float, default=None, help="Unix time of the start (s; default 1714557600)")
+    lg.add_argument("--stop-s", type=float, default=None, help="duration of each stop (s; default 40)")
+    lg.add_argument("--drive-s", type=float, default=None, help="duration of each drive between stops (s; default 20)")
+    lg.add_argument("--rate-hz", type=float, default=None, help="IMU sample rate (Hz; default 100)")
     sim.set_defaults(func=cmd_simulate)
+
+    rep = sub.add_parser("report", help="write a self-contained HTML report of a calibration result")
+    rep.add_argument("result", metavar="RESULT.json", help="result written by `mountcal calibrate -o`")
+    rep.add_argument(
+        "--stops", default=None, help="the stop table the result was fitted to (adds the 3-D figure, headings, σ)"
+    )
+    rep.add_argument("--unit", choices=("mps2", "g"), default="mps2", help="unit of ax, ay, az in --stops")
+    rep.add_argument("--figures", choices=("svg", "png"), default="svg", help="inline SVG (default) or base64 PNG")
+    rep.add_argument("-o", "--output", default=None, help="HTML file to write (default: RESULT with .html)")
+    rep.set_defaults(func=cmd_report)
+
+    flt = sub.add_parser("fleet", help="calibrate many logs of many vehicles: consensus per vehicle, remounts")
+    flt.add_argument(
+        "input", nargs="+", metavar="INPUTS", help="folders of logs (vehicle = parent folder), globs, manifest CSVs"
+    )
+    flt.add_argument("-o", "--output", required=True, help="per-log Parquet table (vehicles go to <stem>_vehicles)")
+    flt.add_argument("--workers", type=int, default=None, help="local worker processes (default: all cores)")
+    flt.add_argument("--scheduler", default=None, help="run on this Dask scheduler, tcp://HOST:PORT")
+    flt.add_argument("--retry-failed", action="store_true", help="recalculate logs an earlier run recorded as failed")
+    flt.add_argument(
+        "--floor-deg", type=float, default=0.0, help="mounting scatter between logs added to each log's σ (deg)"
+    )
+    flt.add_argument("-q", "--quiet", action="store_true", help="no progress line")
+    fg = flt.add_argument_group("every log (a manifest's cells take precedence)")
+    fg.add_argument("--dbc", default=None, help="DBC to decode CAN logs")
+    fg.add_argument("--mapping", default=None, help="TOML naming the accelerometer signals (CAN)")
+    fg.add_argument("--channel", type=int, default=None, help="CAN channel of the IMU")
+    fg.add_argument("--topic", default=None, help="IMU topic (MCAP)")
+    fg.add_argument("--uphill-azimuth-deg", type=float, default=None, help="compass azimuth of the slopes' uphill")
+    fg.add_argument("--max-acc-std", type=float, default=StopDetection.max_acc_std_mps2, help="stillness (m/s²)")
+    fg.add_argument("--min-stop-s", type=float, default=StopDetection.min_duration_s, help="shortest stop (s)")
+    fg.add_argument("--method", choices=("full", "paper"), default="full")
+    fg.add_argument("--model", default="auto", help="auto (default), rotation,slope or rotation,slope,bias")
+    fg.add_argument(
+        "--headings", choices=("uphill", "relative", "none"), default="uphill", help="beta_deg of stop tables"
+    )
+    fg.add_argument("--max-yaw-sigma", type=float, default=5.0, help="report yaw only below this 1σ (deg)")
+    flt.set_defaults(func=cmd_fleet)
     return parser
 
 

@@ -241,7 +241,7 @@ def simulate_parking_log(
     beta = np.concatenate(pieces_beta)
     v = np.concatenate(pieces_v)
     a_long = np.concatenate(pieces_acc_long)
-    omega_z = np.gradient(np.radians(beta), t)  # β counter-clockwise, as the yaw rate
+    omega_z = np.gradient(np.unwrap(np.radians(beta)), t)  # β counter-clockwise, as the yaw rate
     f_v = specific_force_v(np.radians(slope_deg), np.radians(beta), g_mps2)
     f_v[:, 0] += a_long
     f_v[:, 1] += v * omega_z

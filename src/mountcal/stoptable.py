@@ -224,7 +224,7 @@ def write_stop_table(table: StopTable, path: str | Path) -> None:
         if path.suffix.lower() in (".parquet", ".pq"):
             df.to_parquet(tmp, index=False)
         else:
-            df.to_csv(tmp, index=False, float_format="%.10g")
+            df.to_csv(tmp, index=False, float_format="%.15g")
 
 
 def _numeric(df: pd.DataFrame, cols: list[str], source: str) -> FloatArray:
