@@ -54,15 +54,22 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         method=args.method, model=args.model, gravity_mps2=args.gravity, max_yaw_sigma_deg=args.max_yaw_sigma
     )
     if len(inputs) == 1 and _is_stop_table(inputs[0], args):
-        cal = calibrate(read_stop_table(inputs[0], unit=args.unit, headings=args.headings), options)
+        table = read_stop_table(inputs[0], unit=args.unit, headings=args.headings)
+        cal = calibrate(table, options)
     else:
         done = calibrate_log(_job(args, options))
         print("\n".join(describe(done.samples, done.stops, len(inputs))))
-        cal = done.calibration
+        cal, table = done.calibration, done.table
     print(summary(cal))
     if args.output is not None:
         cal.save(args.output)
         print(f"wrote {args.output}")
+    if args.report is not None:
+        from mountcal.report import render  # matplotlib is needed for reports only
+
+        with atomic_path(args.report) as tmp:
+            tmp.write_text(render(cal.to_dict(), table), encoding="utf-8")
+        print(f"wrote {args.report}")
     return 0
 
 
@@ -372,6 +379,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     cal.add_argument("--max-yaw-sigma", type=float, default=5.0, help="report yaw only below this 1σ (deg)")
     cal.add_argument("-o", "--output", default=None, help="result JSON to write")
+    cal.add_argument("--report", default=None, help="also write a self-contained HTML report here")
     cal.set_defaults(func=cmd_calibrate)
 
     stp = sub.add_parser("stops", help="detect the parked periods of a log and write the stop table")
