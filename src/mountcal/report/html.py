@@ -214,17 +214,12 @@ def _undetermined_section(cal: Calibration, doc: Mapping[str, Any]) -> str:
         items.append(f"<b>Yaw</b> is not determined: {escape(cal.yaw_reason or 'no reason given')}.")
     if cal.slope_deg is None:
         items.append("<b>Slope</b> is not determined (see the notes below).")
-    if cal.bias_mps2 is None:
-        test = str(cal.model_selection.get("test", ""))
-        why = _declined(cal.model_selection).get("bias")
-        if "not separable" in test:
-            items.append(f"<b>Accelerometer bias</b> is not estimated: {escape(test)}.")
-        elif why:
-            items.append(f"<b>Accelerometer bias</b> is not in the model: {escape(why)}.")
-        elif cal.method == "paper":
-            items.append("<b>Accelerometer bias</b> is not estimated: the paper's method assumes none.")
-        else:
-            items.append("<b>Accelerometer bias</b>: not in the chosen model (see the model selection).")
+    # Effects the stops cannot separate (as opposed to effects that were tested and not needed).
+    for effect, why in _declined(cal.model_selection).items():
+        if effect not in cal.model and any(w in why for w in ("confounded", "not separable", "not enough stops")):
+            items.append(f"<b>{escape(effect)}</b> cannot be estimated from these stops: {escape(why)}.")
+    if cal.method == "paper":
+        items.append("<b>Accelerometer bias</b> is not estimated: the paper's method assumes none.")
     if not items:
         return '<h2>What the data could not determine</h2>\n<p class="ok">Everything in the model is determined.</p>'
     return "<h2>What the data could not determine</h2>\n<ul>" + "".join(f"<li>{i}</li>" for i in items) + "</ul>"
