@@ -204,8 +204,8 @@ def _fail(where: str, found: str, todo: str = "") -> InputError:
         "a complete, readable MCAP file",
         found,
         todo
-        or "Check that the recording was closed properly; `mcap recover` (the mcap CLI) can "
-        "salvage an interrupted recording into a new file.",
+        or "Copy the file again if it was transferred; `mcap recover` (the mcap CLI) salvages the "
+        "readable part of a damaged or interrupted recording into a new file.",
     )
 
 
@@ -333,31 +333,41 @@ class _Unit:
     what: str  # where in the file, for messages
 
 
-def _decompress(body: bytes, at: int) -> U8Array:
-    """The records of a chunk record's body, decompressed and CRC-checked."""
+_MAX_CHUNK_BYTES = 4 << 30  # as the mcap library's record size limit: a larger claim is damage
+
+
+def _decompress(job: _Job) -> U8Array:
+    """The records of a chunk, decompressed and checked against the chunk's size and CRC."""
     try:
-        _, _, size, crc, name_len = struct.unpack_from("<QQQII", body, 0)
-        compression = body[32 : 32 + name_len].decode()
-        (data_len,) = struct.unpack_from("<Q", body, 32 + name_len)
-    except (struct.error, UnicodeDecodeError) as err:
-        raise _Corrupt(f"a damaged chunk header at byte {at}") from err
-    data = memoryview(body)[40 + name_len : 40 + name_len + data_len]
-    if len(data) != data_len:
-        raise _Corrupt(f"a chunk at byte {at} shorter than its stated {data_len} bytes")
-    try:
-        if compression == "zstd":
-            raw: bytes | memoryview = zstandard.ZstdDecompressor().decompress(data, max_output_size=size)
-        elif compression == "lz4":
-            raw = lz4.frame.decompress(data)
-        elif compression == "":
-            raw = data
+        if job.compression == "zstd" and job.out is not None:
+            records = _unzstd(job.data, job.out)
+        elif job.compression == "lz4":
+            records = np.frombuffer(lz4.frame.decompress(job.data), dtype=np.uint8)
         else:
-            raise _Corrupt(f"a chunk at byte {at} compressed with {compression!r} (readable: zstd, lz4, none)")
+            records = np.frombuffer(job.data, dtype=np.uint8)
     except (zstandard.ZstdError, RuntimeError, ValueError) as err:
-        raise _Corrupt(f"a chunk at byte {at} that does not decompress ({compression}: {err})") from err
-    if len(raw) != size or (crc and zlib.crc32(raw) != crc):
-        raise _Corrupt(f"a chunk at byte {at} whose content fails its size or CRC check")
-    return np.frombuffer(raw, dtype=np.uint8)
+        raise _Corrupt(f"a chunk at byte {job.at} that does not decompress ({job.compression}: {err})") from err
+    if records.size != job.size or (job.crc and zlib.crc32(records.data) != job.crc):
+        raise _Corrupt(f"a chunk at byte {job.at} whose content fails its size or CRC check")
+    return records
+
+
+def _unzstd(data: bytes | memoryview, out: U8Array) -> U8Array:
+    """Decompress a zstd frame into ``out`` (allocated by the reading thread: see :func:`_prefetch`).
+
+    Returns the filled part of ``out``; a frame shorter or longer than ``out`` shows as a size
+    mismatch or an error.
+    """
+    view, filled = out.data, 0
+    with zstandard.ZstdDecompressor().stream_reader(data, read_across_frames=True) as reader:
+        while filled < len(view):
+            got = reader.readinto(view[filled:])
+            if got == 0:
+                break
+            filled += got
+        if filled == len(view) and reader.read(1):
+            raise ValueError("more data than the chunk's stated uncompressed size")
+    return out[:filled]
 
 
 def _messages_from_index(data: U8Array, at: I64Array, what: str) -> _Unit | None:
@@ -430,10 +440,14 @@ def _unit(data: U8Array, index: I64Array | None, what: str) -> _Unit:
 
 @dataclass(frozen=True)
 class _Job:
-    """Bytes read from the file, to be turned into a :class:`_Unit` (possibly on a worker thread)."""
+    """Bytes read from the file, to be turned into records (possibly on the worker thread)."""
 
     at: int  # file offset of the chunk record's body, or of the first loose record
-    body: bytes  # a chunk record's body, or loose records back to back
+    data: bytes | memoryview  # the chunk's (compressed) records, or loose records back to back
+    compression: str  # "zstd", "lz4" or "" (none; also for loose records)
+    size: int  # the records' length once decompressed
+    crc: int  # CRC-32 of the decompressed records, 0 when the writer did not compute it
+    out: U8Array | None  # zstd decompresses into this buffer
     index: I64Array | None  # message record offsets from the chunk's message index, when indexed
     chunk: bool
 
@@ -462,12 +476,12 @@ def _jobs(log: _Log, wanted: frozenset[int] | None) -> Iterator[_Job]:
             log.file.seek(at - _RECORD_HEAD.size)
             loose += log.file.read(_RECORD_HEAD.size + length)
         if loose and (opcode == _OP_CHUNK or len(loose) > _LOOSE_BATCH_BYTES):
-            yield _Job(loose_at, bytes(loose), None, chunk=False)
+            yield _loose_job(loose_at, loose)
             loose.clear()
     if chunk is not None:
         yield from _chunk_job(log, chunk, index, wanted)
     if loose:
-        yield _Job(loose_at, bytes(loose), None, chunk=False)
+        yield _loose_job(loose_at, loose)
 
 
 def _read_message_index(log: _Log, at: int, length: int) -> tuple[int, NDArray[np.uint64]]:
@@ -490,21 +504,43 @@ def _chunk_job(
     if wanted is not None and index and wanted.isdisjoint(index):
         return  # indexed, and none of its messages are wanted
     log.file.seek(at)
+    body = log.file.read(length)
+    try:
+        _, _, size, crc, name_len = struct.unpack_from("<QQQII", body, 0)
+        compression = body[32 : 32 + name_len].decode()
+        (data_len,) = struct.unpack_from("<Q", body, 32 + name_len)
+    except (struct.error, UnicodeDecodeError) as err:
+        raise _Corrupt(f"a damaged chunk header at byte {at}") from err
+    data = memoryview(body)[40 + name_len : 40 + name_len + data_len]
+    if len(data) != data_len or size > _MAX_CHUNK_BYTES:
+        raise _Corrupt(f"a chunk at byte {at} whose stated sizes do not fit the file")
+    if compression not in ("zstd", "lz4", ""):
+        raise _Corrupt(f"a chunk at byte {at} compressed with {compression!r} (readable: zstd, lz4, none)")
+    # The output buffer is allocated here, on the reading thread, and freed here after decoding:
+    # buffers allocated on the worker and freed on this thread cost fresh pages (and time) per chunk.
+    out = np.empty(size, dtype=np.uint8) if compression == "zstd" else None
     offsets = np.concatenate(list(index.values())) if index else None
-    yield _Job(at, log.file.read(length), offsets, chunk=True)
+    yield _Job(at, data, compression, size, crc, out, offsets, chunk=True)
+
+
+def _loose_job(at: int, loose: bytearray) -> _Job:
+    data = bytes(loose)
+    return _Job(at, data, "", len(data), 0, None, None, chunk=False)
 
 
 def _payload(job: _Job) -> U8Array:
     """The records of a job: a chunk decompressed and CRC-checked, or the loose records as they are."""
-    return _decompress(job.body, job.at) if job.chunk else np.frombuffer(job.body, dtype=np.uint8)
+    return _decompress(job) if job.chunk else np.frombuffer(job.data, dtype=np.uint8)
 
 
 def _prefetch(jobs: Iterator[_Job]) -> Generator[tuple[_Job, U8Array], None, None]:
     """Each job with its records, decompressed on a background thread a few chunks ahead.
 
     zstd, lz4 and CRC-32 release the GIL, so on two or more cores decompression overlaps the numpy
-    decoding done by the caller. The read-ahead is bounded (``_READ_AHEAD`` chunks), so memory
-    does not grow with the log.
+    decoding done by the caller. A job the worker has not started when its turn comes is done by
+    the caller instead of waited for, which balances the two threads and keeps a descheduled worker
+    (a busy machine) from stalling the read. The read-ahead is bounded (``_READ_AHEAD`` chunks), so
+    memory does not grow with the log.
     """
     if (os.cpu_count() or 1) < 2:
         yield from ((job, _payload(job)) for job in jobs)
@@ -515,14 +551,18 @@ def _prefetch(jobs: Iterator[_Job]) -> Generator[tuple[_Job, U8Array], None, Non
             for job in jobs:
                 pending.append((job, pool.submit(_payload, job)))
                 if len(pending) > _READ_AHEAD:
-                    done, future = pending.popleft()
-                    yield done, future.result()
+                    yield _next_done(pending)
             while pending:
-                done, future = pending.popleft()
-                yield done, future.result()
+                yield _next_done(pending)
         finally:
             for _, future in pending:
                 future.cancel()
+
+
+def _next_done(pending: deque[tuple[_Job, Future[U8Array]]]) -> tuple[_Job, U8Array]:
+    """The oldest job with its records: from the worker, or done here if the worker has not begun."""
+    job, future = pending.popleft()
+    return job, _payload(job) if future.cancel() else future.result()
 
 
 def _units(log: _Log, wanted: frozenset[int] | None) -> Generator[_Unit, None, None]:
@@ -574,14 +614,18 @@ def _schema_fields(text: str) -> tuple[tuple[str, str], ...]:
 def _select(log: _Log, kind: str, topic: str | None) -> _Selection | None:
     """The topic to read for ``kind``: the one named, else the only one of that type."""
     topics = log.topics()
-    argument = _ARGUMENT[kind]
+    argument, flag = _ARGUMENT[kind], f"--{_ARGUMENT[kind].replace('_', '-')}"
+    candidates = [t for t, chs in topics.items() if log.kind(chs[0]) == kind]
+    names = ", ".join(map(repr, candidates))
     if topic is not None:
         if topic not in topics:
             raise InputError(
                 log.where,
                 f"a topic named {topic!r}",
                 f"topics {log.listing()}",
-                f"Pass one of these as {argument}= (CLI: --{argument.replace('_', '-')}).",
+                f"Pass one of the {_TYPE_NAME[kind]} topics ({names}) as {argument}= (CLI: {flag})."
+                if candidates
+                else f"The log has no {_TYPE_NAME[kind]} topic to pass as {argument}= (CLI: {flag}).",
             )
         chosen = topics[topic]
         if any(log.kind(ch) != kind for ch in chosen):
@@ -589,19 +633,18 @@ def _select(log: _Log, kind: str, topic: str | None) -> _Selection | None:
                 log.where,
                 f"topic {topic!r} of type {_TYPE_NAME[kind]}",
                 f"type {log.type_name(chosen[0])}",
-                f"Pass a {_TYPE_NAME[kind]} topic as {argument}=; topics: {log.listing()}.",
+                f"Pass a {_TYPE_NAME[kind]} topic as {argument}= (CLI: {flag})"
+                + (f": {names}." if candidates else "; the log has none."),
             )
     else:
-        candidates = [t for t, chs in topics.items() if log.kind(chs[0]) == kind]
         if len(candidates) != 1:
             if kind != "imu" and not candidates:
                 return None
-            names = ", ".join(map(repr, candidates))
             raise InputError(
                 log.where,
                 f"exactly one {_TYPE_NAME[kind]} topic",
                 f"{len(candidates)}: {names}" if candidates else f"none; the topics are {log.listing()}",
-                f"Name the topic to read with {argument}= (CLI: --{argument.replace('_', '-')}).",
+                f"Name the topic to read with {argument}= (CLI: {flag}).",
             )
         topic = candidates[0]
         chosen = topics[topic]
@@ -1034,8 +1077,9 @@ def _batch(log: _Log, piece: _Piece, start: int, stop: int, dropped: Counter[str
 def inspect_mcap(path: str | os.PathLike[str]) -> LogSummary:
     """What an MCAP log holds: topics, types, message counts, rates and duration.
 
-    Counts and duration come from the summary's statistics record; per-topic rates from the
-    chunks' message indexes (no decompression). Only a log without them is scanned in full.
+    Counts and duration come from the summary's statistics record, per-topic rates from the
+    chunks' message indexes: no chunk is decompressed, so damage inside a chunk goes unnoticed
+    here (:func:`read_mcap` finds it). Only a log without indexes is scanned in full.
 
     Returns
     -------
@@ -1051,30 +1095,31 @@ def inspect_mcap(path: str | os.PathLike[str]) -> LogSummary:
         raise _fail(log.where, str(err)) from err
     finally:
         log.file.close()
+    streams = tuple(_stream(log, topic, channels, spans) for topic, channels in log.topics().items())
     stats = log.statistics
-    streams = []
-    for topic, channels in log.topics().items():
-        ids = [ch.id for ch in channels if ch.id in spans]
-        count = sum(spans[i][0] for i in ids)
-        if stats is not None:
-            count = sum(stats.channel_counts.get(ch.id, 0) for ch in channels)
-        first = min((spans[i][1] for i in ids), default=0)
-        last = max((spans[i][2] for i in ids), default=0)
-        rate = (count - 1) / ((last - first) * 1e-9) if count > 1 and last > first else 0.0
-        schema = log.schemas.get(channels[0].schema_id)
-        fields = (
-            tuple(n for _, n in _schema_fields(schema.data.decode(errors="replace")))
-            if schema and schema.encoding == "ros2msg"
-            else ()
-        )
-        streams.append(Stream(topic, log.type_name(channels[0]), count, rate, fields))
     if stats is not None and stats.message_count:
         duration = (stats.end_ns - stats.start_ns) * 1e-9
     else:
-        firsts = [s[1] for s in spans.values() if s[0]]
-        lasts = [s[2] for s in spans.values() if s[0]]
-        duration = (max(lasts) - min(firsts)) * 1e-9 if firsts else 0.0
-    return LogSummary(source=log.where, format="mcap", duration_s=duration, streams=tuple(streams))
+        seen = [s for s in spans.values() if s[0]]
+        duration = (max(s[2] for s in seen) - min(s[1] for s in seen)) * 1e-9 if seen else 0.0
+    return LogSummary(source=log.where, format="mcap", duration_s=duration, streams=streams)
+
+
+def _stream(log: _Log, topic: str, channels: list[_McapChannel], spans: _Spans) -> Stream:
+    """One topic's line of :func:`inspect_mcap` (its channels merged)."""
+    ids = [ch.id for ch in channels if ch.id in spans]
+    if log.statistics is not None:
+        count = sum(log.statistics.channel_counts.get(ch.id, 0) for ch in channels)
+    else:
+        count = sum(spans[i][0] for i in ids)
+    first = min((spans[i][1] for i in ids), default=0)
+    last = max((spans[i][2] for i in ids), default=0)
+    rate = (count - 1) / ((last - first) * 1e-9) if count > 1 and last > first else 0.0
+    schema = log.schemas.get(channels[0].schema_id)
+    fields: tuple[str, ...] = ()
+    if schema is not None and schema.encoding == "ros2msg":
+        fields = tuple(name for _, name in _schema_fields(schema.data.decode(errors="replace")))
+    return Stream(topic, log.type_name(channels[0]), count, rate, fields)
 
 
 _Spans = dict[int, tuple[int, int, int]]  # channel id → (count, first, last log time in ns)
