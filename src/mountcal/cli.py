@@ -16,7 +16,7 @@ from mountcal.atomic import atomic_path
 from mountcal.calibrate import Options, calibrate
 from mountcal.errors import InputError, MountcalError
 from mountcal.io.logs import LogOptions, inspect_log
-from mountcal.pipeline import LogJob, calibrate_log, describe, stops_of_log
+from mountcal.pipeline import LogJob, describe, stops_of_log
 from mountcal.result import Calibration
 from mountcal.simulate import PRESETS, simulate_stops
 from mountcal.stops import StopDetection
@@ -57,9 +57,11 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         table = read_stop_table(inputs[0], unit=args.unit, headings=args.headings)
         cal = calibrate(table, options)
     else:
-        done = calibrate_log(_job(args, options))
-        print("\n".join(describe(done.samples, done.stops, len(inputs))))
-        cal, table = done.calibration, done.table
+        from mountcal.pipeline_drive import calibrate_any, describe_any
+
+        done = calibrate_any(_job(args, options), use=args.use)
+        print("\n".join(describe_any(done, len(inputs))))
+        cal, table = done.calibration, done.table  # type: ignore[assignment]  # no stop table: from driving alone
     print(summary(cal))
     if args.output is not None:
         cal.save(args.output)
@@ -100,6 +102,30 @@ def cmd_inspect(args: argparse.Namespace) -> int:
     for st in info.streams:
         fields = f"  [{', '.join(st.fields)}]" if st.fields else ""
         print(f"  {st.name:<32} {st.kind:<28} {st.count:>9} msgs {st.rate_hz:>9.2f} Hz{fields}")
+    return 0
+
+
+def cmd_rotate(args: argparse.Namespace) -> int:
+    """``mountcal rotate LOG… --calibration result.json -o OUT``: the log's samples in the vehicle frame."""
+    from mountcal.rotate_log import rotate_log
+
+    if Path(args.output).resolve() == Path(args.calibration).resolve():
+        raise InputError(
+            str(args.output),
+            "an output path other than the inputs",
+            "the calibration file itself",
+            "Choose another -o path; mountcal never overwrites its input.",
+        )
+    cal = Calibration.load(args.calibration)
+    report = rotate_log(
+        args.input,
+        cal,
+        args.output,
+        fmt=args.format,
+        options=LogOptions(dbc=args.dbc, mapping=args.mapping, channel=args.channel, topic=args.topic),
+        chunk_samples=args.chunk,
+    )
+    print("\n".join(report.lines()))
     return 0
 
 
@@ -306,8 +332,9 @@ def summary(cal: Calibration) -> str:
 
     sel = cal.model_selection
     how = "fixed by --model" if sel.get("mode") == "fixed" else "auto: " + " → ".join(sel.get("steps", []))
+    how = how if cal.method == "full" else cal.method  # "paper", or "driving" when there were no stops
     lines = [
-        f"mountcal — {cal.method} method, model: {', '.join(cal.model)} ({how if cal.method == 'full' else 'paper'})",
+        f"mountcal — {cal.method} method, model: {', '.join(cal.model)} ({how})",
         f"  roll   {pm(cal.roll_deg, cal.roll_sigma_deg)}",
         f"  pitch  {pm(cal.pitch_deg, cal.pitch_sigma_deg)}",
         f"  yaw    {pm(cal.yaw_deg, cal.yaw_sigma_deg)}",
@@ -378,6 +405,12 @@ def _parser() -> argparse.ArgumentParser:
         help="local gravity in m/s² (default: from lat_deg/alt_m when the table has them, else 9.80665)",
     )
     cal.add_argument("--max-yaw-sigma", type=float, default=5.0, help="report yaw only below this 1σ (deg)")
+    cal.add_argument(
+        "--use",
+        choices=("auto", "stops", "driving"),
+        default="auto",
+        help="for a log: its parked stops, its driving (speed changes), or whatever it supports (default)",
+    )
     cal.add_argument("-o", "--output", default=None, help="result JSON to write")
     cal.add_argument("--report", default=None, help="also write a self-contained HTML report here")
     cal.set_defaults(func=cmd_calibrate)
@@ -387,6 +420,21 @@ def _parser() -> argparse.ArgumentParser:
     _log_arguments(stp)
     stp.add_argument("-o", "--output", required=True, help="stop table to write (CSV or .parquet)")
     stp.set_defaults(func=cmd_stops)
+
+    rot = sub.add_parser("rotate", help="write a log's samples in the vehicle frame (Parquet, CSV or MCAP)")
+    rot.add_argument("input", nargs="+", metavar="LOG", help="log file(s); splits of one log are joined")
+    rot.add_argument("--calibration", required=True, help="result JSON written by `mountcal calibrate`")
+    rot.add_argument("-o", "--output", required=True, help="file to write (.parquet, .csv or .mcap)")
+    rot.add_argument(
+        "--format", choices=("parquet", "csv", "mcap"), default=None, help="default: from -o's suffix, else parquet"
+    )
+    rot.add_argument("--chunk", type=int, default=100_000, help="samples per chunk: bounds the memory (default 100000)")
+    rot_log = rot.add_argument_group("logs")
+    rot_log.add_argument("--dbc", default=None, help="DBC to decode a CAN log")
+    rot_log.add_argument("--mapping", default=None, help="TOML naming the accelerometer signals (CAN)")
+    rot_log.add_argument("--channel", type=int, default=None, help="CAN channel of the IMU")
+    rot_log.add_argument("--topic", default=None, help="IMU topic (MCAP)")
+    rot.set_defaults(func=cmd_rotate)
 
     ins = sub.add_parser("inspect", help="list what a log holds")
     ins.add_argument("input", metavar="LOG")

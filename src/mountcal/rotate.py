@@ -92,7 +92,7 @@ def frame_to_sensor(
 
 
 def _as_vectors(a: FloatArray, name: str) -> FloatArray:
-    arr = np.asarray(a, dtype=float)
+    arr = np.array(a, dtype=float)  # a copy: pandas may hand out read-only views, which scipy refuses
     if arr.ndim != 2 or arr.shape[1] != 3:
         raise InputError(name, "an array of shape (n, 3)", f"shape {arr.shape}", "Pass one row per sample.")
     return arr
@@ -107,7 +107,7 @@ def _columns(df: pd.DataFrame, cols: Sequence[str]) -> FloatArray:
             f"no {', '.join(missing)}",
             "Name the columns with acc_columns= / gyro_columns=.",
         )
-    return df[list(cols)].to_numpy(dtype=float)
+    return df[list(cols)].to_numpy(dtype=float, copy=True)
 
 
 def _check_mps2(acc: FloatArray) -> None:

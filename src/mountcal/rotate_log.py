@@ -1,0 +1,548 @@
+"""Whole logs into the vehicle frame, streamed; and the notebook API around it.
+
+:func:`rotate_log` reads a log in bounded chunks (:func:`iter_log`: ``iter_mcap``, ``iter_can``, or
+batches of a CSV/Parquet table), applies a calibration to each (:mod:`mountcal.rotate`: bias
+removed, then ``acc_v = R_vs · (acc_s − b)``; angular rates only rotated) and writes the
+vehicle-frame samples with their original timestamps to Parquet (default), CSV or MCAP
+(:mod:`mountcal.io.writers`). The output appears only when complete (a process killed mid-write
+leaves no file), never over an input; every sample read is written, and whatever a reader dropped
+is counted in the report.
+
+An MCAP input rotated to MCAP keeps everything: each chunk, message index, schema, channel,
+attachment and metadata record is copied byte for byte, and a channel ``<topic>/vehicle`` is added
+with one vehicle-frame ``sensor_msgs/msg/Imu`` (CDR) per original IMU message — same stamp,
+sequence, log and publish time; ``frame_id`` ``base_link`` (REP 103: x forward, y left, z up);
+orientation, when known, turned to the vehicle's; the rate and acceleration covariances rotated.
+
+Notebook use — read a log into a table, load a calibration, apply it:
+
+>>> import tempfile, pathlib
+>>> from mountcal import Calibration, calibrate, frame_to_vehicle, simulate_preset
+>>> from mountcal.io.logs import read_log
+>>> from mountcal.rotate_log import rotate_log, to_frame
+>>> from mountcal.simulate_drive import simulate_drive
+>>> folder = pathlib.Path(tempfile.mkdtemp())
+>>> drive = simulate_drive(duration_s=60.0, seed=1)
+>>> to_frame(drive.to_samples()).to_csv(folder / "drive.csv", index=False)
+>>> df = to_frame(read_log(folder / "drive.csv"))
+>>> list(df.columns)
+['t_s', 'ax', 'ay', 'az', 'gx', 'gy', 'gz', 'speed_mps']
+>>> calibrate(simulate_preset("zhang2011", seed=0)[0]).save(folder / "result.json")
+>>> cal = Calibration.load(folder / "result.json")
+>>> df_v = frame_to_vehicle(df, cal, gyro_columns=("gx", "gy", "gz"))
+>>> round(float(df_v["az"].median()), 1)  # gravity is now on the vehicle's z axis
+9.8
+>>> report = rotate_log([folder / "drive.csv"], cal, folder / "drive_v.parquet")
+>>> report.samples_out == len(df)
+True
+"""
+
+from __future__ import annotations
+
+import importlib.metadata
+import json
+import os
+from collections import Counter
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, BinaryIO
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.csv as pa_csv
+import pyarrow.parquet as pq
+from scipy.spatial.transform import Rotation
+
+from mountcal.conventions import CONVENTIONS, FloatArray
+from mountcal.errors import InputError
+from mountcal.io.logs import CAN_SUFFIXES, TABLE_CHANNELS, LogOptions
+from mountcal.io.samples import Channel, Samples
+from mountcal.io.writers import (
+    CsvSamples,
+    ImuMessages,
+    McapImuSamples,
+    ParquetSamples,
+    atomic_output,
+    copy_mcap_with_imu,
+)
+from mountcal.result import Calibration
+from mountcal.rotate import acc_to_vehicle, rate_to_vehicle
+
+FORMATS = {".parquet": "parquet", ".pq": "parquet", ".csv": "csv", ".mcap": "mcap"}
+VEHICLE_FRAME_ID = "base_link"  # REP 103's body frame: x forward, y left, z up = ISO 8855
+CHUNK_SAMPLES = 100_000
+
+
+@dataclass(frozen=True)
+class RotateReport:
+    """What :func:`rotate_log` read, wrote and dropped.
+
+    ``samples_in`` are the IMU samples the readers delivered and ``samples_out`` those written
+    (always equal); ``dropped`` counts what the readers discarded, by reason. For an MCAP copied
+    through, ``copied_messages`` counts the input's messages (every channel, the original IMU one
+    included) and ``nonfinite`` the IMU messages with NaN or infinite values (rotated, so still
+    NaN, and kept so the new channel has one message per original).
+    """
+
+    output: str
+    format: str
+    inputs: tuple[str, ...]
+    samples_in: int
+    samples_out: int
+    dropped: dict[str, int]
+    chunks: int
+    largest_chunk: int
+    gyro: bool
+    topic: str | None = None
+    copied_messages: int = 0
+    copied_channels: int = 0
+    nonfinite: int = 0
+
+    def lines(self) -> list[str]:
+        """Lines for the user."""
+        dropped = ", ".join(f"{k}: {v}" for k, v in self.dropped.items())
+        out = [
+            f"read {self.samples_in} IMU samples from {len(self.inputs)} file(s)"
+            + (f"; the readers dropped {dropped}" if dropped else "; nothing dropped"),
+            f"wrote {self.samples_out} vehicle-frame samples (accelerometer"
+            + (" and gyro" if self.gyro else "")
+            + f") to {self.output} ({self.format}, {self.chunks} chunk(s) of at most {self.largest_chunk})",
+        ]
+        if self.topic is not None and self.copied_channels:
+            out.append(
+                f"copied {self.copied_messages} messages on {self.copied_channels} channel(s) unchanged; "
+                f"added {self.topic}"
+            )
+        if self.nonfinite:
+            out.append(f"{self.nonfinite} IMU messages hold NaN or infinite values: kept, rotated to NaN")
+        return out
+
+
+def output_format(path: str | os.PathLike[str], fmt: str | None = None) -> str:
+    """``parquet``, ``csv`` or ``mcap``: the one asked for, else from the suffix, else Parquet."""
+    if fmt is not None:
+        if fmt not in ("parquet", "csv", "mcap"):
+            raise InputError("--format", "parquet, csv or mcap", repr(fmt), "Choose one of them.")
+        return fmt
+    return FORMATS.get(Path(path).suffix.lower(), "parquet")
+
+
+def rotate_log(
+    paths: str | os.PathLike[str] | Sequence[str | os.PathLike[str]],
+    cal: Calibration,
+    output: str | os.PathLike[str],
+    *,
+    fmt: str | None = None,
+    options: LogOptions | None = None,
+    chunk_samples: int = CHUNK_SAMPLES,
+    frame_id: str = VEHICLE_FRAME_ID,
+) -> RotateReport:
+    """Write a log's samples in the vehicle frame, streaming with bounded memory.
+
+    Parameters
+    ----------
+    paths : path or sequence of paths
+        One log, or the splits of one log (joined in time order).
+    cal : Calibration
+        The mounting (:meth:`Calibration.load`).
+    output : path
+        The file to write; never one of the inputs.
+    fmt : {"parquet", "csv", "mcap"}, optional
+        Default: from the output's suffix, else Parquet.
+    options : LogOptions, optional
+        DBC, mapping and channel for CAN logs, topic for MCAP.
+    chunk_samples : int
+        Samples per chunk (per Parquet row group): the memory bound.
+    frame_id : str
+        ``header.frame_id`` of the vehicle-frame MCAP messages.
+
+    Returns
+    -------
+    RotateReport
+
+    Raises
+    ------
+    InputError
+        Unreadable input, an output that is an input, data in g instead of m/s², an MCAP output
+        from several MCAP files.
+    """
+    files = [Path(p) for p in ([paths] if isinstance(paths, str | os.PathLike) else paths)]
+    opts = options or LogOptions()
+    out = Path(output)
+    kind = output_format(out, fmt)
+    _check_not_an_input(out, files)
+    if chunk_samples < 1:
+        raise ValueError(f"chunk_samples must be at least 1, got {chunk_samples}")
+    if kind == "mcap" and any(f.suffix.lower() == ".mcap" for f in files):
+        if len(files) != 1:
+            raise InputError(
+                " + ".join(map(str, files)),
+                "one MCAP file to copy through with its vehicle-frame topic",
+                f"{len(files)} files",
+                "Rotate each MCAP file to its own output, or write Parquet/CSV (which joins splits).",
+            )
+        return _rotate_mcap_copy(files[0], cal, out, opts.topic, frame_id)
+    return _rotate_stream(files, cal, out, kind, opts, chunk_samples, frame_id)
+
+
+def _check_not_an_input(out: Path, files: Sequence[Path]) -> None:
+    for f in files:
+        same = out.resolve() == f.resolve() or (out.exists() and f.exists() and os.path.samefile(out, f))
+        if same:
+            raise InputError(
+                str(out),
+                "an output path other than the input",
+                "the input file itself",
+                "Choose another -o path; mountcal never overwrites its input.",
+            )
+
+
+def _metadata(cal: Calibration, files: Sequence[Path]) -> dict[str, str]:
+    try:
+        version = importlib.metadata.version("mountcal")
+    except importlib.metadata.PackageNotFoundError:
+        version = "unknown"
+    return {
+        "mountcal.frame": "vehicle (ISO 8855: x forward, y left, z up)",
+        "mountcal.units": "t_s s; ax, ay, az m/s^2 (specific force, bias removed); gx, gy, gz rad/s",
+        "mountcal.conventions": json.dumps(CONVENTIONS),
+        "mountcal.calibration": json.dumps(
+            {
+                "quaternion_vs_xyzw": cal.rot_vs.as_quat().tolist(),
+                "roll_deg": cal.roll_deg,
+                "pitch_deg": cal.pitch_deg,
+                "yaw_deg": cal.yaw_deg,
+                "bias_mps2": None if cal.bias_mps2 is None else cal.bias_mps2.tolist(),
+                "method": cal.method,
+                "input": cal.provenance.get("input"),
+            }
+        ),
+        "mountcal.inputs": json.dumps([str(f) for f in files]),
+        "mountcal.software": f"mountcal {version}",
+    }
+
+
+# --------------------------------------------------------------------------- any log, streamed
+
+
+def iter_log(
+    paths: str | os.PathLike[str] | Sequence[str | os.PathLike[str]],
+    options: LogOptions | None = None,
+    max_samples: int = CHUNK_SAMPLES,
+) -> Iterator[Samples]:
+    """The samples of a log in chunks of at most ``max_samples``, files in time order.
+
+    MCAP through :func:`~mountcal.io.mcap_log.iter_mcap`, CAN logs through
+    :func:`~mountcal.io.can_log.iter_can`, CSV and Parquet tables (``t_s, ax, ay, az`` and
+    optionally ``gx, gy, gz``) in batches. Each chunk's ``dropped`` counts what its reader
+    discarded. Splits of one log are ordered by their first sample.
+    """
+    opts = options or LogOptions()
+    files = [Path(p) for p in ([paths] if isinstance(paths, str | os.PathLike) else paths)]
+    if not files:
+        raise InputError("LOG", "at least one log file", "none", "Name the log file(s).")
+    if len(files) > 1:
+        files = sorted(files, key=lambda f: _first_time(f, opts))
+    for f in files:
+        yield from _iter_one(f, opts, max_samples)
+
+
+def _iter_one(path: Path, opts: LogOptions, max_samples: int) -> Iterator[Samples]:
+    suffix = path.suffix.lower()
+    if suffix == ".mcap":
+        from mountcal.io.mcap_log import iter_mcap
+
+        return iter_mcap(path, topic=opts.topic, max_samples=max_samples)
+    if suffix in CAN_SUFFIXES or (suffix == ".csv" and opts.dbc is not None):
+        if opts.dbc is None:
+            raise InputError(
+                str(path),
+                "a DBC to decode this CAN log",
+                "no --dbc",
+                "Pass --dbc FILE (and --mapping FILE when the signals are not named plainly).",
+            )
+        from mountcal.io.can_log import iter_can
+
+        return iter_can(path, opts.dbc, mapping=opts.mapping, channel=opts.channel, max_samples=max_samples)
+    if suffix in (".csv", ".parquet", ".pq"):
+        return _iter_table(path, max_samples)
+    raise InputError(
+        str(path),
+        "an MCAP, CAN (BLF, ASC, log, TRC, CSV, MF4) or CSV/Parquet log",
+        f"a file ending in {suffix or '(nothing)'}",
+        "Convert it, or name it by its format.",
+    )
+
+
+def _first_time(path: Path, opts: LogOptions) -> float:
+    chunks = _iter_one(path, opts, 1)
+    try:
+        for chunk in chunks:
+            if len(chunk):
+                return float(chunk.t_s[0])
+        return float("inf")
+    finally:
+        close = getattr(chunks, "close", None)
+        if close is not None:
+            close()
+
+
+_REQUIRED = ("t_s", "ax", "ay", "az")
+
+
+def _iter_table(path: Path, max_samples: int) -> Iterator[Samples]:
+    """A CSV or Parquet sample table in batches; rows with a non-finite value dropped and counted."""
+    where = str(path)
+    if not path.is_file():
+        raise InputError(where, "a readable sample table", "no such file", "Check the path.")
+    try:
+        if path.suffix.lower() == ".csv":
+            names = pa_csv.open_csv(path).schema.names
+            wanted = [c for c in (*_REQUIRED, "gx", "gy", "gz", *TABLE_CHANNELS) if c in names]
+            reader: Any = pa_csv.open_csv(
+                path,
+                read_options=pa_csv.ReadOptions(block_size=1 << 22),
+                convert_options=pa_csv.ConvertOptions(
+                    include_columns=wanted, column_types=dict.fromkeys(wanted, pa.float64())
+                ),
+            )
+        else:
+            parquet = pq.ParquetFile(path)
+            names = parquet.schema_arrow.names
+            wanted = [c for c in (*_REQUIRED, "gx", "gy", "gz", *TABLE_CHANNELS) if c in names]
+            reader = parquet.iter_batches(batch_size=max_samples, columns=wanted)
+    except (pa.ArrowInvalid, OSError) as err:
+        raise InputError(
+            where, "a CSV or Parquet sample table", f"a file that does not parse ({err})", "Check the file."
+        ) from err
+    missing = [c for c in _REQUIRED if c not in names]
+    if missing:
+        raise InputError(
+            where,
+            "columns t_s, ax, ay, az",
+            f"no {', '.join(missing)}",
+            "Rename the columns; a CAN log in CSV needs --dbc.",
+        )
+    gyro = all(c in names for c in ("gx", "gy", "gz"))
+    try:
+        for batch in reader:
+            for start in range(0, batch.num_rows, max_samples):
+                yield _table_samples(batch.slice(start, max_samples), gyro, where)
+    except pa.ArrowInvalid as err:
+        raise InputError(
+            where, "numbers in every sample column", f"a value that is not one ({err})", "Fix or remove that row."
+        ) from err
+
+
+def _table_samples(batch: pa.RecordBatch, gyro: bool, where: str) -> Samples:
+    def col(name: str) -> FloatArray:
+        return np.asarray(batch.column(name).to_numpy(zero_copy_only=False), dtype=np.float64)
+
+    t = col("t_s")
+    acc = np.column_stack([col(c) for c in ("ax", "ay", "az")])
+    g = np.column_stack([col(c) for c in ("gx", "gy", "gz")]) if gyro else None
+    ok = np.isfinite(t) & np.isfinite(acc).all(axis=1)
+    if g is not None:
+        ok &= np.isfinite(g).all(axis=1)
+    channels = {}
+    for name in TABLE_CHANNELS:
+        if name in batch.schema.names:
+            v = col(name)
+            good = np.isfinite(v) & np.isfinite(t)
+            channels[name] = Channel(t[good], v[good])
+    dropped = {"non-finite sample rows": int((~ok).sum())} if not ok.all() else {}
+    return Samples(t[ok], acc[ok], None if g is None else g[ok], channels, source=where, dropped=dropped)
+
+
+# --------------------------------------------------------------------------- Parquet, CSV, MCAP from a stream
+
+
+def _rotate_stream(
+    files: Sequence[Path],
+    cal: Calibration,
+    out: Path,
+    kind: str,
+    opts: LogOptions,
+    chunk_samples: int,
+    frame_id: str,
+) -> RotateReport:
+    chunks = iter_log(files, opts, chunk_samples)
+    first = next(chunks, None)
+    if first is None:
+        raise InputError(" + ".join(map(str, files)), "IMU samples", "none", "Check the log and the topic/DBC.")
+    acc_to_vehicle(first.acc_s, cal, check_units=True)  # data in g are refused before any output exists
+    tally = _Tally(gyro=first.gyro_s is not None, several=len(files) > 1)
+    with atomic_output(out) as f:
+        writer = _writer(f, kind, tally.gyro, cal, files, frame_id)
+        try:
+            for chunk in _chain(first, chunks):
+                tally.write(writer, chunk, cal)
+        finally:
+            writer.close()  # after an error this only completes the unnamed file, which is dropped
+    return RotateReport(
+        output=str(out),
+        format=kind,
+        inputs=tuple(map(str, files)),
+        samples_in=tally.samples,
+        samples_out=tally.samples,
+        dropped={k: v for k, v in tally.dropped.items() if v},
+        chunks=tally.chunks,
+        largest_chunk=tally.largest,
+        gyro=tally.gyro,
+        topic="/imu/vehicle" if kind == "mcap" else None,
+    )
+
+
+@dataclass
+class _Tally:
+    """Rotates and writes chunk after chunk, counting what went through."""
+
+    gyro: bool
+    several: bool
+    samples: int = 0
+    chunks: int = 0
+    largest: int = 0
+    dropped: Counter[str] = field(default_factory=Counter)
+
+    def write(self, writer: ParquetSamples | CsvSamples | McapImuSamples, chunk: Samples, cal: Calibration) -> None:
+        self.dropped.update(chunk.dropped)
+        n = len(chunk)
+        if n == 0:
+            return
+        if (chunk.gyro_s is not None) != self.gyro:
+            raise InputError(
+                chunk.source,
+                "the same channels in every file of the log" if self.several else "a gyro in every chunk",
+                "a file without the gyro" if self.gyro else "a gyro in only some files",
+                "Rotate the files separately.",
+            )
+        acc_v = acc_to_vehicle(chunk.acc_s, cal, check_units=False)  # units checked on the first chunk
+        gyro_v = rate_to_vehicle(chunk.gyro_s, cal) if chunk.gyro_s is not None else None
+        writer.write(chunk.t_s, acc_v, gyro_v)
+        self.samples, self.chunks, self.largest = self.samples + n, self.chunks + 1, max(self.largest, n)
+
+
+def _chain(first: Samples, rest: Iterator[Samples]) -> Iterator[Samples]:
+    # No read-ahead thread: the MCAP and BLF readers already decompress on a background thread,
+    # and on two cores a third thread measured slower, not faster.
+    yield first
+    yield from rest
+
+
+def _writer(
+    f: BinaryIO, kind: str, gyro: bool, cal: Calibration, files: Sequence[Path], frame_id: str
+) -> ParquetSamples | CsvSamples | McapImuSamples:
+    meta = _metadata(cal, files)
+    if kind == "parquet":
+        return ParquetSamples(f, gyro, meta)
+    if kind == "csv":
+        return CsvSamples(f, gyro, meta)
+    return McapImuSamples(f, "/imu/vehicle", frame_id, {k.removeprefix("mountcal."): v for k, v in meta.items()})
+
+
+# --------------------------------------------------------------------------- MCAP copied through
+
+
+def _rotate_mcap_copy(src: Path, cal: Calibration, out: Path, topic: str | None, frame_id: str) -> RotateReport:
+    meta = {k.removeprefix("mountcal."): v for k, v in _metadata(cal, [src]).items()}
+    checked = False
+
+    def transform(msgs: ImuMessages) -> tuple[ImuMessages, int]:
+        nonlocal checked
+        rotated = _to_vehicle(msgs, cal, check_units=not checked)
+        checked = checked or len(msgs) >= 10
+        return rotated
+
+    with atomic_output(out) as g:
+        stats = copy_mcap_with_imu(src, g, transform, topic=topic, suffix="/vehicle", frame_id=frame_id, metadata=meta)
+    return RotateReport(
+        output=str(out),
+        format="mcap",
+        inputs=(str(src),),
+        samples_in=stats.imu_messages,
+        samples_out=stats.imu_messages,
+        dropped={},
+        chunks=stats.imu_chunks,
+        largest_chunk=stats.largest_chunk,
+        gyro=True,
+        topic=stats.topic,
+        copied_messages=stats.copied_messages,
+        copied_channels=stats.copied_channels,
+        nonfinite=stats.nonfinite,
+    )
+
+
+def _to_vehicle(msgs: ImuMessages, cal: Calibration, check_units: bool) -> tuple[ImuMessages, int]:
+    """The messages in the vehicle frame, and how many hold a non-finite value."""
+    acc, gyro = msgs.linear_acceleration, msgs.angular_velocity
+    finite = np.isfinite(acc).all(axis=1) & np.isfinite(gyro).all(axis=1)
+    if check_units and finite.sum() >= 10:
+        acc_to_vehicle(acc[finite], cal, check_units=True)  # refuses g units with a clear message
+    rot = cal.rot_vs.as_matrix()
+    orientation = msgs.orientation.copy()
+    known = (msgs.orientation_covariance[:, 0] != -1.0) & (np.linalg.norm(orientation, axis=1) > 0.5)
+    known &= np.isfinite(orientation).all(axis=1)
+    if known.any():  # the vehicle's orientation: R_wv = R_ws · R_vsᵀ
+        orientation[known] = (Rotation.from_quat(orientation[known]) * cal.rot_vs.inv()).as_quat()
+    return (
+        ImuMessages(
+            sec=msgs.sec,
+            nanosec=msgs.nanosec,
+            orientation=orientation,
+            orientation_covariance=msgs.orientation_covariance,
+            angular_velocity=rate_to_vehicle(gyro, cal),
+            angular_velocity_covariance=_rotate_covariance(msgs.angular_velocity_covariance, rot),
+            linear_acceleration=acc_to_vehicle(acc, cal, check_units=False),
+            linear_acceleration_covariance=_rotate_covariance(msgs.linear_acceleration_covariance, rot),
+        ),
+        int((~finite).sum()),
+    )
+
+
+def _rotate_covariance(cov: FloatArray, rot: FloatArray) -> FloatArray:
+    """``R · C · Rᵀ`` for each row-major 3×3 covariance (rows marked unknown, ``C[0] = −1``, kept)."""
+    c = cov.reshape(-1, 3, 3)
+    out = np.einsum("ij,njk,lk->nil", rot, c, rot).reshape(-1, 9)
+    return np.where((cov[:, 0] == -1.0)[:, None], cov, out)
+
+
+# --------------------------------------------------------------------------- tables for notebooks
+
+
+def to_frame(samples: Samples) -> pd.DataFrame:
+    """Samples as a DataFrame: ``t_s, ax, ay, az`` (and ``gx, gy, gz``), plus each channel held.
+
+    Parameters
+    ----------
+    samples : Samples
+        From :func:`mountcal.io.logs.read_log` (sensor frame, SI units).
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per IMU sample: ``t_s`` (s), ``ax, ay, az`` (m/s²), ``gx, gy, gz`` (rad/s) when
+        logged, and each auxiliary channel (``speed_mps``, ``heading_deg``, …) at its latest
+        value at or before the row's time (NaN before its first sample; channels keep their own
+        clock, so this is a sample-and-hold, not an interpolation). ``attrs`` records the frame
+        (``"sensor"``), the source, the axis mapping and the reader's drop counts.
+    """
+    data: dict[str, Any] = {"t_s": samples.t_s}
+    for j, name in enumerate(("ax", "ay", "az")):
+        data[name] = samples.acc_s[:, j]
+    if samples.gyro_s is not None:
+        for j, name in enumerate(("gx", "gy", "gz")):
+            data[name] = samples.gyro_s[:, j]
+    for key, ch in samples.channels.items():
+        order = np.argsort(ch.t_s, kind="stable")
+        t_ch, v_ch = ch.t_s[order], ch.value[order]
+        idx = np.searchsorted(t_ch, samples.t_s, side="right") - 1
+        data[key] = np.where(idx >= 0, v_ch[np.clip(idx, 0, None)], np.nan) if t_ch.size else np.nan
+    # One block per column (pandas ≥ 3 hands out read-only views of a shared block, which
+    # scipy's Rotation.apply refuses; see the report of issue 5).
+    df = pd.DataFrame({"t_s": data.pop("t_s")})
+    for name, column in data.items():
+        df[name] = column
+    df.attrs.update(frame="sensor", source=samples.source, axis_map=samples.axis_map, dropped=dict(samples.dropped))
+    return df
