@@ -22,7 +22,7 @@ from mountcal.estimate.driving import estimate_driving
 from mountcal.io.logs import LogOptions, read_log
 from mountcal.result import Calibration
 from mountcal.rotate import acc_to_sensor, acc_to_vehicle, frame_to_sensor, frame_to_vehicle
-from mountcal.rotate_log import rotate_log, to_frame
+from mountcal.rotate_log import to_frame
 from mountcal.simulate import simulate_preset, simulate_stops
 from mountcal.stoptable import StopTable, read_stop_table, stop_table_from_frame
 
@@ -39,7 +39,6 @@ __all__ = [
     "frame_to_vehicle",
     "read_log",
     "read_stop_table",
-    "rotate_log",
     "simulate_preset",
     "simulate_stops",
     "stop_table_from_frame",
