@@ -1,0 +1,317 @@
+"""Fleet inputs: folders, globs and manifest CSVs → one :class:`FleetJob` per log.
+
+- A **folder** is searched recursively (hidden files and folders skipped); every file with a log
+  suffix is one log and its vehicle id is its parent folder's name. A sheet named
+  ``<log name>.protocol.csv`` beside a log is that log's protocol sheet.
+- A **glob** (``'fleet/*/*.mcap'``, quoted so that mountcal expands it) names logs the same way.
+- A **manifest** is a CSV with the columns :data:`MANIFEST_COLUMNS` (``vehicle_id`` and ``log``
+  required); ``log`` may be a glob matching the split files of one log. Relative paths are
+  relative to the manifest's folder; empty cells take the command-line defaults.
+- Any other file is one log of the vehicle named by its parent folder.
+
+Stop tables (CSV/Parquet with ``beta_deg, ax, ay, az``) are accepted wherever a log is.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+from collections.abc import Collection, Iterator, Sequence
+from dataclasses import dataclass, field, replace
+from glob import glob
+from pathlib import Path
+
+import pandas as pd
+
+from mountcal.calibrate import Options
+from mountcal.errors import InputError
+from mountcal.io.logs import CAN_SUFFIXES, LogOptions
+from mountcal.pipeline import LogJob
+from mountcal.stops import StopDetection
+from mountcal.stoptable import Headings
+
+LOG_SUFFIXES = frozenset({".mcap", ".csv", ".parquet", ".pq", *CAN_SUFFIXES})
+PROTOCOL_SUFFIX = ".protocol.csv"
+MANIFEST_REQUIRED = ("vehicle_id", "log")
+MANIFEST_COLUMNS = (
+    *MANIFEST_REQUIRED,
+    "protocol_sheet",
+    "dbc",
+    "mapping",
+    "channel",
+    "topic",
+    "uphill_azimuth_deg",
+    "start_time",
+)
+_GLOB_CHARS = re.compile(r"[*?\[]")
+
+
+@dataclass(frozen=True)
+class JobDefaults:
+    """Settings every log gets unless its manifest row says otherwise (the command-line options)."""
+
+    log: LogOptions = field(default_factory=LogOptions)
+    detection: StopDetection = field(default_factory=StopDetection)
+    uphill_azimuth_deg: float | None = None
+    options: Options = field(default_factory=Options)
+    headings: Headings = "uphill"  # what a stop table's beta_deg is measured from
+
+
+@dataclass(frozen=True)
+class FleetJob:
+    """One log of one vehicle, ready for a worker.
+
+    Attributes
+    ----------
+    vehicle_id : str
+    log : str
+        The log as the results name it: its path as found (split files joined with ``" + "``).
+    job : LogJob
+        What :func:`mountcal.pipeline.calibrate_log` needs, with absolute paths, so that a worker
+        on another machine of a shared file system finds the files.
+    headings : {"uphill", "relative", "none"}
+        What ``beta_deg`` of a stop table is measured from (logs find their own headings).
+    start_time : str or None
+        The log's start (ISO 8601, UTC) from the manifest; None to take it from the log's clock.
+    origin : str
+        Where the job came from (a folder, a glob, a manifest row), for messages.
+    """
+
+    vehicle_id: str
+    log: str
+    job: LogJob
+    headings: Headings = "uphill"
+    start_time: str | None = None
+    origin: str = ""
+
+
+def collect_jobs(
+    inputs: Sequence[str | Path], defaults: JobDefaults | None = None, exclude: Collection[str | Path] = ()
+) -> list[FleetJob]:
+    """The jobs of folders, globs, log files and manifests, in input order.
+
+    A log reached twice (a folder and a glob over it) is listed twice; :func:`run_fleet` keeps the
+    first and counts the others.
+
+    Parameters
+    ----------
+    inputs : sequence of str or Path
+    defaults : JobDefaults, optional
+    exclude : collection of paths
+        Files and folders never taken as logs (the fleet's own outputs).
+
+    Raises
+    ------
+    InputError
+        An input names nothing, a manifest is malformed, or no log is found at all.
+    """
+    defaults = defaults or JobDefaults()
+    skip = {Path(p).resolve() for p in exclude}
+    jobs = [job for item in inputs for job in _jobs_of_input(str(item), defaults, skip)]
+    if not jobs:
+        raise InputError(
+            ", ".join(map(str, inputs)) or "INPUTS",
+            "log files (" + ", ".join(sorted(LOG_SUFFIXES)) + "), folders of them, globs or a manifest CSV",
+            "no log",
+            "Check the paths; a folder is searched recursively for files with those suffixes.",
+        )
+    return jobs
+
+
+def _jobs_of_input(item: str, defaults: JobDefaults, skip: set[Path]) -> Iterator[FleetJob]:
+    path = Path(item)
+    if path.is_dir():
+        for file in _walk_logs(path, skip):
+            yield _file_job(file, defaults, origin=f"folder {item}")
+    elif path.is_file():
+        if path.resolve() in skip:
+            raise InputError(
+                item,
+                "an input other than the fleet's own output",
+                "the output table (or its vehicles table) named as an input",
+                "Choose another -o path; mountcal never overwrites its input.",
+            )
+        if _is_manifest(path):
+            yield from read_manifest(path, defaults)
+        else:
+            yield _file_job(path, defaults, origin=item)
+    elif _GLOB_CHARS.search(item):
+        matches = [Path(m) for m in sorted(glob(item, recursive=True), key=natural_key)]
+        files = [m for m in matches if m.is_file() and m.resolve() not in skip and not _is_protocol(m)]
+        if not files:
+            raise InputError(item, "a glob matching log files", "no match", "Check the pattern (quote it).")
+        for file in files:
+            yield _file_job(file, defaults, origin=f"glob {item}")
+    else:
+        raise InputError(
+            item, "a log file, a folder of logs, a glob or a manifest CSV", "nothing at this path", "Check the path."
+        )
+
+
+def _walk_logs(folder: Path, skip: set[Path]) -> Iterator[Path]:
+    for root, dirs, files in os.walk(folder):
+        here = Path(root)
+        dirs[:] = sorted(
+            (d for d in dirs if not d.startswith(".") and (here / d).resolve() not in skip), key=natural_key
+        )
+        for name in sorted(files, key=natural_key):
+            file = here / name
+            if (
+                not name.startswith(".")
+                and file.suffix.lower() in LOG_SUFFIXES
+                and not _is_protocol(file)
+                and file.resolve() not in skip
+            ):
+                yield file
+
+
+def _is_protocol(path: Path) -> bool:
+    return path.name.lower().endswith(PROTOCOL_SUFFIX)
+
+
+def _file_job(path: Path, defaults: JobDefaults, origin: str) -> FleetJob:
+    sheet = path.with_name(path.name.rsplit(".", 1)[0] + PROTOCOL_SUFFIX)
+    vehicle = path.resolve().parent.name
+    return FleetJob(
+        vehicle_id=vehicle,
+        log=str(path),
+        job=LogJob(
+            paths=(str(path.resolve()),),
+            log=defaults.log,
+            detection=defaults.detection,
+            protocol=str(sheet.resolve()) if sheet.is_file() else None,
+            uphill_azimuth_deg=defaults.uphill_azimuth_deg,
+            options=defaults.options,
+        ),
+        headings=defaults.headings,
+        origin=origin,
+    )
+
+
+def _is_manifest(path: Path) -> bool:
+    if path.suffix.lower() != ".csv":
+        return False
+    try:
+        columns = pd.read_csv(path, nrows=0, comment="#", skipinitialspace=True).columns
+    except Exception:  # unreadable: not a manifest; the log reader will say what is wrong with it
+        return False
+    return all(c in {str(col).strip() for col in columns} for c in MANIFEST_REQUIRED)
+
+
+def read_manifest(path: str | Path, defaults: JobDefaults | None = None) -> list[FleetJob]:
+    """The jobs of a manifest CSV (columns :data:`MANIFEST_COLUMNS`), in row order.
+
+    Raises
+    ------
+    InputError
+        A required column is missing, a column is unknown (a typo would silently lose a setting),
+        or a cell cannot be read (the message names the row).
+    """
+    path = Path(path)
+    defaults = defaults or JobDefaults()
+    try:
+        df = pd.read_csv(path, dtype=str, keep_default_na=False, comment="#", skipinitialspace=True)
+    except Exception as err:  # pandas raises many types for malformed files
+        raise InputError(str(path), "a manifest CSV", f"a file that does not parse ({err})", "Fix the CSV.") from err
+    df = df.rename(columns=lambda c: str(c).strip())
+    missing = [c for c in MANIFEST_REQUIRED if c not in df.columns]
+    unknown = [c for c in df.columns if c not in MANIFEST_COLUMNS]
+    if missing or unknown:
+        raise InputError(
+            str(path),
+            f"manifest columns {', '.join(MANIFEST_REQUIRED)} and optionally "
+            + ", ".join(MANIFEST_COLUMNS[len(MANIFEST_REQUIRED) :]),
+            (f"no column {', '.join(missing)}" if missing else f"unknown column(s) {', '.join(unknown)}"),
+            "Rename the columns (a misspelt column would silently lose its setting).",
+        )
+    base = path.resolve().parent
+    jobs = []
+    for i, row in enumerate(df.to_dict("records")):
+        where = f"{path} row {i + 2}"  # the header is line 1
+        cells = {k: str(v).strip() for k, v in row.items()}
+        vehicle = cells["vehicle_id"]
+        if not vehicle or not cells["log"]:
+            raise InputError(where, "a vehicle_id and a log", "an empty cell", "Fill the row or delete it.")
+        paths = _manifest_log_paths(cells["log"], base)
+        log_options = replace(
+            defaults.log,
+            dbc=_rel(cells.get("dbc"), base) or defaults.log.dbc,
+            mapping=_rel(cells.get("mapping"), base) or defaults.log.mapping,
+            channel=_int(cells["channel"], where, "channel") if cells.get("channel") else defaults.log.channel,
+            topic=cells.get("topic") or defaults.log.topic,
+        )
+        azimuth = (
+            _float(cells["uphill_azimuth_deg"], where, "uphill_azimuth_deg")
+            if cells.get("uphill_azimuth_deg")
+            else defaults.uphill_azimuth_deg
+        )
+        jobs.append(
+            FleetJob(
+                vehicle_id=vehicle,
+                log=" + ".join(str(p) for p in paths),
+                job=LogJob(
+                    paths=tuple(str(p.resolve()) for p in paths),
+                    log=log_options,
+                    detection=defaults.detection,
+                    protocol=_rel(cells.get("protocol_sheet"), base),
+                    uphill_azimuth_deg=azimuth,
+                    options=defaults.options,
+                ),
+                headings=defaults.headings,
+                start_time=parse_start_time(cells["start_time"], where) if cells.get("start_time") else None,
+                origin=where,
+            )
+        )
+    return jobs
+
+
+def _manifest_log_paths(entry: str, base: Path) -> list[Path]:
+    """The files of a manifest's ``log`` cell; an unmatched name is kept so that its row fails clearly."""
+    pattern = entry if Path(entry).is_absolute() else str(base / entry)
+    if _GLOB_CHARS.search(entry):
+        matches = sorted((Path(m) for m in glob(pattern, recursive=True) if Path(m).is_file()), key=natural_key)
+        return matches or [Path(pattern)]
+    return [Path(pattern)]
+
+
+def _rel(value: str | None, base: Path) -> str | None:
+    if not value:
+        return None
+    return str(Path(value) if Path(value).is_absolute() else (base / value).resolve())
+
+
+def _float(value: str, where: str, column: str) -> float:
+    try:
+        out = float(value)
+    except ValueError:
+        out = math.nan
+    if not math.isfinite(out):
+        raise InputError(where, f"a number in {column}", repr(value), "Write a finite number or leave it empty.")
+    return out
+
+
+def _int(value: str, where: str, column: str) -> int:
+    try:
+        return int(value)
+    except ValueError as err:
+        raise InputError(where, f"an integer in {column}", repr(value), "Write an integer or leave it empty.") from err
+
+
+def parse_start_time(value: str, where: str) -> str:
+    """ISO 8601 UTC of a manifest's ``start_time`` (a time without a zone is taken as UTC)."""
+    try:
+        stamp = pd.Timestamp(value)
+    except (ValueError, TypeError) as err:
+        raise InputError(
+            where, "start_time as ISO 8601 (2024-05-01T08:30:00Z)", repr(value), "Fix the cell or leave it empty."
+        ) from err
+    if stamp is pd.NaT:
+        raise InputError(where, "start_time as ISO 8601", repr(value), "Fix the cell or leave it empty.")
+    stamp = stamp.tz_localize("UTC") if stamp.tzinfo is None else stamp.tz_convert("UTC")
+    return str(stamp.isoformat())
+
+
+def natural_key(name: str | Path) -> tuple[tuple[int, int | str], ...]:
+    """Sort key that orders ``log_9`` before ``log_10``."""
+    return tuple((0, int(t)) if t.isdigit() else (1, t) for t in re.split(r"(\d+)", str(name)) if t)

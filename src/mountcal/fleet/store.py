@@ -1,0 +1,291 @@
+"""Results that survive a kill: content hashes, one atomic part file per finished log, atomic tables.
+
+A log's result is keyed by the SHA-256 of its files' bytes and of every option that changes the
+answer (:func:`job_hash`), so a re-run skips what is done however the files were renamed or moved.
+Each finished log is written to ``<output>.parts/<hash>.json`` atomically (temporary file, then
+rename): a kill at any moment leaves whole part files only, and a re-run reads them back. The final
+tables are consolidated from the parts and written atomically too.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.metadata
+import json
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from mountcal.atomic import atomic_path
+from mountcal.errors import InputError
+from mountcal.fleet.inputs import FleetJob
+
+PART_FORMAT = "mountcal.fleet.part"
+PART_VERSION = 1
+HASH_BLOCK_BYTES = 1 << 20
+TABLE_MARK = b"mountcal.fleet"  # Parquet metadata key of the tables written here
+
+
+def software_version() -> str:
+    """The installed mountcal version (part of every key: another version may answer differently)."""
+    try:
+        return importlib.metadata.version("mountcal")
+    except importlib.metadata.PackageNotFoundError:
+        return "unknown"
+
+
+def file_sha256(path: str | Path, where: str | None = None) -> str:
+    """SHA-256 of a file's bytes, read in blocks (bounded memory).
+
+    Raises
+    ------
+    InputError
+        The file cannot be read; ``where`` names the setting that points at it.
+    """
+    digest = hashlib.sha256()
+    try:
+        with open(path, "rb") as f:
+            while block := f.read(HASH_BLOCK_BYTES):
+                digest.update(block)
+    except OSError as err:
+        raise InputError(
+            where or str(path),
+            "a readable file",
+            f"{err.strerror or type(err).__name__} ({path})",
+            "Check the path; the other logs are calibrated regardless.",
+        ) from err
+    return digest.hexdigest()
+
+
+def job_hash(job: FleetJob) -> str:
+    """The key of a log's result: its files' bytes plus every setting that changes the answer.
+
+    Paths and the vehicle id are not part of it (a renamed or moved log is the same log); the file
+    suffixes (they choose the reader), the contents of the DBC, mapping and protocol sheet are, as
+    is the mountcal version.
+    """
+    lj = job.job
+    log = asdict(lj.log)
+    for key in ("dbc", "mapping"):
+        if log[key] is not None:
+            log[key] = file_sha256(log[key], where=f"{job.log}: {key} {log[key]}")
+    spec = {
+        "key": PART_FORMAT,
+        "version": PART_VERSION,
+        "mountcal": software_version(),
+        "files": [(Path(p).suffix.lower(), file_sha256(p, where=job.log)) for p in lj.paths],  # suffix: the reader
+        "log": log,
+        "protocol": None if lj.protocol is None else file_sha256(lj.protocol, where=f"{job.log}: protocol sheet"),
+        "detection": asdict(lj.detection),
+        "uphill_azimuth_deg": lj.uphill_azimuth_deg,
+        "options": asdict(lj.options),
+        "headings": job.headings,
+    }
+    return hashlib.sha256(json.dumps(spec, sort_keys=True, default=str).encode()).hexdigest()
+
+
+class PartStore:
+    """The folder of finished logs' results: ``<hash>.json``, each written atomically."""
+
+    def __init__(self, folder: str | Path) -> None:
+        self.folder = Path(folder)
+
+    def path(self, key: str) -> Path:
+        return self.folder / f"{key}.json"
+
+    def remove_temporaries(self) -> int:
+        """Delete temporary files a killed run left behind; returns how many."""
+        if not self.folder.is_dir():
+            return 0
+        stale = list(self.folder.glob(".*.part"))
+        for tmp in stale:
+            tmp.unlink(missing_ok=True)
+        return len(stale)
+
+    def load(self) -> tuple[dict[str, dict[str, Any]], int]:
+        """The stored results by key, and the number of unreadable part files (they are redone)."""
+        records: dict[str, dict[str, Any]] = {}
+        bad = 0
+        if not self.folder.is_dir():
+            return records, bad
+        for file in self.folder.glob("*.json"):
+            try:
+                doc = json.loads(file.read_text(encoding="utf-8"))
+                ok = (
+                    doc.get("format") == PART_FORMAT
+                    and doc.get("format_version") == PART_VERSION
+                    and doc.get("key") == file.stem
+                    and isinstance(doc.get("record"), dict)
+                )
+            except (OSError, ValueError, AttributeError):
+                ok = False
+            if ok:
+                records[file.stem] = doc["record"]
+            else:
+                bad += 1
+        return records, bad
+
+    def save(self, key: str, record: dict[str, Any]) -> None:
+        """Write one result atomically."""
+        doc = {"format": PART_FORMAT, "format_version": PART_VERSION, "key": key, "record": record}
+        text = json.dumps(doc, allow_nan=False, default=_plain)
+        with atomic_path(self.path(key)) as tmp:
+            tmp.write_text(text, encoding="utf-8")
+
+
+def _plain(value: object) -> object:
+    if hasattr(value, "tolist"):
+        return value.tolist()
+    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
+
+
+def write_table(frame: pd.DataFrame, schema: pa.Schema, path: str | Path) -> None:
+    """Write a DataFrame as Parquet with an explicit schema, atomically.
+
+    The schema keeps each column's type when every value is null (all logs failed, no yaw).
+    """
+    table = pa.Table.from_pandas(frame[schema.names], schema=schema, preserve_index=False)
+    table = table.replace_schema_metadata({**(table.schema.metadata or {}), TABLE_MARK: schema.metadata[TABLE_MARK]})
+    with atomic_path(path) as tmp:
+        pq.write_table(table, tmp)
+
+
+def check_overwritable(path: str | Path) -> None:
+    """Refuse to replace an existing file that is not a table this module wrote (a log, say).
+
+    Raises
+    ------
+    InputError
+    """
+    path = Path(path)
+    if not path.exists():
+        return
+    try:
+        mark = (pq.read_schema(path).metadata or {}).get(TABLE_MARK)
+    except Exception:  # not Parquet at all
+        mark = None
+    if mark is None:
+        raise InputError(
+            str(path),
+            "a new output path, or a table an earlier `mountcal fleet` run wrote",
+            "an existing file that mountcal did not write",
+            "Choose another -o path; mountcal never overwrites its input.",
+        )
+
+
+# --- the tables' columns: name, Arrow type, meaning (docs/fleet.md lists the same) ----------------
+
+_F, _I, _S, _B = pa.float64(), pa.int64(), pa.string(), pa.bool_()
+_T = pa.timestamp("us", tz="UTC")
+_L = pa.list_(pa.string())
+
+LOG_COLUMNS: tuple[tuple[str, pa.DataType, str], ...] = (
+    ("vehicle_id", _S, "vehicle (manifest, or the log's parent folder name)"),
+    ("log", _S, "the log file(s) as found; split files joined with ' + '"),
+    ("status", _S, "ok or failed"),
+    ("start_time", _T, "start of the log (manifest, or the log's clock when it is Unix time)"),
+    ("start_time_source", _S, "manifest, log clock, or null"),
+    ("input_kind", _S, "log or stop table"),
+    ("roll_deg", _F, "roll γ (deg)"),
+    ("roll_sigma_deg", _F, "1σ of roll (deg)"),
+    ("pitch_deg", _F, "pitch θ (deg)"),
+    ("pitch_sigma_deg", _F, "1σ of pitch (deg)"),
+    ("yaw_deg", _F, "yaw φ (deg); null when not determined"),
+    ("yaw_sigma_deg", _F, "1σ of yaw (deg); null when not determined"),
+    ("yaw_reason", _S, "why yaw is not determined; null when it is"),
+    ("slope_deg", _F, "slope α of the parking plane (deg)"),
+    ("slope_sigma_deg", _F, "1σ of the slope (deg)"),
+    ("rot_sigma_x_deg", _F, "1σ of the rotation about the vehicle x axis (deg)"),
+    ("rot_sigma_y_deg", _F, "1σ of the rotation about the vehicle y axis (deg)"),
+    ("rot_sigma_z_deg", _F, "1σ of the rotation about the vehicle z axis (deg); null when yaw is not determined"),
+    ("quat_x", _F, "rot_vs as a quaternion (x, y, z, w)"),
+    ("quat_y", _F, ""),
+    ("quat_z", _F, ""),
+    ("quat_w", _F, ""),
+    ("method", _S, "full or paper"),
+    ("model", _S, "fitted terms, e.g. rotation,slope,bias"),
+    ("bias_x_mps2", _F, "fitted accelerometer bias, sensor x (m/s²); null when no bias was fitted"),
+    ("bias_y_mps2", _F, ""),
+    ("bias_z_mps2", _F, ""),
+    ("bias_sigma_x_mps2", _F, "1σ of the bias (m/s²)"),
+    ("bias_sigma_y_mps2", _F, ""),
+    ("bias_sigma_z_mps2", _F, ""),
+    ("residual_rms_mps2", _F, "RMS of the stop residuals (m/s²)"),
+    ("chi2", _F, "χ² of the fit"),
+    ("dof", _I, "its degrees of freedom"),
+    ("fit_p_value", _F, "P(χ² ≥ chi2) when the stop covariances are known"),
+    ("n_stops", _I, "stops used"),
+    ("headings", _S, "uphill, relative or none"),
+    ("heading_source", _S, "where the headings came from (logs)"),
+    ("n_samples", _I, "samples read (logs)"),
+    ("dropped", _S, "samples or frames the reader discarded, by reason"),
+    ("flags", _L, "see docs/fleet.md"),
+    ("notes", _S, "the calibration's notes, joined with ' | '"),
+    ("error", _S, "why the log failed: the message (file, expected, found, what to do)"),
+    ("error_type", _S, "the exception type of a failure"),
+    ("segment", _I, "index of the vehicle's mounting period this log belongs to"),
+    ("in_consensus", _B, "whether the log entered its segment's consensus"),
+    ("consensus_chi2", _F, "χ² of this log against the consensus of the segment's other logs"),
+    ("consensus_dof", _I, "its degrees of freedom (2 without yaw, 3 with)"),
+    ("consensus_p_value", _F, "P(χ² ≥ consensus_chi2); below 0.001 the log disagrees"),
+    ("content_hash", _S, "SHA-256 of the log's bytes and the options (the resume key)"),
+    ("mountcal_version", _S, "software that computed the row"),
+    ("elapsed_s", _F, "wall time of the calibration on its worker (s)"),
+)
+
+VEHICLE_COLUMNS: tuple[tuple[str, pa.DataType, str], ...] = (
+    ("vehicle_id", _S, "vehicle"),
+    ("segment", _I, "mounting period, 0 = the first; a new one starts at each remount"),
+    ("n_segments", _I, "mounting periods of the vehicle"),
+    ("latest", _B, "whether this is the vehicle's current mounting"),
+    ("status", _S, "ok, or no calibration (no log of the vehicle succeeded)"),
+    ("reason", _S, "why there is no calibration"),
+    ("order", _S, "how the logs were put in time order: start_time or log name"),
+    ("n_logs", _I, "successful logs in the segment"),
+    ("n_used", _I, "of those, logs in the consensus"),
+    ("n_disagreeing", _I, "logs that disagree with the consensus (χ² test at 0.1 %)"),
+    ("disagreeing_logs", _L, "those logs"),
+    ("n_failed_vehicle", _I, "failed logs of the whole vehicle"),
+    ("first_log", _S, "first log of the segment"),
+    ("last_log", _S, "last log of the segment"),
+    ("first_start_time", _T, ""),
+    ("last_start_time", _T, ""),
+    ("roll_deg", _F, "consensus roll (deg)"),
+    ("roll_sigma_deg", _F, "its 1σ (deg)"),
+    ("pitch_deg", _F, "consensus pitch (deg)"),
+    ("pitch_sigma_deg", _F, "its 1σ (deg)"),
+    ("yaw_deg", _F, "consensus yaw (deg); null when no log determined it"),
+    ("yaw_sigma_deg", _F, "its 1σ (deg)"),
+    ("yaw_reason", _S, "why yaw is not determined"),
+    ("rot_sigma_x_deg", _F, "1σ of the consensus rotation about vehicle x (deg)"),
+    ("rot_sigma_y_deg", _F, ""),
+    ("rot_sigma_z_deg", _F, ""),
+    ("quat_x", _F, "consensus rot_vs as a quaternion (x, y, z, w)"),
+    ("quat_y", _F, ""),
+    ("quat_z", _F, ""),
+    ("quat_w", _F, ""),
+    ("chi2", _F, "χ² of the used logs about the consensus"),
+    ("dof", _I, "its degrees of freedom"),
+    ("p_value", _F, "P(χ² ≥ chi2)"),
+    ("sigma_scale", _F, "factor applied to the consensus σ: √(χ²/dof) when the logs scatter beyond their σ, else 1"),
+    ("remount", _B, "a remount was detected at the start of this segment"),
+    ("remount_log", _S, "the first log after the remount"),
+    ("remount_change_deg", _F, "angle of the change of mounting (deg)"),
+    ("remount_change_sigma_deg", _F, "its 1σ (deg)"),
+    ("remount_change_x_deg", _F, "the change as a rotation about vehicle x (deg)"),
+    ("remount_change_y_deg", _F, "… about vehicle y (deg)"),
+    ("remount_change_z_deg", _F, "… about vehicle z (deg); null when yaw is not determined on both sides"),
+    ("remount_statistic", _F, "χ² of the change against the two-segment consensus"),
+    ("remount_dof", _I, "its degrees of freedom"),
+    ("remount_p_value", _F, "Bonferroni-corrected p-value of the change point (flagged below 0.001)"),
+)
+
+
+def schema(columns: tuple[tuple[str, pa.DataType, str], ...], kind: str) -> pa.Schema:
+    """The Arrow schema of a table (``kind`` "logs" or "vehicles"), each column's meaning as metadata."""
+    fields = [pa.field(n, t, metadata={"description": d} if d else None) for n, t, d in columns]
+    return pa.schema(fields, metadata={TABLE_MARK: f"{kind} {PART_VERSION}"})

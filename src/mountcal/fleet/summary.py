@@ -1,0 +1,45 @@
+"""The text the ``fleet`` command prints when a run is done."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from mountcal.fleet.run import FleetResult
+
+MAX_LISTED = 20
+
+
+def summary_lines(result: FleetResult) -> list[str]:
+    """What was done, what failed and why, and which vehicles were remounted."""
+    logs, vehicles = result.logs, result.vehicles
+    failed = logs[logs["status"] != "ok"]
+    lines = [
+        f"mountcal fleet — {len(logs)} logs of {logs['vehicle_id'].nunique()} vehicles on {result.engine}: "
+        f"{len(logs) - len(failed)} ok, {len(failed)} failed; {result.computed} calibrated now, "
+        f"{result.reused} from earlier runs ({result.elapsed_s:.1f} s)"
+    ]
+    for row in failed.head(MAX_LISTED).itertuples():
+        named = Path(str(row.log).split(" + ")[0]).name in str(row.error)  # the message names the file
+        lines.append(f"  failed  {row.vehicle_id}  {row.error if named else f'{row.log}: {row.error}'}")
+    if len(failed) > MAX_LISTED:
+        lines.append(f"  … and {len(failed) - MAX_LISTED} more failed logs (see the status and error columns)")
+    disagreeing = int(logs["flags"].map(lambda f: "disagrees_with_consensus" in f).sum())
+    if disagreeing:
+        lines.append(f"  {disagreeing} logs disagree with their vehicle's consensus (flag disagrees_with_consensus)")
+    for row in vehicles[vehicles["remount"].fillna(False).astype(bool)].itertuples():
+        lines.append(
+            f"  remount {row.vehicle_id} at {row.remount_log}: mounting changed by "
+            f"{row.remount_change_deg:.3f}° ± {row.remount_change_sigma_deg:.3f}° ({_p(row.remount_p_value)})"
+        )
+    nothing = vehicles[vehicles["status"] != "ok"]
+    for row in nothing.itertuples():
+        lines.append(f"  no calibration for {row.vehicle_id}: {row.reason}")
+    set_aside = [f"{n} {reason}" for reason, n in result.discarded.items() if n]
+    if set_aside:
+        lines.append("  set aside: " + "; ".join(set_aside))
+    lines.append(f"wrote {result.output} and {result.vehicles_path} (finished logs are kept in {result.parts})")
+    return lines
+
+
+def _p(p: float) -> str:
+    return "p < 1e-15" if p < 1e-15 else f"p = {p:.2g}"

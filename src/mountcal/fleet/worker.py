@@ -1,0 +1,178 @@
+"""What a worker does with one log: calibrate it and return a plain record, never raise.
+
+The record holds only plain types (it travels between processes and into JSON). A log that fails
+is a record too, with the message of the :class:`~mountcal.errors.MountcalError` (file, expected,
+found, what to do) or, for anything unexpected, the exception's type and text. Workers need
+nothing but the installed package; paths in the job are absolute.
+"""
+
+from __future__ import annotations
+
+import time
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from mountcal.calibrate import calibrate
+from mountcal.conventions import GIMBAL_LOCK_PITCH_DEG
+from mountcal.errors import InputError, MountcalError
+from mountcal.fleet.inputs import FleetJob
+from mountcal.pipeline import calibrate_log
+from mountcal.result import Calibration
+from mountcal.stoptable import read_stop_table
+
+STOP_TABLE_MARKERS = {"beta_deg", "n", "sx"}
+MISFIT_P = 1e-3  # a fit χ² this improbable means the model misses an effect
+UNIX_TIME_S = (1.0e9, 4.1e9)  # a log clock in this range is Unix time (2001 … 2099)
+
+
+def run_job(job: FleetJob) -> dict[str, Any]:
+    """Calibrate one log and return its record (status ``ok`` or ``failed``); never raises."""
+    started = time.perf_counter()
+    record: dict[str, Any] = {"status": "failed"}
+    try:
+        record.update(_calibrate(job))
+        record["status"] = "ok"
+    except MountcalError as err:
+        record.update(error=str(err), error_type=type(err).__name__)
+    except Exception as err:  # a bug or a library failure on one log must not stop the batch
+        kind = f"{type(err).__module__}.{type(err).__qualname__}"
+        record.update(error=f"unexpected {kind}: {err}", error_type=kind)
+    record["elapsed_s"] = time.perf_counter() - started
+    return record
+
+
+def _calibrate(job: FleetJob) -> dict[str, Any]:
+    lj = job.job
+    if len(lj.paths) == 1 and is_stop_table(Path(lj.paths[0]), lj.log.dbc is not None):
+        table = read_stop_table(lj.paths[0], headings=job.headings)
+        cal = calibrate(table, lj.options)
+        record = calibration_record(cal)
+        record.update(input_kind="stop table", n_stops=len(table), headings=table.headings)
+        if table.t_s is not None and table.t_s.size:
+            record["log_start_time"] = _unix_time(float(np.min(table.t_s)))
+        return record
+    done = calibrate_log(lj)
+    record = calibration_record(done.calibration)
+    samples = done.samples
+    record.update(
+        input_kind="log",
+        n_stops=len(done.table),
+        headings=done.table.headings,
+        heading_source=done.stops.heading_source,
+        n_samples=len(samples),
+        dropped="; ".join(f"{k}: {v}" for k, v in samples.dropped.items()) or None,
+        log_start_time=_unix_time(float(samples.t_s[0])) if len(samples) else None,
+    )
+    if samples.dropped:
+        record["flags"].append("samples_dropped")
+    if done.stops.unmatched_protocol_rows:
+        record["flags"].append("protocol_rows_without_stop")
+    return record
+
+
+def is_stop_table(path: Path, has_dbc: bool) -> bool:
+    """Whether a CSV/Parquet file is a stop table (``beta_deg``, ``n`` or ``sx``, or no ``t_s``).
+
+    Raises
+    ------
+    InputError
+        The file is empty or does not parse as CSV or Parquet.
+    """
+    suffix = path.suffix.lower()
+    if suffix not in (".csv", ".parquet", ".pq") or (has_dbc and suffix == ".csv"):
+        return False
+    try:
+        if path.stat().st_size == 0:
+            found = "an empty file (0 bytes)"
+        elif suffix == ".csv":
+            columns = pd.read_csv(path, nrows=0, comment="#", skipinitialspace=True).columns
+            return _stop_columns(columns)
+        else:
+            import pyarrow.parquet as pq
+
+            return _stop_columns(pq.read_schema(path).names)
+    except OSError as err:
+        found = f"a file that cannot be read ({err.strerror or err})"
+    except Exception as err:  # pandas and pyarrow raise many types for malformed files
+        found = f"a file that does not parse ({type(err).__name__}: {err})"
+    raise InputError(
+        str(path),
+        "a CSV or Parquet stop table (beta_deg, ax, ay, az) or sample table (t_s, ax, ay, az)",
+        found,
+        "Replace or remove the file; the other logs are calibrated regardless.",
+    )
+
+
+def _stop_columns(columns: Any) -> bool:
+    names = {str(c).strip() for c in columns}
+    return bool(names & STOP_TABLE_MARKERS) or "t_s" not in names
+
+
+def _unix_time(t_s: float) -> str | None:
+    if not UNIX_TIME_S[0] < t_s < UNIX_TIME_S[1]:
+        return None
+    return datetime.fromtimestamp(t_s, tz=UTC).isoformat()
+
+
+def calibration_record(cal: Calibration) -> dict[str, Any]:
+    """The per-log columns of a calibration (plain types; None where not determined)."""
+    quat = cal.rot_vs.as_quat()
+    rot_sigma = list(cal.rotation_sigma_deg)
+    flags: list[str] = []
+    if rot_sigma[0] is None or rot_sigma[1] is None:
+        # the paper's method gives σ of the angles only; near level they are the σ about the axes
+        rot_sigma = [cal.roll_sigma_deg, cal.pitch_sigma_deg, cal.yaw_sigma_deg]
+        flags.append("axis_sigma_from_angles")
+    if cal.yaw_deg is None:
+        flags.append("yaw_not_determined")
+        rot_sigma[2] = None
+    if cal.slope_deg is None:
+        flags.append("slope_not_determined")
+    if "bias" in cal.model:
+        flags.append("bias_fitted")
+    chi2, dof = cal.fit.get("chi2"), cal.fit.get("dof")
+    p_fit = cal.fit.get("p_value")  # None when the stop noise was estimated from the residuals
+    if p_fit is not None and p_fit < MISFIT_P:
+        flags.append("model_misfit")
+    if not getattr(cal, "confident", True):
+        flags.append("not_confident")
+    if abs(cal.pitch_deg) > GIMBAL_LOCK_PITCH_DEG:
+        flags.append("near_gimbal_lock")
+    bias = [None] * 3 if cal.bias_mps2 is None else [float(v) for v in cal.bias_mps2]
+    bias_sigma = [None] * 3 if cal.bias_sigma_mps2 is None else [float(v) for v in cal.bias_sigma_mps2]
+    return {
+        "roll_deg": cal.roll_deg,
+        "roll_sigma_deg": cal.roll_sigma_deg,
+        "pitch_deg": cal.pitch_deg,
+        "pitch_sigma_deg": cal.pitch_sigma_deg,
+        "yaw_deg": cal.yaw_deg,
+        "yaw_sigma_deg": cal.yaw_sigma_deg,
+        "yaw_reason": cal.yaw_reason,
+        "slope_deg": cal.slope_deg,
+        "slope_sigma_deg": cal.slope_sigma_deg,
+        "rot_sigma_x_deg": rot_sigma[0],
+        "rot_sigma_y_deg": rot_sigma[1],
+        "rot_sigma_z_deg": rot_sigma[2],
+        "quat_x": float(quat[0]),
+        "quat_y": float(quat[1]),
+        "quat_z": float(quat[2]),
+        "quat_w": float(quat[3]),
+        "method": cal.method,
+        "model": ",".join(cal.model),
+        "bias_x_mps2": bias[0],
+        "bias_y_mps2": bias[1],
+        "bias_z_mps2": bias[2],
+        "bias_sigma_x_mps2": bias_sigma[0],
+        "bias_sigma_y_mps2": bias_sigma[1],
+        "bias_sigma_z_mps2": bias_sigma[2],
+        "residual_rms_mps2": cal.residual_rms_mps2,
+        "chi2": None if chi2 is None else float(chi2),
+        "dof": None if dof is None else int(dof),
+        "fit_p_value": p_fit,
+        "flags": flags,
+        "notes": " | ".join(cal.notes) or None,
+    }
