@@ -24,7 +24,7 @@ submitting the 200 jobs to the last result (the steady-state throughput a long f
 
 Run from the repository root::
 
-    .venv/bin/python benchmarks/fleet_throughput.py --runs 3
+    .venv/bin/python benchmarks/fleet_throughput.py --runs 5
 
 ``--workdir DIR`` keeps the generated fleet (it is reused when its parameters match).
 """

@@ -92,17 +92,28 @@ def read_table_samples(path: Path) -> Samples:
             f"no {', '.join(missing)}",
             "Rename the columns; a CAN log in CSV needs --dbc.",
         )
-    values = df[["t_s", "ax", "ay", "az"]].to_numpy(dtype=float)
+    values = df[["t_s", "ax", "ay", "az"]].apply(pd.to_numeric, errors="coerce").to_numpy(dtype=float)
     ok = np.all(np.isfinite(values), axis=1)
-    gyro = df[["gx", "gy", "gz"]].to_numpy(dtype=float) if {"gx", "gy", "gz"} <= set(df.columns) else None
+    gyro = (
+        df[["gx", "gy", "gz"]].apply(pd.to_numeric, errors="coerce").to_numpy(dtype=float)
+        if {"gx", "gy", "gz"} <= set(df.columns)
+        else None
+    )
     if gyro is not None:
         ok &= np.all(np.isfinite(gyro), axis=1)
-    dropped = {"non-finite sample rows": int((~ok).sum())} if not ok.all() else {}
+    dropped = {"rows with missing or non-numeric values": int((~ok).sum())} if not ok.all() else {}
+    if not ok.any():
+        raise InputError(
+            str(path),
+            "numeric t_s, ax, ay, az",
+            "no row with numbers in all of them",
+            "Check the table's columns and units.",
+        )
     order = np.argsort(values[ok, 0], kind="stable")
     channels = {}
     for name in TABLE_CHANNELS:
         if name in df.columns:
-            v = df[name].to_numpy(dtype=float)
+            v = pd.to_numeric(df[name], errors="coerce").to_numpy(dtype=float)
             good = np.isfinite(v) & np.isfinite(df["t_s"].to_numpy(dtype=float))
             channels[name] = Channel(df["t_s"].to_numpy(dtype=float)[good], v[good])
     return Samples(

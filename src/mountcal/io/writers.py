@@ -56,6 +56,7 @@ from numpy.typing import NDArray
 
 from mountcal.errors import InputError
 from mountcal.io import cdr
+from mountcal.io.export import ros2_definition
 
 FloatArray = NDArray[np.float64]
 U8Array = NDArray[np.uint8]
@@ -64,34 +65,7 @@ MAGIC = b"\x89MCAP0\r\n"
 ACC_COLUMNS = ("ax", "ay", "az")
 GYRO_COLUMNS = ("gx", "gy", "gz")
 IMU_SCHEMA_NAME = "sensor_msgs/msg/Imu"
-IMU_DEFINITION = """\
-std_msgs/Header header
-geometry_msgs/Quaternion orientation
-float64[9] orientation_covariance
-geometry_msgs/Vector3 angular_velocity
-float64[9] angular_velocity_covariance
-geometry_msgs/Vector3 linear_acceleration
-float64[9] linear_acceleration_covariance
-================================================================================
-MSG: builtin_interfaces/Time
-int32 sec
-uint32 nanosec
-================================================================================
-MSG: geometry_msgs/Quaternion
-float64 x
-float64 y
-float64 z
-float64 w
-================================================================================
-MSG: geometry_msgs/Vector3
-float64 x
-float64 y
-float64 z
-================================================================================
-MSG: std_msgs/Header
-builtin_interfaces/Time stamp
-string frame_id
-"""
+IMU_DEFINITION = ros2_definition(IMU_SCHEMA_NAME)  # the one ROS 2 definition text mountcal writes
 _MESSAGE_HEAD = 22  # channel id u16, sequence u32, log time u64, publish time u64
 _RECORD_HEAD = 9  # opcode u8, length u64
 
