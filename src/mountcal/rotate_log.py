@@ -57,7 +57,7 @@ from scipy.spatial.transform import Rotation
 
 from mountcal.conventions import CONVENTIONS, FloatArray
 from mountcal.errors import InputError
-from mountcal.io.logs import CAN_SUFFIXES, TABLE_CHANNELS, LogOptions
+from mountcal.io.logs import TABLE_CHANNELS, LogOptions, log_kind
 from mountcal.io.samples import Channel, Samples
 from mountcal.io.writers import (
     CsvSamples,
@@ -250,30 +250,16 @@ def iter_log(
 
 
 def _iter_one(path: Path, opts: LogOptions, max_samples: int) -> Iterator[Samples]:
-    suffix = path.suffix.lower()
-    if suffix == ".mcap":
+    kind = log_kind(path, opts)
+    if kind == "mcap":
         from mountcal.io.mcap_log import iter_mcap
 
         return iter_mcap(path, topic=opts.topic, max_samples=max_samples)
-    if suffix in CAN_SUFFIXES or (suffix == ".csv" and opts.dbc is not None):
-        if opts.dbc is None:
-            raise InputError(
-                str(path),
-                "a DBC to decode this CAN log",
-                "no --dbc",
-                "Pass --dbc FILE (and --mapping FILE when the signals are not named plainly).",
-            )
+    if kind == "can":
         from mountcal.io.can_log import iter_can
 
         return iter_can(path, opts.dbc, mapping=opts.mapping, channel=opts.channel, max_samples=max_samples)
-    if suffix in (".csv", ".parquet", ".pq"):
-        return _iter_table(path, max_samples)
-    raise InputError(
-        str(path),
-        "an MCAP, CAN (BLF, ASC, log, TRC, CSV, MF4) or CSV/Parquet log",
-        f"a file ending in {suffix or '(nothing)'}",
-        "Convert it, or name it by its format.",
-    )
+    return _iter_table(path, max_samples)
 
 
 def _first_time(path: Path, opts: LogOptions) -> float:

@@ -51,7 +51,7 @@ def inspect_log(path: str | Path, options: LogOptions | None = None) -> LogSumma
     """What a log holds: topics or messages, signals, rates, duration."""
     opts = options or LogOptions()
     path = Path(path)
-    kind = _kind(path, opts)
+    kind = log_kind(path, opts)
     if kind == "mcap":
         from mountcal.io.mcap_log import inspect_mcap
 
@@ -150,7 +150,8 @@ def join(parts: Sequence[Samples]) -> Samples:
     )
 
 
-def _kind(path: Path, opts: LogOptions) -> str:
+def log_kind(path: Path, opts: LogOptions) -> str:
+    """``"mcap"``, ``"can"`` or ``"table"``: which reader a log file needs (a CAN log needs a DBC)."""
     suffix = path.suffix.lower()
     if suffix == ".mcap":
         return "mcap"
@@ -174,7 +175,7 @@ def _kind(path: Path, opts: LogOptions) -> str:
 
 
 def _read_one(path: Path, opts: LogOptions) -> Samples:
-    kind = _kind(path, opts)
+    kind = log_kind(path, opts)
     if kind == "mcap":
         from mountcal.io.mcap_log import read_mcap
 
