@@ -46,37 +46,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from mountcal.io.writers import IMU_DEFINITION
+
 T0_UNIX_S = 1_714_557_600  # 2024-05-01T10:00:00Z
 UPHILL_AZIMUTH_DEG = 30.0  # simulate_parking_log's default
 REMOUNTED = "v07"
-IMU_MSGDEF = """\
-std_msgs/Header header
-geometry_msgs/Quaternion orientation
-float64[9] orientation_covariance
-geometry_msgs/Vector3 angular_velocity
-float64[9] angular_velocity_covariance
-geometry_msgs/Vector3 linear_acceleration
-float64[9] linear_acceleration_covariance
-================================================================================
-MSG: std_msgs/Header
-builtin_interfaces/Time stamp
-string frame_id
-================================================================================
-MSG: builtin_interfaces/Time
-int32 sec
-uint32 nanosec
-================================================================================
-MSG: geometry_msgs/Quaternion
-float64 x
-float64 y
-float64 z
-float64 w
-================================================================================
-MSG: geometry_msgs/Vector3
-float64 x
-float64 y
-float64 z
-"""
 KINDS = ("csv", "parquet", "mcap")
 RATE_HZ = 200.0
 
@@ -113,7 +87,7 @@ def write_log(path: str, kind: str, angles: tuple[float, float, float], seed: in
     t0_ns = (T0_UNIX_S + day * 86_400) * 10**9
     cov = [0.0] * 9
     with open(path, "wb") as f, Writer(f) as writer:
-        schema = writer.register_msgdef("sensor_msgs/msg/Imu", IMU_MSGDEF)
+        schema = writer.register_msgdef("sensor_msgs/msg/Imu", IMU_DEFINITION)
         for t, a, w in zip(log.t_s.tolist(), log.acc_s.tolist(), log.gyro_s.tolist(), strict=True):
             t_ns = t0_ns + round(t * 1e9)
             msg = {

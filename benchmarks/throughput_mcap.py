@@ -30,35 +30,9 @@ from pathlib import Path
 
 import numpy as np
 
+from mountcal.io.writers import IMU_DEFINITION
+
 TOPIC = "/imu/data"
-IMU_MSGDEF = """\
-std_msgs/Header header
-geometry_msgs/Quaternion orientation
-float64[9] orientation_covariance
-geometry_msgs/Vector3 angular_velocity
-float64[9] angular_velocity_covariance
-geometry_msgs/Vector3 linear_acceleration
-float64[9] linear_acceleration_covariance
-================================================================================
-MSG: std_msgs/Header
-builtin_interfaces/Time stamp
-string frame_id
-================================================================================
-MSG: builtin_interfaces/Time
-int32 sec
-uint32 nanosec
-================================================================================
-MSG: geometry_msgs/Quaternion
-float64 x
-float64 y
-float64 z
-float64 w
-================================================================================
-MSG: geometry_msgs/Vector3
-float64 x
-float64 y
-float64 z
-"""
 
 
 def simulate_drive(n: int, rate_hz: float, seed: int = 0) -> dict[str, np.ndarray]:
@@ -95,7 +69,7 @@ def write_log(path: Path, n: int, rate_hz: float) -> None:
     sim = simulate_drive(n, rate_hz)
     cov = [0.0004, 0, 0, 0, 0.0004, 0, 0, 0, 0.0004]
     with open(path, "wb") as f, Writer(f) as writer:
-        schema = writer.register_msgdef("sensor_msgs/msg/Imu", IMU_MSGDEF)
+        schema = writer.register_msgdef("sensor_msgs/msg/Imu", IMU_DEFINITION)
         for i in range(n):
             t_ns = int(sim["t_ns"][i])
             ax, ay, az = sim["acc"][i].tolist()

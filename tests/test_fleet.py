@@ -26,40 +26,13 @@ from mountcal.fleet import FleetOptions, JobDefaults, LocalEngine, collect_jobs,
 from mountcal.fleet.progress import Progress
 from mountcal.fleet.store import PartStore, job_hash
 from mountcal.fleet.worker import run_job
+from mountcal.io.writers import IMU_DEFINITION
 from mountcal.simulate import ParkingLog, simulate_parking_log, simulate_stops
 from mountcal.stoptable import write_stop_table
 
 TRUTH = (5.0, 6.0, 7.0)
 UPHILL_AZIMUTH_DEG = 30.0
 T0_UNIX_S = 1_714_557_600  # 2024-05-01T10:00:00Z
-IMU_MSGDEF = """\
-std_msgs/Header header
-geometry_msgs/Quaternion orientation
-float64[9] orientation_covariance
-geometry_msgs/Vector3 angular_velocity
-float64[9] angular_velocity_covariance
-geometry_msgs/Vector3 linear_acceleration
-float64[9] linear_acceleration_covariance
-================================================================================
-MSG: std_msgs/Header
-builtin_interfaces/Time stamp
-string frame_id
-================================================================================
-MSG: builtin_interfaces/Time
-int32 sec
-uint32 nanosec
-================================================================================
-MSG: geometry_msgs/Quaternion
-float64 x
-float64 y
-float64 z
-float64 w
-================================================================================
-MSG: geometry_msgs/Vector3
-float64 x
-float64 y
-float64 z
-"""
 
 
 # --- writing simulated logs with real writers ------------------------------------------------------
@@ -95,7 +68,7 @@ def write_mcap(path: Path, log: ParkingLog) -> None:
 
     cov = [0.0] * 9
     with open(path, "wb") as f, Writer(f) as writer:
-        schema = writer.register_msgdef("sensor_msgs/msg/Imu", IMU_MSGDEF)
+        schema = writer.register_msgdef("sensor_msgs/msg/Imu", IMU_DEFINITION)
         for t, a, w in zip(log.t_s.tolist(), log.acc_s.tolist(), log.gyro_s.tolist(), strict=True):
             t_ns = T0_UNIX_S * 10**9 + round(t * 1e9)
             msg = {
