@@ -164,9 +164,9 @@ def test_level_ground_does_not_fit_a_bias_it_cannot_separate() -> None:
     table, _ = simulate_preset("zhang2011", slope_deg=0.05, bias_mps2=np.array([0.0, 0.2, 0.0]), seed=2)
     cal = calibrate(table)
     assert "bias" not in cal.model
-    assert any(
-        d["effect"] == "bias" and "not separable" in d["why"] for d in cal.model_selection["declined"]
-    ), cal.model_selection["declined"]
+    assert any(d["effect"] == "bias" and "not separable" in d["why"] for d in cal.model_selection["declined"]), (
+        cal.model_selection["declined"]
+    )
 
 
 def test_crb_report_matches_model_md_section_5() -> None:

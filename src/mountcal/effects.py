@@ -259,7 +259,7 @@ def with_surface(table: StopTable, rot_vs: Rotation, sigma_rad: float, g: float)
     """
     rm = rot_vs.as_matrix()
     extra = (g * sigma_rad) ** 2 * rm.T @ np.diag([1.0, 1.0, 0.0]) @ rm
-    return replace(table, cov_s=table.cov_s + extra)  # type: ignore[operator]
+    return replace(table, cov_s=table.cov_s + extra)
 
 
 def _neg2loglik(table: StopTable, fit: full.Fit) -> float:

@@ -39,23 +39,23 @@ def acc_to_vehicle(acc_s: FloatArray, cal: Calibration, check_units: bool = True
         _check_mps2(acc)
     if cal.bias_mps2 is not None:
         acc = acc - cal.bias_mps2
-    return np.asarray(cal.rot_vs.apply(acc), dtype=float)
+    return _rotated(acc, cal.rot_vs.as_matrix())
 
 
 def acc_to_sensor(acc_v: FloatArray, cal: Calibration) -> FloatArray:
     """The inverse of :func:`acc_to_vehicle`: vehicle-frame specific force as the sensor reads it."""
-    acc = np.asarray(cal.rot_vs.inv().apply(_as_vectors(acc_v, "acc_v")), dtype=float)
+    acc = _rotated(_as_vectors(acc_v, "acc_v"), cal.rot_vs.as_matrix().T)
     return acc + cal.bias_mps2 if cal.bias_mps2 is not None else acc
 
 
 def rate_to_vehicle(gyro_s: FloatArray, cal: Calibration) -> FloatArray:
     """Angular rate (any unit) from the sensor to the vehicle frame: rotation only."""
-    return np.asarray(cal.rot_vs.apply(_as_vectors(gyro_s, "gyro_s")), dtype=float)
+    return _rotated(_as_vectors(gyro_s, "gyro_s"), cal.rot_vs.as_matrix())
 
 
 def rate_to_sensor(gyro_v: FloatArray, cal: Calibration) -> FloatArray:
     """Angular rate from the vehicle back to the sensor frame."""
-    return np.asarray(cal.rot_vs.inv().apply(_as_vectors(gyro_v, "gyro_v")), dtype=float)
+    return _rotated(_as_vectors(gyro_v, "gyro_v"), cal.rot_vs.as_matrix().T)
 
 
 def frame_to_vehicle(
@@ -91,8 +91,13 @@ def frame_to_sensor(
     return out
 
 
+def _rotated(vectors: FloatArray, matrix: FloatArray) -> FloatArray:
+    """Rows ``v`` as ``R · v``: one (n, 3) × (3, 3) product."""
+    return np.asarray(vectors @ matrix.T, dtype=float)
+
+
 def _as_vectors(a: FloatArray, name: str) -> FloatArray:
-    arr = np.array(a, dtype=float)  # a copy: pandas may hand out read-only views, which scipy refuses
+    arr = np.asarray(a, dtype=float)
     if arr.ndim != 2 or arr.shape[1] != 3:
         raise InputError(name, "an array of shape (n, 3)", f"shape {arr.shape}", "Pass one row per sample.")
     return arr

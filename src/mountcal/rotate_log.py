@@ -44,6 +44,7 @@ import json
 import os
 from collections import Counter
 from collections.abc import Iterator, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, BinaryIO
@@ -360,12 +361,22 @@ def _rotate_stream(
         raise InputError(" + ".join(map(str, files)), "IMU samples", "none", "Check the log and the topic/DBC.")
     acc_to_vehicle(first.acc_s, cal, check_units=True)  # data in g are refused before any output exists
     tally = _Tally(gyro=first.gyro_s is not None, several=len(files) > 1)
-    with atomic_output(out) as f:
+    with atomic_output(out) as f, ThreadPoolExecutor(max_workers=1) as encoder:
         writer = _writer(f, kind, tally.gyro, cal, files, frame_id)
+        # Encoding and compressing chunk k (pyarrow releases the GIL) overlaps reading chunk k + 1;
+        # one chunk in flight keeps memory bounded.
+        pending: Future[None] | None = None
         try:
             for chunk in _chain(first, chunks):
-                tally.write(writer, chunk, cal)
+                rows = tally.rotate(chunk, cal)
+                if pending is not None:
+                    pending.result()
+                pending = encoder.submit(writer.write, *rows) if rows is not None else None
+            if pending is not None:
+                pending.result()
         finally:
+            if pending is not None:
+                wait([pending])  # after an error: no write still running when the file is dropped
             writer.close()  # after an error this only completes the unnamed file, which is dropped
     return RotateReport(
         output=str(out),
@@ -392,11 +403,12 @@ class _Tally:
     largest: int = 0
     dropped: Counter[str] = field(default_factory=Counter)
 
-    def write(self, writer: ParquetSamples | CsvSamples | McapImuSamples, chunk: Samples, cal: Calibration) -> None:
+    def rotate(self, chunk: Samples, cal: Calibration) -> tuple[FloatArray, FloatArray, FloatArray | None] | None:
+        """The chunk's rows to write, in the vehicle frame (None for an empty chunk), counted."""
         self.dropped.update(chunk.dropped)
         n = len(chunk)
         if n == 0:
-            return
+            return None
         if (chunk.gyro_s is not None) != self.gyro:
             raise InputError(
                 chunk.source,
@@ -406,8 +418,8 @@ class _Tally:
             )
         acc_v = acc_to_vehicle(chunk.acc_s, cal, check_units=False)  # units checked on the first chunk
         gyro_v = rate_to_vehicle(chunk.gyro_s, cal) if chunk.gyro_s is not None else None
-        writer.write(chunk.t_s, acc_v, gyro_v)
         self.samples, self.chunks, self.largest = self.samples + n, self.chunks + 1, max(self.largest, n)
+        return chunk.t_s, acc_v, gyro_v
 
 
 def _chain(first: Samples, rest: Iterator[Samples]) -> Iterator[Samples]:

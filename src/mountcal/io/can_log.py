@@ -213,18 +213,21 @@ def iter_can(
         raise ValueError(f"max_samples must be >= 1; got {max_samples}")
     path = Path(path)
     plan = _plan(path, dbc, mapping, channel)
-    pending: list[Samples] = []
-    count = 0
+    held: list[Samples] = []  # pieces without rows but with auxiliary samples or drop counts
     for piece in _pieces(path, plan, max(2 * max_samples, 1000)):
-        pending.append(piece)
-        count += len(piece)
-        while count >= max_samples:
-            joined = _concat(pending, plan, str(path))
-            head, rest = _split(joined, max_samples)
+        if not len(piece):
+            if piece.channels or piece.dropped:
+                held.append(piece)
+            continue
+        if held:
+            piece, held = _concat([*held, piece], plan, str(path)), []
+        # pieces go out as they come (views when split): joining them to exact sizes only copies
+        while len(piece) > max_samples:
+            head, piece = _split(piece, max_samples)
             yield head
-            pending, count = [rest], len(rest)
-    if pending and (count or any(p.channels or p.dropped for p in pending)):
-        yield _concat(pending, plan, str(path))
+        yield piece
+    if held:
+        yield _concat(held, plan, str(path))
 
 
 def inspect_can(path: str | Path, dbc: str | Path | Any | None = None) -> LogSummary:
@@ -728,7 +731,8 @@ def _take(
     name = source.message.name
     short = chosen.dlc < payload_bytes(source.message, source.signals + source.valid)
     _count(dropped, f"{name}: frame shorter than the DBC layout", short)
-    chosen = chosen.take(~short)
+    if short.any():
+        chosen = chosen.take(~short)
     decoded = decode(chosen, source.message, source.signals + source.valid)
     keep = np.ones(len(chosen), np.bool_)
     if source.valid:
@@ -736,9 +740,11 @@ def _take(
         _count(dropped, f"{name}: {' or '.join(source.valid)} == 0", invalid)
         keep &= ~invalid
     values = np.stack([decoded[s] for s in source.signals], axis=1)
-    finite = np.isfinite(values).all(axis=1)
+    finite = np.logical_and.reduce([np.isfinite(decoded[s]) for s in source.signals])
     _count(dropped, f"{name}: non-finite value", keep & ~finite)
     keep &= finite
+    if keep.all():
+        return chosen.t_s, values
     return chosen.t_s[keep], values[keep]
 
 
@@ -796,6 +802,8 @@ class _Aligner:
             values.append(self.v[k][index] if ok.any() else np.zeros((n, self.v[k].shape[1])))
         _count(dropped, f"{self.names[0]}: no frame of {', '.join(self.names[1:])} within one period", ~keep)
         self._trim(n, periods)
+        if keep.all():
+            return t_out, values
         return t_out[keep], [v[keep] for v in values]
 
     def _periods_known(self, final: bool) -> bool:
@@ -846,12 +854,17 @@ def _to_samples(
     plan: _Plan,
     source: str,
 ) -> Samples:
-    """Scaled device-axis columns, rotated by the axis map, as one Samples piece."""
-    device = np.empty((t_s.shape[0], 6 if plan.has_gyro else 3))
-    for column, (k, signal, scale) in enumerate(plan.columns):
-        device[:, column] = rows[k][:, plan.imu[k].signals.index(signal)] * scale
-    acc_s = device[:, :3] @ plan.axes.T
-    gyro_s = device[:, 3:] @ plan.axes.T if plan.has_gyro else None
+    """Scaled device-axis columns, permuted by the axis map, as one Samples piece."""
+    n = t_s.shape[0]
+    acc_s = np.empty((n, 3))
+    gyro_s = np.empty((n, 3)) if plan.has_gyro else None
+    # the axis map is a signed permutation: sensor axis i is ±(device axis j), a scaled column copy
+    for i, j in enumerate(np.argmax(np.abs(plan.axes), axis=1)):
+        sign = plan.axes[i, j]
+        for out, column in ((acc_s, j), (gyro_s, 3 + j)):
+            if out is not None:
+                k, signal, scale = plan.columns[column]
+                out[:, i] = rows[k][:, plan.imu[k].signals.index(signal)] * (sign * scale)
     return Samples(np.asarray(t_s, np.float64), acc_s, gyro_s, channels, source, plan.axis_map, dict(dropped))
 
 

@@ -1,7 +1,7 @@
 """DBC files: loading with cantools, and decoding whole columns of frames with numpy.
 
 cantools decodes one frame at a time in Python; here a signal of n frames is a handful of numpy
-shifts and masks over the (n, 64) payload table, byte by byte. Both byte orders are supported
+shifts and masks over the (n, 8 to 64) payload table, byte by byte. Both byte orders are supported
 (Intel/little-endian: ``start`` is the least significant bit; Motorola/big-endian: ``start`` is the
 most significant bit in the DBC's sawtooth numbering), any start bit and length up to 64, two's
 complement signed values and IEEE-754 float signals, and messages with one multiplexer.
@@ -154,8 +154,8 @@ def raw_values(data: NDArray[np.uint8], signal: Any) -> U64Array:
 
     Parameters
     ----------
-    data : ndarray, shape (n, 64), uint8
-        Payloads, zero-padded.
+    data : ndarray, shape (n, w), uint8
+        Payloads, zero-padded; bytes past w read as zero.
     signal : cantools Signal
         Its ``start``, ``length`` and ``byte_order``.
 
@@ -171,13 +171,27 @@ def raw_values(data: NDArray[np.uint8], signal: Any) -> U64Array:
             f"{length} bits from start bit {signal.start}",
             "Check the signal definition in the DBC.",
         )
-    value = np.zeros(data.shape[0], np.uint64)
     lsb, first, last = _bit_span(signal)
-    for j in range(first, last + 1):
+    if last < 8 <= data.shape[1]:
+        return _raw_from_word(data, signal, lsb, length)
+    value = np.zeros(data.shape[0], np.uint64)
+    for j in range(first, min(last, data.shape[1] - 1) + 1):
         # weight of byte j's bit 0 relative to the signal's LSB
         shift = 8 * j - lsb if signal.byte_order == "little_endian" else lsb - 8 * j - 7
         column = data[:, j].astype(np.uint64)
         value |= column << np.uint64(shift) if shift >= 0 else column >> np.uint64(-shift)
+    if length < 64:
+        value &= np.uint64((1 << length) - 1)
+    return value
+
+
+def _raw_from_word(data: NDArray[np.uint8], signal: Any, lsb: int, length: int) -> U64Array:
+    """A signal within the first 8 bytes: one shift and mask of each row read as a 64-bit word
+    (little-endian for Intel signals; big-endian for Motorola, where linear bit l sits at 63 − l)."""
+    order = "<u8" if signal.byte_order == "little_endian" else ">u8"
+    words = np.ascontiguousarray(data[:, :8]).view(order)[:, 0].astype(np.uint64)
+    shift = lsb if signal.byte_order == "little_endian" else 63 - lsb
+    value = words >> np.uint64(shift)
     if length < 64:
         value &= np.uint64((1 << length) - 1)
     return value
