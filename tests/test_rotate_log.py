@@ -191,6 +191,17 @@ def test_rotation_is_exact_against_a_float64_matrix_reference(
     np.testing.assert_allclose(gyro, ref_gyro, rtol=0, atol=1e-12)
 
 
+@pytest.mark.parametrize("fmt", ["parquet", "csv", "mcap"])
+def test_single_thread_output_equals_overlapped(logs, cal: Calibration, tmp_path: Path, fmt: str, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """Without helper threads (OMP_NUM_THREADS=1) the chunks are encoded inline: the same rows."""
+    path, opts = logs["blf"]
+    rotate_log(path, cal, tmp_path / f"a.{fmt}", options=opts, chunk_samples=1000)
+    monkeypatch.setenv("OMP_NUM_THREADS", "1")
+    rotate_log(path, cal, tmp_path / f"b.{fmt}", options=opts, chunk_samples=1000)
+    for a, b in zip(read_output(tmp_path / f"a.{fmt}", fmt), read_output(tmp_path / f"b.{fmt}", fmt), strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_sensor_to_vehicle_to_sensor_is_the_identity(logs, tmp_path: Path, seed: int) -> None:  # type: ignore[no-untyped-def]
     table, _ = simulate_preset("zhang2011", seed=seed, roll_deg=40.0 * seed - 30, yaw_deg=120.0 * seed)

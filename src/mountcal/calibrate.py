@@ -17,7 +17,6 @@ from datetime import UTC, datetime
 from typing import Any, Literal
 
 import numpy as np
-from scipy import stats
 
 from mountcal.conventions import (
     G_N,
@@ -31,6 +30,7 @@ from mountcal.errors import InputError, NotEnoughInformation
 from mountcal.estimate import full, paper
 from mountcal.estimate.bound import crb_deg, euler_gradients
 from mountcal.estimate.geometry import span_ratio
+from mountcal.pvalues import chi2_sf
 from mountcal.result import Calibration
 from mountcal.stoptable import StopTable
 
@@ -144,7 +144,7 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
     fit_info = {
         "chi2": f.chi2,
         "dof": f.dof,
-        "p_value": float(stats.chi2.sf(f.chi2, f.dof)) if f.noise_known and f.dof > 0 else None,
+        "p_value": float(chi2_sf(f.chi2, f.dof)) if f.noise_known and f.dof > 0 else None,
         "noise": "per-stop covariance from the table" if f.noise_known else "common σ estimated from the residuals",
         "noise_scale_mps2": None if f.noise_known else f.noise_scale,
         "iterations": f.iterations,

@@ -12,10 +12,10 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import stats
 
 from mountcal.conventions import FloatArray
 from mountcal.estimate import full
+from mountcal.pvalues import chi2_logsf, f_logsf
 from mountcal.stoptable import StopTable
 
 STRUCTURE_P = 1e-3  # a structure this improbable under the model counts as unexplained
@@ -154,7 +154,7 @@ def _chi2(fit: full.Fit) -> Finding:
             1.0,
             0.0,
         )
-    logp = float(stats.chi2.logsf(fit.chi2, fit.dof))
+    logp = float(chi2_logsf(fit.chi2, fit.dof))
     return Finding(
         "chi2",
         "scatter beyond the stops' own noise",
@@ -173,12 +173,12 @@ def _regression(w: FloatArray, x: FloatArray, test: str, what: str, fit: full.Fi
     explained = float(np.sum((xx @ coef) ** 2))
     dof = coef.size
     if fit.noise_known:
-        logp = float(stats.chi2.logsf(explained, dof))
+        logp = float(chi2_logsf(explained, dof))
     else:
         rest = max(float(np.sum(w**2)) - explained, 1e-300)
         resid_dof = max(fit.dof - dof, 1)
         f_stat = (explained / dof) / (rest / resid_dof)
-        logp = float(stats.f.logsf(f_stat, dof, resid_dof))
+        logp = float(f_logsf(f_stat, dof, resid_dof))
     # Size in physical units: the fitted structure's RMS amplitude in the vehicle frame.
     sigma = (
         np.sqrt(np.mean(np.diagonal(table.cov_s, axis1=1, axis2=2), axis=1))
@@ -202,7 +202,7 @@ def _norm(table: StopTable, fit: full.Fit) -> Finding:
         else np.full(len(table), fit.noise_scale**2)
     )
     stat = float(np.sum(d) ** 2 / np.sum(var))
-    logp = float(stats.chi2.logsf(stat, 1))
+    logp = float(chi2_logsf(stat, 1))
     return Finding(
         "norm",
         "common offset of |a| from the model's g",

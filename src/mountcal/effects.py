@@ -17,11 +17,12 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
-from scipy import optimize, stats
+from scipy import optimize
 from scipy.spatial.transform import Rotation
 
 from mountcal.diagnose import Finding, analyse, leave_one_out
 from mountcal.estimate import full
+from mountcal.pvalues import chi2_logsf, f_logsf
 from mountcal.stoptable import StopTable
 
 BASE: tuple[str, ...] = ("rotation", "slope")
@@ -235,7 +236,7 @@ def _outlier(cur: Step, table: StopTable, g: float, k: int) -> tuple[float, Step
     if not np.any(np.isfinite(d2)):
         return None
     i = int(np.nanargmax(d2))
-    logp = float(stats.chi2.logsf(d2[i], 3)) + np.log(n)  # the worst of n stops
+    logp = float(chi2_logsf(d2[i], 3)) + np.log(n)  # the worst of n stops
     original = [j for j in range(len(table)) if j not in cur.excluded][i]
     keep = np.ones(n, dtype=bool)
     keep[i] = False
@@ -286,7 +287,7 @@ def _surface(cur: Step, g: float, k: int) -> tuple[float, Step] | None:
     h = 0.05
     curvature = (cost(res.x + h)[0] - 2 * value + cost(res.x - h)[0]) / h**2
     stat = max(_neg2loglik(base, cur.fit) - value, 0.0)
-    logp = float(stats.chi2.logsf(stat, 1))
+    logp = float(chi2_logsf(stat, 1))
     sigma = float(np.exp(res.x))
     if res.x > upper - 0.05:
         return None  # the scatter needs more tilt than roads have: not this effect
@@ -310,9 +311,9 @@ def _lrt(small: full.Fit, big: full.Fit) -> tuple[float, str]:
     extra = len(big.names) - len(small.names)
     if small.noise_known:
         stat = max(small.chi2 - big.chi2, 0.0)
-        return float(stats.chi2.logsf(stat, extra)), f"likelihood ratio χ²({extra}) = {stat:.1f}"
+        return float(chi2_logsf(stat, extra)), f"likelihood ratio χ²({extra}) = {stat:.1f}"
     f_stat = ((small.chi2 - big.chi2) / extra) / (big.chi2 / max(big.dof, 1))
-    return float(stats.f.logsf(max(f_stat, 0.0), extra, max(big.dof, 1))), f"F({extra}, {big.dof}) = {f_stat:.2f}"
+    return float(f_logsf(max(f_stat, 0.0), extra, max(big.dof, 1))), f"F({extra}, {big.dof}) = {f_stat:.2f}"
 
 
 def _inseparable(cur: Step, terms: tuple[str, ...], g: float) -> str | None:

@@ -70,6 +70,7 @@ from mountcal.io.writers import (
 )
 from mountcal.result import Calibration
 from mountcal.rotate import acc_to_vehicle, rate_to_vehicle
+from mountcal.threads import helpers_allowed
 
 FORMATS = {".parquet": "parquet", ".pq": "parquet", ".csv": "csv", ".mcap": "mcap"}
 VEHICLE_FRAME_ID = "base_link"  # REP 103's body frame: x forward, y left, z up = ISO 8855
@@ -365,13 +366,18 @@ def _rotate_stream(
         writer = _writer(f, kind, tally.gyro, cal, files, frame_id)
         # Encoding and compressing chunk k (pyarrow releases the GIL) overlaps reading chunk k + 1;
         # one chunk in flight keeps memory bounded.
+        overlap = helpers_allowed()
         pending: Future[None] | None = None
         try:
             for chunk in _chain(first, chunks):
                 rows = tally.rotate(chunk, cal)
                 if pending is not None:
                     pending.result()
-                pending = encoder.submit(writer.write, *rows) if rows is not None else None
+                    pending = None
+                if rows is not None and overlap:
+                    pending = encoder.submit(writer.write, *rows)
+                elif rows is not None:
+                    writer.write(*rows)
             if pending is not None:
                 pending.result()
         finally:

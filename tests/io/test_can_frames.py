@@ -96,6 +96,17 @@ def test_blf_fast_path_equals_blfreader_on_multi_container_file(tmp_path: Path) 
     _assert_same(read_frames(path), _reference(path))
 
 
+def test_blf_single_thread_path_equals_threaded(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A process limited to one thread (OMP_NUM_THREADS=1, as fleet workers) inflates inline."""
+    path = _write(tmp_path / "bus.blf", _traffic(20_000), max_container_size=4096)
+    threaded = read_frames(path)
+    monkeypatch.setenv("OMP_NUM_THREADS", "1")
+    inline = read_frames(path)
+    for name in ("t_s", "channel", "arbitration_id", "is_extended", "dlc", "data"):
+        np.testing.assert_array_equal(getattr(inline, name), getattr(threaded, name))
+    _assert_same(inline, _reference(path))
+
+
 def test_blf_uniform_classic_log_equals_blfreader(tmp_path: Path) -> None:
     path = _write(tmp_path / "bus.blf", _traffic(30_000, fd=False), max_container_size=16384)
     _assert_same(read_frames(path), _reference(path))
@@ -209,11 +220,16 @@ def test_truncated_blf_is_reported(tmp_path: Path, good_blf: Path) -> None:
         read_frames(open_ended)
 
 
-def test_corrupt_blf_container_is_reported(tmp_path: Path, good_blf: Path) -> None:
+@pytest.mark.parametrize("threads", ["default", "one"])
+def test_corrupt_blf_container_is_reported(
+    tmp_path: Path, good_blf: Path, threads: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    if threads == "one":
+        monkeypatch.setenv("OMP_NUM_THREADS", "1")
     data = bytearray(good_blf.read_bytes())
     data[144 + 32 + 100 : 144 + 32 + 140] = b"\xff" * 40  # inside the first zlib stream
     bad = _copy(good_blf, tmp_path / "bad.blf", bytes(data))
-    with pytest.raises(InputError, match=r"zlib-compressed log container"):
+    with pytest.raises(InputError, match=r"bad\.blf.*zlib-compressed log container.*undecodable"):
         read_frames(bad)
 
 

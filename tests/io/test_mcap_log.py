@@ -427,6 +427,17 @@ def test_iter_chunks_concatenate_to_read(tmp_path: Path, max_samples: int) -> No
     assert all(b.channels == {} and b.source == str(path) for b in batches)
 
 
+def test_single_thread_path_equals_threaded(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A process limited to one thread (OMP_NUM_THREADS=1, as fleet workers) decompresses inline."""
+    path = write_log(tmp_path / "log.mcap", n=3000, chunk_size=3000)
+    threaded = read_mcap(path)
+    monkeypatch.setenv("OMP_NUM_THREADS", "1")
+    inline = read_mcap(path)
+    np.testing.assert_array_equal(inline.t_s, threaded.t_s)
+    np.testing.assert_array_equal(inline.acc_s, threaded.acc_s)
+    np.testing.assert_array_equal(inline.gyro_s, threaded.gyro_s)
+
+
 def _peak_bytes(fn: Any) -> int:
     tracemalloc.start()
     try:

@@ -17,9 +17,10 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import optimize, stats
+from scipy import optimize
 
 from mountcal.conventions import FloatArray
+from mountcal.pvalues import chi2_sf, f_sf
 
 TERMS = ("bias", "scale", "cross_axis")
 PLAUSIBLE = {"bias": 1.0, "scale": 0.05, "cross_axis": 0.05}  # a 1σ beyond these means "not determined"
@@ -128,11 +129,11 @@ def loop(
         extra = len(new.names) - len(cur.names)
         if cov_s is not None:
             stat = max(cur.chi2 - new.chi2, 0.0)
-            p = float(stats.chi2.sf(stat, extra))
+            p = float(chi2_sf(stat, extra))
             test = f"likelihood ratio χ²({extra}) = {stat:.1f}, p = {p:.3g}"
         else:
             f_stat = ((cur.chi2 - new.chi2) / extra) / (new.chi2 / max(new.dof, 1))
-            p = float(stats.f.sf(f_stat, extra, max(new.dof, 1)))
+            p = float(f_sf(f_stat, extra, max(new.dof, 1)))
             test = f"F({extra}, {new.dof}) = {f_stat:.2f}, p = {p:.3g}"
         if p >= alpha:
             break

@@ -29,11 +29,11 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
-from scipy import stats
 from scipy.spatial.transform import Rotation
 
 from mountcal.conventions import FloatArray, angles_from_rot_vs
 from mountcal.fleet.inputs import natural_key
+from mountcal.pvalues import chi2_logsf, chi2_sf
 
 ALPHA = 1e-3  # significance of disagreement and of a remount
 MAX_ITERATIONS = 100
@@ -70,7 +70,7 @@ class Consensus:
 
     @property
     def p_value(self) -> float:
-        return float(stats.chi2.sf(self.chi2, self.dof)) if self.dof > 0 else float("nan")
+        return float(chi2_sf(self.chi2, self.dof)) if self.dof > 0 else float("nan")
 
 
 @dataclass(frozen=True)
@@ -238,7 +238,7 @@ def best_split(rot_vs: Rotation, info: FloatArray) -> ChangePoint | None:
         statistic, dof = _difference_chi2(mean_a, cov_a, mean_b, cov_b, obs_a & obs_b)
         if dof == 0:
             continue
-        log_sf = float(stats.chi2.logsf(statistic, dof))
+        log_sf = float(chi2_logsf(statistic, dof))
         if best is None or (log_sf, -statistic) < (best[0], -best[1]):
             best = (log_sf, statistic, dof, k)
     if best is None:
@@ -294,7 +294,7 @@ def _split_at(rot_vs: Rotation, info: FloatArray, k: int) -> ChangePoint | None:
     statistic, dof = _difference_chi2(mean_a, cov_a, mean_b, cov_b, obs_a & obs_b)
     if dof == 0:
         return None
-    return ChangePoint(k, statistic, dof, float(stats.chi2.sf(statistic, dof)))
+    return ChangePoint(k, statistic, dof, float(chi2_sf(statistic, dof)))
 
 
 def segment_consensus(
@@ -319,7 +319,7 @@ def segment_consensus(
         chi2_used, dof_used = leave_one_out(info[used], cons)
         if used.sum() <= 2:
             break
-        p = np.where(dof_used > 0, stats.chi2.sf(np.nan_to_num(chi2_used), np.maximum(dof_used, 1)), 1.0)
+        p = np.where(dof_used > 0, chi2_sf(np.nan_to_num(chi2_used), np.maximum(dof_used, 1)), 1.0)
         worst = int(np.argmin(p))
         if p[worst] >= alpha:
             break
@@ -448,7 +448,7 @@ def _vehicle_rows(logs: pd.DataFrame, vehicle: str, alpha: float, floor_deg: flo
     rows = []
     for s, seg in enumerate(segments):
         index = usable.index[seg.start : seg.stop]
-        p = np.where(seg.log_dof > 0, stats.chi2.sf(np.nan_to_num(seg.log_chi2), np.maximum(seg.log_dof, 1)), np.nan)
+        p = np.where(seg.log_dof > 0, chi2_sf(np.nan_to_num(seg.log_chi2), np.maximum(seg.log_dof, 1)), np.nan)
         disagree = (p < alpha) | ~seg.used
         for j, idx in enumerate(index):
             logs.at[idx, "segment"] = s

@@ -41,6 +41,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mountcal.errors import InputError
+from mountcal.threads import helpers_allowed
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -378,39 +379,41 @@ def _blf_compressed_containers(f: BinaryIO, path: Path) -> Iterator[tuple[int, i
         offset += stride
 
 
-def _inflate(method: int, usize: int, payload: bytes) -> bytes:
-    if method == 0:
-        return payload
-    if method == 2:
-        return zlib.decompress(payload, bufsize=max(usize, 1))
-    raise ValueError(f"unknown BLF compression method {method}")
+def _inflate(method: int, usize: int, payload: bytes, path: Path) -> bytes:
+    try:
+        if method == 0:
+            return payload
+        if method == 2:
+            return zlib.decompress(payload, bufsize=max(usize, 1))
+        found = f"unknown compression method {method}"
+    except zlib.error as err:
+        found = f"an undecodable one ({err})"
+    raise _blf_error(path, "a zlib-compressed log container", found)
 
 
 def _blf_inflated(f: BinaryIO, path: Path) -> Iterator[bytes]:
-    """Container payloads, inflated in two threads (zlib releases the GIL).
+    """Container payloads, inflated in two threads (zlib releases the GIL), or here where
+    :func:`~mountcal.threads.helpers_allowed` says no.
 
     Up to a scan batch and a half of inflated bytes is kept in flight, so the threads inflate the
     next batch while the caller scans this one (a shallow queue left them idle during the scan).
     """
+    containers = _blf_compressed_containers(f, path)
+    if not helpers_allowed():
+        yield from (_inflate(method, usize, payload, path) for method, usize, payload in containers)
+        return
     pending: deque[tuple[Future[bytes], int]] = deque()
     in_flight = 0
     with ThreadPoolExecutor(max_workers=2) as pool:
-        for method, usize, payload in _blf_compressed_containers(f, path):
-            pending.append((pool.submit(_inflate, method, usize, payload), usize))
+        for method, usize, payload in containers:
+            pending.append((pool.submit(_inflate, method, usize, payload, path), usize))
             in_flight += usize
             while in_flight > _BLF_BATCH_BYTES * 3 // 2:
                 future, size = pending.popleft()
                 in_flight -= size
-                yield _inflated_result(future, path)
+                yield future.result()
         while pending:
-            yield _inflated_result(pending.popleft()[0], path)
-
-
-def _inflated_result(future: Future[bytes], path: Path) -> bytes:
-    try:
-        return future.result()
-    except (zlib.error, ValueError) as err:
-        raise _blf_error(path, "a zlib-compressed log container", f"an undecodable one ({err})") from err
+            yield pending.popleft()[0].result()
 
 
 def _iter_blf(path: Path, keep: _Filter) -> Iterator[CanFrames]:

@@ -45,6 +45,7 @@ from numpy.typing import NDArray
 from mountcal.errors import InputError
 from mountcal.io import cdr
 from mountcal.io.samples import Channel, FloatArray, LogSummary, Samples, Stream
+from mountcal.threads import helpers_allowed
 
 I64Array = NDArray[np.int64]
 U8Array = NDArray[np.uint8]
@@ -537,12 +538,13 @@ def _prefetch(jobs: Iterator[_Job]) -> Generator[tuple[_Job, U8Array], None, Non
     """Each job with its records, decompressed on a background thread a few chunks ahead.
 
     zstd, lz4 and CRC-32 release the GIL, so on two or more cores decompression overlaps the numpy
-    decoding done by the caller. A job the worker has not started when its turn comes is done by
-    the caller instead of waited for, which balances the two threads and keeps a descheduled worker
-    (a busy machine) from stalling the read. The read-ahead is bounded (``_READ_AHEAD`` chunks), so
-    memory does not grow with the log.
+    decoding done by the caller (inline where :func:`~mountcal.threads.helpers_allowed` says no).
+    A job the worker has not started when its turn comes is done by the caller instead of waited
+    for, which balances the two threads and keeps a descheduled worker (a busy machine) from
+    stalling the read. The read-ahead is bounded (``_READ_AHEAD`` chunks), so memory does not grow
+    with the log.
     """
-    if (os.cpu_count() or 1) < 2:
+    if not helpers_allowed():
         yield from ((job, _payload(job)) for job in jobs)
         return
     with ThreadPoolExecutor(1, thread_name_prefix="mountcal-mcap") as pool:
