@@ -6,13 +6,15 @@ Parquet sample table and a ROS 2 MCAP (``mcap_ros2.writer``, with its protocol s
 vehicle has its own mounting; vehicle ``v07`` is remounted by 2° after its fifth log.
 
 Each configuration is timed end to end as a user runs it — a fresh ``mountcal fleet`` process
-(``python -m mountcal.cli``) writing a fresh output, so interpreter start, imports, hashing, worker
+(``python -m mountcal``) writing a fresh output, so interpreter start, imports, hashing, worker
 start-up, the calibrations and the consolidation are all inside:
 
 1. ``--workers 1``;
 2. ``--workers 2``;
 3. ``--scheduler`` to a Dask ``LocalCluster(n_workers=2, threads_per_worker=1, processes=True)``
-   started beforehand (its start-up is reported separately: it is the cluster owner's cost).
+   started just before the run and closed after it (its start-up is reported separately: it is the
+   cluster owner's cost). No cluster exists during the local runs: an idle one's heartbeats would
+   load them.
 
 The runs of a repetition are interleaved, so a slow moment of the machine hits all alike; the
 best and the median over ``--runs`` are reported (the best is the least disturbed by other loads).
@@ -32,6 +34,7 @@ Run from the repository root::
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import shutil
@@ -40,6 +43,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
@@ -140,7 +144,7 @@ def run_cli(logs: Path, output: Path, extra: list[str]) -> float:
         output.with_name(output.name + ".parts"),
     ):
         shutil.rmtree(stale, ignore_errors=True) if stale.is_dir() else stale.unlink(missing_ok=True)
-    command = [sys.executable, "-m", "mountcal.cli", "fleet", str(logs), "-o", str(output), "-q"]
+    command = [sys.executable, "-m", "mountcal", "fleet", str(logs), "-o", str(output), "-q"]
     command += ["--uphill-azimuth-deg", str(UPHILL_AZIMUTH_DEG), *extra]
     started = time.perf_counter()
     subprocess.run(command, check=True, stdout=subprocess.DEVNULL)
@@ -151,23 +155,26 @@ ENGINE_RUNS = 3
 
 
 def report(title: str, times: dict[str, list[float]], n_logs: int, busy: dict[str, list[float]] | None = None) -> None:
-    """Best and median wall time per configuration, throughput and speed-up over one worker."""
+    """Per configuration: best and median wall time with their speed-ups over one worker, and the
+    paired speed-up (the median over repetitions of one worker's time over this configuration's
+    time in the same repetition: the runs of a repetition are back to back, so a slow spell of the
+    machine hits both sides of each ratio alike)."""
     print(f"{title}:")
-    print(
-        f"  {'configuration':<30} {'best s':>7} {'logs/s':>7} {'speed-up':>8} {'median s':>9} {'speed-up':>8}", end=""
-    )
-    print(f" {'busy s':>7}" if busy else "", "  runs (s)")
-    best0, median0 = min(times["local, 1 worker"]), statistics.median(times["local, 1 worker"])
+    head = f"  {'configuration':<30} {'best s':>7} {'logs/s':>7} {'speed-up':>8} {'median s':>9} {'speed-up':>8}"
+    print(head + f" {'paired':>7}" + (f" {'busy s':>7}" if busy else ""), "  runs (s)")
+    one = times["local, 1 worker"]
+    best0, median0 = min(one), statistics.median(one)
     for name, values in times.items():
         best, median = min(values), statistics.median(values)
+        paired = statistics.median(a / b for a, b in zip(one, values, strict=True))
         line = f"  {name:<30} {best:>7.1f} {n_logs / best:>7.2f} {best0 / best:>7.2f}×"
-        line += f" {median:>9.1f} {median0 / median:>7.2f}×"
+        line += f" {median:>9.1f} {median0 / median:>7.2f}× {paired:>6.2f}×"
         if busy:
             line += f" {statistics.median(busy[name]):>7.1f}"
         print(line, "  " + ", ".join(f"{v:.1f}" for v in values))
 
 
-def engine_only(logs: Path, name: str, address: str) -> list[float]:
+def engine_only(logs: Path, name: str, address: str | None) -> list[float]:
     """Seconds from submitting every job to the last result, on warm workers (no storing, no tables)."""
     from mountcal.fleet import DaskEngine, JobDefaults, LocalEngine, collect_jobs
     from mountcal.fleet.store import job_hash
@@ -175,7 +182,7 @@ def engine_only(logs: Path, name: str, address: str) -> list[float]:
     jobs = collect_jobs([logs], JobDefaults(uphill_azimuth_deg=UPHILL_AZIMUTH_DEG))
     todo = {job_hash(j): j for j in jobs}
     warm = dict(list(todo.items())[:4])
-    engine = DaskEngine(address) if name.startswith("Dask") else LocalEngine(1 if "1 worker" in name else 2)
+    engine = DaskEngine(address) if address else LocalEngine(1 if "1 worker" in name else 2)
     times = []
     with engine:
         for _ in engine.results(warm.items()):
@@ -186,6 +193,18 @@ def engine_only(logs: Path, name: str, address: str) -> list[float]:
             times.append(time.perf_counter() - started)
             assert all(r["status"] == "ok" for r in records)
     return times
+
+
+@contextlib.contextmanager
+def dask_cluster(startup_s: list[float]) -> Iterator[str]:
+    """A fresh LocalCluster (2 single-threaded worker processes) for the Dask runs only, so that its
+    idle heartbeats never load the local runs; its start-up time is appended to ``startup_s``."""
+    from distributed import LocalCluster
+
+    started = time.perf_counter()
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        startup_s.append(time.perf_counter() - started)
+        yield cluster.scheduler_address
 
 
 def same(a: tuple[pd.DataFrame, pd.DataFrame], b: tuple[pd.DataFrame, pd.DataFrame]) -> bool:
@@ -206,8 +225,6 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--workdir", type=Path, default=None, help="keep the generated fleet here")
     args = parser.parse_args(argv)
 
-    from distributed import LocalCluster
-
     workdir = args.workdir or Path(tempfile.mkdtemp(prefix="mountcal-fleet-"))
     try:
         started = time.perf_counter()
@@ -217,37 +234,40 @@ def main(argv: list[str] | None = None) -> int:
         print(
             f"fleet: {args.logs} logs, {size / 1e6:.0f} MB in {logs} (ready in {time.perf_counter() - started:.0f} s)"
         )
-        started = time.perf_counter()
-        with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
-            cluster_s = time.perf_counter() - started
-            configs = {
-                "local, 1 worker": ["--workers", "1"],
-                "local, 2 workers": ["--workers", "2"],
-                "Dask LocalCluster, 2 workers": ["--scheduler", cluster.scheduler_address],
-            }
-            times: dict[str, list[float]] = {name: [] for name in configs}
-            busy: dict[str, list[float]] = {name: [] for name in configs}
-            loads: list[float] = []
-            mismatches: list[str] = []
-            for rep in range(args.runs):
-                tables = {}
-                for k, (name, extra) in enumerate(configs.items()):
-                    output = workdir / f"out{k}" / "fleet.parquet"
+        configs = {
+            "local, 1 worker": ["--workers", "1"],
+            "local, 2 workers": ["--workers", "2"],
+            "Dask LocalCluster, 2 workers": ["--scheduler"],
+        }
+        times: dict[str, list[float]] = {name: [] for name in configs}
+        busy: dict[str, list[float]] = {name: [] for name in configs}
+        loads: list[float] = []
+        cluster_s: list[float] = []
+        mismatches: list[str] = []
+        for rep in range(args.runs):
+            tables = {}
+            for k, (name, extra) in enumerate(configs.items()):
+                output = workdir / f"out{k}" / "fleet.parquet"
+                # each configuration alone on the machine: the Dask cluster exists only for its own runs
+                with dask_cluster(cluster_s) if name.startswith("Dask") else contextlib.nullcontext() as address:
                     loads.append(os.getloadavg()[0])
-                    times[name].append(run_cli(logs, output, extra))
-                    tables[name] = (
-                        pd.read_parquet(output).drop(columns="elapsed_s"),
-                        pd.read_parquet(output.with_name("fleet_vehicles.parquet")),
-                    )
-                    busy[name].append(float(pd.read_parquet(output, columns=["elapsed_s"])["elapsed_s"].sum()))
-                mismatches += [
-                    f"run {rep + 1}: {name}" for name in configs if not same(tables[name], tables["local, 1 worker"])
-                ]
-            engine_s = {name: engine_only(logs, name, cluster.scheduler_address) for name in configs}
+                    times[name].append(run_cli(logs, output, extra + ([address] if address else [])))
+                tables[name] = (
+                    pd.read_parquet(output).drop(columns="elapsed_s"),
+                    pd.read_parquet(output.with_name("fleet_vehicles.parquet")),
+                )
+                busy[name].append(float(pd.read_parquet(output, columns=["elapsed_s"])["elapsed_s"].sum()))
+            mismatches += [
+                f"run {rep + 1}: {name}" for name in configs if not same(tables[name], tables["local, 1 worker"])
+            ]
+        engine_s = {}
+        for name in configs:
+            with dask_cluster(cluster_s) if name.startswith("Dask") else contextlib.nullcontext() as address:
+                engine_s[name] = engine_only(logs, name, address)
         reference_logs, reference_vehicles = tables["local, 1 worker"]
         ok = int((reference_logs["status"] == "ok").sum())
         remounted = sorted(reference_vehicles.loc[reference_vehicles["remount"], "vehicle_id"])
-        print(f"Dask LocalCluster start-up (not in the runs): {cluster_s:.1f} s")
+        print(f"Dask LocalCluster start-up (not in the runs, median): {statistics.median(cluster_s):.1f} s")
         print(f"{ok}/{len(reference_logs)} logs ok; remounts flagged: {remounted}")
         print(f"tables identical across the configurations of each run: {'yes' if not mismatches else mismatches}")
         shown = ", ".join(f"{x:.1f}" for x in loads)

@@ -236,7 +236,7 @@ def test_a_killed_run_resumes_without_redoing_finished_logs_or_duplicating_rows(
             sample_frame(parking(10 * v + i)).to_csv(logs / f"van{v}" / f"s{i}.csv", index=False, float_format="%.7g")
     output = tmp_path / "fleet.parquet"
     parts = outputs_of(output)[2]
-    command = [sys.executable, "-m", "mountcal.cli", "fleet", str(logs), "-o", str(output), "--workers", "1"]
+    command = [sys.executable, "-m", "mountcal", "fleet", str(logs), "-o", str(output), "--workers", "1"]
     proc = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     try:
         deadline = time.monotonic() + 120

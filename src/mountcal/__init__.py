@@ -17,14 +17,71 @@ Pipeline: stop table (:mod:`mountcal.stoptable`) → fit (:mod:`mountcal.calibra
 :mod:`mountcal.simulate` is the shared truth generator.
 """
 
-from mountcal.calibrate import Options, calibrate
-from mountcal.estimate.driving import estimate_driving
-from mountcal.io.logs import LogOptions, read_log
-from mountcal.result import Calibration
-from mountcal.rotate import acc_to_sensor, acc_to_vehicle, frame_to_sensor, frame_to_vehicle
-from mountcal.rotate_log import to_frame
-from mountcal.simulate import simulate_preset, simulate_stops
-from mountcal.stoptable import StopTable, read_stop_table, stop_table_from_frame
+from __future__ import annotations
+
+import importlib
+import sys
+import types
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from mountcal.calibrate import Options, calibrate
+    from mountcal.estimate.driving import estimate_driving
+    from mountcal.io.logs import LogOptions, read_log
+    from mountcal.result import Calibration
+    from mountcal.rotate import acc_to_sensor, acc_to_vehicle, frame_to_sensor, frame_to_vehicle
+    from mountcal.rotate_log import to_frame
+    from mountcal.simulate import simulate_preset, simulate_stops
+    from mountcal.stoptable import StopTable, read_stop_table, stop_table_from_frame
+
+# Exported names, imported on first use (PEP 562): `import mountcal` and the command line start in
+# a fraction of a second; each name comes from the module that defines it.
+_HOMES = {
+    "Calibration": "mountcal.result",
+    "LogOptions": "mountcal.io.logs",
+    "Options": "mountcal.calibrate",
+    "StopTable": "mountcal.stoptable",
+    "acc_to_sensor": "mountcal.rotate",
+    "acc_to_vehicle": "mountcal.rotate",
+    "calibrate": "mountcal.calibrate",
+    "estimate_driving": "mountcal.estimate.driving",
+    "frame_to_sensor": "mountcal.rotate",
+    "frame_to_vehicle": "mountcal.rotate",
+    "read_log": "mountcal.io.logs",
+    "read_stop_table": "mountcal.stoptable",
+    "simulate_preset": "mountcal.simulate",
+    "simulate_stops": "mountcal.simulate",
+    "stop_table_from_frame": "mountcal.stoptable",
+    "to_frame": "mountcal.rotate_log",
+}
+
+
+class _Package(types.ModuleType):
+    """The package module: importing the submodule ``mountcal.calibrate`` binds the name
+    ``calibrate`` in the package, which here stays the function :func:`mountcal.calibrate.calibrate`
+    (as it did when the exports were imported eagerly)."""
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        if name in _HOMES and isinstance(value, types.ModuleType):
+            return
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _Package
+
+
+def __getattr__(name: str) -> Any:
+    home = _HOMES.get(name)
+    if home is None:
+        raise AttributeError(f"module 'mountcal' has no attribute {name!r}")
+    value = getattr(importlib.import_module(home), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_HOMES})
+
 
 __all__ = [
     "Calibration",

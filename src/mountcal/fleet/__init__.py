@@ -2,7 +2,8 @@
 
 - :mod:`~mountcal.fleet.inputs`: folders, globs and manifest CSVs → :class:`FleetJob` per log.
 - :mod:`~mountcal.fleet.worker`: one log → one plain record (never raises).
-- :mod:`~mountcal.fleet.run`: engines (local processes, Dask) and :func:`run_fleet`.
+- :mod:`~mountcal.fleet.engines`: where logs are calibrated (local worker processes, Dask).
+- :mod:`~mountcal.fleet.run`: :func:`run_fleet`.
 - :mod:`~mountcal.fleet.store`: content hashes, atomic part files, the tables' columns.
 - :mod:`~mountcal.fleet.vehicles`: consensus on SO(3), disagreeing logs, remount detection.
 
@@ -14,10 +15,48 @@ Usage::
     result.logs, result.vehicles  # DataFrames, also written as Parquet
 """
 
-from mountcal.fleet.inputs import FleetJob, JobDefaults, collect_jobs, read_manifest
-from mountcal.fleet.run import DaskEngine, FleetOptions, FleetResult, LocalEngine, outputs_of, run_fleet
-from mountcal.fleet.summary import summary_lines
-from mountcal.fleet.vehicles import analyse_fleet
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from mountcal.fleet.engines import DaskEngine, LocalEngine
+    from mountcal.fleet.inputs import FleetJob, JobDefaults, collect_jobs, read_manifest
+    from mountcal.fleet.run import FleetOptions, FleetResult, outputs_of, run_fleet
+    from mountcal.fleet.summary import summary_lines
+    from mountcal.fleet.vehicles import analyse_fleet
+
+# imported on first use (PEP 562), so that mountcal.fleet.engines can start the worker server before
+# anything heavy is imported
+_HOMES = {
+    "DaskEngine": "mountcal.fleet.engines",
+    "FleetJob": "mountcal.fleet.inputs",
+    "FleetOptions": "mountcal.fleet.run",
+    "FleetResult": "mountcal.fleet.run",
+    "JobDefaults": "mountcal.fleet.inputs",
+    "LocalEngine": "mountcal.fleet.engines",
+    "analyse_fleet": "mountcal.fleet.vehicles",
+    "collect_jobs": "mountcal.fleet.inputs",
+    "outputs_of": "mountcal.fleet.run",
+    "read_manifest": "mountcal.fleet.inputs",
+    "run_fleet": "mountcal.fleet.run",
+    "summary_lines": "mountcal.fleet.summary",
+}
+
+
+def __getattr__(name: str) -> Any:
+    home = _HOMES.get(name)
+    if home is None:
+        raise AttributeError(f"module 'mountcal.fleet' has no attribute {name!r}")
+    value = getattr(importlib.import_module(home), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_HOMES})
+
 
 __all__ = [
     "DaskEngine",

@@ -1,0 +1,310 @@
+"""Engines: where the logs of a fleet are calibrated.
+
+- :class:`LocalEngine` (default): a :class:`concurrent.futures.ProcessPoolExecutor` on the local
+  cores, started by a ``forkserver`` that has mountcal imported (``spawn`` where there is none),
+  with one BLAS/OpenMP thread per worker (so N workers use N cores, not N²; mountcal's readers
+  then use no helper threads either, :func:`mountcal.threads.helpers_allowed`). Chosen over a Dask
+  ``LocalCluster`` because it needs no set-up, no ports and no optional dependency, starts in about
+  a second, and its workers die with the parent. At most two jobs per worker are in flight, so
+  when a worker process dies (out of memory, a crash in a native library) the suspects are known:
+  they are retried one at a time, and a log that kills its worker twice is recorded as failed.
+- :class:`DaskEngine` (``--scheduler tcp://HOST:PORT``): the same jobs on an existing Dask
+  distributed cluster via ``distributed.Client(address)``. Workers need only the installed
+  mountcal and the log files at the same paths (a shared file system). A task whose worker dies
+  repeatedly comes back as ``KilledWorker`` and is recorded as failed.
+
+This module imports nothing heavy, so that the command line can start the worker server
+(:func:`start_worker_server`) before it imports mountcal's numerical code itself: the two imports
+then run at the same time, on two cores.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib
+import itertools
+import multiprocessing
+import multiprocessing.forkserver
+import os
+import secrets
+import threading
+from collections import deque
+from collections.abc import Iterable, Iterator
+from concurrent.futures import FIRST_COMPLETED, CancelledError, Future, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from typing import TYPE_CHECKING, Any, Protocol
+
+from mountcal.errors import InputError, MountcalError
+
+if TYPE_CHECKING:
+    from mountcal.fleet.inputs import FleetJob
+
+WORKER_MODULE = "mountcal.fleet.worker"  # what the worker server imports before forking workers
+THREAD_VARIABLES = (
+    "OMP_NUM_THREADS",
+    "OPENBLAS_NUM_THREADS",
+    "MKL_NUM_THREADS",
+    "VECLIB_MAXIMUM_THREADS",
+    "NUMEXPR_NUM_THREADS",
+)
+QUEUED_PER_WORKER = 2  # jobs in flight per worker: one running, one waiting (no idle gap between logs)
+MAX_WORKER_DEATHS = 2  # a log in flight when its worker died this often is recorded as failed
+
+
+class Engine(Protocol):
+    """Runs :func:`~mountcal.fleet.worker.run_job` on jobs and yields (key, record) as each finishes.
+
+    ``results`` takes (key, job) pairs lazily, so the caller can hash the logs while the first
+    ones are being calibrated. ``start`` may begin setting up in the background; ``results`` starts
+    it if needed; ``close`` releases the workers. Engines are context managers.
+    """
+
+    name: str
+
+    def start(self) -> None: ...
+
+    def results(self, jobs: Iterable[tuple[str, FleetJob]]) -> Iterator[tuple[str, dict[str, Any]]]: ...
+
+    def close(self) -> None: ...
+
+    def __enter__(self) -> Engine: ...
+
+    def __exit__(self, *exc: object) -> None: ...
+
+
+def engine_failure(err: BaseException, what: str) -> dict[str, Any]:
+    """The record of a log the engine could not run (not stored: the next run retries it)."""
+    kind = f"{type(err).__module__}.{type(err).__qualname__}"
+    return {"status": "failed", "error": f"{what} ({kind}: {err})", "error_type": kind, "_transient": True}
+
+
+class LocalEngine:
+    """Worker processes on this machine (see the module docstring)."""
+
+    def __init__(self, workers: int | None = None) -> None:
+        if workers is not None and workers < 1:
+            raise InputError("--workers", "a number of worker processes ≥ 1", str(workers), "Pass --workers 1 or more.")
+        available = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+        self.workers = workers or available or 1
+        self.name = f"local, {self.workers} worker process{'es' if self.workers > 1 else ''}"
+        self._pool: ProcessPoolExecutor | None = None
+        self._starting: threading.Thread | None = None
+        self._start_error: BaseException | None = None
+        self._saved_env: dict[str, str | None] | None = None
+
+    def __enter__(self) -> LocalEngine:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def start(self) -> None:
+        """Start the workers in a background thread (the forkserver imports mountcal meanwhile)."""
+        if self._starting is not None:
+            return
+        self._saved_env = {k: os.environ.get(k) for k in THREAD_VARIABLES}
+        start_worker_server()
+        self._starting = threading.Thread(target=self._warm_up, name="mountcal-fleet-start", daemon=True)
+        self._starting.start()
+
+    def _warm_up(self) -> None:
+        try:
+            self._pool = self._new_pool()
+            for _ in range(self.workers):  # each submit to a pool without an idle worker forks one
+                self._pool.submit(os.getpid)
+        except BaseException as err:  # re-raised by results()
+            self._start_error = err
+
+    def close(self) -> None:
+        """Stop the workers and restore the environment."""
+        if self._starting is not None:
+            self._starting.join()
+        if self._pool is not None:
+            self._pool.shutdown(wait=False, cancel_futures=True)
+            self._pool = None
+        if self._saved_env is not None:
+            for k, v in self._saved_env.items():
+                if v is None:
+                    os.environ.pop(k, None)
+                else:
+                    os.environ[k] = v
+            self._saved_env = None
+        self._starting = None
+
+    def results(self, jobs: Iterable[tuple[str, FleetJob]]) -> Iterator[tuple[str, dict[str, Any]]]:
+        source = iter(jobs)
+        first = next(source, None)
+        if first is None:  # nothing to calibrate: no workers needed
+            return
+        from mountcal.fleet.worker import run_job  # all of mountcal: imported once there is work
+
+        source = itertools.chain([first], source)
+        self.start()
+        assert self._starting is not None
+        self._starting.join()
+        if self._start_error is not None:
+            raise self._start_error
+        by_key: dict[str, FleetJob] = {}
+        suspects: deque[str] = deque()
+        deaths: dict[str, int] = {}
+        inflight: dict[Future[dict[str, Any]], str] = {}
+        exhausted = False
+        while not exhausted or suspects or inflight:
+            pool = self._pool
+            assert pool is not None
+            if suspects:  # after a worker died, run each suspect alone to find the culprit
+                if not inflight:
+                    key = suspects.popleft()
+                    inflight[pool.submit(run_job, by_key[key])] = key
+            else:
+                while not exhausted and len(inflight) < QUEUED_PER_WORKER * self.workers:
+                    pair = next(source, None)  # pulls (and hashes) the next log only when a worker needs it
+                    if pair is None:
+                        exhausted = True
+                    else:
+                        by_key[pair[0]] = pair[1]
+                        inflight[pool.submit(run_job, pair[1])] = pair[0]
+            if not inflight:
+                continue
+            done, _ = wait(inflight, return_when=FIRST_COMPLETED)
+            broken = any(isinstance(f.exception(), BrokenProcessPool) for f in done)
+            if broken:  # a dead worker fails the whole pool: collect every job in flight
+                done = wait(inflight).done
+            for future in done:
+                key = inflight.pop(future)
+                error = future.exception()
+                if error is None:
+                    by_key.pop(key, None)
+                    yield key, future.result()
+                elif not isinstance(error, BrokenProcessPool):  # e.g. a job that does not pickle
+                    yield key, engine_failure(error, "the worker pool could not run this log")
+                else:
+                    deaths[key] = deaths.get(key, 0) + 1
+                    if deaths[key] < MAX_WORKER_DEATHS:
+                        suspects.append(key)
+                    else:
+                        what = (
+                            f"the worker process died {deaths[key]} times while calibrating this log "
+                            "(out of memory, or a crash in a native library)"
+                        )
+                        yield key, engine_failure(error, what)
+            if broken:
+                pool.shutdown(wait=True, cancel_futures=True)
+                self._pool = self._new_pool()
+
+    def _new_pool(self) -> ProcessPoolExecutor:
+        return ProcessPoolExecutor(max_workers=self.workers, mp_context=worker_context())
+
+
+def worker_context() -> multiprocessing.context.BaseContext:
+    """``forkserver`` with mountcal preloaded where there is one (workers start in milliseconds after
+    the first), else ``spawn``; never a plain ``fork`` of a process that may hold threads."""
+    if "forkserver" in multiprocessing.get_all_start_methods():
+        context = multiprocessing.get_context("forkserver")
+        context.set_forkserver_preload([WORKER_MODULE])
+        return context
+    return multiprocessing.get_context("spawn")
+
+
+def start_worker_server() -> None:
+    """Set one BLAS/OpenMP thread for the worker processes to come and start the forkserver, which
+    imports mountcal in the background; returns at once. Calling it again does nothing more.
+
+    The variables are set in this process's environment, which the server and its workers inherit
+    (:meth:`LocalEngine.close` restores them).
+    """
+    os.environ.update({k: "1" for k in THREAD_VARIABLES})
+    if worker_context().get_start_method() == "forkserver":
+        multiprocessing.forkserver.ensure_running()
+
+
+class DaskEngine:
+    """An existing Dask distributed cluster (see the module docstring)."""
+
+    def __init__(self, address: str, timeout_s: float = 20.0) -> None:
+        self.address, self.timeout_s = address, timeout_s
+        self.name = f"Dask scheduler {address}"
+        self._client: Any = None
+        self._distributed: Any = None
+
+    def __enter__(self) -> DaskEngine:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def start(self) -> None:
+        """Connect to the scheduler (before any log is hashed: an unreachable one fails at once)."""
+        if self._client is not None:
+            return
+        try:
+            self._distributed = importlib.import_module("distributed")  # optional: mountcal[fleet]
+        except ImportError as err:
+            raise InputError(
+                "--scheduler",
+                "the Dask distributed package",
+                "it is not installed",
+                "Install it: pip install 'mountcal[fleet]'; or run without --scheduler on the local cores.",
+            ) from err
+        try:
+            self._client = self._distributed.Client(self.address, timeout=self.timeout_s, set_as_default=False)
+        except (OSError, TimeoutError, ValueError) as err:
+            raise InputError(
+                f"--scheduler {self.address}",
+                "a reachable Dask scheduler (tcp://HOST:PORT)",
+                f"no connection ({type(err).__name__}: {err})",
+                "Start one (`dask scheduler`, then `dask worker ADDRESS` on each machine) or check the address.",
+            ) from err
+
+    def close(self) -> None:
+        if self._client is not None:
+            with contextlib.suppress(Exception):
+                self._client.close()
+            self._client = None
+
+    def results(self, jobs: Iterable[tuple[str, FleetJob]]) -> Iterator[tuple[str, dict[str, Any]]]:
+        from mountcal.fleet.worker import run_job
+
+        self.start()
+        client = self._client
+        token = secrets.token_hex(4)
+        futures: dict[Any, str] = {}
+        finished = self._distributed.as_completed([], loop=client.loop)
+        try:
+            for key, job in jobs:  # submit as the logs are hashed; collect what is already done meanwhile
+                future = client.submit(run_job, job, key=f"mountcal-fleet-{token}-{key[:16]}", pure=False)
+                futures[future] = key
+                finished.add(future)
+                while finished.has_ready():
+                    yield from self._collect(finished.next_batch(block=False), futures)
+            while not finished.is_empty():
+                yield from self._collect(finished.next_batch(block=True), futures)
+        except CancelledError as err:
+            raise MountcalError(
+                f"--scheduler {self.address}: lost the Dask scheduler ({err}); the logs finished so far are "
+                "kept: run the same command again to resume."
+            ) from err
+        finally:
+            with contextlib.suppress(Exception):
+                client.cancel([f for f in futures if not f.done()])
+
+    @staticmethod
+    def _collect(batch: Iterable[Any], futures: dict[Any, str]) -> Iterator[tuple[str, dict[str, Any]]]:
+        for future in batch:
+            key = futures.pop(future)
+            try:
+                record = future.result()
+            except (CancelledError, MountcalError):
+                raise
+            except Exception as err:  # KilledWorker and the like: this log, not the batch
+                record = engine_failure(err, "the Dask cluster could not run this log")
+            future.release()
+            yield key, record
+
+
+def make_engine(workers: int | None = None, scheduler: str | None = None) -> Engine:
+    """A Dask engine for a scheduler address, else local worker processes."""
+    return DaskEngine(scheduler) if scheduler else LocalEngine(workers)
+
+
+__all__ = ["DaskEngine", "Engine", "LocalEngine", "engine_failure", "make_engine", "start_worker_server"]

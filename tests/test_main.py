@@ -1,0 +1,42 @@
+"""The console script: a local fleet starts its worker server before the heavy imports."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from mountcal.__main__ import _local_fleet
+
+
+@pytest.mark.parametrize(
+    ("args", "early"),
+    [
+        (["fleet", "logs/", "-o", "f.parquet"], True),
+        (["fleet", "logs/", "-o", "f.parquet", "--workers", "2"], True),
+        (["fleet", "logs/", "-o", "f.parquet", "--scheduler", "tcp://h:8786"], False),
+        (["fleet", "logs/", "-o", "f.parquet", "--scheduler=tcp://h:8786"], False),
+        (["fleet", "--help"], False),
+        (["calibrate", "stops.csv"], False),
+        ([], False),
+    ],
+)
+def test_only_a_local_fleet_starts_workers_early(args: list[str], early: bool) -> None:
+    assert _local_fleet(args) is early
+
+
+def test_importing_mountcal_is_light() -> None:
+    """`import mountcal` and the fleet engines import none of numpy, scipy, pandas (names load on use)."""
+    code = (
+        "import sys, mountcal, mountcal.fleet.engines; "
+        "heavy = sorted(m for m in ('numpy', 'scipy', 'pandas', 'pyarrow') if m in sys.modules); "
+        "print(','.join(heavy)); mountcal.calibrate; print('numpy' in sys.modules)"
+    )
+    lines = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert lines.splitlines() == ["", "True"]  # nothing heavy until a name is used; then it loads
+
+
+def test_python_dash_m_mountcal_runs_the_cli() -> None:
+    done = subprocess.run([sys.executable, "-m", "mountcal", "--help"], capture_output=True, text=True)
+    assert done.returncode == 0 and "calibrate" in done.stdout and "fleet" in done.stdout
