@@ -10,10 +10,11 @@ error frames carry no signal values and are not part of it). Conventions:
   ASC becomes 0, an MF4 ``BusChannel`` is kept as stored (CANedge ``CAN 2`` is 2), ``can1`` in a
   candump log is 1. Formats without a channel (CSV) give -1.
 - ``dlc`` is the number of data bytes (python-can's ``Message.dlc``; for CAN FD the length, not the
-  4-bit code); ``data`` is zero-padded to 64 bytes.
+  4-bit code); ``data`` is zero-padded to 8 bytes, or to 64 when a frame is longer (CAN FD).
 
 Speed: BLF is parsed here, not through python-can (whose ``BLFReader`` is kept only as the
-cross-check of the tests): containers are inflated in a small thread pool (zlib releases the GIL);
+cross-check of the tests): containers are inflated with ISA-L (``isal``, zlib-compatible and 1.7×
+faster than zlib here) in a small thread pool, which releases the GIL;
 a batch of them is first read as one strided record array while its objects repeat the first
 one's size and kind (a classic CAN log is all 48-byte CAN_MESSAGEs); anything else goes through
 a general scan that locates every ``LOBJ`` signature with numpy, verifies the object chain
@@ -28,7 +29,6 @@ import gc
 import math
 import struct
 import sys
-import zlib
 from collections import deque
 from collections.abc import Callable, Collection, Iterable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -38,6 +38,7 @@ from pathlib import Path
 from typing import Any, BinaryIO
 
 import numpy as np
+from isal import isal_zlib  # zlib-compatible inflate, 1.7× faster than zlib's on BLF containers
 from numpy.typing import NDArray
 
 from mountcal.errors import InputError
@@ -384,15 +385,15 @@ def _inflate(method: int, usize: int, payload: bytes, path: Path) -> bytes:
         if method == 0:
             return payload
         if method == 2:
-            return zlib.decompress(payload, bufsize=max(usize, 1))
+            return isal_zlib.decompress(payload, bufsize=max(usize, 1))
         found = f"unknown compression method {method}"
-    except zlib.error as err:
+    except isal_zlib.error as err:  # type: ignore[misc]  # the stub types it as an instance, not a class
         found = f"an undecodable one ({err})"
     raise _blf_error(path, "a zlib-compressed log container", found)
 
 
 def _blf_inflated(f: BinaryIO, path: Path) -> Iterator[bytes]:
-    """Container payloads, inflated in two threads (zlib releases the GIL), or here where
+    """Container payloads, inflated in two threads (ISA-L releases the GIL), or here where
     :func:`~mountcal.threads.helpers_allowed` says no.
 
     Up to a scan batch and a half of inflated bytes is kept in flight, so the threads inflate the
