@@ -56,6 +56,7 @@ import pyarrow.csv as pa_csv
 import pyarrow.parquet as pq
 from scipy.spatial.transform import Rotation
 
+from mountcal.atomic import atomic_output
 from mountcal.conventions import CONVENTIONS, FloatArray
 from mountcal.errors import InputError
 from mountcal.io.logs import TABLE_CHANNELS, LogOptions, log_kind
@@ -65,7 +66,6 @@ from mountcal.io.writers import (
     ImuMessages,
     McapImuSamples,
     ParquetSamples,
-    atomic_output,
     copy_mcap_with_imu,
 )
 from mountcal.result import Calibration

@@ -13,23 +13,18 @@ Every writer takes one chunk of samples at a time, so memory does not grow with 
   vehicle-frame IMU channel beside the original one; or it holds that IMU channel alone. The new
   messages are ``sensor_msgs/msg/Imu`` in CDR, built for a whole chunk at once with numpy.
 
-:func:`atomic_output` is where every output is written: an unnamed file in the target's folder
-(Linux ``O_TMPFILE``) that is linked to its name only once complete, so a process killed
-mid-write leaves nothing behind; where the file system cannot do that, a hidden temporary file
-that is renamed into place (and removed on any error).
+Every output is written through :func:`mountcal.atomic.atomic_output`: a process killed mid-write
+leaves nothing behind.
 """
 
 from __future__ import annotations
 
-import contextlib
 import io
 import os
 import struct
-import tempfile
 import zlib
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any, BinaryIO
 
 import lz4.frame
@@ -70,74 +65,6 @@ _MESSAGE_HEAD = 22  # channel id u16, sequence u32, log time u64, publish time u
 _RECORD_HEAD = 9  # opcode u8, length u64
 
 
-# --------------------------------------------------------------------------- atomic output
-
-
-@contextlib.contextmanager
-def atomic_output(target: str | os.PathLike[str]) -> Iterator[BinaryIO]:
-    """A binary file that appears at ``target`` only when the block completes without error.
-
-    The data go to an unnamed file in the target's folder (``O_TMPFILE``), which is flushed,
-    synced and then linked to ``target`` (replacing an existing file atomically). A process that
-    dies before that — an exception, a crash, ``SIGKILL`` — leaves no file at all. Where the file
-    system lacks ``O_TMPFILE`` a hidden ``.NAME.*.part`` file beside the target is used and renamed
-    into place; it is removed on an exception (only a hard kill can leave it).
-    """
-    path = Path(target)
-    folder = path.parent if str(path.parent) else Path(".")
-    folder.mkdir(parents=True, exist_ok=True)
-    mode = 0o666 & ~_umask()
-    try:
-        fd = os.open(folder, os.O_TMPFILE | os.O_WRONLY, mode)
-    except (AttributeError, OSError):
-        fd = -1
-    if fd >= 0:
-        with os.fdopen(fd, "wb") as f:
-            yield f
-            f.flush()
-            os.fsync(f.fileno())
-            _link_into_place(f.fileno(), folder, path.name)
-        return
-    handle, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=folder)
-    tmp = Path(name)
-    try:
-        os.chmod(handle, mode)
-        with os.fdopen(handle, "wb") as f:
-            yield f
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-def _link_into_place(fd: int, folder: Path, name: str) -> None:
-    """Give the unnamed file ``fd`` the name ``folder/name``, replacing what is there atomically."""
-    dir_fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
-    try:
-        source = f"/proc/self/fd/{fd}"
-        try:
-            os.link(source, name, dst_dir_fd=dir_fd, follow_symlinks=True)
-            return
-        except FileExistsError:
-            pass
-        temp = f".{name}.{os.getpid()}.{id(source):x}.part"
-        os.link(source, temp, dst_dir_fd=dir_fd, follow_symlinks=True)
-        try:
-            os.replace(temp, name, src_dir_fd=dir_fd, dst_dir_fd=dir_fd)
-        except BaseException:
-            os.unlink(temp, dir_fd=dir_fd)
-            raise
-    finally:
-        os.close(dir_fd)
-
-
 # --------------------------------------------------------------------------- tables
 
 
@@ -159,7 +86,7 @@ class ParquetSamples:
     Parameters
     ----------
     file : binary file
-        Where to write (from :func:`atomic_output`).
+        Where to write (from :func:`mountcal.atomic.atomic_output`).
     gyro : bool
         Whether the rows carry ``gx, gy, gz``.
     metadata : mapping of str to str
