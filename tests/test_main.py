@@ -40,3 +40,21 @@ def test_importing_mountcal_is_light() -> None:
 def test_python_dash_m_mountcal_runs_the_cli() -> None:
     done = subprocess.run([sys.executable, "-m", "mountcal", "--help"], capture_output=True, text=True)
     assert done.returncode == 0 and "calibrate" in done.stdout and "fleet" in done.stdout
+
+
+def test_an_export_named_like_its_submodule_stays_the_export() -> None:
+    """`mountcal.calibrate` is the function even after the submodule mountcal.calibrate is imported."""
+    code = (
+        "import mountcal.calibrate, mountcal; from mountcal import calibrate; "
+        "import types; print(callable(mountcal.calibrate) and not isinstance(calibrate, types.ModuleType))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "True"
+
+
+def test_unknown_names_are_attribute_errors() -> None:
+    import mountcal
+
+    with pytest.raises(AttributeError, match="no attribute 'nope'"):
+        mountcal.nope  # noqa: B018
+    assert {"calibrate", "Calibration", "read_log"} <= set(dir(mountcal))

@@ -19,10 +19,9 @@ Pipeline: stop table (:mod:`mountcal.stoptable`) → fit (:mod:`mountcal.calibra
 
 from __future__ import annotations
 
-import importlib
-import sys
-import types
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from mountcal import lazy
 
 if TYPE_CHECKING:
     from mountcal.calibrate import Options, calibrate
@@ -56,32 +55,7 @@ _HOMES = {
 }
 
 
-class _Package(types.ModuleType):
-    """The package module: importing the submodule ``mountcal.calibrate`` binds the name
-    ``calibrate`` in the package, which here stays the function :func:`mountcal.calibrate.calibrate`
-    (as it did when the exports were imported eagerly)."""
-
-    def __setattr__(self, name: str, value: Any) -> None:
-        if name in _HOMES and isinstance(value, types.ModuleType):
-            return
-        super().__setattr__(name, value)
-
-
-sys.modules[__name__].__class__ = _Package
-
-
-def __getattr__(name: str) -> Any:
-    home = _HOMES.get(name)
-    if home is None:
-        raise AttributeError(f"module 'mountcal' has no attribute {name!r}")
-    value = getattr(importlib.import_module(home), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *_HOMES})
-
+lazy.install(__name__, _HOMES)
 
 __all__ = [
     "Calibration",

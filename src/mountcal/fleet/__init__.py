@@ -17,8 +17,9 @@ Usage::
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from mountcal import lazy
 
 if TYPE_CHECKING:
     from mountcal.fleet.engines import DaskEngine, LocalEngine
@@ -45,18 +46,7 @@ _HOMES = {
 }
 
 
-def __getattr__(name: str) -> Any:
-    home = _HOMES.get(name)
-    if home is None:
-        raise AttributeError(f"module 'mountcal.fleet' has no attribute {name!r}")
-    value = getattr(importlib.import_module(home), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *_HOMES})
-
+lazy.install(__name__, _HOMES)
 
 __all__ = [
     "DaskEngine",
