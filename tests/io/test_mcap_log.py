@@ -411,6 +411,43 @@ def test_json_encoded_messages(tmp_path: Path) -> None:
     np.testing.assert_allclose(np.column_stack([samples.t_s, samples.acc_s, samples.gyro_s]), ref, rtol=1e-12)
 
 
+@pytest.mark.parametrize("encoding", ["cdr", "json"])
+@pytest.mark.parametrize("unknown_every", [1, 7])
+def test_a_gyro_marked_unknown_is_not_used(tmp_path: Path, encoding: str, unknown_every: int) -> None:
+    """REP 145: angular_velocity_covariance[0] = −1 marks a gyro the device does not provide (an
+    accelerometer alone publishes zeros there). Such rates are not used — not even when only some
+    messages say so — and the count is reported; the accelerations are all kept."""
+    path = tmp_path / f"{encoding}.mcap"
+    n = 70
+    marked = [i for i in range(n) if i % unknown_every == 0]
+    with open(path, "wb") as f:
+        if encoding == "cdr":
+            ros = Ros2Writer(f)
+            schema = ros.register_msgdef("sensor_msgs/msg/Imu", IMU_MSGDEF)
+        else:
+            raw = McapWriter(f)
+            raw.start()
+            channel = raw.register_channel(
+                "/imu", "json", raw.register_schema("sensor_msgs/msg/Imu", "jsonschema", b"{}")
+            )
+        for i in range(n):
+            t_ns = T0_NS + i * DT_NS
+            msg = imu_msg(t_ns, [0.1, 0.2, 9.8], [0.0, 0.0, 0.0])
+            if i in marked:
+                msg["angular_velocity_covariance"] = [-1.0] + [0.0] * 8
+            if encoding == "cdr":
+                ros.write_message("/imu", schema, msg, log_time=t_ns)
+            else:
+                raw.add_message(channel, log_time=t_ns, data=json.dumps(msg).encode(), publish_time=t_ns)
+        ros.finish() if encoding == "cdr" else raw.finish()
+    samples = read_mcap(path)
+    assert samples.gyro_s is None
+    assert len(samples) == n
+    assert samples.dropped["imu_gyro_marked_unknown"] == len(marked)
+    batches = list(iter_mcap(path, max_samples=n))  # one batch: the same decision streamed
+    assert len(batches) == 1 and batches[0].gyro_s is None
+
+
 # --------------------------------------------------------------------------- 2. streaming
 
 

@@ -206,15 +206,18 @@ def decode_imu(buf: U8Array, start: I64Array, size: I64Array) -> Decoded:
     -------
     Decoded
         columns ``acc`` (n, 3) ``linear_acceleration`` in m/s² and ``gyro`` (n, 3)
-        ``angular_velocity`` in rad/s, both in the message's ``frame_id`` frame.
+        ``angular_velocity`` in rad/s, both in the message's ``frame_id`` frame, and
+        ``gyro_unknown`` (n,), 1.0 where ``angular_velocity_covariance[0]`` is −1: REP 145's mark
+        of a field the device does not provide.
     """
     rows = _cdr_rows(buf, start, size)
     sec, nanosec, end = _header(rows)
     orientation = _align(end, 8)  # quaternion (32 B), then a 3x3 covariance (72 B)
     rows.need(orientation + 296, "the Imu fields after header")
     gyro = rows.read(orientation + 104, "<f8", 3)
+    gyro_unknown = (rows.read(orientation + 128, "<f8", 1)[:, 0] == -1.0).astype(np.float64)
     acc = rows.read(orientation + 200, "<f8", 3)
-    return Decoded(sec, nanosec, {"acc": acc, "gyro": gyro})
+    return Decoded(sec, nanosec, {"acc": acc, "gyro": gyro, "gyro_unknown": gyro_unknown})
 
 
 def decode_temperature(buf: U8Array, start: I64Array, size: I64Array) -> Decoded:

@@ -19,6 +19,9 @@ Conventions of every function here:
   ``frame_id`` frame, taken as the sensor frame ``s`` (``axis_map`` ``"x,y,z"``).
 - **Drops**: samples with a NaN or infinite value are dropped and counted in ``Samples.dropped``;
   so are GNSS fixes with ``status < 0`` (no fix) and odometry orientations that are not a rotation.
+- **Gyro**: ``angular_velocity_covariance[0] = −1`` (REP 145: not provided) in any message of a read
+  or chunk means no gyro (``gyro_s`` None), counted as ``imu_gyro_marked_unknown``; its zeros
+  would otherwise read as a vehicle that never turns.
 - **Errors**: anything wrong with the file or the request raises
   :class:`~mountcal.errors.InputError` naming the file, what was expected, what was found and what to
   do. The input file is only read.
@@ -735,7 +738,7 @@ def _json_stamp(message: object) -> tuple[int, int]:
 def _decode_json(kind: str, data: U8Array, start: I64Array, size: I64Array) -> cdr.Decoded:
     """Per-message JSON decoding (the one non-vectorized path), same result shape as CDR's."""
     paths = _JSON_PATHS[kind]
-    rows, stamps = [], []
+    rows, stamps, unknown = [], [], []
     raw = data.tobytes()
     for s, n in zip(start.tolist(), size.tolist(), strict=True):
         try:
@@ -743,6 +746,7 @@ def _decode_json(kind: str, data: U8Array, start: I64Array, size: I64Array) -> c
         except (json.JSONDecodeError, UnicodeDecodeError) as err:
             raise cdr.CdrError(f"a message that is not JSON ({err})") from err
         stamps.append(_json_stamp(message))
+        unknown.append(_json_gyro_unknown(message))
         rows.append([_json_value(message, p) for col in paths.values() for p in col])
     table = np.array(rows, dtype=np.float64).reshape(len(rows), -1)
     sec, nanosec = np.array(stamps, dtype=np.int64).reshape(-1, 2).T
@@ -751,7 +755,15 @@ def _decode_json(kind: str, data: U8Array, start: I64Array, size: I64Array) -> c
         block = table[:, i : i + len(col)]
         columns[name] = block[:, 0] if len(col) == 1 else block
         i += len(col)
+    if kind == "imu":
+        columns["gyro_unknown"] = np.array(unknown, np.float64)
     return cdr.Decoded(sec, nanosec, columns)
+
+
+def _json_gyro_unknown(message: object) -> bool:
+    """Whether ``angular_velocity_covariance[0]`` is −1 (the field may be absent in JSON)."""
+    cov = message.get("angular_velocity_covariance") if isinstance(message, dict) else None
+    return isinstance(cov, list) and bool(cov) and cov[0] == -1
 
 
 def _times(decoded: cdr.Decoded, log_ns: NDArray[np.uint64]) -> FloatArray:
@@ -816,9 +828,10 @@ def _pieces(decoded: cdr.Decoded, kind: str, dropped: Counter[str]) -> dict[str,
     c = decoded.columns
     t = c["t"]
     if kind == "imu":
-        ok = _finite(c["acc"], c["gyro"])
+        unknown = c["gyro_unknown"] > 0  # the gyro of these messages is not used (see _gyro)
+        ok = _finite(c["acc"]) & (unknown | _finite(c["gyro"]))
         dropped["imu_nonfinite"] += int((~ok).sum())
-        return {"imu": _keep(t, {"acc": c["acc"], "gyro": c["gyro"]}, ok)}
+        return {"imu": _keep(t, {"acc": c["acc"], "gyro": c["gyro"], "gyro_unknown": c["gyro_unknown"]}, ok)}
     if kind == "temperature":
         ok = _finite(c["temperature"])
         dropped["temperature_c_nonfinite"] += int((~ok).sum())
@@ -927,11 +940,22 @@ def _read_open(log: _Log, topics: dict[str, str | None]) -> Samples:
     return Samples(
         t_s=samples.t_s,
         acc_s=samples.columns["acc"],
-        gyro_s=samples.columns["gyro"],
+        gyro_s=_gyro(samples, dropped),
         channels=channels,
         source=log.where,
         dropped={k: v for k, v in dropped.items() if v},
     )
+
+
+def _gyro(piece: _Piece, dropped: Counter[str]) -> FloatArray | None:
+    """The gyro column, or None when messages mark it unknown (``angular_velocity_covariance[0]
+    = −1``, REP 145: an accelerometer without a gyro publishes zeros there). Where only some do,
+    none is used: zeros among real rates would read as standing still; the count is reported."""
+    unknown = int(np.count_nonzero(piece.columns["gyro_unknown"]))
+    if not unknown:
+        return piece.columns["gyro"]
+    dropped["imu_gyro_marked_unknown"] += unknown
+    return None
 
 
 def read_mcap(
@@ -1067,10 +1091,11 @@ def _slice(piece: _Piece, start: int, stop: int) -> _Piece:
 def _batch(log: _Log, piece: _Piece, start: int, stop: int, dropped: Counter[str]) -> Samples:
     """Rows ``start:stop`` of ``piece`` as Samples of their own (copied, sorted by time)."""
     part = _concat([_slice(piece, start, stop)])
+    gyro = _gyro(part, dropped)
     return Samples(
         t_s=part.t_s.copy(),
         acc_s=part.columns["acc"].copy(),
-        gyro_s=part.columns["gyro"].copy(),
+        gyro_s=None if gyro is None else gyro.copy(),
         source=log.where,
         dropped={k: v for k, v in dropped.items() if v},
     )
