@@ -50,8 +50,6 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from mountcal.io.writers import IMU_DEFINITION
-
 T0_UNIX_S = 1_714_557_600  # 2024-05-01T10:00:00Z
 UPHILL_AZIMUTH_DEG = 30.0  # simulate_parking_log's default
 REMOUNTED = "v07"
@@ -86,33 +84,17 @@ def write_log(path: str, kind: str, angles: tuple[float, float, float], seed: in
         else:
             frame.to_parquet(path)
         return
-    from mcap_ros2.writer import Writer
+    from mountcal.io import export
 
-    t0_ns = (T0_UNIX_S + day * 86_400) * 10**9
-    cov = [0.0] * 9
-    with open(path, "wb") as f, Writer(f) as writer:
-        schema = writer.register_msgdef("sensor_msgs/msg/Imu", IMU_DEFINITION)
-        for t, a, w in zip(log.t_s.tolist(), log.acc_s.tolist(), log.gyro_s.tolist(), strict=True):
-            t_ns = t0_ns + round(t * 1e9)
-            msg = {
-                "header": {"stamp": {"sec": t_ns // 10**9, "nanosec": t_ns % 10**9}, "frame_id": "imu"},
-                "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0},
-                "orientation_covariance": cov,
-                "angular_velocity": dict(zip("xyz", w, strict=True)),
-                "angular_velocity_covariance": cov,
-                "linear_acceleration": dict(zip("xyz", a, strict=True)),
-                "linear_acceleration_covariance": cov,
-            }
-            writer.write_message("/imu", schema, msg, log_time=t_ns, publish_time=t_ns)
-    sheet = pd.DataFrame(log.protocol, columns=["t_start_s", "t_end_s", "beta_deg"])
-    sheet[["t_start_s", "t_end_s"]] += t0_ns / 1e9
-    sheet.to_csv(Path(path).with_name(Path(path).stem + ".protocol.csv"), index=False, float_format="%.3f")
+    start_s = T0_UNIX_S + day * 86_400
+    export.write_mcap(path, log, with_temperature=False, with_odometry=False, start_time_s=start_s)
+    export.write_protocol(Path(path).with_name(Path(path).stem + ".protocol.csv"), log, start_time_s=start_s)
 
 
 def generate(folder: Path, n_logs: int, n_vehicles: int) -> None:
     """Write the fleet (in parallel: it is set-up, not the measurement)."""
     stamp = folder / "fleet.json"
-    params = {"n_logs": n_logs, "n_vehicles": n_vehicles, "rate_hz": RATE_HZ, "version": 2}
+    params = {"n_logs": n_logs, "n_vehicles": n_vehicles, "rate_hz": RATE_HZ, "version": 3}
     if stamp.exists() and json.loads(stamp.read_text()) == params:
         return
     shutil.rmtree(folder, ignore_errors=True)

@@ -34,28 +34,13 @@ import json
 import resource
 import subprocess
 import sys
-import textwrap
 import time
 from pathlib import Path
 
 import numpy as np
 
-DBC = textwrap.dedent(
-    """\
-    VERSION ""
-    NS_ :
-    BS_:
-    BU_: IMU
-    BO_ 256 IMU_ACC: 6 IMU
-     SG_ AccelerationX : 0|16@1- (0.001,0) [-32|32] "m/s^2" Vector__XXX
-     SG_ AccelerationY : 16|16@1- (0.001,0) [-32|32] "m/s^2" Vector__XXX
-     SG_ AccelerationZ : 32|16@1- (0.001,0) [-32|32] "m/s^2" Vector__XXX
-    BO_ 257 IMU_GYRO: 6 IMU
-     SG_ AngularRateX : 0|16@1- (0.0001,0) [-3|3] "rad/s" Vector__XXX
-     SG_ AngularRateY : 16|16@1- (0.0001,0) [-3|3] "rad/s" Vector__XXX
-     SG_ AngularRateZ : 32|16@1- (0.0001,0) [-3|3] "rad/s" Vector__XXX
-    """
-)
+# the IMU of the BLF logs: two 6-byte messages of three 16-bit signals (shared with the tests)
+DBC = Path(__file__).resolve().parents[1] / "tests" / "data" / "imu_acc_gyro.dbc"
 T0_NS = 1_714_557_600_000_000_000
 
 
@@ -155,8 +140,6 @@ def prepare(workdir: Path, hours: list[float], bus_hz: float) -> tuple[dict[tupl
     from mountcal.calibrate import Options
 
     workdir.mkdir(parents=True, exist_ok=True)
-    dbc = workdir / "imu.dbc"
-    dbc.write_text(DBC)
     cal = workdir / "result.json"
     if not cal.exists():
         table, _ = simulate_preset("zhang2011", seed=1, bias_mps2=np.array([0.1, -0.05, 0.2]))
@@ -171,12 +154,12 @@ def prepare(workdir: Path, hours: list[float], bus_hz: float) -> tuple[dict[tupl
                 if kind == "mcap":
                     write_mcap(path, h)
                 else:
-                    write_blf(path, dbc, h, bus_hz if kind == "bus" else 0.0)
+                    write_blf(path, DBC, h, bus_hz if kind == "bus" else 0.0)
                 print(
                     f"wrote {path} ({path.stat().st_size / 1e6:.0f} MB) in {time.perf_counter() - t0:.0f} s", flush=True
                 )
             logs[(kind, h)] = path
-    return logs, dbc, cal
+    return logs, DBC, cal
 
 
 # --------------------------------------------------------------------------- the two methods

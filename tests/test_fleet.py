@@ -26,7 +26,7 @@ from mountcal.fleet import FleetOptions, JobDefaults, LocalEngine, collect_jobs,
 from mountcal.fleet.progress import Progress
 from mountcal.fleet.store import PartStore, job_hash
 from mountcal.fleet.worker import run_job
-from mountcal.io.writers import IMU_DEFINITION
+from mountcal.io import export
 from mountcal.simulate import ParkingLog, simulate_parking_log, simulate_stops
 from mountcal.stoptable import write_stop_table
 
@@ -64,26 +64,8 @@ def sample_frame(log: ParkingLog) -> pd.DataFrame:
 
 def write_mcap(path: Path, log: ParkingLog) -> None:
     """ROS 2 Imu messages stamped in Unix time, and the protocol sheet on that clock beside them."""
-    from mcap_ros2.writer import Writer
-
-    cov = [0.0] * 9
-    with open(path, "wb") as f, Writer(f) as writer:
-        schema = writer.register_msgdef("sensor_msgs/msg/Imu", IMU_DEFINITION)
-        for t, a, w in zip(log.t_s.tolist(), log.acc_s.tolist(), log.gyro_s.tolist(), strict=True):
-            t_ns = T0_UNIX_S * 10**9 + round(t * 1e9)
-            msg = {
-                "header": {"stamp": {"sec": t_ns // 10**9, "nanosec": t_ns % 10**9}, "frame_id": "imu"},
-                "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0},
-                "orientation_covariance": cov,
-                "angular_velocity": dict(zip("xyz", w, strict=True)),
-                "angular_velocity_covariance": cov,
-                "linear_acceleration": dict(zip("xyz", a, strict=True)),
-                "linear_acceleration_covariance": cov,
-            }
-            writer.write_message("/imu", schema, msg, log_time=t_ns, publish_time=t_ns)
-    sheet = pd.DataFrame(log.protocol, columns=["t_start_s", "t_end_s", "beta_deg"])
-    sheet[["t_start_s", "t_end_s"]] += T0_UNIX_S
-    sheet.to_csv(path.with_name(path.stem + ".protocol.csv"), index=False, float_format="%.3f")
+    export.write_mcap(path, log, with_temperature=False, with_odometry=False, start_time_s=T0_UNIX_S)
+    export.write_protocol(path.with_name(path.stem + ".protocol.csv"), log, start_time_s=T0_UNIX_S)
 
 
 def write_stop_tables(folder: Path, n: int, seed: int, change_at: int | None = None) -> None:

@@ -11,7 +11,6 @@ import os
 import signal
 import subprocess
 import sys
-import textwrap
 from pathlib import Path
 
 import can
@@ -37,22 +36,7 @@ from mountcal.rotate_log import rotate_log, to_frame
 from mountcal.simulate_drive import simulate_drive
 
 T0_NS = 1_714_557_600_000_000_000
-DBC = textwrap.dedent(
-    """\
-    VERSION ""
-    NS_ :
-    BS_:
-    BU_: IMU
-    BO_ 256 IMU_ACC: 6 IMU
-     SG_ AccelerationX : 0|16@1- (0.001,0) [-32|32] "m/s^2" Vector__XXX
-     SG_ AccelerationY : 16|16@1- (0.001,0) [-32|32] "m/s^2" Vector__XXX
-     SG_ AccelerationZ : 32|16@1- (0.001,0) [-32|32] "m/s^2" Vector__XXX
-    BO_ 257 IMU_GYRO: 6 IMU
-     SG_ AngularRateX : 0|16@1- (0.0001,0) [-3|3] "rad/s" Vector__XXX
-     SG_ AngularRateY : 16|16@1- (0.0001,0) [-3|3] "rad/s" Vector__XXX
-     SG_ AngularRateZ : 32|16@1- (0.0001,0) [-3|3] "rad/s" Vector__XXX
-    """
-)
+DBC = Path(__file__).resolve().parent / "data" / "imu_acc_gyro.dbc"  # two 6-byte messages, 16-bit signals
 
 
 @pytest.fixture(scope="module")
@@ -122,14 +106,12 @@ def logs(tmp_path_factory: pytest.TempPathFactory, drive) -> dict[str, tuple[Pat
     frame.to_csv(folder / "drive.csv", index=False)
     frame.to_parquet(folder / "drive.parquet", index=False)
     write_mcap(folder / "drive.mcap", drive)
-    dbc = folder / "imu.dbc"
-    dbc.write_text(DBC)
-    write_blf(folder / "drive.blf", dbc, drive)
+    write_blf(folder / "drive.blf", DBC, drive)
     return {
         "csv": (folder / "drive.csv", LogOptions()),
         "parquet": (folder / "drive.parquet", LogOptions()),
         "mcap": (folder / "drive.mcap", LogOptions()),
-        "blf": (folder / "drive.blf", LogOptions(dbc=str(dbc))),
+        "blf": (folder / "drive.blf", LogOptions(dbc=str(DBC))),
     }
 
 
