@@ -51,6 +51,12 @@ def novatel_rotation(mount: Mounting) -> NovatelRotation:
     sigma = [None if s is None else float(np.degrees(s)) for s in sig]
     lo, hi = SD_RANGE_DEG
     notes: list[str] = []
+    if any(s is not None and s > hi for s in sigma):
+        # Near X = ±90° (gimbal lock) Z and Y are not separately defined and their σ diverges while the
+        # rotation is well known: state the σ of small rotations about NovAtel's vehicle x, y, z instead.
+        sx, sy, sz = mount.sigma_rad  # about ISO x (forward), y (left), z (up)
+        sigma = [None if s is None else float(np.degrees(s)) for s in (sy, sx, sz)]
+        notes.append("X near ±90° (gimbal lock): standard deviations of small rotations about the vehicle axes")
     sd: list[float] = []
     for axis, s in zip("XYZ", sigma, strict=True):
         if s is None:
