@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from pyubx2 import SET, UBXReader
+from pyubx2 import GET, SET, UBXReader, calc_checksum
 from scipy.spatial.transform import Rotation
 
 from mountcal.calibrate import calibrate
@@ -200,6 +200,20 @@ def test_ublox_bytes_round_trip_on_the_grid(base: Calibration, seed: int) -> Non
         raw["IMU_MNTALG_YAW"] / 100, raw["IMU_MNTALG_PITCH"] / 100, raw["IMU_MNTALG_ROLL"] / 100, a_s
     )
     np.testing.assert_allclose(back, (matrix @ a_s.T).T, rtol=0, atol=TOL)
+
+
+def test_ublox_ucenter_file_lines_decode_to_the_same_values(simulated: Calibration) -> None:
+    """u-center's generation-9 configuration file: ``CFG-VALGET - 06 8B …`` lines, one per layer."""
+    raw = decode_ubx(bytes(export(simulated, "ublox-ubx")))
+    lines = str(export(simulated, "ublox-ucenter")).splitlines()
+    assert len(lines) == 3
+    for layer, line in enumerate(lines):
+        name, dash, hexdata = line.split(" ", 2)
+        assert (name, dash) == ("CFG-VALGET", "-")
+        data = bytes.fromhex(hexdata)
+        msg = UBXReader.parse(b"\xb5\x62" + data + calc_checksum(data), msgmode=GET)
+        assert msg.identity == "CFG-VALGET" and msg.layer == layer
+        assert {k: getattr(msg, f"CFG_SFIMU_{k}") for k in raw} == raw
 
 
 def test_ublox_yaw_just_below_360_wraps_to_0(base: Calibration) -> None:

@@ -20,13 +20,14 @@ from mountcal.exporters.common import Mounting, YawPolicy, mounting
 from mountcal.exporters.novatel import novatel_rotation, novatel_text
 from mountcal.exporters.ros import Frames, static_transform_command, tf2_quaternion, urdf_joint
 from mountcal.exporters.rotation import rotation_json, rotation_yaml
-from mountcal.exporters.ublox import ublox_mount, ublox_text, valset
+from mountcal.exporters.ublox import ublox_mount, ublox_text, ucenter_config, valset
 from mountcal.result import Calibration
 
 Writer = Callable[[Mounting, Frames | None], str | bytes]
 
 FORMATS: dict[str, Writer] = {
     "ublox": lambda m, f: ublox_text(ublox_mount(m)),
+    "ublox-ucenter": lambda m, f: ucenter_config(ublox_mount(m).raw),
     "ublox-ubx": lambda m, f: valset(ublox_mount(m).raw),
     "novatel": lambda m, f: novatel_text(novatel_rotation(m)),
     "ros2-static-tf": lambda m, f: static_transform_command(m, f or Frames()),
@@ -87,11 +88,16 @@ def cmd_export(args: argparse.Namespace) -> int:
         else:
             sys.stdout.write(out)
         return 0
-    with atomic_path(args.output) as tmp:
-        if isinstance(out, bytes):
-            tmp.write_bytes(out)
-        else:
-            tmp.write_text(out, encoding="utf-8")
+    try:
+        with atomic_path(args.output) as tmp:
+            if isinstance(out, bytes):
+                tmp.write_bytes(out)
+            else:
+                tmp.write_text(out, encoding="utf-8")
+    except OSError as err:
+        raise InputError(
+            str(args.output), "a writable file path", f"an error writing it ({err.strerror})", "Choose another -o path."
+        ) from err
     print(f"wrote {args.output} ({args.to})", file=sys.stderr)
     return 0
 

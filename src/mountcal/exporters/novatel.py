@@ -61,7 +61,7 @@ def novatel_rotation(mount: Mounting) -> NovatelRotation:
     for axis, s in zip("XYZ", sigma, strict=True):
         if s is None:
             sd.append(hi)
-            notes.append(f"{axis} standard deviation unknown (yaw not determined): sent as NovAtel's maximum {hi:g}°")
+            notes.append(f"{axis} standard deviation unknown (the result has none): sent as NovAtel's maximum {hi:g}°")
         elif s > hi:
             raise NotEnoughInformation(
                 f"the {axis} rotation's 1σ is {s:.1f}°, beyond the {hi:g}° NovAtel accepts: the calibration "

@@ -68,6 +68,38 @@ def ublox_mount(mount: Mounting) -> UbloxMount:
     return UbloxMount(yaw, float(pitch), float(roll), raw, (sigma[0], sigma[1], sigma[2]), mount)
 
 
+def _key_values(values: dict[str, int]) -> bytes:
+    out = bytearray()
+    for name, value in values.items():
+        key, fmt = KEYS[name]
+        out += struct.pack("<I", key) + struct.pack(fmt, value)
+    return bytes(out)
+
+
+def _frame(msg_class: int, msg_id: int, payload: bytes) -> bytes:
+    """A UBX frame: sync chars, class, id, length, payload, 8-bit Fletcher checksum over class…payload."""
+    body = struct.pack("<BBH", msg_class, msg_id, len(payload)) + payload
+    ck_a = ck_b = 0
+    for byte in body:
+        ck_a = (ck_a + byte) & 0xFF
+        ck_b = (ck_b + ck_a) & 0xFF
+    return b"\xb5\x62" + body + bytes((ck_a, ck_b))
+
+
+def ucenter_config(values: dict[str, int], layers: tuple[str, ...] = ("ram", "bbr", "flash")) -> str:
+    """A u-center (generation 9) configuration file: one ``CFG-VALGET - 06 8B …`` line per layer.
+
+    The format u-center's Receiver Configuration tool saves and loads: the hex of class, id, length
+    and a VALGET payload (version 1, layer 0 RAM / 1 BBR / 2 Flash), without sync chars or checksum.
+    """
+    numbers = {"ram": 0, "bbr": 1, "flash": 2}
+    lines = []
+    for layer in layers:
+        frame = _frame(0x06, 0x8B, struct.pack("<BBH", 1, numbers[layer], 0) + _key_values(values))
+        lines.append("CFG-VALGET - " + frame[2:-2].hex(" ").upper())
+    return "\n".join(lines) + "\n"
+
+
 def valset(values: dict[str, int], layers: tuple[str, ...] = ("ram", "bbr", "flash")) -> bytes:
     """The ``UBX-CFG-VALSET`` message (version 0) that sets ``values``, with its checksum.
 
@@ -77,16 +109,7 @@ def valset(values: dict[str, int], layers: tuple[str, ...] = ("ram", "bbr", "fla
     mask = 0
     for layer in layers:
         mask |= LAYERS[layer]
-    payload = bytearray(struct.pack("<BBxx", 0, mask))
-    for name, value in values.items():
-        key, fmt = KEYS[name]
-        payload += struct.pack("<I", key) + struct.pack(fmt, value)
-    body = struct.pack("<BBH", 0x06, 0x8A, len(payload)) + payload
-    ck_a = ck_b = 0
-    for byte in body:  # 8-bit Fletcher over class, id, length and payload
-        ck_a = (ck_a + byte) & 0xFF
-        ck_b = (ck_b + ck_a) & 0xFF
-    return b"\xb5\x62" + body + bytes((ck_a, ck_b))
+    return _frame(0x06, 0x8A, struct.pack("<BBxx", 0, mask) + _key_values(values))
 
 
 def ublox_text(m: UbloxMount) -> str:
