@@ -465,6 +465,15 @@ def test_cli_bad_input_writes_nothing(tmp_path: Path, capsys: pytest.CaptureFixt
     assert not out.exists() and list(tmp_path.iterdir()) == [broken]
 
 
+def test_cli_never_overwrites_the_result(base: Calibration, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    result = tmp_path / "r.json"
+    base.save(result)
+    before = result.read_bytes()
+    assert main(["export", str(result), "--to", "yaml", "-o", str(result)]) == 2
+    assert "never overwrites its input" in capsys.readouterr().err
+    assert result.read_bytes() == before
+
+
 def test_cli_refuses_undetermined_yaw_without_output(
     base: Calibration, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -38,7 +38,7 @@ def quaternion_xyzw(mount: Mounting) -> np.ndarray:
 def sigma_lines(mount: Mounting, prefix: str) -> list[str]:
     sig = propagate_sigma(lambda r: np.array(angles_from_rot_vs(r)), mount, np.array([2 * np.pi] * 3))
     text = ", ".join(
-        f"{name} {'not determined' if s is None else number(float(s), 6)}"
+        f"{name} {'not determined' if s is None else f'{s:.3g}'}"
         for name, s in zip(("roll", "pitch", "yaw"), sig, strict=True)
     )
     lines = [f"{prefix} {h}" for h in mount.header]

@@ -67,6 +67,7 @@ def parameterisations(mount: Mounting) -> dict[str, Any]:
     m_sigma = propagate_sigma(_matrix, mount)
     return {
         "format": "mountcal.rotation",
+        "format_version": 1,
         "rotation": "rot_vs: sensor to vehicle coordinates, a_v = R a_s",
         "vehicle_frame": CONVENTIONS["vehicle_frame"],
         "sensor_frame": CONVENTIONS["sensor_frame"],
