@@ -506,6 +506,10 @@ def _parser() -> argparse.ArgumentParser:
     )
     fg.add_argument("--max-yaw-sigma", type=float, default=5.0, help="report yaw only below this 1σ (deg)")
     flt.set_defaults(func=cmd_fleet)
+
+    from mountcal.exporters import add_parser as add_export_parser  # `mountcal export`: issue 16
+
+    add_export_parser(sub)
     return parser
 
 

@@ -53,6 +53,18 @@ def angles_from_rot_vs(rot_vs: Rotation) -> tuple[float, float, float]:
     return float(roll), float(pitch), float(yaw)
 
 
+def euler_angles(rot: Rotation, sequence: str) -> tuple[float, float, float]:
+    """Another convention's Euler angles of a rotation, in radians, in the order of ``sequence``.
+
+    ``sequence`` is scipy's (upper case: intrinsic). For the exporters, whose vendors each use
+    their own sequence; at gimbal lock scipy sets the last angle to 0 and the rotation stays exact.
+    """
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="Gimbal lock detected")
+        a, b, c = rot.as_euler(sequence)
+    return float(a), float(b), float(c)
+
+
 def specific_force_v(slope_rad: float, beta_rad: ArrayLike, g: float = G_N) -> FloatArray:
     """Static specific force in the vehicle frame, parked at heading β on slope α (MODEL.md §2).
 

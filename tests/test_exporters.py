@@ -1,0 +1,487 @@
+"""`mountcal export`: each vendor's documented example, and round trips through each vendor's formula.
+
+Every vendor formula here is written from the vendor's documentation with this file's own
+elementary rotations — not with mountcal's conventions module — so a sign or order slip in the
+exporters is caught. The round trips take a gravity vector and a forward acceleration, as the
+sensor reads them, through the exported parameters and compare with ``rot_vs`` (≤ 1e-9 m/s²).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import xml.etree.ElementTree as ET
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from pyubx2 import GET, SET, UBXReader, calc_checksum
+from scipy.spatial.transform import Rotation
+
+from mountcal.calibrate import calibrate
+from mountcal.cli import main
+from mountcal.errors import NotEnoughInformation
+from mountcal.exporters import FORMATS, Frames, export
+from mountcal.result import Calibration
+from mountcal.simulate import simulate_stops
+
+G = 9.80665
+TOL = 1e-9
+
+
+def rx(deg: float) -> np.ndarray:
+    c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))
+    return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+
+
+def ry(deg: float) -> np.ndarray:
+    c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))
+    return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+
+
+def rz(deg: float) -> np.ndarray:
+    c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+
+def from_axes(x: tuple[float, ...], y: tuple[float, ...], z: tuple[float, ...]) -> np.ndarray:
+    """rot_vs from where the sensor's x, y, z axes point in the ISO 8855 vehicle frame (its columns)."""
+    return np.column_stack([x, y, z]).astype(float)
+
+
+def sensor_readings(rot_vs: np.ndarray) -> np.ndarray:
+    """Gravity (parked level) and a 2 m/s² forward acceleration, as the sensor reads them."""
+    return np.array([rot_vs.T @ [0.0, 0.0, G], rot_vs.T @ [2.0, 0.0, 0.0]])
+
+
+@pytest.fixture(scope="module")
+def base() -> Calibration:
+    table, _ = simulate_stops(5.0, 6.0, 7.0, seed=3)
+    return calibrate(table)
+
+
+def with_rotation(cal: Calibration, matrix: np.ndarray) -> Calibration:
+    """The calibration with another (exact) mounting rotation and its σ."""
+    return replace(cal, rot_vs=Rotation.from_matrix(matrix), yaw_deg=0.0)
+
+
+ORIENTATIONS = {  # (roll, pitch, yaw) of simulated mountings, degrees, incl. a box on its side and upside down
+    "small": (5.0, 6.0, 7.0),
+    "on its side": (88.0, -20.0, 130.0),
+    "upside down": (178.0, 3.0, -95.0),
+    "nose down": (-30.0, -75.0, 200.0),
+}
+
+
+@pytest.fixture(scope="module", params=list(ORIENTATIONS))
+def simulated(request: pytest.FixtureRequest) -> Calibration:
+    roll, pitch, yaw = ORIENTATIONS[request.param]
+    rot = Rotation.from_matrix(rz(yaw) @ ry(pitch) @ rx(roll))
+    table, _ = simulate_stops(rot_vs=rot, seed=11)
+    cal = calibrate(table)
+    assert cal.yaw_deg is not None and cal.confident
+    return cal
+
+
+# ---------------------------------------------------------------- u-blox ----------------------------------
+
+UBLOX_ISO_FROM_INSTALLATION = np.diag([1.0, -1.0, -1.0])  # installation frame: x forward, y right, z down
+
+
+def ublox_to_vehicle(yaw: float, pitch: float, roll: float, a_imu: np.ndarray) -> np.ndarray:
+    """u-blox: the angles rotate the installation frame into the IMU frame, yaw (z), then pitch (new y), then
+    roll (new x): the IMU axes in installation coordinates are the columns of Rz·Ry·Rx."""
+    a_inst = (rz(yaw) @ ry(pitch) @ rx(roll)) @ a_imu.T
+    return (UBLOX_ISO_FROM_INSTALLATION @ a_inst).T
+
+
+def ublox_values(text: str) -> dict[str, tuple[float, float | None]]:
+    """Key → (value in degrees as set, exact value) from the u-center-style text."""
+    out = {}
+    for m in re.finditer(r"^(CFG-SFIMU-\S+) 0x[0-9a-f]{8} (\S+)(?:.*exact (\S+),)?", text, re.M):
+        out[m.group(1)] = (float(m.group(2)), None if m.group(3) is None else float(m.group(3)))
+    return out
+
+
+def decode_ubx(data: bytes) -> dict[str, int]:
+    msg = UBXReader.parse(data, msgmode=SET)  # checks the checksum
+    assert msg.identity == "CFG-VALSET"
+    names = ("AUTO_MNTALG_ENA", "IMU_MNTALG_YAW", "IMU_MNTALG_PITCH", "IMU_MNTALG_ROLL")
+    return {n: getattr(msg, f"CFG_SFIMU_{n}") for n in names}
+
+
+UBLOX_MANUAL = {  # ZED-F9K integration manual UBX-20046189, single-angle examples of CFG-SFIMU-IMU_MNTALG
+    # yaw 344.0°: IMU frame = installation frame turned 344° about its z (down) axis: x 16° left of forward
+    "yaw": (
+        (344.0, 0.0, 0.0),
+        from_axes(
+            (np.cos(np.radians(16)), np.sin(np.radians(16)), 0),
+            (np.sin(np.radians(16)), -np.cos(np.radians(16)), 0),
+            (0, 0, -1),
+        ),
+    ),
+    # pitch 26.5° about the installation y (right) axis: x tilted 26.5° up, z down tilted forward
+    "pitch": (
+        (0.0, 26.5, 0.0),
+        from_axes(
+            (np.cos(np.radians(26.5)), 0, np.sin(np.radians(26.5))),
+            (0, -1, 0),
+            (np.sin(np.radians(26.5)), 0, -np.cos(np.radians(26.5))),
+        ),
+    ),
+    # roll −23.5° about the installation x (forward) axis: y (right) tilted 23.5° up
+    "roll": (
+        (0.0, 0.0, -23.5),
+        from_axes(
+            (1, 0, 0),
+            (0, -np.cos(np.radians(23.5)), np.sin(np.radians(23.5))),
+            (0, -np.sin(np.radians(23.5)), -np.cos(np.radians(23.5))),
+        ),
+    ),
+}
+
+
+@pytest.mark.parametrize("case", list(UBLOX_MANUAL))
+def test_ublox_manual_single_angle_examples(base: Calibration, case: str) -> None:
+    (yaw, pitch, roll), matrix = UBLOX_MANUAL[case]
+    cal = with_rotation(base, matrix)
+    values = ublox_values(str(export(cal, "ublox")))
+    assert values["CFG-SFIMU-IMU_MNTALG_YAW"][0] == yaw
+    assert values["CFG-SFIMU-IMU_MNTALG_PITCH"][0] == pitch
+    assert values["CFG-SFIMU-IMU_MNTALG_ROLL"][0] == roll
+    assert values["CFG-SFIMU-AUTO_MNTALG_ENA"][0] == 0
+    raw = decode_ubx(bytes(export(cal, "ublox-ubx")))
+    assert raw == {
+        "AUTO_MNTALG_ENA": 0,
+        "IMU_MNTALG_YAW": round(yaw * 100),
+        "IMU_MNTALG_PITCH": round(pitch * 100),
+        "IMU_MNTALG_ROLL": round(roll * 100),
+    }
+
+
+def test_ublox_round_trip_exact_angles(simulated: Calibration) -> None:
+    values = ublox_values(str(export(simulated, "ublox")))
+    yaw, pitch, roll = (values[f"CFG-SFIMU-IMU_MNTALG_{k}"][1] for k in ("YAW", "PITCH", "ROLL"))
+    assert yaw is not None and pitch is not None and roll is not None
+    assert 0 <= yaw < 360 and -90 <= pitch <= 90 and -180 <= roll <= 180
+    a_s = sensor_readings(simulated.rot_vs.as_matrix())
+    np.testing.assert_allclose(ublox_to_vehicle(yaw, pitch, roll, a_s), simulated.rot_vs.apply(a_s), rtol=0, atol=TOL)
+
+
+def test_ublox_bytes_decode_to_the_text_and_stay_within_the_resolution(simulated: Calibration) -> None:
+    values = ublox_values(str(export(simulated, "ublox")))
+    raw = decode_ubx(bytes(export(simulated, "ublox-ubx")))
+    for key in ("YAW", "PITCH", "ROLL"):
+        assert raw[f"IMU_MNTALG_{key}"] == round(values[f"CFG-SFIMU-IMU_MNTALG_{key}"][0] * 100)
+    a_s = sensor_readings(simulated.rot_vs.as_matrix())
+    sent = ublox_to_vehicle(
+        raw["IMU_MNTALG_YAW"] / 100, raw["IMU_MNTALG_PITCH"] / 100, raw["IMU_MNTALG_ROLL"] / 100, a_s
+    )
+    half_step = np.radians(0.005) * 3  # at most half a 0.01° step on each of the three angles
+    assert np.max(np.linalg.norm(sent - simulated.rot_vs.apply(a_s), axis=1) / G) <= half_step
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_ublox_bytes_round_trip_on_the_grid(base: Calibration, seed: int) -> None:
+    """A mounting whose u-blox angles are whole hundredths of a degree survives the bytes exactly."""
+    rng = np.random.default_rng(seed)
+    yaw, pitch, roll = (
+        rng.integers(-18000, 36000) / 100,
+        rng.integers(-8900, 8900) / 100,
+        rng.integers(-18000, 18000) / 100,
+    )
+    matrix = UBLOX_ISO_FROM_INSTALLATION @ rz(yaw) @ ry(pitch) @ rx(roll)
+    raw = decode_ubx(bytes(export(with_rotation(base, matrix), "ublox-ubx")))
+    assert raw["IMU_MNTALG_YAW"] == round(yaw * 100) % 36000  # wrapped into 0…360° as U4
+    a_s = sensor_readings(matrix)
+    back = ublox_to_vehicle(
+        raw["IMU_MNTALG_YAW"] / 100, raw["IMU_MNTALG_PITCH"] / 100, raw["IMU_MNTALG_ROLL"] / 100, a_s
+    )
+    np.testing.assert_allclose(back, (matrix @ a_s.T).T, rtol=0, atol=TOL)
+
+
+def test_ublox_ucenter_file_lines_decode_to_the_same_values(simulated: Calibration) -> None:
+    """u-center's generation-9 configuration file: ``CFG-VALGET - 06 8B …`` lines, one per layer."""
+    raw = decode_ubx(bytes(export(simulated, "ublox-ubx")))
+    lines = str(export(simulated, "ublox-ucenter")).splitlines()
+    assert len(lines) == 3
+    for layer, line in enumerate(lines):
+        name, dash, hexdata = line.split(" ", 2)
+        assert (name, dash) == ("CFG-VALGET", "-")
+        data = bytes.fromhex(hexdata)
+        msg = UBXReader.parse(b"\xb5\x62" + data + calc_checksum(data), msgmode=GET)
+        assert msg.identity == "CFG-VALGET" and msg.layer == layer
+        assert {k: getattr(msg, f"CFG_SFIMU_{k}") for k in raw} == raw
+
+
+def test_ublox_yaw_just_below_360_wraps_to_0(base: Calibration) -> None:
+    matrix = UBLOX_ISO_FROM_INSTALLATION @ rz(-0.004)
+    raw = decode_ubx(bytes(export(with_rotation(base, matrix), "ublox-ubx")))
+    assert raw["IMU_MNTALG_YAW"] == 0  # 359.996° rounds to 360.00°, which u-blox's 0…360 range holds as 0
+
+
+# ---------------------------------------------------------------- NovAtel ---------------------------------
+
+ISO_FROM_NOVATEL_VEHICLE = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # x right, y fwd, z up
+
+
+def novatel_to_vehicle(x: float, y: float, z: float, a_body: np.ndarray) -> np.ndarray:
+    """NovAtel OEM7: rotate the IMU body frame about Z, then the new X, then the new Y onto the vehicle frame:
+    the vehicle axes in body coordinates are the columns of Rz·Rx·Ry, so a_vehicle = (Rz·Rx·Ry)ᵀ a_body."""
+    a_nov = (rz(z) @ rx(x) @ ry(y)).T @ a_body.T
+    return (ISO_FROM_NOVATEL_VEHICLE @ a_nov).T
+
+
+def novatel_values(text: str) -> list[float]:
+    line = next(ln for ln in text.splitlines() if ln.startswith("SETINSROTATION"))
+    fields = line.split()
+    assert fields[1] == "RBV"
+    return [float(v) for v in fields[2:]]
+
+
+NOVATEL_EXAMPLES = {
+    # SMART7 Installation and Operation User Manual, rotational offsets example: IMU Y along the vehicle Y
+    # (forward), a 180° rotation about Y makes Z and X coincide: IMU x left, z down → SETINSROTATION RBV 0 180 0
+    "smart7": ((0.0, 180.0, 0.0), from_axes((0, 1, 0), (1, 0, 0), (0, 0, -1))),
+    # OEM7 SPAN manual, "Rotational Offsets - Example": X −90, Y 0, Z +90 — the IMU of APN-065's example 2,
+    # described there in words: X axis down, Y axis to the right, Z axis backwards
+    "oem7": ((-90.0, 0.0, 90.0), from_axes((0, 0, -1), (0, -1, 0), (-1, 0, 0))),
+}
+
+
+@pytest.mark.parametrize("case", list(NOVATEL_EXAMPLES))
+def test_novatel_manual_examples(base: Calibration, case: str) -> None:
+    expected, matrix = NOVATEL_EXAMPLES[case]
+    got = novatel_values(str(export(with_rotation(base, matrix), "novatel")))
+    np.testing.assert_allclose(got[:3], expected, rtol=0, atol=1e-9)
+    assert all(0.25 <= s <= 45 for s in got[3:])  # NovAtel's range of the standard deviations
+
+
+def test_novatel_round_trip_and_sigma(simulated: Calibration) -> None:
+    got = novatel_values(str(export(simulated, "novatel")))
+    assert all(-180 <= v <= 180 for v in got[:3])
+    a_s = sensor_readings(simulated.rot_vs.as_matrix())
+    np.testing.assert_allclose(novatel_to_vehicle(*got[:3], a_s), simulated.rot_vs.apply(a_s), rtol=0, atol=TOL)
+    assert got[3:] == [max(0.25, s) for s in got[3:]]
+
+
+def test_novatel_sigma_is_propagated_to_its_angles(base: Calibration) -> None:
+    """With σ large enough to pass NovAtel's 0.25° floor, a level mounting's Z σ is the σ about vertical."""
+    cal = replace(with_rotation(base, np.eye(3)), rotation_sigma_deg=(1.0, 2.0, 3.0))
+    sd = novatel_values(str(export(cal, "novatel")))[3:]
+    # ISO x (forward) is NovAtel y, ISO y (left) is NovAtel −x: σ about NovAtel X, Y, Z = 2, 1, 3
+    np.testing.assert_allclose(sd, [2.0, 1.0, 3.0], rtol=1e-6)
+
+
+# ---------------------------------------------------------------- ROS 2 -----------------------------------
+
+
+def quat_rotate(q_xyzw: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """tf2: a transform parent → child maps child coordinates to parent ones, p = q v q* (Hamilton)."""
+    x, y, z, w = q_xyzw
+    u = np.array([x, y, z])
+    return v + 2 * np.cross(u, np.cross(u, v) + w * v)
+
+
+def urdf_rpy_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    """URDF origin rpy: fixed-axis roll about x, then pitch about y, then yaw about z (radians)."""
+    return rz(np.degrees(yaw)) @ ry(np.degrees(pitch)) @ rx(np.degrees(roll))
+
+
+def static_tf_args(text: str) -> dict[str, str]:
+    line = next(ln for ln in text.splitlines() if ln.startswith("ros2 run tf2_ros static_transform_publisher"))
+    tokens = line.split()[4:]
+    return dict(zip(tokens[0::2], tokens[1::2], strict=True))
+
+
+def urdf_origin(text: str) -> tuple[ET.Element, list[float], list[float]]:
+    joint = ET.fromstring(text)  # the comments before the element are skipped by the parser
+    origin = joint.find("origin")
+    assert origin is not None
+    return joint, [float(v) for v in origin.get("xyz", "").split()], [float(v) for v in origin.get("rpy", "").split()]
+
+
+def test_ros_urdf_specification_example(base: Calibration) -> None:
+    """The URDF joint specification's example origin ``xyz="0 0 1" rpy="0 0 3.1416"`` comes back as written."""
+    matrix = urdf_rpy_matrix(0.0, 0.0, 3.1416)
+    cal = with_rotation(base, matrix)
+    frames = Frames(parent="link1", child="link2", translation_m=(0.0, 0.0, 1.0))
+    joint, xyz, rpy = urdf_origin(str(export(cal, "urdf", frames=frames)))
+    assert joint.get("type") == "fixed"
+    assert joint.find("parent").get("link") == "link1"  # type: ignore[union-attr]
+    assert joint.find("child").get("link") == "link2"  # type: ignore[union-attr]
+    assert xyz == [0.0, 0.0, 1.0]
+    np.testing.assert_allclose(rpy[:2], [0.0, 0.0], atol=1e-11)
+    assert rpy[2] == pytest.approx(3.1416 - 2 * np.pi, abs=1e-11)  # the same angle, written within (−π, π]
+    args = static_tf_args(str(export(cal, "ros2-static-tf", frames=frames)))
+    assert (args["--frame-id"], args["--child-frame-id"]) == ("link1", "link2")
+    q = [float(args[k]) for k in ("--qx", "--qy", "--qz", "--qw")]
+    expected = np.array([0, 0, np.sin(3.1416 / 2), np.cos(3.1416 / 2)])
+    np.testing.assert_allclose(q, -expected, atol=1e-11)  # −q, the same rotation, written with w ≥ 0
+
+
+def test_ros_round_trips(simulated: Calibration) -> None:
+    a_s = sensor_readings(simulated.rot_vs.as_matrix())
+    expected = simulated.rot_vs.apply(a_s)
+    args = static_tf_args(str(export(simulated, "ros2-static-tf")))
+    assert (args["--frame-id"], args["--child-frame-id"]) == ("base_link", "imu_link")
+    q = np.array([float(args[k]) for k in ("--qx", "--qy", "--qz", "--qw")])
+    np.testing.assert_allclose([quat_rotate(q, v) for v in a_s], expected, rtol=0, atol=TOL)
+    _, _, rpy = urdf_origin(str(export(simulated, "urdf")))
+    np.testing.assert_allclose((urdf_rpy_matrix(*rpy) @ a_s.T).T, expected, rtol=0, atol=TOL)
+    tf2 = str(export(simulated, "tf2"))
+    match = re.search(r"tf2::Quaternion q\((\S+), (\S+), (\S+), (\S+)\);", tf2)
+    assert match is not None
+    q2 = np.array([float(v) for v in match.groups()])
+    np.testing.assert_allclose([quat_rotate(q2, v) for v in a_s], expected, rtol=0, atol=TOL)
+
+
+# ---------------------------------------------------------------- Autoware --------------------------------
+
+
+def test_autoware_documented_entry(base: Calibration) -> None:
+    """Autoware's documentation shows a sensor-kit entry ``roll: -0.01, pitch: 0.71, yaw: -1.580`` (a camera)
+    and ``tamagawa/imu_link`` at z 0.8: each comes back as written."""
+    for child, xyz, rpy in (
+        ("camera0/camera_link", (0.0, -0.56362, -0.30555), (-0.01, 0.71, -1.580)),
+        ("tamagawa/imu_link", (0.0, 0.0, 0.8), (0.0, 0.0, 0.0)),
+    ):
+        cal = with_rotation(base, urdf_rpy_matrix(*rpy))
+        frames = Frames(parent="sensor_kit_base_link", child=child, translation_m=xyz)
+        doc = yaml.safe_load(str(export(cal, "autoware", frames=frames)))
+        entry = doc["sensor_kit_base_link"][child]
+        assert [entry[k] for k in ("x", "y", "z")] == list(xyz)
+        np.testing.assert_allclose([entry[k] for k in ("roll", "pitch", "yaw")], rpy, atol=1e-11)
+
+
+def test_autoware_round_trip(simulated: Calibration) -> None:
+    doc = yaml.safe_load(str(export(simulated, "autoware")))
+    entry = doc["sensor_kit_base_link"]["imu_link"]
+    a_s = sensor_readings(simulated.rot_vs.as_matrix())
+    back = (urdf_rpy_matrix(entry["roll"], entry["pitch"], entry["yaw"]) @ a_s.T).T
+    np.testing.assert_allclose(back, simulated.rot_vs.apply(a_s), rtol=0, atol=TOL)
+
+
+# ---------------------------------------------------------------- JSON / YAML -----------------------------
+
+
+def test_rotation_documents_agree_with_each_other_and_round_trip(simulated: Calibration) -> None:
+    doc = json.loads(str(export(simulated, "json")))
+    assert yaml.safe_load(str(export(simulated, "yaml"))) == doc
+    a_s = sensor_readings(simulated.rot_vs.as_matrix())
+    expected = simulated.rot_vs.apply(a_s)
+    w, x, y, z = doc["quaternion_wxyz"]["value"]
+    assert doc["quaternion_xyzw"]["value"] == [x, y, z, w]
+    np.testing.assert_allclose([quat_rotate(np.array([x, y, z, w]), v) for v in a_s], expected, atol=TOL)
+    np.testing.assert_allclose((np.array(doc["matrix"]["value"]) @ a_s.T).T, expected, atol=TOL)
+    axis, angle = np.array(doc["axis_angle"]["axis"]), doc["axis_angle"]["angle_rad"]
+    rodrigues = [
+        v * np.cos(angle) + np.cross(axis, v) * np.sin(angle) + axis * (axis @ v) * (1 - np.cos(angle)) for v in a_s
+    ]
+    np.testing.assert_allclose(rodrigues, expected, atol=TOL)
+    yaw, pitch, roll = doc["euler_zyx"]["yaw_pitch_roll_deg"]
+    np.testing.assert_allclose((rz(yaw) @ ry(pitch) @ rx(roll) @ a_s.T).T, expected, atol=TOL)
+
+
+def test_rotation_sigma_matches_the_result_where_they_coincide(simulated: Calibration) -> None:
+    """The ZYX Euler σ is the result's own roll/pitch/yaw σ; the rotation-vector σ of a small rotation is the
+    σ about the vehicle axes; every σ is positive and finite."""
+    doc = json.loads(str(export(simulated, "json")))
+    sig_yaw, sig_pitch, sig_roll = doc["euler_zyx"]["sigma_deg"]
+    np.testing.assert_allclose(
+        [sig_roll, sig_pitch, sig_yaw],
+        [simulated.roll_sigma_deg, simulated.pitch_sigma_deg, simulated.yaw_sigma_deg],
+        rtol=0.05,
+    )
+    flat = [s for k in ("quaternion_xyzw", "matrix") for s in np.ravel(doc[k]["sigma"])]
+    assert all(np.isfinite(s) and s >= 0 for s in flat)
+    assert max(flat) > 0
+
+
+def test_monte_carlo_agrees_with_the_propagated_quaternion_sigma(base: Calibration) -> None:
+    """First-order propagation, checked by sampling rotations with the stated σ about the vehicle axes."""
+    cal = replace(with_rotation(base, rz(40) @ ry(-30) @ rx(60)), rotation_sigma_deg=(0.5, 1.0, 2.0))
+    doc = json.loads(str(export(cal, "json")))
+    rng = np.random.default_rng(0)
+    deltas = rng.normal(size=(20000, 3)) * np.radians([0.5, 1.0, 2.0])
+    q = (Rotation.from_rotvec(deltas) * cal.rot_vs).as_quat()
+    q *= np.sign(q @ np.array(doc["quaternion_xyzw"]["value"]))[:, None]
+    np.testing.assert_allclose(q.std(axis=0), doc["quaternion_xyzw"]["sigma"], rtol=0.03)
+
+
+# ---------------------------------------------------------------- refusals and the CLI --------------------
+
+
+def test_undetermined_yaw_is_refused_by_every_format_unless_told(base: Calibration) -> None:
+    cal = replace(
+        base,
+        yaw_deg=None,
+        yaw_sigma_deg=None,
+        yaw_reason="level ground",
+        rotation_sigma_deg=(base.rotation_sigma_deg[0], base.rotation_sigma_deg[1], None),
+    )
+    for fmt in FORMATS:
+        with pytest.raises(NotEnoughInformation, match="yaw is not determined"):
+            export(cal, fmt)
+    doc = json.loads(str(export(cal, "json", yaw="zero")))
+    assert doc["yaw_assumed_zero"] is True
+    yaw, pitch, roll = doc["euler_zyx"]["yaw_pitch_roll_deg"]
+    assert yaw == pytest.approx(0.0, abs=1e-12)
+    assert (roll, pitch) == pytest.approx((cal.roll_deg, cal.pitch_deg), abs=1e-9)  # the tilt is kept exactly
+    assert doc["euler_zyx"]["sigma_deg"][0] is None  # no σ is invented for the yaw
+    assert "YAW NOT DETERMINED" in str(export(cal, "novatel", yaw="zero"))
+
+
+def test_unconfident_result_is_refused_unless_accepted(base: Calibration) -> None:
+    cal = replace(base, confident=False)
+    with pytest.raises(NotEnoughInformation, match="not confident"):
+        export(cal, "ublox")
+    assert "NOT confident" in str(export(cal, "ublox", accept_unconfident=True))
+
+
+def test_cli_writes_files_and_stdout(base: Calibration, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    result = tmp_path / "r.json"
+    base.save(result)
+    assert main(["export", str(result), "--to", "novatel"]) == 0
+    assert "SETINSROTATION RBV" in capsys.readouterr().out
+    assert main(["export", str(result), "--to", "urdf", "-o", "-", "--parent", "chassis", "--child", "imu"]) == 0
+    assert '<parent link="chassis"/>' in capsys.readouterr().out
+    out = tmp_path / "m.ubx"
+    assert main(["export", str(result), "--to", "ublox-ubx", "-o", str(out)]) == 0
+    assert decode_ubx(out.read_bytes())["AUTO_MNTALG_ENA"] == 0
+
+
+def test_cli_bad_input_writes_nothing(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "out.txt"
+    missing = tmp_path / "missing.json"
+    assert main(["export", str(missing), "--to", "ublox", "-o", str(out)]) == 2
+    assert "missing.json" in capsys.readouterr().err
+    broken = tmp_path / "broken.json"
+    broken.write_text("{not json", encoding="utf-8")
+    assert main(["export", str(broken), "--to", "json", "-o", str(out)]) == 2
+    assert "invalid JSON" in capsys.readouterr().err
+    assert not out.exists() and list(tmp_path.iterdir()) == [broken]
+
+
+def test_cli_never_overwrites_the_result(base: Calibration, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    result = tmp_path / "r.json"
+    base.save(result)
+    before = result.read_bytes()
+    assert main(["export", str(result), "--to", "yaml", "-o", str(result)]) == 2
+    assert "never overwrites its input" in capsys.readouterr().err
+    assert result.read_bytes() == before
+
+
+def test_cli_refuses_undetermined_yaw_without_output(
+    base: Calibration, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    result = tmp_path / "r.json"
+    replace(base, yaw_deg=None, yaw_sigma_deg=None, yaw_reason="level ground").save(result)
+    out = tmp_path / "out.txt"
+    assert main(["export", str(result), "--to", "autoware", "-o", str(out)]) == 3
+    assert "--yaw-undetermined zero" in capsys.readouterr().err
+    assert not out.exists()
+    assert main(["export", str(result), "--to", "autoware", "-o", str(out), "--yaw-undetermined", "zero"]) == 0
+    assert "YAW NOT DETERMINED" in out.read_text(encoding="utf-8")
