@@ -18,6 +18,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from mountcal import terms as model_terms
 from mountcal.conventions import (
     G_N,
     GIMBAL_LOCK_PITCH_DEG,
@@ -25,7 +26,7 @@ from mountcal.conventions import (
     angles_from_rot_vs,
     normal_gravity,
 )
-from mountcal.effects import Loop, Step, close_the_loop, effect_values
+from mountcal.effects import MIN_TEMPERATURE_SPAN_C, Loop, Step, close_the_loop, effect_values
 from mountcal.errors import InputError, NotEnoughInformation
 from mountcal.estimate import full, paper
 from mountcal.estimate.bound import crb_deg, euler_gradients
@@ -66,19 +67,48 @@ def calibrate(table: StopTable, options: Options | None = None) -> Calibration:
 
 
 def parse_model(spec: str) -> tuple[str, ...] | None:
-    """``"auto"`` → None; a comma list of terms, starting ``rotation,slope``, → the terms."""
+    """``"auto"`` → None; a comma list of terms (:mod:`mountcal.terms`), starting ``rotation,slope``."""
     terms = tuple(t.strip() for t in spec.split(",") if t.strip())
     if terms == ("auto",):
         return None
-    unknown = [t for t in terms if t not in full.TERMS]
-    if terms[:2] != BASE or unknown or len(set(terms)) != len(terms):
+    unknown = [t for t in terms if t not in model_terms.BY_NAME]
+    if terms[:2] != model_terms.BASE or unknown or len(set(terms)) != len(terms):
         raise InputError(
             "--model",
-            f"auto, or rotation,slope followed by any of {', '.join(full.TERMS[2:])}",
-            repr(spec),
+            model_terms.help_text(),
+            repr(spec) + (f" (unknown: {', '.join(unknown)})" if unknown else ""),
             "For example --model rotation,slope,bias.",
         )
     return terms
+
+
+def check_model(table: StopTable, terms: tuple[str, ...]) -> None:
+    """Refuse a fixed model whose terms need a column the table lacks, or values it does not vary."""
+    for name in terms:
+        missing = [c for c in model_terms.BY_NAME[name].needs if getattr(table, _FIELD[c]) is None]
+        if missing:
+            raise InputError(
+                f"{table.source} with --model {','.join(terms)}",
+                f"the column {', '.join(missing)} for the term {name}",
+                "no such column",
+                f"Add the column, or leave {name} out of --model (or use --model auto).",
+            )
+    if "temperature" in terms and table.temperature_c is not None:
+        span = float(np.ptp(table.temperature_c))
+        if span < MIN_TEMPERATURE_SPAN_C:
+            raise NotEnoughInformation(
+                f"{table.source}: the term temperature needs stops at different temperatures (a span of at least "
+                f"{MIN_TEMPERATURE_SPAN_C:g} °C), found a span of {span:.3g} °C: a drift per °C cannot be measured. "
+                "Leave temperature out of --model."
+            )
+    if "site_slope" in terms and table.site is not None and np.unique(table.site).size < 2:
+        raise NotEnoughInformation(
+            f"{table.source}: the term site_slope needs stops at two or more sites, found one. "
+            "Leave site_slope out of --model."
+        )
+
+
+_FIELD = {"temperature_c": "temperature_c", "site": "site"}
 
 
 # --- the full estimator -------------------------------------------------------------------------
@@ -86,6 +116,8 @@ def parse_model(spec: str) -> tuple[str, ...] | None:
 
 def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibration:
     fixed = parse_model(opts.model)
+    if fixed is not None:
+        check_model(table, fixed)
     from_position = g_source.startswith("WGS 84")
     loop = close_the_loop(
         table,
@@ -119,6 +151,8 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
             + "; ".join(f"{u.what}: {u.size}" for u in loop.unexplained)
             + f"); the σ are widened ×{birge:.2f} (Birge ratio) and the result is not confident"
         )
+    if f.branch:
+        notes.append(f.branch + "; the result is not confident")
     pitch = angles["pitch_deg"]
     if abs(pitch) > GIMBAL_LOCK_PITCH_DEG:
         notes.append(
@@ -192,7 +226,7 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
         unexplained=[u.to_dict() for u in loop.unexplained],
         diagnostics=[d.to_dict() for d in loop.findings],
         effects=effect_values(f),
-        confident=not loop.unexplained,
+        confident=not loop.unexplained and f.branch is None,
     )
 
 

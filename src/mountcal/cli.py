@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from mountcal import terms as model_terms
 from mountcal.atomic import atomic_path
 from mountcal.calibrate import Options, calibrate
 from mountcal.errors import InputError, MountcalError
@@ -390,7 +391,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     _log_arguments(cal)
     cal.add_argument("--method", choices=("full", "paper"), default="full")
-    cal.add_argument("--model", default="auto", help="auto (default), rotation,slope or rotation,slope,bias")
+    cal.add_argument("--model", default="auto", help=model_terms.help_text())
     cal.add_argument("--unit", choices=("mps2", "g"), default="mps2", help="unit of ax, ay, az (default m/s²)")
     cal.add_argument(
         "--headings",
@@ -500,7 +501,7 @@ def _parser() -> argparse.ArgumentParser:
     fg.add_argument("--max-acc-std", type=float, default=StopDetection.max_acc_std_mps2, help="stillness (m/s²)")
     fg.add_argument("--min-stop-s", type=float, default=StopDetection.min_duration_s, help="shortest stop (s)")
     fg.add_argument("--method", choices=("full", "paper"), default="full")
-    fg.add_argument("--model", default="auto", help="auto (default), rotation,slope or rotation,slope,bias")
+    fg.add_argument("--model", default="auto", help=model_terms.help_text())
     fg.add_argument(
         "--headings", choices=("uphill", "relative", "none"), default="uphill", help="beta_deg of stop tables"
     )

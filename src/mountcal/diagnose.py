@@ -28,14 +28,15 @@ class Finding:
     test: str
     what: str
     size: str
-    statistic: float
+    statistic: float | None  # None (with ``reason``) when the test does not exist for these data
     dof: int
-    p_value: float
-    log10_p: float
+    p_value: float | None
+    log10_p: float | None
+    reason: str | None = None
 
     @property
     def significant(self) -> bool:
-        return self.p_value < STRUCTURE_P
+        return self.p_value is not None and self.p_value < STRUCTURE_P
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -46,6 +47,7 @@ class Finding:
             "dof": self.dof,
             "p_value": self.p_value,
             "log10_p": self.log10_p,
+            **({"reason": self.reason} if self.reason else {}),
         }
 
 
@@ -145,15 +147,12 @@ def _put_beta(state: full.State, i: int, value: float) -> full.State:
 
 def _chi2(fit: full.Fit) -> Finding:
     if not fit.noise_known or fit.dof <= 0:
-        return Finding(
-            "chi2",
-            "scatter beyond the stops' own noise",
-            "noise unknown: estimated from the residuals",
-            float("nan"),
-            fit.dof,
-            1.0,
-            0.0,
+        why = (
+            "no test: the stop noise is unknown (no sx/sy/sz and n columns), so it was estimated from these residuals"
+            if not fit.noise_known
+            else "no test: no degrees of freedom are left"
         )
+        return Finding("chi2", "scatter beyond the stops' own noise", why, None, fit.dof, None, None, why)
     logp = float(chi2_logsf(fit.chi2, fit.dof))
     return Finding(
         "chi2",

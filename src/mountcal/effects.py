@@ -21,6 +21,7 @@ from scipy import optimize
 from scipy.spatial.transform import Rotation
 
 from mountcal.diagnose import Finding, analyse, leave_one_out
+from mountcal.errors import NotEnoughInformation
 from mountcal.estimate import full
 from mountcal.pvalues import chi2_logsf, f_logsf
 from mountcal.stoptable import StopTable
@@ -32,6 +33,7 @@ MIN_TEMPERATURE_SPAN_C = 2.0
 MAX_ROUNDS = 6
 MAX_SURFACE_TILT_DEG = 3.0  # roads and car parks: cross slopes and grades of a few degrees at most
 SAME_PLACE_M = 30.0  # stops farther apart than this may stand on different surfaces
+MAX_BIAS_G = 0.5  # an offset this large is not an accelerometer bias (consumer MEMS: < 0.1 g) but a sign or unit error
 EARTH_GRAVITY_MPS2 = (9.77, 9.835)  # normal gravity: 9.780 (equator) to 9.832 (poles) at sea level, less with height
 
 
@@ -127,6 +129,7 @@ def close_the_loop(
     declined: list[dict[str, Any]] = []
     if fixed is not None:
         if fixed != BASE:
+            _refuse_inseparable(steps[-1], fixed, g_mps2)
             f = full.fit(table, fixed, g_mps2, base.state)
             steps.append(Step("fixed", "terms fixed by --model", fixed, (), table, f))
         return _finish(steps, declined)
@@ -188,6 +191,16 @@ def _next_step(
                 f"the fitted g = {f.state.g_mps2:.4f} m/s² is outside Earth's range "
                 f"{EARTH_GRAVITY_MPS2[0]}–{EARTH_GRAVITY_MPS2[1]} m/s²: the offset is not gravity (a vertical "
                 "bias or a scale error?)",
+                len(cur.excluded),
+            )
+            continue
+        bias_g = float(np.linalg.norm(f.state.bias_s)) / f.state.g_mps2
+        if "bias" in terms and bias_g > MAX_BIAS_G:
+            _decline(
+                declined,
+                name,
+                f"the fitted bias |b| = {bias_g:.2f} g exceeds {MAX_BIAS_G:g} g: no accelerometer has such a bias "
+                "(a negated axis or a wrong unit?)",
                 len(cur.excluded),
             )
             continue
@@ -330,6 +343,17 @@ def _inseparable(cur: Step, terms: tuple[str, ...], g: float) -> str | None:
     if tilt > MAX_TILT_SIGMA_DEG:
         return f"not separable from the tilt: with it the tilt 1σ would be {tilt:.3g}°"
     return None
+
+
+def _refuse_inseparable(base: Step, fixed: tuple[str, ...], g: float) -> None:
+    """A fixed model whose terms these stops cannot separate is refused, naming the first such term."""
+    for i in range(len(BASE), len(fixed)):
+        problem = _inseparable(base, fixed[: i + 1], g)
+        if problem:
+            raise NotEnoughInformation(
+                f"{base.table.source}: the term {fixed[i]} of --model {','.join(fixed)} cannot be fitted: it is "
+                f"{problem}. Leave it out of --model (or use --model auto, which adds only what the stops separate)."
+            )
 
 
 def _group(name: str) -> str:

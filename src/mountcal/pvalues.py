@@ -3,6 +3,10 @@
 The same values as ``scipy.stats.chi2.sf`` / ``logsf`` and ``scipy.stats.f.sf`` / ``logsf`` (which
 evaluate these functions too), without importing ``scipy.stats``: that import alone costs about
 0.4 s, paid by every command and by every fleet worker server at start-up.
+
+Where the probability underflows (below ~1e-308) scipy's log is −inf; a written result must hold
+finite numbers, so there the log tail comes from the continued fractions of the incomplete gamma
+and beta functions, evaluated in log space (Numerical Recipes §6.2, §6.4).
 """
 
 from __future__ import annotations
@@ -19,9 +23,10 @@ def chi2_sf(x: Any, dof: Any) -> Any:
 
 
 def chi2_logsf(x: Any, dof: Any) -> Any:
-    """log P(χ²(dof) > x); −inf where the probability underflows."""
+    """log P(χ²(dof) > x), finite where the probability underflows."""
     x = np.maximum(x, 0.0)
-    return _log_tail(special.chdtrc(dof, x), special.chdtr(dof, x))
+    out = _log_tail(special.chdtrc(dof, x), special.chdtr(dof, x))
+    return _refine(out, lambda xi, d: _log_upper_gamma(d / 2.0, xi / 2.0), x, dof)
 
 
 def f_sf(x: Any, dfn: Any, dfd: Any) -> Any:
@@ -30,9 +35,11 @@ def f_sf(x: Any, dfn: Any, dfd: Any) -> Any:
 
 
 def f_logsf(x: Any, dfn: Any, dfd: Any) -> Any:
-    """log P(F(dfn, dfd) > x); −inf where the probability underflows."""
+    """log P(F(dfn, dfd) > x), finite where the probability underflows."""
     x = np.maximum(x, 0.0)
-    return _log_tail(special.fdtrc(dfn, dfd, x), special.fdtr(dfn, dfd, x))
+    out = _log_tail(special.fdtrc(dfn, dfd, x), special.fdtr(dfn, dfd, x))
+    # P(F > x) = I_z(dfd/2, dfn/2) with z = dfd / (dfd + dfn·x)
+    return _refine(out, lambda xi, m, d: _log_beta_lower(d / 2.0, m / 2.0, d / (d + m * xi)), x, dfn, dfd)
 
 
 def _log_tail(sf: Any, cdf: Any) -> Any:
@@ -40,6 +47,61 @@ def _log_tail(sf: Any, cdf: Any) -> Any:
     with np.errstate(divide="ignore"):
         out = np.where(sf > 0.5, np.log1p(-cdf), np.log(sf))
     return out[()] if out.ndim == 0 else out
+
+
+def _refine(out: Any, log_tail: Any, x: Any, *dofs: Any) -> Any:
+    """Replace the −inf entries of ``out`` (underflowed tails) by ``log_tail(x, *dofs)``."""
+    arr = np.array(out, dtype=float, ndmin=1)
+    bad = np.flatnonzero(np.isneginf(arr))
+    if bad.size:
+        args = np.broadcast_arrays(
+            np.array(x, dtype=float, ndmin=1), *(np.array(d, dtype=float, ndmin=1) for d in dofs)
+        )
+        arr = np.broadcast_to(arr, args[0].shape).copy()
+        bad = np.flatnonzero(np.isneginf(arr))
+        for i in bad:  # only the few underflowed entries: a scalar loop is fine
+            arr[i] = log_tail(*(float(a.flat[i]) for a in args))
+    return arr[0] if np.ndim(out) == 0 else arr.reshape(np.shape(out) or arr.shape)
+
+
+def _log_upper_gamma(a: float, x: float) -> float:
+    """log Q(a, x), the regularised upper incomplete gamma, by its continued fraction (x > a + 1)."""
+    tiny = 1e-300
+    b = x + 1.0 - a
+    c, d = 1.0 / tiny, 1.0 / b
+    h = d
+    for i in range(1, 10_000):
+        an = -i * (i - a)
+        b += 2.0
+        d = an * d + b
+        d = tiny if abs(d) < tiny else d
+        c = b + an / c
+        c = tiny if abs(c) < tiny else c
+        d = 1.0 / d
+        h *= d * c
+        if abs(d * c - 1.0) < 1e-15:
+            break
+    return float(-x + a * np.log(x) - special.gammaln(a) + np.log(h))
+
+
+def _log_beta_lower(a: float, b: float, z: float) -> float:
+    """log I_z(a, b), the regularised incomplete beta, by its continued fraction (z < (a+1)/(a+b+2))."""
+    tiny = 1e-300
+    qab, qap, qam = a + b, a + 1.0, a - 1.0
+    c, d = 1.0, 1.0 - qab * z / qap
+    d = 1.0 / (tiny if abs(d) < tiny else d)
+    h = d
+    for m in range(1, 10_000):
+        m2 = 2 * m
+        for aa in (m * (b - m) * z / ((qam + m2) * (a + m2)), -(a + m) * (qab + m) * z / ((a + m2) * (qap + m2))):
+            d = 1.0 + aa * d
+            d = 1.0 / (tiny if abs(d) < tiny else d)
+            c = 1.0 + aa / c
+            c = tiny if abs(c) < tiny else c
+            h *= d * c
+        if abs(d * c - 1.0) < 1e-15:
+            break
+    return float(a * np.log(z) + b * np.log1p(-z) - np.log(a) - special.betaln(a, b) + np.log(h))
 
 
 __all__ = ["chi2_logsf", "chi2_sf", "f_logsf", "f_sf"]

@@ -71,6 +71,7 @@ class Fit:
     noise_scale: float  # 1 when Σ_i are known; σ̂ (m/s²) when estimated
     residual_s: FloatArray  # shape (n, 3), m/s²
     iterations: int
+    branch: str | None = None  # why the physical branch is in doubt (None: it fits best, or is exactly equivalent)
 
     def value(self, name: str) -> float:
         """A fitted scalar by parameter name (as in ``names``)."""
@@ -237,6 +238,9 @@ def fit(
     state = adapt(start if start is not None else initial_state(table, g_mps2), table, terms, g_mps2)
     state, iterations = _levenberg_marquardt(model, state, max_iter)
     state = _canonical(state, table)
+    branch = None
+    if _unphysical(state):
+        state, branch = _physical_branch(model, state, max_iter)
     r = model.residual(state)
     jac = model.jacobian(state)
     fisher = jac.T @ jac
@@ -256,6 +260,7 @@ def fit(
         noise_scale=float(np.sqrt(scale2)),
         residual_s=table.acc_s - model.predict(state),
         iterations=iterations,
+        branch=branch,
     )
 
 
@@ -271,6 +276,70 @@ def information(
 
 
 def _canonical(state: State, table: StopTable) -> State:
+    """α ≥ 0: a negative slope is the same plane seen from the other side.
+
+    Without headings, α > 90° (the vehicle's up axis pointing down) is exactly the mirror of
+    π − α with the vehicle turned about its x axis and every β negated: ``Rx(π) f_v(π − α, −β) =
+    f_v(α, β)``, so both predict the same stops and physics (α < 90°, +g up) picks the latter.
+    """
+    state = replace(state, slope_rad=np.angle(np.exp(1j * state.slope_rad)))  # α in (−π, π]
+    state = _nonnegative(state, table)
+    if table.headings == "none" and np.all(np.cos(state.slope_rad) < 0):
+        return replace(
+            state,
+            rot_vs=_TURN_X * state.rot_vs,
+            slope_rad=np.pi - state.slope_rad,
+            beta_rad=-state.beta_rad,
+        )
+    return state
+
+
+_TURN_X = Rotation.from_euler("x", np.pi)
+BRANCH_DCHI2 = 9.0  # a likelihood ratio of ~100:1 between the two branches
+
+
+def _unphysical(state: State) -> bool:
+    """A slope outside [0°, 90°): the vehicle's up axis pointing down (MODEL.md §1: +g up), or, with
+    headings from uphill, a negative slope (the headings would be measured from downhill)."""
+    return bool(np.any(np.cos(state.slope_rad) <= 0) or np.any(state.slope_rad < 0))
+
+
+def _physical_branch(model: StaticModel, state: State, max_iter: int) -> tuple[State, str | None]:
+    """The best fit with α in [0°, 90°), from the mirrors of an unphysical optimum, and a note if in doubt.
+
+    With headings the mirror is not an exact symmetry (it would negate every β), so the data
+    may tell the two apart; when the physical branch fits clearly worse, the stops contradict
+    the model's +g up (a negated axis, a wrong heading direction) and that is reported.
+    """
+    cost_wrong = float(np.sum(model.residual(state) ** 2))
+    physical_slope = np.maximum(np.arccos(np.abs(np.cos(state.slope_rad))), 1e-3)
+    best: tuple[float, State] | None = None
+    for axis in "xyz":  # the optimum turned half a turn about each vehicle axis, with the slope made physical
+        start = replace(state, rot_vs=Rotation.from_euler(axis, np.pi) * state.rot_vs, slope_rad=physical_slope)
+        try:
+            found, _ = _levenberg_marquardt(model, start, max_iter)
+        except FitFailed:
+            continue
+        found = _canonical(found, model.table)
+        cost_found = float(np.sum(model.residual(found) ** 2))
+        if not _unphysical(found) and (best is None or cost_found < best[0]):
+            best = (cost_found, found)
+    mirror = best[1] if best is not None else replace(state, slope_rad=np.clip(physical_slope, 0.0, np.radians(89.9)))
+    cost = float(np.sum(model.residual(mirror) ** 2))
+    dof = max(model.residual(mirror).size - len(model.names), 1)
+    s2 = 1.0 if model.table.cov_s is not None else max(cost_wrong / dof, 1e-300)
+    dchi2 = (cost - cost_wrong) / s2
+    if dchi2 <= BRANCH_DCHI2:
+        return mirror, None
+    slope = float(np.degrees(np.mean(state.slope_rad)))
+    return mirror, (
+        f"the stops fit an unphysical solution (slope {slope:.1f}°: up axis down, or headings from downhill) better "
+        f"than any physical one (Δχ² = {dchi2:.1f}): the sensor may not read +g up (a negated or swapped axis), or the "
+        "headings run clockwise; the physical branch is reported but is not trustworthy"
+    )
+
+
+def _nonnegative(state: State, table: StopTable) -> State:
     """α ≥ 0: a negative slope is the same plane seen from the other side."""
     if state.slope_rad.size == 1 and state.slope_rad[0] < 0:
         if table.headings == "none":  # ... with every β turned by π
