@@ -827,6 +827,8 @@ def _iter_mf4(path: Path, keep: _Filter, max_frames: int) -> Iterator[CanFrames]
         groups = _mf4_can_groups(mdf)
         if not groups and not any(any(c.name == "CAN_DataFrame" for c in g.channels) for g in mdf.groups):
             raise _mf4_error(path, "no CAN_DataFrame channel group (not a bus log)")
+        for g in groups:
+            _check_mf4_blocks(path, mdf.groups[g])
         start = float(mdf.header.start_time.timestamp())
         sources = [_mf4_records(path, mdf, g, start, keep, max_frames) for g in groups]
         if len(sources) == 1:
@@ -835,6 +837,14 @@ def _iter_mf4(path: Path, keep: _Filter, max_frames: int) -> Iterator[CanFrames]
             yield from _merge_by_time([(c for c in s if len(c)) for s in sources])
     finally:
         mdf.close()
+
+
+def _check_mf4_blocks(path: Path, group: Any) -> None:
+    """Refuse a data block stating more than the block limit before asammdf inflates it."""
+    for block in group.get_data_blocks():
+        if block.original_size > max_block_bytes():
+            what = f"an MF4 data block (at byte {block.address})"
+            raise block_too_large(str(path), what, f"one stating {block.original_size} bytes")
 
 
 def _merge_by_time(sources: list[Iterator[CanFrames]]) -> Iterator[CanFrames]:
