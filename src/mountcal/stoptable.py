@@ -16,6 +16,7 @@ import pandas as pd
 
 from mountcal.conventions import G_N, FloatArray
 from mountcal.errors import InputError, NotEnoughInformation
+from mountcal.io.inputs import check_parquet_rows, check_regular_file
 
 # Column names of the stop table file.
 BETA = "beta_deg"
@@ -134,6 +135,9 @@ def read_stop_table(path: str | Path, unit: Unit = "mps2", headings: Headings = 
     """
     path = Path(path)
     where = str(path)
+    check_regular_file(path, "stop table")
+    if path.suffix.lower() in (".parquet", ".pq"):
+        check_parquet_rows(path)
     try:
         raw = path.read_bytes()
     except OSError as err:

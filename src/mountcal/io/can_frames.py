@@ -42,6 +42,7 @@ from isal import isal_zlib  # zlib-compatible inflate, 1.7× faster than zlib's 
 from numpy.typing import NDArray
 
 from mountcal.errors import InputError
+from mountcal.io.inputs import block_too_large, check_regular_file, hold, max_block_bytes
 from mountcal.threads import helpers_allowed
 
 FloatArray = NDArray[np.float64]
@@ -188,7 +189,8 @@ def read_frames(path: str | Path, *, ids: Collection[int] | None = None, channel
     CanFrames
         The frames in file order.
     """
-    return CanFrames.concat(iter_frames(path, ids=ids, channel=channel, max_frames=1 << 20))
+    chunks = iter_frames(path, ids=ids, channel=channel, max_frames=1 << 20)
+    return CanFrames.concat(hold(chunks, str(path), "CAN frames"))
 
 
 def iter_frames(
@@ -219,8 +221,7 @@ def iter_frames(
     """
     path = Path(path)
     fmt = log_format(path)
-    if not path.is_file():
-        raise InputError(str(path), "a CAN log file", "no such file", "Check the path.")
+    check_regular_file(path, "CAN log")
     keep = _Filter(ids, channel)
     if fmt == "blf":
         chunks = _iter_blf(path, keep)
@@ -366,6 +367,8 @@ def _blf_compressed_containers(f: BinaryIO, path: Path) -> Iterator[tuple[int, i
         if signature != b"LOBJ" or size < _BLF_OBJ_BASE.size:
             raise _blf_error(path, f"an object signature b'LOBJ' at byte {offset}", f"{raw[:4]!r}")
         stride = size + size % 4  # objects are followed by size % 4 padding bytes
+        if size > max_block_bytes():  # checked before it is read
+            raise block_too_large(str(path), f"a BLF object (at byte {offset})", f"one of {size} bytes")
         if len(block) - pos < size:
             block, pos = block[pos:] + f.read(max(_BLF_READ_BYTES, stride)), 0
         if len(block) - pos < size:
@@ -375,18 +378,31 @@ def _blf_compressed_containers(f: BinaryIO, path: Path) -> Iterator[tuple[int, i
             if size < _BLF_OBJ_BASE.size + _BLF_CONTAINER.size:
                 raise _blf_error(path, "a log container header", f"a {size}-byte container")
             method, usize = _BLF_CONTAINER.unpack_from(block, pos + _BLF_OBJ_BASE.size)
+            if usize > max_block_bytes():
+                found = f"one stating {usize} bytes"
+                raise block_too_large(str(path), f"a BLF log container (at byte {offset})", found)
             yield method, usize, block[pos + _BLF_OBJ_BASE.size + _BLF_CONTAINER.size : pos + size]
         pos += stride
         offset += stride
 
 
 def _inflate(method: int, usize: int, payload: bytes, path: Path) -> bytes:
+    """A container's objects; the inflate stops one byte past the size the container states, so a
+    container inflating to more (a decompression bomb) costs no more memory than it declares."""
     try:
         if method == 0:
             return payload
         if method == 2:
-            return isal_zlib.decompress(payload, bufsize=max(usize, 1))
-        found = f"unknown compression method {method}"
+            inflater = isal_zlib.decompressobj()
+            out = inflater.decompress(payload, max_length=usize + 1)
+            if len(out) > usize:
+                found = f"one stating {usize} bytes that inflates to more"
+            elif not inflater.eof:
+                found = "an incomplete zlib stream"
+            else:
+                return out
+        else:
+            found = f"unknown compression method {method}"
     except isal_zlib.error as err:  # type: ignore[misc]  # the stub types it as an instance, not a class
         found = f"an undecodable one ({err})"
     raise _blf_error(path, "a zlib-compressed log container", found)
@@ -811,6 +827,8 @@ def _iter_mf4(path: Path, keep: _Filter, max_frames: int) -> Iterator[CanFrames]
         groups = _mf4_can_groups(mdf)
         if not groups and not any(any(c.name == "CAN_DataFrame" for c in g.channels) for g in mdf.groups):
             raise _mf4_error(path, "no CAN_DataFrame channel group (not a bus log)")
+        for g in groups:
+            _check_mf4_blocks(path, mdf.groups[g])
         start = float(mdf.header.start_time.timestamp())
         sources = [_mf4_records(path, mdf, g, start, keep, max_frames) for g in groups]
         if len(sources) == 1:
@@ -819,6 +837,14 @@ def _iter_mf4(path: Path, keep: _Filter, max_frames: int) -> Iterator[CanFrames]
             yield from _merge_by_time([(c for c in s if len(c)) for s in sources])
     finally:
         mdf.close()
+
+
+def _check_mf4_blocks(path: Path, group: Any) -> None:
+    """Refuse a data block stating more than the block limit before asammdf inflates it."""
+    for block in group.get_data_blocks():
+        if block.original_size > max_block_bytes():
+            what = f"an MF4 data block (at byte {block.address})"
+            raise block_too_large(str(path), what, f"one stating {block.original_size} bytes")
 
 
 def _merge_by_time(sources: list[Iterator[CanFrames]]) -> Iterator[CanFrames]:

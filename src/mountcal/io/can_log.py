@@ -61,6 +61,7 @@ from numpy.typing import NDArray
 from mountcal.errors import InputError
 from mountcal.io.can_frames import CanFrames, iter_frames, log_format
 from mountcal.io.dbc import decode, load_dbc, payload_bytes, raw_values
+from mountcal.io.inputs import check_regular_file, hold
 from mountcal.io.samples import Channel, FloatArray, LogSummary, Samples, Stream
 
 G_N = 9.80665  # standard gravity, m/s², for signals in g
@@ -188,7 +189,7 @@ def read_can(
     """
     path = Path(path)
     plan = _plan(path, dbc, mapping, channel)
-    return _concat(list(_pieces(path, plan, _FRAMES_PER_CHUNK)), plan, str(path))
+    return _concat(hold(_pieces(path, plan, _FRAMES_PER_CHUNK), str(path), "samples"), plan, str(path))
 
 
 def iter_can(
@@ -325,8 +326,7 @@ def _plan(
     path: Path, dbc: str | Path | Any, mapping: str | Path | Mapping[str, Any] | None, channel: int | None
 ) -> _Plan:
     log_format(path)
-    if not path.is_file():
-        raise InputError(str(path), "a CAN log file", "no such file", "Check the path.")
+    check_regular_file(path, "CAN log")
     db = _database(dbc)
     dbc_name = str(dbc) if isinstance(dbc, str | Path) else "the DBC"
     spec = _mapping_dict(mapping)

@@ -21,6 +21,7 @@ import numpy as np
 import pandas as pd
 
 from mountcal.errors import InputError
+from mountcal.io.inputs import check_parquet_rows, check_regular_file
 from mountcal.io.samples import Channel, LogSummary, Samples
 
 CAN_SUFFIXES = {".blf", ".asc", ".log", ".trc", ".mf4", ".mdf"}
@@ -73,8 +74,12 @@ def inspect_log(path: str | Path, options: LogOptions | None = None) -> LogSumma
 
 def read_table_samples(path: Path) -> Samples:
     """A CSV or Parquet table of samples: ``t_s, ax, ay, az`` in s and m/s²."""
+    check_regular_file(path, "sample table")
+    parquet = path.suffix.lower() in (".parquet", ".pq")
+    if parquet:
+        check_parquet_rows(path)
     try:
-        df = pd.read_parquet(path) if path.suffix.lower() in (".parquet", ".pq") else pd.read_csv(path)
+        df = pd.read_parquet(path) if parquet else pd.read_csv(path)
     except FileNotFoundError as err:
         raise InputError(str(path), "a readable sample table", "no such file", "Check the path.") from err
     except Exception as err:  # pandas raises many types for malformed files

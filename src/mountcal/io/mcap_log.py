@@ -29,6 +29,7 @@ Conventions of every function here:
 
 from __future__ import annotations
 
+import array
 import json
 import os
 import struct
@@ -47,6 +48,7 @@ from numpy.typing import NDArray
 
 from mountcal.errors import InputError
 from mountcal.io import cdr
+from mountcal.io.inputs import block_too_large, check_regular_file, max_block_bytes, max_rows, too_many_rows
 from mountcal.io.samples import Channel, FloatArray, LogSummary, Samples, Stream
 from mountcal.threads import helpers_allowed
 
@@ -61,6 +63,8 @@ _FOOTER = struct.Struct("<BQQQI")  # the whole footer record: opcode, length, su
 _MESSAGE_HEAD = 22  # channel id u16, sequence u32, log time u64, publish time u64
 _LOOSE_BATCH_BYTES = 8 << 20  # messages outside chunks are batched up to this size
 _READ_AHEAD = 3  # chunks decompressed ahead of the decoding
+_READ_AHEAD_BYTES = 32 << 20  # a larger chunk is decompressed when its turn comes, not ahead
+_MAX_CHUNK_OTHERS = 1 << 17  # non-message records in one chunk: a schema and a channel per channel id
 
 _KIND_OF_SCHEMA = {
     f"{pkg}/{sep}{name}": kind
@@ -219,6 +223,7 @@ def _open(path: str | os.PathLike[str], *, discover: bool = True) -> _Log:
     Without a summary listing the channels, ``discover`` finds them by reading the data section.
     """
     where = str(path)
+    check_regular_file(path, "MCAP log")
     try:
         file = open(path, "rb")  # closed by the caller, which owns the _Log
     except OSError as err:
@@ -285,9 +290,11 @@ def _read_summary(log: _Log, footer: bytes, start: int, end: int, crc: int) -> N
             log.statistics = _parse_statistics(body)
 
 
-def _walk(buf: bytes | memoryview, start: int, end: int, what: str) -> list[tuple[int, int, int]]:
-    """Records (opcode, body offset, body length) in ``buf[start:end]``, which they must tile."""
-    out = []
+def _walk(buf: bytes | memoryview, start: int, end: int, what: str) -> Iterator[tuple[int, int, int]]:
+    """Records (opcode, body offset, body length) in ``buf[start:end]``, which they must tile.
+
+    A generator: a section of millions of tiny records costs time, not memory.
+    """
     pos, unpack = start, _RECORD_HEAD.unpack_from
     while pos < end:
         if pos + _RECORD_HEAD.size > end:
@@ -296,8 +303,18 @@ def _walk(buf: bytes | memoryview, start: int, end: int, what: str) -> list[tupl
         body = pos + _RECORD_HEAD.size
         if body + length > end:
             raise _Corrupt(f"a record (opcode 0x{opcode:02x}) at byte {pos} of the {what} running past its end")
-        out.append((opcode, body, length))
+        yield opcode, body, length
         pos = body + length
+
+
+def _chunk_others(records: Iterator[tuple[int, int, int]], what: str, found: int = 0) -> list[tuple[int, int, int]]:
+    """The non-message records of a chunk (its schemas and channels), at most ``_MAX_CHUNK_OTHERS``
+    in all with the ``found`` ones already listed: more is filler, not a recording."""
+    out = []
+    for record in records:
+        out.append(record)
+        if len(out) + found > _MAX_CHUNK_OTHERS:
+            raise _Corrupt(f"more than {_MAX_CHUNK_OTHERS} records other than messages in the {what}")
     return out
 
 
@@ -346,7 +363,7 @@ def _decompress(job: _Job) -> U8Array:
         if job.compression == "zstd" and job.out is not None:
             records = _unzstd(job.data, job.out)
         elif job.compression == "lz4":
-            records = np.frombuffer(lz4.frame.decompress(job.data), dtype=np.uint8)
+            records = _unlz4(job.data, job.size)
         else:
             records = np.frombuffer(job.data, dtype=np.uint8)
     except (zstandard.ZstdError, RuntimeError, ValueError) as err:
@@ -354,6 +371,15 @@ def _decompress(job: _Job) -> U8Array:
     if records.size != job.size or (job.crc and zlib.crc32(records.data) != job.crc):
         raise _Corrupt(f"a chunk at byte {job.at} whose content fails its size or CRC check")
     return records
+
+
+def _unlz4(data: bytes | memoryview, size: int) -> U8Array:
+    """Decompress an lz4 frame, stopping one byte past ``size``: a frame inflating to more than
+    the chunk states is refused without inflating the rest."""
+    out = lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=size + 1)
+    if len(out) > size:
+        raise ValueError("more data than the chunk's stated uncompressed size")
+    return np.frombuffer(out, dtype=np.uint8)
 
 
 def _unzstd(data: bytes | memoryview, out: U8Array) -> U8Array:
@@ -396,7 +422,7 @@ def _messages_from_index(data: U8Array, at: I64Array, what: str) -> _Unit | None
     others: list[tuple[int, int, int]] = []
     for i in np.flatnonzero(gap_end > gap_start):  # normally just the leading schema/channel records
         try:
-            records = _walk(data.data, int(gap_start[i]), int(gap_end[i]), "chunk")
+            records = _chunk_others(_walk(data.data, int(gap_start[i]), int(gap_end[i]), what), what, len(others))
         except _Corrupt:
             return None
         if any(op == _OP_MESSAGE for op, _, _ in records):
@@ -426,14 +452,24 @@ def _messages_by_stride(data: U8Array, what: str) -> _Unit | None:
 
 
 def _messages_by_walk(data: U8Array, what: str) -> _Unit:
-    """The unit found by stepping through the records one by one (the slow, general way)."""
-    records = _walk(data.data, 0, data.size, what)
-    messages = [(pos - _RECORD_HEAD.size, length) for op, pos, length in records if op == _OP_MESSAGE]
-    table = np.array(messages, dtype=np.int64).reshape(-1, 2)
-    if np.any(table[:, 1] < _MESSAGE_HEAD):
-        raise _Corrupt(f"a message record shorter than its 22-byte header in the {what}")
-    others = [r for r in records if r[0] != _OP_MESSAGE]
-    return _Unit(data, table[:, 0].copy(), table[:, 1].copy(), others, what)
+    """The unit found by stepping through the records one by one (the slow, general way).
+
+    Message offsets and lengths go to compact arrays (each message record is at least 31 bytes,
+    so they take at most half the chunk's size); other records are capped in number.
+    """
+    at, lengths = array.array("q"), array.array("q")
+    others: list[tuple[int, int, int]] = []
+    for opcode, pos, length in _walk(data.data, 0, data.size, what):
+        if opcode != _OP_MESSAGE:
+            others.append((opcode, pos, length))
+            if len(others) > _MAX_CHUNK_OTHERS:
+                raise _Corrupt(f"more than {_MAX_CHUNK_OTHERS} records other than messages in the {what}")
+        elif length < _MESSAGE_HEAD:
+            raise _Corrupt(f"a message record shorter than its 22-byte header in the {what}")
+        else:
+            at.append(pos - _RECORD_HEAD.size)
+            lengths.append(length)
+    return _Unit(data, np.array(at, dtype=np.int64), np.array(lengths, dtype=np.int64), others, what)
 
 
 def _unit(data: U8Array, index: I64Array | None, what: str) -> _Unit:
@@ -507,6 +543,8 @@ def _chunk_job(
     at, length = chunk
     if wanted is not None and index and wanted.isdisjoint(index):
         return  # indexed, and none of its messages are wanted
+    if length > max_block_bytes() + (1 << 16):  # checked before reading it: a header holds a name
+        raise block_too_large(log.where, f"an MCAP chunk (at byte {at})", f"a chunk record of {length} bytes")
     log.file.seek(at)
     body = log.file.read(length)
     try:
@@ -518,6 +556,8 @@ def _chunk_job(
     data = memoryview(body)[40 + name_len : 40 + name_len + data_len]
     if len(data) != data_len or size > _MAX_CHUNK_BYTES:
         raise _Corrupt(f"a chunk at byte {at} whose stated sizes do not fit the file")
+    if size > max_block_bytes() or data_len > max_block_bytes():
+        raise block_too_large(log.where, f"an MCAP chunk (at byte {at})", f"a chunk stating {size} bytes")
     if compression not in ("zstd", "lz4", ""):
         raise _Corrupt(f"a chunk at byte {at} compressed with {compression!r} (readable: zstd, lz4, none)")
     # The output buffer is allocated here, on the reading thread, and freed here after decoding:
@@ -554,6 +594,11 @@ def _prefetch(jobs: Iterator[_Job]) -> Generator[tuple[_Job, U8Array], None, Non
         pending: deque[tuple[_Job, Future[U8Array]]] = deque()
         try:
             for job in jobs:
+                if job.size > _READ_AHEAD_BYTES:  # a big chunk: alone in memory, not read ahead
+                    while pending:
+                        yield _next_done(pending)
+                    yield job, _payload(job)
+                    continue
                 pending.append((job, pool.submit(_payload, job)))
                 if len(pending) > _READ_AHEAD:
                     yield _next_done(pending)
@@ -575,7 +620,10 @@ def _units(log: _Log, wanted: frozenset[int] | None) -> Generator[_Unit, None, N
     with closing(_prefetch(_jobs(log, wanted))) as prefetched:  # stop the worker on any exit
         for job, data in prefetched:
             what = f"{'chunk' if job.chunk else 'records'} at byte {job.at}"
-            yield _unit(data, job.index if job.chunk else None, what)
+            unit = _unit(data, job.index if job.chunk else None, what)
+            del job, data  # hold one chunk, not two, while the next one is read
+            yield unit
+            del unit
 
 
 def _discover(log: _Log) -> tuple[dict[int, _Schema], dict[int, _McapChannel]]:
@@ -584,13 +632,13 @@ def _discover(log: _Log) -> tuple[dict[int, _Schema], dict[int, _McapChannel]]:
     with closing(_units(log, None)) as units:
         for unit in units:
             for opcode, at, length in unit.others:
-                body = unit.data.data[at : at + length]
                 if opcode == _OP_SCHEMA:
-                    schema = _parse_schema(body)
+                    schema = _parse_schema(unit.data.data[at : at + length])
                     schemas[schema.id] = schema
                 elif opcode == _OP_CHANNEL:
-                    channel = _parse_channel(body)
+                    channel = _parse_channel(unit.data.data[at : at + length])
                     channels[channel.id] = channel
+            del unit  # not held while the next chunk is read
     return schemas, channels
 
 
@@ -886,7 +934,9 @@ def _decoded_units(
     wanted = frozenset(i for s in selections for i in s.channel_ids)
     with closing(_units(log, wanted)) as units:
         for unit in units:
-            yield _decode_unit(unit, selections, log.where)
+            decoded = _decode_unit(unit, selections, log.where)
+            del unit  # not held while the next chunk is read
+            yield decoded
 
 
 def _concat(pieces: list[_Piece]) -> _Piece:
@@ -925,11 +975,15 @@ def _read_open(log: _Log, topics: dict[str, str | None]) -> Samples:
     selections = [imu, *(s for s in aux if s is not None)]
     collected: dict[str, list[_Piece]] = {}
     dropped: Counter[str] = Counter()
+    held, limit = 0, max_rows()
     with closing(_decoded_units(log, selections)) as units:
         for pieces, drops in units:
             dropped.update(drops)
             for key, piece in pieces.items():
                 collected.setdefault(key, []).append(piece)
+                held += piece.t_s.size
+            if held > limit:  # counted a chunk at a time, before the whole log is held
+                raise too_many_rows(log.where, "samples (all topics read)", held)
     if not collected.get("imu") or not sum(p.t_s.size for p in collected["imu"]):
         raise _no_samples(log, imu.topic, dropped)
     samples = _concat(collected.pop("imu"))
@@ -1183,6 +1237,7 @@ def _spans_from_scan(log: _Log) -> _Spans:
         for unit in units:
             channel = _record_field(unit.data, unit.messages, _RECORD_HEAD.size, "<u2")
             log_ns = _record_field(unit.data, unit.messages, _RECORD_HEAD.size + 6, "<u8")
+            del unit  # not held while the next chunk is read
             for channel_id in np.unique(channel).tolist():
                 _merge(spans, channel_id, log_ns[channel == channel_id])
     return spans

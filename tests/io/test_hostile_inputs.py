@@ -1,0 +1,244 @@
+"""Hostile and unlucky inputs to the readers: decompression bombs and special files.
+
+Each bomb starts from a file written by the real writer (mcap's Writer, python-can's BLFWriter)
+and is then altered by byte surgery. Each is run through the CLI in a subprocess whose peak RSS is
+measured: it must end in a clear message (exit 2, no traceback) within the memory bound stated
+in docs/reliability.md.
+"""
+
+from __future__ import annotations
+
+import ast
+import os
+import struct
+import subprocess
+import sys
+import zlib
+from collections.abc import Iterator
+from pathlib import Path
+
+import can
+import lz4.frame
+import numpy as np
+import pytest
+import zstandard
+from mcap.writer import CompressionType, Writer
+
+from mountcal.errors import InputError
+from mountcal.io.can_frames import read_frames
+from mountcal.io.inputs import check_regular_file
+from mountcal.io.logs import read_table_samples
+from mountcal.io.mcap_log import inspect_mcap, read_mcap
+
+REPO = Path(__file__).resolve().parents[2]
+DBC = REPO / "data" / "imu_mm5_10.dbc"
+MIB = 1 << 20
+# The bound of docs/reliability.md for an input whose output is small: 1 GiB. These inputs are
+# refused, so their peak must stay far below what the bomb declares or inflates to.
+RSS_BOUND_MB = 1024
+
+_MEASURE = """
+import resource, subprocess, sys
+run = subprocess.run(sys.argv[1:], capture_output=True, text=True, timeout=120)
+peak_mb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+print(repr((run.returncode, run.stdout, run.stderr, peak_mb)))
+"""
+
+
+def run_cli(*args: str, env: dict[str, str] | None = None) -> tuple[int, str, float]:
+    """Exit code, stderr and peak RSS (MB) of ``mountcal ARGS`` alone in a measuring process."""
+    environ = {**os.environ, "PYTHONPATH": str(REPO / "src"), **(env or {})}
+    cmd = [sys.executable, "-c", _MEASURE, sys.executable, "-m", "mountcal", *args]
+    out = subprocess.run(cmd, capture_output=True, text=True, env=environ, timeout=180, check=True)
+    code, _, stderr, peak = ast.literal_eval(out.stdout)
+    return code, stderr, peak
+
+
+def assert_refused(code: int, stderr: str, peak_mb: float, *words: str) -> None:
+    assert code == 2, stderr
+    assert "Traceback" not in stderr, stderr
+    for word in words:
+        assert word in stderr, stderr
+    assert peak_mb < RSS_BOUND_MB, f"peak RSS {peak_mb:.0f} MB"
+    print(f"peak RSS {peak_mb:.0f} MB")  # shown with -s: the figures of docs/reliability.md
+
+
+# --------------------------------------------------------------------------- MCAP
+
+
+def _record(opcode: int, body: bytes) -> bytes:
+    return struct.pack("<BQ", opcode, len(body)) + body
+
+
+def _zeros_compressed(size: int, compress: object, head: bytes = b"") -> bytes:
+    """``size`` zero bytes through a streaming compressor (the test never holds them)."""
+    piece = bytes(MIB)
+    out = [head] + [compress.compress(piece) for _ in range(size // MIB)]  # type: ignore[attr-defined]
+    return b"".join(out) + compress.flush()  # type: ignore[attr-defined]
+
+
+def _bomb_mcap(path: Path, chunks: list[tuple[str, int, bytes]]) -> Path:
+    """An MCAP log from mcap's Writer (header, schema, channel), then ``chunks`` of
+    (compression, stated size, compressed records) spliced in, without indexes or summary."""
+    real = path.with_suffix(".real.mcap")
+    with real.open("wb") as f:
+        writer = Writer(f, compression=CompressionType.NONE, use_chunking=False)
+        writer.start(profile="ros2", library="test")
+        writer.register_schema("sensor_msgs/msg/Imu", "ros2msg", b"")
+        writer.finish()
+    raw = real.read_bytes()
+    magic = raw[:8]
+    header_len = struct.unpack_from("<Q", raw, 9)[0]
+    body_end = 8 + 9 + header_len
+    out = bytearray(raw[:body_end])
+    for compression, size, data in chunks:
+        name = compression.encode()
+        body = struct.pack("<QQQI", 0, 0, size, 0) + struct.pack("<I", len(name)) + name
+        out += _record(0x06, body + struct.pack("<Q", len(data)) + data)
+    out += _record(0x0F, struct.pack("<I", 0))  # data end
+    out += _record(0x02, struct.pack("<QQI", 0, 0, 0))  # footer without a summary
+    out += magic
+    path.write_bytes(bytes(out))
+    return path
+
+
+@pytest.fixture(scope="module")
+def zstd_gib_of_zeros() -> bytes:
+    return _zeros_compressed(1 << 30, zstandard.ZstdCompressor(level=1).compressobj())
+
+
+def test_mcap_chunk_stating_a_gibibyte_is_refused_before_inflating(tmp_path: Path, zstd_gib_of_zeros: bytes) -> None:
+    bomb = _bomb_mcap(tmp_path / "bomb.mcap", [("zstd", 1 << 30, zstd_gib_of_zeros)])
+    assert bomb.stat().st_size < 100_000
+    assert_refused(*run_cli("inspect", str(bomb)), "MOUNTCAL_MAX_BLOCK_MB", str(bomb))
+    assert_refused(*run_cli("stops", str(bomb), "-o", str(tmp_path / "s.csv")), "MOUNTCAL_MAX_BLOCK_MB")
+    assert not (tmp_path / "s.csv").exists()
+
+
+def test_mcap_six_chunks_of_zeros_under_the_limit_are_refused_in_bounded_memory(tmp_path: Path) -> None:
+    """200 MiB of zero records per chunk: honest sizes, but 10⁸ empty records are no recording."""
+    data = _zeros_compressed(200 * MIB, zstandard.ZstdCompressor(level=1).compressobj())
+    bomb = _bomb_mcap(tmp_path / "bomb6.mcap", [("zstd", 200 * MIB, data)] * 6)
+    assert bomb.stat().st_size < 200_000
+    code, stderr, peak = run_cli("inspect", str(bomb))
+    assert_refused(code, stderr, peak, "records other than messages")
+    with pytest.raises(InputError, match="records other than messages"):
+        read_mcap(bomb)
+
+
+def test_mcap_lz4_chunk_inflating_past_its_stated_size_is_cut_off(tmp_path: Path) -> None:
+    compressor = lz4.frame.LZ4FrameCompressor()
+    data = _zeros_compressed(512 * MIB, compressor, compressor.begin())
+    bomb = _bomb_mcap(tmp_path / "lz4.mcap", [("lz4", 4096, data)])
+    assert_refused(*run_cli("inspect", str(bomb)), "does not decompress")
+
+
+def test_mcap_raised_limit_is_used(tmp_path: Path, zstd_gib_of_zeros: bytes) -> None:
+    """The limit is the variable's: at 2 MiB a 4 MiB chunk is refused, at the default it is read."""
+    data = _zeros_compressed(4 * MIB, zstandard.ZstdCompressor(level=1).compressobj())
+    bomb = _bomb_mcap(tmp_path / "small.mcap", [("zstd", 4 * MIB, data)])
+    code, stderr, _ = run_cli("inspect", str(bomb), env={"MOUNTCAL_MAX_BLOCK_MB": "2"})
+    assert code == 2 and "MOUNTCAL_MAX_BLOCK_MB=8" in stderr, stderr
+    with pytest.raises(InputError, match="records other than messages"):  # read, then refused as filler
+        inspect_mcap(bomb)
+
+
+# --------------------------------------------------------------------------- BLF
+
+
+def _blf_with_bomb(path: Path, inflated: int, stated: int) -> Path:
+    """A BLF from python-can's BLFWriter whose first log container is replaced by one stating
+    ``stated`` bytes whose zlib stream inflates to ``inflated`` zero bytes."""
+    real = path.with_suffix(".real.blf")
+    with can.BLFWriter(str(real)) as writer:
+        for k in range(2000):
+            writer.on_message_received(can.Message(timestamp=k * 0.01, arbitration_id=0x123, data=bytes(8)))
+    raw = real.read_bytes()
+    header_size = struct.unpack_from("<L", raw, 4)[0]
+    signature, obj_header, _, obj_size, obj_type = struct.unpack_from("<4sHHLL", raw, header_size)
+    assert signature == b"LOBJ" and obj_type == 10  # a log container
+    payload = _zeros_compressed(inflated, zlib.compressobj(9))
+    container = struct.pack("<H6xL4x", 2, stated) + payload
+    size = 16 + len(container)
+    obj = struct.pack("<4sHHLL", b"LOBJ", obj_header, 1, size, 10) + container + bytes(size % 4)
+    rest = raw[header_size + obj_size + obj_size % 4 :]
+    out = bytearray(raw[:header_size] + obj + rest)
+    struct.pack_into("<Q", out, 16, len(out))  # the file size the header records
+    path.write_bytes(bytes(out))
+    return path
+
+
+def test_blf_container_inflating_past_its_stated_size_is_refused(tmp_path: Path) -> None:
+    bomb = _blf_with_bomb(tmp_path / "bomb.blf", 512 * MIB, 131_072)
+    assert bomb.stat().st_size < 1_000_000
+    code, stderr, peak = run_cli("inspect", str(bomb), "--dbc", str(DBC))
+    assert_refused(code, stderr, peak, "stating 131072 bytes that inflates to more")
+    assert peak < 400, f"peak RSS {peak:.0f} MB"  # the cap holds it to what the container states
+    with pytest.raises(InputError, match="inflates to more"):
+        read_frames(bomb)
+
+
+def test_blf_container_stating_more_than_the_limit_is_refused(tmp_path: Path) -> None:
+    bomb = _blf_with_bomb(tmp_path / "big.blf", MIB, 1 << 31)
+    with pytest.raises(InputError, match="MOUNTCAL_MAX_BLOCK_MB"):
+        read_frames(bomb)
+
+
+# --------------------------------------------------------------------------- tables
+
+
+def test_parquet_declaring_more_rows_than_the_limit_is_refused_from_its_footer(tmp_path: Path) -> None:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    n = 3_000_000  # zeros: a few kilobytes on disk
+    table = pa.table({c: pa.array(np.zeros(n)) for c in ("t_s", "ax", "ay", "az")})
+    path = tmp_path / "rows.parquet"
+    pq.write_table(table, path)
+    code, stderr, _ = run_cli("inspect", str(path), env={"MOUNTCAL_MAX_ROWS": "1000000"})
+    assert code == 2 and "MOUNTCAL_MAX_ROWS" in stderr and "3000000" in stderr, stderr
+    assert "Traceback" not in stderr
+
+
+# --------------------------------------------------------------------------- special files
+
+
+def _special_files(tmp_path: Path) -> Iterator[tuple[Path, str]]:
+    fifo = tmp_path / "pipe.mcap"
+    os.mkfifo(fifo)
+    yield fifo, "FIFO"
+    folder = tmp_path / "folder.blf"
+    folder.mkdir()
+    yield folder, "directory"
+    yield Path("/dev/zero"), "character device"
+
+
+@pytest.mark.parametrize("suffix", [".mcap", ".blf", ".csv", ".parquet"])
+def test_special_files_are_refused_not_read(tmp_path: Path, suffix: str) -> None:
+    for special, kind in _special_files(tmp_path):
+        link = special.parent / f"link{suffix}"  # readers pick the format by suffix
+        if link.is_symlink():
+            link.unlink()
+        link.symlink_to(special)
+        args = ["inspect", str(link)] + (["--dbc", str(DBC)] if suffix == ".blf" else [])
+        code, stderr, _ = run_cli(*args)  # a read of any of them would block or never end
+        assert code == 2 and kind in stderr and "Traceback" not in stderr, stderr
+
+
+def test_check_regular_file_names_the_role(tmp_path: Path) -> None:
+    (tmp_path / "dir").mkdir()
+    plain = tmp_path / "plain.csv"
+    plain.write_text("t_s,ax,ay,az\n")
+    assert check_regular_file(plain, "stop table") == plain
+    with pytest.raises(InputError, match=r"a protocol sheet as a regular file.*a directory"):
+        check_regular_file(tmp_path / "dir", "protocol sheet")
+    with pytest.raises(InputError, match="no such file"):
+        check_regular_file(tmp_path / "absent", "DBC")
+    with pytest.raises(InputError, match="directory"):
+        read_table_samples(tmp_path / "dir")
+
+
+def test_a_recording_still_reads_whole(tmp_path: Path) -> None:
+    """The limits do not touch a real log: parking.mcap reads as before."""
+    samples = read_mcap(REPO / "data" / "parking.mcap")
+    assert len(samples) > 10_000 and np.isfinite(samples.acc_s).all()
