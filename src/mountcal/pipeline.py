@@ -9,6 +9,7 @@ from pathlib import Path
 from mountcal.calibrate import Options, calibrate
 from mountcal.io.logs import LogOptions, read_log
 from mountcal.io.samples import Samples
+from mountcal.io.timestamps import increasing_times
 from mountcal.result import Calibration
 from mountcal.stops import StopDetection, StopTableFromLog, read_protocol, tabulate
 from mountcal.stoptable import StopTable, stop_table_from_frame
@@ -38,7 +39,7 @@ class LogCalibration:
 
 def stops_of_log(job: LogJob) -> tuple[Samples, StopTableFromLog]:
     """Read the log and tabulate its stops with their headings."""
-    samples = read_log(list(job.paths), job.log)
+    samples = increasing_times(read_log(list(job.paths), job.log))  # duplicate stamps merged and counted
     protocol = read_protocol(job.protocol) if job.protocol else None
     return samples, tabulate(samples, job.detection, protocol, job.uphill_azimuth_deg)
 
@@ -58,4 +59,5 @@ def describe(samples: Samples, found: StopTableFromLog, n_files: int) -> Sequenc
         f"read {len(samples)} samples from {n_files} file(s)" + (f"; dropped {dropped}" if dropped else ""),
         f"found {len(found.frame)} stops; headings: {found.heading_source}"
         + (f"; {found.unmatched_protocol_rows} protocol rows without a stop" if found.unmatched_protocol_rows else ""),
+        *found.notes,
     ]

@@ -24,6 +24,7 @@ from mountcal.errors import NotEnoughInformation
 from mountcal.estimate.driving import DrivingFit, DrivingOptions, combine, driving_calibration, estimate_driving
 from mountcal.io.logs import read_log
 from mountcal.io.samples import Samples
+from mountcal.io.timestamps import increasing_times
 from mountcal.pipeline import LogJob
 from mountcal.result import Calibration
 from mountcal.stops import StopTableFromLog, read_protocol, tabulate
@@ -68,7 +69,7 @@ def calibrate_any(job: LogJob, use: Use = "auto", driving: DrivingOptions | None
     NotEnoughInformation
         When the log supports neither source (the message gives both reasons).
     """
-    samples = read_log(list(job.paths), job.log)
+    samples = increasing_times(read_log(list(job.paths), job.log))  # duplicate stamps merged and counted
     source = " + ".join(str(Path(p)) for p in job.paths)
     skipped: dict[str, str] = {}
     static = found = table = None
@@ -121,6 +122,7 @@ def describe_any(result: LogResult, n_files: int) -> Sequence[str]:
                 else ""
             )
         )
+        lines += found.notes
     if result.driving is not None:
         d = result.driving
         offset = f"{d.time_offset_s:+.3f} s" + (
