@@ -9,7 +9,6 @@ from pathlib import Path
 from mountcal.calibrate import Options, calibrate
 from mountcal.io.logs import LogOptions, read_log
 from mountcal.io.samples import Samples
-from mountcal.io.timestamps import increasing_times
 from mountcal.result import Calibration
 from mountcal.stops import StopDetection, StopTableFromLog, read_protocol, tabulate
 from mountcal.stoptable import StopTable, stop_table_from_frame
@@ -39,7 +38,7 @@ class LogCalibration:
 
 def stops_of_log(job: LogJob) -> tuple[Samples, StopTableFromLog]:
     """Read the log and tabulate its stops with their headings."""
-    samples = increasing_times(read_log(list(job.paths), job.log))  # duplicate stamps merged and counted
+    samples = read_log(list(job.paths), job.log)  # stop detection merges duplicate stamps and says so
     protocol = read_protocol(job.protocol) if job.protocol else None
     return samples, tabulate(samples, job.detection, protocol, job.uphill_azimuth_deg)
 

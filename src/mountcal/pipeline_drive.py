@@ -69,7 +69,7 @@ def calibrate_any(job: LogJob, use: Use = "auto", driving: DrivingOptions | None
     NotEnoughInformation
         When the log supports neither source (the message gives both reasons).
     """
-    samples = increasing_times(read_log(list(job.paths), job.log))  # duplicate stamps merged and counted
+    samples = read_log(list(job.paths), job.log)
     source = " + ".join(str(Path(p)) for p in job.paths)
     skipped: dict[str, str] = {}
     static = found = table = None
@@ -86,7 +86,7 @@ def calibrate_any(job: LogJob, use: Use = "auto", driving: DrivingOptions | None
     fit = None
     if use in ("auto", "driving"):
         try:
-            fit = estimate_driving(samples, driving, tilt_from=static)
+            fit = estimate_driving(increasing_times(samples), driving, tilt_from=static)  # duplicate stamps merged
         except NotEnoughInformation as err:
             if use == "driving":
                 raise
@@ -104,7 +104,7 @@ def calibrate_any(job: LogJob, use: Use = "auto", driving: DrivingOptions | None
     assert fit is not None
     g, g_source = _gravity(samples, job.options.gravity_mps2)
     cal = driving_calibration(fit, gravity_mps2=g, gravity_source=g_source, provenance=_provenance(job.paths))
-    return LogResult(cal, samples, "driving", None, fit, None, None, skipped)
+    return LogResult(cal, increasing_times(samples), "driving", None, fit, None, None, skipped)  # counts merged stamps
 
 
 def describe_any(result: LogResult, n_files: int) -> Sequence[str]:

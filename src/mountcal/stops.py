@@ -118,10 +118,12 @@ class StopSearch:
 
 def still_mask(samples: Samples, cfg: StopDetection) -> np.ndarray:
     """Boolean mask, shape (n,), of the samples that look parked (times strictly increasing)."""
-    return _stillness(samples, cfg)[0]
+    return _stillness(samples, cfg, _lsb(samples.acc_s), None if samples.gyro_s is None else _lsb(samples.gyro_s))[0]
 
 
-def _stillness(samples: Samples, cfg: StopDetection) -> tuple[np.ndarray, Thresholds]:
+def _stillness(
+    samples: Samples, cfg: StopDetection, acc_lsb: FloatArray, gyro_lsb: FloatArray | None
+) -> tuple[np.ndarray, Thresholds]:
     """The still mask and the thresholds it used.
 
     The moving statistics run on short blocks (≈ 1/40 of the window) rather than on every sample:
@@ -130,7 +132,6 @@ def _stillness(samples: Samples, cfg: StopDetection) -> tuple[np.ndarray, Thresh
     """
     t, acc = samples.t_s, samples.acc_s
     n = len(samples)
-    acc_lsb = _lsb(acc)
     if n < 3:
         return np.zeros(n, dtype=bool), Thresholds(cfg.max_acc_std_mps2 or ACC_STD_FLOOR, np.zeros(3), acc_lsb)
     rate = 1.0 / float(np.median(np.diff(t)))
@@ -162,7 +163,7 @@ def _stillness(samples: Samples, cfg: StopDetection) -> tuple[np.ndarray, Thresh
     found = Thresholds(max_std, acc_rest, acc_lsb, speed_mps=cfg.max_speed_mps if has_speed else None)
     if samples.gyro_s is not None:
         g_mean, g_std = moving(samples.gyro_s)
-        g_lsb = _lsb(samples.gyro_s)
+        g_lsb = np.zeros(3) if gyro_lsb is None else gyro_lsb
         g_rest = np.percentile(g_std, REST_QUANTILE, axis=0)
         # the bias: the rate while the accelerometer (and speed) say still; a drive's median rate otherwise
         bias = np.median(g_mean[still] if still.sum() >= w else g_mean, axis=0)
@@ -199,10 +200,13 @@ def find_stops(
         inside each interval is taken.
     """
     cfg = cfg or StopDetection()
+    # the quantisation of the samples as logged: merging equal stamps averages codes into half steps
+    acc_lsb = _lsb(samples.acc_s)
+    gyro_lsb = None if samples.gyro_s is None else _lsb(samples.gyro_s)
     before = dict(samples.dropped)
     samples = increasing_times(samples)
     counts = {k: v - before.get(k, 0) for k, v in samples.dropped.items() if v != before.get(k, 0)}
-    still, thresholds = _stillness(samples, cfg)
+    still, thresholds = _stillness(samples, cfg, acc_lsb, gyro_lsb)
     runs = _runs(still)
     t = samples.t_s
     if windows is not None:
@@ -337,9 +341,11 @@ def _cov_of_mean(acc: FloatArray, lsb: FloatArray) -> FloatArray:
 
     Quantisation with step q biases a mean by up to q/2 when the noise does not dither it (a
     constant signal on one code says only that the truth lies within ±q/2: σ = q/√12), and by a
-    vanishing amount when it does: the mean of a quantised Gaussian of noise σ is off by a term
-    ∝ exp(−2π²σ²/q²) (Widrow's quantisation theorem). The floor ``q/√12 · exp(−2π²σ²/q²)``, with σ the
-    noise before quantisation (``s² − q²/12``), spans both.
+    vanishing amount when it does. Samples on two codes (a fraction p on the rarer one) leave a
+    small noise unknown: the mean is then off by at most q·(½ − p), so the floor is
+    ``min(q/√12, q·(½ − p))``. Samples on three or more codes are dithered by a noise σ (estimated
+    as ``s² − q²/12``), and the mean of a quantised Gaussian is off by a term ∝ exp(−2π²σ²/q²)
+    (Widrow's quantisation theorem): the floor is ``q/√12 · exp(−2π²σ²/q²)``.
     """
     n = acc.shape[0]
     k = BATCHES if n >= 10 * BATCHES else max(n // 2, 1)
@@ -350,10 +356,17 @@ def _cov_of_mean(acc: FloatArray, lsb: FloatArray) -> FloatArray:
     if cov.shape != (3, 3):  # a single sample
         cov = np.zeros((3, 3))
     sample_var = acc.var(axis=0, ddof=1) if n > 1 else np.zeros(3)
-    q = np.asarray(lsb, dtype=float)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        noise_var = np.clip(sample_var - q**2 / 12.0, 0.0, None)
-        floor = np.where(q > 0, q**2 / 12.0 * np.exp(-4.0 * np.pi**2 * noise_var / np.where(q > 0, q, 1.0) ** 2), 0.0)
+    floor = np.zeros(3)
+    for j, q in enumerate(np.asarray(lsb, dtype=float)):
+        if q <= 0:
+            continue
+        _, counts = np.unique(np.round(acc[:, j] / q), return_counts=True)
+        if counts.size <= 2:
+            rare = counts.min() / n if counts.size == 2 else 0.0
+            floor[j] = min(q / np.sqrt(12.0), q * (0.5 - rare)) ** 2
+        else:
+            noise_var = max(sample_var[j] - q**2 / 12.0, 0.0)
+            floor[j] = q**2 / 12.0 * np.exp(-4.0 * np.pi**2 * noise_var / q**2)
     cov[np.diag_indices(3)] = np.maximum(np.diag(cov), floor)
     cov[np.diag_indices(3)] = np.maximum(np.diag(cov), sample_var / n)  # never less than independent samples
     return cov
