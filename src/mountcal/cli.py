@@ -173,7 +173,7 @@ def cmd_fleet(args: argparse.Namespace) -> int:
 
     defaults = JobDefaults(
         log=LogOptions(dbc=args.dbc, mapping=args.mapping, channel=args.channel, topic=args.topic),
-        detection=StopDetection(max_acc_std_mps2=args.max_acc_std, min_duration_s=args.min_stop_s),
+        detection=_detection(args),
         uphill_azimuth_deg=args.uphill_azimuth_deg,
         options=Options(method=args.method, model=args.model, max_yaw_sigma_deg=args.max_yaw_sigma),
         headings=args.headings,
@@ -217,7 +217,7 @@ def _job(args: argparse.Namespace, options: Options | None = None) -> LogJob:
     return LogJob(
         paths=tuple(args.input),
         log=LogOptions(dbc=args.dbc, mapping=args.mapping, channel=args.channel, topic=args.topic),
-        detection=StopDetection(max_acc_std_mps2=args.max_acc_std, min_duration_s=args.min_stop_s),
+        detection=_detection(args),
         protocol=args.protocol,
         uphill_azimuth_deg=args.uphill_azimuth_deg,
         options=options or Options(),
@@ -372,13 +372,38 @@ def _log_arguments(p: argparse.ArgumentParser) -> None:
         default=None,
         help="compass azimuth of the slope's uphill direction, with a heading signal in the log",
     )
-    g.add_argument(
-        "--max-acc-std",
-        type=float,
-        default=StopDetection.max_acc_std_mps2,
-        help="stillness: moving std of each axis below this (m/s²)",
+    _detection_arguments(g)
+
+
+def _detection_arguments(g: argparse._ArgumentGroup) -> None:
+    """The thresholds of stop detection (:class:`mountcal.stops.StopDetection`); unset ones come from the log."""
+    d = StopDetection()
+
+    def add(flag: str, default: float | None, text: str) -> None:
+        shown = "from the log" if default is None else f"{default:g}"
+        g.add_argument(flag, type=float, default=default, help=f"{text}; default {shown})")
+
+    add("--max-acc-std", d.max_acc_std_mps2, "stillness: moving std of each axis below this (m/s²")
+    add("--max-gyro-std", d.max_gyro_std_rad_s, "stillness: moving std of each gyro axis below this (rad/s")
+    add("--max-gyro-rate", d.max_gyro_rad_s, "stillness: angular rate within this of the gyro's bias (rad/s")
+    add("--max-speed", d.max_speed_mps, "stillness: speed at most this (m/s")
+    add("--still-window-s", d.window_s, "window of the moving statistics (s")
+    add("--min-stop-s", d.min_duration_s, "shortest stop (s")
+    add("--trim-s", d.trim_s, "settling cut from both ends of a stop (s")
+    add("--max-heading-wander", d.max_heading_wander_deg, "a stop whose heading wanders more is split (deg")
+
+
+def _detection(args: argparse.Namespace) -> StopDetection:
+    return StopDetection(
+        window_s=args.still_window_s,
+        max_acc_std_mps2=args.max_acc_std,
+        max_gyro_std_rad_s=args.max_gyro_std,
+        max_gyro_rad_s=args.max_gyro_rate,
+        max_speed_mps=args.max_speed,
+        min_duration_s=args.min_stop_s,
+        trim_s=args.trim_s,
+        max_heading_wander_deg=args.max_heading_wander,
     )
-    g.add_argument("--min-stop-s", type=float, default=StopDetection.min_duration_s, help="shortest stop (s)")
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -498,8 +523,7 @@ def _parser() -> argparse.ArgumentParser:
     fg.add_argument("--channel", type=int, default=None, help="CAN channel of the IMU")
     fg.add_argument("--topic", default=None, help="IMU topic (MCAP)")
     fg.add_argument("--uphill-azimuth-deg", type=float, default=None, help="compass azimuth of the slopes' uphill")
-    fg.add_argument("--max-acc-std", type=float, default=StopDetection.max_acc_std_mps2, help="stillness (m/s²)")
-    fg.add_argument("--min-stop-s", type=float, default=StopDetection.min_duration_s, help="shortest stop (s)")
+    _detection_arguments(fg)
     fg.add_argument("--method", choices=("full", "paper"), default="full")
     fg.add_argument("--model", default="auto", help=model_terms.help_text())
     fg.add_argument(

@@ -38,7 +38,7 @@ class LogCalibration:
 
 def stops_of_log(job: LogJob) -> tuple[Samples, StopTableFromLog]:
     """Read the log and tabulate its stops with their headings."""
-    samples = read_log(list(job.paths), job.log)
+    samples = read_log(list(job.paths), job.log)  # stop detection merges duplicate stamps and says so
     protocol = read_protocol(job.protocol) if job.protocol else None
     return samples, tabulate(samples, job.detection, protocol, job.uphill_azimuth_deg)
 
@@ -58,4 +58,5 @@ def describe(samples: Samples, found: StopTableFromLog, n_files: int) -> Sequenc
         f"read {len(samples)} samples from {n_files} file(s)" + (f"; dropped {dropped}" if dropped else ""),
         f"found {len(found.frame)} stops; headings: {found.heading_source}"
         + (f"; {found.unmatched_protocol_rows} protocol rows without a stop" if found.unmatched_protocol_rows else ""),
+        *found.notes,
     ]

@@ -24,6 +24,7 @@ from mountcal.errors import NotEnoughInformation
 from mountcal.estimate.driving import DrivingFit, DrivingOptions, combine, driving_calibration, estimate_driving
 from mountcal.io.logs import read_log
 from mountcal.io.samples import Samples
+from mountcal.io.timestamps import increasing_times
 from mountcal.pipeline import LogJob
 from mountcal.result import Calibration
 from mountcal.stops import StopTableFromLog, read_protocol, tabulate
@@ -85,7 +86,7 @@ def calibrate_any(job: LogJob, use: Use = "auto", driving: DrivingOptions | None
     fit = None
     if use in ("auto", "driving"):
         try:
-            fit = estimate_driving(samples, driving, tilt_from=static)
+            fit = estimate_driving(increasing_times(samples), driving, tilt_from=static)  # duplicate stamps merged
         except NotEnoughInformation as err:
             if use == "driving":
                 raise
@@ -103,7 +104,7 @@ def calibrate_any(job: LogJob, use: Use = "auto", driving: DrivingOptions | None
     assert fit is not None
     g, g_source = _gravity(samples, job.options.gravity_mps2)
     cal = driving_calibration(fit, gravity_mps2=g, gravity_source=g_source, provenance=_provenance(job.paths))
-    return LogResult(cal, samples, "driving", None, fit, None, None, skipped)
+    return LogResult(cal, increasing_times(samples), "driving", None, fit, None, None, skipped)  # counts merged stamps
 
 
 def describe_any(result: LogResult, n_files: int) -> Sequence[str]:
@@ -121,6 +122,7 @@ def describe_any(result: LogResult, n_files: int) -> Sequence[str]:
                 else ""
             )
         )
+        lines += found.notes
     if result.driving is not None:
         d = result.driving
         offset = f"{d.time_offset_s:+.3f} s" + (

@@ -202,12 +202,22 @@ def simulate_parking_log(
     uphill_azimuth_deg: float = 30.0,
     g_mps2: float = G_N,
     seed: int | np.random.Generator | None = None,
+    gyro_bias_rad_s: FloatArray | None = None,
+    acc_lsb_mps2: float = 0.0,
+    gyro_lsb_rad_s: float = 0.0,
+    paired_stamps: bool = False,
+    wander_deg: tuple[float, ...] | None = None,
 ) -> ParkingLog:
     """A parking session on one slope: stops at the headings β, driven between with turns.
 
     Between stops the vehicle launches, turns to the next heading and brakes (peak speed
     ≈ 6 m/s); the specific force then adds the longitudinal acceleration and the centripetal
     one (``v · ω``). Engine-idle vibration is white noise of ``noise_mps2`` on every sample.
+
+    What field loggers add: a constant gyro bias; quantisation of the accelerometer and gyro to
+    steps of ``acc_lsb_mps2`` and ``gyro_lsb_rad_s`` (0: none); samples stamped in pairs (two
+    readings per stamp, ``paired_stamps``); and a vehicle that slowly turns by ``wander_deg[i]``
+    during stop i (the protocol's β is the heading at the stop's start).
     """
     rng = np.random.default_rng(seed)
     rot = rot_vs_from_angles(*np.radians([roll_deg, pitch_deg, yaw_deg]))
@@ -217,11 +227,12 @@ def simulate_parking_log(
     pieces_t, pieces_beta, pieces_v, pieces_acc_long = [], [], [], []
     protocol = []
     t0 = 0.0
+    wander = np.zeros(betas.size) if wander_deg is None else np.asarray(wander_deg, dtype=float)
     for i, b in enumerate(betas):
         n_stop = int(stop_s * rate_hz)
         tt = t0 + np.arange(n_stop) * dt
         pieces_t.append(tt)
-        pieces_beta.append(np.full(n_stop, b))
+        pieces_beta.append(b + wander[i] * np.arange(n_stop) / n_stop)
         pieces_v.append(np.zeros(n_stop))
         pieces_acc_long.append(np.zeros(n_stop))
         protocol.append((float(tt[0]), float(tt[-1]), float(b)))
@@ -229,6 +240,7 @@ def simulate_parking_log(
         if i + 1 < betas.size:
             n_drive = int(drive_s * rate_hz)
             tau = np.arange(n_drive) / n_drive
+            b = b + wander[i]  # the drive starts where the stop's heading ended
             turn = ((betas[i + 1] - b + 180.0) % 360.0) - 180.0 + 360.0  # a full loop plus the change
             v_peak = 6.0
             v = v_peak * np.sin(np.pi * tau) ** 2
@@ -248,10 +260,16 @@ def simulate_parking_log(
     acc = rot.inv().apply(f_v) + bias + rng.normal(0.0, noise_mps2, size=f_v.shape)
     gyro_v = np.column_stack([np.zeros_like(omega_z), np.zeros_like(omega_z), omega_z])
     gyro = rot.inv().apply(gyro_v) + rng.normal(0.0, gyro_noise_rad_s, size=f_v.shape)
+    if gyro_bias_rad_s is not None:
+        gyro = gyro + np.asarray(gyro_bias_rad_s, dtype=float)
+    if acc_lsb_mps2 > 0:
+        acc = np.round(acc / acc_lsb_mps2) * acc_lsb_mps2
+    if gyro_lsb_rad_s > 0:
+        gyro = np.round(gyro / gyro_lsb_rad_s) * gyro_lsb_rad_s
     temperature = 25.0 + 5.0 * t / t[-1] + rng.normal(0.0, 0.05, size=t.size)
     truth = Truth(rot_vs=rot, slope_deg=slope_deg, beta_deg=betas, g_mps2=g_mps2, bias_mps2=bias)
     return ParkingLog(
-        t_s=t,
+        t_s=t[np.arange(t.size) // 2 * 2] if paired_stamps else t,
         acc_s=acc,
         gyro_s=gyro,
         speed_mps=v,

@@ -1,15 +1,20 @@
 """Parked periods in a log: detection, per-stop statistics, and the stop table they make.
 
 A sample is *still* when, over a moving window, every accelerometer axis varies less than a
-threshold, the angular rate (when logged) is small and the vehicle speed (when logged) is near
-zero. Still runs longer than ``min_duration_s`` after trimming ``trim_s`` of settling at both ends
-are stops. Each stop's mean gets an honest covariance: batch means account for correlated
-vibration, and a quantised signal that does not dither is given its quantisation floor.
+threshold, the angular rate (when logged) neither changes nor departs from the gyro's own bias,
+and the vehicle speed (when logged) is near zero. The thresholds are set from the log itself: the
+sensor's rest noise (the quietest windows), its quantisation step (a quantised axis at rest may
+toggle between two codes) and the gyro bias (a constant rate is still, a changing one is not);
+every one can be given instead. Still runs longer than ``min_duration_s`` after trimming
+``trim_s`` of settling at both ends are stops; a run whose heading wanders more than
+``max_heading_wander_deg`` is split into pieces that do not (too short a piece is dropped), and
+both are counted. Each stop's mean gets an honest covariance: batch means account for correlated
+vibration, and quantisation sets a floor that depends on how much the noise dithers it.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
@@ -17,22 +22,68 @@ import pandas as pd
 from mountcal.conventions import FloatArray
 from mountcal.errors import NotEnoughInformation
 from mountcal.io.samples import Channel, Samples
+from mountcal.io.timestamps import increasing_times
 
 BATCHES = 10  # batch means for the variance of a stop mean
 BLOCKS_PER_WINDOW = 40
+REST_QUANTILE = 2.0  # percent of the windows taken as the sensor at rest
+REST_FACTOR = 3.0  # a still window spreads less than this many times the rest noise
+ACC_STD_FLOOR = 0.12  # m/s²: without a speed signal, any parked vehicle is at least this still
+ACC_STD_FLOOR_WITH_SPEED = 0.3  # with a speed signal stillness rests on it: idle vibration is allowed
+GYRO_STD_FLOOR = 0.01  # rad/s (0.57 °/s): a parked vehicle rotates less, a pulling-off one more
+GYRO_RATE_FLOOR = 0.02  # rad/s away from the gyro bias
 
 
 @dataclass(frozen=True)
 class StopDetection:
-    """Thresholds of stop detection (defaults work on the CANedge car log in shared/data/real)."""
+    """Thresholds of stop detection; ``None`` means "set from the log" (see :class:`Thresholds`)."""
 
     window_s: float = 2.0
-    max_acc_std_mps2: float = 0.12
-    max_acc_std_with_speed_mps2: float = 0.3  # with a speed signal, stillness rests on it; idle vibration is allowed
-    max_gyro_rad_s: float = 0.02
+    max_acc_std_mps2: float | None = None  # moving std of each accelerometer axis
+    max_gyro_std_rad_s: float | None = None  # moving std of each gyro axis: a changing rate is not still
+    max_gyro_rad_s: float | None = None  # |moving mean rate − gyro bias|: a turn is not still
     max_speed_mps: float = 0.3
     min_duration_s: float = 8.0
     trim_s: float = 2.0
+    max_heading_wander_deg: float = 10.0  # span of the (window-smoothed) heading within one stop
+
+
+@dataclass(frozen=True)
+class Thresholds:
+    """The stillness thresholds used, with the sensor properties measured to set them."""
+
+    acc_std_mps2: float
+    acc_rest_noise_mps2: FloatArray  # shape (3,), moving std in the quietest windows
+    acc_lsb_mps2: FloatArray  # shape (3,), quantisation step (0 when not quantised)
+    gyro_std_rad_s: float | None = None
+    gyro_rate_rad_s: float | None = None
+    gyro_bias_rad_s: FloatArray | None = None
+    gyro_rest_noise_rad_s: FloatArray | None = None
+    gyro_lsb_rad_s: FloatArray | None = None
+    speed_mps: float | None = None
+
+    def lines(self) -> list[str]:
+        """What the detector used, for the user (with the option that changes each)."""
+
+        def vec(x: FloatArray, scale: float = 1.0) -> str:
+            return "(" + ", ".join(f"{v * scale:.3g}" for v in x) + ")"
+
+        out = [
+            f"stillness: accelerometer moving std < {self.acc_std_mps2:.3g} m/s² (--max-acc-std; rest noise "
+            f"{vec(self.acc_rest_noise_mps2)}, quantisation {vec(self.acc_lsb_mps2)} m/s²)"
+        ]
+        if self.gyro_std_rad_s is not None and self.gyro_rate_rad_s is not None and self.gyro_bias_rad_s is not None:
+            assert self.gyro_rest_noise_rad_s is not None and self.gyro_lsb_rad_s is not None
+            deg = float(np.degrees(1.0))
+            out.append(
+                f"stillness: gyro moving std < {self.gyro_std_rad_s:.3g} rad/s (--max-gyro-std) and rate within "
+                f"{self.gyro_rate_rad_s:.3g} rad/s of the gyro bias {vec(self.gyro_bias_rad_s, deg)} °/s "
+                f"(--max-gyro-rate; rest noise {vec(self.gyro_rest_noise_rad_s, deg)} °/s, "
+                f"quantisation {vec(self.gyro_lsb_rad_s, deg)} °/s)"
+            )
+        if self.speed_mps is not None:
+            out.append(f"stillness: speed ≤ {self.speed_mps:g} m/s (--max-speed)")
+        return out
 
 
 @dataclass(frozen=True)
@@ -46,14 +97,34 @@ class Stop:
     acc_cov_mean_s: FloatArray  # shape (3, 3), covariance of the mean
     channels: dict[str, float]  # means of the auxiliary channels over the stop
     heading_std_deg: float | None = None
+    acc_std_s: FloatArray = field(default_factory=lambda: np.full(3, np.nan))  # sample std of each axis
 
     @property
     def duration_s(self) -> float:
         return self.t_end_s - self.t_start_s
 
 
+@dataclass(frozen=True)
+class StopSearch:
+    """The stops of a log, the thresholds that found them, and what was changed or left out."""
+
+    stops: list[Stop]
+    thresholds: Thresholds
+    counts: dict[str, int] = field(default_factory=dict)
+
+    def lines(self) -> list[str]:
+        return self.thresholds.lines() + [f"{k}: {v}" for k, v in self.counts.items()]
+
+
 def still_mask(samples: Samples, cfg: StopDetection) -> np.ndarray:
-    """Boolean mask, shape (n,), of the samples that look parked.
+    """Boolean mask, shape (n,), of the samples that look parked (times strictly increasing)."""
+    return _stillness(samples, cfg, _lsb(samples.acc_s), None if samples.gyro_s is None else _lsb(samples.gyro_s))[0]
+
+
+def _stillness(
+    samples: Samples, cfg: StopDetection, acc_lsb: FloatArray, gyro_lsb: FloatArray | None
+) -> tuple[np.ndarray, Thresholds]:
+    """The still mask and the thresholds it used.
 
     The moving statistics run on short blocks (≈ 1/40 of the window) rather than on every sample:
     stillness over seconds does not need the sample rate's resolution, and an hour at 200 Hz then
@@ -62,45 +133,80 @@ def still_mask(samples: Samples, cfg: StopDetection) -> np.ndarray:
     t, acc = samples.t_s, samples.acc_s
     n = len(samples)
     if n < 3:
-        return np.zeros(n, dtype=bool)
+        return np.zeros(n, dtype=bool), Thresholds(cfg.max_acc_std_mps2 or ACC_STD_FLOOR, np.zeros(3), acc_lsb)
     rate = 1.0 / float(np.median(np.diff(t)))
     block = max(int(cfg.window_s * rate) // BLOCKS_PER_WINDOW, 1)
     starts = np.arange(0, n, block)
     count = np.diff(np.append(starts, n)).astype(float)[:, None]
-    s1 = np.add.reduceat(acc, starts, axis=0)
-    s2 = np.add.reduceat(acc * acc, starts, axis=0)
     w = max(round(cfg.window_s * rate / block), 1)
-    m1, m2, mc = _moving_mean(s1, w), _moving_mean(s2, w), _moving_mean(count, w)
-    std = np.sqrt(np.clip(m2 / mc - (m1 / mc) ** 2, 0.0, None))
+    mc = _moving_mean(count, w)
+
+    def moving(x: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Moving mean and std of each column over the window, per block."""
+        m1 = _moving_mean(np.add.reduceat(x, starts, axis=0), w) / mc
+        m2 = _moving_mean(np.add.reduceat(x * x, starts, axis=0), w) / mc
+        return m1, np.sqrt(np.clip(m2 - m1**2, 0.0, None))
+
+    _, std = moving(acc)
     speed = samples.channels.get("speed_mps")
     has_speed = speed is not None and speed.t_s.size > 0
-    max_std = cfg.max_acc_std_with_speed_mps2 if has_speed else cfg.max_acc_std_mps2
+    acc_rest = np.percentile(std, REST_QUANTILE, axis=0)
+    max_std = cfg.max_acc_std_mps2
+    if max_std is None:  # above the rest noise, and above a quantised axis toggling between two codes (std ≤ q/2)
+        floor = ACC_STD_FLOOR_WITH_SPEED if has_speed else ACC_STD_FLOOR
+        max_std = max(floor, REST_FACTOR * float(acc_rest.max()), float(acc_lsb.max()))
     still = std.max(axis=1) < max_std
-    if samples.gyro_s is not None:
-        rate_sum = np.add.reduceat(np.linalg.norm(samples.gyro_s, axis=1), starts)[:, None]
-        still &= (_moving_mean(rate_sum, w) / mc)[:, 0] < cfg.max_gyro_rad_s
     if speed is not None and has_speed:
         # a block is still only if the speed is low at both of its ends
         still &= np.abs(_hold(speed, t[starts])) <= cfg.max_speed_mps
         still &= np.abs(_hold(speed, t[np.minimum(starts + block - 1, n - 1)])) <= cfg.max_speed_mps
-    return np.repeat(still, count[:, 0].astype(int))
+    found = Thresholds(max_std, acc_rest, acc_lsb, speed_mps=cfg.max_speed_mps if has_speed else None)
+    if samples.gyro_s is not None:
+        g_mean, g_std = moving(samples.gyro_s)
+        g_lsb = np.zeros(3) if gyro_lsb is None else gyro_lsb
+        g_rest = np.percentile(g_std, REST_QUANTILE, axis=0)
+        # the bias: the rate while the accelerometer (and speed) say still; a drive's median rate otherwise
+        bias = np.median(g_mean[still] if still.sum() >= w else g_mean, axis=0)
+        max_g_std = cfg.max_gyro_std_rad_s
+        if max_g_std is None:
+            max_g_std = max(GYRO_STD_FLOOR, REST_FACTOR * float(g_rest.max()), float(g_lsb.max()))
+        max_rate = cfg.max_gyro_rad_s
+        if max_rate is None:
+            max_rate = max(GYRO_RATE_FLOOR, 2.0 * float(g_lsb.max()))
+        still &= (g_std.max(axis=1) < max_g_std) & (np.linalg.norm(g_mean - bias, axis=1) < max_rate)
+        found = Thresholds(max_std, acc_rest, acc_lsb, max_g_std, max_rate, bias, g_rest, g_lsb, found.speed_mps)
+    return np.repeat(still, count[:, 0].astype(int)), found
 
 
 def detect_stops(
     samples: Samples, cfg: StopDetection | None = None, windows: list[tuple[float, float]] | None = None
 ) -> list[Stop]:
-    """The stops of a log, in time order.
+    """The stops of a log, in time order (see :func:`find_stops` for the thresholds and counts)."""
+    return find_stops(samples, cfg, windows).stops
+
+
+def find_stops(
+    samples: Samples, cfg: StopDetection | None = None, windows: list[tuple[float, float]] | None = None
+) -> StopSearch:
+    """The stops of a log, in time order, with the thresholds used and what was changed or dropped.
 
     Parameters
     ----------
     samples : Samples
+        Times need not be strictly increasing: equal stamps are merged and counted.
     cfg : StopDetection, optional
     windows : list of (t_start_s, t_end_s), optional
         Restrict each stop to one of these intervals (a protocol sheet); the longest still run
         inside each interval is taken.
     """
     cfg = cfg or StopDetection()
-    still = still_mask(samples, cfg)
+    # the quantisation of the samples as logged: merging equal stamps averages codes into half steps
+    acc_lsb = _lsb(samples.acc_s)
+    gyro_lsb = None if samples.gyro_s is None else _lsb(samples.gyro_s)
+    before = dict(samples.dropped)
+    samples = increasing_times(samples)
+    counts = {k: v - before.get(k, 0) for k, v in samples.dropped.items() if v != before.get(k, 0)}
+    still, thresholds = _stillness(samples, cfg, acc_lsb, gyro_lsb)
     runs = _runs(still)
     t = samples.t_s
     if windows is not None:
@@ -111,31 +217,74 @@ def detect_stops(
             if cand:
                 chosen.append(max(cand, key=lambda r: t[r[1] - 1] - t[r[0]]))
         runs = chosen
+    heading = samples.channels.get("heading_deg")
+    lsb = thresholds.acc_lsb_mps2
     stops = []
+    split = pieces_dropped = 0
     for i0, i1 in runs:
-        lo, hi = t[i0] + cfg.trim_s, t[i1 - 1] - cfg.trim_s
-        if hi - lo < cfg.min_duration_s:
-            continue
-        sel = slice(int(np.searchsorted(t, lo)), int(np.searchsorted(t, hi, side="right")))
-        stops.append(_stop_stats(samples, sel))
-    return stops
+        pieces = [(float(t[i0]), float(t[i1 - 1]))]
+        if heading is not None and heading.t_s.size:
+            pieces = _steady_heading(heading, pieces[0], cfg.max_heading_wander_deg, cfg.window_s)
+        kept = 0
+        for p_lo, p_hi in pieces:
+            lo, hi = p_lo + cfg.trim_s, p_hi - cfg.trim_s
+            if hi - lo < cfg.min_duration_s:
+                continue
+            sel = slice(int(np.searchsorted(t, lo)), int(np.searchsorted(t, hi, side="right")))
+            stops.append(_stop_stats(samples, sel, lsb))
+            kept += 1
+        if len(pieces) > 1:
+            split += 1
+            pieces_dropped += len(pieces) - kept
+    if split:
+        counts[f"still periods whose heading wandered > {cfg.max_heading_wander_deg:g}° (split)"] = split
+        counts["pieces of those too short to be a stop (dropped)"] = pieces_dropped
+    return StopSearch(stops, thresholds, counts)
+
+
+def _steady_heading(
+    heading: Channel, span: tuple[float, float], limit_deg: float, window_s: float
+) -> list[tuple[float, float]]:
+    """``span`` cut into pieces over which the heading (smoothed over the window) stays within the limit."""
+    lo, hi = span
+    inside = (heading.t_s >= lo) & (heading.t_s <= hi)
+    if np.count_nonzero(inside) < 2:
+        return [span]
+    ht = heading.t_s[inside]
+    k = max(1, min(round(window_s / float(np.median(np.diff(ht)))), ht.size))
+    h = _moving_mean(np.degrees(np.unwrap(np.radians(heading.value[inside]))), k)
+    if np.ptp(h) <= limit_deg:
+        return [span]
+    pieces = []
+    a = 0
+    while a < h.size:
+        grow = np.maximum.accumulate(h[a:]) - np.minimum.accumulate(h[a:])
+        over = np.flatnonzero(grow > limit_deg)
+        b = a + int(over[0]) if over.size else h.size
+        pieces.append((lo if a == 0 else float(ht[a]), hi if b == h.size else float(ht[b - 1])))
+        a = b
+    return pieces
 
 
 def stop_frame(stops: list[Stop], beta_deg: FloatArray | None = None) -> pd.DataFrame:
     """The stop table (the columns :mod:`mountcal.stoptable` reads) of detected stops.
 
-    ``sx, sy, sz`` are written so that ``s²/n`` is the variance of each stop mean.
+    ``sx, sy, sz`` are the standard deviations of the samples of each stop (what a user sees in the
+    data); ``sx_mean, sy_mean, sz_mean`` are the 1σ uncertainties of the stop means the fit uses:
+    correlated vibration and the quantisation floor make them larger than ``s/√n``.
     """
     if not stops:
         raise NotEnoughInformation("no stops to tabulate")
     acc = np.array([s.acc_mean_s for s in stops])
     n = np.array([s.n for s in stops])
     var = np.array([np.diag(s.acc_cov_mean_s) for s in stops])
+    std = np.array([s.acc_std_s for s in stops])
     df = pd.DataFrame({"ax": acc[:, 0], "ay": acc[:, 1], "az": acc[:, 2]})
     if beta_deg is not None:
         df.insert(0, "beta_deg", np.asarray(beta_deg) % 360.0)
-    df["sx"], df["sy"], df["sz"] = (np.sqrt(var[:, k] * n) for k in range(3))
+    df["sx"], df["sy"], df["sz"] = (std[:, k] for k in range(3))
     df["n"] = n
+    df["sx_mean"], df["sy_mean"], df["sz_mean"] = (np.sqrt(var[:, k]) for k in range(3))
     df["t_s"] = [s.t_start_s for s in stops]
     df["duration_s"] = [s.duration_s for s in stops]
     for key in ("temperature_c", "lat_deg", "lon_deg", "alt_m", "heading_deg"):
@@ -150,11 +299,11 @@ def beta_from_heading(heading_deg: FloatArray, uphill_azimuth_deg: float) -> Flo
     return (uphill_azimuth_deg - np.asarray(heading_deg, dtype=float)) % 360.0
 
 
-def _stop_stats(samples: Samples, sel: slice) -> Stop:
+def _stop_stats(samples: Samples, sel: slice, lsb: FloatArray) -> Stop:
     t, acc = samples.t_s[sel], samples.acc_s[sel]
     n = acc.shape[0]
     mean = acc.mean(axis=0)
-    cov = _cov_of_mean(acc)
+    cov = _cov_of_mean(acc, lsb)
     channels: dict[str, float] = {}
     heading_std = None
     for key, ch in samples.channels.items():
@@ -168,30 +317,58 @@ def _stop_stats(samples: Samples, sel: slice) -> Stop:
             heading_std = abs(float(np.degrees(np.sqrt(max(-2.0 * np.log(min(max(abs(z), 1e-12), 1.0)), 0.0)))))
         else:
             channels[key] = float(np.mean(v))
-    return Stop(float(t[0]), float(t[-1]), n, mean, cov, channels, heading_std)
+    std = acc.std(axis=0, ddof=1) if n > 1 else np.zeros(3)
+    return Stop(float(t[0]), float(t[-1]), n, mean, cov, channels, heading_std, std)
 
 
-def _cov_of_mean(acc: FloatArray) -> FloatArray:
-    """Covariance of the mean of correlated, possibly quantised samples, shape (3, 3)."""
+def _lsb(x: FloatArray) -> FloatArray:
+    """Quantisation step of each column (the smallest step between its values; 0 when it is not quantised).
+
+    An axis that never changes borrows the others' step: a logger's axes share one resolution.
+    """
+    steps = np.zeros(x.shape[1])
+    for j in range(x.shape[1]):
+        d = np.diff(np.unique(x[:, j]))
+        d = d[d > 1e-9 * max(1.0, float(np.abs(x[:, j]).max(initial=0.0)))]  # float noise is not a step
+        steps[j] = d.min() if d.size else np.nan
+    if np.all(np.isnan(steps)):
+        return np.zeros(x.shape[1])
+    return np.where(np.isnan(steps), np.nanmin(steps), steps)
+
+
+def _cov_of_mean(acc: FloatArray, lsb: FloatArray) -> FloatArray:
+    """Covariance of the mean of correlated, possibly quantised samples, shape (3, 3).
+
+    Quantisation with step q biases a mean by up to q/2 when the noise does not dither it (a
+    constant signal on one code says only that the truth lies within ±q/2: σ = q/√12), and by a
+    vanishing amount when it does. Samples on two codes (a fraction p on the rarer one) leave a
+    small noise unknown: the mean is then off by at most q·(½ − p), so the floor is
+    ``min(q/√12, q·(½ − p))``. Samples on three or more codes are dithered by a noise σ (estimated
+    as ``s² − q²/12``), and the mean of a quantised Gaussian is off by a term ∝ exp(−2π²σ²/q²)
+    (Widrow's quantisation theorem): the floor is ``q/√12 · exp(−2π²σ²/q²)``.
+    """
     n = acc.shape[0]
     k = BATCHES if n >= 10 * BATCHES else max(n // 2, 1)
     edges = np.linspace(0, n, k + 1).astype(int)
     batch = np.add.reduceat(acc, edges[:-1], axis=0) / np.diff(edges)[:, None]
     cov = np.cov(batch.T) / k if k > 1 else np.cov(acc.T) / n
     cov = np.atleast_2d(cov)
-    # A quantised axis that does not dither averages to a level, not to the truth: σ ≥ q/√12.
-    # Logger axes share one resolution, so an axis stuck on a single level borrows the others' q.
-    spacing = [np.diff(np.unique(acc[:, j])) for j in range(3)]
-    steps = np.concatenate(spacing)
-    q_all = float(steps.min()) if steps.size else 0.0
+    if cov.shape != (3, 3):  # a single sample
+        cov = np.zeros((3, 3))
+    sample_var = acc.var(axis=0, ddof=1) if n > 1 else np.zeros(3)
     floor = np.zeros(3)
-    for j in range(3):
-        q = float(spacing[j].min()) if spacing[j].size else q_all
-        if acc[:, j].std() < q:
-            floor[j] = q**2 / 12.0
+    for j, q in enumerate(np.asarray(lsb, dtype=float)):
+        if q <= 0:
+            continue
+        _, counts = np.unique(np.round(acc[:, j] / q), return_counts=True)
+        if counts.size <= 2:
+            rare = counts.min() / n if counts.size == 2 else 0.0
+            floor[j] = min(q / np.sqrt(12.0), q * (0.5 - rare)) ** 2
+        else:
+            noise_var = max(sample_var[j] - q**2 / 12.0, 0.0)
+            floor[j] = q**2 / 12.0 * np.exp(-4.0 * np.pi**2 * noise_var / q**2)
     cov[np.diag_indices(3)] = np.maximum(np.diag(cov), floor)
-    sample_floor = np.diag(np.cov(acc.T)) / n  # never claim less than independent samples would
-    cov[np.diag_indices(3)] = np.maximum(np.diag(cov), sample_floor)
+    cov[np.diag_indices(3)] = np.maximum(np.diag(cov), sample_var / n)  # never less than independent samples
     return cov
 
 
@@ -223,6 +400,7 @@ class StopTableFromLog:
     headings: str  # "uphill", "relative" or "none"
     heading_source: str
     unmatched_protocol_rows: int = 0
+    notes: tuple[str, ...] = ()  # the thresholds used and what detection changed or dropped
 
 
 def read_protocol(path: str) -> pd.DataFrame:
@@ -264,21 +442,25 @@ def tabulate(
     where = samples.source or "log"
     if protocol is not None:
         windows = list(zip(protocol["t_start_s"], protocol["t_end_s"], strict=True))
-        stops = detect_stops(samples, cfg, windows=windows)
+        search = find_stops(samples, cfg, windows=windows)
+        stops = search.stops
         kept = [i for i, (lo, hi) in enumerate(windows) if any(lo <= s.t_start_s and s.t_end_s <= hi for s in stops)]
         if not stops:
             raise NotEnoughInformation(
                 f"{where}: no parked period found inside any protocol interval. Check that "
-                "the sheet's times are on the log's clock, or relax the stop thresholds."
+                f"the sheet's times are on the log's clock, or {RELAX}. Used: {'; '.join(search.lines())}."
             )
         beta = protocol["beta_deg"].to_numpy()[kept]
-        return StopTableFromLog(stop_frame(stops, beta), "uphill", "protocol sheet", len(windows) - len(kept))
-    stops = detect_stops(samples, cfg)
+        return StopTableFromLog(
+            stop_frame(stops, beta), "uphill", "protocol sheet", len(windows) - len(kept), tuple(search.lines())
+        )
+    search = find_stops(samples, cfg)
+    stops = search.stops
+    notes = tuple(search.lines())
     if not stops:
         raise NotEnoughInformation(
-            f"{where}: no parked period found (no still run ≥ "
-            f"{(cfg or StopDetection()).min_duration_s:g} s). Relax --min-stop-s or the "
-            "stillness thresholds, or check that the log holds parked periods."
+            f"{where}: no parked period found (no still run ≥ {(cfg or StopDetection()).min_duration_s:g} s). "
+            f"Check that the log holds parked periods, or {RELAX}. Used: {'; '.join(notes)}."
         )
     heading = np.array([s.channels.get("heading_deg", np.nan) for s in stops])
     if np.all(np.isfinite(heading)):
@@ -287,10 +469,19 @@ def tabulate(
                 stop_frame(stops, beta_from_heading(heading, uphill_azimuth_deg)),
                 "uphill",
                 f"heading channel with uphill azimuth {uphill_azimuth_deg:g}°",
+                notes=notes,
             )
         return StopTableFromLog(
             stop_frame(stops, beta_from_heading(heading, 0.0)),
             "relative",
             "heading channel without the uphill azimuth (relative)",
+            notes=notes,
         )
-    return StopTableFromLog(stop_frame(stops), "none", "none")
+    return StopTableFromLog(stop_frame(stops), "none", "none", notes=notes)
+
+
+# Advice naming the options that change stop detection (tests check that every one exists).
+RELAX = (
+    "relax the stillness thresholds: --max-acc-std (m/s²), --max-gyro-std and --max-gyro-rate (rad/s), "
+    "--max-speed (m/s), --min-stop-s, --trim-s, --still-window-s, --max-heading-wander (deg)"
+)

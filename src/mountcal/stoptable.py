@@ -21,8 +21,9 @@ from mountcal.io.inputs import check_parquet_rows, check_regular_file
 # Column names of the stop table file.
 BETA = "beta_deg"
 ACC = ("ax", "ay", "az")
-STD = ("sx", "sy", "sz")
-COUNT = "n"
+STD = ("sx", "sy", "sz")  # standard deviation of the samples of a stop
+COUNT = "n"  # samples averaged
+STD_MEAN = ("sx_mean", "sy_mean", "sz_mean")  # 1σ of the stop mean; when given, it is used instead of s/√n
 TEMPERATURE = "temperature_c"
 TIME = "t_s"
 SITE = "site"
@@ -30,8 +31,8 @@ LAT = "lat_deg"
 LON = "lon_deg"
 ALT = "alt_m"
 REQUIRED = ACC
-OPTIONAL = (BETA, *STD, COUNT, TEMPERATURE, TIME, SITE, LAT, LON, ALT)
-COLUMNS = (BETA, *ACC, *STD, COUNT, TEMPERATURE, TIME, SITE, LAT, LON, ALT)
+OPTIONAL = (BETA, *STD, COUNT, *STD_MEAN, TEMPERATURE, TIME, SITE, LAT, LON, ALT)
+COLUMNS = (BETA, *ACC, *STD, COUNT, *STD_MEAN, TEMPERATURE, TIME, SITE, LAT, LON, ALT)
 
 Headings = Literal["uphill", "relative", "none"]
 Unit = Literal["mps2", "g"]
@@ -199,6 +200,17 @@ def stop_table_from_frame(
             )
         cov = np.zeros((len(df), 3, 3))
         cov[:, [0, 1, 2], [0, 1, 2]] = std**2 / count[:, None]
+    if all(c in df.columns for c in STD_MEAN):  # the mean's own uncertainty (correlation, quantisation)
+        sigma = _numeric(df, list(STD_MEAN), source) * scale
+        if np.any(sigma <= 0):
+            raise InputError(
+                source,
+                "uncertainties of the stop means sx_mean, sy_mean, sz_mean > 0",
+                f"non-positive values in rows {_rows(np.flatnonzero(np.any(sigma <= 0, axis=1)))}",
+                "Fix those rows, or drop the sx_mean, sy_mean, sz_mean columns to use s/√n.",
+            )
+        cov = np.zeros((len(df), 3, 3))
+        cov[:, [0, 1, 2], [0, 1, 2]] = sigma**2
 
     def optional(name: str) -> FloatArray | None:
         return _numeric(df, [name], source)[:, 0] if name in df.columns else None

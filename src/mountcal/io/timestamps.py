@@ -1,0 +1,83 @@
+"""Strictly increasing sample times: duplicate stamps merged, out-of-order samples put in order.
+
+Loggers often stamp samples in pairs (two IMU readings per CAN frame or per message) and clocks
+sometimes step back. Everything downstream (stop detection, driving) divides by the sample step, so
+the samples are made strictly increasing first, and what was changed is counted in
+``Samples.dropped``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from mountcal.io.samples import Channel, FloatArray, Samples
+
+MERGED = "samples merged (duplicate timestamp)"
+REORDERED = "samples out of time order (put in order)"
+CIRCULAR = ("heading_deg",)  # channels averaged as angles
+
+
+def increasing_times(samples: Samples) -> Samples:
+    """The samples with strictly increasing times: equal stamps averaged into one sample.
+
+    The counts of merged and reordered samples are added to ``dropped`` (the merged samples are
+    not lost: each merged sample is the mean of its group). Auxiliary channels get the same
+    treatment (headings averaged as angles), counted under their own names.
+    """
+    t = samples.t_s
+    dropped = dict(samples.dropped)
+    channels = {}
+    for key, ch in samples.channels.items():
+        new_ch, merged, reordered = _channel(ch, circular=key in CIRCULAR)
+        channels[key] = new_ch
+        _count(dropped, f"{key}: {MERGED}", merged)
+        _count(dropped, f"{key}: {REORDERED}", reordered)
+    if t.size < 2 or bool(np.all(np.diff(t) > 0)):
+        return replace(samples, channels=channels, dropped=dropped) if channels != samples.channels else samples
+    order, reordered = _order(t)
+    ts = t[order]
+    starts = np.flatnonzero(np.concatenate([[True], np.diff(ts) > 0]))
+    size = np.diff(np.append(starts, ts.size)).astype(float)[:, None]
+
+    def merge(x: FloatArray) -> FloatArray:
+        return np.add.reduceat(x[order], starts, axis=0) / size
+
+    _count(dropped, MERGED, ts.size - starts.size)
+    _count(dropped, REORDERED, reordered)
+    return replace(
+        samples,
+        t_s=ts[starts],
+        acc_s=merge(samples.acc_s),
+        gyro_s=None if samples.gyro_s is None else merge(samples.gyro_s),
+        channels=channels,
+        dropped=dropped,
+    )
+
+
+def _order(t: FloatArray) -> tuple[np.ndarray, int]:
+    """A stable time order and how many samples stepped back in time."""
+    backwards = int(np.count_nonzero(np.diff(t) < 0))
+    return (np.argsort(t, kind="stable") if backwards else np.arange(t.size)), backwards
+
+
+def _channel(ch: Channel, circular: bool) -> tuple[Channel, int, int]:
+    if ch.t_s.size < 2 or bool(np.all(np.diff(ch.t_s) > 0)):
+        return ch, 0, 0
+    order, reordered = _order(ch.t_s)
+    ts = ch.t_s[order]
+    starts = np.flatnonzero(np.concatenate([[True], np.diff(ts) > 0]))
+    size = np.diff(np.append(starts, ts.size)).astype(float)
+    v = ch.value[order]
+    if circular:
+        z = np.add.reduceat(np.exp(1j * np.radians(v)), starts) / size
+        value = np.degrees(np.angle(z)) % 360.0
+    else:
+        value = np.add.reduceat(v, starts) / size
+    return Channel(ts[starts], value), ts.size - starts.size, reordered
+
+
+def _count(dropped: dict[str, int], key: str, k: int) -> None:
+    if k:
+        dropped[key] = dropped.get(key, 0) + k

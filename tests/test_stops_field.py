@@ -1,0 +1,233 @@
+"""Stop detection on what field loggers record: gyro bias, quantisation, paired stamps, wandering headings."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mountcal import cli
+from mountcal.calibrate import calibrate
+from mountcal.errors import NotEnoughInformation
+from mountcal.io.samples import Channel, Samples
+from mountcal.io.timestamps import MERGED, increasing_times
+from mountcal.simulate import ParkingLog, simulate_parking_log
+from mountcal.stops import (
+    RELAX,
+    StopDetection,
+    Thresholds,
+    _cov_of_mean,
+    beta_from_heading,
+    detect_stops,
+    find_stops,
+    stop_frame,
+    tabulate,
+)
+from mountcal.stoptable import stop_table_from_frame
+
+LSB = 0.125  # m/s², the CANedge GNSS/IMU accelerometer
+GYRO_LSB = np.radians(0.25)
+
+
+def samples_of(log: ParkingLog, speed: bool = True) -> Samples:
+    channels = {"heading_deg": Channel(log.t_s, log.heading_deg)}
+    if speed:
+        channels["speed_mps"] = Channel(log.t_s, log.speed_mps)
+    return Samples(log.t_s, log.acc_s, log.gyro_s, channels)
+
+
+def field_log(bias_dps: float, seed: int, paired: bool = True, **kw: object) -> ParkingLog:
+    rng = np.random.default_rng(seed)
+    direction = rng.normal(size=3)
+    bias = np.radians(bias_dps) * direction / np.linalg.norm(direction)
+    return simulate_parking_log(
+        seed=rng,
+        gyro_bias_rad_s=bias,
+        acc_lsb_mps2=LSB,
+        gyro_lsb_rad_s=GYRO_LSB,
+        paired_stamps=paired,
+        **kw,  # type: ignore[arg-type]
+    )
+
+
+def assert_every_stop_found(stops: list, log: ParkingLog) -> None:  # type: ignore[type-arg]
+    assert len(stops) == len(log.protocol)
+    for stop, (lo, hi, _) in zip(stops, log.protocol, strict=True):
+        assert lo <= stop.t_start_s < stop.t_end_s <= hi
+        assert stop.duration_s > 0.8 * (hi - lo - 2 * StopDetection().trim_s)
+
+
+@pytest.mark.parametrize("bias_dps", [1.2, 3.0, 4.5])
+@pytest.mark.parametrize("speed", [True, False])
+def test_a_biased_quantised_gyro_with_paired_stamps_finds_every_stop(bias_dps: float, speed: bool) -> None:
+    log = field_log(bias_dps, seed=int(bias_dps * 10) + speed)
+    search = find_stops(samples_of(log, speed))
+    assert_every_stop_found(search.stops, log)
+    assert search.thresholds.gyro_bias_rad_s is not None
+    measured = np.degrees(np.linalg.norm(search.thresholds.gyro_bias_rad_s))
+    assert measured == pytest.approx(bias_dps, abs=0.2)  # the bias the gyro showed at rest
+    np.testing.assert_allclose(search.thresholds.acc_lsb_mps2, LSB)
+    assert search.counts[MERGED] == len(log.t_s) // 2  # every other sample shared its stamp
+
+
+def test_the_fixed_gyro_limit_of_before_misses_every_stop_of_a_biased_gyro() -> None:
+    """The failure the data-driven thresholds fix: |rate| < 0.02 rad/s around zero is never met."""
+    log = field_log(3.0, seed=5)
+    assert detect_stops(samples_of(log), StopDetection(max_gyro_rad_s=0.02, max_gyro_std_rad_s=1.0)) != []
+    still_at_zero = np.linalg.norm(log.gyro_s, axis=1) < 0.02
+    assert not still_at_zero.any()
+
+
+def test_a_constant_rate_is_still_and_a_changing_one_is_not() -> None:
+    rng = np.random.default_rng(1)
+    t = np.arange(12_000) / 100.0
+    acc = np.array([0.3, -0.2, 9.8]) + rng.normal(0.0, 0.03, (t.size, 3))
+    gyro = np.radians([2.0, -1.5, 3.5]) + rng.normal(0.0, 0.002, (t.size, 3))
+    wobble = (t > 40.0) & (t < 80.0)
+    gyro[wobble, 2] += 0.05 * np.sin(2 * np.pi * 0.5 * t[wobble])  # a rate that changes: rotating
+    stops = detect_stops(Samples(t, acc, gyro))
+    assert len(stops) == 2
+    assert stops[0].t_end_s < 40.5 and stops[1].t_start_s > 79.5
+
+
+def test_a_turn_at_a_steady_rate_away_from_the_bias_is_not_still() -> None:
+    rng = np.random.default_rng(2)
+    t = np.arange(9_000) / 100.0
+    acc = np.array([0.0, 0.0, 9.8]) + rng.normal(0.0, 0.03, (t.size, 3))
+    gyro = np.radians([1.0, 1.0, 2.0]) + rng.normal(0.0, 0.002, (t.size, 3))
+    gyro[(t > 30.0) & (t < 60.0), 2] += np.radians(10.0)  # a steady 10 °/s turn
+    stops = detect_stops(Samples(t, acc, gyro))
+    assert len(stops) == 2 and all(s.t_end_s < 30.5 or s.t_start_s > 59.5 for s in stops)
+
+
+def test_duplicate_and_backward_stamps_are_merged_counted_and_stop_detection_runs() -> None:
+    t = np.repeat(np.arange(3000) / 50.0, 2)  # every stamp twice
+    acc = np.tile([0.0, 0.0, 9.81], (t.size, 1)) + np.random.default_rng(0).normal(0, 0.02, (t.size, 3))
+    t[1000], t[1001] = t[1001], t[1000]  # identical values: no reorder; make one step back instead
+    t[2000] = t[1990]
+    s = increasing_times(Samples(t, acc, channels={"heading_deg": Channel(t, np.where(t < 30, 359.0, 1.0))}))
+    assert np.all(np.diff(s.t_s) > 0)
+    assert s.dropped[MERGED] >= 3000 and s.dropped["samples out of time order (put in order)"] == 1
+    assert len(s) + s.dropped[MERGED] == t.size
+    np.testing.assert_allclose(s.acc_s.mean(axis=0), acc.mean(axis=0), atol=1e-3)
+    assert set(np.round(s.channels["heading_deg"].value)) <= {359.0, 1.0, 0.0, 360.0}  # averaged as angles
+    assert len(detect_stops(Samples(t, acc))) == 1  # the raw stamps: no ZeroDivisionError
+
+
+def test_a_log_with_paired_stamps_calibrates_from_the_command_line(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    log = field_log(2.0, seed=9)
+    import pandas as pd
+
+    path = tmp_path / "paired.csv"
+    frame = pd.DataFrame(
+        {
+            "t_s": log.t_s,
+            "ax": log.acc_s[:, 0],
+            "ay": log.acc_s[:, 1],
+            "az": log.acc_s[:, 2],
+            "gx": log.gyro_s[:, 0],
+            "gy": log.gyro_s[:, 1],
+            "gz": log.gyro_s[:, 2],
+            "speed_mps": log.speed_mps,
+            "heading_deg": log.heading_deg,
+        }
+    )
+    frame.to_csv(path, index=False)
+    out = tmp_path / "stops.csv"
+    assert cli.main(["stops", str(path), "-o", str(out), "--uphill-azimuth-deg", str(log.uphill_azimuth_deg)]) == 0
+    printed = capsys.readouterr().out
+    assert f"{MERGED}: {len(log.t_s) // 2}" in printed and "gyro bias" in printed
+    table = pd.read_csv(out)
+    assert len(table) == len(log.protocol)
+
+
+def test_a_heading_that_wanders_splits_or_drops_the_stop_and_is_counted() -> None:
+    wander = [0.0] * 12
+    wander[4] = 45.0  # the vehicle turns slowly by 45° during the fifth stop
+    wander[7] = 2.0  # and by 2° during the eighth: a steady heading for the fit
+    log = simulate_parking_log(seed=4, wander_deg=tuple(wander), gyro_noise_rad_s=0.002)
+    search = find_stops(samples_of(log))
+    inside = [[s for s in search.stops if lo <= s.t_start_s and s.t_end_s <= hi] for lo, hi, _ in log.protocol]
+    assert all(len(found) == 1 for i, found in enumerate(inside) if i != 4)
+    for piece in inside[4]:  # what is kept of the wandering stop holds a steady heading
+        assert piece.heading_std_deg is not None and piece.heading_std_deg < StopDetection().max_heading_wander_deg
+    split = [v for k, v in search.counts.items() if "wandered" in k]
+    assert split == [1]
+    heading = np.array([s.channels["heading_deg"] for s in search.stops])
+    beta = beta_from_heading(heading, log.uphill_azimuth_deg)
+    table = stop_table_from_frame(stop_frame(search.stops, beta))
+    cal = calibrate(table)
+    roll, pitch, yaw = log.truth.angles_deg
+    assert abs(cal.roll_deg - roll) < 4 * cal.roll_sigma_deg
+    assert abs(cal.pitch_deg - pitch) < 4 * cal.pitch_sigma_deg
+    assert cal.yaw_deg is not None and abs(cal.yaw_deg - yaw) < 4 * cal.yaw_sigma_deg  # type: ignore[operator]
+
+
+@pytest.mark.parametrize("noise_lsb", [0.0, 0.05, 0.15, 0.3, 0.6, 1.5])
+def test_the_stop_mean_uncertainty_covers_the_quantisation_error(noise_lsb: float) -> None:
+    """Against the truth, over true values spread across a code: |error|/σ has an RMS near 1, not ≫ 1.
+
+    Without dithering a mean is off by up to q/2 (σ = q/√12); with noise ≳ q/2 the error is the noise's.
+    """
+    rng = np.random.default_rng(int(noise_lsb * 100))
+    z = []
+    for truth in rng.uniform(0.0, LSB, 200):
+        x = truth + rng.normal(0.0, noise_lsb * LSB, (2000, 3))
+        q = np.round(x / LSB) * LSB
+        sigma = np.sqrt(np.diag(_cov_of_mean(q, np.full(3, LSB))))
+        z.append((q.mean(axis=0) - truth) / sigma)
+    rms = float(np.sqrt(np.mean(np.square(z))))
+    assert 0.3 < rms < 1.6
+
+
+def test_the_stop_table_gives_the_samples_std_and_the_means_sigma() -> None:
+    log = field_log(2.0, seed=11, paired=False)  # merged pairs would halve the samples' variance
+    stops = detect_stops(samples_of(log))
+    frame = stop_frame(stops)
+    for stop, (_, row) in zip(stops, frame.iterrows(), strict=True):
+        sel = (log.t_s >= stop.t_start_s) & (log.t_s <= stop.t_end_s)
+        std = log.acc_s[sel].std(axis=0)
+        np.testing.assert_allclose(row[["sx", "sy", "sz"]].to_numpy(float), std, rtol=0.1, atol=0.01)
+        assert np.all(row[["sx", "sy", "sz"]].to_numpy(float) < 0.2)  # not a floor times √n
+    table = stop_table_from_frame(frame)
+    assert table.cov_s is not None
+    np.testing.assert_allclose(
+        np.sqrt(table.cov_s[:, [0, 1, 2], [0, 1, 2]]), frame[["sx_mean", "sy_mean", "sz_mean"]].to_numpy()
+    )
+
+
+def _options_named(text: str) -> set[str]:
+    return set(re.findall(r"--[a-z][a-z0-9-]+", text))
+
+
+def test_every_option_named_in_a_stop_detection_message_exists() -> None:
+    log = field_log(2.0, seed=12)
+    messages = [RELAX, *find_stops(samples_of(log)).lines()]
+    moving = Samples(log.t_s[log.speed_mps > 1.0], log.acc_s[log.speed_mps > 1.0])
+    with pytest.raises(NotEnoughInformation) as err:
+        tabulate(moving)
+    messages.append(str(err.value))
+    named = set().union(*map(_options_named, messages))
+    assert {"--max-acc-std", "--max-gyro-std", "--max-gyro-rate", "--max-speed", "--min-stop-s"} <= named
+    parser = cli._parser()
+    sub = next(a for a in parser._actions if a.dest == "command").choices  # type: ignore[union-attr]
+    for command in ("calibrate", "stops", "fleet"):
+        known = {flag for action in sub[command]._actions for flag in action.option_strings}
+        assert named <= known, f"{command} lacks {named - known}"
+
+
+def test_each_option_reaches_the_detector() -> None:
+    given = "--max-acc-std 0.2 --max-gyro-std 0.03 --max-gyro-rate 0.04 --max-speed 0.5 --still-window-s 3 "
+    given += "--min-stop-s 5 --trim-s 1 --max-heading-wander 7"
+    args = cli._parser().parse_args(["stops", "x.csv", "-o", "y.csv", *given.split()])
+    assert cli._detection(args) == StopDetection(3.0, 0.2, 0.03, 0.04, 0.5, 5.0, 1.0, 7.0)
+    log = field_log(2.0, seed=13)
+    used = find_stops(samples_of(log), cli._detection(args)).thresholds
+    assert (used.acc_std_mps2, used.gyro_std_rad_s, used.gyro_rate_rad_s) == (0.2, 0.03, 0.04)
+
+
+def test_thresholds_report_names_their_options() -> None:
+    t = Thresholds(0.1, np.zeros(3), np.zeros(3), 0.01, 0.02, np.zeros(3), np.zeros(3), np.zeros(3), 0.3)
+    assert {"--max-acc-std", "--max-gyro-std", "--max-gyro-rate", "--max-speed"} <= _options_named(" ".join(t.lines()))
