@@ -107,6 +107,7 @@ def cmd_inspect(args: argparse.Namespace) -> int:
 
 def cmd_rotate(args: argparse.Namespace) -> int:
     """``mountcal rotate LOG… --calibration result.json -o OUT``: the log's samples in the vehicle frame."""
+    from mountcal.rotate import check_applicable
     from mountcal.rotate_log import rotate_log
 
     if Path(args.output).resolve() == Path(args.calibration).resolve():
@@ -117,6 +118,9 @@ def cmd_rotate(args: argparse.Namespace) -> int:
             "Choose another -o path; mountcal never overwrites its input.",
         )
     cal = Calibration.load(args.calibration)
+    check_applicable(  # refused before any reading, naming the calibration file
+        cal, level_only=args.level_only, require_confident=args.require_confident, where=str(args.calibration)
+    )
     report = rotate_log(
         args.input,
         cal,
@@ -124,7 +128,11 @@ def cmd_rotate(args: argparse.Namespace) -> int:
         fmt=args.format,
         options=LogOptions(dbc=args.dbc, mapping=args.mapping, channel=args.channel, topic=args.topic),
         chunk_samples=args.chunk,
+        level_only=args.level_only,
+        require_confident=args.require_confident,
     )
+    for text in report.warnings:
+        print(f"mountcal: warning: {text} (recorded in {args.output}'s metadata)", file=sys.stderr)
     print("\n".join(report.lines()))
     return 0
 
@@ -429,6 +437,12 @@ def _parser() -> argparse.ArgumentParser:
         "--format", choices=("parquet", "csv", "mcap"), default=None, help="default: from -o's suffix, else parquet"
     )
     rot.add_argument("--chunk", type=int, default=100_000, help="samples per chunk: bounds the memory (default 100000)")
+    rot.add_argument(
+        "--level-only",
+        action="store_true",
+        help="accept a calibration without yaw: write a levelled frame (z up, heading the sensor's own)",
+    )
+    rot.add_argument("--require-confident", action="store_true", help="refuse a calibration that is not confident")
     rot_log = rot.add_argument_group("logs")
     rot_log.add_argument("--dbc", default=None, help="DBC to decode a CAN log")
     rot_log.add_argument("--mapping", default=None, help="TOML naming the accelerometer signals (CAN)")

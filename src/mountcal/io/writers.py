@@ -75,9 +75,13 @@ def _table(t_s: FloatArray, acc: FloatArray, gyro: FloatArray | None, schema: pa
     return pa.Table.from_arrays([pa.array(np.ascontiguousarray(c, dtype=np.float64)) for c in columns], schema=schema)
 
 
-def _schema(gyro: bool, metadata: Mapping[str, str]) -> pa.Schema:
+def _schema(gyro: bool, metadata: Mapping[str, str], descriptions: Mapping[str, str] | None = None) -> pa.Schema:
     names = ["t_s", *ACC_COLUMNS, *(GYRO_COLUMNS if gyro else ())]
-    return pa.schema([pa.field(n, pa.float64()) for n in names], metadata=dict(metadata))
+    said = descriptions or {}
+    return pa.schema(
+        [pa.field(n, pa.float64(), metadata={"description": said[n]} if n in said else None) for n in names],
+        metadata=dict(metadata),
+    )
 
 
 class ParquetSamples:
@@ -91,10 +95,18 @@ class ParquetSamples:
         Whether the rows carry ``gx, gy, gz``.
     metadata : mapping of str to str
         Stored in the file's key-value metadata (frame, conventions, calibration).
+    descriptions : mapping of column name to str, optional
+        Each column's meaning, stored in its field metadata under ``description``.
     """
 
-    def __init__(self, file: BinaryIO, gyro: bool, metadata: Mapping[str, str]) -> None:
-        self.schema = _schema(gyro, metadata)
+    def __init__(
+        self,
+        file: BinaryIO,
+        gyro: bool,
+        metadata: Mapping[str, str],
+        descriptions: Mapping[str, str] | None = None,
+    ) -> None:
+        self.schema = _schema(gyro, metadata, descriptions)
         self.gyro = gyro
         # Float columns: no dictionary (it only costs time), byte-stream split + zstd (fast, small).
         self._writer = pq.ParquetWriter(

@@ -1,0 +1,192 @@
+"""Applying a calibration: correct, or a clear refusal (issue 11, items 3, 4, 5 and 7).
+
+- An undetermined yaw is never stored nor applied: the result holds the levelling rotation
+  (yaw the sensor's own), ``rotate`` refuses it or (``--level-only``) writes a frame that says so,
+  on every path (stops, driving, fleet consensus, the Python API, old result files).
+- A result that is not confident is applied with a warning recorded in the output, or refused.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pyarrow.parquet as pq
+import pytest
+from scipy.spatial.transform import Rotation
+
+from mountcal import calibrate
+from mountcal.cli import main
+from mountcal.conventions import angles_from_rot_vs
+from mountcal.errors import InputError
+from mountcal.result import Calibration
+from mountcal.rotate import acc_to_vehicle, frame_to_vehicle
+from mountcal.rotate_log import rotate_log, to_frame
+from mountcal.simulate import simulate_stops
+from mountcal.simulate_drive import simulate_drive
+from mountcal.stoptable import write_stop_table as write_table
+
+REPO = Path(__file__).resolve().parents[1]
+PARKING = REPO / "data" / "parking.mcap"
+E_Z = np.array([0.0, 0.0, 1.0])
+
+
+def up_of(rot: Rotation) -> np.ndarray:
+    """The vehicle's up axis in sensor coordinates."""
+    return np.asarray(rot.inv().apply(E_Z), dtype=float)
+
+
+@pytest.fixture(scope="module")
+def noyaw() -> Calibration:
+    """Stops with relative headings: tilt determined, yaw not (MODEL.md §4)."""
+    table, _ = simulate_stops(roll_deg=5.0, pitch_deg=6.0, yaw_deg=37.0, slope_deg=5.0, headings="relative", seed=2)
+    cal = calibrate(table)
+    assert cal.yaw_deg is None and cal.yaw_reason
+    return cal
+
+
+@pytest.fixture(scope="module")
+def drive_csv(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("drive") / "drive.csv"
+    to_frame(simulate_drive(duration_s=120.0, seed=4).to_samples()).to_csv(path, index=False)
+    return path
+
+
+# --------------------------------------------------------------------------- what is stored
+
+
+def test_a_result_without_yaw_stores_the_levelling_rotation_not_an_invented_yaw(noyaw: Calibration) -> None:
+    truth = Rotation.from_euler("ZYX", [37.0, 6.0, 5.0], degrees=True)
+    yaw = np.degrees(angles_from_rot_vs(noyaw.rot_vs)[2])
+    assert abs(yaw) < 1e-9  # the estimator's own yaw (≈ 37° + the unknown offset) is not kept
+    assert np.degrees(np.arccos(up_of(noyaw.rot_vs) @ up_of(truth))) < 0.5  # it still levels
+    # the levelled x axis is the sensor's x on the horizontal: sensor x has no levelled-y part
+    assert abs(noyaw.rot_vs.apply([1.0, 0.0, 0.0])[1]) < 1e-12
+    doc = noyaw.to_dict()
+    assert doc["rotation"]["yaw"] == "sensor's own" and "levelled" in doc["rotation"]["frame"]
+    assert doc["mounting"]["yaw_deg"] is None
+
+
+def test_an_old_result_file_with_a_yaw_in_its_rotation_is_levelled_on_load(noyaw: Calibration, tmp_path: Path) -> None:
+    doc = noyaw.to_dict()
+    yawed = Rotation.from_euler("z", 37.0, degrees=True) * noyaw.rot_vs  # as the previous version stored it
+    doc["rotation"] = {"quaternion_xyzw": yawed.as_quat().tolist(), "matrix_vs": yawed.as_matrix().tolist()}
+    path = tmp_path / "old.json"
+    path.write_text(json.dumps(doc), encoding="utf-8")
+    loaded = Calibration.load(path)
+    assert abs(np.degrees(angles_from_rot_vs(loaded.rot_vs)[2])) < 1e-9
+    assert np.allclose(up_of(loaded.rot_vs), up_of(yawed), atol=1e-12)
+    out = tmp_path / "out.parquet"
+    assert main(["rotate", str(PARKING), "--calibration", str(path), "-o", str(out)]) == 2
+    assert not out.exists()
+
+
+# --------------------------------------------------------------------------- rotate refuses, or levels only
+
+
+def test_issue_repro_rotate_refuses_a_calibration_whose_yaw_was_never_determined(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    result, out = tmp_path / "noyaw.json", tmp_path / "out.parquet"
+    assert main(["calibrate", str(PARKING), "-o", str(result)]) == 0
+    doc = json.loads(result.read_text(encoding="utf-8"))
+    assert doc["mounting"]["yaw_deg"] is None
+    stored_yaw = np.degrees(angles_from_rot_vs(Rotation.from_quat(doc["rotation"]["quaternion_xyzw"]))[2])
+    assert abs(stored_yaw) < 1e-9  # was ~37°
+    capsys.readouterr()
+    assert main(["rotate", str(PARKING), "--calibration", str(result), "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and str(result) in err and "yaw not determined" in err
+    for remedy in ("--protocol", "--uphill-azimuth-deg", "speed", "--level-only"):
+        assert remedy in err
+    assert not out.exists()
+
+
+def test_level_only_writes_a_frame_whose_metadata_and_columns_say_yaw_is_the_sensors_own(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    result, out = tmp_path / "noyaw.json", tmp_path / "out.parquet"
+    assert main(["calibrate", str(PARKING), "-o", str(result)]) == 0
+    capsys.readouterr()
+    assert main(["rotate", str(PARKING), "--calibration", str(result), "-o", str(out), "--level-only"]) == 0
+    captured = capsys.readouterr()
+    assert "levelled" in captured.err and "levelled-frame samples" in captured.out
+    schema = pq.read_schema(out)
+    meta = {k.decode(): v.decode() for k, v in (schema.metadata or {}).items()}
+    assert meta["mountcal.frame"].startswith("levelled") and "sensor's own" in meta["mountcal.frame"]
+    assert "ISO 8855" not in meta["mountcal.frame"]
+    assert meta["mountcal.yaw"].startswith("sensor's own")
+    for name in ("ax", "ay", "az", "gx", "gy", "gz"):
+        assert "sensor's own heading" in schema.field(name).metadata[b"description"].decode()
+    # the data: the parked samples have gravity on +z (levelled) whatever the heading
+    df = pd.read_parquet(out)
+    assert float(df["az"].median()) > 9.7
+    # CSV cannot carry the warning: refused
+    assert (
+        main(["rotate", str(PARKING), "--calibration", str(result), "-o", str(tmp_path / "o.csv"), "--level-only"]) == 2
+    )
+    assert not (tmp_path / "o.csv").exists()
+
+
+def test_level_only_mcap_uses_a_levelled_topic_and_frame_id(noyaw: Calibration, tmp_path: Path) -> None:
+    from mcap.reader import make_reader
+
+    out = tmp_path / "out.mcap"
+    report = rotate_log(PARKING, noyaw, out, level_only=True)
+    assert report.topic is not None and report.topic.endswith("/levelled")
+    with open(out, "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    channels = {c.topic: c for c in summary.channels.values()}
+    assert not any(t.endswith("/vehicle") for t in channels)
+    assert "sensor's own" in channels[report.topic].metadata["frame"]
+
+
+def test_the_python_api_refuses_an_undetermined_yaw_unless_level_only(noyaw: Calibration) -> None:
+    acc = np.tile([0.0, 0.0, 9.8], (20, 1))
+    with pytest.raises(InputError, match="yaw not determined"):
+        acc_to_vehicle(acc, noyaw)
+    df = pd.DataFrame(acc, columns=["ax", "ay", "az"])
+    with pytest.raises(InputError, match="level_only=True"):
+        frame_to_vehicle(df, noyaw)
+    with pytest.warns(UserWarning, match="levelled only"):
+        levelled = frame_to_vehicle(df, noyaw, level_only=True)
+    assert levelled.attrs["frame"] == "levelled"
+    with pytest.raises(InputError):
+        rotate_log(PARKING, noyaw, Path("never-written.parquet"))
+    assert not Path("never-written.parquet").exists()
+
+
+def test_a_drive_that_does_not_determine_yaw_stores_no_yaw_and_is_refused(drive_csv: Path, tmp_path: Path) -> None:
+    from mountcal.estimate.driving import DrivingOptions
+    from mountcal.pipeline import LogJob
+    from mountcal.pipeline_drive import calibrate_any
+
+    done = calibrate_any(LogJob(paths=(str(drive_csv),)), use="driving", driving=DrivingOptions(max_yaw_sigma_deg=1e-6))
+    cal = done.calibration
+    assert cal.yaw_deg is None and "determines yaw only" in str(cal.yaw_reason)
+    assert abs(np.degrees(angles_from_rot_vs(cal.rot_vs)[2])) < 1e-9
+    with pytest.raises(InputError, match="speed"):
+        rotate_log(drive_csv, cal, tmp_path / "o.parquet")
+    assert not (tmp_path / "o.parquet").exists()
+
+
+def test_a_fleet_consensus_without_yaw_stores_the_levelling_rotation(tmp_path: Path) -> None:
+    for seed in range(3):
+        table, _ = simulate_stops(
+            roll_deg=4.0, pitch_deg=-3.0, yaw_deg=50.0, slope_deg=6.0, headings="relative", seed=seed
+        )
+        (tmp_path / "van").mkdir(exist_ok=True)
+        write_table(table, tmp_path / "van" / f"stops_{seed}.csv")
+    out = tmp_path / "fleet.parquet"
+    assert main(["fleet", str(tmp_path / "van"), "-o", str(out), "--headings", "relative", "--workers", "1", "-q"]) == 0
+    logs = pd.read_parquet(out)
+    vehicles = pd.read_parquet(tmp_path / "fleet_vehicles.parquet")
+    assert (logs["status"] == "ok").all() and logs["yaw_deg"].isna().all()
+    for frame in (logs, vehicles):
+        for _, row in frame.iterrows():
+            rot = Rotation.from_quat(row[["quat_x", "quat_y", "quat_z", "quat_w"]].to_numpy(dtype=float))
+            assert abs(np.degrees(angles_from_rot_vs(rot)[2])) < 1e-6
+    assert vehicles["yaw_deg"].isna().all()
