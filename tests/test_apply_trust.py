@@ -190,3 +190,112 @@ def test_a_fleet_consensus_without_yaw_stores_the_levelling_rotation(tmp_path: P
             rot = Rotation.from_quat(row[["quat_x", "quat_y", "quat_z", "quat_w"]].to_numpy(dtype=float))
             assert abs(np.degrees(angles_from_rot_vs(rot)[2])) < 1e-6
     assert vehicles["yaw_deg"].isna().all()
+
+
+# --------------------------------------------------------------------------- not confident: visible, or refused
+
+
+@pytest.fixture(scope="module")
+def doubtful(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A result the residual loop marks not confident: stops disturbed by 30 mg the model lacks."""
+    disturbance = np.random.default_rng(0).normal(0.0, 0.03, (12, 3))
+    table, _ = simulate_stops(disturbance_mps2=disturbance, seed=1)
+    cal = calibrate(table)
+    assert not cal.confident and cal.yaw_deg is not None
+    path = tmp_path_factory.mktemp("doubtful") / "doubtful.json"
+    cal.save(path)
+    return path
+
+
+def test_issue_repro_rotate_warns_about_and_records_a_result_that_is_not_confident(
+    doubtful: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "out.parquet"
+    assert main(["rotate", str(PARKING), "--calibration", str(doubtful), "-o", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "warning" in err and "not confident" in err
+    meta = {k.decode(): v.decode() for k, v in (pq.read_schema(out).metadata or {}).items()}
+    assert json.loads(meta["mountcal.confident"]) is False
+    assert any("not confident" in w for w in json.loads(meta["mountcal.warnings"]))
+    assert meta["mountcal.frame"].startswith("vehicle")
+    mcap_out = tmp_path / "out.mcap"
+    report = rotate_log(PARKING, Calibration.load(doubtful), mcap_out)
+    assert any("not confident" in w for w in report.warnings)
+    from mcap.reader import make_reader
+
+    with open(mcap_out, "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    assert [c.metadata["confident"] for c in summary.channels.values() if c.topic == report.topic] == ["false"]
+
+
+def test_require_confident_refuses_a_result_that_is_not_confident(
+    doubtful: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "out.parquet"
+    code = main(["rotate", str(PARKING), "--calibration", str(doubtful), "-o", str(out), "--require-confident"])
+    err = capsys.readouterr().err
+    assert code == 2 and "not confident" in err and str(doubtful) in err and "Traceback" not in err
+    assert not out.exists()
+    with pytest.raises(InputError, match="not confident"):
+        frame_to_vehicle(
+            pd.DataFrame(np.tile([0.0, 0.0, 9.8], (20, 1)), columns=["ax", "ay", "az"]),
+            Calibration.load(doubtful),
+            require_confident=True,
+        )
+
+
+def test_fleet_warns_about_logs_that_are_not_confident_and_records_them(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    van = tmp_path / "van"
+    van.mkdir()
+    write_table(simulate_stops(seed=3)[0], van / "good.csv")
+    disturbance = np.random.default_rng(0).normal(0.0, 0.03, (12, 3))
+    write_table(simulate_stops(disturbance_mps2=disturbance, seed=1)[0], van / "doubtful.csv")
+    out = tmp_path / "fleet.parquet"
+    assert main(["fleet", str(van), "-o", str(out), "--workers", "1", "-q"]) == 0
+    err = capsys.readouterr().err
+    assert "warning" in err and "1 log(s) not confident" in err and "doubtful.csv" in err
+    for table in (out, tmp_path / "fleet_vehicles.parquet"):
+        meta = pq.read_schema(table).metadata or {}
+        assert json.loads(meta[b"mountcal.confident"]) is False
+        assert [Path(p).name for p in json.loads(meta[b"mountcal.not_confident_logs"])] == ["doubtful.csv"]
+    refused = tmp_path / "refused.parquet"
+    assert main(["fleet", str(van), "-o", str(refused), "--workers", "1", "-q", "--require-confident"]) == 2
+    assert "not confident" in capsys.readouterr().err
+    assert not refused.exists() and not (tmp_path / "refused_vehicles.parquet").exists()
+
+
+def test_issue_repro_fleet_never_takes_its_own_outputs_as_logs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import shutil
+
+    van = tmp_path / "fleet" / "van"
+    van.mkdir(parents=True)
+    shutil.copy(PARKING, van / "parking.mcap")
+    shutil.copy(REPO / "data" / "parking_protocol.csv", van / "parking.protocol.csv")
+    first = tmp_path / "fleet" / "fleet.parquet"
+    assert main(["fleet", str(tmp_path / "fleet"), "-o", str(first), "--workers", "1", "-q"]) == 0
+    assert len(pd.read_parquet(first)) == 1
+    # Outputs lying among the logs under other names: recognised by their content, not their names.
+    result = tmp_path / "result.json"
+    args = ["--protocol", str(van / "parking.protocol.csv")]
+    assert main(["calibrate", str(van / "parking.mcap"), *args, "-o", str(result)]) == 0
+    assert (
+        main(["rotate", str(van / "parking.mcap"), "--calibration", str(result), "-o", str(van / "day2.parquet")]) == 0
+    )
+    assert main(["rotate", str(van / "parking.mcap"), "--calibration", str(result), "-o", str(van / "day3.mcap")]) == 0
+    first.rename(van / "day4.parquet")
+    capsys.readouterr()
+    second = tmp_path / "second.parquet"
+    assert main(["fleet", str(tmp_path), "-o", str(second), "--workers", "1", "-q"]) == 0
+    out = capsys.readouterr().out
+    logs = pd.read_parquet(second)
+    assert [Path(p).name for p in logs["log"]] == ["parking.mcap"] and (logs["status"] == "ok").all()
+    assert "set aside 4 file(s) mountcal wrote" in out  # day2, day3, day4 and the first run's vehicles table
+    with pytest.raises(InputError, match="a file mountcal wrote"):
+        from mountcal.fleet.inputs import collect_jobs
+
+        collect_jobs([van / "day2.parquet"])

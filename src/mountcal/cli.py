@@ -185,13 +185,18 @@ def cmd_fleet(args: argparse.Namespace) -> int:
         options=Options(method=args.method, model=args.model, max_yaw_sigma_deg=args.max_yaw_sigma),
         headings=args.headings,
     )
-    jobs = collect_jobs(args.input, defaults, exclude=outputs_of(args.output))
+    ours: list[Path] = []
+    jobs = collect_jobs(args.input, defaults, exclude=outputs_of(args.output), set_aside=ours)
+    if ours:
+        listed = ", ".join(map(str, ours[:5])) + (" …" if len(ours) > 5 else "")
+        print(f"set aside {len(ours)} file(s) mountcal wrote (fleet tables, rotated logs): {listed}")
     options = FleetOptions(
         workers=args.workers,
         scheduler=args.scheduler,
         retry_failed=args.retry_failed,
         progress=not args.quiet,
         floor_deg=args.floor_deg,
+        require_confident=args.require_confident,
     )
     try:
         result = run_fleet(jobs, args.output, options)
@@ -202,6 +207,13 @@ def cmd_fleet(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 130
+    if result.not_confident:
+        listed = ", ".join(result.not_confident[:5]) + (" …" if len(result.not_confident) > 5 else "")
+        print(
+            f"mountcal: warning: {len(result.not_confident)} log(s) not confident (flag not_confident; recorded in "
+            f"the tables' metadata, mountcal.not_confident_logs): {listed}",
+            file=sys.stderr,
+        )
     print("\n".join(summary_lines(result)))
     return 0
 
@@ -505,6 +517,9 @@ def _parser() -> argparse.ArgumentParser:
         "--floor-deg", type=float, default=0.0, help="mounting scatter between logs added to each log's σ (deg)"
     )
     flt.add_argument("-q", "--quiet", action="store_true", help="no progress line")
+    flt.add_argument(
+        "--require-confident", action="store_true", help="refuse (write no table) if a log's result is not confident"
+    )
     fg = flt.add_argument_group("every log (a manifest's cells take precedence)")
     fg.add_argument("--dbc", default=None, help="DBC to decode CAN logs")
     fg.add_argument("--mapping", default=None, help="TOML naming the accelerometer signals (CAN)")

@@ -25,6 +25,7 @@ import struct
 import zlib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, BinaryIO
 
 import lz4.frame
@@ -35,6 +36,7 @@ import pyarrow.parquet as pq
 import zstandard
 from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
+from mcap.reader import make_reader
 from mcap.records import (
     AttachmentIndex,
     Channel,
@@ -848,3 +850,25 @@ def _imu_channels(summary: Any, topic: str | None, where: str) -> tuple[frozense
             "Write Parquet or CSV instead (--format parquet), which reads JSON messages too.",
         )
     return frozenset(c.id for c in chans), topic, int(chans[0].schema_id)
+
+
+def written_by_mountcal(path: Path) -> bool:
+    """Whether mountcal wrote this file (recognised by its metadata, not its name).
+
+    A fleet table or a rotated log in Parquet carries ``mountcal.*`` file metadata; a rotated MCAP
+    has a channel whose metadata holds the frame and the calibration applied. Such a file is an
+    output, never a log to calibrate (a rotated log would calibrate to the identity).
+    """
+    suffix = path.suffix.lower()
+    try:
+        if suffix in (".parquet", ".pq"):
+            keys = (pq.read_schema(path).metadata or {}).keys()
+            return any(k.startswith(b"mountcal.") for k in keys)
+        if suffix == ".mcap":
+            with path.open("rb") as f:
+                summary = make_reader(f).get_summary()
+            channels = summary.channels.values() if summary is not None else ()
+            return any({"frame", "calibration"} <= c.metadata.keys() for c in channels)
+    except Exception:  # unreadable: not recognisably ours; the log reader will say what is wrong with it
+        return False
+    return False
