@@ -9,6 +9,9 @@
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -299,3 +302,55 @@ def test_issue_repro_fleet_never_takes_its_own_outputs_as_logs(
         from mountcal.fleet.inputs import collect_jobs
 
         collect_jobs([van / "day2.parquet"])
+
+
+# --------------------------------------------------------------------------- optional dependencies, checked first
+
+BLOCKER = """
+import importlib.abc, runpy, sys
+HIDDEN = set(sys.argv[1].split(","))
+class Hide(importlib.abc.MetaPathFinder):  # as if `pip install .` without the extra
+    def find_spec(self, name, path=None, target=None):
+        if name.split(".")[0] in HIDDEN:
+            raise ModuleNotFoundError(f"No module named {name!r}", name=name)
+        return None
+sys.meta_path.insert(0, Hide())
+sys.argv = ["mountcal", *sys.argv[2:]]
+runpy.run_module("mountcal", run_name="__main__")
+"""
+
+
+def run_without(hidden: str, *args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+    """The real CLI in a fresh interpreter where ``hidden`` (comma-separated top-level modules) cannot be imported."""
+    env = {**os.environ, "PYTHONPATH": str(REPO / "src")}
+    return subprocess.run(
+        [sys.executable, "-c", BLOCKER, hidden, *args], capture_output=True, text=True, cwd=cwd, env=env, timeout=300
+    )
+
+
+def test_issue_repro_calibrate_report_without_matplotlib_refuses_before_writing_anything(tmp_path: Path) -> None:
+    stops = REPO / "data" / "zhang2011_stops.csv"
+    done = run_without("matplotlib", "calibrate", str(stops), "-o", "r.json", "--report", "r.html", cwd=tmp_path)
+    assert done.returncode == 2, done.stderr
+    assert "Traceback" not in done.stderr and "ModuleNotFoundError" not in done.stderr
+    assert "matplotlib" in done.stderr and "pip install 'mountcal[report]'" in done.stderr
+    assert not (tmp_path / "r.json").exists() and not (tmp_path / "r.html").exists()
+    assert list(tmp_path.iterdir()) == []  # no temporary file either
+    # the blocker hides only what it names: without --report the same command works and writes
+    done = run_without("matplotlib", "calibrate", str(stops), "-o", "r.json", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "r.json").exists()
+
+
+def test_report_and_fleet_scheduler_name_their_extra_when_it_is_missing(tmp_path: Path) -> None:
+    result = tmp_path / "r.json"
+    assert main(["calibrate", str(REPO / "data" / "zhang2011_stops.csv"), "-o", str(result)]) == 0
+    done = run_without("matplotlib", "report", str(result), cwd=tmp_path)
+    assert done.returncode == 2 and "pip install 'mountcal[report]'" in done.stderr and "Traceback" not in done.stderr
+    assert not (tmp_path / "r.html").exists()
+    (tmp_path / "van").mkdir()
+    write_table(simulate_stops(seed=0)[0], tmp_path / "van" / "a.csv")
+    args = ("fleet", str(tmp_path / "van"), "-o", "f.parquet", "--scheduler", "tcp://127.0.0.1:1", "-q")
+    done = run_without("distributed,dask", *args, cwd=tmp_path)
+    assert done.returncode == 2 and "pip install 'mountcal[fleet]'" in done.stderr and "Traceback" not in done.stderr
+    assert not (tmp_path / "f.parquet").exists() and not (tmp_path / "f.parquet.parts").exists()

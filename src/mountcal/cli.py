@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import sys
 from collections.abc import Sequence
@@ -50,6 +51,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             "the input file itself",
             "Choose another -o path; mountcal never overwrites its input.",
         )
+    if args.report is not None:
+        require("matplotlib", "report", "calibrate --report")  # before any work: nothing is written without it
     options = Options(
         method=args.method, model=args.model, gravity_mps2=args.gravity, max_yaw_sigma_deg=args.max_yaw_sigma
     )
@@ -139,15 +142,9 @@ def cmd_rotate(args: argparse.Namespace) -> int:
 
 def cmd_report(args: argparse.Namespace) -> int:
     """``mountcal report RESULT.json [--stops STOPS]``: a self-contained HTML report of a calibration."""
-    try:
-        from mountcal.report import render  # matplotlib is needed by this command only
-    except ImportError as err:
-        raise InputError(
-            "mountcal report",
-            "matplotlib installed",
-            f"it missing ({err})",
-            "Install it: pip install 'mountcal[report]'.",
-        ) from err
+    require("matplotlib", "report", "mountcal report")
+    from mountcal.report import render  # matplotlib is needed by this command only
+
     result = Path(args.result)
     output = Path(args.output) if args.output is not None else result.with_suffix(".html")
     inputs = [result] + ([Path(args.stops)] if args.stops else [])
@@ -178,6 +175,8 @@ def cmd_fleet(args: argparse.Namespace) -> int:
     """``mountcal fleet INPUTS… -o fleet.parquet``: calibrate many logs of many vehicles, resumably."""
     from mountcal.fleet import FleetOptions, JobDefaults, collect_jobs, outputs_of, run_fleet, summary_lines
 
+    if args.scheduler is not None:
+        require("distributed", "fleet", "fleet --scheduler")  # before any log is read or hashed
     defaults = JobDefaults(
         log=LogOptions(dbc=args.dbc, mapping=args.mapping, channel=args.channel, topic=args.topic),
         detection=StopDetection(max_acc_std_mps2=args.max_acc_std, min_duration_s=args.min_stop_s),
@@ -216,6 +215,19 @@ def cmd_fleet(args: argparse.Namespace) -> int:
         )
     print("\n".join(summary_lines(result)))
     return 0
+
+
+def require(module: str, extra: str, needed_by: str) -> None:
+    """Refuse, before any work, an option whose optional dependency is not installed; name the extra."""
+    try:
+        importlib.import_module(module)
+    except ImportError as err:
+        raise InputError(
+            needed_by,
+            f"the optional package {module} installed",
+            f"it missing ({err})",
+            f"Install it: pip install 'mountcal[{extra}]'. Nothing was written.",
+        ) from err
 
 
 def _is_stop_table(path: Path, args: argparse.Namespace) -> bool:
