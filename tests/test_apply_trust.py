@@ -12,6 +12,7 @@ import json
 import os
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -25,7 +26,7 @@ from mountcal.cli import main
 from mountcal.conventions import angles_from_rot_vs
 from mountcal.errors import InputError
 from mountcal.result import Calibration
-from mountcal.rotate import acc_to_vehicle, frame_to_vehicle
+from mountcal.rotate import acc_to_vehicle, check_applicable, frame_to_vehicle
 from mountcal.rotate_log import rotate_log, to_frame
 from mountcal.simulate import simulate_stops
 from mountcal.simulate_drive import simulate_drive
@@ -354,3 +355,72 @@ def test_report_and_fleet_scheduler_name_their_extra_when_it_is_missing(tmp_path
     done = run_without("distributed,dask", *args, cwd=tmp_path)
     assert done.returncode == 2 and "pip install 'mountcal[fleet]'" in done.stderr and "Traceback" not in done.stderr
     assert not (tmp_path / "f.parquet").exists() and not (tmp_path / "f.parquet.parts").exists()
+
+
+# --------------------------------------------------------------------------- stops against driving
+
+
+@pytest.fixture(scope="module")
+def drive_and_stops(tmp_path_factory: pytest.TempPathFactory):  # type: ignore[no-untyped-def]
+    """One mounting seen by a drive (written as a log) and by stops on a 5° slope, headings relative."""
+    truth = dict(roll_deg=-7.0, pitch_deg=-2.0, yaw_deg=25.0)
+    path = tmp_path_factory.mktemp("drive") / "drive.csv"
+    to_frame(simulate_drive(**truth, duration_s=300.0, seed=5).to_samples()).to_csv(path, index=False)
+    table, _ = simulate_stops(**truth, slope_deg=5.0, headings="relative", seed=5)
+    return path, table, calibrate(table)
+
+
+def mirror_of(cal: Calibration) -> Calibration:
+    """The stops' mirror solution (roll + 180°, slope 180° − α): it fits stops without headings as well."""
+    flipped = cal.rot_vs * Rotation.from_euler("x", 180.0, degrees=True)
+    roll = (cal.roll_deg + 360.0) % 360.0 - 180.0
+    return replace(cal, rot_vs=flipped, roll_deg=roll, slope_deg=180.0 - (cal.slope_deg or 0.0))
+
+
+def test_issue_repro_stops_and_driving_that_disagree_in_tilt_are_a_finding_not_combined(
+    drive_and_stops, capsys: pytest.CaptureFixture[str]
+) -> None:  # type: ignore[no-untyped-def]
+    from mountcal.cli import summary
+    from mountcal.estimate.driving import combine, estimate_driving
+    from mountcal.io.logs import read_log
+    from mountcal.pipeline import LogJob
+    from mountcal.pipeline_drive import stops_with_drive
+    from mountcal.report import render
+
+    path, table, static = drive_and_stops
+    samples = read_log([path])
+    agree = combine(static, estimate_driving(samples, tilt_from=static))  # the same mounting: combined
+    assert agree.confident and agree.yaw_deg is not None and agree.fit["calibrated_from"] == "stops + driving"
+    mirror = mirror_of(static)
+    fit = estimate_driving(samples, tilt_from=mirror)
+    assert fit.tilt_check is not None and fit.tilt_check["angle_deg"] > 170.0
+    cal = stops_with_drive(mirror, table, fit, samples, LogJob(paths=(str(path),)))
+    assert not cal.confident
+    assert [u["test"] for u in cal.unexplained if u["test"] == "stops_vs_driving"] == ["stops_vs_driving"]
+    assert "disagree" in cal.fit["calibrated_from"]
+    text = summary(cal)
+    assert "DISAGREE" in text and "NOT CONFIDENT" in text and "tilt by 1" in text
+    assert "stops_vs_driving" in render(cal.to_dict(), None)
+    # the physical branch: the rotated drive has +g up (the mirror would give −g)
+    acc_v = cal.rot_vs.apply(samples.acc_s)
+    assert float(np.median(acc_v[:, 2])) > 9.0
+    assert float(np.median(mirror.rot_vs.apply(samples.acc_s)[:, 2])) < -9.0
+    # and the result is refused where confidence is required
+    with pytest.raises(InputError, match="not confident"):
+        check_applicable(cal, require_confident=True)
+
+
+def test_stops_and_driving_that_disagree_in_yaw_are_not_combined(drive_and_stops) -> None:  # type: ignore[no-untyped-def]
+    from mountcal.estimate.driving import combine, estimate_driving
+    from mountcal.io.logs import read_log
+
+    path, _, _ = drive_and_stops
+    table, _ = simulate_stops(roll_deg=-7.0, pitch_deg=-2.0, yaw_deg=25.0, slope_deg=5.0, seed=5)
+    static = calibrate(table)  # uphill headings: a yaw of its own
+    assert static.yaw_deg is not None and static.confident
+    wrong = replace(static, yaw_deg=static.yaw_deg + 20.0)  # as from a wrong uphill azimuth
+    wrong = replace(wrong, rot_vs=Rotation.from_euler("z", 20.0, degrees=True) * static.rot_vs)
+    cal = combine(wrong, estimate_driving(read_log([path]), tilt_from=wrong))
+    assert not cal.confident and cal.yaw_deg == wrong.yaw_deg  # not averaged with the drive's
+    finding = [u for u in cal.unexplained if u["test"] == "stops_vs_driving"]
+    assert len(finding) == 1 and "yaw by -2" in finding[0]["size"]

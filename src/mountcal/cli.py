@@ -386,6 +386,9 @@ def summary(cal: Calibration) -> str:
     if cal.slope_deg is None:
         lines.append("  slope not determined (see notes)")
     lines += [f"  note: {n}" for n in cal.notes]
+    if not cal.confident:
+        found = "; ".join(f"{u.get('what')} ({u.get('size')})" for u in cal.unexplained) or "see the notes"
+        lines.append(f"  NOT CONFIDENT: {found}; rotate warns, --require-confident refuses")
     lines.append("  (uncertainties are 1σ)")
     return "\n".join(lines)
 
