@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import sys
 from collections.abc import Sequence
@@ -51,6 +52,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             "the input file itself",
             "Choose another -o path; mountcal never overwrites its input.",
         )
+    if args.report is not None:
+        require("matplotlib", "report", "calibrate --report")  # before any work: nothing is written without it
     options = Options(
         method=args.method, model=args.model, gravity_mps2=args.gravity, max_yaw_sigma_deg=args.max_yaw_sigma
     )
@@ -108,6 +111,7 @@ def cmd_inspect(args: argparse.Namespace) -> int:
 
 def cmd_rotate(args: argparse.Namespace) -> int:
     """``mountcal rotate LOG… --calibration result.json -o OUT``: the log's samples in the vehicle frame."""
+    from mountcal.rotate import check_applicable
     from mountcal.rotate_log import rotate_log
 
     if Path(args.output).resolve() == Path(args.calibration).resolve():
@@ -118,6 +122,9 @@ def cmd_rotate(args: argparse.Namespace) -> int:
             "Choose another -o path; mountcal never overwrites its input.",
         )
     cal = Calibration.load(args.calibration)
+    check_applicable(  # refused before any reading, naming the calibration file
+        cal, level_only=args.level_only, require_confident=args.require_confident, where=str(args.calibration)
+    )
     report = rotate_log(
         args.input,
         cal,
@@ -125,22 +132,20 @@ def cmd_rotate(args: argparse.Namespace) -> int:
         fmt=args.format,
         options=LogOptions(dbc=args.dbc, mapping=args.mapping, channel=args.channel, topic=args.topic),
         chunk_samples=args.chunk,
+        level_only=args.level_only,
+        require_confident=args.require_confident,
     )
+    for text in report.warnings:
+        print(f"mountcal: warning: {text} (recorded in {args.output}'s metadata)", file=sys.stderr)
     print("\n".join(report.lines()))
     return 0
 
 
 def cmd_report(args: argparse.Namespace) -> int:
     """``mountcal report RESULT.json [--stops STOPS]``: a self-contained HTML report of a calibration."""
-    try:
-        from mountcal.report import render  # matplotlib is needed by this command only
-    except ImportError as err:
-        raise InputError(
-            "mountcal report",
-            "matplotlib installed",
-            f"it missing ({err})",
-            "Install it: pip install 'mountcal[report]'.",
-        ) from err
+    require("matplotlib", "report", "mountcal report")
+    from mountcal.report import render  # matplotlib is needed by this command only
+
     result = Path(args.result)
     output = Path(args.output) if args.output is not None else result.with_suffix(".html")
     inputs = [result] + ([Path(args.stops)] if args.stops else [])
@@ -171,6 +176,8 @@ def cmd_fleet(args: argparse.Namespace) -> int:
     """``mountcal fleet INPUTS… -o fleet.parquet``: calibrate many logs of many vehicles, resumably."""
     from mountcal.fleet import FleetOptions, JobDefaults, collect_jobs, outputs_of, run_fleet, summary_lines
 
+    if args.scheduler is not None:
+        require("distributed", "fleet", "fleet --scheduler")  # before any log is read or hashed
     defaults = JobDefaults(
         log=LogOptions(dbc=args.dbc, mapping=args.mapping, channel=args.channel, topic=args.topic),
         detection=_detection(args),
@@ -178,13 +185,18 @@ def cmd_fleet(args: argparse.Namespace) -> int:
         options=Options(method=args.method, model=args.model, max_yaw_sigma_deg=args.max_yaw_sigma),
         headings=args.headings,
     )
-    jobs = collect_jobs(args.input, defaults, exclude=outputs_of(args.output))
+    ours: list[Path] = []
+    jobs = collect_jobs(args.input, defaults, exclude=outputs_of(args.output), set_aside=ours)
+    if ours:
+        listed = ", ".join(map(str, ours[:5])) + (" …" if len(ours) > 5 else "")
+        print(f"set aside {len(ours)} file(s) mountcal wrote (fleet tables, rotated logs): {listed}")
     options = FleetOptions(
         workers=args.workers,
         scheduler=args.scheduler,
         retry_failed=args.retry_failed,
         progress=not args.quiet,
         floor_deg=args.floor_deg,
+        require_confident=args.require_confident,
     )
     try:
         result = run_fleet(jobs, args.output, options)
@@ -195,8 +207,28 @@ def cmd_fleet(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 130
+    if result.not_confident:
+        listed = ", ".join(result.not_confident[:5]) + (" …" if len(result.not_confident) > 5 else "")
+        print(
+            f"mountcal: warning: {len(result.not_confident)} log(s) not confident (flag not_confident; recorded in "
+            f"the tables' metadata, mountcal.not_confident_logs): {listed}",
+            file=sys.stderr,
+        )
     print("\n".join(summary_lines(result)))
     return 0
+
+
+def require(module: str, extra: str, needed_by: str) -> None:
+    """Refuse, before any work, an option whose optional dependency is not installed; name the extra."""
+    try:
+        importlib.import_module(module)
+    except ImportError as err:
+        raise InputError(
+            needed_by,
+            f"the optional package {module} installed",
+            f"it missing ({err})",
+            f"Install it: pip install 'mountcal[{extra}]'. Nothing was written.",
+        ) from err
 
 
 def _is_stop_table(path: Path, args: argparse.Namespace) -> bool:
@@ -355,6 +387,9 @@ def summary(cal: Calibration) -> str:
     if cal.slope_deg is None:
         lines.append("  slope not determined (see notes)")
     lines += [f"  note: {n}" for n in cal.notes]
+    if not cal.confident:
+        found = "; ".join(f"{u.get('what')} ({u.get('size')})" for u in cal.unexplained) or "see the notes"
+        lines.append(f"  NOT CONFIDENT: {found}; rotate warns, --require-confident refuses")
     lines.append("  (uncertainties are 1σ)")
     return "\n".join(lines)
 
@@ -455,6 +490,12 @@ def _parser() -> argparse.ArgumentParser:
         "--format", choices=("parquet", "csv", "mcap"), default=None, help="default: from -o's suffix, else parquet"
     )
     rot.add_argument("--chunk", type=int, default=100_000, help="samples per chunk: bounds the memory (default 100000)")
+    rot.add_argument(
+        "--level-only",
+        action="store_true",
+        help="accept a calibration without yaw: write a levelled frame (z up, heading the sensor's own)",
+    )
+    rot.add_argument("--require-confident", action="store_true", help="refuse a calibration that is not confident")
     rot_log = rot.add_argument_group("logs")
     rot_log.add_argument("--dbc", default=None, help="DBC to decode a CAN log")
     rot_log.add_argument("--mapping", default=None, help="TOML naming the accelerometer signals (CAN)")
@@ -517,6 +558,9 @@ def _parser() -> argparse.ArgumentParser:
         "--floor-deg", type=float, default=0.0, help="mounting scatter between logs added to each log's σ (deg)"
     )
     flt.add_argument("-q", "--quiet", action="store_true", help="no progress line")
+    flt.add_argument(
+        "--require-confident", action="store_true", help="refuse (write no table) if a log's result is not confident"
+    )
     fg = flt.add_argument_group("every log (a manifest's cells take precedence)")
     fg.add_argument("--dbc", default=None, help="DBC to decode CAN logs")
     fg.add_argument("--mapping", default=None, help="TOML naming the accelerometer signals (CAN)")

@@ -65,6 +65,16 @@ def euler_angles(rot: Rotation, sequence: str) -> tuple[float, float, float]:
     return float(a), float(b), float(c)
 
 
+def levelled(rot_vs: Rotation) -> Rotation:
+    """The mounting rotation with yaw 0: the vehicle's up axis kept, its x axis the sensor's x on the horizontal.
+
+    What a calibration holds when yaw is not determined: it levels (z up) but leaves the heading
+    the sensor's own instead of inventing one. Built from the up axis, so it is exact even at pitch ±90°.
+    """
+    roll, pitch = tilt_from_normal(np.asarray(rot_vs.inv().apply([0.0, 0.0, 1.0]), dtype=float))
+    return rot_vs_from_angles(roll, pitch, 0.0)
+
+
 def specific_force_v(slope_rad: float, beta_rad: ArrayLike, g: float = G_N) -> FloatArray:
     """Static specific force in the vehicle frame, parked at heading β on slope α (MODEL.md §2).
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import hashlib
 import importlib.metadata
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, Literal
@@ -21,7 +21,14 @@ import numpy as np
 from mountcal.calibrate import calibrate
 from mountcal.conventions import G_N, normal_gravity
 from mountcal.errors import NotEnoughInformation
-from mountcal.estimate.driving import DrivingFit, DrivingOptions, combine, driving_calibration, estimate_driving
+from mountcal.estimate.driving import (
+    DrivingFit,
+    DrivingOptions,
+    combine,
+    driving_calibration,
+    estimate_driving,
+    not_combined,
+)
 from mountcal.io.logs import read_log
 from mountcal.io.samples import Samples
 from mountcal.io.timestamps import increasing_times
@@ -97,7 +104,9 @@ def calibrate_any(job: LogJob, use: Use = "auto", driving: DrivingOptions | None
                 ) from err
             skipped["driving"] = str(err)
     if static is not None and fit is not None:
-        cal = combine(static, fit)
+        cal = stops_with_drive(static, table, fit, samples, job, driving)
+        if cal.fit.get("combination", {}).get("disagreement") is not None:
+            skipped["combination"] = "the stops and the drive disagree beyond 3σ (see the notes)"
         return LogResult(cal, samples, str(cal.fit["calibrated_from"]), static, fit, found, table, skipped)
     if static is not None:
         return LogResult(static, samples, "stops", static, None, found, table, skipped)
@@ -105,6 +114,35 @@ def calibrate_any(job: LogJob, use: Use = "auto", driving: DrivingOptions | None
     g, g_source = _gravity(samples, job.options.gravity_mps2)
     cal = driving_calibration(fit, gravity_mps2=g, gravity_source=g_source, provenance=_provenance(job.paths))
     return LogResult(cal, increasing_times(samples), "driving", None, fit, None, None, skipped)  # counts merged stamps
+
+
+def stops_with_drive(
+    static: Calibration,
+    table: StopTable | None,
+    fit: DrivingFit,
+    samples: Samples,
+    job: LogJob,
+    driving: DrivingOptions | None = None,
+) -> Calibration:
+    """The stops' calibration with the drive's yaw folded in, or — when they disagree — not combined.
+
+    ``fit`` is the drive levelled with ``static``. On a disagreement beyond 3σ the result is not
+    confident and carries the finding; it is the stops' result when their rotation puts the
+    stops' specific force +g up, else (their mirror solution) the drive's own, levelled by its
+    mean gravity: either way the result is on the physical branch.
+    """
+    cal = combine(static, fit)
+    found = cal.fit.get("combination", {}).get("disagreement")
+    if found is None or _up_is_up(static, table):
+        return cal
+    alone = estimate_driving(samples, driving)  # levelled by its own mean gravity: +g up by construction
+    g, g_source = _gravity(samples, job.options.gravity_mps2)
+    cal = not_combined(
+        driving_calibration(alone, gravity_mps2=g, gravity_source=g_source, provenance=_provenance(job.paths)),
+        fit,
+        found,
+    )
+    return replace(cal, fit={**cal.fit, "calibrated_from": "driving (the stops disagree and put −g up)"})
 
 
 def describe_any(result: LogResult, n_files: int) -> Sequence[str]:
@@ -136,6 +174,14 @@ def describe_any(result: LogResult, n_files: int) -> Sequence[str]:
     lines.append(f"calibrated from: {result.used}")
     lines += [f"not used: {k} — {v}" for k, v in result.skipped.items()]
     return lines
+
+
+def _up_is_up(cal: Calibration, table: StopTable | None) -> bool:
+    """Whether the calibration rotates the parked stops' specific force to +g up (the physical branch)."""
+    if table is None:
+        return cal.slope_deg is None or cal.slope_deg < 90.0
+    acc = table.acc_s - (cal.bias_mps2 if cal.bias_mps2 is not None else 0.0)
+    return bool(np.median(cal.rot_vs.apply(acc)[:, 2]) > 0.0)
 
 
 def _gravity(samples: Samples, given: float | None) -> tuple[float, str]:

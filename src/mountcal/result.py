@@ -15,11 +15,16 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from mountcal.atomic import atomic_path
-from mountcal.conventions import CONVENTIONS, FloatArray
+from mountcal.conventions import CONVENTIONS, FloatArray, levelled
 from mountcal.errors import InputError
 
 FORMAT = "mountcal.calibration"
 FORMAT_VERSION = 1
+VEHICLE_FRAME = "vehicle (ISO 8855: x forward, y left, z up)"
+LEVELLED_FRAME = (
+    "levelled (z up; x is the sensor's x axis on the horizontal: yaw not determined, so the heading is the "
+    "sensor's own, not the vehicle's)"
+)
 
 
 @dataclass(frozen=True)
@@ -60,9 +65,18 @@ class Calibration:
     effects: dict[str, Any] = field(default_factory=dict)  # fitted effect values ± σ
     confident: bool = True  # False when the residual shows structure the model does not explain
 
+    def __post_init__(self) -> None:
+        if self.yaw_deg is None:  # a yaw nobody determined is never kept, whoever built the value
+            object.__setattr__(self, "rot_vs", levelled(self.rot_vs))
+
     @property
     def yaw_determined(self) -> bool:
         return self.yaw_deg is not None
+
+    @property
+    def frame(self) -> str:
+        """The frame ``rot_vs`` maps into: the vehicle's, or (yaw not determined) the levelled one."""
+        return VEHICLE_FRAME if self.yaw_determined else LEVELLED_FRAME
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON document (plain types)."""
@@ -87,6 +101,8 @@ class Calibration:
             "rotation": {
                 "quaternion_xyzw": self.rot_vs.as_quat().tolist(),
                 "matrix_vs": self.rot_vs.as_matrix().tolist(),
+                "yaw": "vehicle" if self.yaw_determined else "sensor's own",
+                "frame": self.frame,
             },
             "slope_deg": self.slope_deg,
             "bias_mps2": _list(self.bias_mps2),

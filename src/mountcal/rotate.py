@@ -2,10 +2,16 @@
 
 ``acc_v = R_vs · (acc_s − b)`` removes the fitted bias (when the calibration carries one) and
 rotates; ``acc_s = R_vsᵀ · acc_v + b`` undoes it. Angular rates are only rotated.
+
+A calibration without a determined yaw is refused (its rotation only levels: the heading would be
+the sensor's own), unless the caller asks for exactly that with ``level_only=True``
+(``--level-only``); :func:`check_applicable` is the one place that decides, and also says when a
+result is not confident (refused with ``require_confident=True``).
 """
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 
 import numpy as np
@@ -16,9 +22,60 @@ from mountcal.errors import InputError
 from mountcal.result import Calibration
 
 ACC_COLUMNS = ("ax", "ay", "az")
+YAW_SOURCES = (
+    "calibrate with --protocol SHEET (headings from the slope's uphill direction), with --uphill-azimuth-deg "
+    "and a heading signal in the log, or from a log with driving and a vehicle speed channel"
+)
 
 
-def acc_to_vehicle(acc_s: FloatArray, cal: Calibration, check_units: bool = True) -> FloatArray:
+def check_applicable(
+    cal: Calibration, *, level_only: bool = False, require_confident: bool = False, where: str | None = None
+) -> list[str]:
+    """Refuse a calibration that must not be applied as asked; the warnings for one applied with care.
+
+    Raises
+    ------
+    InputError
+        Yaw is not determined and ``level_only`` is False (the rotation would only level); the
+        result is not confident and ``require_confident`` is True.
+    """
+    where = where or f"calibration of {cal.provenance.get('input') or 'unknown input'}"
+    if not cal.yaw_determined and not level_only:
+        raise InputError(
+            where,
+            "a calibration with a determined yaw, to rotate into the vehicle frame",
+            f"yaw not determined ({cal.yaw_reason or 'no reason recorded'})",
+            f"Determine yaw: {YAW_SOURCES}. Or, to level only (z up, the heading left the sensor's own), "
+            "pass --level-only (level_only=True in Python).",
+        )
+    found: list[str] = []
+    if not cal.confident:
+        why = "; ".join(str(u.get("what", u)) for u in cal.unexplained) or "see the result's notes"
+        if require_confident:
+            raise InputError(
+                where,
+                "a confident calibration (--require-confident)",
+                f"a result that is not confident ({why})",
+                "Check the result's notes and unexplained structure, re-calibrate, or drop --require-confident.",
+            )
+        found.append(
+            f"the calibration is not confident ({why}); its σ are qualified and the rotation may be wrong "
+            f"(roll ± {cal.roll_sigma_deg:.2g}°, pitch ± {cal.pitch_sigma_deg:.2g}°)"
+        )
+    if level_only and not cal.yaw_determined:
+        found.append(f"levelled only: yaw not determined ({cal.yaw_reason}); the heading is the sensor's own")
+    return found
+
+
+def _matrix(cal: Calibration, level_only: bool) -> FloatArray:
+    if not cal.yaw_determined and not level_only:
+        check_applicable(cal)  # raises with the reason and what would determine yaw
+    return np.asarray(cal.rot_vs.as_matrix(), dtype=float)
+
+
+def acc_to_vehicle(
+    acc_s: FloatArray, cal: Calibration, check_units: bool = True, *, level_only: bool = False
+) -> FloatArray:
     """Specific force from the sensor to the vehicle frame, bias removed.
 
     Parameters
@@ -28,6 +85,9 @@ def acc_to_vehicle(acc_s: FloatArray, cal: Calibration, check_units: bool = True
     cal : Calibration
     check_units : bool
         Refuse data whose typical magnitude is ~1 (g units) instead of ~9.8 (m/s²).
+    level_only : bool
+        Accept a calibration without a determined yaw (the result is then levelled, not in the
+        vehicle frame); refused otherwise.
 
     Returns
     -------
@@ -37,25 +97,26 @@ def acc_to_vehicle(acc_s: FloatArray, cal: Calibration, check_units: bool = True
     acc = _as_vectors(acc_s, "acc_s")
     if check_units:
         _check_mps2(acc)
+    matrix = _matrix(cal, level_only)
     if cal.bias_mps2 is not None:
         acc = acc - cal.bias_mps2
-    return _rotated(acc, cal.rot_vs.as_matrix())
+    return _rotated(acc, matrix)
 
 
-def acc_to_sensor(acc_v: FloatArray, cal: Calibration) -> FloatArray:
+def acc_to_sensor(acc_v: FloatArray, cal: Calibration, *, level_only: bool = False) -> FloatArray:
     """The inverse of :func:`acc_to_vehicle`: vehicle-frame specific force as the sensor reads it."""
-    acc = _rotated(_as_vectors(acc_v, "acc_v"), cal.rot_vs.as_matrix().T)
+    acc = _rotated(_as_vectors(acc_v, "acc_v"), _matrix(cal, level_only).T)
     return acc + cal.bias_mps2 if cal.bias_mps2 is not None else acc
 
 
-def rate_to_vehicle(gyro_s: FloatArray, cal: Calibration) -> FloatArray:
+def rate_to_vehicle(gyro_s: FloatArray, cal: Calibration, *, level_only: bool = False) -> FloatArray:
     """Angular rate (any unit) from the sensor to the vehicle frame: rotation only."""
-    return _rotated(_as_vectors(gyro_s, "gyro_s"), cal.rot_vs.as_matrix())
+    return _rotated(_as_vectors(gyro_s, "gyro_s"), _matrix(cal, level_only))
 
 
-def rate_to_sensor(gyro_v: FloatArray, cal: Calibration) -> FloatArray:
+def rate_to_sensor(gyro_v: FloatArray, cal: Calibration, *, level_only: bool = False) -> FloatArray:
     """Angular rate from the vehicle back to the sensor frame."""
-    return _rotated(_as_vectors(gyro_v, "gyro_v"), cal.rot_vs.as_matrix().T)
+    return _rotated(_as_vectors(gyro_v, "gyro_v"), _matrix(cal, level_only).T)
 
 
 def frame_to_vehicle(
@@ -63,16 +124,26 @@ def frame_to_vehicle(
     cal: Calibration,
     acc_columns: Sequence[str] = ACC_COLUMNS,
     gyro_columns: Sequence[str] | None = None,
+    *,
+    level_only: bool = False,
+    require_confident: bool = False,
 ) -> pd.DataFrame:
     """A copy of ``df`` with its accelerometer (m/s²) and gyro columns in the vehicle frame.
 
-    Other columns are kept as they are; ``attrs["frame"]`` records the frame.
+    Other columns are kept as they are; ``attrs["frame"]`` records the frame (``"levelled"`` with
+    ``level_only`` and no determined yaw), ``attrs["confident"]`` the calibration's verdict and
+    ``attrs["warnings"]`` what :func:`check_applicable` found (also issued as a ``UserWarning``).
     """
+    found = check_applicable(cal, level_only=level_only, require_confident=require_confident)
+    for text in found:
+        warnings.warn(text, UserWarning, stacklevel=2)
     out = df.copy()
-    out[list(acc_columns)] = acc_to_vehicle(_columns(df, acc_columns), cal)
+    out[list(acc_columns)] = acc_to_vehicle(_columns(df, acc_columns), cal, level_only=level_only)
     if gyro_columns is not None:
-        out[list(gyro_columns)] = rate_to_vehicle(_columns(df, gyro_columns), cal)
-    out.attrs["frame"] = "vehicle"
+        out[list(gyro_columns)] = rate_to_vehicle(_columns(df, gyro_columns), cal, level_only=level_only)
+    out.attrs.update(
+        frame="vehicle" if cal.yaw_determined else "levelled", confident=cal.confident, warnings=list(found)
+    )
     return out
 
 
@@ -81,12 +152,14 @@ def frame_to_sensor(
     cal: Calibration,
     acc_columns: Sequence[str] = ACC_COLUMNS,
     gyro_columns: Sequence[str] | None = None,
+    *,
+    level_only: bool = False,
 ) -> pd.DataFrame:
     """The inverse of :func:`frame_to_vehicle`."""
     out = df.copy()
-    out[list(acc_columns)] = acc_to_sensor(_columns(df, acc_columns), cal)
+    out[list(acc_columns)] = acc_to_sensor(_columns(df, acc_columns), cal, level_only=level_only)
     if gyro_columns is not None:
-        out[list(gyro_columns)] = rate_to_sensor(_columns(df, gyro_columns), cal)
+        out[list(gyro_columns)] = rate_to_sensor(_columns(df, gyro_columns), cal, level_only=level_only)
     out.attrs["frame"] = "sensor"
     return out
 

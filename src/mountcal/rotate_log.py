@@ -45,7 +45,7 @@ import os
 from collections import Counter
 from collections.abc import Iterator, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor, wait
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, BinaryIO
 
@@ -68,12 +68,13 @@ from mountcal.io.writers import (
     ParquetSamples,
     copy_mcap_with_imu,
 )
-from mountcal.result import Calibration
-from mountcal.rotate import acc_to_vehicle, rate_to_vehicle
+from mountcal.result import VEHICLE_FRAME, Calibration
+from mountcal.rotate import acc_to_vehicle, check_applicable, rate_to_vehicle
 from mountcal.threads import helpers_allowed
 
 FORMATS = {".parquet": "parquet", ".pq": "parquet", ".csv": "csv", ".mcap": "mcap"}
 VEHICLE_FRAME_ID = "base_link"  # REP 103's body frame: x forward, y left, z up = ISO 8855
+LEVELLED_FRAME_ID = "mountcal_levelled"  # z up, heading the sensor's own: not REP 103's base_link
 CHUNK_SAMPLES = 100_000
 
 
@@ -101,6 +102,8 @@ class RotateReport:
     copied_messages: int = 0
     copied_channels: int = 0
     nonfinite: int = 0
+    frame: str = VEHICLE_FRAME
+    warnings: tuple[str, ...] = ()  # what check_applicable found: not confident, levelled only
 
     def lines(self) -> list[str]:
         """Lines for the user."""
@@ -108,7 +111,8 @@ class RotateReport:
         out = [
             f"read {self.samples_in} IMU samples from {len(self.inputs)} file(s)"
             + (f"; the readers dropped {dropped}" if dropped else "; nothing dropped"),
-            f"wrote {self.samples_out} vehicle-frame samples (accelerometer"
+            f"wrote {self.samples_out} {'vehicle' if self.frame == VEHICLE_FRAME else 'levelled'}-frame samples "
+            "(accelerometer"
             + (" and gyro" if self.gyro else "")
             + f") to {self.output} ({self.format}, {self.chunks} chunk(s) of at most {self.largest_chunk})",
         ]
@@ -140,8 +144,16 @@ def rotate_log(
     options: LogOptions | None = None,
     chunk_samples: int = CHUNK_SAMPLES,
     frame_id: str = VEHICLE_FRAME_ID,
+    level_only: bool = False,
+    require_confident: bool = False,
 ) -> RotateReport:
     """Write a log's samples in the vehicle frame, streaming with bounded memory.
+
+    A calibration without a determined yaw is refused unless ``level_only``: then the output is
+    levelled (z up, heading the sensor's own) and its metadata, column descriptions, MCAP topic
+    (``…/levelled``) and frame id (``mountcal_levelled``) say so. A result that is not confident is
+    applied with a warning (``RotateReport.warnings``, and ``confident: false`` in the metadata), or
+    refused with ``require_confident``.
 
     Parameters
     ----------
@@ -159,6 +171,10 @@ def rotate_log(
         Samples per chunk (per Parquet row group): the memory bound.
     frame_id : str
         ``header.frame_id`` of the vehicle-frame MCAP messages.
+    level_only : bool
+        Accept a calibration without yaw and write the levelled frame.
+    require_confident : bool
+        Refuse a calibration that is not confident.
 
     Returns
     -------
@@ -168,13 +184,24 @@ def rotate_log(
     ------
     InputError
         Unreadable input, an output that is an input, data in g instead of m/s², an MCAP output
-        from several MCAP files.
+        from several MCAP files; an undetermined yaw without ``level_only`` (or to CSV, which
+        cannot say so), a result that is not confident with ``require_confident``.
     """
     files = [Path(p) for p in ([paths] if isinstance(paths, str | os.PathLike) else paths)]
     opts = options or LogOptions()
     out = Path(output)
     kind = output_format(out, fmt)
     _check_not_an_input(out, files)
+    found = tuple(check_applicable(cal, level_only=level_only, require_confident=require_confident))
+    if not cal.yaw_determined:
+        if kind == "csv":
+            raise InputError(
+                str(out),
+                "Parquet or MCAP for a levelled frame (their metadata say the heading is the sensor's own)",
+                "CSV, which has no place to say it",
+                "Write .parquet or .mcap, or determine yaw first.",
+            )
+        frame_id = LEVELLED_FRAME_ID if frame_id == VEHICLE_FRAME_ID else frame_id
     if chunk_samples < 1:
         raise ValueError(f"chunk_samples must be at least 1, got {chunk_samples}")
     if kind == "mcap" and any(f.suffix.lower() == ".mcap" for f in files):
@@ -185,8 +212,10 @@ def rotate_log(
                 f"{len(files)} files",
                 "Rotate each MCAP file to its own output, or write Parquet/CSV (which joins splits).",
             )
-        return _rotate_mcap_copy(files[0], cal, out, opts.topic, frame_id)
-    return _rotate_stream(files, cal, out, kind, opts, chunk_samples, frame_id)
+        report = _rotate_mcap_copy(files[0], cal, out, opts.topic, frame_id)
+    else:
+        report = _rotate_stream(files, cal, out, kind, opts, chunk_samples, frame_id)
+    return replace(report, frame=cal.frame, warnings=found)
 
 
 def _check_not_an_input(out: Path, files: Sequence[Path]) -> None:
@@ -207,8 +236,11 @@ def _metadata(cal: Calibration, files: Sequence[Path]) -> dict[str, str]:
     except importlib.metadata.PackageNotFoundError:
         version = "unknown"
     return {
-        "mountcal.frame": "vehicle (ISO 8855: x forward, y left, z up)",
+        "mountcal.frame": cal.frame,
         "mountcal.units": "t_s s; ax, ay, az m/s^2 (specific force, bias removed); gx, gy, gz rad/s",
+        "mountcal.yaw": "vehicle" if cal.yaw_determined else "sensor's own (not determined)",
+        "mountcal.confident": json.dumps(cal.confident),
+        "mountcal.warnings": json.dumps(check_applicable(cal, level_only=True)),
         "mountcal.conventions": json.dumps(CONVENTIONS),
         "mountcal.calibration": json.dumps(
             {
@@ -360,7 +392,7 @@ def _rotate_stream(
     first = next(chunks, None)
     if first is None:
         raise InputError(" + ".join(map(str, files)), "IMU samples", "none", "Check the log and the topic/DBC.")
-    acc_to_vehicle(first.acc_s, cal, check_units=True)  # data in g are refused before any output exists
+    acc_to_vehicle(first.acc_s, cal, check_units=True, level_only=True)  # g units refused before any output
     tally = _Tally(gyro=first.gyro_s is not None, several=len(files) > 1)
     with atomic_output(out) as f, ThreadPoolExecutor(max_workers=1) as encoder:
         writer = _writer(f, kind, tally.gyro, cal, files, frame_id)
@@ -394,7 +426,7 @@ def _rotate_stream(
         chunks=tally.chunks,
         largest_chunk=tally.largest,
         gyro=tally.gyro,
-        topic="/imu/vehicle" if kind == "mcap" else None,
+        topic=_topic("/imu", cal) if kind == "mcap" else None,
     )
 
 
@@ -422,8 +454,9 @@ class _Tally:
                 "a file without the gyro" if self.gyro else "a gyro in only some files",
                 "Rotate the files separately.",
             )
-        acc_v = acc_to_vehicle(chunk.acc_s, cal, check_units=False)  # units checked on the first chunk
-        gyro_v = rate_to_vehicle(chunk.gyro_s, cal) if chunk.gyro_s is not None else None
+        # Units checked on the first chunk; yaw by rotate_log (level_only=True: already decided there).
+        acc_v = acc_to_vehicle(chunk.acc_s, cal, check_units=False, level_only=True)
+        gyro_v = rate_to_vehicle(chunk.gyro_s, cal, level_only=True) if chunk.gyro_s is not None else None
         self.samples, self.chunks, self.largest = self.samples + n, self.chunks + 1, max(self.largest, n)
         return chunk.t_s, acc_v, gyro_v
 
@@ -440,10 +473,29 @@ def _writer(
 ) -> ParquetSamples | CsvSamples | McapImuSamples:
     meta = _metadata(cal, files)
     if kind == "parquet":
-        return ParquetSamples(f, gyro, meta)
+        return ParquetSamples(f, gyro, meta, descriptions=_descriptions(cal))
     if kind == "csv":
         return CsvSamples(f, gyro, meta)
-    return McapImuSamples(f, "/imu/vehicle", frame_id, {k.removeprefix("mountcal."): v for k, v in meta.items()})
+    return McapImuSamples(f, _topic("/imu", cal), frame_id, {k.removeprefix("mountcal."): v for k, v in meta.items()})
+
+
+def _topic(base: str, cal: Calibration) -> str:
+    return base + ("/vehicle" if cal.yaw_determined else "/levelled")
+
+
+def _descriptions(cal: Calibration) -> dict[str, str]:
+    """Each written column's meaning, stored with the column (Parquet field metadata)."""
+    axes = (
+        "vehicle frame (ISO 8855)"
+        if cal.yaw_determined
+        else "levelled frame: z up, x and y about the sensor's own heading (yaw not determined)"
+    )
+    out = {"t_s": "time, s (the log's clock)"}
+    for n, what in zip(("ax", "ay", "az"), ("x", "y", "z"), strict=True):
+        out[n] = f"specific force along {what}, m/s^2, bias removed; {axes}"
+    for n, what in zip(("gx", "gy", "gz"), ("x", "y", "z"), strict=True):
+        out[n] = f"angular rate about {what}, rad/s; {axes}"
+    return out
 
 
 # --------------------------------------------------------------------------- MCAP copied through
@@ -460,7 +512,9 @@ def _rotate_mcap_copy(src: Path, cal: Calibration, out: Path, topic: str | None,
         return rotated
 
     with atomic_output(out) as g:
-        stats = copy_mcap_with_imu(src, g, transform, topic=topic, suffix="/vehicle", frame_id=frame_id, metadata=meta)
+        stats = copy_mcap_with_imu(
+            src, g, transform, topic=topic, suffix=_topic("", cal), frame_id=frame_id, metadata=meta
+        )
     return RotateReport(
         output=str(out),
         format="mcap",
@@ -483,7 +537,7 @@ def _to_vehicle(msgs: ImuMessages, cal: Calibration, check_units: bool) -> tuple
     acc, gyro = msgs.linear_acceleration, msgs.angular_velocity
     finite = np.isfinite(acc).all(axis=1) & np.isfinite(gyro).all(axis=1)
     if check_units and finite.sum() >= 10:
-        acc_to_vehicle(acc[finite], cal, check_units=True)  # refuses g units with a clear message
+        acc_to_vehicle(acc[finite], cal, check_units=True, level_only=True)  # refuses g units; yaw decided earlier
     rot = cal.rot_vs.as_matrix()
     orientation = msgs.orientation.copy()
     known = (msgs.orientation_covariance[:, 0] != -1.0) & (np.linalg.norm(orientation, axis=1) > 0.5)
@@ -496,9 +550,9 @@ def _to_vehicle(msgs: ImuMessages, cal: Calibration, check_units: bool) -> tuple
             nanosec=msgs.nanosec,
             orientation=orientation,
             orientation_covariance=msgs.orientation_covariance,
-            angular_velocity=rate_to_vehicle(gyro, cal),
+            angular_velocity=rate_to_vehicle(gyro, cal, level_only=True),
             angular_velocity_covariance=_rotate_covariance(msgs.angular_velocity_covariance, rot),
-            linear_acceleration=acc_to_vehicle(acc, cal, check_units=False),
+            linear_acceleration=acc_to_vehicle(acc, cal, check_units=False, level_only=True),
             linear_acceleration_covariance=_rotate_covariance(msgs.linear_acceleration_covariance, rot),
         ),
         int((~finite).sum()),

@@ -52,6 +52,7 @@ from mountcal.result import Calibration
 
 IntArray = NDArray[np.int64]
 AGREE_Z = 2.0  # |z| above this: the two estimates disagree beyond their uncertainties (≈ 95 %)
+DISAGREE_Z = 3.0  # |z| above this (tilt or yaw): a finding; the stops and the drive are not combined
 GAP_FACTOR = 3.0  # an IMU step longer than this × the median step is a gap
 MIN_INTERVALS = 20
 
@@ -891,6 +892,67 @@ def driving_calibration(
     )
 
 
+def disagreement(static: Calibration, fit: DrivingFit) -> dict[str, Any] | None:
+    """The stops against the drive, beyond ``DISAGREE_Z`` σ in tilt or yaw: an ``unexplained`` entry, else None.
+
+    Tilt: the drive's mean gravity against the stops' up axis (``fit.tilt_check``), about the
+    vehicle x and y axes. Yaw: the two yaws about the vehicle z axis, when both determine one.
+    """
+    parts: list[str] = []
+    z_max = 0.0
+    check = fit.tilt_check
+    if check is not None:
+        z_tilt = max(abs(check["z_about_vehicle_x"]), abs(check["z_about_vehicle_y"]))
+        if z_tilt > DISAGREE_Z or not np.isfinite(z_tilt):
+            parts.append(
+                f"tilt by {check['angle_deg']:.1f}° (z = {check['z_about_vehicle_x']:+.1f} about x, "
+                f"{check['z_about_vehicle_y']:+.1f} about y)"
+            )
+            z_max = max(z_max, z_tilt)
+    s_drive, s_static = fit.rotation_sigma_deg[2], static.rotation_sigma_deg[2] or static.yaw_sigma_deg
+    if fit.yaw_deg is not None and static.yaw_deg is not None and s_drive is not None and s_static is not None:
+        diff = float((fit.yaw_deg - static.yaw_deg + 180.0) % 360.0 - 180.0)
+        z_yaw = diff / float(np.hypot(s_drive, s_static))
+        if abs(z_yaw) > DISAGREE_Z:
+            parts.append(
+                f"yaw by {diff:+.1f}° (z = {z_yaw:+.1f}): {fit.yaw_deg:.2f}° from driving, "
+                f"{static.yaw_deg:.2f}° from the stops"
+            )
+            z_max = max(z_max, abs(z_yaw))
+    if not parts:
+        return None
+    return {
+        "test": "stops_vs_driving",
+        "what": "the parked stops and the drive disagree beyond their uncertainties (not combined)",
+        "size": "; ".join(parts),
+        "statistic": float(z_max) if np.isfinite(z_max) else None,
+        "z_limit": DISAGREE_Z,
+        "p_value": None,
+    }
+
+
+def not_combined(static: Calibration, fit: DrivingFit, found: dict[str, Any]) -> Calibration:
+    """The stops' calibration, not confident, with the disagreement with the drive as a finding."""
+    words = (
+        f"stops and driving DISAGREE: {found['size']}, beyond {DISAGREE_Z:g}σ; they are not combined and the "
+        "result is not confident. One of them misses an effect (a remount between the stops and the drive, "
+        "a wrong protocol heading or uphill azimuth, a speed channel not along the vehicle x axis, the stops' "
+        "mirror solution)"
+    )
+    return replace(
+        static,
+        fit={
+            **static.fit,
+            "calibrated_from": "stops (driving disagrees: not combined)",
+            "driving": fit.to_dict(),
+            "combination": {"used": "none: disagreement", "disagreement": found, "tilt_check": fit.tilt_check},
+        },
+        notes=(*static.notes, words),
+        unexplained=[*static.unexplained, found],
+        confident=False,
+    )
+
+
 def combine(static: Calibration, fit: DrivingFit) -> Calibration:
     """The static calibration with the yaw from driving folded in.
 
@@ -899,10 +961,15 @@ def combine(static: Calibration, fit: DrivingFit) -> Calibration:
     when both have one, they are combined by inverse variance (of the rotation about the vehicle z
     axis) and their difference is reported as a z-score, with a note when ``|z| > 2``: then they
     disagree beyond their uncertainties and one of them misses an effect. Roll and pitch stay the
-    static ones; the driving's mean gravity is reported as a check (``tilt_check``).
+    static ones; the driving's mean gravity is reported as a check (``tilt_check``). Beyond
+    ``DISAGREE_Z`` σ in tilt or yaw they are not combined (:func:`not_combined`): the stops'
+    result comes back not confident, the disagreement in its notes and ``unexplained``.
     """
     if not fit.tilt_source.startswith("static"):
         raise ValueError("combine() needs a driving fit levelled with the static calibration (tilt_from=static)")
+    found = disagreement(static, fit)
+    if found is not None:
+        return not_combined(static, fit, found)
     notes = list(static.notes)
     combination: dict[str, Any] = {"static_yaw_deg": static.yaw_deg, "driving_yaw_deg": fit.yaw_deg}
     s_drive = fit.rotation_sigma_deg[2]

@@ -27,6 +27,7 @@ import pandas as pd
 from mountcal.calibrate import Options
 from mountcal.errors import InputError
 from mountcal.io.logs import CAN_SUFFIXES, LogOptions
+from mountcal.io.writers import written_by_mountcal
 from mountcal.pipeline import LogJob
 from mountcal.stops import StopDetection
 from mountcal.stoptable import Headings
@@ -87,7 +88,10 @@ class FleetJob:
 
 
 def collect_jobs(
-    inputs: Sequence[str | Path], defaults: JobDefaults | None = None, exclude: Collection[str | Path] = ()
+    inputs: Sequence[str | Path],
+    defaults: JobDefaults | None = None,
+    exclude: Collection[str | Path] = (),
+    set_aside: list[Path] | None = None,
 ) -> list[FleetJob]:
     """The jobs of folders, globs, log files and manifests, in input order.
 
@@ -100,6 +104,9 @@ def collect_jobs(
     defaults : JobDefaults, optional
     exclude : collection of paths
         Files and folders never taken as logs (the fleet's own outputs).
+    set_aside : list, optional
+        Receives the files of folders and globs that were not taken because mountcal wrote them
+        (:func:`written_by_mountcal`: fleet tables, rotated logs), whatever their names.
 
     Raises
     ------
@@ -108,7 +115,8 @@ def collect_jobs(
     """
     defaults = defaults or JobDefaults()
     skip = {Path(p).resolve() for p in exclude}
-    jobs = [job for item in inputs for job in _jobs_of_input(str(item), defaults, skip)]
+    ours: list[Path] = [] if set_aside is None else set_aside
+    jobs = [job for item in inputs for job in _jobs_of_input(str(item), defaults, skip, ours)]
     if not jobs:
         raise InputError(
             ", ".join(map(str, inputs)) or "INPUTS",
@@ -119,10 +127,13 @@ def collect_jobs(
     return jobs
 
 
-def _jobs_of_input(item: str, defaults: JobDefaults, skip: set[Path]) -> Iterator[FleetJob]:
+def _jobs_of_input(item: str, defaults: JobDefaults, skip: set[Path], ours: list[Path]) -> Iterator[FleetJob]:
     path = Path(item)
     if path.is_dir():
         for file in _walk_logs(path, skip):
+            if written_by_mountcal(file):
+                ours.append(file)
+                continue
             yield _file_job(file, defaults, origin=f"folder {item}")
     elif path.is_file():
         if path.resolve() in skip:
@@ -134,6 +145,13 @@ def _jobs_of_input(item: str, defaults: JobDefaults, skip: set[Path]) -> Iterato
             )
         if _is_manifest(path):
             yield from read_manifest(path, defaults)
+        elif written_by_mountcal(path):
+            raise InputError(
+                item,
+                "a log as recorded",
+                "a file mountcal wrote (a fleet table, or a log already rotated into the vehicle frame)",
+                "Pass the original log.",
+            )
         else:
             yield _file_job(path, defaults, origin=item)
     elif _GLOB_CHARS.search(item):
@@ -142,6 +160,9 @@ def _jobs_of_input(item: str, defaults: JobDefaults, skip: set[Path]) -> Iterato
         if not files:
             raise InputError(item, "a glob matching log files", "no match", "Check the pattern (quote it).")
         for file in files:
+            if written_by_mountcal(file):
+                ours.append(file)
+                continue
             yield _file_job(file, defaults, origin=f"glob {item}")
     else:
         raise InputError(

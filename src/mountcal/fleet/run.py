@@ -7,6 +7,7 @@ killed run loses at most the logs in flight.
 
 from __future__ import annotations
 
+import json
 import time
 from collections.abc import Iterator, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -53,6 +54,9 @@ class FleetOptions:
         Significance of a disagreeing log and of a remount.
     floor_deg : float
         Mounting scatter between logs added in quadrature to each log's σ (0: trust the σ).
+    require_confident : bool
+        Refuse (write no table) when a log's calibration is not confident; else they are listed in
+        ``FleetResult.not_confident`` and in both tables' metadata (``mountcal.not_confident_logs``).
     """
 
     workers: int | None = None
@@ -61,6 +65,7 @@ class FleetOptions:
     progress: bool = True
     alpha: float = ALPHA
     floor_deg: float = 0.0
+    require_confident: bool = False
 
 
 @dataclass(frozen=True)
@@ -92,6 +97,7 @@ class FleetResult:
     engine: str
     elapsed_s: float
     discarded: dict[str, int] = field(default_factory=dict)
+    not_confident: tuple[str, ...] = ()  # logs whose calibration is not confident (flag not_confident)
 
 
 def outputs_of(output: str | Path) -> tuple[Path, Path, Path]:
@@ -168,8 +174,17 @@ def run_fleet(jobs: Sequence[FleetJob], output: str | Path, options: FleetOption
     logs = _log_table(jobs, keys, setup_failures, results)
     logs, vehicles = analyse_fleet(logs, options.alpha, options.floor_deg)
     vehicles = _complete(vehicles, VEHICLE_COLUMNS)
-    write_table(vehicles, schema(VEHICLE_COLUMNS, "vehicles"), vehicles_path)
-    write_table(logs, schema(LOG_COLUMNS, "logs"), output)
+    doubtful = tuple(str(log) for log, flag in zip(logs["log"], logs["flags"], strict=True) if "not_confident" in flag)
+    if doubtful and options.require_confident:
+        raise InputError(
+            str(output),
+            "a confident calibration of every log (--require-confident)",
+            f"{len(doubtful)} not confident: {', '.join(doubtful[:5])}" + (" …" if len(doubtful) > 5 else ""),
+            "Check those logs (their results are kept for the next run), or drop --require-confident.",
+        )
+    said = {"mountcal.confident": json.dumps(not doubtful), "mountcal.not_confident_logs": json.dumps(doubtful)}
+    write_table(vehicles, schema(VEHICLE_COLUMNS, "vehicles"), vehicles_path, said)
+    write_table(logs, schema(LOG_COLUMNS, "logs"), output, said)
     return FleetResult(
         logs=logs,
         vehicles=vehicles,
@@ -185,6 +200,7 @@ def run_fleet(jobs: Sequence[FleetJob], output: str | Path, options: FleetOption
             "temporary files of a killed run": stale,
             "unreadable part files (their logs were recalculated)": unreadable,
         },
+        not_confident=doubtful,
     )
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 import hashlib
 import importlib.metadata
 import json
+from collections.abc import Mapping
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
@@ -146,13 +147,17 @@ def _plain(value: object) -> object:
     raise TypeError(f"not JSON serialisable: {type(value).__name__}")
 
 
-def write_table(frame: pd.DataFrame, schema: pa.Schema, path: str | Path) -> None:
-    """Write a DataFrame as Parquet with an explicit schema, atomically.
+def write_table(
+    frame: pd.DataFrame, schema: pa.Schema, path: str | Path, metadata: Mapping[str, str] | None = None
+) -> None:
+    """Write a DataFrame as Parquet with an explicit schema, atomically; ``metadata`` is added to the file's.
 
     The schema keeps each column's type when every value is null (all logs failed, no yaw).
     """
     table = pa.Table.from_pandas(frame[schema.names], schema=schema, preserve_index=False)
-    table = table.replace_schema_metadata({**(table.schema.metadata or {}), TABLE_MARK: schema.metadata[TABLE_MARK]})
+    table = table.replace_schema_metadata(
+        {**(table.schema.metadata or {}), **(metadata or {}), TABLE_MARK: schema.metadata[TABLE_MARK]}
+    )
     with atomic_path(path) as tmp:
         pq.write_table(table, tmp)
 

@@ -31,7 +31,7 @@ import numpy as np
 import pandas as pd
 from scipy.spatial.transform import Rotation
 
-from mountcal.conventions import FloatArray, angles_from_rot_vs
+from mountcal.conventions import FloatArray, angles_from_rot_vs, levelled
 from mountcal.fleet.inputs import natural_key
 from mountcal.pvalues import chi2_logsf, chi2_sf
 
@@ -471,7 +471,8 @@ def _segment_row(
 ) -> dict[str, Any]:
     cons = seg.consensus
     angles, sigma = angles_with_sigma(cons)
-    quat = cons.rot_vs.as_quat()
+    # Without yaw the consensus stores the levelling rotation: its yaw was arbitrary, never invented.
+    quat = (cons.rot_vs if cons.observed[2] else levelled(cons.rot_vs)).as_quat()
     rot_sigma = np.degrees(np.sqrt(np.clip(np.diagonal(cons.cov_rad2), 0.0, None)))
     part = usable.loc[index]
     yaw_reason = None

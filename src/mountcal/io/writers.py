@@ -25,6 +25,7 @@ import struct
 import zlib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, BinaryIO
 
 import lz4.frame
@@ -35,6 +36,7 @@ import pyarrow.parquet as pq
 import zstandard
 from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
+from mcap.reader import make_reader
 from mcap.records import (
     AttachmentIndex,
     Channel,
@@ -75,9 +77,13 @@ def _table(t_s: FloatArray, acc: FloatArray, gyro: FloatArray | None, schema: pa
     return pa.Table.from_arrays([pa.array(np.ascontiguousarray(c, dtype=np.float64)) for c in columns], schema=schema)
 
 
-def _schema(gyro: bool, metadata: Mapping[str, str]) -> pa.Schema:
+def _schema(gyro: bool, metadata: Mapping[str, str], descriptions: Mapping[str, str] | None = None) -> pa.Schema:
     names = ["t_s", *ACC_COLUMNS, *(GYRO_COLUMNS if gyro else ())]
-    return pa.schema([pa.field(n, pa.float64()) for n in names], metadata=dict(metadata))
+    said = descriptions or {}
+    return pa.schema(
+        [pa.field(n, pa.float64(), metadata={"description": said[n]} if n in said else None) for n in names],
+        metadata=dict(metadata),
+    )
 
 
 class ParquetSamples:
@@ -91,10 +97,18 @@ class ParquetSamples:
         Whether the rows carry ``gx, gy, gz``.
     metadata : mapping of str to str
         Stored in the file's key-value metadata (frame, conventions, calibration).
+    descriptions : mapping of column name to str, optional
+        Each column's meaning, stored in its field metadata under ``description``.
     """
 
-    def __init__(self, file: BinaryIO, gyro: bool, metadata: Mapping[str, str]) -> None:
-        self.schema = _schema(gyro, metadata)
+    def __init__(
+        self,
+        file: BinaryIO,
+        gyro: bool,
+        metadata: Mapping[str, str],
+        descriptions: Mapping[str, str] | None = None,
+    ) -> None:
+        self.schema = _schema(gyro, metadata, descriptions)
         self.gyro = gyro
         # Float columns: no dictionary (it only costs time), byte-stream split + zstd (fast, small).
         self._writer = pq.ParquetWriter(
@@ -836,3 +850,25 @@ def _imu_channels(summary: Any, topic: str | None, where: str) -> tuple[frozense
             "Write Parquet or CSV instead (--format parquet), which reads JSON messages too.",
         )
     return frozenset(c.id for c in chans), topic, int(chans[0].schema_id)
+
+
+def written_by_mountcal(path: Path) -> bool:
+    """Whether mountcal wrote this file (recognised by its metadata, not its name).
+
+    A fleet table or a rotated log in Parquet carries ``mountcal.*`` file metadata; a rotated MCAP
+    has a channel whose metadata holds the frame and the calibration applied. Such a file is an
+    output, never a log to calibrate (a rotated log would calibrate to the identity).
+    """
+    suffix = path.suffix.lower()
+    try:
+        if suffix in (".parquet", ".pq"):
+            keys = (pq.read_schema(path).metadata or {}).keys()
+            return any(k.startswith(b"mountcal.") for k in keys)
+        if suffix == ".mcap":
+            with path.open("rb") as f:
+                summary = make_reader(f).get_summary()
+            channels = summary.channels.values() if summary is not None else ()
+            return any({"frame", "calibration"} <= c.metadata.keys() for c in channels)
+    except Exception:  # unreadable: not recognisably ours; the log reader will say what is wrong with it
+        return False
+    return False
