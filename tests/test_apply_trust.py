@@ -424,3 +424,22 @@ def test_stops_and_driving_that_disagree_in_yaw_are_not_combined(drive_and_stops
     assert not cal.confident and cal.yaw_deg == wrong.yaw_deg  # not averaged with the drive's
     finding = [u for u in cal.unexplained if u["test"] == "stops_vs_driving"]
     assert len(finding) == 1 and "yaw by -2" in finding[0]["size"]
+
+
+@pytest.mark.real_data
+def test_a_real_drive_with_stops_is_combined_only_when_they_agree_and_rotates_to_plus_g_up(real_data: Path) -> None:
+    from mountcal.io.logs import LogOptions
+    from mountcal.pipeline import LogJob
+    from mountcal.pipeline_drive import calibrate_any
+
+    car = real_data / "canedge" / "3BA199E2_car_DK_2021-07-26" / "00000165"
+    opts = LogOptions(dbc=str(real_data / "canedge" / "dbc" / "gnss.dbc"), channel=2)
+    done = calibrate_any(LogJob(paths=tuple(sorted(str(p) for p in car.glob("*.MF4"))), log=opts))
+    cal = done.calibration
+    combination = cal.fit.get("combination", {})
+    if "disagreement" in combination:  # a finding: not combined, not confident, said everywhere
+        assert not cal.confident and any(u["test"] == "stops_vs_driving" for u in cal.unexplained)
+    else:
+        assert done.used == "stops + driving" and combination["tilt_check"]["agree"]
+    acc_v = cal.rot_vs.apply(done.samples.acc_s)
+    assert float(np.nanmedian(acc_v[:, 2])) > 9.0  # the physical branch: +g up
