@@ -443,3 +443,12 @@ def test_a_real_drive_with_stops_is_combined_only_when_they_agree_and_rotates_to
         assert done.used == "stops + driving" and combination["tilt_check"]["agree"]
     acc_v = cal.rot_vs.apply(done.samples.acc_s)
     assert float(np.nanmedian(acc_v[:, 2])) > 9.0  # the physical branch: +g up
+
+
+def test_a_document_that_says_yaw_is_not_determined_is_never_given_one(noyaw: Calibration) -> None:
+    doc = noyaw.to_dict()
+    doc["mounting"]["yaw_deg"], doc["uncertainty"]["yaw_deg"] = 37.0, 1.0  # hand-edited, or another writer
+    cal = Calibration.from_dict(doc)
+    assert cal.yaw_deg is None and not cal.yaw_determined
+    with pytest.raises(InputError, match="yaw not determined"):
+        check_applicable(cal)
