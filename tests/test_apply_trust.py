@@ -398,6 +398,8 @@ def test_issue_repro_stops_and_driving_that_disagree_in_tilt_are_a_finding_not_c
     assert not cal.confident
     assert [u["test"] for u in cal.unexplained if u["test"] == "stops_vs_driving"] == ["stops_vs_driving"]
     assert "disagree" in cal.fit["calibrated_from"]
+    assert not str(cal.fit["driving"]["tilt_source"]).startswith("static")  # levelled by the drive itself
+    assert str(cal.fit["driving_levelled_with_stops"]["tilt_source"]).startswith("static")
     text = summary(cal)
     assert "DISAGREE" in text and "NOT CONFIDENT" in text and "tilt by 1" in text
     assert "stops_vs_driving" in render(cal.to_dict(), None)
