@@ -398,6 +398,8 @@ def test_issue_repro_stops_and_driving_that_disagree_in_tilt_are_a_finding_not_c
     assert not cal.confident
     assert [u["test"] for u in cal.unexplained if u["test"] == "stops_vs_driving"] == ["stops_vs_driving"]
     assert "disagree" in cal.fit["calibrated_from"]
+    assert not str(cal.fit["driving"]["tilt_source"]).startswith("static")  # levelled by the drive itself
+    assert str(cal.fit["driving_levelled_with_stops"]["tilt_source"]).startswith("static")
     text = summary(cal)
     assert "DISAGREE" in text and "NOT CONFIDENT" in text and "tilt by 1" in text
     assert "stops_vs_driving" in render(cal.to_dict(), None)
@@ -424,3 +426,31 @@ def test_stops_and_driving_that_disagree_in_yaw_are_not_combined(drive_and_stops
     assert not cal.confident and cal.yaw_deg == wrong.yaw_deg  # not averaged with the drive's
     finding = [u for u in cal.unexplained if u["test"] == "stops_vs_driving"]
     assert len(finding) == 1 and "yaw by -2" in finding[0]["size"]
+
+
+@pytest.mark.real_data
+def test_a_real_drive_with_stops_is_combined_only_when_they_agree_and_rotates_to_plus_g_up(real_data: Path) -> None:
+    from mountcal.io.logs import LogOptions
+    from mountcal.pipeline import LogJob
+    from mountcal.pipeline_drive import calibrate_any
+
+    car = real_data / "canedge" / "3BA199E2_car_DK_2021-07-26" / "00000165"
+    opts = LogOptions(dbc=str(real_data / "canedge" / "dbc" / "gnss.dbc"), channel=2)
+    done = calibrate_any(LogJob(paths=tuple(sorted(str(p) for p in car.glob("*.MF4"))), log=opts))
+    cal = done.calibration
+    combination = cal.fit.get("combination", {})
+    if "disagreement" in combination:  # a finding: not combined, not confident, said everywhere
+        assert not cal.confident and any(u["test"] == "stops_vs_driving" for u in cal.unexplained)
+    else:
+        assert done.used == "stops + driving" and combination["tilt_check"]["agree"]
+    acc_v = cal.rot_vs.apply(done.samples.acc_s)
+    assert float(np.nanmedian(acc_v[:, 2])) > 9.0  # the physical branch: +g up
+
+
+def test_a_document_that_says_yaw_is_not_determined_is_never_given_one(noyaw: Calibration) -> None:
+    doc = noyaw.to_dict()
+    doc["mounting"]["yaw_deg"], doc["uncertainty"]["yaw_deg"] = 37.0, 1.0  # hand-edited, or another writer
+    cal = Calibration.from_dict(doc)
+    assert cal.yaw_deg is None and not cal.yaw_determined
+    with pytest.raises(InputError, match="yaw not determined"):
+        check_applicable(cal)

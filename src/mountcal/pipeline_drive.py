@@ -142,7 +142,15 @@ def stops_with_drive(
         fit,
         found,
     )
-    return replace(cal, fit={**cal.fit, "calibrated_from": "driving (the stops disagree and put −g up)"})
+    return replace(
+        cal,
+        fit={
+            **cal.fit,
+            "calibrated_from": "driving (the stops disagree and put −g up)",
+            "driving": alone.to_dict(),  # the fit used; the one levelled with the stops shows the disagreement
+            "driving_levelled_with_stops": fit.to_dict(),
+        },
+    )
 
 
 def describe_any(result: LogResult, n_files: int) -> Sequence[str]:

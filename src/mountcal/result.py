@@ -148,6 +148,8 @@ class Calibration:
             )
         try:
             unc, mount = doc["uncertainty"], doc["mounting"]
+            if doc["yaw"].get("determined") is False:  # never trust a number the document itself disowns
+                mount, unc = {**mount, "yaw_deg": None}, {**unc, "yaw_deg": None}
             return cls(
                 method=doc["method"],
                 model=tuple(doc["model"]),

@@ -945,7 +945,12 @@ def not_combined(static: Calibration, fit: DrivingFit, found: dict[str, Any]) ->
             **static.fit,
             "calibrated_from": "stops (driving disagrees: not combined)",
             "driving": fit.to_dict(),
-            "combination": {"used": "none: disagreement", "disagreement": found, "tilt_check": fit.tilt_check},
+            "combination": {
+                "used": "none: disagreement",
+                "agree": False,
+                "disagreement": found,
+                "tilt_check": fit.tilt_check,
+            },
         },
         notes=(*static.notes, words),
         unexplained=[*static.unexplained, found],

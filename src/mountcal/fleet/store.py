@@ -28,7 +28,7 @@ from mountcal.errors import InputError
 from mountcal.fleet.inputs import FleetJob
 
 PART_FORMAT = "mountcal.fleet.part"
-PART_VERSION = 1
+PART_VERSION = 2  # 2: a log without yaw stores the levelling rotation (1 stored an invented yaw)
 TABLE_MARK = b"mountcal.fleet"  # Parquet metadata key of the tables written here
 
 

@@ -302,6 +302,8 @@ def _mg_to_mm(x: Any) -> Any:
 
 def _residual_in(cal: Calibration, frame: Frame) -> tuple[FloatArray, tuple[str, str, str]]:
     if frame == "vehicle":
+        if not cal.yaw_determined:  # the rotation only levels: x and y keep the sensor's own heading
+            return cal.rot_vs.apply(cal.residual_s), ("levelled x (sensor's heading)", "levelled y", "vehicle z (up)")
         return cal.rot_vs.apply(cal.residual_s), ("vehicle x (forward)", "vehicle y (left)", "vehicle z (up)")
     if frame != "sensor":
         raise ValueError(f"frame must be 'sensor' or 'vehicle', not {frame!r}")

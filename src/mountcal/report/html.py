@@ -561,7 +561,9 @@ def _provenance_section(cal: Calibration, doc: Mapping[str, Any]) -> str:
     return (
         "<h2>Provenance and conventions</h2>\n<table>"
         + rows
-        + f"<tr><th>rotation quaternion (x, y, z, w)</th><td><code>{q}</code></td></tr>"
+        + f"<tr><th>rotation quaternion (x, y, z, w)</th><td><code>{q}</code>"
+        + ("" if cal.yaw_determined else f"<br>{escape(cal.frame)}")
+        + "</td></tr>"
         + conv_rows
         + f"<tr><th>format</th><td>{escape(str(doc.get('format')))} version {escape(str(doc.get('format_version')))}"
         "</td></tr></table>"
