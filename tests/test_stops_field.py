@@ -212,7 +212,8 @@ def test_every_option_named_in_a_stop_detection_message_exists() -> None:
     named = set().union(*map(_options_named, messages))
     assert {"--max-acc-std", "--max-gyro-std", "--max-gyro-rate", "--max-speed", "--min-stop-s"} <= named
     parser = cli._parser()
-    sub = next(a for a in parser._actions if a.dest == "command").choices  # type: ignore[union-attr]
+    sub = next(a for a in parser._actions if a.dest == "command").choices
+    assert isinstance(sub, dict)
     for command in ("calibrate", "stops", "fleet"):
         known = {flag for action in sub[command]._actions for flag in action.option_strings}
         assert named <= known, f"{command} lacks {named - known}"
@@ -231,3 +232,41 @@ def test_each_option_reaches_the_detector() -> None:
 def test_thresholds_report_names_their_options() -> None:
     t = Thresholds(0.1, np.zeros(3), np.zeros(3), 0.01, 0.02, np.zeros(3), np.zeros(3), np.zeros(3), 0.3)
     assert {"--max-acc-std", "--max-gyro-std", "--max-gyro-rate", "--max-speed"} <= _options_named(" ".join(t.lines()))
+
+
+CANEDGE = Path("canedge")
+
+
+@pytest.mark.real_data
+def test_the_desk_canedge_log_at_rest_gives_a_stop_with_default_thresholds(real_data: Path) -> None:
+    """The desk unit's gyro reads (0.47, −0.51, −1.0) °/s at rest: |rate| ≈ 1.2 °/s, above the old fixed 0.02 rad/s."""
+    from mountcal.io.logs import LogOptions, read_log
+
+    path = real_data / CANEDGE / "2F6913DB_desk_static_2022-01-06" / "00000001.MF4"
+    samples = read_log([str(path)], LogOptions(dbc=str(real_data / CANEDGE / "dbc" / "gnss.dbc"), channel=2))
+    search = find_stops(samples)
+    assert len(search.stops) == 1 and search.stops[0].duration_s > 20.0
+    assert search.thresholds.gyro_bias_rad_s is not None
+    assert np.degrees(np.linalg.norm(search.thresholds.gyro_bias_rad_s)) > 1.1
+    np.testing.assert_allclose(search.thresholds.acc_lsb_mps2, LSB)
+    stop = search.stops[0]
+    assert stop.acc_mean_s[2] > 9.5  # z up: +g on z
+
+
+@pytest.mark.real_data
+def test_the_canedge_car_stop_table_is_honest_and_its_tilt_physical(real_data: Path) -> None:
+    from mountcal.io.logs import LogOptions
+    from mountcal.pipeline import LogJob, calibrate_log
+
+    files = sorted((real_data / CANEDGE / "3BA199E2_car_DK_2021-07-26" / "00000165").glob("*.MF4"))
+    job = LogJob(tuple(map(str, files)), LogOptions(dbc=str(real_data / CANEDGE / "dbc" / "gnss.dbc"), channel=2))
+    done = calibrate_log(job)
+    frame = done.stops.frame
+    assert len(frame) >= 5  # the drive parks six times for ≥ 8 s at zero speed; one is too short once trimmed
+    s = frame[["sx", "sy", "sz"]].to_numpy()
+    assert np.all(s < 0.3)  # the samples' spread at rest, not a floor times √n (was 1.65 m/s²)
+    sigma = frame[["sx_mean", "sy_mean", "sz_mean"]].to_numpy()
+    assert np.all(sigma >= s / np.sqrt(frame["n"].to_numpy())[:, None] * 0.999)
+    assert np.all(sigma <= LSB / np.sqrt(12.0) + 1e-12)  # at most a code's worth of uncertainty
+    up = done.calibration.rot_vs.apply(frame[["ax", "ay", "az"]].to_numpy(dtype=float, copy=True))
+    assert np.all(up[:, 2] > 9.0)  # the rotated stops read +g up
