@@ -22,6 +22,7 @@ from mountcal.stops import (
     beta_from_heading,
     detect_stops,
     find_stops,
+    still_mask,
     stop_frame,
     tabulate,
 )
@@ -114,6 +115,7 @@ def test_duplicate_and_backward_stamps_are_merged_counted_and_stop_detection_run
     np.testing.assert_allclose(s.acc_s.mean(axis=0), acc.mean(axis=0), atol=1e-3)
     assert set(np.round(s.channels["heading_deg"].value)) <= {359.0, 1.0, 0.0, 360.0}  # averaged as angles
     assert len(detect_stops(Samples(t, acc))) == 1  # the raw stamps: no ZeroDivisionError
+    assert still_mask(Samples(t, acc), StopDetection()).mean() > 0.9
 
 
 def test_a_log_with_paired_stamps_calibrates_from_the_command_line(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
@@ -270,3 +272,12 @@ def test_the_canedge_car_stop_table_is_honest_and_its_tilt_physical(real_data: P
     assert np.all(sigma <= LSB / np.sqrt(12.0) + 1e-12)  # at most a code's worth of uncertainty
     up = done.calibration.rot_vs.apply(frame[["ax", "ay", "az"]].to_numpy(dtype=float, copy=True))
     assert np.all(up[:, 2] > 9.0)  # the rotated stops read +g up
+
+
+@pytest.mark.parametrize("speed", [True, False])
+def test_a_drive_that_parks_three_times_with_every_field_effect_gives_three_stops(speed: bool) -> None:
+    """Gyro bias 4.5 °/s, 0.125 m/s² and 0.25 °/s codes, stamps in pairs, headings creeping by a few degrees."""
+    log = field_log(4.5, seed=21, beta_deg=(0.0, 120.0, 240.0), wander_deg=(3.0, 0.0, 6.0), stop_s=30.0)
+    search = find_stops(samples_of(log, speed))
+    assert_every_stop_found(search.stops, log)
+    assert not any("wandered" in k for k in search.counts)

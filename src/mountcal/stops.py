@@ -134,7 +134,11 @@ def _stillness(
     n = len(samples)
     if n < 3:
         return np.zeros(n, dtype=bool), Thresholds(cfg.max_acc_std_mps2 or ACC_STD_FLOOR, np.zeros(3), acc_lsb)
-    rate = 1.0 / float(np.median(np.diff(t)))
+    steps = np.diff(t)
+    steps = steps[steps > 0]  # stamps in pairs have a median step of 0; find_stops merges them first
+    if steps.size == 0:
+        return np.zeros(n, dtype=bool), Thresholds(cfg.max_acc_std_mps2 or ACC_STD_FLOOR, np.zeros(3), acc_lsb)
+    rate = 1.0 / float(np.median(steps))
     block = max(int(cfg.window_s * rate) // BLOCKS_PER_WINDOW, 1)
     starts = np.arange(0, n, block)
     count = np.diff(np.append(starts, n)).astype(float)[:, None]
@@ -237,7 +241,9 @@ def find_stops(
             split += 1
             pieces_dropped += len(pieces) - kept
     if split:
-        counts[f"still periods whose heading wandered > {cfg.max_heading_wander_deg:g}° (split)"] = split
+        counts[
+            f"still periods whose heading wandered > {cfg.max_heading_wander_deg:g}° (split; --max-heading-wander)"
+        ] = split
         counts["pieces of those too short to be a stop (dropped)"] = pieces_dropped
     return StopSearch(stops, thresholds, counts)
 
