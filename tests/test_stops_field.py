@@ -143,6 +143,8 @@ def test_a_log_with_paired_stamps_calibrates_from_the_command_line(tmp_path: Pat
     assert f"{MERGED}: {len(log.t_s) // 2}" in printed and "gyro bias" in printed
     table = pd.read_csv(out)
     assert len(table) == len(log.protocol)
+    assert cli.main(["calibrate", str(path), "--uphill-azimuth-deg", str(log.uphill_azimuth_deg)]) == 0  # and driving
+    assert "calibrated from: stops" in capsys.readouterr().out
 
 
 def test_a_heading_that_wanders_splits_or_drops_the_stop_and_is_counted() -> None:
@@ -281,3 +283,21 @@ def test_a_drive_that_parks_three_times_with_every_field_effect_gives_three_stop
     search = find_stops(samples_of(log, speed))
     assert_every_stop_found(search.stops, log)
     assert not any("wandered" in k for k in search.counts)
+
+
+def test_quantised_paired_stops_give_a_chi2_that_matches_their_covariance() -> None:
+    """End to end: with honest stop covariances the fit's χ²/dof is near 1 — not ≪ 1 (a floor too high), not ≫ 1."""
+    ratios = []
+    for seed in range(4):
+        log = field_log(2.5, seed=30 + seed)
+        search = find_stops(samples_of(log))
+        heading = np.array([s.channels["heading_deg"] for s in search.stops])
+        cal = calibrate(
+            stop_table_from_frame(stop_frame(search.stops, beta_from_heading(heading, log.uphill_azimuth_deg)))
+        )
+        ratios.append(cal.fit["chi2"] / cal.fit["dof"])
+        roll, pitch, _ = log.truth.angles_deg
+        assert (
+            abs(cal.roll_deg - roll) < 4 * cal.roll_sigma_deg and abs(cal.pitch_deg - pitch) < 4 * cal.pitch_sigma_deg
+        )
+    assert 0.5 < float(np.mean(ratios)) < 1.6

@@ -22,7 +22,7 @@ import pandas as pd
 from mountcal.conventions import FloatArray
 from mountcal.errors import NotEnoughInformation
 from mountcal.io.samples import Channel, Samples
-from mountcal.io.timestamps import increasing_times
+from mountcal.io.timestamps import increasing_times, time_ordered
 
 BATCHES = 10  # batch means for the variance of a stop mean
 BLOCKS_PER_WINDOW = 40
@@ -208,7 +208,8 @@ def find_stops(
     acc_lsb = _lsb(samples.acc_s)
     gyro_lsb = None if samples.gyro_s is None else _lsb(samples.gyro_s)
     before = dict(samples.dropped)
-    samples = increasing_times(samples)
+    logged = time_ordered(samples)  # every sample as logged, for the stops' statistics
+    samples = increasing_times(logged)  # equal stamps merged, for the moving windows and the runs
     counts = {k: v - before.get(k, 0) for k, v in samples.dropped.items() if v != before.get(k, 0)}
     still, thresholds = _stillness(samples, cfg, acc_lsb, gyro_lsb)
     runs = _runs(still)
@@ -234,8 +235,8 @@ def find_stops(
             lo, hi = p_lo + cfg.trim_s, p_hi - cfg.trim_s
             if hi - lo < cfg.min_duration_s:
                 continue
-            sel = slice(int(np.searchsorted(t, lo)), int(np.searchsorted(t, hi, side="right")))
-            stops.append(_stop_stats(samples, sel, lsb))
+            sel = slice(int(np.searchsorted(logged.t_s, lo)), int(np.searchsorted(logged.t_s, hi, side="right")))
+            stops.append(_stop_stats(logged, sel, lsb))
             kept += 1
         if len(pieces) > 1:
             split += 1
