@@ -149,7 +149,8 @@ def _stillness(
         """Moving mean and std of each column over the window, per block."""
         m1 = _moving_mean(np.add.reduceat(x, starts, axis=0), w) / mc
         m2 = _moving_mean(np.add.reduceat(x * x, starts, axis=0), w) / mc
-        return m1, np.sqrt(np.clip(m2 - m1**2, 0.0, None))
+        var = m2 - m1**2
+        return m1, np.sqrt(np.where(var > 1e-12 * (1.0 + m1**2), var, 0.0))  # below: rounding of m2 − m1²
 
     _, std = moving(acc)
     speed = samples.channels.get("speed_mps")
