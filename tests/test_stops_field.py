@@ -6,6 +6,7 @@ import re
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from mountcal import cli
@@ -120,8 +121,6 @@ def test_duplicate_and_backward_stamps_are_merged_counted_and_stop_detection_run
 
 def test_a_log_with_paired_stamps_calibrates_from_the_command_line(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
     log = field_log(2.0, seed=9)
-    import pandas as pd
-
     path = tmp_path / "paired.csv"
     frame = pd.DataFrame(
         {
@@ -301,3 +300,13 @@ def test_quantised_paired_stops_give_a_chi2_that_matches_their_covariance() -> N
             abs(cal.roll_deg - roll) < 4 * cal.roll_sigma_deg and abs(cal.pitch_deg - pitch) < 4 * cal.pitch_sigma_deg
         )
     assert 0.5 < float(np.mean(ratios)) < 1.6
+
+
+def test_with_a_protocol_a_wandering_stop_keeps_one_piece_per_row() -> None:
+    wander = [0.0] * 12
+    wander[2] = 30.0  # 30° over a 120-s stop: steady pieces of ~40 s
+    log = simulate_parking_log(seed=6, wander_deg=tuple(wander), stop_s=120.0)
+    protocol = pd.DataFrame(log.protocol, columns=["t_start_s", "t_end_s", "beta_deg"])
+    found = tabulate(samples_of(log), protocol=protocol)
+    assert len(found.frame) == 12 and found.unmatched_protocol_rows == 0
+    assert any("wandered" in note for note in found.notes)

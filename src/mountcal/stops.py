@@ -231,22 +231,24 @@ def find_stops(
         pieces = [(float(t[i0]), float(t[i1 - 1]))]
         if heading is not None and heading.t_s.size:
             pieces = _steady_heading(heading, pieces[0], cfg.max_heading_wander_deg, cfg.window_s)
-        kept = 0
+        found = []
         for p_lo, p_hi in pieces:
             lo, hi = p_lo + cfg.trim_s, p_hi - cfg.trim_s
             if hi - lo < cfg.min_duration_s:
                 continue
             sel = slice(int(np.searchsorted(logged.t_s, lo)), int(np.searchsorted(logged.t_s, hi, side="right")))
-            stops.append(_stop_stats(logged, sel, lsb))
-            kept += 1
+            found.append(_stop_stats(logged, sel, lsb))
+        if windows is not None and len(found) > 1:  # one stop per protocol row: its longest steady piece
+            found = [max(found, key=lambda s: s.duration_s)]
+        stops += found
         if len(pieces) > 1:
             split += 1
-            pieces_dropped += len(pieces) - kept
+            pieces_dropped += len(pieces) - len(found)
     if split:
         counts[
             f"still periods whose heading wandered > {cfg.max_heading_wander_deg:g}° (split; --max-heading-wander)"
         ] = split
-        counts["pieces of those too short to be a stop (dropped)"] = pieces_dropped
+        counts["pieces of those not kept as a stop (too short, or not the longest in a protocol row)"] = pieces_dropped
     return StopSearch(stops, thresholds, counts)
 
 
