@@ -32,6 +32,7 @@ ACC_STD_FLOOR = 0.12  # m/s²: without a speed signal, any parked vehicle is at 
 ACC_STD_FLOOR_WITH_SPEED = 0.3  # with a speed signal stillness rests on it: idle vibration is allowed
 GYRO_STD_FLOOR = 0.01  # rad/s (0.57 °/s): a parked vehicle rotates less, a pulling-off one more
 GYRO_RATE_FLOOR = 0.02  # rad/s away from the gyro bias
+LSB_SAMPLES = 65_536  # samples searched for the quantisation step
 
 
 @dataclass(frozen=True)
@@ -336,6 +337,7 @@ def _lsb(x: FloatArray) -> FloatArray:
 
     An axis that never changes borrows the others' step: a logger's axes share one resolution.
     """
+    x = x[:: max(1, x.shape[0] // LSB_SAMPLES)]  # adjacent codes show up in any long stretch; sorting all is slow
     steps = np.zeros(x.shape[1])
     for j in range(x.shape[1]):
         d = np.diff(np.unique(x[:, j]))
@@ -368,7 +370,7 @@ def _cov_of_mean(acc: FloatArray, lsb: FloatArray) -> FloatArray:
     sample_var = acc.var(axis=0, ddof=1) if n > 1 else np.zeros(3)
     floor = np.zeros(3)
     for j, q in enumerate(np.asarray(lsb, dtype=float)):
-        if q <= 0:
+        if q <= 0.1 * np.sqrt(sample_var[j]):  # many codes, dithered: the floor is exp(−400π²)-small
             continue
         _, counts = np.unique(np.round(acc[:, j] / q), return_counts=True)
         if counts.size <= 2:
