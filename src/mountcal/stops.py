@@ -118,7 +118,7 @@ class StopSearch:
 
 
 def still_mask(samples: Samples, cfg: StopDetection) -> np.ndarray:
-    """Boolean mask, shape (n,), of the samples that look parked (times strictly increasing)."""
+    """Boolean mask, shape (n,), of the samples that look parked (equal stamps allowed; in time order)."""
     return _stillness(samples, cfg, _lsb(samples.acc_s), None if samples.gyro_s is None else _lsb(samples.gyro_s))[0]
 
 
