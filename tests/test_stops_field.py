@@ -6,6 +6,7 @@ import re
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from mountcal import cli
@@ -22,6 +23,7 @@ from mountcal.stops import (
     beta_from_heading,
     detect_stops,
     find_stops,
+    still_mask,
     stop_frame,
     tabulate,
 )
@@ -114,12 +116,11 @@ def test_duplicate_and_backward_stamps_are_merged_counted_and_stop_detection_run
     np.testing.assert_allclose(s.acc_s.mean(axis=0), acc.mean(axis=0), atol=1e-3)
     assert set(np.round(s.channels["heading_deg"].value)) <= {359.0, 1.0, 0.0, 360.0}  # averaged as angles
     assert len(detect_stops(Samples(t, acc))) == 1  # the raw stamps: no ZeroDivisionError
+    assert still_mask(Samples(t, acc), StopDetection()).mean() > 0.9
 
 
 def test_a_log_with_paired_stamps_calibrates_from_the_command_line(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
     log = field_log(2.0, seed=9)
-    import pandas as pd
-
     path = tmp_path / "paired.csv"
     frame = pd.DataFrame(
         {
@@ -141,6 +142,8 @@ def test_a_log_with_paired_stamps_calibrates_from_the_command_line(tmp_path: Pat
     assert f"{MERGED}: {len(log.t_s) // 2}" in printed and "gyro bias" in printed
     table = pd.read_csv(out)
     assert len(table) == len(log.protocol)
+    assert cli.main(["calibrate", str(path), "--uphill-azimuth-deg", str(log.uphill_azimuth_deg)]) == 0  # and driving
+    assert "calibrated from: stops" in capsys.readouterr().out
 
 
 def test_a_heading_that_wanders_splits_or_drops_the_stop_and_is_counted() -> None:
@@ -212,7 +215,8 @@ def test_every_option_named_in_a_stop_detection_message_exists() -> None:
     named = set().union(*map(_options_named, messages))
     assert {"--max-acc-std", "--max-gyro-std", "--max-gyro-rate", "--max-speed", "--min-stop-s"} <= named
     parser = cli._parser()
-    sub = next(a for a in parser._actions if a.dest == "command").choices  # type: ignore[union-attr]
+    sub = next(a for a in parser._actions if a.dest == "command").choices
+    assert isinstance(sub, dict)
     for command in ("calibrate", "stops", "fleet"):
         known = {flag for action in sub[command]._actions for flag in action.option_strings}
         assert named <= known, f"{command} lacks {named - known}"
@@ -231,3 +235,78 @@ def test_each_option_reaches_the_detector() -> None:
 def test_thresholds_report_names_their_options() -> None:
     t = Thresholds(0.1, np.zeros(3), np.zeros(3), 0.01, 0.02, np.zeros(3), np.zeros(3), np.zeros(3), 0.3)
     assert {"--max-acc-std", "--max-gyro-std", "--max-gyro-rate", "--max-speed"} <= _options_named(" ".join(t.lines()))
+
+
+CANEDGE = Path("canedge")
+
+
+@pytest.mark.real_data
+def test_the_desk_canedge_log_at_rest_gives_a_stop_with_default_thresholds(real_data: Path) -> None:
+    """The desk unit's gyro reads (0.47, −0.51, −1.0) °/s at rest: |rate| ≈ 1.2 °/s, above the old fixed 0.02 rad/s."""
+    from mountcal.io.logs import LogOptions, read_log
+
+    path = real_data / CANEDGE / "2F6913DB_desk_static_2022-01-06" / "00000001.MF4"
+    samples = read_log([str(path)], LogOptions(dbc=str(real_data / CANEDGE / "dbc" / "gnss.dbc"), channel=2))
+    search = find_stops(samples)
+    assert len(search.stops) == 1 and search.stops[0].duration_s > 20.0
+    assert search.thresholds.gyro_bias_rad_s is not None
+    assert np.degrees(np.linalg.norm(search.thresholds.gyro_bias_rad_s)) > 1.1
+    np.testing.assert_allclose(search.thresholds.acc_lsb_mps2, LSB)
+    stop = search.stops[0]
+    assert stop.acc_mean_s[2] > 9.5  # z up: +g on z
+
+
+@pytest.mark.real_data
+def test_the_canedge_car_stop_table_is_honest_and_its_tilt_physical(real_data: Path) -> None:
+    from mountcal.io.logs import LogOptions
+    from mountcal.pipeline import LogJob, calibrate_log
+
+    files = sorted((real_data / CANEDGE / "3BA199E2_car_DK_2021-07-26" / "00000165").glob("*.MF4"))
+    job = LogJob(tuple(map(str, files)), LogOptions(dbc=str(real_data / CANEDGE / "dbc" / "gnss.dbc"), channel=2))
+    done = calibrate_log(job)
+    frame = done.stops.frame
+    assert len(frame) >= 5  # the drive parks six times for ≥ 8 s at zero speed; one is too short once trimmed
+    s = frame[["sx", "sy", "sz"]].to_numpy()
+    assert np.all(s < 0.3)  # the samples' spread at rest, not a floor times √n (was 1.65 m/s²)
+    sigma = frame[["sx_mean", "sy_mean", "sz_mean"]].to_numpy()
+    assert np.all(sigma >= s / np.sqrt(frame["n"].to_numpy())[:, None] * 0.999)
+    assert np.all(sigma <= LSB / np.sqrt(12.0) + 1e-12)  # at most a code's worth of uncertainty
+    up = done.calibration.rot_vs.apply(frame[["ax", "ay", "az"]].to_numpy(dtype=float, copy=True))
+    assert np.all(up[:, 2] > 9.0)  # the rotated stops read +g up
+
+
+@pytest.mark.parametrize("speed", [True, False])
+def test_a_drive_that_parks_three_times_with_every_field_effect_gives_three_stops(speed: bool) -> None:
+    """Gyro bias 4.5 °/s, 0.125 m/s² and 0.25 °/s codes, stamps in pairs, headings creeping by a few degrees."""
+    log = field_log(4.5, seed=21, beta_deg=(0.0, 120.0, 240.0), wander_deg=(3.0, 0.0, 6.0), stop_s=30.0)
+    search = find_stops(samples_of(log, speed))
+    assert_every_stop_found(search.stops, log)
+    assert not any("wandered" in k for k in search.counts)
+
+
+def test_quantised_paired_stops_give_a_chi2_that_matches_their_covariance() -> None:
+    """End to end: with honest stop covariances the fit's χ²/dof is near 1 — not ≪ 1 (a floor too high), not ≫ 1."""
+    ratios = []
+    for seed in range(4):
+        log = field_log(2.5, seed=30 + seed)
+        search = find_stops(samples_of(log))
+        heading = np.array([s.channels["heading_deg"] for s in search.stops])
+        cal = calibrate(
+            stop_table_from_frame(stop_frame(search.stops, beta_from_heading(heading, log.uphill_azimuth_deg)))
+        )
+        ratios.append(cal.fit["chi2"] / cal.fit["dof"])
+        roll, pitch, _ = log.truth.angles_deg
+        assert (
+            abs(cal.roll_deg - roll) < 4 * cal.roll_sigma_deg and abs(cal.pitch_deg - pitch) < 4 * cal.pitch_sigma_deg
+        )
+    assert 0.5 < float(np.mean(ratios)) < 1.6
+
+
+def test_with_a_protocol_a_wandering_stop_keeps_one_piece_per_row() -> None:
+    wander = [0.0] * 12
+    wander[2] = 30.0  # 30° over a 120-s stop: steady pieces of ~40 s
+    log = simulate_parking_log(seed=6, wander_deg=tuple(wander), stop_s=120.0)
+    protocol = pd.DataFrame(log.protocol, columns=["t_start_s", "t_end_s", "beta_deg"])
+    found = tabulate(samples_of(log), protocol=protocol)
+    assert len(found.frame) == 12 and found.unmatched_protocol_rows == 0
+    assert any("wandered" in note for note in found.notes)

@@ -288,6 +288,12 @@ def cmd_simulate(args: argparse.Namespace) -> int:
             )
         fix = None if args.fix is None else (float(args.fix[0]), float(args.fix[1]), float(args.fix[2]))
         session = {k: getattr(args, k) for k in ("stop_s", "drive_s", "rate_hz") if getattr(args, k) is not None}
+        field_effects = {  # what field loggers add (simulate_parking_log)
+            "gyro_bias_rad_s": None if args.gyro_bias_dps is None else np.radians(args.gyro_bias_dps),
+            "acc_lsb_mps2": args.acc_lsb,
+            "gyro_lsb_rad_s": float(np.radians(args.gyro_lsb_dps)),
+            "paired_stamps": args.paired_stamps,
+        }
         log = simulate_parking_log(
             params["roll_deg"],
             params["pitch_deg"],
@@ -298,6 +304,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
             g_mps2=G_N if fix is None else normal_gravity(fix[0], fix[2]),
             seed=args.seed,
             **session,
+            **field_effects,
         )
         start = export.START_TIME_S if args.start_time is None else args.start_time
         roll, pitch, yaw = log.truth.angles_deg
@@ -534,6 +541,10 @@ def _parser() -> argparse.ArgumentParser:
     lg.add_argument("--stop-s", type=float, default=None, help="duration of each stop (s; default 40)")
     lg.add_argument("--drive-s", type=float, default=None, help="duration of each drive between stops (s; default 20)")
     lg.add_argument("--rate-hz", type=float, default=None, help="IMU sample rate (Hz; default 100)")
+    lg.add_argument("--gyro-bias-dps", type=float, nargs=3, metavar=("BX", "BY", "BZ"), help="gyro bias (°/s)")
+    lg.add_argument("--acc-lsb", type=float, default=0.0, help="accelerometer quantisation step (m/s²; default none)")
+    lg.add_argument("--gyro-lsb-dps", type=float, default=0.0, help="gyro quantisation step (°/s; default none)")
+    lg.add_argument("--paired-stamps", action="store_true", help="stamp the IMU samples in pairs, as some loggers do")
     sim.set_defaults(func=cmd_simulate)
 
     rep = sub.add_parser("report", help="write a self-contained HTML report of a calibration result")

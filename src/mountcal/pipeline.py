@@ -38,7 +38,7 @@ class LogCalibration:
 
 def stops_of_log(job: LogJob) -> tuple[Samples, StopTableFromLog]:
     """Read the log and tabulate its stops with their headings."""
-    samples = read_log(list(job.paths), job.log)  # stop detection merges duplicate stamps and says so
+    samples = read_log(list(job.paths), job.log)
     protocol = read_protocol(job.protocol) if job.protocol else None
     return samples, tabulate(samples, job.detection, protocol, job.uphill_azimuth_deg)
 

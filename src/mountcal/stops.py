@@ -22,7 +22,7 @@ import pandas as pd
 from mountcal.conventions import FloatArray
 from mountcal.errors import NotEnoughInformation
 from mountcal.io.samples import Channel, Samples
-from mountcal.io.timestamps import increasing_times
+from mountcal.io.timestamps import increasing_times, time_ordered
 
 BATCHES = 10  # batch means for the variance of a stop mean
 BLOCKS_PER_WINDOW = 40
@@ -32,6 +32,7 @@ ACC_STD_FLOOR = 0.12  # m/s²: without a speed signal, any parked vehicle is at 
 ACC_STD_FLOOR_WITH_SPEED = 0.3  # with a speed signal stillness rests on it: idle vibration is allowed
 GYRO_STD_FLOOR = 0.01  # rad/s (0.57 °/s): a parked vehicle rotates less, a pulling-off one more
 GYRO_RATE_FLOOR = 0.02  # rad/s away from the gyro bias
+LSB_SAMPLES = 65_536  # samples searched for the quantisation step
 
 
 @dataclass(frozen=True)
@@ -117,7 +118,7 @@ class StopSearch:
 
 
 def still_mask(samples: Samples, cfg: StopDetection) -> np.ndarray:
-    """Boolean mask, shape (n,), of the samples that look parked (times strictly increasing)."""
+    """Boolean mask, shape (n,), of the samples that look parked (equal stamps allowed; in time order)."""
     return _stillness(samples, cfg, _lsb(samples.acc_s), None if samples.gyro_s is None else _lsb(samples.gyro_s))[0]
 
 
@@ -134,7 +135,11 @@ def _stillness(
     n = len(samples)
     if n < 3:
         return np.zeros(n, dtype=bool), Thresholds(cfg.max_acc_std_mps2 or ACC_STD_FLOOR, np.zeros(3), acc_lsb)
-    rate = 1.0 / float(np.median(np.diff(t)))
+    steps = np.diff(t)
+    steps = steps[steps > 0]  # stamps in pairs have a median step of 0; find_stops merges them first
+    if steps.size == 0:
+        return np.zeros(n, dtype=bool), Thresholds(cfg.max_acc_std_mps2 or ACC_STD_FLOOR, np.zeros(3), acc_lsb)
+    rate = 1.0 / float(np.median(steps))
     block = max(int(cfg.window_s * rate) // BLOCKS_PER_WINDOW, 1)
     starts = np.arange(0, n, block)
     count = np.diff(np.append(starts, n)).astype(float)[:, None]
@@ -145,7 +150,8 @@ def _stillness(
         """Moving mean and std of each column over the window, per block."""
         m1 = _moving_mean(np.add.reduceat(x, starts, axis=0), w) / mc
         m2 = _moving_mean(np.add.reduceat(x * x, starts, axis=0), w) / mc
-        return m1, np.sqrt(np.clip(m2 - m1**2, 0.0, None))
+        var = m2 - m1**2
+        return m1, np.sqrt(np.where(var > 1e-12 * (1.0 + m1**2), var, 0.0))  # below: rounding of m2 − m1²
 
     _, std = moving(acc)
     speed = samples.channels.get("speed_mps")
@@ -204,7 +210,8 @@ def find_stops(
     acc_lsb = _lsb(samples.acc_s)
     gyro_lsb = None if samples.gyro_s is None else _lsb(samples.gyro_s)
     before = dict(samples.dropped)
-    samples = increasing_times(samples)
+    logged = time_ordered(samples)  # every sample as logged, for the stops' statistics
+    samples = increasing_times(logged)  # equal stamps merged, for the moving windows and the runs
     counts = {k: v - before.get(k, 0) for k, v in samples.dropped.items() if v != before.get(k, 0)}
     still, thresholds = _stillness(samples, cfg, acc_lsb, gyro_lsb)
     runs = _runs(still)
@@ -225,20 +232,24 @@ def find_stops(
         pieces = [(float(t[i0]), float(t[i1 - 1]))]
         if heading is not None and heading.t_s.size:
             pieces = _steady_heading(heading, pieces[0], cfg.max_heading_wander_deg, cfg.window_s)
-        kept = 0
+        found = []
         for p_lo, p_hi in pieces:
             lo, hi = p_lo + cfg.trim_s, p_hi - cfg.trim_s
             if hi - lo < cfg.min_duration_s:
                 continue
-            sel = slice(int(np.searchsorted(t, lo)), int(np.searchsorted(t, hi, side="right")))
-            stops.append(_stop_stats(samples, sel, lsb))
-            kept += 1
+            sel = slice(int(np.searchsorted(logged.t_s, lo)), int(np.searchsorted(logged.t_s, hi, side="right")))
+            found.append(_stop_stats(logged, sel, lsb))
+        if windows is not None and len(found) > 1:  # one stop per protocol row: its longest steady piece
+            found = [max(found, key=lambda s: s.duration_s)]
+        stops += found
         if len(pieces) > 1:
             split += 1
-            pieces_dropped += len(pieces) - kept
+            pieces_dropped += len(pieces) - len(found)
     if split:
-        counts[f"still periods whose heading wandered > {cfg.max_heading_wander_deg:g}° (split)"] = split
-        counts["pieces of those too short to be a stop (dropped)"] = pieces_dropped
+        counts[
+            f"still periods whose heading wandered > {cfg.max_heading_wander_deg:g}° (split; --max-heading-wander)"
+        ] = split
+        counts["pieces of those not kept as a stop (too short, or not the longest in a protocol row)"] = pieces_dropped
     return StopSearch(stops, thresholds, counts)
 
 
@@ -326,6 +337,7 @@ def _lsb(x: FloatArray) -> FloatArray:
 
     An axis that never changes borrows the others' step: a logger's axes share one resolution.
     """
+    x = x[:: max(1, x.shape[0] // LSB_SAMPLES)]  # adjacent codes show up in any long stretch; sorting all is slow
     steps = np.zeros(x.shape[1])
     for j in range(x.shape[1]):
         d = np.diff(np.unique(x[:, j]))
@@ -358,7 +370,7 @@ def _cov_of_mean(acc: FloatArray, lsb: FloatArray) -> FloatArray:
     sample_var = acc.var(axis=0, ddof=1) if n > 1 else np.zeros(3)
     floor = np.zeros(3)
     for j, q in enumerate(np.asarray(lsb, dtype=float)):
-        if q <= 0:
+        if q <= 0.1 * np.sqrt(sample_var[j]):  # many codes, dithered: the floor is exp(−400π²)-small
             continue
         _, counts = np.unique(np.round(acc[:, j] / q), return_counts=True)
         if counts.size <= 2:

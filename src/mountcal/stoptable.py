@@ -2,6 +2,12 @@
 
 On disk it is CSV or Parquet with the columns named in :data:`COLUMNS`; in memory a
 :class:`StopTable` of SI arrays. Reading validates everything a fit needs and says what is wrong.
+
+The noise columns: ``sx, sy, sz`` are the standard deviations of each stop's samples and ``n`` their
+count, so ``s²/n`` is the variance of the mean for independent, unquantised samples.
+``sx_mean, sy_mean, sz_mean`` (written by ``mountcal stops``) are the 1σ of each stop mean itself,
+including correlated vibration and the quantisation floor (:func:`mountcal.stops.stop_frame`); when
+present they are used instead of ``s/√n``.
 """
 
 from __future__ import annotations

@@ -26,7 +26,33 @@ def increasing_times(samples: Samples) -> Samples:
     not lost: each merged sample is the mean of its group). Auxiliary channels get the same
     treatment (headings averaged as angles), counted under their own names.
     """
+    samples = time_ordered(samples)
     t = samples.t_s
+    if t.size < 2 or bool(np.all(np.diff(t) > 0)):
+        return samples
+    starts = np.flatnonzero(np.concatenate([[True], np.diff(t) > 0]))
+    size = np.diff(np.append(starts, t.size)).astype(float)[:, None]
+
+    def merge(x: FloatArray) -> FloatArray:
+        return np.add.reduceat(x, starts, axis=0) / size
+
+    dropped = dict(samples.dropped)
+    _count(dropped, MERGED, t.size - starts.size)
+    return replace(
+        samples,
+        t_s=t[starts],
+        acc_s=merge(samples.acc_s),
+        gyro_s=None if samples.gyro_s is None else merge(samples.gyro_s),
+        dropped=dropped,
+    )
+
+
+def time_ordered(samples: Samples) -> Samples:
+    """The samples in time order (stable), equal stamps kept; channels made strictly increasing.
+
+    Statistics of the samples themselves (a quantised sensor's codes) need every sample as
+    logged; only the order is fixed here, and counted.
+    """
     dropped = dict(samples.dropped)
     channels = {}
     for key, ch in samples.channels.items():
@@ -34,23 +60,15 @@ def increasing_times(samples: Samples) -> Samples:
         channels[key] = new_ch
         _count(dropped, f"{key}: {MERGED}", merged)
         _count(dropped, f"{key}: {REORDERED}", reordered)
-    if t.size < 2 or bool(np.all(np.diff(t) > 0)):
-        return replace(samples, channels=channels, dropped=dropped) if channels != samples.channels else samples
-    order, reordered = _order(t)
-    ts = t[order]
-    starts = np.flatnonzero(np.concatenate([[True], np.diff(ts) > 0]))
-    size = np.diff(np.append(starts, ts.size)).astype(float)[:, None]
-
-    def merge(x: FloatArray) -> FloatArray:
-        return np.add.reduceat(x[order], starts, axis=0) / size
-
-    _count(dropped, MERGED, ts.size - starts.size)
+    order, reordered = _order(samples.t_s)
     _count(dropped, REORDERED, reordered)
+    if not reordered:
+        return replace(samples, channels=channels, dropped=dropped) if dropped != samples.dropped else samples
     return replace(
         samples,
-        t_s=ts[starts],
-        acc_s=merge(samples.acc_s),
-        gyro_s=None if samples.gyro_s is None else merge(samples.gyro_s),
+        t_s=samples.t_s[order],
+        acc_s=samples.acc_s[order],
+        gyro_s=None if samples.gyro_s is None else samples.gyro_s[order],
         channels=channels,
         dropped=dropped,
     )
