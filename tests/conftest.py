@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -12,7 +13,8 @@ settings.register_profile("mountcal", derandomize=True, max_examples=60, deadlin
 settings.load_profile("mountcal")
 
 REPO = Path(__file__).resolve().parents[1]
-REAL_DATA = (REPO / ".." / "shared" / "data" / "real").resolve()
+# MOUNTCAL_REAL_DATA points elsewhere (a worktree not beside ../shared)
+REAL_DATA = Path(os.environ.get("MOUNTCAL_REAL_DATA", REPO / ".." / "shared" / "data" / "real")).resolve()
 
 
 @pytest.fixture
