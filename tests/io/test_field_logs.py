@@ -5,12 +5,14 @@ python-can's readers; the J1939 DBC and the truck log are real (CSS Electronics,
 
 from __future__ import annotations
 
+import shlex
 import shutil
 from pathlib import Path
 
 import can
 import cantools
 import numpy as np
+import pandas as pd
 import pytest
 from cantools import j1939
 
@@ -173,4 +175,77 @@ def _two_splits(tmp_path: Path) -> tuple[Path, Path]:
     return (
         _write(tmp_path / "split1.blf", _imu_only(200, T0)),
         _write(tmp_path / "split2.blf", _imu_only(200, T0 + 2.0 + 0.005)),
+    )
+
+
+DOC = REPO / "docs" / "field-logs.md"
+
+
+def _doc_commands() -> list[list[str]]:
+    """The ``$ mountcal ...`` lines of docs/field-logs.md, as argument lists."""
+    lines = DOC.read_text(encoding="utf-8").splitlines()
+    return [shlex.split(line[len("$ mountcal ") :]) for line in lines if line.startswith("$ mountcal ")]
+
+
+def _doc_mapping() -> str:
+    text = DOC.read_text(encoding="utf-8")
+    block = text.split("```toml\n", 1)[1].split("```", 1)[0]
+    assert block.startswith("# mm5_on_truck.toml\n")
+    return block
+
+
+def _truck_with_mm5(path: Path, j1939_dbc: Path) -> Path:
+    """An MM5.10 (data/imu_mm5_10.dbc, its TX1 at 0x174) on a truck's J1939 bus, channel 1: parked
+    for 40 s (CCVS1 speed 0 from source address 00), then driving at 30 km/h for 20 s."""
+    imu = cantools.database.load_file(REPO / "data" / "imu_mm5_10.dbc")
+    ccvs1 = cantools.database.load_file(j1939_dbc).get_message_by_name("CCVS1")
+    rng = np.random.default_rng(11)
+    messages = []
+    for k in range(6000):
+        t = T0 + 0.01 * k
+        g = np.array([0.05, -0.03, 0.998]) + rng.normal(0.0, 0.002, 3)
+        for name, ident, dt, values in (
+            ("MM5_10_TX1", 0x174, 0.0, {"AY1": g[1]}),
+            ("MM5_10_TX2", 0x80, 1e-4, {"AX1": g[0]}),
+            ("MM5_10_TX3", 0x576, 2e-4, {"AZ": g[2]}),
+        ):
+            message = imu.get_message_by_name(name)
+            full = {s.name: values.get(s.name, 0.0) for s in message.signals}
+            messages.append(
+                can.Message(
+                    timestamp=t + dt, arbitration_id=ident, is_extended_id=False, data=message.encode(full), channel=1
+                )
+            )
+        if k % 10 == 0:
+            data = ccvs1.encode({"WheelBasedVehicleSpeed": 0.0 if k < 4000 else 30.0})
+            messages.append(
+                can.Message(timestamp=t + 5e-3, arbitration_id=0x18FEF100, is_extended_id=True, data=data, channel=1)
+            )
+    return _write(path, messages)
+
+
+@pytest.mark.real_data
+def test_field_logs_doc_commands(
+    real_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    (tmp_path / "canedge").symlink_to(real_data / "canedge")  # the doc's paths, without copying the logs
+    (tmp_path / "data").symlink_to(REPO / "data")
+    (tmp_path / "mm5_on_truck.toml").write_text(_doc_mapping(), encoding="utf-8")
+    _truck_with_mm5(tmp_path / "truck_mm5.blf", real_data / J1939_DBC)
+    monkeypatch.chdir(tmp_path)
+    commands = _doc_commands()
+    assert [c[0] for c in commands] == ["inspect", "inspect", "stops", "inspect", "inspect", "stops"]
+    outputs = []
+    for argv in commands:
+        assert main(argv) == 0, argv
+        outputs.append(capsys.readouterr().out)
+    assert "0x0CF00400" in outputs[1] and "DLC 8" in outputs[1]
+    assert "EEC1" in outputs[3] and "CCVS1" in outputs[3] and "WheelBasedVehicleSpeed" in outputs[3]
+    assert "MM5_10_TX2" in outputs[4] and "CCVS1" in outputs[4] and "0x174" in outputs[4]
+    assert len(pd.read_csv(tmp_path / "stops.csv")) >= 3  # the car parks several times
+    truck_stops = pd.read_csv(tmp_path / "truck_stops.csv")
+    assert len(truck_stops) == 1 and truck_stops["duration_s"].iloc[0] > 30.0
+    # the IMU's mean specific force, read through the moved message, in m/s²
+    np.testing.assert_allclose(
+        truck_stops[["ax", "ay", "az"]].iloc[0], [0.05 * G_N, -0.03 * G_N, 0.998 * G_N], atol=0.01
     )
