@@ -8,6 +8,7 @@ from __future__ import annotations
 import shlex
 import shutil
 from pathlib import Path
+from typing import Any
 
 import can
 import cantools
@@ -107,6 +108,28 @@ def test_several_dbcs_and_a_message_moved_by_the_mapping(real_data: Path, tmp_pa
     del mapping["messages"]
     with pytest.raises(InputError, match=r"frames of MM5_10_TX1 \(0x070\).*Nearest ids to MM5_10_TX1's: 0x080"):
         read_can(path, [IMU_DBC, j1939_dbc], mapping=mapping)
+
+
+@pytest.mark.real_data
+def test_a_pgn_from_two_senders_is_refused_until_one_is_placed(real_data: Path, tmp_path: Path) -> None:
+    j1939_dbc = real_data / J1939_DBC
+    messages = _vehicle_bus(j1939_dbc, 200)
+    other = [m for m in messages if m.arbitration_id == 0x18FEF100]
+    for m in other:  # a second sender (source address 0x17) of the same PGN, with other speeds
+        data = bytes(m.data[:1]) + bytes([0xFF, 0x7F]) + bytes(m.data[3:])
+        messages.append(can.Message(timestamp=m.timestamp + 1e-3, arbitration_id=0x18FEF117, data=data, channel=1))
+    path = _write(tmp_path / "two_senders.blf", messages)
+    signals = {"ax": "MM5_10_TX2.AX1", "ay": "MM5_10_TX1.AY1", "az": "MM5_10_TX3.AZ"}
+    mapping: dict[str, Any] = {"signals": {**signals, "speed": "CCVS1.WheelBasedVehicleSpeed"}}
+    with pytest.raises(
+        InputError,
+        match=r"CCVS1 \(J1939 PGN 0x0FEF1\) from one sender, found it from 2 ids: "
+        r"0x18FEF100, 0x18FEF117",
+    ):
+        read_can(path, [IMU_DBC, j1939_dbc], mapping=mapping)
+    mapping["messages"] = {"CCVS1": {"id": 0x18FEF100}}
+    speed = read_can(path, [IMU_DBC, j1939_dbc], mapping=mapping).channels["speed_mps"]
+    assert len(speed.value) == len(other) and speed.value.max() < 10.0  # only source 00's 0-4.5 km/h
 
 
 def test_a_message_clash_between_dbcs_is_reported(tmp_path: Path) -> None:

@@ -291,6 +291,7 @@ class _Source:
     signals: list[str] = field(default_factory=list)
     valid: list[str] = field(default_factory=list)
     channels: set[int] = field(default_factory=set)
+    ids: set[int] = field(default_factory=set)  # ids seen, for a message matched by J1939 PGN
     # where its frames are: arbitration_id & mask == value, the id kind, the channel (None: any one)
     value: int = 0
     mask: int = 0x1FFFFFFF
@@ -798,6 +799,16 @@ def _select(frames: CanFrames, source: _Source, plan: _Plan) -> CanFrames:
                 f"it on channels {found}",
                 "Choose one with `channel=` (or `channel = N` in the mapping).",
             )
+        if source.mask != 0x1FFFFFFF:  # matched by J1939 PGN: one sender, or two streams would mix
+            source.ids.update(np.unique(chosen.arbitration_id).tolist())
+            if len(source.ids) > 1:
+                found = ", ".join(frame_id_text(i, True) for i in sorted(source.ids)[:_SHOWN])
+                raise InputError(
+                    plan.where,
+                    f"message {source.message.name} (J1939 PGN 0x{source.value >> 8:05X}) from one sender",
+                    f"it from {len(source.ids)} ids: {found}",
+                    f"Pick one in the mapping: [messages] {source.message.name} = {{ id = 0x... }}.",
+                )
     return chosen
 
 
