@@ -23,6 +23,7 @@ from mountcal.io.can_frames import read_frames
 from mountcal.io.can_log import inspect_can, read_can
 from mountcal.io.dbc import decode, load_dbcs, select_frames
 from mountcal.io.logs import LogOptions, read_log
+from mountcal.rotate_log import iter_log
 
 REPO = Path(__file__).resolve().parents[2]
 IMU_DBC = REPO / "tests" / "data" / "mm5_imu.dbc"
@@ -175,6 +176,10 @@ def test_overlapping_files_are_refused(tmp_path: Path) -> None:
     overlapping = _write(tmp_path / "other_logger.blf", _imu_only(200, T0 + 1.0))
     with pytest.raises(InputError, match=r"overlapping clocks: .*other_logger\.blf starts at"):
         read_log([first, overlapping], options)
+    # rotate streams the files: refused too, and no output is left
+    assert sum(len(c) for c in iter_log([second, first], options, 64)) == 400
+    with pytest.raises(InputError, match=r"overlapping clocks: .*other_logger\.blf starts at t = "):
+        list(iter_log([first, overlapping], options, 64))
 
 
 def _imu_only(n: int, t0: float) -> list[can.Message]:

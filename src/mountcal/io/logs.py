@@ -165,14 +165,19 @@ def _check_consecutive(parts: Sequence[Samples]) -> None:
     for before, after in pairwise(parts):
         end, start = float(before.t_s[-1]), float(after.t_s[0])
         if start < end:
-            raise InputError(
-                f"{before.source} + {after.source}",
-                "splits of one log, each starting after the previous one ends",
-                f"overlapping clocks: {after.source} starts at t = {start:.3f} s, {end - start:.3f} s before "
-                f"{before.source} ends (t = {end:.3f} s)",
-                "Give the files of one recording session at a time (two loggers, or a file given twice, "
-                "cannot be joined into one log).",
-            )
+            raise overlap_error(before.source, end, after.source, start)
+
+
+def overlap_error(before: str, end: float, after: str, start: float) -> InputError:
+    """The refusal of two files whose clocks overlap: ``after`` starts before ``before`` ends."""
+    return InputError(
+        f"{before} + {after}",
+        "splits of one log, each starting after the previous one ends",
+        f"overlapping clocks: {after} starts at t = {start:.3f} s, {end - start:.3f} s before {before} ends "
+        f"(t = {end:.3f} s)",
+        "Give the files of one recording session at a time (two loggers, or a file given twice, "
+        "cannot be joined into one log).",
+    )
 
 
 def log_kind(path: Path, opts: LogOptions) -> str:
