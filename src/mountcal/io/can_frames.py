@@ -7,7 +7,7 @@ error frames carry no signal values and are not part of it). Conventions:
   reports ``Message.timestamp`` (absolute Unix time for BLF and MF4, whatever the text file says for
   the text formats).
 - ``channel`` is the channel number as python-can reports it: Vector's 1-based ``CAN 1`` in BLF and
-  ASC becomes 0, an MF4 ``BusChannel`` is kept as stored (CANedge ``CAN 2`` is 2), ``can1`` in a
+  ASC becomes 0, an MF4 ``BusChannel`` is kept as the file gives it (CANedge ``CAN 2`` is 2), ``can1`` in a
   candump log is 1. Formats without a channel (CSV) give -1.
 - ``dlc`` is the number of data bytes (python-can's ``Message.dlc``; for CAN FD the length, not the
   4-bit code); ``data`` is zero-padded to 8 bytes, or to 64 when a frame is longer (CAN FD).
@@ -19,8 +19,11 @@ a batch of them is first read as one strided record array while its objects repe
 one's size and kind (a classic CAN log is all 48-byte CAN_MESSAGEs); anything else goes through
 a general scan that locates every ``LOBJ`` signature with numpy, verifies the object chain
 vectorised and gathers the fields of the wanted frames with fancy indexing. MF4 bus logs are read
-with asammdf's record arrays. The text formats (ASC, candump ``.log``, TRC, CSV) go through
-python-can's readers, batched into arrays; they are the slow formats.
+with asammdf's record arrays of raw values, each numeric field then through the file's conversion
+for it (CANedge firmware 01.07+ stores ``BusChannel`` and ``IDE`` as 0-bit channels whose value is
+the conversion's constant), as python-can's ``MF4Reader`` reads them. The text formats (ASC,
+candump ``.log``, TRC, CSV) go through python-can's readers, batched into arrays; they are the slow
+formats.
 """
 
 from __future__ import annotations

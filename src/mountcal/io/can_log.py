@@ -23,6 +23,12 @@ right-handed sensor frame. It is a small TOML file (or the equivalent dict)::
     accel = "m/s^2"                # m/s^2 or g
     gyro = "deg/s"                 # deg/s or rad/s
 
+An optional ``[messages]`` table places a DBC message at another id and/or channel, e.g.
+``MM5_10_TX1 = { id = 0x174, channel = 1 }`` (``extended = true`` for a 29-bit id <= 0x7FF).
+The DBC may be several files (their messages together; a name or id defined twice is refused). A
+message of a J1939 DBC (``VFrameFormat`` ``J1939PG``) is matched by its PGN, from any source
+address; one PGN from several source addresses is refused until ``[messages]`` picks one id.
+
 Without a mapping (or without its ``[signals]`` table) the signals are detected from their names
 when the DBC and the log make the choice unambiguous: one message with AccelerationX/Y/Z, AccX..,
 AX/AY/AZ or Accel_Longitudinal/Lateral/Vertical, or one such signal per axis across messages. A
@@ -1070,11 +1076,10 @@ def _log_mismatch(path: Path, db: Any, where: str, channel: int | None, wanted: 
         )
     if not wanted:
         return None
-    names = ", ".join(w.text + ("" if w.channel in (None, channel) else f" on channel {w.channel}") for w in wanted)
-    on = "" if channel is None else f" on channel {channel}"
+    names = ", ".join(w.text + ("" if w.channel is None else f" on channel {w.channel}") for w in wanted)
     return InputError(
         where,
-        f"frames of {names}{on}",
+        f"frames of {names}",
         "none; the log has " + _seen(stats) + "".join(_closest(w, stats) for w in wanted),
         "Check the mapping (its [messages] table places a message at another id or channel), the channel "
         "and that the logger recorded this message.",
