@@ -143,6 +143,20 @@ def test_a_message_clash_between_dbcs_is_reported(tmp_path: Path) -> None:
 
 
 @pytest.mark.real_data
+def test_a_pgn_clash_between_dbcs_is_reported(real_data: Path, tmp_path: Path) -> None:
+    """The demo DBC's messages renamed and sent from source address 00: by PGN they are the same."""
+    text = (real_data / J1939_DBC).read_text(encoding="cp1252")
+    eec1_from_00 = 0x80000000 | 0x0CF00400  # the DBC's extended-id flag
+    copy = text.replace("EEC1", "EEC1_ECU00").replace("CCVS1", "CCVS1_ECU00")
+    copy = copy.replace(str(0x80000000 | 0x0CF004FE), str(eec1_from_00))
+    (tmp_path / "ecu00.dbc").write_text(copy, encoding="cp1252")
+    with pytest.raises(
+        InputError, match=r"frame id 0x0CF00400 \(EEC1_ECU00 in .*ecu00\.dbc\) matches 0x0CF004FE \(EEC1 in"
+    ):
+        load_dbcs([real_data / J1939_DBC, tmp_path / "ecu00.dbc"])
+
+
+@pytest.mark.real_data
 def test_inspect_without_a_dbc_lists_ids_per_channel(real_data: Path, capsys: pytest.CaptureFixture[str]) -> None:
     summary = inspect_can(real_data / TRUCK)
     streams = {(s.kind, s.name): s for s in summary.streams}

@@ -97,20 +97,31 @@ def load_dbcs(paths: str | Path | Sequence[str | Path]) -> Any:
     import cantools
 
     owner_of_name: dict[str, str] = {}
-    owner_of_id: dict[tuple[int, bool], tuple[str, str]] = {}
+    # the frames a message takes, as (value, mask, extended): its own key, and for a whole 29-bit
+    # id also its PGN key, which a J1939 message of another file would match
+    owner_of_key: dict[tuple[int, int, bool], tuple[str, Any]] = {}
+    owner_of_pgn: dict[tuple[int, int, bool], tuple[str, Any]] = {}
     clashes: list[str] = []
     messages: list[Any] = []
     for path in paths:
         db = load_dbc(path)
         for message in db.messages:
-            name, key = message.name, (int(message.frame_id), bool(message.is_extended_frame))
+            name, key, pgn = message.name, *_match_keys(message)
+            other = next(
+                (o for o in (owner_of_key.get(key), owner_of_pgn.get(key), owner_of_key.get(pgn or key))
+                 if o is not None and o[0] != str(path)),
+                None,
+            )  # fmt: skip
             if owner_of_name.get(name, str(path)) != str(path):
                 clashes.append(f"message name {name} in {owner_of_name[name]} and {path}")
-            elif key in owner_of_id and owner_of_id[key][0] != str(path):
-                other = owner_of_id[key]
-                clashes.append(f"frame id {frame_id_text(*key)} ({other[1]} in {other[0]}, {name} in {path})")
+            elif other is not None:
+                ident = frame_id_text(int(message.frame_id), bool(message.is_extended_frame))
+                theirs = frame_id_text(int(other[1].frame_id), bool(other[1].is_extended_frame))
+                clashes.append(f"frame id {ident} ({name} in {path}) matches {theirs} ({other[1].name} in {other[0]})")
             owner_of_name.setdefault(name, str(path))
-            owner_of_id.setdefault(key, (str(path), name))
+            owner_of_key.setdefault(key, (str(path), message))
+            if pgn is not None:
+                owner_of_pgn.setdefault(pgn, (str(path), message))
             messages.append(message)
     if clashes:
         shown = "; ".join(clashes[:5]) + (f"; and {len(clashes) - 5} more" if len(clashes) > 5 else "")
@@ -150,6 +161,17 @@ def id_match(message: Any) -> tuple[int, int]:
         mask = _J1939_PDU2 if (ident >> 16) & 0xFF >= 240 else _J1939_PDU1
         return ident & mask, mask
     return ident, 0x1FFFFFFF
+
+
+def _match_keys(message: Any) -> tuple[tuple[int, int, bool], tuple[int, int, bool] | None]:
+    """The message's (value, mask, extended) and, for one matched by its whole 29-bit id, the key
+    of its PGN (what a J1939 message of the same PGN has as its own key)."""
+    value, mask = id_match(message)
+    extended = bool(message.is_extended_frame)
+    if mask != 0x1FFFFFFF or not extended:
+        return (value, mask, extended), None
+    pgn_mask = _J1939_PDU2 if (value >> 16) & 0xFF >= 240 else _J1939_PDU1
+    return (value, mask, extended), (value & pgn_mask, pgn_mask, extended)
 
 
 def select_frames(frames: CanFrames, message: Any) -> CanFrames:
