@@ -56,7 +56,7 @@ import math
 import re
 import tomllib
 from collections import Counter
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -256,9 +256,10 @@ def inspect_can(path: str | Path, dbc: str | Path | Any | None = None) -> LogSum
     fmt = log_format(path)
     db = _database(dbc) if dbc is not None else None
     stats = _id_stats(path)
+    wants = [(_Want.of(m, None), m) for m in db.messages] if db is not None else []
     streams = []
     for (chan, ident, ext), entry in sorted(stats.items()):
-        message = _message_by_id(db, ident, ext) if db is not None else None
+        message = next((m for w, m in wants if w.matches(ident, ext)), None)
         name = message.name if message is not None else frame_id_text(ident, ext)
         fields = tuple(s.name for s in message.signals) if message is not None else ()
         span = entry.last - entry.first
@@ -315,11 +316,6 @@ class _Source:
             self.value, self.mask = ident, 0x1FFFFFFF
             self.extended = ident > 0x7FF if extended is None else extended
         self.channel = channel if on is None else on
-
-    @property
-    def id_text(self) -> str:
-        text = frame_id_text(self.value, self.extended)
-        return text + (" (J1939 PGN)" if self.mask != 0x1FFFFFFF else "")
 
     @property
     def name(self) -> str:
@@ -454,7 +450,7 @@ class _Presence:
                 pairs = np.unique(frames.arbitration_id.astype(np.int64) * 2 + frames.is_extended)
                 self._keys.update((int(p) // 2, bool(p % 2)) for p in pairs)
         keys = self._keys
-        return [m for m in messages if any(_Want.of(m, None).matches(i, e) for i, e in keys)]
+        return [m for m in messages if _Want.of(m, None).matches_any(keys)]
 
 
 def _normalise(name: str) -> str:
@@ -1048,6 +1044,9 @@ class _Want:
     def matches(self, ident: int, extended: bool) -> bool:
         return extended == self.extended and ident & self.mask == self.value
 
+    def matches_any(self, keys: Iterable[tuple[int, bool]]) -> bool:
+        return any(self.matches(i, e) for i, e in keys)
+
     @property
     def text(self) -> str:
         pgn = f", J1939 PGN 0x{self.value >> 8:05X}" if self.mask != 0x1FFFFFFF else ""
@@ -1066,7 +1065,7 @@ def _log_mismatch(path: Path, db: Any, where: str, channel: int | None, wanted: 
     for (_, ident, ext), entry in stats.items():
         per_id[(ident, ext)] += entry.count
     known = [_Want.of(m, None) for m in db.messages]
-    if not any(w.matches(i, e) for i, e in per_id for w in known):
+    if not any(w.matches_any(per_id) for w in known):
         examples = ", ".join(w.text for w in known[:_SHOWN]) + (", ..." if len(known) > _SHOWN else "")
         return InputError(
             where,
@@ -1110,13 +1109,6 @@ def _closest(want: _Want, stats: dict[tuple[int, int, bool], _IdStat]) -> str:
         return f". No {'29' if want.extended else '11'}-bit id in the log for {want.name}"
     near = ", ".join(frame_id_text(i, x) for i, x in same_kind[:3])
     return f". Nearest ids to {want.name}'s: {near}"
-
-
-def _message_by_id(db: Any, ident: int, extended: bool) -> Any:
-    for m in db.messages:
-        if _Want.of(m, None).matches(ident, extended):
-            return m
-    return None
 
 
 @dataclass
