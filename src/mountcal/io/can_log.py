@@ -671,7 +671,11 @@ def _placements(table: Any, db: Any, where: str) -> dict[str, tuple[int | None, 
         if not isinstance(place, Mapping):
             raise InputError(where, f"messages.{name} as a table", repr(place), "Write `{ id = 0x174, channel = 1 }`.")
         _check_keys(place, {"id", "channel", "extended"}, where, f"messages.{name}.")
-        ident = None if place.get("id") is None else _int_setting(place["id"], f"messages.{name}.id")
+        ident = place.get("id")
+        if ident is not None and (isinstance(ident, bool) or not isinstance(ident, int)):
+            raise InputError(
+                where, f"messages.{name}.id as a TOML integer", repr(ident), f"Write `{name} = {{ id = 0x174 }}`."
+            )
         if ident is not None and not 0 <= ident <= 0x1FFFFFFF:
             raise InputError(where, "an id from 0 to 0x1FFFFFFF", f"{ident:#x}", f"Fix messages.{name}.id.")
         extended = place.get("extended")
