@@ -101,10 +101,11 @@ def cmd_stops(args: argparse.Namespace) -> int:
 
 def cmd_inspect(args: argparse.Namespace) -> int:
     """``mountcal inspect LOG``: list what the log holds."""
-    info = inspect_log(args.input, LogOptions(dbc=args.dbc))
+    info = inspect_log(args.input, LogOptions(dbc=_dbcs(args.dbc)))
     print(f"{info.source}: {info.format}, {info.duration_s:.1f} s")
     for st in info.streams:
         fields = f"  [{', '.join(st.fields)}]" if st.fields else ""
+        fields += f"  DLC {','.join(map(str, st.dlcs))}" if st.dlcs else ""
         print(f"  {st.name:<32} {st.kind:<28} {st.count:>9} msgs {st.rate_hz:>9.2f} Hz{fields}")
     return 0
 
@@ -130,7 +131,7 @@ def cmd_rotate(args: argparse.Namespace) -> int:
         cal,
         args.output,
         fmt=args.format,
-        options=LogOptions(dbc=args.dbc, mapping=args.mapping, channel=args.channel, topic=args.topic),
+        options=LogOptions(dbc=_dbcs(args.dbc), mapping=args.mapping, channel=args.channel, topic=args.topic),
         chunk_samples=args.chunk,
         level_only=args.level_only,
         require_confident=args.require_confident,
@@ -245,10 +246,17 @@ def _is_stop_table(path: Path, args: argparse.Namespace) -> bool:
     return bool(cols & {"beta_deg", "n", "sx"}) or "t_s" not in cols
 
 
+def _dbcs(given: list[str] | None) -> str | tuple[str, ...] | None:
+    """``--dbc`` given once (a path) or repeated (their messages together)."""
+    if not given:
+        return None
+    return given[0] if len(given) == 1 else tuple(given)
+
+
 def _job(args: argparse.Namespace, options: Options | None = None) -> LogJob:
     return LogJob(
         paths=tuple(args.input),
-        log=LogOptions(dbc=args.dbc, mapping=args.mapping, channel=args.channel, topic=args.topic),
+        log=LogOptions(dbc=_dbcs(args.dbc), mapping=args.mapping, channel=args.channel, topic=args.topic),
         detection=_detection(args),
         protocol=args.protocol,
         uphill_azimuth_deg=args.uphill_azimuth_deg,
@@ -403,7 +411,7 @@ def summary(cal: Calibration) -> str:
 
 def _log_arguments(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("logs")
-    g.add_argument("--dbc", default=None, help="DBC to decode a CAN log")
+    g.add_argument("--dbc", action="append", default=None, help="DBC to decode a CAN log (repeat for several)")
     g.add_argument("--mapping", default=None, help="TOML naming the accelerometer signals (CAN)")
     g.add_argument("--channel", type=int, default=None, help="CAN channel of the IMU")
     g.add_argument("--topic", default=None, help="IMU topic (MCAP)")
@@ -504,7 +512,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     rot.add_argument("--require-confident", action="store_true", help="refuse a calibration that is not confident")
     rot_log = rot.add_argument_group("logs")
-    rot_log.add_argument("--dbc", default=None, help="DBC to decode a CAN log")
+    rot_log.add_argument("--dbc", action="append", default=None, help="DBC to decode a CAN log (repeat for several)")
     rot_log.add_argument("--mapping", default=None, help="TOML naming the accelerometer signals (CAN)")
     rot_log.add_argument("--channel", type=int, default=None, help="CAN channel of the IMU")
     rot_log.add_argument("--topic", default=None, help="IMU topic (MCAP)")
@@ -512,7 +520,7 @@ def _parser() -> argparse.ArgumentParser:
 
     ins = sub.add_parser("inspect", help="list what a log holds")
     ins.add_argument("input", metavar="LOG")
-    ins.add_argument("--dbc", default=None, help="DBC naming the CAN messages")
+    ins.add_argument("--dbc", action="append", default=None, help="DBC naming the CAN messages (repeat for several)")
     ins.set_defaults(func=cmd_inspect)
 
     sim = sub.add_parser("simulate", help="write a simulated stop table, or (--log) a parking session as logs")

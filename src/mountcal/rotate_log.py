@@ -59,7 +59,7 @@ from scipy.spatial.transform import Rotation
 from mountcal.atomic import atomic_output
 from mountcal.conventions import CONVENTIONS, FloatArray
 from mountcal.errors import InputError
-from mountcal.io.logs import TABLE_CHANNELS, LogOptions, log_kind
+from mountcal.io.logs import TABLE_CHANNELS, LogOptions, log_kind, overlap_error
 from mountcal.io.samples import Channel, Samples
 from mountcal.io.writers import (
     CsvSamples,
@@ -279,8 +279,15 @@ def iter_log(
         raise InputError("LOG", "at least one log file", "none", "Name the log file(s).")
     if len(files) > 1:
         files = sorted(files, key=lambda f: _first_time(f, opts))
+    previous: tuple[str, float] | None = None  # the file before and its last time
     for f in files:
-        yield from _iter_one(f, opts, max_samples)
+        first = True
+        for chunk in _iter_one(f, opts, max_samples):
+            if len(chunk):
+                if first and previous is not None and float(chunk.t_s[0]) < previous[1]:
+                    raise overlap_error(previous[0], previous[1], str(f), float(chunk.t_s[0]))
+                first, previous = False, (str(f), float(chunk.t_s[-1]))
+            yield chunk
 
 
 def _iter_one(path: Path, opts: LogOptions, max_samples: int) -> Iterator[Samples]:

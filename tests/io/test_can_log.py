@@ -251,7 +251,12 @@ def test_missing_message_in_the_log(tmp_path: Path) -> None:
     messages = [m for m in _mm5_messages(50) if m.arbitration_id != 0x576]
     path = _write(tmp_path / "no_tx3.blf", messages)
     spec = {"signals": {"ax": "MM5_10_TX2.AX1", "ay": "MM5_10_TX1.AY1", "az": "MM5_10_TX3.AZ"}}
-    with pytest.raises(InputError, match=r"expected frames of MM5_10_TX3 \(0x576\), found none; the log has ids"):
+    with pytest.raises(
+        InputError,
+        match=r"expected frames of MM5_10_TX3 \(0x576\), found none; the log has 4 ids on channels 0 \(130 frames\); "
+        r"the most frequent: 0x070 \(50\), 0x080 \(50\), 0x343 \(25\), 0x7DF \(5\)"
+        r"\. Nearest ids to MM5_10_TX3's: 0x343",
+    ):
         read_can(path, OWN_DBC, mapping=spec)
 
 
@@ -263,7 +268,9 @@ def test_wrong_dbc_lists_ids_seen_and_expected(tmp_path: Path) -> None:
     path = _write(tmp_path / "obd.blf", messages)
     before = _digest(path)
     with pytest.raises(
-        InputError, match=r"DBC \(ids 0x070, 0x080.*no frame of any of them; the log has ids 0x7E8, 0x7E9"
+        InputError,
+        match=r"DBC \(\d+ messages: MM5_10_TX1 \(0x070\).*no frame of any of them; the log has 2 ids on channels 0 "
+        r"\(20 frames\); the most frequent: 0x7E8 \(10\), 0x7E9 \(10\)",
     ):
         read_can(path, OWN_DBC)
     assert _digest(path) == before
@@ -289,6 +296,7 @@ def test_inspect_names_messages_and_rates(mm5_blf: Path) -> None:
     streams = {s.name: s for s in summary.streams}
     assert streams["MM5_10_TX2"].count == 50 and streams["MM5_10_TX2"].rate_hz == pytest.approx(100.0)
     assert streams["MM5_10_TX2"].fields == ("Roll_Rate", "AX1") and streams["MM5_10_TX2"].kind == "can0"
+    assert streams["MM5_10_TX2"].dlcs == (8,)
     assert streams["0x7DF"].count == 5 and streams["0x7DF"].fields == ()
     assert {s.name for s in inspect_can(mm5_blf).streams} == {"0x070", "0x080", "0x576", "0x343", "0x7DF"}
 

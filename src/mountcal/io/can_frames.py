@@ -7,7 +7,7 @@ error frames carry no signal values and are not part of it). Conventions:
   reports ``Message.timestamp`` (absolute Unix time for BLF and MF4, whatever the text file says for
   the text formats).
 - ``channel`` is the channel number as python-can reports it: Vector's 1-based ``CAN 1`` in BLF and
-  ASC becomes 0, an MF4 ``BusChannel`` is kept as stored (CANedge ``CAN 2`` is 2), ``can1`` in a
+  ASC becomes 0, an MF4 ``BusChannel`` is kept as the file gives it (CANedge ``CAN 2`` is 2), ``can1`` in a
   candump log is 1. Formats without a channel (CSV) give -1.
 - ``dlc`` is the number of data bytes (python-can's ``Message.dlc``; for CAN FD the length, not the
   4-bit code); ``data`` is zero-padded to 8 bytes, or to 64 when a frame is longer (CAN FD).
@@ -19,8 +19,11 @@ a batch of them is first read as one strided record array while its objects repe
 one's size and kind (a classic CAN log is all 48-byte CAN_MESSAGEs); anything else goes through
 a general scan that locates every ``LOBJ`` signature with numpy, verifies the object chain
 vectorised and gathers the fields of the wanted frames with fancy indexing. MF4 bus logs are read
-with asammdf's record arrays. The text formats (ASC, candump ``.log``, TRC, CSV) go through
-python-can's readers, batched into arrays; they are the slow formats.
+with asammdf's record arrays of raw values, each numeric field then through the file's conversion
+for it (CANedge firmware 01.07+ stores ``BusChannel`` and ``IDE`` as 0-bit channels whose value is
+the conversion's constant), as python-can's ``MF4Reader`` reads them. The text formats (ASC,
+candump ``.log``, TRC, CSV) go through python-can's readers, batched into arrays; they are the slow
+formats.
 """
 
 from __future__ import annotations
@@ -774,22 +777,56 @@ def _mf4_can_groups(mdf: Any) -> list[int]:
 def _mf4_records(path: Path, mdf: Any, group: int, start: float, keep: _Filter, max_frames: int) -> Iterator[CanFrames]:
     """One group's frames, a record range at a time."""
     total = int(mdf.groups[group].channel_group.cycles_nr)
+    conversions = _mf4_conversions(mdf, group)
     for offset in range(0, total, max_frames):
         try:
             sig = mdf.get("CAN_DataFrame", group=group, record_offset=offset, record_count=max_frames, raw=True)
         except Exception as err:  # asammdf reports damaged data blocks with assorted exceptions
             raise _mf4_error(path, f"unreadable records from {offset} ({type(err).__name__}: {err})") from err
-        yield _mf4_table(sig.samples, np.asarray(sig.timestamps, np.float64) + start, keep)
+        yield _mf4_table(sig.samples, np.asarray(sig.timestamps, np.float64) + start, keep, conversions, path)
 
 
-def _mf4_table(rec: NDArray[Any], t_s: FloatArray, keep: _Filter) -> CanFrames:
-    """A CAN_DataFrame record array as CanFrames (fields missing from the file take defaults)."""
+# the CAN_DataFrame fields whose value is a number we use (not DataBytes, read as bytes)
+_MF4_NUMERIC = ("BusChannel", "ID", "IDE", "DLC", "DataLength")
+
+
+def _mf4_conversions(mdf: Any, group: int) -> dict[str, Any]:
+    """The conversions of a group's numeric CAN_DataFrame fields, by field name.
+
+    A field's value is its raw value through its conversion. CANedge firmware 01.07 and later
+    relies on it: one channel group per bus and id kind, with ``BusChannel`` and ``IDE`` stored as
+    0-bit channels whose value is the constant of a linear conversion (the raw "value" of a 0-bit
+    channel is only the record index). Raw values without a conversion are the values.
+    """
+    out = {}
+    for channel in mdf.groups[group].channels:
+        field = str(channel.name).removeprefix("CAN_DataFrame.")
+        if field in _MF4_NUMERIC and channel.conversion is not None:
+            out[field] = channel.conversion
+    return out
+
+
+def _mf4_converted(values: NDArray[Any], conversion: Any, field: str, path: Path) -> NDArray[Any]:
+    """``values`` through an asammdf conversion; a conversion to text is refused."""
+    if conversion is None:
+        return values
+    out = np.asarray(conversion.convert(values))
+    if out.dtype.kind not in "biuf":
+        raise _mf4_error(path, f"CAN_DataFrame.{field} converted to {out.dtype} values, not numbers")
+    return out
+
+
+def _mf4_table(rec: NDArray[Any], t_s: FloatArray, keep: _Filter, conversions: dict[str, Any], path: Path) -> CanFrames:
+    """A CAN_DataFrame record array (raw values) as CanFrames: numeric fields through their
+    conversions, as python-can's MF4Reader reads them; fields missing from the file take defaults."""
     names = set(rec.dtype.names or ())
     n = rec.shape[0]
 
     def column(name: str, default: int) -> NDArray[Any]:
         key = f"CAN_DataFrame.{name}"
-        return np.asarray(rec[key]) if key in names else np.full(n, default)
+        if key not in names:
+            return np.full(n, default)
+        return _mf4_converted(np.asarray(rec[key]), conversions.get(name), name, path)
 
     raw_id = column("ID", 0).astype(np.uint32)
     channel = column("BusChannel", -1).astype(np.int64)
@@ -804,7 +841,7 @@ def _mf4_table(rec: NDArray[Any], t_s: FloatArray, keep: _Filter) -> CanFrames:
         t_s[index],
         channel[index],
         ident.astype(np.uint32),
-        np.where(ide < 0, ident > 0x7FF, ide > 0),
+        np.where(ide < 0, ident > 0x7FF, ide != 0),
         length.astype(np.uint8),
         _pad_payload(payload, length),
     )

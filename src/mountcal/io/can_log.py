@@ -23,6 +23,12 @@ right-handed sensor frame. It is a small TOML file (or the equivalent dict)::
     accel = "m/s^2"                # m/s^2 or g
     gyro = "deg/s"                 # deg/s or rad/s
 
+An optional ``[messages]`` table places a DBC message at another id and/or channel, e.g.
+``MM5_10_TX1 = { id = 0x174, channel = 1 }`` (``extended = true`` for a 29-bit id <= 0x7FF).
+The DBC may be several files (their messages together; a name or id defined twice is refused). A
+message of a J1939 DBC (``VFrameFormat`` ``J1939PG``) is matched by its PGN, from any source
+address; one PGN from several source addresses is refused until ``[messages]`` picks one id.
+
 Without a mapping (or without its ``[signals]`` table) the signals are detected from their names
 when the DBC and the log make the choice unambiguous: one message with AccelerationX/Y/Z, AccX..,
 AX/AY/AZ or Accel_Longitudinal/Lateral/Vertical, or one such signal per axis across messages. A
@@ -50,7 +56,7 @@ import math
 import re
 import tomllib
 from collections import Counter
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -60,7 +66,7 @@ from numpy.typing import NDArray
 
 from mountcal.errors import InputError
 from mountcal.io.can_frames import CanFrames, iter_frames, log_format
-from mountcal.io.dbc import decode, load_dbc, payload_bytes, raw_values
+from mountcal.io.dbc import decode, frame_id_text, id_match, load_dbcs, payload_bytes, raw_values
 from mountcal.io.inputs import check_regular_file, hold
 from mountcal.io.samples import Channel, FloatArray, LogSummary, Samples, Stream
 
@@ -147,7 +153,7 @@ _NAME_PATTERNS = {
     "longitude": "(?:gnss|gps|pos)?lon(?:gitude)?",
     "altitude": "(?:gnss|gps|pos)?alt(?:itude)?",
 }
-_MAPPING_KEYS = {"channel", "axes", "allow_left_handed", "valid", "signals", "units"}
+_MAPPING_KEYS = {"channel", "axes", "allow_left_handed", "valid", "signals", "units", "messages"}
 _UNIT_KEYS = {"accel", "gyro", *AUX_KEYS}
 
 
@@ -238,27 +244,31 @@ def inspect_can(path: str | Path, dbc: str | Path | Any | None = None) -> LogSum
     ----------
     path : str or Path
         A CAN log in any supported format.
-    dbc : str, Path or cantools Database, optional
+    dbc : str, Path, sequence of them, or cantools Database, optional
         Names the messages and lists their signals; without it messages are named by hex id.
 
     Returns
     -------
     LogSummary
-        Streams sorted by channel and id; ``kind`` is ``"can<channel>"`` (``"can"`` without one).
+        Streams sorted by channel and id; ``kind`` is ``"can<channel>"`` (``"can"`` without one);
+        ``dlcs`` the data lengths each id was seen with.
     """
     path = Path(path)
     fmt = log_format(path)
     db = _database(dbc) if dbc is not None else None
     stats = _id_stats(path)
+    wants = [(_Want.of(m, None), m) for m in db.messages] if db is not None else []
     streams = []
-    for (chan, ident, ext), (count, first, last) in sorted(stats.items()):
-        message = _message_by_id(db, ident, ext) if db is not None else None
-        name = message.name if message is not None else _hex_id(ident, ext)
+    for (chan, ident, ext), entry in sorted(stats.items()):
+        message = next((m for w, m in wants if w.matches(ident, ext)), None)
+        name = message.name if message is not None else frame_id_text(ident, ext)
         fields = tuple(s.name for s in message.signals) if message is not None else ()
-        rate = (count - 1) / (last - first) if last > first else 0.0
-        streams.append(Stream(name, "can" if chan < 0 else f"can{chan}", count, rate, fields))
+        span = entry.last - entry.first
+        rate = (entry.count - 1) / span if span > 0 else 0.0
+        kind = "can" if chan < 0 else f"can{chan}"
+        streams.append(Stream(name, kind, entry.count, rate, fields, tuple(sorted(entry.dlcs))))
     if stats:
-        duration = max(v[2] for v in stats.values()) - min(v[1] for v in stats.values())
+        duration = max(v.last for v in stats.values()) - min(v.first for v in stats.values())
     else:
         duration = 0.0
     return LogSummary(str(path), fmt, float(duration), tuple(streams))
@@ -289,10 +299,24 @@ class _Source:
     signals: list[str] = field(default_factory=list)
     valid: list[str] = field(default_factory=list)
     channels: set[int] = field(default_factory=set)
+    ids: set[int] = field(default_factory=set)  # ids seen, for a message matched by J1939 PGN
+    # where its frames are: arbitration_id & mask == value, the id kind, the channel (None: any one)
+    value: int = 0
+    mask: int = 0x1FFFFFFF
+    extended: bool = False
+    channel: int | None = None
 
-    @property
-    def key(self) -> tuple[int, bool]:
-        return int(self.message.frame_id), bool(self.message.is_extended_frame)
+    def place(self, placements: Mapping[str, tuple[int | None, bool | None, int | None]], channel: int | None) -> None:
+        """Where the frames are: the mapping's placement of the message, else the DBC's id (J1939
+        messages by PGN) on ``channel``."""
+        ident, extended, on = placements.get(self.message.name, (None, None, None))
+        if ident is None:
+            self.value, self.mask = id_match(self.message)
+            self.extended = bool(self.message.is_extended_frame)
+        else:
+            self.value, self.mask = ident, 0x1FFFFFFF
+            self.extended = ident > 0x7FF if extended is None else extended
+        self.channel = channel if on is None else on
 
     @property
     def name(self) -> str:
@@ -313,13 +337,32 @@ class _Plan:
     axis_map: str
     channel: int | None
 
-    def ids(self) -> list[int]:
-        sources = self.imu + [a[0] for a in self.aux.values()]
-        return sorted({s.key[0] for s in sources})
+    def sources(self) -> list[_Source]:
+        return self.imu + [a[0] for a in self.aux.values()]
+
+    def ids(self) -> list[int] | None:
+        """The ids to read, or None when a source matches a range of them (J1939 PGN)."""
+        if any(s.mask != 0x1FFFFFFF for s in self.sources()):
+            return None
+        return sorted({s.value for s in self.sources()})
+
+    def read_channel(self) -> int | None:
+        """The channel to read, when every source is on the same one."""
+        channels = {s.channel for s in self.sources()}
+        return channels.pop() if len(channels) == 1 else None
 
 
-def _database(dbc: str | Path | Any) -> Any:
-    return load_dbc(dbc) if isinstance(dbc, str | Path) else dbc
+def _database(dbc: str | Path | Sequence[str | Path] | Any) -> Any:
+    """A cantools database from one DBC path, several, or the database itself."""
+    return load_dbcs(dbc) if isinstance(dbc, str | Path | list | tuple) else dbc
+
+
+def _dbc_name(dbc: Any) -> str:
+    if isinstance(dbc, str | Path):
+        return str(dbc)
+    if isinstance(dbc, list | tuple):
+        return " + ".join(map(str, dbc))
+    return "the DBC"
 
 
 def _plan(
@@ -328,7 +371,7 @@ def _plan(
     log_format(path)
     check_regular_file(path, "CAN log")
     db = _database(dbc)
-    dbc_name = str(dbc) if isinstance(dbc, str | Path) else "the DBC"
+    dbc_name = _dbc_name(dbc)
     spec = _mapping_dict(mapping)
     if channel is None and spec.get("channel") is not None:
         channel = _int_setting(spec["channel"], "channel")
@@ -399,12 +442,15 @@ class _Presence:
     def filter(self, messages: list[Any]) -> list[Any]:
         """The messages among ``messages`` that occur in the log."""
         if self._keys is None:
-            ids = sorted({int(m.frame_id) for m in self.db.messages})
+            wants = [_Want.of(m, None) for m in self.db.messages]
+            # a J1939 message matches a range of ids: then every id is read
+            ids = sorted({w.value for w in wants}) if all(w.mask == 0x1FFFFFFF for w in wants) else None
             self._keys = set()
             for frames in iter_frames(self.path, ids=ids, channel=self.channel, max_frames=1 << 18):
                 pairs = np.unique(frames.arbitration_id.astype(np.int64) * 2 + frames.is_extended)
                 self._keys.update((int(p) // 2, bool(p % 2)) for p in pairs)
-        return [m for m in messages if (int(m.frame_id), bool(m.is_extended_frame)) in self._keys]
+        keys = self._keys
+        return [m for m in messages if _Want.of(m, None).matches_any(keys)]
 
 
 def _normalise(name: str) -> str:
@@ -426,14 +472,19 @@ def _detect(db: Any, present: _Presence, where: str) -> dict[str, str]:
         logged = present.filter(list({id(m): m for m, _ in hits}.values())) if hits else []
         absent = " (not in the log)" if present.channel is None else f" (not on channel {present.channel})"
         names = [
-            f"{m.name}.{sig} [{_hex_id(m.frame_id, m.is_extended_frame)}]" + ("" if m in logged else absent)
+            f"{m.name}.{sig} [{frame_id_text(m.frame_id, m.is_extended_frame)}]" + ("" if m in logged else absent)
             for m, sig in hits
         ]
         raise InputError(
             where,
             "one unambiguous set of accelerometer signals (AccelerationX/Y/Z, AccX.., AX/AY/AZ, "
             "Accel_Longitudinal/Lateral/Vertical) in messages present in the log",
-            "candidates " + (", ".join(names) if names else "none"),
+            "candidates "
+            + (
+                ", ".join(names[:_SHOWN]) + (f" and {len(names) - _SHOWN} more" if len(names) > _SHOWN else "")
+                if names
+                else "none"
+            ),
             "Write a mapping naming ax, ay, az as message.signal (see mountcal.io.can_log)"
             + ("." if present.channel is None else ", or check the channel."),
         )
@@ -532,7 +583,8 @@ def _resolve(db: Any, text: Any, role: str, present: _Presence, where: str) -> _
         )
     if len(messages) > 1:
         logged = present.filter(messages)
-        mismatch = None if logged else _log_mismatch(present.path, db, where, present.channel, messages)
+        wants = [_Want.of(m, present.channel) for m in messages]
+        mismatch = None if logged else _log_mismatch(present.path, db, where, present.channel, wants)
         if mismatch is not None:
             raise mismatch
         messages = logged or messages
@@ -597,7 +649,42 @@ def _build_plan(
     _assign_validity(sources + [a[0] for a in aux.values()], spec.get("valid"), db, where, present)
     axes, axis_map = _axes(spec.get("axes", "x,y,z"), spec.get("allow_left_handed", False))
     aux_required = {AUX_KEYS[r] for r in refs if r in AUX_KEYS} if explicit else set()
+    placements = _placements(spec.get("messages", {}), db, where)
+    for source in sources + [a[0] for a in aux.values()]:
+        source.place(placements, channel)
     return _Plan(where, db, sources, columns, has_gyro, aux, aux_required, axes, axis_map, channel)
+
+
+def _placements(table: Any, db: Any, where: str) -> dict[str, tuple[int | None, bool | None, int | None]]:
+    """The mapping's ``[messages]``: a DBC message placed at another id and/or channel, e.g.
+    ``MM5_10_TX1 = { id = 0x174, channel = 1 }`` (``extended = true`` for a 29-bit id at or
+    below 0x7FF)."""
+    if not isinstance(table, Mapping):
+        raise InputError(where, "a [messages] table", repr(table), "Write `[messages]` then `NAME = { id = 0x174 }`.")
+    out: dict[str, tuple[int | None, bool | None, int | None]] = {}
+    for name, place in table.items():
+        messages = _message_refs(db, str(name))
+        if not messages:
+            raise InputError(
+                where, f"a DBC message {name!r} in [messages]", "no message of that name or id", "Fix the mapping."
+            )
+        if not isinstance(place, Mapping):
+            raise InputError(where, f"messages.{name} as a table", repr(place), "Write `{ id = 0x174, channel = 1 }`.")
+        _check_keys(place, {"id", "channel", "extended"}, where, f"messages.{name}.")
+        ident = place.get("id")
+        if ident is not None and (isinstance(ident, bool) or not isinstance(ident, int)):
+            raise InputError(
+                where, f"messages.{name}.id as a TOML integer", repr(ident), f"Write `{name} = {{ id = 0x174 }}`."
+            )
+        if ident is not None and not 0 <= ident <= 0x1FFFFFFF:
+            raise InputError(where, "an id from 0 to 0x1FFFFFFF", f"{ident:#x}", f"Fix messages.{name}.id.")
+        extended = place.get("extended")
+        if extended is not None and not isinstance(extended, bool):
+            raise InputError(where, f"messages.{name}.extended as true or false", repr(extended), "Fix the mapping.")
+        channel = None if place.get("channel") is None else _int_setting(place["channel"], f"messages.{name}.channel")
+        for message in messages:
+            out[message.name] = (ident, extended, channel)
+    return out
 
 
 def _mux_of(ref: _Ref) -> tuple[int, ...] | None:
@@ -684,7 +771,7 @@ def _pieces(path: Path, plan: _Plan, frames_per_chunk: int) -> Iterator[Samples]
     seen = Counter[str]()  # frames selected per source, before validation
     dropped_total = Counter[str]()
     rows_total = 0
-    for frames in iter_frames(path, ids=plan.ids(), channel=plan.channel, max_frames=frames_per_chunk):
+    for frames in iter_frames(path, ids=plan.ids(), channel=plan.read_channel(), max_frames=frames_per_chunk):
         dropped = Counter[str]()
         for k, source in enumerate(plan.imu):
             t_s, values = _take(frames, source, plan, dropped, seen)
@@ -702,12 +789,15 @@ def _pieces(path: Path, plan: _Plan, frames_per_chunk: int) -> Iterator[Samples]
 
 
 def _select(frames: CanFrames, source: _Source, plan: _Plan) -> CanFrames:
-    ident, ext = source.key
-    chosen = frames.take((frames.arbitration_id == ident) & (frames.is_extended == ext))
+    ids = frames.arbitration_id if source.mask == 0x1FFFFFFF else frames.arbitration_id & np.uint32(source.mask)
+    wanted = (ids == source.value) & (frames.is_extended == source.extended)
+    if source.channel is not None:
+        wanted &= frames.channel == source.channel
+    chosen = frames.take(wanted)
     if len(chosen):
         low, high = int(chosen.channel.min()), int(chosen.channel.max())
         source.channels.update((low, high) if low == high or high - low == 1 else np.unique(chosen.channel).tolist())
-        if plan.channel is None and len(source.channels) > 1:
+        if source.channel is None and len(source.channels) > 1:
             found = ", ".join(map(str, sorted(source.channels)))
             raise InputError(
                 plan.where,
@@ -715,6 +805,16 @@ def _select(frames: CanFrames, source: _Source, plan: _Plan) -> CanFrames:
                 f"it on channels {found}",
                 "Choose one with `channel=` (or `channel = N` in the mapping).",
             )
+        if source.mask != 0x1FFFFFFF:  # matched by J1939 PGN: one sender, or two streams would mix
+            source.ids.update(np.unique(chosen.arbitration_id).tolist())
+            if len(source.ids) > 1:
+                found = ", ".join(frame_id_text(i, True) for i in sorted(source.ids)[:_SHOWN])
+                raise InputError(
+                    plan.where,
+                    f"message {source.message.name} (J1939 PGN 0x{source.value >> 8:05X}) from one sender",
+                    f"it from {len(source.ids)} ids: {found}",
+                    f"Pick one in the mapping: [messages] {source.message.name} = {{ id = 0x... }}.",
+                )
     return chosen
 
 
@@ -917,7 +1017,8 @@ def _check_found(path: Path, plan: _Plan, seen: Counter[str], total_rows: int, d
     silent = [s for s in plan.imu if not seen[s.name]]
     if not silent and not missing_aux and total_rows:
         return
-    wanted = [s.message for s in silent] + [plan.aux[k][0].message for k in missing_aux]
+    sources = silent + [plan.aux[k][0] for k in missing_aux]
+    wanted = [_Want(s.message.name, s.value, s.mask, s.extended, s.channel) for s in sources]
     mismatch = _log_mismatch(path, plan.db, plan.where, plan.channel, wanted)
     if mismatch is not None:
         raise mismatch
@@ -929,64 +1030,119 @@ def _check_found(path: Path, plan: _Plan, seen: Counter[str], total_rows: int, d
     )
 
 
-def _log_mismatch(path: Path, db: Any, where: str, channel: int | None, wanted: list[Any]) -> InputError | None:
+@dataclass(frozen=True)
+class _Want:
+    """A message looked for in the log: its name and where its frames would be."""
+
+    name: str
+    value: int
+    mask: int
+    extended: bool
+    channel: int | None
+
+    @classmethod
+    def of(cls, message: Any, channel: int | None) -> _Want:
+        value, mask = id_match(message)
+        return cls(message.name, value, mask, bool(message.is_extended_frame), channel)
+
+    def matches(self, ident: int, extended: bool) -> bool:
+        return extended == self.extended and ident & self.mask == self.value
+
+    def matches_any(self, keys: Iterable[tuple[int, bool]]) -> bool:
+        return any(self.matches(i, e) for i, e in keys)
+
+    @property
+    def text(self) -> str:
+        pgn = f", J1939 PGN 0x{self.value >> 8:05X}" if self.mask != 0x1FFFFFFF else ""
+        return f"{self.name} ({frame_id_text(self.value, self.extended)}{pgn})"
+
+
+_SHOWN = 10  # ids, channels and near matches an error lists: it has to fit on a screen
+
+
+def _log_mismatch(path: Path, db: Any, where: str, channel: int | None, wanted: list[_Want]) -> InputError | None:
     """The error for an empty log, a log the DBC does not describe, or one lacking ``wanted``."""
     stats = _id_stats(path)
     if not stats:
         return InputError(str(path), "CAN frames", "an empty log (no data frames)", "Check the logger's output.")
-    counts = Counter[tuple[int, bool]]()
-    for (_, ident, ext), (count, _, _) in stats.items():
-        counts[(ident, ext)] += count
-    log_ids = _id_list([key for key, _ in counts.most_common()])
-    dbc_ids = {(int(m.frame_id), bool(m.is_extended_frame)) for m in db.messages}
-    if not set(counts) & dbc_ids:
+    per_id = Counter[tuple[int, bool]]()
+    for (_, ident, ext), entry in stats.items():
+        per_id[(ident, ext)] += entry.count
+    known = [_Want.of(m, None) for m in db.messages]
+    if not any(w.matches_any(per_id) for w in known):
+        examples = ", ".join(w.text for w in known[:_SHOWN]) + (", ..." if len(known) > _SHOWN else "")
         return InputError(
             where,
-            "frames of messages of the DBC (ids " + _id_list(sorted(dbc_ids)) + ")",
-            "no frame of any of them; the log has ids " + log_ids,
+            f"frames of messages of the DBC ({len(known)} messages: {examples})",
+            "no frame of any of them; the log has " + _seen(stats),
             "Use the DBC that describes this bus (29-bit ids print with 8 hex digits).",
         )
     if not wanted:
         return None
-    names = ", ".join(f"{m.name} ({_hex_id(int(m.frame_id), bool(m.is_extended_frame))})" for m in wanted)
-    on = "" if channel is None else f" on channel {channel}"
-    channels = sorted({c for (c, _, _) in stats})
+    names = ", ".join(w.text + ("" if w.channel is None else f" on channel {w.channel}") for w in wanted)
     return InputError(
         where,
-        f"frames of {names}{on}",
-        f"none; the log has ids {log_ids} on channels {channels}",
-        "Check the mapping, the channel and that the logger recorded this message.",
+        f"frames of {names}",
+        "none; the log has " + _seen(stats) + "".join(_closest(w, stats) for w in wanted),
+        "Check the mapping (its [messages] table places a message at another id or channel), the channel "
+        "and that the logger recorded this message.",
     )
 
 
-def _id_list(keys: Sequence[tuple[int, bool]], limit: int = 20) -> str:
-    text = ", ".join(_hex_id(i, e) for i, e in keys[:limit])
-    return text + (f" and {len(keys) - limit} more" if len(keys) > limit else "")
+def _seen(stats: dict[tuple[int, int, bool], _IdStat]) -> str:
+    """The channels and the most frequent ids of a log, with frame counts, in a few lines."""
+    per_channel = Counter[int]()
+    per_id = Counter[tuple[int, bool]]()
+    for (chan, ident, ext), entry in stats.items():
+        per_channel[chan] += entry.count
+        per_id[(ident, ext)] += entry.count
+    channels = ", ".join(f"{c} ({n} frames)" for c, n in per_channel.most_common(_SHOWN))
+    more = f" and {len(per_channel) - _SHOWN} more" if len(per_channel) > _SHOWN else ""
+    top = ", ".join(f"{frame_id_text(i, e)} ({n})" for (i, e), n in per_id.most_common(_SHOWN))
+    return f"{len(per_id)} ids on channels {channels}{more}; the most frequent: {top}"
 
 
-def _hex_id(ident: int, extended: bool) -> str:
-    return f"0x{ident:08X}" if extended else f"0x{ident:03X}"
+def _closest(want: _Want, stats: dict[tuple[int, int, bool], _IdStat]) -> str:
+    """Where the log has the wanted id on other channels, else its ids nearest to it."""
+    elsewhere = [(c, e.count) for (c, i, x), e in stats.items() if want.matches(i, x)]
+    if elsewhere:
+        where = ", ".join(f"channel {c} ({n} frames)" for c, n in sorted(elsewhere)[:_SHOWN])
+        return f". {want.name} is on {where}"
+    same_kind = sorted({(i, x) for (_, i, x) in stats if x == want.extended}, key=lambda k: abs(k[0] - want.value))
+    if not same_kind:
+        return f". No {'29' if want.extended else '11'}-bit id in the log for {want.name}"
+    near = ", ".join(frame_id_text(i, x) for i, x in same_kind[:3])
+    return f". Nearest ids to {want.name}'s: {near}"
 
 
-def _message_by_id(db: Any, ident: int, extended: bool) -> Any:
-    for m in db.messages:
-        if int(m.frame_id) == ident and bool(m.is_extended_frame) == extended:
-            return m
-    return None
+@dataclass
+class _IdStat:
+    """One (channel, id, extended) of a log: frames, first and last time, the DLCs seen."""
+
+    count: int
+    first: float
+    last: float
+    dlcs: set[int]
 
 
-def _id_stats(path: Path) -> dict[tuple[int, int, bool], tuple[int, float, float]]:
-    """Per (channel, id, extended): frame count, first and last time, in one streamed pass."""
-    stats: dict[tuple[int, int, bool], tuple[int, float, float]] = {}
+def _id_stats(path: Path) -> dict[tuple[int, int, bool], _IdStat]:
+    """Per (channel, id, extended): frame count, first and last time, DLCs, in one streamed pass."""
+    stats: dict[tuple[int, int, bool], _IdStat] = {}
     for frames in iter_frames(path, max_frames=1 << 18):
         key = (frames.channel * (1 << 33)) + frames.arbitration_id.astype(np.int64) * 2 + frames.is_extended
         uniq, first, counts = np.unique(key, return_index=True, return_counts=True)
         last = len(key) - 1 - np.unique(key[::-1], return_index=True)[1]
-        for u, f, c, la in zip(uniq, first, counts, last, strict=True):
-            chan, rest = int(u) // (1 << 33), int(u) % (1 << 33)
+        pairs = np.unique(key * 128 + frames.dlc)  # the DLCs of each id
+        dlcs: dict[int, set[int]] = {}
+        for pair in pairs.tolist():
+            dlcs.setdefault(pair // 128, set()).add(pair % 128)
+        for u, f, c, la in zip(uniq.tolist(), first, counts, last, strict=True):
+            chan, rest = u // (1 << 33), u % (1 << 33)
             k = (chan, rest // 2, bool(rest % 2))
-            n0, t0, _ = stats.get(k, (0, float(frames.t_s[f]), 0.0))
-            stats[k] = (n0 + int(c), t0, float(frames.t_s[la]))
+            entry = stats.setdefault(k, _IdStat(0, float(frames.t_s[f]), 0.0, set()))
+            entry.count += int(c)
+            entry.last = float(frames.t_s[la])
+            entry.dlcs |= dlcs[u]
     return stats
 
 

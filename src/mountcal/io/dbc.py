@@ -78,6 +78,109 @@ def _load_cached(path: str, mtime_ns: int, size: int) -> Any:
     ) from last
 
 
+def load_dbcs(paths: str | Path | Sequence[str | Path]) -> Any:
+    """One cantools database from one DBC or several (the IMU in one, the vehicle in another).
+
+    Raises
+    ------
+    InputError
+        When a file does not load (see :func:`load_dbc`), or two files define a message of the same
+        name or the same frame id: which one a frame means would be a guess.
+    """
+    if isinstance(paths, str | Path):
+        return load_dbc(paths)
+    paths = list(paths)
+    if not paths:
+        raise InputError("--dbc", "at least one DBC file", "none", "Pass --dbc FILE.")
+    if len(paths) == 1:
+        return load_dbc(paths[0])
+    import cantools
+
+    owner_of_name: dict[str, str] = {}
+    # the frames a message takes, as (value, mask, extended): its own key, and for a whole 29-bit
+    # id also its PGN key, which a J1939 message of another file would match
+    owner_of_key: dict[tuple[int, int, bool], tuple[str, Any]] = {}
+    owner_of_pgn: dict[tuple[int, int, bool], tuple[str, Any]] = {}
+    clashes: list[str] = []
+    messages: list[Any] = []
+    for path in paths:
+        db = load_dbc(path)
+        for message in db.messages:
+            name, key, pgn = message.name, *_match_keys(message)
+            other = next(
+                (o for o in (owner_of_key.get(key), owner_of_pgn.get(key), owner_of_key.get(pgn or key))
+                 if o is not None and o[0] != str(path)),
+                None,
+            )  # fmt: skip
+            if owner_of_name.get(name, str(path)) != str(path):
+                clashes.append(f"message name {name} in {owner_of_name[name]} and {path}")
+            elif other is not None:
+                ident = frame_id_text(int(message.frame_id), bool(message.is_extended_frame))
+                theirs = frame_id_text(int(other[1].frame_id), bool(other[1].is_extended_frame))
+                clashes.append(f"frame id {ident} ({name} in {path}) matches {theirs} ({other[1].name} in {other[0]})")
+            owner_of_name.setdefault(name, str(path))
+            owner_of_key.setdefault(key, (str(path), message))
+            if pgn is not None:
+                owner_of_pgn.setdefault(pgn, (str(path), message))
+            messages.append(message)
+    if clashes:
+        shown = "; ".join(clashes[:5]) + (f"; and {len(clashes) - 5} more" if len(clashes) > 5 else "")
+        raise InputError(
+            " + ".join(str(p) for p in paths),
+            "DBC files that define different messages",
+            shown,
+            "Drop the duplicate DBC, or remove the message from one of the files.",
+        )
+    return cantools.database.can.Database(messages=messages, strict=False)
+
+
+def frame_id_text(ident: int, extended: bool) -> str:
+    """A frame id as it is usually written: 3 hex digits for 11-bit ids, 8 for 29-bit ones."""
+    return f"0x{ident:08X}" if extended else f"0x{ident:03X}"
+
+
+# J1939 (SAE J1939-21): a 29-bit id is priority (3 bits), EDP, DP, PDU format PF (8), PDU specific
+# PS (8), source address (8). The PGN is EDP, DP, PF and, when PF >= 240 (PDU2), PS; for PDU1 the
+# PS is a destination address and not part of it.
+_J1939_PDU2 = 0x03FFFF00  # id bits of the PGN of a PDU2 message
+_J1939_PDU1 = 0x03FF0000  # of a PDU1 message
+
+
+def id_match(message: Any) -> tuple[int, int]:
+    """``(value, mask)``: a frame with ``arbitration_id & mask == value`` (and the message's id kind)
+    is this message.
+
+    A message of the J1939 protocol (cantools sets ``protocol == "j1939"`` from a DBC whose
+    ``ProtocolType`` is J1939, for messages whose ``VFrameFormat`` is ``J1939PG``) is matched by its
+    parameter group number: any priority, any source address (and any destination for PDU1), as
+    J1939 tools do. Any other message, including an ``ExtendedCAN`` one in a J1939 DBC, is matched by
+    its whole id, source address included.
+    """
+    ident = int(message.frame_id)
+    if message.protocol == "j1939" and message.is_extended_frame:
+        mask = _J1939_PDU2 if (ident >> 16) & 0xFF >= 240 else _J1939_PDU1
+        return ident & mask, mask
+    return ident, 0x1FFFFFFF
+
+
+def _match_keys(message: Any) -> tuple[tuple[int, int, bool], tuple[int, int, bool] | None]:
+    """The message's (value, mask, extended) and, for one matched by its whole 29-bit id, the key
+    of its PGN (what a J1939 message of the same PGN has as its own key)."""
+    value, mask = id_match(message)
+    extended = bool(message.is_extended_frame)
+    if mask != 0x1FFFFFFF or not extended:
+        return (value, mask, extended), None
+    pgn_mask = _J1939_PDU2 if (value >> 16) & 0xFF >= 240 else _J1939_PDU1
+    return (value, mask, extended), (value & pgn_mask, pgn_mask, extended)
+
+
+def select_frames(frames: CanFrames, message: Any) -> CanFrames:
+    """The frames of ``message`` (by :func:`id_match`) in a table of frames."""
+    value, mask = id_match(message)
+    ids = frames.arbitration_id if mask == 0x1FFFFFFF else frames.arbitration_id & np.uint32(mask)
+    return frames.take((ids == value) & (frames.is_extended == bool(message.is_extended_frame)))
+
+
 class _DropOverwriteNotes(logging.Filter):
     def filter(self, record: logging.LogRecord) -> bool:
         return not record.getMessage().startswith("Overwriting message")
@@ -248,4 +351,13 @@ def _muxed(signals: list[Any]) -> list[Any]:
     return [s for s in signals if s.multiplexer_ids]
 
 
-__all__ = ["decode", "load_dbc", "payload_bytes", "raw_values"]
+__all__ = [
+    "decode",
+    "frame_id_text",
+    "id_match",
+    "load_dbc",
+    "load_dbcs",
+    "payload_bytes",
+    "raw_values",
+    "select_frames",
+]

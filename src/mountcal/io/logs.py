@@ -7,7 +7,8 @@
   in rad/s, ``speed_mps``, ``heading_deg``, ``temperature_c``, ``lat_deg``, ``alt_m``).
 
 A log split over several files (a logger's 10-minute MF4 splits) is read file by file and joined
-in time order.
+in time order. Files whose clocks overlap are not splits of one log (two loggers, or one session
+given twice): joining them would interleave two recordings, so they are refused.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from __future__ import annotations
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
+from itertools import pairwise
 from pathlib import Path
 
 import numpy as np
@@ -32,7 +34,7 @@ TABLE_CHANNELS = ("speed_mps", "heading_deg", "temperature_c", "lat_deg", "lon_d
 class LogOptions:
     """How to read a log: the DBC and mapping for CAN, the topic for MCAP."""
 
-    dbc: str | None = None
+    dbc: str | tuple[str, ...] | None = None  # several DBCs: their messages together (no clash allowed)
     mapping: str | None = None
     channel: int | None = None
     topic: str | None = None
@@ -52,7 +54,8 @@ def inspect_log(path: str | Path, options: LogOptions | None = None) -> LogSumma
     """What a log holds: topics or messages, signals, rates, duration."""
     opts = options or LogOptions()
     path = Path(path)
-    kind = log_kind(path, opts)
+    # a CAN log is listed without a DBC too: ids per channel with counts, rates and DLCs
+    kind = "can" if path.suffix.lower() in CAN_SUFFIXES else log_kind(path, opts)
     if kind == "mcap":
         from mountcal.io.mcap_log import inspect_mcap
 
@@ -132,8 +135,15 @@ def read_table_samples(path: Path) -> Samples:
 
 
 def join(parts: Sequence[Samples]) -> Samples:
-    """Samples of several files in time order, with channels and drop counts merged."""
+    """Samples of several files in time order, with channels and drop counts merged.
+
+    Raises
+    ------
+    InputError
+        When two files' clocks overlap: they are not consecutive splits of one log.
+    """
     parts = sorted(parts, key=lambda s: float(s.t_s[0]) if len(s) else np.inf)
+    _check_consecutive([p for p in parts if len(p)])
     gyro = None
     if all(p.gyro_s is not None for p in parts):
         gyro = np.concatenate([p.gyro_s for p in parts if p.gyro_s is not None])
@@ -152,6 +162,26 @@ def join(parts: Sequence[Samples]) -> Samples:
         source=" + ".join(p.source for p in parts),
         axis_map=parts[0].axis_map,
         dropped=dict(dropped),
+    )
+
+
+def _check_consecutive(parts: Sequence[Samples]) -> None:
+    """Refuse files (sorted by their first sample) whose time spans overlap."""
+    for before, after in pairwise(parts):
+        end, start = float(before.t_s[-1]), float(after.t_s[0])
+        if start < end:
+            raise overlap_error(before.source, end, after.source, start)
+
+
+def overlap_error(before: str, end: float, after: str, start: float) -> InputError:
+    """The refusal of two files whose clocks overlap: ``after`` starts before ``before`` ends."""
+    return InputError(
+        f"{before} + {after}",
+        "splits of one log, each starting after the previous one ends",
+        f"overlapping clocks: {after} starts at t = {start:.3f} s, {end - start:.3f} s before {before} ends "
+        f"(t = {end:.3f} s)",
+        "Give the files of one recording session at a time (two loggers, or a file given twice, "
+        "cannot be joined into one log).",
     )
 
 

@@ -73,6 +73,7 @@ class Stream:
     count: int
     rate_hz: float
     fields: tuple[str, ...] = ()  # signal or field names, where known
+    dlcs: tuple[int, ...] = ()  # CAN: the data lengths the id was seen with
 
 
 @dataclass(frozen=True)
