@@ -13,6 +13,8 @@ out) prediction. What the final model still leaves in the residual is reported a
 
 from __future__ import annotations
 
+import logging
+import time
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -25,6 +27,7 @@ from mountcal.estimate import full
 from mountcal.pvalues import chi2_logsf, f_logsf
 from mountcal.stoptable import StopTable
 
+log = logging.getLogger(__name__)
 BASE: tuple[str, ...] = ("rotation", "slope")
 NULL_TOL = 1e-10  # relative eigenvalue of the normalised Fisher information counted as zero
 MAX_TILT_SIGMA_DEG = 5.0  # an effect that would leave the tilt this uncertain is not separable
@@ -32,6 +35,7 @@ MIN_TEMPERATURE_SPAN_C = 2.0
 MAX_ROUNDS = 6
 MAX_SURFACE_TILT_DEG = 3.0  # roads and car parks: cross slopes and grades of a few degrees at most
 SAME_PLACE_M = 30.0  # stops farther apart than this may stand on different surfaces
+PROGRESS_STOPS = 2000  # from this many stops a model choice takes seconds: its rounds are logged at INFO
 EARTH_GRAVITY_MPS2 = (9.77, 9.835)  # normal gravity: 9.780 (equator) to 9.832 (poles) at sea level, less with height
 
 
@@ -130,8 +134,26 @@ def close_the_loop(
             f = full.fit(table, fixed, g_mps2, base.state)
             steps.append(Step("fixed", "terms fixed by --model", fixed, (), table, f))
         return _finish(steps, declined)
-    for _ in range(MAX_ROUNDS):
+    level = logging.INFO if len(table) >= PROGRESS_STOPS else logging.DEBUG
+    for round_ in range(1, MAX_ROUNDS + 1):
+        t0 = time.perf_counter()
+        log.log(
+            level,
+            "model choice on %d stops, round %d (at most %d): testing effects against %s",
+            len(table),
+            round_,
+            MAX_ROUNDS,
+            ", ".join(steps[-1].terms),
+        )
         step = _next_step(steps[-1], table, g_mps2, gravity_known, alpha, declined)
+        took = time.perf_counter() - t0
+        log.log(
+            level,
+            "model choice, round %d: %s (%.1f s)",
+            round_,
+            "nothing more to add" if step is None else f"{step.added} added",
+            took,
+        )
         if step is None:
             break
         steps.append(step)
@@ -237,7 +259,7 @@ def _outlier(cur: Step, table: StopTable, g: float, k: int) -> tuple[float, Step
         return None
     i = int(np.nanargmax(d2))
     logp = float(chi2_logsf(d2[i], 3)) + np.log(n)  # the worst of n stops
-    original = [j for j in range(len(table)) if j not in cur.excluded][i]
+    original = int(np.delete(np.arange(len(table)), list(cur.excluded))[i])
     keep = np.ones(n, dtype=bool)
     keep[i] = False
     sub = cur.table.subset(keep)
