@@ -294,7 +294,8 @@ def _surface(cur: Step, g: float, k: int) -> tuple[float, Step] | None:
 
     The search runs with the mean model held at the current fit (O(n) per trial, no refit); three
     refits around its optimum then give the profile likelihood's curvature and, as their parabola's
-    vertex, its own optimum — four fits instead of one per trial. Where the vertex is not close to
+    vertex, its own optimum; one more at the largest road tilt checks that the profile does not fall
+    to the bound — five fits instead of one per trial of a search. Where the vertex is not close to
     the held optimum the profile is searched directly.
     """
     if cur.table.cov_s is None or cur.fit.dof < 2:
@@ -316,14 +317,20 @@ def _surface(cur: Step, g: float, k: int) -> tuple[float, Step] | None:
     lower, upper = float(np.log(1e-5)), float(np.log(np.radians(MAX_SURFACE_TILT_DEG)))
     x = float(optimize.minimize_scalar(held, bounds=(lower, upper), method="bounded", options={"xatol": 0.01}).x)
     h = 0.05
-    mid, table, f = cost(x, cur.fit.state)
+    value, table, f = cost(x, cur.fit.state)
     below, above = cost(x - h, f.state)[0], cost(x + h, f.state)[0]
-    curvature = (above - 2 * mid + below) / h**2
+    if cost(upper, f.state)[0] < min(value, below, above):
+        return None  # the profile falls all the way to the bound: more tilt than roads have, not this effect
+    curvature = (above - 2 * value + below) / h**2
     shift = -(above - below) / (2 * h * curvature) if curvature > 0 else np.inf
-    if abs(shift) <= 2 * h and lower <= x + shift <= upper:  # the profile's optimum is next to the held one
-        x += shift
-        value, table, f = cost(x, f.state)
-    else:  # refitting moves the optimum far (a stop with a large pull): search the profile itself
+    if x < lower + 2 * h:  # no tilt with the model held; refitting finds none either where a search would look first
+        near = all(cost(t, f.state)[0] >= value for t in lower + np.array([0.382, 0.618]) * (upper - lower))
+    else:  # the profile's optimum is next to the held one: the vertex of its parabola
+        near = abs(shift) <= 2 * h and lower <= x + shift <= upper
+        if near:
+            x += shift
+            value, table, f = cost(x, f.state)
+    if not near:  # refitting moves the optimum far (a stop with a large pull): search the profile itself
         res = optimize.minimize_scalar(
             lambda t: cost(t, cur.fit.state)[0], bounds=(lower, upper), method="bounded", options={"xatol": 0.01}
         )
