@@ -295,8 +295,8 @@ def _surface(cur: Step, g: float, k: int) -> tuple[float, Step] | None:
     The search runs with the mean model held at the current fit (O(n) per trial, no refit); three
     refits around its optimum then give the profile likelihood's curvature and, as their parabola's
     vertex, its own optimum; one more at the largest road tilt checks that the profile does not fall
-    to the bound — five fits instead of one per trial of a search. Where the vertex is not close to
-    the held optimum the profile is searched directly.
+    to the bound — three to five fits instead of one per trial of a search. Where the vertex is not
+    close to the held optimum the profile is searched directly.
     """
     if cur.table.cov_s is None or cur.fit.dof < 2:
         return None
@@ -318,16 +318,17 @@ def _surface(cur: Step, g: float, k: int) -> tuple[float, Step] | None:
     x = float(optimize.minimize_scalar(held, bounds=(lower, upper), method="bounded", options={"xatol": 0.01}).x)
     h = 0.05
     value, table, f = cost(x, cur.fit.state)
-    below, above = cost(x - h, f.state)[0], cost(x + h, f.state)[0]
-    if cost(upper, f.state)[0] < min(value, below, above):
-        return None  # the profile falls all the way to the bound: more tilt than roads have, not this effect
-    curvature = (above - 2 * value + below) / h**2
-    shift = -(above - below) / (2 * h * curvature) if curvature > 0 else np.inf
     if x < lower + 2 * h:  # no tilt with the model held; refitting finds none either where a search would look first
+        curvature = (held(x + h) - 2 * held(x) + held(x - h)) / h**2
         near = all(cost(t, f.state)[0] >= value for t in lower + np.array([0.382, 0.618]) * (upper - lower))
-    else:  # the profile's optimum is next to the held one: the vertex of its parabola
-        near = abs(shift) <= 2 * h and lower <= x + shift <= upper
-        if near:
+    else:
+        below, above = cost(x - h, f.state)[0], cost(x + h, f.state)[0]
+        if cost(upper, f.state)[0] < min(value, below, above):
+            return None  # the profile falls all the way to the bound: more tilt than roads have, not this effect
+        curvature = (above - 2 * value + below) / h**2
+        shift = -(above - below) / (2 * h * curvature) if curvature > 0 else np.inf
+        near = abs(shift) <= 2 * h and lower <= x + shift <= upper  # the profile's optimum is next to the held one
+        if near:  # ... at the vertex of its parabola
             x += shift
             value, table, f = cost(x, f.state)
     if not near:  # refitting moves the optimum far (a stop with a large pull): search the profile itself
