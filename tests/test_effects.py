@@ -13,7 +13,7 @@ from mountcal.calibrate import Options, calibrate
 from mountcal.cli import main
 from mountcal.conventions import G_N
 from mountcal.diagnose import leave_one_out, leave_one_out_refit
-from mountcal.effects import BASE, PROGRESS_STOPS
+from mountcal.effects import BASE, PROGRESS_STOPS, close_the_loop, with_surface
 from mountcal.estimate import full
 from mountcal.simulate import random_bias, simulate_preset, simulate_stops
 from mountcal.stoptable import StopTable, write_stop_table
@@ -204,3 +204,34 @@ def test_a_long_model_choice_reports_its_rounds_on_stderr_not_stdout(
     assert any(f"on {PROGRESS_STOPS} stops, round 1" in line for line in rounds)
     assert any("round 1: bias added" in line for line in rounds)
     assert "nothing more to add" in rounds[-1]
+
+
+def _at_three_sites(tilt_deg: float, seed: int) -> StopTable:
+    """48 stops at three sites (a, b, c in turn), each stop on a road tilted by ``tilt_deg`` (1σ)."""
+    rng = np.random.default_rng(seed)
+    table, truth = simulate_stops(beta_deg=np.resize(np.arange(0.0, 360.0, 30.0), 48), seed=rng)
+    tilt = Rotation.from_rotvec(np.column_stack([np.radians(rng.normal(0, tilt_deg, (48, 2))), np.zeros(48)]))
+    acc = truth.rot_vs.inv().apply(tilt.apply(truth.rot_vs.apply(table.acc_s)))
+    return replace(table, acc_s=acc, site=np.array(["a", "b", "c"])[np.arange(48) % 3])
+
+
+def test_the_road_tilt_found_is_the_profile_likelihoods_optimum() -> None:
+    table = _at_three_sites(0.2, seed=21)
+    loop = close_the_loop(table, G_N, gravity_known=False, alpha=1e-3)
+    step = next(s for s in loop.steps if s.added == "surface")
+    prev = loop.steps[loop.steps.index(step) - 1]
+    extra = step.table.cov_s - prev.table.cov_s  # type: ignore[operator]
+    log_sigma = np.log(np.sqrt(np.trace(extra[0]) / 2) / G_N)
+    assert 0.1 < np.degrees(np.exp(log_sigma)) < 0.4
+    # The reference: refit the mean model on a grid of road tilts around it, no shortcut.
+    grid = log_sigma + np.linspace(-0.1, 0.1, 41)
+    profile = []
+    for x in grid:
+        widened = with_surface(prev.table, prev.fit.state.rot_vs, float(np.exp(x)), G_N)
+        f = full.fit(widened, prev.terms, G_N, prev.fit.state)
+        profile.append(f.chi2 + np.sum(np.linalg.slogdet(widened.cov_s)[1]))
+    assert abs(grid[int(np.argmin(profile))] - log_sigma) <= 0.01  # the old search's tolerance
+
+
+def test_no_road_tilt_is_added_when_the_stops_share_one_surface() -> None:
+    assert sum("surface" in calibrate(_at_three_sites(0.0, seed=s)).model for s in range(6)) == 0
