@@ -6,7 +6,8 @@
     python benchmarks/compare_choices.py old.json new.json
 
 A run agrees when the whole path is the same: every step added, in order, with the same stops
-excluded. Prints each disagreement and the agreement per scenario and overall.
+excluded. Prints each disagreement, the agreement per scenario and overall, and (where the files
+carry them) the largest change of an angle.
 """
 
 from __future__ import annotations
@@ -29,13 +30,16 @@ def main() -> None:
         other = new.get(scenario, [])
         if len(other) != len(runs):
             raise SystemExit(f"{scenario}: {len(runs)} runs in {args.old}, {len(other)} in {args.new}")
-        agree = 0
+        agree, moved = 0, 0.0
         for i, (a, b) in enumerate(zip(runs, other, strict=True)):
-            if a == b:
+            if (a["model"], a["steps"]) == (b["model"], b["steps"]):
                 agree += 1
+                if "angles_deg" in a:
+                    both = [(x, y) for x, y in zip(a["angles_deg"], b["angles_deg"], strict=True) if None not in (x, y)]
+                    moved = max([moved] + [abs(x - y) for x, y in both])
             else:
                 print(f"{scenario}, run {i}: {a['steps']} → {b['steps']}")
-        print(f"{scenario}: {agree}/{len(runs)}")
+        print(f"{scenario}: {agree}/{len(runs)}" + (f", angles within {moved:.2g}°" if "angles_deg" in runs[0] else ""))
         total, same = total + len(runs), same + agree
     print(f"all: {same}/{total} runs choose the same path ({same / max(total, 1):.2%})")
 
