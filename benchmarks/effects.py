@@ -13,6 +13,7 @@ Cramér–Rao bound of the true model, how often unexplained structure is flagge
 from __future__ import annotations
 
 import argparse
+import json
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
@@ -126,6 +127,7 @@ def true_bound(s: Scenario, table: StopTable, truth: Truth, params: dict[str, ob
 
 def run(s: Scenario, runs: int, seed: int) -> dict[str, object]:
     rng = np.random.default_rng(seed)
+    chosen: list[dict[str, object]] = []
     found = flagged = confident = 0
     before, after = np.zeros((runs, 3)), np.zeros((runs, 3))
     covered = np.zeros((runs, 3), dtype=bool)
@@ -133,6 +135,8 @@ def run(s: Scenario, runs: int, seed: int) -> dict[str, object]:
     for r in range(runs):
         table, truth, params = simulate(s, rng)
         cal = calibrate(table)
+        path = [(st["added"], st["excluded_stops"]) for st in cal.model_steps]
+        chosen.append({"model": list(cal.model), "steps": path})
         true = np.array(truth.angles_deg)
         first = cal.model_steps[0]["angles"]
         before[r] = [first["roll_deg"], first["pitch_deg"], first["yaw_deg"]] - true
@@ -153,6 +157,7 @@ def run(s: Scenario, runs: int, seed: int) -> dict[str, object]:
         "after": np.sqrt(np.mean(after**2, axis=0)),
         "coverage": covered.mean(axis=0),
         "crb": crb,
+        "chosen": chosen,
     }
 
 
@@ -162,6 +167,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=4)
     ap.add_argument("--markdown", default=None)
     ap.add_argument("--only", default=None, help="run the scenarios whose name contains this")
+    ap.add_argument("--choices", default=None, help="write the model chosen in every run to this JSON file")
     args = ap.parse_args()
     t0 = time.perf_counter()
     lines = [
@@ -171,10 +177,12 @@ def main() -> None:
         "RMS after (chosen model) | CRB of the true model | after / CRB | 95 % coverage after |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
+    choices: dict[str, object] = {}
     for i, s in enumerate(SCENARIOS):
         if args.only and args.only not in s.name:
             continue
         res = run(s, args.runs, args.seed + i)
+        choices[s.name] = res["chosen"]
         crb = res["crb"]
         bound_v = np.array([np.nan if crb[f"{a}_deg"] is None else crb[f"{a}_deg"] for a in ANGLES])  # type: ignore[index]
         fmt = lambda v: " / ".join(f"{x:.3f}" for x in v)  # noqa: E731
@@ -195,6 +203,9 @@ def main() -> None:
     if args.markdown:
         with open(args.markdown, "w", encoding="utf-8") as fh:
             fh.write(text)
+    if args.choices:
+        with open(args.choices, "w", encoding="utf-8") as fh:
+            json.dump(choices, fh, indent=1)
 
 
 if __name__ == "__main__":

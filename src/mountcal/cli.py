@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
+import logging
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -29,6 +30,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the console script."""
     parser = _parser()
     args = parser.parse_args(argv)
+    _progress_on_stderr()
     try:
         return int(args.func(args))
     except MountcalError as err:
@@ -40,6 +42,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("mountcal: interrupted; no output was written", file=sys.stderr)
         return 130
+
+
+class _StderrProgress(logging.Handler):
+    """Progress of long steps (``mountcal.*`` loggers at INFO) on the current stderr, never stdout."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        print(f"mountcal: {record.getMessage()}", file=sys.stderr, flush=True)
+
+
+def _progress_on_stderr() -> None:
+    root = logging.getLogger("mountcal")
+    if not any(isinstance(h, _StderrProgress) for h in root.handlers):
+        root.addHandler(_StderrProgress(logging.INFO))
+        root.setLevel(logging.INFO)
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:

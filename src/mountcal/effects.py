@@ -13,6 +13,8 @@ out) prediction. What the final model still leaves in the residual is reported a
 
 from __future__ import annotations
 
+import logging
+import time
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -26,6 +28,7 @@ from mountcal.estimate import full
 from mountcal.pvalues import chi2_logsf, f_logsf
 from mountcal.stoptable import StopTable
 
+log = logging.getLogger(__name__)
 BASE: tuple[str, ...] = ("rotation", "slope")
 NULL_TOL = 1e-10  # relative eigenvalue of the normalised Fisher information counted as zero
 MAX_TILT_SIGMA_DEG = 5.0  # an effect that would leave the tilt this uncertain is not separable
@@ -34,6 +37,7 @@ MAX_ROUNDS = 6
 MAX_SURFACE_TILT_DEG = 3.0  # roads and car parks: cross slopes and grades of a few degrees at most
 SAME_PLACE_M = 30.0  # stops farther apart than this may stand on different surfaces
 MAX_BIAS_G = 0.5  # an offset this large is not an accelerometer bias (consumer MEMS: < 0.1 g) but a sign or unit error
+PROGRESS_STOPS = 2000  # from this many stops a model choice takes seconds: its rounds are logged at INFO
 EARTH_GRAVITY_MPS2 = (9.77, 9.835)  # normal gravity: 9.780 (equator) to 9.832 (poles) at sea level, less with height
 
 
@@ -133,8 +137,26 @@ def close_the_loop(
             f = full.fit(table, fixed, g_mps2, base.state)
             steps.append(Step("fixed", "terms fixed by --model", fixed, (), table, f))
         return _finish(steps, declined)
-    for _ in range(MAX_ROUNDS):
+    level = logging.INFO if len(table) >= PROGRESS_STOPS else logging.DEBUG
+    for round_ in range(1, MAX_ROUNDS + 1):
+        t0 = time.perf_counter()
+        log.log(
+            level,
+            "model choice on %d stops, round %d (at most %d): testing effects against %s",
+            len(table),
+            round_,
+            MAX_ROUNDS,
+            ", ".join(steps[-1].terms),
+        )
         step = _next_step(steps[-1], table, g_mps2, gravity_known, alpha, declined)
+        took = time.perf_counter() - t0
+        log.log(
+            level,
+            "model choice, round %d: %s (%.1f s)",
+            round_,
+            "nothing more to add" if step is None else f"{step.added} added",
+            took,
+        )
         if step is None:
             break
         steps.append(step)
@@ -250,7 +272,7 @@ def _outlier(cur: Step, table: StopTable, g: float, k: int) -> tuple[float, Step
         return None
     i = int(np.nanargmax(d2))
     logp = float(chi2_logsf(d2[i], 3)) + np.log(n)  # the worst of n stops
-    original = [j for j in range(len(table)) if j not in cur.excluded][i]
+    original = int(np.delete(np.arange(len(table)), list(cur.excluded))[i])
     keep = np.ones(n, dtype=bool)
     keep[i] = False
     sub = cur.table.subset(keep)
@@ -281,28 +303,58 @@ def _neg2loglik(table: StopTable, fit: full.Fit) -> float:
 
 
 def _surface(cur: Step, g: float, k: int) -> tuple[float, Step] | None:
-    """A random road tilt per stop (stops on different surfaces): its σ by maximum likelihood."""
+    """A random road tilt per stop (stops on different surfaces): its σ by maximum likelihood.
+
+    The search runs with the mean model held at the current fit (O(n) per trial, no refit); three
+    refits around its optimum then give the profile likelihood's curvature and, as their parabola's
+    vertex, its own optimum; one more at the largest road tilt checks that the profile does not fall
+    to the bound — three to five fits instead of one per trial of a search. Where the vertex is not
+    close to the held optimum the profile is searched directly.
+    """
     if cur.table.cov_s is None or cur.fit.dof < 2:
         return None
     base = cur.table
     rot = cur.fit.state.rot_vs
+    resid = cur.fit.residual_s
 
-    def cost(log_sigma: float) -> tuple[float, StopTable, full.Fit]:
+    def held(log_sigma: float) -> float:
+        cov = with_surface(base, rot, float(np.exp(log_sigma)), g).cov_s
+        chi2 = np.einsum("ni,ni->", resid, np.linalg.solve(cov, resid[..., None])[..., 0])  # type: ignore[arg-type]
+        return float(chi2 + np.sum(np.linalg.slogdet(cov)[1]))  # type: ignore[arg-type]
+
+    def cost(log_sigma: float, start: full.State) -> tuple[float, StopTable, full.Fit]:
         table = with_surface(base, rot, float(np.exp(log_sigma)), g)
-        f = full.fit(table, cur.terms, g, cur.fit.state)
+        f = full.fit(table, cur.terms, g, start)
         return _neg2loglik(table, f), table, f
 
-    upper = float(np.log(np.radians(MAX_SURFACE_TILT_DEG)))
-    res = optimize.minimize_scalar(
-        lambda x: cost(x)[0], bounds=(np.log(1e-5), upper), method="bounded", options={"xatol": 0.01}
-    )
-    value, table, f = cost(float(res.x))
+    lower, upper = float(np.log(1e-5)), float(np.log(np.radians(MAX_SURFACE_TILT_DEG)))
+    x = float(optimize.minimize_scalar(held, bounds=(lower, upper), method="bounded", options={"xatol": 0.01}).x)
     h = 0.05
-    curvature = (cost(res.x + h)[0] - 2 * value + cost(res.x - h)[0]) / h**2
+    value, table, f = cost(x, cur.fit.state)
+    if x < lower + 2 * h:  # no tilt with the model held; refitting finds none either where a search would look first
+        curvature = (held(x + h) - 2 * held(x) + held(x - h)) / h**2
+        near = all(cost(t, f.state)[0] >= value for t in lower + np.array([0.382, 0.618]) * (upper - lower))
+    else:
+        below, above = cost(x - h, f.state)[0], cost(x + h, f.state)[0]
+        if cost(upper, f.state)[0] < min(value, below, above):
+            return None  # the profile falls all the way to the bound: more tilt than roads have, not this effect
+        curvature = (above - 2 * value + below) / h**2
+        shift = -(above - below) / (2 * h * curvature) if curvature > 0 else np.inf
+        near = abs(shift) <= 2 * h and lower <= x + shift <= upper  # the profile's optimum is next to the held one
+        if near:  # ... at the vertex of its parabola
+            x += shift
+            value, table, f = cost(x, f.state)
+    if not near:  # refitting moves the optimum far (a stop with a large pull): search the profile itself
+        res = optimize.minimize_scalar(
+            lambda t: cost(t, cur.fit.state)[0], bounds=(lower, upper), method="bounded", options={"xatol": 0.01}
+        )
+        x = float(res.x)
+        value, table, f = cost(x, cur.fit.state)
+        curvature = (cost(x + h, cur.fit.state)[0] - 2 * value + cost(x - h, cur.fit.state)[0]) / h**2
     stat = max(_neg2loglik(base, cur.fit) - value, 0.0)
     logp = float(chi2_logsf(stat, 1))
-    sigma = float(np.exp(res.x))
-    if res.x > upper - 0.05:
+    sigma = float(np.exp(x))
+    if x > upper - 0.05:
         return None  # the scatter needs more tilt than roads have: not this effect
     rel = float(np.sqrt(2.0 / curvature)) if curvature > 0 else float("nan")
     reason = (

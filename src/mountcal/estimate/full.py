@@ -252,7 +252,7 @@ def fit(
         state=state,
         terms=terms,
         names=model.names,
-        cov=_inverse(fisher) * scale2,
+        cov=inverse_information(fisher) * scale2,
         fisher=fisher,
         chi2=chi2,
         dof=dof,
@@ -416,7 +416,7 @@ def _levenberg_marquardt(model: StaticModel, state: State, max_iter: int) -> tup
     raise FitFailed(f"no convergence in {max_iter} iterations (cost {cost:.6g})")
 
 
-def _inverse(fisher: FloatArray) -> FloatArray:
+def inverse_information(fisher: FloatArray) -> FloatArray:
     """Inverse of the information matrix; the pseudo-inverse where it is singular."""
     scale = np.sqrt(np.clip(np.diag(fisher), 1e-300, None))
     normed = fisher / np.outer(scale, scale)
