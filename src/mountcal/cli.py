@@ -16,11 +16,13 @@ from mountcal.atomic import atomic_path
 from mountcal.calibrate import Options, calibrate
 from mountcal.errors import InputError, MountcalError
 from mountcal.io.logs import LogOptions, inspect_log
+from mountcal.paths import SystemFailure, check_outputs, special_kind
 from mountcal.pipeline import LogJob, describe, stops_of_log
 from mountcal.result import Calibration
 from mountcal.simulate import PRESETS, simulate_stops
 from mountcal.stops import StopDetection
 from mountcal.stoptable import read_stop_table, write_stop_table
+from mountcal.terminal import safe
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -30,11 +32,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return int(args.func(args))
     except MountcalError as err:
-        print(f"mountcal: error: {err}", file=sys.stderr)
+        print(f"mountcal: error: {safe(err, keep=chr(10))}", file=sys.stderr)
         return err.exit_code
     except BrokenPipeError:  # output piped into `head` and the like
         sys.stderr.close()
         return 0
+    except OSError as err:  # the system refused a read or a write
+        failure = SystemFailure(str(err.filename or f"mountcal {args.command}"), "reading or writing", err)
+        print(f"mountcal: error: {safe(failure)}", file=sys.stderr)
+        return failure.exit_code
     except KeyboardInterrupt:
         print("mountcal: interrupted; no output was written", file=sys.stderr)
         return 130
@@ -43,13 +49,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 def cmd_calibrate(args: argparse.Namespace) -> int:
     """``mountcal calibrate STOPS|LOG…``: estimate the mounting and write the result JSON."""
     inputs = [Path(p) for p in args.input]
-    if args.output is not None and any(Path(args.output).resolve() == p.resolve() for p in inputs):
-        raise InputError(
-            str(args.output),
-            "an output path other than the input",
-            "the input file itself",
-            "Choose another -o path; mountcal never overwrites its input.",
-        )
+    check_outputs({"-o": args.output, "--report": args.report}, _log_inputs(args))
     options = Options(
         method=args.method, model=args.model, gravity_mps2=args.gravity, max_yaw_sigma_deg=args.max_yaw_sigma
     )
@@ -60,7 +60,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         from mountcal.pipeline_drive import calibrate_any, describe_any
 
         done = calibrate_any(_job(args, options), use=args.use)
-        print("\n".join(describe_any(done, len(inputs))))
+        print(safe("\n".join(describe_any(done, len(inputs))), keep="\n"))
         cal, table = done.calibration, done.table  # type: ignore[assignment]  # no stop table: from driving alone
     print(summary(cal))
     if args.output is not None:
@@ -77,15 +77,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
 def cmd_stops(args: argparse.Namespace) -> int:
     """``mountcal stops LOG…``: detect the parked periods and write the stop table."""
-    if any(Path(args.output).resolve() == Path(p).resolve() for p in args.input):
-        raise InputError(
-            str(args.output),
-            "an output path other than the input",
-            "the input file itself",
-            "Choose another -o path; mountcal never overwrites its input.",
-        )
+    check_outputs({"-o": args.output}, _log_inputs(args))
     samples, found = stops_of_log(_job(args))
-    print("\n".join(describe(samples, found, len(args.input))))
+    print(safe("\n".join(describe(samples, found, len(args.input))), keep="\n"))
     with atomic_path(args.output) as tmp:
         if Path(args.output).suffix.lower() in (".parquet", ".pq"):
             found.frame.to_parquet(tmp, index=False)
@@ -98,10 +92,10 @@ def cmd_stops(args: argparse.Namespace) -> int:
 def cmd_inspect(args: argparse.Namespace) -> int:
     """``mountcal inspect LOG``: list what the log holds."""
     info = inspect_log(args.input, LogOptions(dbc=args.dbc))
-    print(f"{info.source}: {info.format}, {info.duration_s:.1f} s")
-    for st in info.streams:
-        fields = f"  [{', '.join(st.fields)}]" if st.fields else ""
-        print(f"  {st.name:<32} {st.kind:<28} {st.count:>9} msgs {st.rate_hz:>9.2f} Hz{fields}")
+    print(safe(f"{info.source}: {info.format}, {info.duration_s:.1f} s"))
+    for st in info.streams:  # names come from the file: shown escaped (no terminal control, no bidi)
+        fields = f"  [{', '.join(map(safe, st.fields))}]" if st.fields else ""
+        print(f"  {safe(st.name):<32} {safe(st.kind):<28} {st.count:>9} msgs {st.rate_hz:>9.2f} Hz{fields}")
     return 0
 
 
@@ -109,13 +103,9 @@ def cmd_rotate(args: argparse.Namespace) -> int:
     """``mountcal rotate LOG… --calibration result.json -o OUT``: the log's samples in the vehicle frame."""
     from mountcal.rotate_log import rotate_log
 
-    if Path(args.output).resolve() == Path(args.calibration).resolve():
-        raise InputError(
-            str(args.output),
-            "an output path other than the inputs",
-            "the calibration file itself",
-            "Choose another -o path; mountcal never overwrites its input.",
-        )
+    check_outputs({"-o": args.output}, _log_inputs(args) | {"--calibration": args.calibration})
+    if args.chunk < 1:
+        raise InputError("--chunk", "a number of samples ≥ 1", str(args.chunk), "Pass --chunk 100000 (the default).")
     cal = Calibration.load(args.calibration)
     report = rotate_log(
         args.input,
@@ -142,14 +132,7 @@ def cmd_report(args: argparse.Namespace) -> int:
         ) from err
     result = Path(args.result)
     output = Path(args.output) if args.output is not None else result.with_suffix(".html")
-    inputs = [result] + ([Path(args.stops)] if args.stops else [])
-    if any(output.resolve() == p.resolve() for p in inputs):
-        raise InputError(
-            str(output),
-            "an output path other than the inputs",
-            "an input file itself",
-            "Choose another -o path; mountcal never overwrites its input.",
-        )
+    check_outputs({"-o": output}, {"result": result, "--stops": args.stops})
     cal = Calibration.load(result)  # validates format and version
     doc = json.loads(result.read_text(encoding="utf-8"))  # the whole document: entries Calibration may not keep
     table = None
@@ -177,6 +160,8 @@ def cmd_fleet(args: argparse.Namespace) -> int:
         options=Options(method=args.method, model=args.model, max_yaw_sigma_deg=args.max_yaw_sigma),
         headings=args.headings,
     )
+    table, vehicles, _ = outputs_of(args.output)
+    check_outputs({"-o": table, "its vehicles table": vehicles}, _log_inputs(args))
     jobs = collect_jobs(args.input, defaults, exclude=outputs_of(args.output))
     options = FleetOptions(
         workers=args.workers,
@@ -201,6 +186,8 @@ def cmd_fleet(args: argparse.Namespace) -> int:
 def _is_stop_table(path: Path, args: argparse.Namespace) -> bool:
     if path.suffix.lower() not in (".csv", ".parquet", ".pq") or getattr(args, "dbc", None):
         return False
+    if special_kind(path) is not None:  # a FIFO or a device: let the stop-table reader refuse it unopened
+        return True
     try:
         cols = set(
             pd.read_parquet(path).columns
@@ -210,6 +197,14 @@ def _is_stop_table(path: Path, args: argparse.Namespace) -> bool:
     except Exception:  # unreadable: let the stop-table reader say why
         return True
     return bool(cols & {"beta_deg", "n", "sx"}) or "t_s" not in cols
+
+
+def _log_inputs(args: argparse.Namespace) -> dict[str, Any]:
+    """Every file a log command reads, by option name (for :func:`check_outputs`)."""
+    return {
+        "input": args.input,
+        **{f"--{k}": getattr(args, k, None) for k in ("dbc", "mapping", "protocol")},
+    }
 
 
 def _job(args: argparse.Namespace, options: Options | None = None) -> LogJob:
@@ -236,15 +231,15 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         from mountcal.io import export
         from mountcal.simulate import simulate_parking_log
 
-        outputs = [Path(p).resolve() for p in [*args.log, args.protocol, args.truth] if p is not None]
-        clash = len(set(outputs)) < len(outputs) or (args.dbc is not None and Path(args.dbc).resolve() in outputs)
-        if args.output is not None or clash:
+        if args.output is not None:
             raise InputError(
                 "mountcal simulate --log",
-                "distinct output paths other than the --dbc, and no -o (which writes a stop table)",
-                "-o" if args.output is not None else "a path named twice, or the DBC named as an output",
-                "Name each log, the protocol sheet and the truth once; mountcal never overwrites its input.",
+                "no -o (which writes a stop table)",
+                "-o",
+                "Name the logs with --log, and the protocol sheet and the truth with their options.",
             )
+        logs = {f"--log {p}" if len(args.log) > 1 else "--log": p for p in args.log}
+        check_outputs(logs | {"--protocol": args.protocol, "--truth": args.truth}, {"--dbc": args.dbc})
         formats = [export.check_log_path(p, args.dbc) for p in args.log]
         if args.protocol is not None and "asc" in formats and len(formats) > 1:
             raise InputError(
@@ -293,6 +288,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         raise InputError(
             "mountcal simulate", "-o STOPS.csv (a stop table) or --log LOG", "neither", "Name what to write."
         )
+    check_outputs({"-o": args.output, "--truth": args.truth}, {})
     table, truth = simulate_stops(
         headings=args.headings, heading_offset_deg=args.heading_offset, seed=args.seed, **params
     )
@@ -304,21 +300,16 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     )
     print(f"wrote {args.output}")
     if args.truth is not None:
-        Path(args.truth).write_text(
-            json.dumps(
-                {
-                    "roll_deg": roll,
-                    "pitch_deg": pitch,
-                    "yaw_deg": yaw,
-                    "slope_deg": truth.slope_deg,
-                    "bias_mps2": truth.bias_mps2.tolist(),
-                    "g_mps2": truth.g_mps2,
-                },
-                indent=2,
-            )
-            + "\n",
-            encoding="utf-8",
-        )
+        truth_doc = {
+            "roll_deg": roll,
+            "pitch_deg": pitch,
+            "yaw_deg": yaw,
+            "slope_deg": truth.slope_deg,
+            "bias_mps2": truth.bias_mps2.tolist(),
+            "g_mps2": truth.g_mps2,
+        }
+        with atomic_path(args.truth) as tmp:
+            tmp.write_text(json.dumps(truth_doc, indent=2) + "\n", encoding="utf-8")
     return 0
 
 

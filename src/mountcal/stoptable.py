@@ -7,6 +7,7 @@ On disk it is CSV or Parquet with the columns named in :data:`COLUMNS`; in memor
 from __future__ import annotations
 
 import hashlib
+import io
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Literal
@@ -16,6 +17,7 @@ import pandas as pd
 
 from mountcal.conventions import G_N, FloatArray
 from mountcal.errors import InputError, NotEnoughInformation
+from mountcal.paths import read_input_bytes
 
 # Column names of the stop table file.
 BETA = "beta_deg"
@@ -134,17 +136,12 @@ def read_stop_table(path: str | Path, unit: Unit = "mps2", headings: Headings = 
     """
     path = Path(path)
     where = str(path)
-    try:
-        raw = path.read_bytes()
-    except OSError as err:
-        raise InputError(
-            where, "a readable stop table file", f"an error opening it ({err.strerror})", "Check the path."
-        ) from err
+    raw = read_input_bytes(path, "a stop table file")  # a regular file, size bounded
     try:
         if path.suffix.lower() in (".parquet", ".pq"):
-            df = pd.read_parquet(path)
+            df = pd.read_parquet(io.BytesIO(raw))
         else:
-            df = pd.read_csv(path, comment="#", skipinitialspace=True)
+            df = pd.read_csv(io.BytesIO(raw), comment="#", skipinitialspace=True)
     except Exception as err:  # pandas/pyarrow raise many types for malformed files
         raise InputError(
             where,

@@ -27,6 +27,7 @@ import pandas as pd
 from mountcal.calibrate import Options
 from mountcal.errors import InputError
 from mountcal.io.logs import CAN_SUFFIXES, LogOptions
+from mountcal.paths import input_file
 from mountcal.pipeline import LogJob
 from mountcal.stops import StopDetection
 from mountcal.stoptable import Headings
@@ -208,7 +209,7 @@ def read_manifest(path: str | Path, defaults: JobDefaults | None = None) -> list
         A required column is missing, a column is unknown (a typo would silently lose a setting),
         or a cell cannot be read (the message names the row).
     """
-    path = Path(path)
+    path = input_file(path, "a manifest CSV")
     defaults = defaults or JobDefaults()
     try:
         df = pd.read_csv(path, dtype=str, keep_default_na=False, comment="#", skipinitialspace=True)
