@@ -21,7 +21,7 @@ from mountcal.pipeline import LogJob, describe, stops_of_log
 from mountcal.result import Calibration
 from mountcal.simulate import PRESETS, simulate_stops
 from mountcal.stops import StopDetection
-from mountcal.stoptable import read_stop_table, write_stop_table
+from mountcal.stoptable import read_stop_table, same_stops, write_stop_table
 from mountcal.terminal import safe
 
 
@@ -141,6 +141,15 @@ def cmd_report(args: argparse.Namespace) -> int:
         table = read_stop_table(
             args.stops, unit=args.unit, headings=headings if headings in ("uphill", "relative", "none") else "uphill"
         )
+        stored = cal.provenance.get("stops_fingerprint")
+        if not isinstance(stored, dict) or not same_stops(stored, table):
+            raise InputError(
+                str(args.stops),
+                f"the stop table {result} was fitted to (same stops, order, headings and --unit)",
+                "a different table" if isinstance(stored, dict) else f"no record of that table in {result}",
+                "Pass the table given to `mountcal calibrate` (or written by `mountcal stops` for its log), "
+                "or re-run calibrate on this one; omit --stops to report without it.",
+            )
     html = render(doc, table, image_format=args.figures)
     with atomic_path(output) as tmp:
         tmp.write_text(html, encoding="utf-8")

@@ -10,7 +10,7 @@ import hashlib
 import io
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 import pandas as pd
@@ -209,6 +209,38 @@ def stop_table_from_frame(
         lon_deg=optional(LON),
         source=source,
     )
+
+
+def fingerprint(table: StopTable) -> dict[str, Any]:
+    """Order-sensitive sums of the stop means and headings: they identify the table a result was
+    fitted to. Not a file hash: a log's stop table never was a file, and CSV, Parquet or a
+    rewrite of the same stops must match; :func:`same_stops` compares them to 1e-9 relative."""
+    n = len(table)
+    rank = np.arange(1, n + 1, dtype=float)[:, None] / max(n, 1)
+    beta = None if table.beta_rad is None else np.degrees(table.beta_rad)
+    return {
+        "n": n,
+        "acc_sum_mps2": table.acc_s.sum(axis=0).tolist(),
+        "acc_ranked_sum_mps2": (rank * table.acc_s).sum(axis=0).tolist(),
+        "beta_ranked_sum_deg": None if beta is None else float((rank[:, 0] * beta).sum()),
+    }
+
+
+def same_stops(stored: dict[str, Any], table: StopTable) -> bool:
+    """Whether ``table`` is the table of the :func:`fingerprint` ``stored`` (1e-9 relative)."""
+    now = fingerprint(table)
+    with_beta = stored.get("beta_ranked_sum_deg") is not None
+    if stored.get("n") != now["n"] or with_beta != (now["beta_ranked_sum_deg"] is not None):
+        return False
+    tol = {"acc_sum_mps2": G_N, "acc_ranked_sum_mps2": G_N, "beta_ranked_sum_deg": 360.0}  # × n × 1e-9
+    try:
+        return all(
+            np.allclose(np.asarray(stored[k], dtype=float), np.asarray(now[k], dtype=float), rtol=0, atol=t * n)
+            for k, t, n in ((k, t * 1e-9, max(now["n"], 1)) for k, t in tol.items())
+            if now[k] is not None
+        )
+    except (KeyError, TypeError, ValueError):
+        return False
 
 
 def write_stop_table(table: StopTable, path: str | Path) -> None:
