@@ -172,7 +172,8 @@ def stop_table_from_frame(
             "Park at more headings (12 evenly spread is the paper's protocol)."
         )
     scale = G_N if unit == "g" else 1.0
-    acc = _numeric(df, list(ACC), source) * scale
+    with np.errstate(over="ignore"):  # a huge value becomes inf here and is refused by the gravity check
+        acc = _numeric(df, list(ACC), source) * scale
     _check_gravity(acc, unit, source)
 
     beta = None
@@ -273,7 +274,7 @@ def _numeric(df: pd.DataFrame, cols: list[str], source: str) -> FloatArray:
 
 
 def _check_gravity(acc: FloatArray, unit: Unit, source: str) -> None:
-    mag = np.linalg.norm(acc, axis=1)
+    mag = np.hypot(np.hypot(acc[:, 0], acc[:, 1]), acc[:, 2])  # no overflow below 1e308
     lo, hi = GRAVITY_BAND
     bad = np.flatnonzero((mag < lo * G_N) | (mag > hi * G_N))
     if bad.size == 0:
@@ -290,6 +291,13 @@ def _check_gravity(acc: FloatArray, unit: Unit, source: str) -> None:
         hint = "The magnitudes look like g: add --unit g."
     elif np.median(mag) / scale > 5.0 and unit == "g":
         hint = "The magnitudes look like m/s²: drop --unit g."
+    with np.errstate(over="ignore"):
+        other = mag[bad] * (G_N if unit == "mps2" else 1.0 / G_N)  # the bad rows read in the other unit
+    hopeless = bad[~(np.isfinite(other) & (other >= lo * G_N) & (other <= hi * G_N))]
+    if hopeless.size == bad.size:  # the unit explains none of them: advising --unit would be wrong
+        hint = "Those rows are no static reading in either unit (huge, overflowing or near-zero): fix or remove them."
+    elif hopeless.size:
+        hint += f" Rows {_rows(hopeless)} are no static reading in either unit: fix or remove them."
     raise InputError(source, f"static readings of magnitude near gravity ({lo:g}–{hi:g} g)", found, hint)
 
 
