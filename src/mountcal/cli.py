@@ -19,6 +19,7 @@ from mountcal.io.logs import LogOptions, inspect_log
 from mountcal.paths import SystemFailure, check_outputs, special_kind
 from mountcal.pipeline import LogJob, describe, stops_of_log
 from mountcal.result import Calibration
+from mountcal.result_file import read_json
 from mountcal.simulate import PRESETS, simulate_stops
 from mountcal.stops import StopDetection
 from mountcal.stoptable import read_stop_table, same_stops, write_stop_table
@@ -134,7 +135,7 @@ def cmd_report(args: argparse.Namespace) -> int:
     output = Path(args.output) if args.output is not None else result.with_suffix(".html")
     check_outputs({"-o": output}, {"result": result, "--stops": args.stops})
     cal = Calibration.load(result)  # validates format and version
-    doc = json.loads(result.read_text(encoding="utf-8"))  # the whole document: entries Calibration may not keep
+    doc = read_json(result)  # the whole document: entries Calibration may not keep
     table = None
     if args.stops:
         headings = cal.fit.get("headings")
@@ -188,7 +189,7 @@ def cmd_fleet(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 130
-    print("\n".join(summary_lines(result)))
+    print(safe("\n".join(summary_lines(result)), keep="\n"))
     return 0
 
 
@@ -247,7 +248,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                 "-o",
                 "Name the logs with --log, and the protocol sheet and the truth with their options.",
             )
-        logs = {f"--log {p}" if len(args.log) > 1 else "--log": p for p in args.log}
+        logs = {f"--log #{i + 1}" if len(args.log) > 1 else "--log": p for i, p in enumerate(args.log)}
         check_outputs(logs | {"--protocol": args.protocol, "--truth": args.truth}, {"--dbc": args.dbc})
         formats = [export.check_log_path(p, args.dbc) for p in args.log]
         if args.protocol is not None and "asc" in formats and len(formats) > 1:

@@ -27,7 +27,7 @@ import pandas as pd
 from mountcal.calibrate import Options
 from mountcal.errors import InputError
 from mountcal.io.logs import CAN_SUFFIXES, LogOptions
-from mountcal.paths import input_file
+from mountcal.paths import input_file, special_kind
 from mountcal.pipeline import LogJob
 from mountcal.stops import StopDetection
 from mountcal.stoptable import Headings
@@ -145,8 +145,12 @@ def _jobs_of_input(item: str, defaults: JobDefaults, skip: set[Path]) -> Iterato
         for file in files:
             yield _file_job(file, defaults, origin=f"glob {item}")
     else:
+        kind = special_kind(path)
         raise InputError(
-            item, "a log file, a folder of logs, a glob or a manifest CSV", "nothing at this path", "Check the path."
+            item,
+            "a log file, a folder of logs, a glob or a manifest CSV",
+            kind or "nothing at this path",
+            "Check the path." if kind is None else "Pass a regular file; mountcal reads no devices or FIFOs.",
         )
 
 
