@@ -146,7 +146,7 @@ def cmd_report(args: argparse.Namespace) -> int:
         if not isinstance(stored, dict) or not same_stops(stored, table):
             raise InputError(
                 str(args.stops),
-                f"the stop table {result} was fitted to (same stops, order, headings and --unit)",
+                f"the stop table of this result (the one {result} was fitted to: same stops, order, headings, --unit)",
                 "a different table" if isinstance(stored, dict) else f"no record of that table in {result}",
                 "Pass the table given to `mountcal calibrate` (or written by `mountcal stops` for its log), "
                 "or re-run calibrate on this one; omit --stops to report without it.",
