@@ -83,6 +83,8 @@ SCHEMA_VISIBLE = {
     "huge bias": _set("bias_mps2", [1e308, 0.0, 0.0]),
     "two-element bias": _set("bias_mps2", [0.1, 0.2]),
     "negative sigma": _set("uncertainty.roll_deg", -0.1),
+    "negative bias sigma": _set("uncertainty.bias_mps2.1", -0.01),
+    "negative sigma about z": _set("uncertainty.rotation_about_vehicle_xyz_deg.2", -1.0),
     "gravity of the moon": _set("gravity.value_mps2", 1.62),
     "yaw without sigma": _set("uncertainty.yaw_deg", None),
     "yaw dropped but still determined": _set("mounting.yaw_deg", None),

@@ -90,7 +90,7 @@ def check_document(doc: dict[str, Any], where: str) -> None:
             return None
         return float(value)
 
-    def vector(path: str, n: int, bound: float, *, null: bool = False, items_null: bool = False) -> None:
+    def vector(path: str, n: int, lo: float, hi: float, *, null: bool = False, items_null: bool = False) -> None:
         value = _get(doc, path)
         if value is None and null:
             return
@@ -98,7 +98,7 @@ def check_document(doc: dict[str, Any], where: str) -> None:
             problems.append(f"{path} = {_show(value)} (expected {n} numbers)")
             return
         for i in range(n):
-            number(f"{path}.{i}", -bound, bound, null=items_null)
+            number(f"{path}.{i}", lo, hi, null=items_null)
 
     for key, kind in (("method", str), ("model", list), ("fit", dict), ("provenance", dict)):
         if not isinstance(doc.get(key), kind):
@@ -116,9 +116,9 @@ def check_document(doc: dict[str, Any], where: str) -> None:
         number(f"uncertainty.{name}", 0, 360)
     number("uncertainty.yaw_deg", 0, 360, null=yaw is None)
     number("uncertainty.slope_deg", 0, 360, null=True)
-    vector("uncertainty.rotation_about_vehicle_xyz_deg", 3, 360, items_null=True)
-    vector("bias_mps2", 3, MAX_BIAS_MPS2, null=True)
-    vector("uncertainty.bias_mps2", 3, MAX_BIAS_MPS2, null=_get(doc, "bias_mps2") is None)
+    vector("uncertainty.rotation_about_vehicle_xyz_deg", 3, 0, 360, items_null=True)
+    vector("bias_mps2", 3, -MAX_BIAS_MPS2, MAX_BIAS_MPS2, null=True)
+    vector("uncertainty.bias_mps2", 3, 0, MAX_BIAS_MPS2, null=_get(doc, "bias_mps2") is None)
     number("gravity.value_mps2", *GRAVITY_RANGE_MPS2)
     number("residual_rms_mps2", 0, 2 * G_N)
     if not isinstance(_get(doc, "gravity.source"), str):
