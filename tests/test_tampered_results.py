@@ -92,6 +92,7 @@ SCHEMA_VISIBLE = {
     "residual row of 2": _set("stops.residual_s_mps2.0", [0.0, 0.0]),
     "boolean angle": _set("mounting.roll_deg", True),
 }
+LOADER_ONLY = {"condition number as text": _set("observability.condition_number", "x")}  # the schema leaves it open
 
 
 @pytest.mark.parametrize("tamper", list(SCHEMA_VISIBLE), ids=list(SCHEMA_VISIBLE))
@@ -102,6 +103,14 @@ def test_schema_visible_tampering_is_refused_by_both_validators(made: dict[str, 
         jsonschema.validate(doc, schema())
     with pytest.raises(InputError, match="re-create it with `mountcal calibrate`"):
         Calibration.from_dict(doc, "tampered.json")
+
+
+def test_a_field_the_report_formats_is_checked_too(made: dict[str, Path]) -> None:
+    for change in LOADER_ONLY.values():
+        doc = json.loads(made["auto"].read_text())
+        change(doc)
+        with pytest.raises(InputError, match="condition_number"):
+            Calibration.from_dict(doc, "tampered.json")
 
 
 def _rotated_quaternion(doc: Doc) -> None:

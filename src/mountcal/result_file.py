@@ -121,6 +121,8 @@ def check_document(doc: dict[str, Any], where: str) -> None:
     vector("uncertainty.bias_mps2", 3, 0, MAX_BIAS_MPS2, null=_get(doc, "bias_mps2") is None)
     number("gravity.value_mps2", *GRAVITY_RANGE_MPS2)
     number("residual_rms_mps2", 0, 2 * G_N)
+    if isinstance(doc.get("observability"), dict) and "condition_number" in doc["observability"]:
+        number("observability.condition_number", 1 - 1e-9, math.inf, null=True)  # the report formats it
     if not isinstance(_get(doc, "gravity.source"), str):
         problems.append(f"gravity.source = {_show(_get(doc, 'gravity.source'))} (expected a text)")
     determined = _get(doc, "yaw.determined")
