@@ -70,8 +70,13 @@ def read_json(path: PathLike, what: str = "a calibration JSON file") -> Any:
 def _max_depth(raw: bytes) -> int:
     """The deepest nesting of arrays and objects, strings ignored (a linear scan, no recursion)."""
     bare = np.frombuffer(_STRINGS.sub(b'""', raw), dtype=np.uint8)
-    step = np.isin(bare, (ord("["), ord("{"))).astype(np.int64) - np.isin(bare, (ord("]"), ord("}")))
-    return int(np.cumsum(step).max(initial=0))
+    deepest = level = 0
+    for start in range(0, bare.size, 1 << 22):  # 4 MiB at a time: bounded memory on a big file
+        chunk = bare[start : start + (1 << 22)]
+        step = (chunk == ord("[")).astype(np.int32) + (chunk == ord("{")) - (chunk == ord("]")) - (chunk == ord("}"))
+        depth = level + np.cumsum(step, dtype=np.int64)
+        deepest, level = max(deepest, int(depth.max(initial=level))), int(depth[-1]) if depth.size else level
+    return deepest
 
 
 def check_document(doc: dict[str, Any], where: str) -> None:
