@@ -10,6 +10,9 @@ Two forms of the one rule, for the two ways libraries write:
   ``DataFrame.to_csv``, ``pyarrow.parquet.write_table``), renamed onto the target on success and
   removed on an exception; only a hard kill can leave the hidden ``.NAME.*.part`` file.
 
+A write the system refuses (no space, no permission, a directory in the way) is a
+:class:`~mountcal.paths.SystemFailure` naming the target, with nothing left behind.
+
 Both flush and ``fsync`` the data before the name changes, so that after a power cut the target
 holds either its old content or the whole new one (``durable=False`` skips that for files that
 are cheap to recompute, such as a fleet's per-log part files).
@@ -24,6 +27,8 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import BinaryIO
 
+from mountcal.paths import SystemFailure
+
 
 @contextlib.contextmanager
 def atomic_output(target: str | os.PathLike[str]) -> Iterator[BinaryIO]:
@@ -34,7 +39,8 @@ def atomic_output(target: str | os.PathLike[str]) -> Iterator[BinaryIO]:
     """
     path = Path(target)
     folder = path.parent if str(path.parent) else Path(".")
-    folder.mkdir(parents=True, exist_ok=True)
+    with _refused_as_failure(path):
+        folder.mkdir(parents=True, exist_ok=True)
     try:
         fd = os.open(folder, os.O_TMPFILE | os.O_WRONLY, 0o666 & ~_umask())
     except (AttributeError, OSError):
@@ -43,7 +49,7 @@ def atomic_output(target: str | os.PathLike[str]) -> Iterator[BinaryIO]:
         with atomic_path(path) as tmp, tmp.open("wb") as f:
             yield f
         return
-    with os.fdopen(fd, "wb") as f:
+    with _refused_as_failure(path), os.fdopen(fd, "wb") as f:
         yield f
         f.flush()
         os.fsync(f.fileno())
@@ -55,19 +61,35 @@ def atomic_path(target: str | Path, *, durable: bool = True) -> Iterator[Path]:
     """Yield a temporary path in the target's folder; on success sync it (unless ``durable`` is
     False) and rename it onto the target."""
     target = Path(target)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    fd, name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".part", dir=target.parent)
-    os.close(fd)
+    with _refused_as_failure(target):
+        target.parent.mkdir(parents=True, exist_ok=True)
+        fd, name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".part", dir=target.parent)
+        os.close(fd)
     tmp = Path(name)
-    tmp.chmod(0o666 & ~_umask())  # mkstemp makes 0600; outputs get the usual permissions
     try:
-        yield tmp
-        if durable:
-            with tmp.open("rb+") as f:
-                os.fsync(f.fileno())
-        os.replace(tmp, target)
+        with _refused_as_failure(target):
+            tmp.chmod(0o666 & ~_umask())  # mkstemp makes 0600; outputs get the usual permissions
+            yield tmp
+            if durable:
+                with tmp.open("rb+") as f:
+                    os.fsync(f.fileno())
+            os.replace(tmp, target)
     finally:
         tmp.unlink(missing_ok=True)
+
+
+@contextlib.contextmanager
+def _refused_as_failure(target: Path) -> Iterator[None]:
+    """An OSError of the write itself (no file named, or the target, its folder or temporary file)
+    becomes a SystemFailure naming the target; an error reading some other file passes unchanged."""
+    try:
+        yield
+    except OSError as err:
+        name = None if err.filename is None else Path(os.fsdecode(err.filename))
+        ours = name is None or name in (target, target.parent) or name.name.startswith(f".{target.name}.")
+        if not ours and not str(name).startswith("/proc/self/fd/"):
+            raise
+        raise SystemFailure(str(target), "writing", err) from err
 
 
 def _umask() -> int:

@@ -33,7 +33,7 @@ from mountcal.estimate.bound import crb_deg, euler_gradients
 from mountcal.estimate.geometry import span_ratio
 from mountcal.pvalues import chi2_sf
 from mountcal.result import Calibration
-from mountcal.stoptable import StopTable
+from mountcal.stoptable import StopTable, fingerprint
 
 Method = Literal["full", "paper"]
 BASE: tuple[str, ...] = ("rotation", "slope")
@@ -449,6 +449,7 @@ def _provenance(table: StopTable, method: str, terms: tuple[str, ...]) -> dict[s
     return {
         "input": table.source,
         "input_sha256": table.sha256 or None,
+        "stops_fingerprint": fingerprint(table),  # lets `report --stops` check it has the right table
         "software": f"mountcal {version}",
         "method": method,
         "model": list(terms),

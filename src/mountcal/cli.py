@@ -19,11 +19,14 @@ from mountcal.atomic import atomic_path
 from mountcal.calibrate import Options, calibrate
 from mountcal.errors import InputError, MountcalError
 from mountcal.io.logs import LogOptions, inspect_log
+from mountcal.paths import SystemFailure, check_outputs, special_kind
 from mountcal.pipeline import LogJob, describe, stops_of_log
 from mountcal.result import Calibration
+from mountcal.result_file import read_json
 from mountcal.simulate import PRESETS, simulate_stops
 from mountcal.stops import StopDetection
-from mountcal.stoptable import read_stop_table, write_stop_table
+from mountcal.stoptable import read_stop_table, same_stops, write_stop_table
+from mountcal.terminal import safe
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -34,11 +37,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return int(args.func(args))
     except MountcalError as err:
-        print(f"mountcal: error: {err}", file=sys.stderr)
+        print(f"mountcal: error: {safe(err, keep=chr(10))}", file=sys.stderr)
         return err.exit_code
     except BrokenPipeError:  # output piped into `head` and the like
         sys.stderr.close()
         return 0
+    except OSError as err:  # the system refused a read or a write
+        failure = SystemFailure(str(err.filename or f"mountcal {args.command}"), "reading or writing", err)
+        print(f"mountcal: error: {safe(failure)}", file=sys.stderr)
+        return failure.exit_code
     except KeyboardInterrupt:
         print("mountcal: interrupted; no output was written", file=sys.stderr)
         return 130
@@ -61,13 +68,7 @@ def _progress_on_stderr() -> None:
 def cmd_calibrate(args: argparse.Namespace) -> int:
     """``mountcal calibrate STOPS|LOG…``: estimate the mounting and write the result JSON."""
     inputs = [Path(p) for p in args.input]
-    if args.output is not None and any(Path(args.output).resolve() == p.resolve() for p in inputs):
-        raise InputError(
-            str(args.output),
-            "an output path other than the input",
-            "the input file itself",
-            "Choose another -o path; mountcal never overwrites its input.",
-        )
+    check_outputs({"-o": args.output, "--report": args.report}, _log_inputs(args))
     if args.report is not None:
         require("matplotlib", "report", "calibrate --report")  # before any work: nothing is written without it
     options = Options(
@@ -80,7 +81,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         from mountcal.pipeline_drive import calibrate_any, describe_any
 
         done = calibrate_any(_job(args, options), use=args.use)
-        print("\n".join(describe_any(done, len(inputs))))
+        print(safe("\n".join(describe_any(done, len(inputs))), keep="\n"))
         cal, table = done.calibration, done.table  # type: ignore[assignment]  # no stop table: from driving alone
     print(summary(cal))
     if args.output is not None:
@@ -97,15 +98,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
 def cmd_stops(args: argparse.Namespace) -> int:
     """``mountcal stops LOG…``: detect the parked periods and write the stop table."""
-    if any(Path(args.output).resolve() == Path(p).resolve() for p in args.input):
-        raise InputError(
-            str(args.output),
-            "an output path other than the input",
-            "the input file itself",
-            "Choose another -o path; mountcal never overwrites its input.",
-        )
+    check_outputs({"-o": args.output}, _log_inputs(args))
     samples, found = stops_of_log(_job(args))
-    print("\n".join(describe(samples, found, len(args.input))))
+    print(safe("\n".join(describe(samples, found, len(args.input))), keep="\n"))
     with atomic_path(args.output) as tmp:
         if Path(args.output).suffix.lower() in (".parquet", ".pq"):
             found.frame.to_parquet(tmp, index=False)
@@ -118,11 +113,11 @@ def cmd_stops(args: argparse.Namespace) -> int:
 def cmd_inspect(args: argparse.Namespace) -> int:
     """``mountcal inspect LOG``: list what the log holds."""
     info = inspect_log(args.input, LogOptions(dbc=_dbcs(args.dbc)))
-    print(f"{info.source}: {info.format}, {info.duration_s:.1f} s")
-    for st in info.streams:
-        fields = f"  [{', '.join(st.fields)}]" if st.fields else ""
+    print(safe(f"{info.source}: {info.format}, {info.duration_s:.1f} s"))
+    for st in info.streams:  # names come from the file: shown escaped (no terminal control, no bidi)
+        fields = f"  [{', '.join(map(safe, st.fields))}]" if st.fields else ""
         fields += f"  DLC {','.join(map(str, st.dlcs))}" if st.dlcs else ""
-        print(f"  {st.name:<32} {st.kind:<28} {st.count:>9} msgs {st.rate_hz:>9.2f} Hz{fields}")
+        print(f"  {safe(st.name):<32} {safe(st.kind):<28} {st.count:>9} msgs {st.rate_hz:>9.2f} Hz{fields}")
     return 0
 
 
@@ -131,13 +126,9 @@ def cmd_rotate(args: argparse.Namespace) -> int:
     from mountcal.rotate import check_applicable
     from mountcal.rotate_log import rotate_log
 
-    if Path(args.output).resolve() == Path(args.calibration).resolve():
-        raise InputError(
-            str(args.output),
-            "an output path other than the inputs",
-            "the calibration file itself",
-            "Choose another -o path; mountcal never overwrites its input.",
-        )
+    check_outputs({"-o": args.output}, _log_inputs(args) | {"--calibration": args.calibration})
+    if args.chunk < 1:
+        raise InputError("--chunk", "a number of samples ≥ 1", str(args.chunk), "Pass --chunk 100000 (the default).")
     cal = Calibration.load(args.calibration)
     check_applicable(  # refused before any reading, naming the calibration file
         cal, level_only=args.level_only, require_confident=args.require_confident, where=str(args.calibration)
@@ -165,22 +156,24 @@ def cmd_report(args: argparse.Namespace) -> int:
 
     result = Path(args.result)
     output = Path(args.output) if args.output is not None else result.with_suffix(".html")
-    inputs = [result] + ([Path(args.stops)] if args.stops else [])
-    if any(output.resolve() == p.resolve() for p in inputs):
-        raise InputError(
-            str(output),
-            "an output path other than the inputs",
-            "an input file itself",
-            "Choose another -o path; mountcal never overwrites its input.",
-        )
+    check_outputs({"-o": output}, {"result": result, "--stops": args.stops})
     cal = Calibration.load(result)  # validates format and version
-    doc = json.loads(result.read_text(encoding="utf-8"))  # the whole document: entries Calibration may not keep
+    doc = read_json(result)  # the whole document: entries Calibration may not keep
     table = None
     if args.stops:
         headings = cal.fit.get("headings")
         table = read_stop_table(
             args.stops, unit=args.unit, headings=headings if headings in ("uphill", "relative", "none") else "uphill"
         )
+        stored = cal.provenance.get("stops_fingerprint")
+        if not isinstance(stored, dict) or not same_stops(stored, table):
+            raise InputError(
+                str(args.stops),
+                f"the stop table of this result (the one {result} was fitted to: same stops, order, headings, --unit)",
+                "a different table" if isinstance(stored, dict) else f"no record of that table in {result}",
+                "Pass the table given to `mountcal calibrate` (or written by `mountcal stops` for its log), "
+                "or re-run calibrate on this one; omit --stops to report without it.",
+            )
     html = render(doc, table, image_format=args.figures)
     with atomic_path(output) as tmp:
         tmp.write_text(html, encoding="utf-8")
@@ -202,11 +195,13 @@ def cmd_fleet(args: argparse.Namespace) -> int:
         options=Options(method=args.method, model=args.model, max_yaw_sigma_deg=args.max_yaw_sigma),
         headings=args.headings,
     )
+    table, vehicles, _ = outputs_of(args.output)
+    check_outputs({"-o": table, "its vehicles table": vehicles}, _log_inputs(args))
     ours: list[Path] = []
     jobs = collect_jobs(args.input, defaults, exclude=outputs_of(args.output), set_aside=ours)
     if ours:
         listed = ", ".join(map(str, ours[:5])) + (" …" if len(ours) > 5 else "")
-        print(f"set aside {len(ours)} file(s) mountcal wrote (fleet tables, rotated logs): {listed}")
+        print(safe(f"set aside {len(ours)} file(s) mountcal wrote (fleet tables, rotated logs): {listed}"))
     options = FleetOptions(
         workers=args.workers,
         scheduler=args.scheduler,
@@ -227,11 +222,13 @@ def cmd_fleet(args: argparse.Namespace) -> int:
     if result.not_confident:
         listed = ", ".join(result.not_confident[:5]) + (" …" if len(result.not_confident) > 5 else "")
         print(
-            f"mountcal: warning: {len(result.not_confident)} log(s) not confident (flag not_confident; recorded in "
-            f"the tables' metadata, mountcal.not_confident_logs): {listed}",
+            safe(
+                f"mountcal: warning: {len(result.not_confident)} log(s) not confident (flag not_confident; recorded "
+                f"in the tables' metadata, mountcal.not_confident_logs): {listed}"
+            ),
             file=sys.stderr,
         )
-    print("\n".join(summary_lines(result)))
+    print(safe("\n".join(summary_lines(result)), keep="\n"))
     return 0
 
 
@@ -251,6 +248,8 @@ def require(module: str, extra: str, needed_by: str) -> None:
 def _is_stop_table(path: Path, args: argparse.Namespace) -> bool:
     if path.suffix.lower() not in (".csv", ".parquet", ".pq") or getattr(args, "dbc", None):
         return False
+    if special_kind(path) is not None:  # a FIFO or a device: let the stop-table reader refuse it unopened
+        return True
     try:
         cols = set(
             pd.read_parquet(path).columns
@@ -267,6 +266,14 @@ def _dbcs(given: list[str] | None) -> str | tuple[str, ...] | None:
     if not given:
         return None
     return given[0] if len(given) == 1 else tuple(given)
+
+
+def _log_inputs(args: argparse.Namespace) -> dict[str, Any]:
+    """Every file a log command reads, by option name (for :func:`check_outputs`)."""
+    return {
+        "input": args.input,
+        **{f"--{k}": getattr(args, k, None) for k in ("dbc", "mapping", "protocol")},
+    }
 
 
 def _job(args: argparse.Namespace, options: Options | None = None) -> LogJob:
@@ -293,15 +300,15 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         from mountcal.io import export
         from mountcal.simulate import simulate_parking_log
 
-        outputs = [Path(p).resolve() for p in [*args.log, args.protocol, args.truth] if p is not None]
-        clash = len(set(outputs)) < len(outputs) or (args.dbc is not None and Path(args.dbc).resolve() in outputs)
-        if args.output is not None or clash:
+        if args.output is not None:
             raise InputError(
                 "mountcal simulate --log",
-                "distinct output paths other than the --dbc, and no -o (which writes a stop table)",
-                "-o" if args.output is not None else "a path named twice, or the DBC named as an output",
-                "Name each log, the protocol sheet and the truth once; mountcal never overwrites its input.",
+                "no -o (which writes a stop table)",
+                "-o",
+                "Name the logs with --log, and the protocol sheet and the truth with their options.",
             )
+        logs = {f"--log #{i + 1}" if len(args.log) > 1 else "--log": p for i, p in enumerate(args.log)}
+        check_outputs(logs | {"--protocol": args.protocol, "--truth": args.truth}, {"--dbc": args.dbc})
         formats = [export.check_log_path(p, args.dbc) for p in args.log]
         if args.protocol is not None and "asc" in formats and len(formats) > 1:
             raise InputError(
@@ -357,6 +364,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         raise InputError(
             "mountcal simulate", "-o STOPS.csv (a stop table) or --log LOG", "neither", "Name what to write."
         )
+    check_outputs({"-o": args.output, "--truth": args.truth}, {})
     table, truth = simulate_stops(
         headings=args.headings, heading_offset_deg=args.heading_offset, seed=args.seed, **params
     )
@@ -368,21 +376,16 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     )
     print(f"wrote {args.output}")
     if args.truth is not None:
-        Path(args.truth).write_text(
-            json.dumps(
-                {
-                    "roll_deg": roll,
-                    "pitch_deg": pitch,
-                    "yaw_deg": yaw,
-                    "slope_deg": truth.slope_deg,
-                    "bias_mps2": truth.bias_mps2.tolist(),
-                    "g_mps2": truth.g_mps2,
-                },
-                indent=2,
-            )
-            + "\n",
-            encoding="utf-8",
-        )
+        truth_doc = {
+            "roll_deg": roll,
+            "pitch_deg": pitch,
+            "yaw_deg": yaw,
+            "slope_deg": truth.slope_deg,
+            "bias_mps2": truth.bias_mps2.tolist(),
+            "g_mps2": truth.g_mps2,
+        }
+        with atomic_path(args.truth) as tmp:
+            tmp.write_text(json.dumps(truth_doc, indent=2) + "\n", encoding="utf-8")
     return 0
 
 

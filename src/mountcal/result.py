@@ -17,6 +17,7 @@ from scipy.spatial.transform import Rotation
 from mountcal.atomic import atomic_path
 from mountcal.conventions import CONVENTIONS, FloatArray, levelled
 from mountcal.errors import InputError
+from mountcal.result_file import check_document, read_json
 
 FORMAT = "mountcal.calibration"
 FORMAT_VERSION = 1
@@ -146,6 +147,7 @@ class Calibration:
                 f"format_version {doc.get('format_version')!r}",
                 "Re-run `mountcal calibrate` with this version of mountcal, or upgrade mountcal.",
             )
+        check_document(doc, where)  # types, finiteness, ranges, shapes, rotation against angles
         try:
             unc, mount = doc["uncertainty"], doc["mounting"]
             if doc["yaw"].get("determined") is False:  # never trust a number the document itself disowns
@@ -195,22 +197,7 @@ class Calibration:
     def load(cls, path: str | Path) -> Calibration:
         """Read a calibration JSON file."""
         path = Path(path)
-        try:
-            doc = json.loads(path.read_text(encoding="utf-8"))
-        except OSError as err:
-            raise InputError(
-                str(path),
-                "a readable calibration JSON file",
-                f"an error opening it ({err.strerror})",
-                "Check the path.",
-            ) from err
-        except json.JSONDecodeError as err:
-            raise InputError(
-                str(path),
-                "a calibration JSON file",
-                f"invalid JSON ({err})",
-                "Pass a file written by `mountcal calibrate`.",
-            ) from err
+        doc = read_json(path)  # a regular file, size- and depth-bounded, no NaN literals
         if not isinstance(doc, dict):
             raise InputError(
                 str(path), "a JSON object", type(doc).__name__, "Pass a file written by `mountcal calibrate`."

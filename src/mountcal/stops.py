@@ -418,7 +418,9 @@ class StopTableFromLog:
 def read_protocol(path: str) -> pd.DataFrame:
     """A protocol sheet: CSV ``t_start_s, t_end_s, beta_deg`` (times on the log's clock)."""
     from mountcal.errors import InputError
+    from mountcal.paths import input_file
 
+    input_file(path, "a protocol sheet CSV")  # not a FIFO or a device: reading ends
     try:
         df = pd.read_csv(path, comment="#", skipinitialspace=True)
     except (OSError, ValueError) as err:

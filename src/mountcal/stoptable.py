@@ -13,16 +13,18 @@ present they are used instead of ``s/√n``.
 from __future__ import annotations
 
 import hashlib
+import io
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 import pandas as pd
 
 from mountcal.conventions import G_N, FloatArray
 from mountcal.errors import InputError, NotEnoughInformation
-from mountcal.io.inputs import check_parquet_rows, check_regular_file
+from mountcal.io.inputs import check_parquet_rows
+from mountcal.paths import read_input_bytes
 
 # Column names of the stop table file.
 BETA = "beta_deg"
@@ -142,20 +144,14 @@ def read_stop_table(path: str | Path, unit: Unit = "mps2", headings: Headings = 
     """
     path = Path(path)
     where = str(path)
-    check_regular_file(path, "stop table")
+    raw = read_input_bytes(path, "a stop table file")  # a regular file, size bounded
     if path.suffix.lower() in (".parquet", ".pq"):
         check_parquet_rows(path)
     try:
-        raw = path.read_bytes()
-    except OSError as err:
-        raise InputError(
-            where, "a readable stop table file", f"an error opening it ({err.strerror})", "Check the path."
-        ) from err
-    try:
         if path.suffix.lower() in (".parquet", ".pq"):
-            df = pd.read_parquet(path)
+            df = pd.read_parquet(io.BytesIO(raw))
         else:
-            df = pd.read_csv(path, comment="#", skipinitialspace=True)
+            df = pd.read_csv(io.BytesIO(raw), comment="#", skipinitialspace=True)
     except Exception as err:  # pandas/pyarrow raise many types for malformed files
         raise InputError(
             where,
@@ -186,7 +182,8 @@ def stop_table_from_frame(
             "Park at more headings (12 evenly spread is the paper's protocol)."
         )
     scale = G_N if unit == "g" else 1.0
-    acc = _numeric(df, list(ACC), source) * scale
+    with np.errstate(over="ignore"):  # a huge value becomes inf here and is refused by the gravity check
+        acc = _numeric(df, list(ACC), source) * scale
     _check_gravity(acc, unit, source)
 
     beta = None
@@ -236,6 +233,38 @@ def stop_table_from_frame(
     )
 
 
+def fingerprint(table: StopTable) -> dict[str, Any]:
+    """Order-sensitive sums of the stop means and headings: they identify the table a result was
+    fitted to. Not a file hash: a log's stop table never was a file, and CSV, Parquet or a
+    rewrite of the same stops must match; :func:`same_stops` compares them to 1e-9 relative."""
+    n = len(table)
+    rank = np.arange(1, n + 1, dtype=float)[:, None] / max(n, 1)
+    beta = None if table.beta_rad is None else np.degrees(table.beta_rad)
+    return {
+        "n": n,
+        "acc_sum_mps2": table.acc_s.sum(axis=0).tolist(),
+        "acc_ranked_sum_mps2": (rank * table.acc_s).sum(axis=0).tolist(),
+        "beta_ranked_sum_deg": None if beta is None else float((rank[:, 0] * beta).sum()),
+    }
+
+
+def same_stops(stored: dict[str, Any], table: StopTable) -> bool:
+    """Whether ``table`` is the table of the :func:`fingerprint` ``stored`` (1e-9 relative)."""
+    now = fingerprint(table)
+    with_beta = stored.get("beta_ranked_sum_deg") is not None
+    if stored.get("n") != now["n"] or with_beta != (now["beta_ranked_sum_deg"] is not None):
+        return False
+    tol = {"acc_sum_mps2": G_N, "acc_ranked_sum_mps2": G_N, "beta_ranked_sum_deg": 360.0}  # × n × 1e-9
+    try:
+        return all(
+            np.allclose(np.asarray(stored[k], dtype=float), np.asarray(now[k], dtype=float), rtol=0, atol=t * n)
+            for k, t, n in ((k, t * 1e-9, max(now["n"], 1)) for k, t in tol.items())
+            if now[k] is not None
+        )
+    except (KeyError, TypeError, ValueError):
+        return False
+
+
 def write_stop_table(table: StopTable, path: str | Path) -> None:
     """Write a stop table as CSV or Parquet (by suffix), atomically."""
     from mountcal.atomic import atomic_path
@@ -266,7 +295,7 @@ def _numeric(df: pd.DataFrame, cols: list[str], source: str) -> FloatArray:
 
 
 def _check_gravity(acc: FloatArray, unit: Unit, source: str) -> None:
-    mag = np.linalg.norm(acc, axis=1)
+    mag = np.hypot(np.hypot(acc[:, 0], acc[:, 1]), acc[:, 2])  # no overflow below 1e308
     lo, hi = GRAVITY_BAND
     bad = np.flatnonzero((mag < lo * G_N) | (mag > hi * G_N))
     if bad.size == 0:
@@ -283,6 +312,13 @@ def _check_gravity(acc: FloatArray, unit: Unit, source: str) -> None:
         hint = "The magnitudes look like g: add --unit g."
     elif np.median(mag) / scale > 5.0 and unit == "g":
         hint = "The magnitudes look like m/s²: drop --unit g."
+    with np.errstate(over="ignore"):
+        other = mag[bad] * (G_N if unit == "mps2" else 1.0 / G_N)  # the bad rows read in the other unit
+    hopeless = bad[~(np.isfinite(other) & (other >= lo * G_N) & (other <= hi * G_N))]
+    if hopeless.size == bad.size:  # the unit explains none of them: advising --unit would be wrong
+        hint = "Those rows are no static reading in either unit (huge, overflowing or near-zero): fix or remove them."
+    elif hopeless.size:
+        hint += f" Rows {_rows(hopeless)} are no static reading in either unit: fix or remove them."
     raise InputError(source, f"static readings of magnitude near gravity ({lo:g}–{hi:g} g)", found, hint)
 
 

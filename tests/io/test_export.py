@@ -448,8 +448,8 @@ def test_writer_refuses_unknown_suffixes(small_log: ParkingLog, tmp_path: Path) 
         (["--log", "x.blf"], "DBC"),
         (["--log", "x.mcap", "x.asc", "--dbc", str(DBC), "--protocol", "p.csv"], "ASC"),
         (["--log", "x.mcap", "-o", "stops.csv"], "-o"),
-        (["--log", "x.mcap", "x.mcap"], "twice"),
-        (["--log", "x.mcap", "--dbc", str(DBC), "--protocol", str(DBC)], "DBC named as an output"),
+        (["--log", "x.mcap", "x.mcap"], "different paths"),
+        (["--log", "x.mcap", "--dbc", str(DBC), "--protocol", str(DBC)], "the --dbc file"),
         ([], "neither"),
     ],
 )

@@ -246,6 +246,7 @@ class DaskEngine:
                 "it is not installed",
                 "Install it: pip install 'mountcal[fleet]'; or run without --scheduler on the local cores.",
             ) from err
+        self._check_address()
         try:
             self._client = self._distributed.Client(self.address, timeout=self.timeout_s, set_as_default=False)
         except (OSError, TimeoutError, ValueError) as err:
@@ -254,6 +255,23 @@ class DaskEngine:
                 "a reachable Dask scheduler (tcp://HOST:PORT)",
                 f"no connection ({type(err).__name__}: {err})",
                 "Start one (`dask scheduler`, then `dask worker ADDRESS` on each machine) or check the address.",
+            ) from err
+
+    def _check_address(self) -> None:
+        """Refuse a malformed address before a Client exists: a Client that failed to parse one
+        still runs its finaliser, which waits 40 s and prints a traceback."""
+        from distributed.comm.addressing import parse_address, parse_host_port
+
+        try:
+            scheme, location = parse_address(self.address)
+            if scheme in ("tcp", "tls", "ws", "wss"):
+                parse_host_port(location)
+        except ValueError as err:
+            raise InputError(
+                f"--scheduler {self.address}",
+                "a Dask scheduler address, tcp://HOST:PORT",
+                f"not an address ({err})",
+                "Write it as tcp://HOST:PORT, e.g. tcp://10.0.0.5:8786 (the port `dask scheduler` prints).",
             ) from err
 
     def close(self) -> None:

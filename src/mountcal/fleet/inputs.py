@@ -28,6 +28,7 @@ from mountcal.calibrate import Options
 from mountcal.errors import InputError
 from mountcal.io.logs import CAN_SUFFIXES, LogOptions
 from mountcal.io.writers import written_by_mountcal
+from mountcal.paths import input_file, special_kind
 from mountcal.pipeline import LogJob
 from mountcal.stops import StopDetection
 from mountcal.stoptable import Headings
@@ -165,8 +166,12 @@ def _jobs_of_input(item: str, defaults: JobDefaults, skip: set[Path], ours: list
                 continue
             yield _file_job(file, defaults, origin=f"glob {item}")
     else:
+        kind = special_kind(path)
         raise InputError(
-            item, "a log file, a folder of logs, a glob or a manifest CSV", "nothing at this path", "Check the path."
+            item,
+            "a log file, a folder of logs, a glob or a manifest CSV",
+            kind or "nothing at this path",
+            "Check the path." if kind is None else "Pass a regular file; mountcal reads no devices or FIFOs.",
         )
 
 
@@ -229,7 +234,7 @@ def read_manifest(path: str | Path, defaults: JobDefaults | None = None) -> list
         A required column is missing, a column is unknown (a typo would silently lose a setting),
         or a cell cannot be read (the message names the row).
     """
-    path = Path(path)
+    path = input_file(path, "a manifest CSV")
     defaults = defaults or JobDefaults()
     try:
         df = pd.read_csv(path, dtype=str, keep_default_na=False, comment="#", skipinitialspace=True)

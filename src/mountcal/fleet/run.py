@@ -32,6 +32,7 @@ from mountcal.fleet.store import (
     write_table,
 )
 from mountcal.fleet.vehicles import ALPHA, analyse_fleet
+from mountcal.paths import output_lock
 
 HASH_THREADS = 4
 
@@ -120,8 +121,14 @@ def run_fleet(jobs: Sequence[FleetJob], output: str | Path, options: FleetOption
     Raises
     ------
     InputError
-        The output is not ``.parquet`` or is one of the inputs; the scheduler is unreachable.
+        The output is not ``.parquet`` or is one of the inputs; the scheduler is unreachable;
+        another run is writing the same output (it holds the lock).
     """
+    with output_lock(outputs_of(output)[0]):  # two runs on one output would redo each other's work
+        return _run_locked(jobs, output, options)
+
+
+def _run_locked(jobs: Sequence[FleetJob], output: str | Path, options: FleetOptions | None) -> FleetResult:
     options = options or FleetOptions()
     started = time.monotonic()
     output, vehicles_path, parts = outputs_of(output)

@@ -26,6 +26,7 @@ from blake3 import blake3
 from mountcal.atomic import atomic_path
 from mountcal.errors import InputError
 from mountcal.fleet.inputs import FleetJob
+from mountcal.paths import special_kind
 
 PART_FORMAT = "mountcal.fleet.part"
 PART_VERSION = 2  # 2: a log without yaw stores the levelling rotation (1 stored an invented yaw)
@@ -51,6 +52,14 @@ def file_digest(path: str | Path, where: str | None = None) -> str:
     InputError
         The file cannot be read; ``where`` names the setting that points at it.
     """
+    kind = special_kind(path)
+    if kind is not None:  # a FIFO or a device would block the hashing, or never end
+        raise InputError(
+            where or str(path),
+            "a regular file",
+            f"{kind} ({path})",
+            "Point the manifest or option at the file itself; the other logs are calibrated regardless.",
+        )
     try:
         digest = blake3(max_threads=1).update_mmap(path)
     except OSError as err:

@@ -69,6 +69,7 @@ from mountcal.io.can_frames import CanFrames, iter_frames, log_format
 from mountcal.io.dbc import decode, frame_id_text, id_match, load_dbcs, payload_bytes, raw_values
 from mountcal.io.inputs import check_regular_file, hold
 from mountcal.io.samples import Channel, FloatArray, LogSummary, Samples, Stream
+from mountcal.paths import input_file
 
 G_N = 9.80665  # standard gravity, m/s², for signals in g
 ACCEL_ROLES = ("ax", "ay", "az")
@@ -391,6 +392,7 @@ def _mapping_dict(mapping: str | Path | Mapping[str, Any] | None) -> dict[str, A
     where = "the mapping"
     if isinstance(mapping, str | Path):
         where = str(mapping)
+        input_file(mapping, "a mapping TOML file")  # not a FIFO or a device: reading ends
         try:
             with Path(mapping).open("rb") as f:
                 spec = tomllib.load(f)

@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 
 from mountcal.errors import InputError
 from mountcal.io.can_frames import DATA_WIDTH, CanFrames
+from mountcal.paths import input_file
 
 FloatArray = NDArray[np.float64]
 U64Array = NDArray[np.uint64]
@@ -42,9 +43,7 @@ def load_dbc(path: str | Path) -> Any:
     InputError
         When the file is missing or no attempt parses; the message quotes cantools' reason.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(str(path), "a DBC file", "no such file", "Check the path given for the DBC.")
+    path = input_file(path, "a DBC file")  # not a FIFO or a device: reading ends
     stat = path.stat()
     return _load_cached(str(path.resolve()), stat.st_mtime_ns, stat.st_size)
 

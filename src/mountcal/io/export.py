@@ -50,6 +50,7 @@ from mountcal.conventions import G_N
 from mountcal.errors import InputError
 from mountcal.io.dbc import load_dbc
 from mountcal.io.samples import FloatArray, Samples
+from mountcal.paths import SystemFailure
 
 if TYPE_CHECKING:
     from mountcal.simulate import ParkingLog
@@ -422,19 +423,19 @@ def _odometry_messages(series: _Series, start_ns: int) -> Iterator[_Message]:
 def _output(target: str | os.PathLike[str]) -> Iterator[Path]:
     """A temporary path with the target's own file name (writers embed it), renamed onto the target.
 
-    Nothing is left behind on failure, and a failure to write is an InputError naming the target.
+    Nothing is left behind on failure, and a failure to write is a SystemFailure naming the target.
     """
     target = Path(target)
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
         folder = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
     except OSError as err:
-        raise InputError(str(target), "a writable folder", f"{type(err).__name__}: {err}", "Check the path.") from err
+        raise SystemFailure(str(target), "creating a temporary folder beside it", err) from err
     try:
         yield folder / target.name
         os.replace(folder / target.name, target)
     except OSError as err:
-        raise InputError(str(target), "a writable file", f"{type(err).__name__}: {err}", "Check the path.") from err
+        raise SystemFailure(str(target), "writing", err) from err
     finally:
         shutil.rmtree(folder, ignore_errors=True)
 
