@@ -322,6 +322,26 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_plan(args: argparse.Namespace) -> int:
+    """``mountcal plan --target …``: the smallest session reaching the target (issue 17)."""
+    from mountcal.plan import run_plan_command
+
+    options = LogOptions(dbc=args.dbc, mapping=args.mapping, channel=args.channel, topic=args.topic)
+    return run_plan_command(
+        args.target,
+        args.model,
+        args.noise,
+        args.rate_hz,
+        args.from_log,
+        options,
+        args.slope_deg,
+        args.max_stops,
+        args.stop_s,
+        args.drive_s,
+        args.output,
+    )
+
+
 def summary(cal: Calibration) -> str:
     """A readable summary: angles ± 1σ, slope, model, residual, what could not be determined."""
 
@@ -506,6 +526,23 @@ def _parser() -> argparse.ArgumentParser:
     )
     fg.add_argument("--max-yaw-sigma", type=float, default=5.0, help="report yaw only below this 1σ (deg)")
     flt.set_defaults(func=cmd_fleet)
+    pln = sub.add_parser("plan", help="plan a session from the bound: stops, headings, dwell, slope")
+    pln.add_argument("--target", required=True, help="1σ targets in degrees, e.g. roll=0.1,pitch=0.1,yaw=0.5")
+    pln.add_argument("--noise", type=float, default=None, help="accelerometer noise per sample, 1σ per axis (mg)")
+    pln.add_argument("--rate-hz", type=float, default=100.0, help="sample rate with --noise (Hz; default 100)")
+    pln.add_argument("--from-log", nargs="+", default=None, metavar="LOG", help="measure noise and rate on a log")
+    pln.add_argument("--slope-deg", type=float, default=None, help="the slope available (default: find one)")
+    pln.add_argument("--model", default="rotation,slope,bias", help="rotation,slope,bias (default) or rotation,slope")
+    pln.add_argument("--max-stops", type=int, default=24, help="most stops to plan (default 24)")
+    pln.add_argument("--stop-s", type=float, default=None, help="dwell of each stop (s; default: chosen)")
+    pln.add_argument("--drive-s", type=float, default=60.0, help="time between stops, for the session length (s)")
+    pln.add_argument("-o", "--output", default=None, help="protocol sheet CSV to write")
+    pln_log = pln.add_argument_group("--from-log")
+    pln_log.add_argument("--dbc", default=None, help="DBC to decode a CAN log")
+    pln_log.add_argument("--mapping", default=None, help="TOML naming the accelerometer signals (CAN)")
+    pln_log.add_argument("--channel", type=int, default=None, help="CAN channel of the IMU")
+    pln_log.add_argument("--topic", default=None, help="IMU topic (MCAP)")
+    pln.set_defaults(func=cmd_plan)
     return parser
 
 
