@@ -342,6 +342,13 @@ def cmd_plan(args: argparse.Namespace) -> int:
     )
 
 
+def cmd_live(args: argparse.Namespace) -> int:
+    """``mountcal live --interface … --channel … --dbc …``: a session on a live CAN bus (issue 17)."""
+    from mountcal.live import run_live_command
+
+    return run_live_command(args)
+
+
 def summary(cal: Calibration) -> str:
     """A readable summary: angles ± 1σ, slope, model, residual, what could not be determined."""
 
@@ -543,6 +550,24 @@ def _parser() -> argparse.ArgumentParser:
     pln_log.add_argument("--channel", type=int, default=None, help="CAN channel of the IMU")
     pln_log.add_argument("--topic", default=None, help="IMU topic (MCAP)")
     pln.set_defaults(func=cmd_plan)
+
+    liv = sub.add_parser("live", help="run a session on a live CAN bus: record, refit at each stop, suggest")
+    liv.add_argument("--interface", required=True, help="python-can interface: socketcan, virtual, pcan, vector, …")
+    liv.add_argument("--channel", required=True, help="bus channel, e.g. can0")
+    liv.add_argument("--dbc", required=True, help="DBC describing the bus")
+    liv.add_argument("--mapping", default=None, help="TOML naming the accelerometer signals")
+    liv.add_argument("--can-channel", type=int, default=None, help="channel number of the IMU frames (recorded)")
+    liv.add_argument("--target", default="roll=0.1,pitch=0.1,yaw=0.5", help="stop when every 1σ is below (deg)")
+    liv.add_argument("--model", default="auto", help="auto (default), rotation,slope or rotation,slope,bias")
+    liv.add_argument("--plan", default=None, help="protocol sheet from `mountcal plan`: stops take its β in order")
+    liv.add_argument("--uphill-azimuth-deg", type=float, default=None, help="β from the bus's heading signal")
+    liv.add_argument("--timeout", type=float, default=10.0, help="a bus silent this long ends the session (s)")
+    liv.add_argument("--max-acc-std", type=float, default=StopDetection.max_acc_std_mps2, help="stillness (m/s²)")
+    liv.add_argument("--min-stop-s", type=float, default=StopDetection.min_duration_s, help="shortest stop (s)")
+    liv.add_argument("--json-events", default=None, help="also write the events as JSON lines here (- = stdout)")
+    liv.add_argument("-o", "--output", default="session", help="prefix: PREFIX.blf, PREFIX.json, PREFIX_stops.csv")
+    liv.add_argument("--report", default=None, help="also write the HTML report here")
+    liv.set_defaults(func=cmd_live)
     return parser
 
 
