@@ -29,7 +29,7 @@ import pandas as pd
 from mountcal.atomic import atomic_path
 from mountcal.calibrate import Options, calibrate
 from mountcal.conventions import specific_force_v
-from mountcal.errors import MountcalError, NotEnoughInformation
+from mountcal.errors import InputError, MountcalError, NotEnoughInformation
 from mountcal.estimate.bound import crb_deg, true_state
 from mountcal.io.can_bus import BUS_ERRORS, BusFrames, open_bus, recorder
 from mountcal.io.can_log import samples_from_frames
@@ -134,6 +134,7 @@ class Live:
         self.beta: list[float] = []  # β of each closed stop (protocol mode)
         self.suggestion: float | None = None
         self.n_closed = 0
+        self.why = ""
         self.last: Session = Session("not started", recording)
 
     def run(self, bus: Any) -> Session:
@@ -184,10 +185,14 @@ class Live:
         """Decode the session so far; on a newly ended stop refit and suggest. True when the target is met."""
         if not self.frames.count:
             return False
-        samples = samples_from_frames(
-            self.frames.table(), self.opts.dbc, mapping=self.opts.mapping, channel=self.opts.can_channel,
-            source=str(self.recording),
-        )  # fmt: skip
+        try:
+            samples = samples_from_frames(
+                self.frames.table(), self.opts.dbc, mapping=self.opts.mapping, channel=self.opts.can_channel,
+                source=str(self.recording),
+            )  # fmt: skip
+        except InputError as err:  # e.g. no accelerometer frame yet: say so, keep listening
+            self._waiting(str(err))
+            return False
         self.last.samples, self.last.dropped = samples, dict(samples.dropped)
         cfg = self.opts.detection
         if len(samples) < 3 or samples.t_s[-1] - samples.t_s[0] < cfg.min_duration_s + 2 * cfg.trim_s:
@@ -197,16 +202,17 @@ class Live:
             stops = [s for s in stops if s.t_end_s + cfg.trim_s + cfg.window_s < samples.t_s[-1]]
         if len(stops) <= self.n_closed and not final:
             return False
-        new = stops[self.n_closed :]
-        for s in new:
-            if self.opts.plan_beta_deg is not None:
-                plan = self.opts.plan_beta_deg
-                self.beta.append(plan[len(self.beta)] if len(self.beta) < len(plan) else np.nan)
+        beta = list(self.beta[: len(stops)])  # built aside: a Ctrl-C here leaves the session consistent
+        plan = self.opts.plan_beta_deg
+        for _ in stops[len(beta) :]:
+            if plan is not None:
+                beta.append(plan[len(beta)] if len(beta) < len(plan) else np.nan)
             else:
-                self.beta.append(np.nan if self.suggestion is None else self.suggestion)
-            self.emit({"event": "stop", "index": len(self.beta), "t_start_s": s.t_start_s, "t_end_s": s.t_end_s,
-                       "n": s.n, "beta_deg": None if np.isnan(self.beta[-1]) else self.beta[-1]})  # fmt: skip
-        self.n_closed = len(stops)
+                beta.append(np.nan if self.suggestion is None else self.suggestion)
+        old, self.beta, self.n_closed = len(self.beta), beta, len(stops)
+        for i, s in enumerate(stops[old:], start=old + 1):
+            self.emit({"event": "stop", "index": i, "t_start_s": s.t_start_s, "t_end_s": s.t_end_s, "n": s.n,
+                       "beta_deg": None if np.isnan(beta[i - 1]) else beta[i - 1]})  # fmt: skip
         if not stops:
             return False
         protocol = None
@@ -230,7 +236,7 @@ class Live:
             table = stop_table_from_frame(frame, headings=found.headings, source=str(self.recording))  # type: ignore[arg-type]
             cal = calibrate(table, self.opts.options)
         except MountcalError as err:  # too few stops yet, one heading, ...
-            self.emit({"event": "waiting", "why": str(err)})
+            self._waiting(str(err))
             self._suggest(None, None)
             return False
         self.last.table, self.last.calibration, self.last.stops_frame = table, cal, frame
@@ -246,6 +252,11 @@ class Live:
             return True
         self._suggest(table, cal)
         return False
+
+    def _waiting(self, why: str) -> None:
+        if why != self.why:  # once per reason, not at every evaluation
+            self.why = why
+            self.emit({"event": "waiting", "why": why})
 
     def _suggest(self, table: StopTable | None, cal: Calibration | None) -> None:
         if self.opts.plan_beta_deg is not None:
@@ -367,8 +378,7 @@ def run_live_command(args: Any) -> int:
             sink(event)
 
     try:
-        with open_bus(args.interface, args.channel) as bus:
-            session = Live(opts, recording, emit).run(bus)
+        bus = open_bus(args.interface, args.channel)
     except BUS_ERRORS as err:
         from mountcal.errors import InputError
 
@@ -378,7 +388,10 @@ def run_live_command(args: Any) -> int:
             str(err),
             "Check the interface name, the channel and that the device is up.",
         ) from err
+    try:
+        session = Live(opts, recording, emit).run(bus)
     finally:
+        bus.shutdown()
         if events_file is not None:
             events_file.close()
     dropped = ", ".join(f"{k}: {v}" for k, v in session.dropped.items())
