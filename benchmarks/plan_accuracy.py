@@ -1,11 +1,11 @@
 """Does `mountcal plan` predict what `calibrate` then achieves? Random plans against Monte Carlo.
 
 Each plan draws a slope (2–10°), a per-sample noise (1–10 mg at 100 Hz), a model (with or without
-an unknown bias, alternating) and targets (0.3–1.2× what 4 stops of 15 s give, so that the plans
-vary); `make_plan` chooses the protocol. The planned session is then simulated ``--runs`` times
-(random mounting, a 20 mg bias in a random direction for the bias model) and calibrated with the
-matching fixed ``--model``; the predicted σ is compared with the RMS error per angle.
-Acceptance: every ratio within 15 %.
+an unknown bias, alternating), a dwell (15, 20 or 30 s) and targets (0.3–1.2× what 4 such stops
+give, so that the plans have 4 to 24 stops); `make_plan` chooses the protocol. The planned session
+is then simulated ``--runs`` times (random mounting, a 20 mg bias in a random direction for the
+bias model) and calibrated with the matching fixed ``--model``; the predicted σ is compared with
+the RMS error per angle. Acceptance: every ratio within 15 %.
 
     python benchmarks/plan_accuracy.py --plans 20 --runs 300 --markdown docs/plan-results.md
 """
@@ -18,19 +18,20 @@ import time
 import numpy as np
 
 from mountcal.conventions import G_N
-from mountcal.plan import DWELLS_S, MIN_STOPS, Noise, Request, bound_of_headings, headings, make_plan, monte_carlo_rms
+from mountcal.plan import MIN_STOPS, Noise, Request, bound_of_headings, headings, make_plan, monte_carlo_rms
 
 TOLERANCE = 0.15
 
 
 def random_request(rng: np.random.Generator, i: int) -> Request:
-    """Targets between 0.3× and 1.2× what the shortest protocol gives, so the plans vary in stops and dwell."""
+    """A dwell of 15, 20 or 30 s and targets 0.3–1.2× what 4 such stops give: plans of 4 to 24 stops."""
     terms = ("rotation", "slope", "bias") if i % 2 else ("rotation", "slope")
     noise = Noise(float(rng.uniform(1.0, 10.0)) * 1e-3 * G_N, 100.0, "benchmark")
     slope = round(float(rng.uniform(2.0, 10.0)), 1)
-    shortest = bound_of_headings(headings(MIN_STOPS), slope, terms, noise.stop_sigma_mps2(min(DWELLS_S) - 4.0))
+    stop_s = float(rng.choice([15.0, 20.0, 30.0]))
+    shortest = bound_of_headings(headings(MIN_STOPS), slope, terms, noise.stop_sigma_mps2(stop_s - 4.0))
     target = {a: float(shortest[a]) * float(rng.uniform(0.3, 1.2)) for a in ("roll", "pitch", "yaw")}  # type: ignore[arg-type]
-    return Request(target, noise, terms, slope_deg=slope)
+    return Request(target, noise, terms, slope_deg=slope, stop_s=stop_s)
 
 
 def main() -> None:

@@ -18,11 +18,11 @@ import pytest
 
 from mountcal.calibrate import Calibration, Options, calibrate
 from mountcal.cli import main
-from mountcal.errors import NotEnoughInformation
+from mountcal.errors import InputError, NotEnoughInformation
 from mountcal.estimate.bound import crb_deg, true_state
 from mountcal.io import export
 from mountcal.io.logs import LogOptions
-from mountcal.live import CANDIDATES_DEG, Live, LiveOptions, Session, next_heading
+from mountcal.live import CANDIDATES_DEG, Live, LiveOptions, Session, fail_if_empty, next_heading
 from mountcal.pipeline import LogJob, calibrate_log
 from mountcal.simulate import simulate_parking_log, simulate_stops
 from mountcal.stops import StopDetection
@@ -217,3 +217,18 @@ def test_a_replayed_real_canedge_log_gives_calibrate_on_its_recording(real_data:
     session, events = run_session(bus, opts, tmp_path / "rec.blf")
     assert session.calibration is not None and len([e for e in events if e["event"] == "stop"]) >= 3
     assert_same(session.calibration, offline(tmp_path / "rec.blf", session, LogOptions(dbc=dbc), uphill=0.0))
+
+
+def test_a_mapped_message_missing_from_the_whole_session_gives_no_result_as_offline(tmp_path: Path) -> None:
+    log = simulate_parking_log(beta_deg=BETA[:3], stop_s=20.0, drive_s=10.0, seed=12)
+    path = tmp_path / "nofix.blf"
+    export.write_log(path, log, dbc_path=DBC)  # no GNSS position, which the mapping names
+    bus = replay(path, "nofix")
+    opts = LiveOptions(DBC, MAPPING, target_deg={"roll": 1e-4}, plan_beta_deg=BETA, silence_s=0.5)
+    session, events = run_session(bus, opts, tmp_path / "rec.blf")
+    assert session.calibration is None
+    assert "SIM_GNSS_POSITION" in events[-2]["why"]
+    with pytest.raises(NotEnoughInformation, match="the recording is kept"):
+        fail_if_empty(session)
+    with pytest.raises(InputError, match="SIM_GNSS_POSITION"):
+        calibrate_log(LogJob(paths=(str(tmp_path / "rec.blf"),), log=LogOptions(dbc=DBC, mapping=MAPPING)))

@@ -188,9 +188,11 @@ class Live:
         try:
             samples = samples_from_frames(
                 self.frames.table(), self.opts.dbc, mapping=self.opts.mapping, channel=self.opts.can_channel,
-                source=str(self.recording),
+                source=str(self.recording), complete=final,
             )  # fmt: skip
         except InputError as err:  # e.g. no accelerometer frame yet: say so, keep listening
+            if final:  # the whole session cannot be decoded: no result that the recording would not give
+                self.last.calibration = None
             self._waiting(str(err))
             return False
         self.last.samples, self.last.dropped = samples, dict(samples.dropped)

@@ -725,11 +725,13 @@ def samples_from_frames(
     mapping: str | Path | Mapping[str, Any] | None = None,
     channel: int | None = None,
     source: str = "<bus>",
+    complete: bool = False,
 ) -> Samples:
     """The samples of frames held in memory (a live bus), decoded exactly as :func:`read_can` decodes a log.
 
-    Signals are resolved against the frames present, as against a log's; no row is required (a bus
-    that has not yet sent an accelerometer frame gives empty samples).
+    Signals are resolved against the frames present, as against a log's. With ``complete`` (the
+    whole session) a mapped message without frames is an error, as it is for a log; otherwise a bus
+    still waiting for it gives what it has.
     """
     db = _database(dbc)
     spec = _mapping_dict(mapping)
@@ -748,7 +750,17 @@ def samples_from_frames(
     if plan.channel is not None:
         keep &= frames.channel == plan.channel
     decoder = _Decoder(plan, source)
-    return _concat([decoder.piece(frames.take(keep)), decoder.final()], plan, source)
+    samples = _concat([decoder.piece(frames.take(keep)), decoder.final()], plan, source)
+    missing = [s.name for s in plan.imu if not decoder.seen[s.name]]
+    missing += [plan.aux[k][0].name for k in sorted(plan.aux_required) if not decoder.seen[plan.aux[k][0].name]]
+    if complete and missing:
+        raise InputError(
+            where,
+            "frames of every mapped message (" + ", ".join(missing) + ")",
+            "none of them on the bus",
+            "Check the mapping, the channel and that the device sends these messages.",
+        )
+    return samples
 
 
 def _select(frames: CanFrames, source: _Source, plan: _Plan) -> CanFrames:
