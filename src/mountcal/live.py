@@ -367,29 +367,31 @@ def run_live_command(args: Any) -> int:
         plan_beta_deg=plan_beta,
         silence_s=args.timeout,
     )
-    sinks: list[Callable[[dict[str, Any]], None]] = [lambda e: print(line_of(e), flush=True)]
-    events_file = None
-    if args.json_events == "-":
-        sinks = [json_sink(sys.stdout)]
-    elif args.json_events:
-        events_file = open(args.json_events, "w", encoding="utf-8")  # open for the session
-        sinks.append(json_sink(events_file))
-
-    def emit(event: dict[str, Any]) -> None:
-        for sink in sinks:
-            sink(event)
-
     try:
         bus = open_bus(args.interface, args.channel)
     except BUS_ERRORS as err:
-        from mountcal.errors import InputError
-
         raise InputError(
             f"--interface {args.interface} --channel {args.channel}",
             "a CAN bus python-can can open",
             str(err),
             "Check the interface name, the channel and that the device is up.",
         ) from err
+    sinks: list[Callable[[dict[str, Any]], None]] = [lambda e: print(line_of(e), flush=True)]
+    events_file = None
+    if args.json_events == "-":
+        sinks = [json_sink(sys.stdout)]
+    elif args.json_events:
+        try:
+            events_file = open(args.json_events, "w", encoding="utf-8")  # open for the session
+        except OSError as err:
+            bus.shutdown()
+            raise InputError(str(args.json_events), "a writable events file", str(err), "Check the path.") from err
+        sinks.append(json_sink(events_file))
+
+    def emit(event: dict[str, Any]) -> None:
+        for sink in sinks:
+            sink(event)
+
     try:
         session = Live(opts, recording, emit).run(bus)
     finally:
