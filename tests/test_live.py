@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -179,7 +180,8 @@ CTRL_C_SCRIPT = textwrap.dedent(
                 time.sleep(0.0002)  # ≈ 50× real time
     threading.Thread(target=feed, daemon=True).start()
     argv = ["live", "--interface", "virtual", "--channel", "ctrlc", "--dbc", sys.argv[2], "--mapping", sys.argv[3]]
-    sys.exit(main([*argv, "--plan", sys.argv[4], "--target", "roll=0.0001", "--timeout", "60", "-o", sys.argv[5]]))
+    sys.exit(main([*argv, "--plan", sys.argv[4], "--target", "roll=0.0001", "--timeout", "60", "-o", sys.argv[5],
+                  "--json-events", sys.argv[5] + ".jsonl"]))
     """
 )
 
@@ -202,6 +204,10 @@ def test_ctrl_c_keeps_the_recording_and_what_was_measured(sim_blf: Path, tmp_pat
     out, err = proc.communicate(timeout=120)
     assert proc.returncode == 130, err
     assert "interrupted: keeping what was measured" in out
+    events = [json.loads(line) for line in prefix.with_suffix(".jsonl").read_text(encoding="utf-8").splitlines()]
+    kinds = [e["event"] for e in events]
+    assert kinds[0] == "started" and kinds[-1] == "ended" and "interrupted" in kinds
+    assert kinds.count("stop") >= 4 and events[-1]["reason"] == "interrupted"
     result = Calibration.load(prefix.with_suffix(".json"))
     job = LogJob(paths=(str(prefix.with_suffix(".blf")),), log=LogOptions(dbc=DBC, mapping=MAPPING),
                  protocol=str(prefix.with_name("session_protocol.csv")))  # fmt: skip
