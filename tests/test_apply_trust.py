@@ -452,7 +452,7 @@ def test_a_real_drive_with_stops_is_combined_only_when_they_agree_and_rotates_to
 def test_a_document_that_says_yaw_is_not_determined_is_never_given_one(noyaw: Calibration) -> None:
     doc = noyaw.to_dict()
     doc["mounting"]["yaw_deg"], doc["uncertainty"]["yaw_deg"] = 37.0, 1.0  # hand-edited, or another writer
-    with pytest.raises(InputError, match="yaw.determined = false while mounting.yaw_deg = 37"):
+    with pytest.raises(InputError, match=r"yaw\.determined = false while mounting\.yaw_deg = 37"):
         Calibration.from_dict(doc)  # a contradiction is refused on load, never resolved by taking the number
     cal = Calibration.from_dict(noyaw.to_dict())
     assert cal.yaw_deg is None and not cal.yaw_determined

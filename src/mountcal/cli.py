@@ -389,6 +389,33 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_plan(args: argparse.Namespace) -> int:
+    """``mountcal plan --target …``: the smallest session reaching the target (issue 17)."""
+    from mountcal.plan import run_plan_command
+
+    options = LogOptions(dbc=args.dbc, mapping=args.mapping, channel=args.channel, topic=args.topic)
+    return run_plan_command(
+        args.target,
+        args.model,
+        args.noise,
+        args.rate_hz,
+        args.from_log,
+        options,
+        args.slope_deg,
+        args.max_stops,
+        args.stop_s,
+        args.drive_s,
+        args.output,
+    )
+
+
+def cmd_live(args: argparse.Namespace) -> int:
+    """``mountcal live --interface … --channel … --dbc …``: a session on a live CAN bus (issue 17)."""
+    from mountcal.live import run_live_command
+
+    return run_live_command(args)
+
+
 def summary(cal: Calibration) -> str:
     """A readable summary: angles ± 1σ, slope, model, residual, what could not be determined."""
 
@@ -613,6 +640,41 @@ def _parser() -> argparse.ArgumentParser:
     )
     fg.add_argument("--max-yaw-sigma", type=float, default=5.0, help="report yaw only below this 1σ (deg)")
     flt.set_defaults(func=cmd_fleet)
+    pln = sub.add_parser("plan", help="plan a session from the bound: stops, headings, dwell, slope")
+    pln.add_argument("--target", required=True, help="1σ targets in degrees, e.g. roll=0.1,pitch=0.1,yaw=0.5")
+    pln.add_argument("--noise", type=float, default=None, help="accelerometer noise per sample, 1σ per axis (mg)")
+    pln.add_argument("--rate-hz", type=float, default=100.0, help="sample rate with --noise (Hz; default 100)")
+    pln.add_argument("--from-log", nargs="+", default=None, metavar="LOG", help="measure noise and rate on a log")
+    pln.add_argument("--slope-deg", type=float, default=None, help="the slope available (default: find one)")
+    pln.add_argument("--model", default="rotation,slope,bias", help="rotation,slope,bias (default) or rotation,slope")
+    pln.add_argument("--max-stops", type=int, default=24, help="most stops to plan (default 24)")
+    pln.add_argument("--stop-s", type=float, default=None, help="dwell of each stop (s; default: chosen)")
+    pln.add_argument("--drive-s", type=float, default=60.0, help="time between stops, for the session length (s)")
+    pln.add_argument("-o", "--output", default=None, help="protocol sheet CSV to write")
+    pln_log = pln.add_argument_group("--from-log")
+    pln_log.add_argument("--dbc", default=None, help="DBC to decode a CAN log")
+    pln_log.add_argument("--mapping", default=None, help="TOML naming the accelerometer signals (CAN)")
+    pln_log.add_argument("--channel", type=int, default=None, help="CAN channel of the IMU")
+    pln_log.add_argument("--topic", default=None, help="IMU topic (MCAP)")
+    pln.set_defaults(func=cmd_plan)
+
+    liv = sub.add_parser("live", help="run a session on a live CAN bus: record, refit at each stop, suggest")
+    liv.add_argument("--interface", required=True, help="python-can interface: socketcan, virtual, pcan, vector, …")
+    liv.add_argument("--channel", required=True, help="bus channel, e.g. can0")
+    liv.add_argument("--dbc", required=True, help="DBC describing the bus")
+    liv.add_argument("--mapping", default=None, help="TOML naming the accelerometer signals")
+    liv.add_argument("--can-channel", type=int, default=None, help="channel number of the IMU frames (recorded)")
+    liv.add_argument("--target", default="roll=0.1,pitch=0.1,yaw=0.5", help="stop when every 1σ is below (deg)")
+    liv.add_argument("--model", default="auto", help="auto (default), rotation,slope or rotation,slope,bias")
+    liv.add_argument("--plan", default=None, help="protocol sheet from `mountcal plan`: stops take its β in order")
+    liv.add_argument("--uphill-azimuth-deg", type=float, default=None, help="β from the bus's heading signal")
+    liv.add_argument("--timeout", type=float, default=10.0, help="a bus silent this long ends the session (s)")
+    liv.add_argument("--max-acc-std", type=float, default=StopDetection.max_acc_std_mps2, help="stillness (m/s²)")
+    liv.add_argument("--min-stop-s", type=float, default=StopDetection.min_duration_s, help="shortest stop (s)")
+    liv.add_argument("--json-events", default=None, help="also write the events as JSON lines here (- = stdout)")
+    liv.add_argument("-o", "--output", default="session", help="prefix: PREFIX.blf, PREFIX.json, PREFIX_stops.csv")
+    liv.add_argument("--report", default=None, help="also write the HTML report here")
+    liv.set_defaults(func=cmd_live)
 
     from mountcal.exporters import add_parser as add_export_parser  # `mountcal export`: issue 16
 

@@ -437,21 +437,22 @@ def _int_setting(value: Any, name: str) -> int:
 class _Presence:
     """Which (id, extended) pairs of the DBC occur in the log on the channel; one pass, on first use."""
 
-    def __init__(self, path: Path, channel: int | None, db: Any) -> None:
-        self.path, self.channel, self.db = path, channel, db
-        self._keys: set[tuple[int, bool]] | None = None
+    def __init__(self, path: Path | None, channel: int | None, db: Any) -> None:
+        self.path, self.channel, self.db = path, channel, db  # path None: the keys are set by the caller
+        self.keys: set[tuple[int, bool]] | None = None
 
     def filter(self, messages: list[Any]) -> list[Any]:
         """The messages among ``messages`` that occur in the log."""
-        if self._keys is None:
+        if self.keys is None:
+            assert self.path is not None  # a bus sets its keys itself
             wants = [_Want.of(m, None) for m in self.db.messages]
             # a J1939 message matches a range of ids: then every id is read
             ids = sorted({w.value for w in wants}) if all(w.mask == 0x1FFFFFFF for w in wants) else None
-            self._keys = set()
+            self.keys = set()
             for frames in iter_frames(self.path, ids=ids, channel=self.channel, max_frames=1 << 18):
                 pairs = np.unique(frames.arbitration_id.astype(np.int64) * 2 + frames.is_extended)
-                self._keys.update((int(p) // 2, bool(p % 2)) for p in pairs)
-        keys = self._keys
+                self.keys.update((int(p) // 2, bool(p % 2)) for p in pairs)
+        keys = self.keys
         return [m for m in messages if _Want.of(m, None).matches_any(keys)]
 
 
@@ -769,25 +770,87 @@ def _axes(text: Any, allow: Any) -> tuple[NDArray[np.float64], str]:
 
 def _pieces(path: Path, plan: _Plan, frames_per_chunk: int) -> Iterator[Samples]:
     """Samples pieces, one per chunk of frames, then the final flush; raises on missing data."""
-    aligner = _Aligner([len(s.signals) for s in plan.imu], [s.name for s in plan.imu])
-    seen = Counter[str]()  # frames selected per source, before validation
-    dropped_total = Counter[str]()
-    rows_total = 0
+    decoder = _Decoder(plan, str(path))
     for frames in iter_frames(path, ids=plan.ids(), channel=plan.read_channel(), max_frames=frames_per_chunk):
+        yield decoder.piece(frames)
+    last = decoder.final()
+    _check_found(path, plan, decoder.seen, decoder.rows_total, decoder.dropped_total)
+    yield last
+
+
+class _Decoder:
+    """Chunks of frames → aligned Samples pieces, with the counts of what was seen and dropped."""
+
+    def __init__(self, plan: _Plan, source: str) -> None:
+        self.plan, self.source = plan, source
+        self.aligner = _Aligner([len(s.signals) for s in plan.imu], [s.name for s in plan.imu])
+        self.seen = Counter[str]()  # frames selected per source, before validation
+        self.dropped_total = Counter[str]()
+        self.rows_total = 0
+
+    def piece(self, frames: CanFrames) -> Samples:
         dropped = Counter[str]()
-        for k, source in enumerate(plan.imu):
-            t_s, values = _take(frames, source, plan, dropped, seen)
-            aligner.add(k, t_s, values)
-        channels = _aux_piece(frames, plan, dropped, seen)
-        t_s, rows = aligner.emit(final=False, dropped=dropped)
-        rows_total += t_s.shape[0]
-        dropped_total.update(dropped)
-        yield _to_samples(t_s, rows, channels, dropped, plan, str(path))
-    dropped = Counter[str]()
-    t_s, rows = aligner.emit(final=True, dropped=dropped)
-    dropped_total.update(dropped)
-    _check_found(path, plan, seen, rows_total + t_s.shape[0], dropped_total)
-    yield _to_samples(t_s, rows, {}, dropped, plan, str(path))
+        for k, source in enumerate(self.plan.imu):
+            t_s, values = _take(frames, source, self.plan, dropped, self.seen)
+            self.aligner.add(k, t_s, values)
+        channels = _aux_piece(frames, self.plan, dropped, self.seen)
+        t_s, rows = self.aligner.emit(final=False, dropped=dropped)
+        self.rows_total += t_s.shape[0]
+        self.dropped_total.update(dropped)
+        return _to_samples(t_s, rows, channels, dropped, self.plan, self.source)
+
+    def final(self) -> Samples:
+        dropped = Counter[str]()
+        t_s, rows = self.aligner.emit(final=True, dropped=dropped)
+        self.rows_total += t_s.shape[0]
+        self.dropped_total.update(dropped)
+        return _to_samples(t_s, rows, {}, dropped, self.plan, self.source)
+
+
+def samples_from_frames(
+    frames: CanFrames,
+    dbc: str | Path | Any,
+    *,
+    mapping: str | Path | Mapping[str, Any] | None = None,
+    channel: int | None = None,
+    source: str = "<bus>",
+    complete: bool = False,
+) -> Samples:
+    """The samples of frames held in memory (a live bus), decoded exactly as :func:`read_can` decodes a log.
+
+    Signals are resolved against the frames present, as against a log's. With ``complete`` (the
+    whole session) a mapped message without frames is an error, as it is for a log; otherwise a bus
+    still waiting for it gives what it has.
+    """
+    db = _database(dbc)
+    spec = _mapping_dict(mapping)
+    if channel is None and spec.get("channel") is not None:
+        channel = _int_setting(spec["channel"], "channel")
+    where = f"{source} with {dbc if isinstance(dbc, str | Path) else 'the DBC'}"
+    present = _Presence(None, channel, db)
+    on_channel = frames if channel is None else frames.take(frames.channel == channel)
+    pairs = np.unique(on_channel.arbitration_id.astype(np.int64) * 2 + on_channel.is_extended)
+    present.keys = {(int(p) // 2, bool(p % 2)) for p in pairs}
+    signals = spec.get("signals") or _detect(db, present, where)
+    refs = {role: _resolve(db, text, role, present, where) for role, text in signals.items()}
+    explicit = "signals" in spec and bool(spec["signals"])
+    plan = _build_plan(where, db, refs, spec.get("units", {}), spec, channel, explicit, present)
+    ids, read_channel = plan.ids(), plan.read_channel()  # ids None: a J1939 PGN matches a range of ids
+    keep = np.ones(len(frames), bool) if ids is None else np.isin(frames.arbitration_id, np.asarray(ids, np.uint32))
+    if read_channel is not None:
+        keep &= frames.channel == read_channel
+    decoder = _Decoder(plan, source)
+    samples = _concat([decoder.piece(frames.take(keep)), decoder.final()], plan, source)
+    missing = [s.name for s in plan.imu if not decoder.seen[s.name]]
+    missing += [plan.aux[k][0].name for k in sorted(plan.aux_required) if not decoder.seen[plan.aux[k][0].name]]
+    if complete and missing:
+        raise InputError(
+            where,
+            "frames of every mapped message (" + ", ".join(missing) + ")",
+            "none of them on the bus",
+            "Check the mapping, the channel and that the device sends these messages.",
+        )
+    return samples
 
 
 def _select(frames: CanFrames, source: _Source, plan: _Plan) -> CanFrames:
@@ -1062,8 +1125,12 @@ class _Want:
 _SHOWN = 10  # ids, channels and near matches an error lists: it has to fit on a screen
 
 
-def _log_mismatch(path: Path, db: Any, where: str, channel: int | None, wanted: list[_Want]) -> InputError | None:
-    """The error for an empty log, a log the DBC does not describe, or one lacking ``wanted``."""
+def _log_mismatch(
+    path: Path | None, db: Any, where: str, channel: int | None, wanted: list[_Want]
+) -> InputError | None:
+    """The error for an empty log, a log the DBC does not describe, or one lacking ``wanted`` (None for a bus)."""
+    if path is None:
+        return None
     stats = _id_stats(path)
     if not stats:
         return InputError(str(path), "CAN frames", "an empty log (no data frames)", "Check the logger's output.")
@@ -1148,4 +1215,4 @@ def _id_stats(path: Path) -> dict[tuple[int, int, bool], _IdStat]:
     return stats
 
 
-__all__ = ["inspect_can", "iter_can", "read_can"]
+__all__ = ["inspect_can", "iter_can", "read_can", "samples_from_frames"]
