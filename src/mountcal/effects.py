@@ -431,8 +431,11 @@ def _extra(table: StopTable, name: str) -> int:
 
 
 def _loo_rms(step: Step) -> float:
+    """RMS of the held-out misses; NaN when no stop can be held out (each alone sets a parameter),
+    so a candidate is then declined: nothing shows it predicts better."""
     _, press = leave_one_out(step.table, step.fit)
-    return float(np.sqrt(np.nanmean(press**2)))
+    finite = press[np.isfinite(press)]
+    return float(np.sqrt(np.mean(finite**2))) if finite.size else float("nan")
 
 
 def _decline(declined: list[dict[str, Any]], effect: str, why: str, round_: int) -> None:
