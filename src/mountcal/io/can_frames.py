@@ -26,12 +26,14 @@ python-can's readers, batched into arrays; they are the slow formats.
 from __future__ import annotations
 
 import gc
+import logging
 import math
 import struct
 import sys
 from collections import deque
 from collections.abc import Callable, Collection, Iterable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
+from contextlib import contextmanager
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -735,11 +737,26 @@ def _open_mdf(path: Path) -> Any:
     if not magic.startswith((b"MDF", b"UnFinMF")):  # CANedge writes unfinalised files
         raise _mf4_error(path, f"no MDF file identification (the file starts {magic!r})")
     try:
-        return MDF(path)
+        with _asammdf_quiet():
+            return MDF(path)
     except Exception as err:  # asammdf raises bare Exception, struct.error, ValueError, ... on bad files
         cause = err
     _release_quietly(cause)
     raise _mf4_error(path, f"a file asammdf cannot open ({type(cause).__name__}: {cause})") from cause
+
+
+@contextmanager
+def _asammdf_quiet() -> Iterator[None]:
+    """asammdf's logger silenced: on a damaged file it prints tracebacks of errors it recovers
+    from (its own bus-logging decoding, which these raw frames do not use); what cannot be read
+    raises, and becomes an InputError here."""
+    logger = logging.getLogger("asammdf")
+    level = logger.level
+    logger.setLevel(logging.CRITICAL + 1)
+    try:
+        yield
+    finally:
+        logger.setLevel(level)
 
 
 def _release_quietly(err: BaseException) -> None:
@@ -776,10 +793,12 @@ def _mf4_records(path: Path, mdf: Any, group: int, start: float, keep: _Filter, 
     total = int(mdf.groups[group].channel_group.cycles_nr)
     for offset in range(0, total, max_frames):
         try:
-            sig = mdf.get("CAN_DataFrame", group=group, record_offset=offset, record_count=max_frames, raw=True)
+            with _asammdf_quiet():
+                sig = mdf.get("CAN_DataFrame", group=group, record_offset=offset, record_count=max_frames, raw=True)
+            table = _mf4_table(sig.samples, np.asarray(sig.timestamps, np.float64) + start, keep)
         except Exception as err:  # asammdf reports damaged data blocks with assorted exceptions
             raise _mf4_error(path, f"unreadable records from {offset} ({type(err).__name__}: {err})") from err
-        yield _mf4_table(sig.samples, np.asarray(sig.timestamps, np.float64) + start, keep)
+        yield table
 
 
 def _mf4_table(rec: NDArray[Any], t_s: FloatArray, keep: _Filter) -> CanFrames:
