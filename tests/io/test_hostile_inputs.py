@@ -242,3 +242,20 @@ def test_a_recording_still_reads_whole(tmp_path: Path) -> None:
     """The limits do not touch a real log: parking.mcap reads as before."""
     samples = read_mcap(REPO / "data" / "parking.mcap")
     assert len(samples) > 10_000 and np.isfinite(samples.acc_s).all()
+
+
+def test_fleet_records_a_bomb_as_a_failed_log_once(tmp_path: Path, zstd_gib_of_zeros: bytes) -> None:
+    """The bomb is an InputError for its log, recorded; the worker does not die and is not retried."""
+    import pandas as pd
+
+    vehicle = tmp_path / "logs" / "van"
+    vehicle.mkdir(parents=True)
+    _bomb_mcap(vehicle / "bomb.mcap", [("zstd", 1 << 30, zstd_gib_of_zeros)])
+    (vehicle / "bomb.real.mcap").unlink()  # the writer's own file, not part of the fleet
+    out = tmp_path / "fleet.parquet"
+    _, stderr, _ = run_cli("fleet", str(tmp_path / "logs"), "-o", str(out), "--workers", "1", "-q")
+    assert "Traceback" not in stderr, stderr
+    logs = pd.read_parquet(out)
+    assert len(logs) == 1 and logs["status"].iloc[0] == "failed", logs
+    assert "MOUNTCAL_MAX_BLOCK_MB" in logs["error"].iloc[0] and logs["error_type"].iloc[0] == "InputError"
+    assert "died" not in logs["error"].iloc[0]
