@@ -259,3 +259,16 @@ def test_fleet_records_a_bomb_as_a_failed_log_once(tmp_path: Path, zstd_gib_of_z
     assert len(logs) == 1 and logs["status"].iloc[0] == "failed", logs
     assert "MOUNTCAL_MAX_BLOCK_MB" in logs["error"].iloc[0] and logs["error_type"].iloc[0] == "InputError"
     assert "died" not in logs["error"].iloc[0]
+
+
+def test_a_limit_that_is_not_a_positive_number_is_refused(monkeypatch: pytest.MonkeyPatch) -> None:
+    from mountcal.io.inputs import max_block_bytes, max_rows
+
+    monkeypatch.setenv("MOUNTCAL_MAX_BLOCK_MB", "lots")
+    with pytest.raises(InputError, match="MOUNTCAL_MAX_BLOCK_MB"):
+        max_block_bytes()
+    monkeypatch.setenv("MOUNTCAL_MAX_BLOCK_MB", "3")
+    assert max_block_bytes() == 3 * MIB
+    monkeypatch.setenv("MOUNTCAL_MAX_ROWS", "0")
+    with pytest.raises(InputError, match="MOUNTCAL_MAX_ROWS"):
+        max_rows()
