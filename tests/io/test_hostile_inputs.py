@@ -272,3 +272,21 @@ def test_a_limit_that_is_not_a_positive_number_is_refused(monkeypatch: pytest.Mo
     monkeypatch.setenv("MOUNTCAL_MAX_ROWS", "0")
     with pytest.raises(InputError, match="MOUNTCAL_MAX_ROWS"):
         max_rows()
+
+
+def test_merging_mf4_groups_with_damaged_unsorted_times_ends_with_every_frame() -> None:
+    """Found by benchmarks/fuzz_mutations.py: a spliced MF4 whose times run backwards hung the merge."""
+    from mountcal.io.can_frames import CanFrames, _merge_by_time
+
+    def frames(t: list[float]) -> CanFrames:
+        n = len(t)
+        return CanFrames(
+            np.array(t), np.zeros(n, np.int64), np.arange(n, dtype=np.uint32), np.zeros(n, bool),
+            np.full(n, 8, np.uint8), np.zeros((n, 8), np.uint8),
+        )  # fmt: skip
+
+    a = iter([frames([10.0, 5.0, 0.0]), frames([1.0, 2.0])])
+    b = iter([frames([3.0, 4.0]), frames([np.nan, 7.0])])
+    merged = CanFrames.concat(list(_merge_by_time([a, b])))
+    assert len(merged) == 9
+    assert sorted(merged.t_s[np.isfinite(merged.t_s)].tolist()) == [0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 7.0, 10.0]

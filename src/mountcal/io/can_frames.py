@@ -871,12 +871,15 @@ def _merge_by_time(sources: list[Iterator[CanFrames]]) -> Iterator[CanFrames]:
     heads: list[CanFrames | None] = [next(s, None) for s in sources]
     while any(h is not None for h in heads):
         # everything up to the earliest last-time of the held chunks is complete
-        horizon = min(float(h.t_s[-1]) for h in heads if h is not None)
+        held = [k for k, h in enumerate(heads) if h is not None]
+        first = held[int(np.argmin([float(heads[k].t_s[-1]) for k in held]))]  # type: ignore[union-attr]
+        horizon = float(heads[first].t_s[-1])  # type: ignore[union-attr]
         out = []
         for k, head in enumerate(heads):
             if head is None:
                 continue
-            cut = int(np.searchsorted(head.t_s, horizon, side="right"))
+            # the chunk that sets the horizon goes whole: progress even where damaged times are unsorted
+            cut = len(head) if k == first else int(np.searchsorted(head.t_s, horizon, side="right"))
             out.append(head.take(slice(0, cut)))
             rest = head.take(slice(cut, None))
             heads[k] = rest if len(rest) else next(sources[k], None)
