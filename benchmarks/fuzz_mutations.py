@@ -14,8 +14,8 @@ applies one mutation to a copy in a temporary directory, and runs ``inspect``, `
 Every command runs in its own process, forked from this one once mountcal is imported (so a case
 costs the command, not the imports), with a time bound and a memory bound. Counted:
 tracebacks (stderr containing ``Traceback``), hangs (killed at the time bound), peak RSS above the
-bound (the process's ``ru_maxrss`` from ``wait4``; it is also killed at twice the bound), and the
-exit codes. Run from the repository root::
+bound (the process's ``ru_maxrss`` from ``wait4``; it is also killed at twice the bound), crashes
+(killed by a signal: a segfault in a native library), and the exit codes. Run from the repository root::
 
     PYTHONPATH=src python benchmarks/fuzz_mutations.py --count 300 --seed 1
 
@@ -254,6 +254,7 @@ def run(count: int, seed: int, report: Callable[[str], None]) -> dict[str, objec
                     name
                     for name, hit in (
                         ("traceback", "Traceback" in outcome.stderr),
+                        ("crash", outcome.code is not None and outcome.code < 0),  # killed by a signal
                         ("hang", outcome.killed == "time"),
                         ("memory", outcome.killed == "memory" or outcome.peak_mb > RSS_BOUND_MB),
                     )
@@ -277,7 +278,8 @@ def run(count: int, seed: int, report: Callable[[str], None]) -> dict[str, objec
                     report(f"case {case} {source.path.name} [{mutation}] {argv[0]}: {', '.join(problems)}")
             counts["cases"] += 1
             if (case + 1) % 25 == 0:
-                report(f"{case + 1}/{count} cases, {counts['traceback']} tracebacks, {counts['hang']} hangs, "
+                report(f"{case + 1}/{count} cases, {counts['traceback']} tracebacks, {counts['crash']} crashes, "
+                       f"{counts['hang']} hangs, "
                        f"{counts['memory']} over memory, peak {peak:.0f} MB, slowest {slowest:.1f} s")  # fmt: skip
     finally:
         shutil.rmtree(workdir, ignore_errors=True)
@@ -285,6 +287,7 @@ def run(count: int, seed: int, report: Callable[[str], None]) -> dict[str, objec
         "cases": counts["cases"],
         "commands": counts["commands"],
         "tracebacks": counts["traceback"],
+        "crashes": counts["crash"],
         "hangs": counts["hang"],
         "over_memory": counts["memory"],
         "exit_codes": dict(codes),
