@@ -242,3 +242,51 @@ def test_a_recording_still_reads_whole(tmp_path: Path) -> None:
     """The limits do not touch a real log: parking.mcap reads as before."""
     samples = read_mcap(REPO / "data" / "parking.mcap")
     assert len(samples) > 10_000 and np.isfinite(samples.acc_s).all()
+
+
+def test_fleet_records_a_bomb_as_a_failed_log_once(tmp_path: Path, zstd_gib_of_zeros: bytes) -> None:
+    """The bomb is an InputError for its log, recorded; the worker does not die and is not retried."""
+    import pandas as pd
+
+    vehicle = tmp_path / "logs" / "van"
+    vehicle.mkdir(parents=True)
+    _bomb_mcap(vehicle / "bomb.mcap", [("zstd", 1 << 30, zstd_gib_of_zeros)])
+    (vehicle / "bomb.real.mcap").unlink()  # the writer's own file, not part of the fleet
+    out = tmp_path / "fleet.parquet"
+    _, stderr, _ = run_cli("fleet", str(tmp_path / "logs"), "-o", str(out), "--workers", "1", "-q")
+    assert "Traceback" not in stderr, stderr
+    logs = pd.read_parquet(out)
+    assert len(logs) == 1 and logs["status"].iloc[0] == "failed", logs
+    assert "MOUNTCAL_MAX_BLOCK_MB" in logs["error"].iloc[0] and logs["error_type"].iloc[0] == "InputError"
+    assert "died" not in logs["error"].iloc[0]
+
+
+def test_a_limit_that_is_not_a_positive_number_is_refused(monkeypatch: pytest.MonkeyPatch) -> None:
+    from mountcal.io.inputs import max_block_bytes, max_rows
+
+    monkeypatch.setenv("MOUNTCAL_MAX_BLOCK_MB", "lots")
+    with pytest.raises(InputError, match="MOUNTCAL_MAX_BLOCK_MB"):
+        max_block_bytes()
+    monkeypatch.setenv("MOUNTCAL_MAX_BLOCK_MB", "3")
+    assert max_block_bytes() == 3 * MIB
+    monkeypatch.setenv("MOUNTCAL_MAX_ROWS", "0")
+    with pytest.raises(InputError, match="MOUNTCAL_MAX_ROWS"):
+        max_rows()
+
+
+def test_merging_mf4_groups_with_damaged_unsorted_times_ends_with_every_frame() -> None:
+    """Found by benchmarks/fuzz_mutations.py: a spliced MF4 whose times run backwards hung the merge."""
+    from mountcal.io.can_frames import CanFrames, _merge_by_time
+
+    def frames(t: list[float]) -> CanFrames:
+        n = len(t)
+        return CanFrames(
+            np.array(t), np.zeros(n, np.int64), np.arange(n, dtype=np.uint32), np.zeros(n, bool),
+            np.full(n, 8, np.uint8), np.zeros((n, 8), np.uint8),
+        )  # fmt: skip
+
+    a = iter([frames([10.0, 5.0, 0.0]), frames([1.0, 2.0])])
+    b = iter([frames([3.0, 4.0]), frames([np.nan, 7.0])])
+    merged = CanFrames.concat(list(_merge_by_time([a, b])))
+    assert len(merged) == 9
+    assert sorted(merged.t_s[np.isfinite(merged.t_s)].tolist()) == [0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 7.0, 10.0]

@@ -29,12 +29,14 @@ formats.
 from __future__ import annotations
 
 import gc
+import logging
 import math
 import struct
 import sys
 from collections import deque
 from collections.abc import Callable, Collection, Iterable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
+from contextlib import contextmanager
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -738,11 +740,26 @@ def _open_mdf(path: Path) -> Any:
     if not magic.startswith((b"MDF", b"UnFinMF")):  # CANedge writes unfinalised files
         raise _mf4_error(path, f"no MDF file identification (the file starts {magic!r})")
     try:
-        return MDF(path)
+        with _asammdf_quiet():
+            return MDF(path)
     except Exception as err:  # asammdf raises bare Exception, struct.error, ValueError, ... on bad files
         cause = err
     _release_quietly(cause)
     raise _mf4_error(path, f"a file asammdf cannot open ({type(cause).__name__}: {cause})") from cause
+
+
+@contextmanager
+def _asammdf_quiet() -> Iterator[None]:
+    """asammdf's logger silenced: on a damaged file it prints tracebacks of errors it recovers
+    from (its own bus-logging decoding, which these raw frames do not use); what cannot be read
+    raises, and becomes an InputError here."""
+    logger = logging.getLogger("asammdf")
+    level = logger.level
+    logger.setLevel(logging.CRITICAL + 1)
+    try:
+        yield
+    finally:
+        logger.setLevel(level)
 
 
 def _release_quietly(err: BaseException) -> None:
@@ -780,10 +797,12 @@ def _mf4_records(path: Path, mdf: Any, group: int, start: float, keep: _Filter, 
     conversions = _mf4_conversions(mdf, group)
     for offset in range(0, total, max_frames):
         try:
-            sig = mdf.get("CAN_DataFrame", group=group, record_offset=offset, record_count=max_frames, raw=True)
+            with _asammdf_quiet():
+                sig = mdf.get("CAN_DataFrame", group=group, record_offset=offset, record_count=max_frames, raw=True)
+            table = _mf4_table(sig.samples, np.asarray(sig.timestamps, np.float64) + start, keep, conversions, path)
         except Exception as err:  # asammdf reports damaged data blocks with assorted exceptions
             raise _mf4_error(path, f"unreadable records from {offset} ({type(err).__name__}: {err})") from err
-        yield _mf4_table(sig.samples, np.asarray(sig.timestamps, np.float64) + start, keep, conversions, path)
+        yield table
 
 
 # the CAN_DataFrame fields whose value is a number we use (not DataBytes, read as bytes)
@@ -889,12 +908,15 @@ def _merge_by_time(sources: list[Iterator[CanFrames]]) -> Iterator[CanFrames]:
     heads: list[CanFrames | None] = [next(s, None) for s in sources]
     while any(h is not None for h in heads):
         # everything up to the earliest last-time of the held chunks is complete
-        horizon = min(float(h.t_s[-1]) for h in heads if h is not None)
+        held = [k for k, h in enumerate(heads) if h is not None]
+        first = held[int(np.argmin([float(heads[k].t_s[-1]) for k in held]))]  # type: ignore[union-attr]
+        horizon = float(heads[first].t_s[-1])  # type: ignore[union-attr]
         out = []
         for k, head in enumerate(heads):
             if head is None:
                 continue
-            cut = int(np.searchsorted(head.t_s, horizon, side="right"))
+            # the chunk that sets the horizon goes whole: progress even where damaged times are unsorted
+            cut = len(head) if k == first else int(np.searchsorted(head.t_s, horizon, side="right"))
             out.append(head.take(slice(0, cut)))
             rest = head.take(slice(cut, None))
             heads[k] = rest if len(rest) else next(sources[k], None)

@@ -20,12 +20,13 @@ that raises it. See ``docs/reliability.md`` for the memory bound these give.
 from __future__ import annotations
 
 import os
-import stat
+import sys
 from collections.abc import Iterable, Sized
 from pathlib import Path
 from typing import TypeVar
 
 from mountcal.errors import InputError
+from mountcal.paths import input_file
 
 MAX_BLOCK_ENV = "MOUNTCAL_MAX_BLOCK_MB"
 MAX_ROWS_ENV = "MOUNTCAL_MAX_ROWS"
@@ -37,48 +38,16 @@ _Sized = TypeVar("_Sized", bound=Sized)
 def check_regular_file(path: str | os.PathLike[str], role: str) -> Path:
     """``path`` as a Path once it is known to be an existing regular file (symlinks followed).
 
-    Parameters
-    ----------
-    path : str or path-like
-        The file a command is about to read.
-    role : str
-        What the file is for, in words (``"MCAP log"``, ``"DBC"``, ``"protocol sheet"``): the
-        message's expectation.
+    ``role`` says what the file is for (``"MCAP log"``, ``"DBC"``): the message's expectation. The
+    check is :func:`mountcal.paths.input_file`'s without its size limit (logs are large; their
+    readers bound what they hold instead).
 
     Raises
     ------
     InputError
-        The path does not exist, cannot be examined, or is a directory, FIFO, socket or device.
+        The path does not exist, or is a directory, FIFO, socket or device.
     """
-    where = str(path)
-    try:
-        mode = os.stat(path).st_mode
-    except FileNotFoundError as err:
-        raise InputError(where, f"a {role} file", "no such file", "Check the path.") from err
-    except OSError as err:
-        found = f"a path that cannot be examined ({err.strerror})"
-        raise InputError(where, f"a {role} file", found, "Check the path and its permissions.") from err
-    if not stat.S_ISREG(mode):
-        raise InputError(
-            where,
-            f"a {role} as a regular file",
-            _kind(mode),
-            "Pass the file itself; to read from a pipe or device, copy it to a file first.",
-        )
-    return Path(path)
-
-
-def _kind(mode: int) -> str:
-    for test, name in (
-        (stat.S_ISDIR, "a directory"),
-        (stat.S_ISFIFO, "a FIFO (named pipe)"),
-        (stat.S_ISCHR, "a character device"),
-        (stat.S_ISBLK, "a block device"),
-        (stat.S_ISSOCK, "a socket"),
-    ):
-        if test(mode):
-            return name
-    return "not a regular file"
+    return input_file(path, f"a {role}", limit=sys.maxsize)
 
 
 def _env_int(name: str, default: int) -> int:
