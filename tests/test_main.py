@@ -58,3 +58,17 @@ def test_unknown_names_are_attribute_errors() -> None:
     with pytest.raises(AttributeError, match="no attribute 'nope'"):
         mountcal.nope  # noqa: B018
     assert {"calibrate", "Calibration", "read_log"} <= set(dir(mountcal))
+
+
+def test_version_is_the_installed_distributions() -> None:
+    """`mountcal --version` and `mountcal.__version__` say the same version, the distribution's when installed."""
+    import importlib.metadata
+
+    import mountcal
+
+    done = subprocess.run([sys.executable, "-m", "mountcal", "--version"], capture_output=True, text=True)
+    assert done.returncode == 0 and done.stdout.strip() == f"mountcal {mountcal.__version__}"
+    try:
+        assert mountcal.__version__ == importlib.metadata.version("mountcal")
+    except importlib.metadata.PackageNotFoundError:  # a source tree on the path, not installed
+        assert mountcal.__version__ == "unknown"

@@ -36,6 +36,7 @@ if TYPE_CHECKING:
 # Exported names, imported on first use (PEP 562): `import mountcal` and the command line start in
 # a fraction of a second; each name comes from the module that defines it.
 _HOMES = {
+    "__version__": "mountcal.version",
     "Calibration": "mountcal.result",
     "LogOptions": "mountcal.io.logs",
     "Options": "mountcal.calibrate",
@@ -62,6 +63,7 @@ __all__ = [
     "LogOptions",
     "Options",
     "StopTable",
+    "__version__",
     "acc_to_sensor",
     "acc_to_vehicle",
     "calibrate",

@@ -11,7 +11,6 @@ makes it precise enough (MODEL.md §4); otherwise it is None with the reason.
 
 from __future__ import annotations
 
-import importlib.metadata
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from typing import Any, Literal
@@ -34,6 +33,7 @@ from mountcal.estimate.geometry import span_ratio
 from mountcal.pvalues import chi2_sf
 from mountcal.result import Calibration
 from mountcal.stoptable import StopTable, fingerprint
+from mountcal.version import software_version
 
 Method = Literal["full", "paper"]
 BASE: tuple[str, ...] = ("rotation", "slope")
@@ -442,10 +442,7 @@ def _gravity(table: StopTable, given: float | None) -> tuple[float, str]:
 
 
 def _provenance(table: StopTable, method: str, terms: tuple[str, ...]) -> dict[str, Any]:
-    try:
-        version = importlib.metadata.version("mountcal")
-    except importlib.metadata.PackageNotFoundError:
-        version = "unknown"
+    version = software_version()
     return {
         "input": table.source,
         "input_sha256": table.sha256 or None,

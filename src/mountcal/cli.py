@@ -27,6 +27,7 @@ from mountcal.simulate import PRESETS, simulate_stops
 from mountcal.stops import StopDetection
 from mountcal.stoptable import read_stop_table, same_stops, write_stop_table
 from mountcal.terminal import safe
+from mountcal.version import software_version
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -504,6 +505,7 @@ def _detection(args: argparse.Namespace) -> StopDetection:
 
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="mountcal", description=__doc__)
+    parser.add_argument("--version", action="version", version=f"mountcal {software_version()}")
     sub = parser.add_subparsers(dest="command", required=True)
 
     cal = sub.add_parser("calibrate", help="estimate the mounting from a stop table or a log")

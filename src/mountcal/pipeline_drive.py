@@ -9,7 +9,6 @@ in (:func:`mountcal.estimate.driving.combine`), saying which and why the others 
 from __future__ import annotations
 
 import hashlib
-import importlib.metadata
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
@@ -36,6 +35,7 @@ from mountcal.pipeline import LogJob
 from mountcal.result import Calibration
 from mountcal.stops import StopTableFromLog, read_protocol, tabulate
 from mountcal.stoptable import StopTable, stop_table_from_frame
+from mountcal.version import software_version
 
 Use = Literal["auto", "stops", "driving"]
 
@@ -204,10 +204,7 @@ def _gravity(samples: Samples, given: float | None) -> tuple[float, str]:
 
 
 def _provenance(paths: Sequence[str]) -> dict[str, Any]:
-    try:
-        version = importlib.metadata.version("mountcal")
-    except importlib.metadata.PackageNotFoundError:
-        version = "unknown"
+    version = software_version()
     return {
         "input": " + ".join(str(Path(p)) for p in paths),
         "input_sha256": [_sha256(Path(p)) for p in paths],

@@ -39,7 +39,6 @@ True
 
 from __future__ import annotations
 
-import importlib.metadata
 import json
 import os
 from collections import Counter
@@ -71,6 +70,7 @@ from mountcal.io.writers import (
 from mountcal.result import VEHICLE_FRAME, Calibration
 from mountcal.rotate import acc_to_vehicle, check_applicable, rate_to_vehicle
 from mountcal.threads import helpers_allowed
+from mountcal.version import software_version
 
 FORMATS = {".parquet": "parquet", ".pq": "parquet", ".csv": "csv", ".mcap": "mcap"}
 VEHICLE_FRAME_ID = "base_link"  # REP 103's body frame: x forward, y left, z up = ISO 8855
@@ -231,10 +231,7 @@ def _check_not_an_input(out: Path, files: Sequence[Path]) -> None:
 
 
 def _metadata(cal: Calibration, files: Sequence[Path]) -> dict[str, str]:
-    try:
-        version = importlib.metadata.version("mountcal")
-    except importlib.metadata.PackageNotFoundError:
-        version = "unknown"
+    version = software_version()
     return {
         "mountcal.frame": cal.frame,
         "mountcal.units": "t_s s; ax, ay, az m/s^2 (specific force, bias removed); gx, gy, gz rad/s",

@@ -28,11 +28,11 @@ from mountcal.fleet.store import (
     check_overwritable,
     job_hash,
     schema,
-    software_version,
     write_table,
 )
 from mountcal.fleet.vehicles import ALPHA, analyse_fleet
 from mountcal.paths import output_lock
+from mountcal.version import software_version
 
 HASH_THREADS = 4
 

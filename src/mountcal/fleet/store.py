@@ -11,7 +11,6 @@ tables are consolidated from the parts and written atomically too.
 from __future__ import annotations
 
 import hashlib
-import importlib.metadata
 import json
 from collections.abc import Mapping
 from dataclasses import asdict
@@ -27,18 +26,11 @@ from mountcal.atomic import atomic_path
 from mountcal.errors import InputError
 from mountcal.fleet.inputs import FleetJob
 from mountcal.paths import special_kind
+from mountcal.version import software_version  # part of every key: another version may answer differently
 
 PART_FORMAT = "mountcal.fleet.part"
 PART_VERSION = 2  # 2: a log without yaw stores the levelling rotation (1 stored an invented yaw)
 TABLE_MARK = b"mountcal.fleet"  # Parquet metadata key of the tables written here
-
-
-def software_version() -> str:
-    """The installed mountcal version (part of every key: another version may answer differently)."""
-    try:
-        return importlib.metadata.version("mountcal")
-    except importlib.metadata.PackageNotFoundError:
-        return "unknown"
 
 
 def file_digest(path: str | Path, where: str | None = None) -> str:
