@@ -15,9 +15,12 @@ reproduces the result offline.
 
 from __future__ import annotations
 
+import contextlib
 import json
+import signal
+import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
@@ -144,26 +147,30 @@ class Live:
         last_rx = time.monotonic()
         self.emit({"event": "started", "recording": str(self.recording)})
         self._suggest(None, None)
+        stop_asked = threading.Event()
         try:
-            while True:
-                msg = bus.recv(timeout=min(0.5, self.opts.silence_s))
-                if msg is None:
-                    if time.monotonic() - last_rx >= self.opts.silence_s:
-                        reason = "bus silent"
-                        self.emit({"event": "silent", "after_s": self.opts.silence_s})
-                        break
-                    continue
-                last_rx = time.monotonic()
-                writer.on_message_received(msg)
-                if msg.is_error_frame or msg.is_remote_frame:
-                    self.ignored += 1
-                    continue
-                self.frames.add(msg)
-                if self.frames.last_t - last_eval >= self.opts.evaluate_every_s:
-                    last_eval = self.frames.last_t
-                    if self._evaluate(final=False):
-                        reason = "target met"
-                        break
+            with _ctrl_c_sets(stop_asked):
+                while True:
+                    if stop_asked.is_set():
+                        raise KeyboardInterrupt  # here, between two steps
+                    msg = bus.recv(timeout=min(0.5, self.opts.silence_s))
+                    if msg is None:
+                        if time.monotonic() - last_rx >= self.opts.silence_s:
+                            reason = "bus silent"
+                            self.emit({"event": "silent", "after_s": self.opts.silence_s})
+                            break
+                        continue
+                    last_rx = time.monotonic()
+                    writer.on_message_received(msg)
+                    if msg.is_error_frame or msg.is_remote_frame:
+                        self.ignored += 1
+                        continue
+                    self.frames.add(msg)
+                    if self.frames.last_t - last_eval >= self.opts.evaluate_every_s:
+                        last_eval = self.frames.last_t
+                        if self._evaluate(final=False):
+                            reason = "target met"
+                            break
         except KeyboardInterrupt:
             reason = "interrupted"
             self.emit({"event": "interrupted"})
@@ -418,3 +425,21 @@ def run_live_command(args: Any) -> int:
             tmp.write_text(render(session.calibration.to_dict(), session.table), encoding="utf-8")
         print(f"wrote {args.report}", file=out)
     return 130 if session.reason == "interrupted" else 0
+
+
+
+@contextlib.contextmanager
+def _ctrl_c_sets(flag: threading.Event) -> Iterator[None]:
+    """Ctrl-C (SIGINT) sets ``flag`` instead of raising wherever the main thread happens to be.
+
+    The session loop checks the flag between two steps, so an interrupt never lands between a
+    stop being counted and its event being sent (the events would then miss a stop the result has).
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, lambda *_: flag.set())
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)

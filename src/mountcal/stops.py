@@ -171,17 +171,31 @@ def _stillness(
         g_mean, g_std = moving(samples.gyro_s)
         g_lsb = np.zeros(3) if gyro_lsb is None else gyro_lsb
         g_rest = np.percentile(g_std, REST_QUANTILE, axis=0)
-        # the bias: the rate while the accelerometer (and speed) say still; a drive's median rate otherwise
-        bias = np.median(g_mean[still] if still.sum() >= w else g_mean, axis=0)
         max_g_std = cfg.max_gyro_std_rad_s
         if max_g_std is None:
             max_g_std = max(GYRO_STD_FLOOR, REST_FACTOR * float(g_rest.max()), float(g_lsb.max()))
         max_rate = cfg.max_gyro_rad_s
         if max_rate is None:
             max_rate = max(GYRO_RATE_FLOOR, 2.0 * float(g_lsb.max()))
+        quiet = still & (g_std.max(axis=1) < max_g_std)
+        bias = _gyro_bias(g_mean[quiet] if quiet.sum() >= w else g_mean, max_rate)
         still &= (g_std.max(axis=1) < max_g_std) & (np.linalg.norm(g_mean - bias, axis=1) < max_rate)
         found = Thresholds(max_std, acc_rest, acc_lsb, max_g_std, max_rate, bias, g_rest, g_lsb, found.speed_mps)
     return np.repeat(still, count[:, 0].astype(int)), found
+
+
+def _gyro_bias(rates: FloatArray, radius: float) -> FloatArray:
+    """The gyro's rate at rest: the median of the densest cluster of quiet rates (rad/s).
+
+    Quiet blocks (accelerometer and gyro steady) are stops, but also cruising straight and steady
+    turns, whose rates differ. A rate shared by most quiet time is the bias; a plain median would
+    take a turn's rate when turning fills more than half the quiet time.
+    """
+    _, inverse, counts = np.unique(np.floor(rates / radius), axis=0, return_inverse=True, return_counts=True)
+    densest = rates[inverse.ravel() == int(np.argmax(counts))]
+    centre = np.median(densest, axis=0)
+    near = rates[np.linalg.norm(rates - centre, axis=1) < radius]
+    return np.median(near, axis=0) if near.size else centre
 
 
 def detect_stops(
