@@ -62,6 +62,19 @@ class StopCase:
     even_headings: bool  # β evenly spread, else drawn at random
     heading_offset_deg: float  # added to β with --headings relative
     seed: int
+    model: str = "auto"  # the --model flag
+
+
+MODELS = (
+    "auto",
+    "rotation,slope",
+    "rotation,slope,bias",
+    "rotation,slope,gravity",
+    "rotation,slope,bias,temperature",
+    "rotation,slope,site_slope",
+    "rotation,slope,scale",
+    "rotation,slope,bias,gravity,scale",
+)
 
 
 @dataclass
@@ -100,6 +113,7 @@ def random_stop_case(rng: np.random.Generator) -> StopCase:
         even_headings=bool(rng.random() < 0.6),
         heading_offset_deg=float(rng.uniform(-180.0, 180.0)),
         seed=int(rng.integers(2**31)),
+        model=str(rng.choice(MODELS)) if rng.random() < 0.3 else "auto",
     )
 
 
@@ -135,7 +149,7 @@ def write_stop_case(case: StopCase, folder: Path) -> tuple[Path, list[str], Rota
         df[cols] = df[cols] / G_N
     path = folder / f"stops_{case.seed}.csv"
     df.to_csv(path, index=False, float_format="%.15g")
-    args = [str(path), "--unit", case.unit, "--headings", case.headings]
+    args = [str(path), "--unit", case.unit, "--headings", case.headings, "--model", case.model]
     return path, args, rot
 
 

@@ -149,3 +149,14 @@ def test_write_stop_table_round_trip_keeps_the_minimal_columns(tmp_path: Path) -
     path = tmp_path / "t.csv"
     write_stop_table(table, path)
     assert {"beta_deg", "ax", "ay", "az"} <= set(pd.read_csv(path).columns)
+
+
+def test_a_model_that_leaves_no_values_to_estimate_the_noise_is_refused(tmp_path: Path) -> None:
+    """3 stops without headings or noise columns: 9 values, and rotation, slope, bias has 9 parameters."""
+    table, _ = simulate_stops(beta_deg=[0.0, 120.0, 240.0], slope_deg=10.0, seed=1)
+    path, out = tmp_path / "three.csv", tmp_path / "r.json"
+    table.to_frame()[["ax", "ay", "az"]].to_csv(path, index=False)
+    assert main(["calibrate", str(path), "--model", "rotation,slope,bias", "-o", str(out)]) == 3
+    assert not out.exists()
+    assert main(["calibrate", str(path), "-o", str(out)]) == 0
+    _finite_json(out)
