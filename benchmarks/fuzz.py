@@ -46,6 +46,7 @@ FAILURES = ("traceback", "nonfinite", "invalid", "wrong_confident")
 MAX_TILT_ERROR_DEG = 10.0
 MAX_YAW_ERROR_SIGMA = 5.0
 HEADINGS = ("uphill", "relative", "none")
+DBC = Path(__file__).resolve().parents[1] / "data" / "imu_mm5_10.dbc"  # the CAN logs' layout (Bosch MM5.10)
 
 
 @dataclass(frozen=True)
@@ -271,16 +272,19 @@ def run_logs(count: int, seed: int, report: Report) -> None:
                 float(v) for v in Rotation.random(random_state=rng.integers(2**31)).as_euler("xyz", degrees=True)
             )
             slope = float(rng.uniform(0.5, 30.0))
-            suffix = str(rng.choice([".mcap", ".csv"]))
+            suffix = str(rng.choice([".mcap", ".blf", ".asc"]))
+            dbc = [] if suffix == ".mcap" else ["--dbc", str(DBC)]
             log, protocol, out = folder / f"log{i}{suffix}", folder / f"protocol{i}.csv", folder / f"log{i}.json"
             make = ["simulate", "--roll", f"{roll}", "--pitch", f"{pitch}", "--yaw", f"{yaw}", "--slope", f"{slope}"]
-            make += ["--seed", str(int(rng.integers(2**31))), "--log", str(log), "--protocol", str(protocol)]
+            make += ["--seed", str(int(rng.integers(2**31))), "--log", str(log), "--protocol", str(protocol), *dbc]
             code, message = run_cli(make)
             if code != 0:
                 report.add("traceback" if code is None else "invalid", f"simulate {make}: {message[-300:]}")
                 continue
             with_protocol = bool(rng.random() < 0.7)
-            args = ["calibrate", str(log), "-o", str(out)] + (["--protocol", str(protocol)] if with_protocol else [])
+            args = ["calibrate", str(log), "-o", str(out), *dbc] + (
+                ["--protocol", str(protocol)] if with_protocol else []
+            )
             code, message = run_cli(args)
             truth = Rotation.from_euler("xyz", [roll, pitch, yaw], degrees=True)
             kind, detail = judge(code, message, out, truth, "uphill" if with_protocol else "none")

@@ -41,6 +41,9 @@ WITH_BIAS: tuple[str, ...] = ("rotation", "slope", "bias")
 MIN_DISTINCT_HEADINGS = 3
 GIVEN = "given by the user"
 NULL_TOL = 1e-8
+# "Confident" promises the answer is usable: tilt within 10° at 5σ, so its 1σ must stay under 2°.
+MAX_CONFIDENT_TILT_SIGMA_DEG = 2.0
+MIN_NOISE_DOF = 10  # a noise estimated from fewer residual values is itself too uncertain to vouch for the σ
 
 
 @dataclass(frozen=True)
@@ -151,8 +154,8 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
             + "; ".join(f"{u.what}: {u.size}" for u in loop.unexplained)
             + f"); the σ are widened ×{birge:.2f} (Birge ratio) and the result is not confident"
         )
-    if f.branch:
-        notes.append(f.branch + "; the result is not confident")
+    doubts = _doubts(f, angles, birge)
+    notes += [d + "; the result is not confident" for d in doubts]
     pitch = angles["pitch_deg"]
     if abs(pitch) > GIMBAL_LOCK_PITCH_DEG:
         notes.append(
@@ -226,8 +229,25 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
         unexplained=[u.to_dict() for u in loop.unexplained],
         diagnostics=[d.to_dict() for d in loop.findings],
         effects=effect_values(f),
-        confident=not loop.unexplained and f.branch is None,
+        confident=not loop.unexplained and not doubts,
     )
+
+
+def _doubts(f: full.Fit, angles: dict[str, Any], birge: float) -> list[str]:
+    """Reasons, besides unexplained structure, why a fit is not to be trusted as it stands."""
+    out = [f.branch] if f.branch else []
+    tilt_sigma = max(angles["roll_sigma_deg"], angles["pitch_sigma_deg"]) * birge
+    if tilt_sigma > MAX_CONFIDENT_TILT_SIGMA_DEG:
+        out.append(
+            f"the tilt is uncertain by {tilt_sigma:.3g}° (1σ; over {MAX_CONFIDENT_TILT_SIGMA_DEG:g}°): more stops, "
+            "a steeper slope or a quieter sensor would pin it down"
+        )
+    if not f.noise_known and f.dof < MIN_NOISE_DOF:
+        out.append(
+            f"the stop noise is estimated from only {f.dof} residual degrees of freedom, so the σ themselves are "
+            "uncertain: add stops, or give each stop's noise (sx, sy, sz, n)"
+        )
+    return out
 
 
 def _angles(table: StopTable, f: full.Fit, opts: Options) -> dict[str, Any]:
