@@ -64,6 +64,7 @@ class StopCase:
     heading_offset_deg: float  # added to β with --headings relative
     seed: int
     model: str = "auto"  # the --model flag
+    method: str = "full"  # the --method flag
 
 
 MODELS = (
@@ -115,6 +116,7 @@ def random_stop_case(rng: np.random.Generator) -> StopCase:
         heading_offset_deg=float(rng.uniform(-180.0, 180.0)),
         seed=int(rng.integers(2**31)),
         model=str(rng.choice(MODELS)) if rng.random() < 0.3 else "auto",
+        method="paper" if rng.random() < 0.15 else "full",
     )
 
 
@@ -150,7 +152,7 @@ def write_stop_case(case: StopCase, folder: Path) -> tuple[Path, list[str], Rota
         df[cols] = df[cols] / G_N
     path = folder / f"stops_{case.seed}.csv"
     df.to_csv(path, index=False, float_format="%.15g")
-    args = [str(path), "--unit", case.unit, "--headings", case.headings, "--model", case.model]
+    args = [str(path), "--unit", case.unit, "--headings", case.headings, "--model", case.model, "--method", case.method]
     return path, args, rot
 
 

@@ -154,7 +154,8 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
             + "; ".join(f"{u.what}: {u.size}" for u in loop.unexplained)
             + f"); the σ are widened ×{birge:.2f} (Birge ratio) and the result is not confident"
         )
-    doubts = _doubts(f, angles, birge)
+    tilt_sigma = max(angles["roll_sigma_deg"], angles["pitch_sigma_deg"]) * birge
+    doubts = _doubts(f.branch, tilt_sigma, None if f.noise_known else f.dof)
     notes += [d + "; the result is not confident" for d in doubts]
     pitch = angles["pitch_deg"]
     if abs(pitch) > GIMBAL_LOCK_PITCH_DEG:
@@ -233,18 +234,20 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
     )
 
 
-def _doubts(f: full.Fit, angles: dict[str, Any], birge: float) -> list[str]:
-    """Reasons, besides unexplained structure, why a fit is not to be trusted as it stands."""
-    out = [f.branch] if f.branch else []
-    tilt_sigma = max(angles["roll_sigma_deg"], angles["pitch_sigma_deg"]) * birge
-    if tilt_sigma > MAX_CONFIDENT_TILT_SIGMA_DEG:
+def _doubts(branch: str | None, tilt_sigma_deg: float, noise_dof: int | None) -> list[str]:
+    """Reasons, besides unexplained structure, why an answer is not to be trusted as it stands.
+
+    ``noise_dof``: the degrees of freedom the stop noise was estimated from (None: the table gave it).
+    """
+    out = [branch] if branch else []
+    if tilt_sigma_deg > MAX_CONFIDENT_TILT_SIGMA_DEG:
         out.append(
-            f"the tilt is uncertain by {tilt_sigma:.3g}° (1σ; over {MAX_CONFIDENT_TILT_SIGMA_DEG:g}°): more stops, "
+            f"the tilt is uncertain by {tilt_sigma_deg:.3g}° (1σ; over {MAX_CONFIDENT_TILT_SIGMA_DEG:g}°): more stops, "
             "a steeper slope or a quieter sensor would pin it down"
         )
-    if not f.noise_known and f.dof < MIN_NOISE_DOF:
+    if noise_dof is not None and noise_dof < MIN_NOISE_DOF:
         out.append(
-            f"the stop noise is estimated from only {f.dof} residual degrees of freedom, so the σ themselves are "
+            f"the stop noise is estimated from only {noise_dof} residual degrees of freedom, so the σ themselves are "
             "uncertain: add stops, or give each stop's noise (sx, sy, sz, n)"
         )
     return out
@@ -390,6 +393,8 @@ def _paper(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrat
     elif sig[2] > opts.max_yaw_sigma_deg:
         yaw_reason = f"yaw 1σ {sig[2]:.3g}° exceeds the limit {opts.max_yaw_sigma_deg:g}°: slope too small"
     slope = None if est.slope_rad is None else float(np.degrees(est.slope_rad))
+    doubts = _doubts(None, float(max(sig[0], sig[1])), None if table.cov_s is not None else 3 * len(table) - 4)
+    notes += [d + "; the result is not confident" for d in doubts]
     if est.slope_rad is None:
         notes.append(
             f"step 2 failed: cos α = {est.cos_slope:.6f} > 1 from the opposite-heading pairs (a vertical bias, scale "
@@ -427,6 +432,7 @@ def _paper(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrat
         model_selection={"mode": "fixed", "chosen": list(BASE)},
         provenance=_provenance(table, "paper", BASE),
         notes=tuple(notes),
+        confident=not doubts,
     )
 
 
