@@ -160,3 +160,13 @@ def test_a_model_that_leaves_no_values_to_estimate_the_noise_is_refused(tmp_path
     assert not out.exists()
     assert main(["calibrate", str(path), "-o", str(out)]) == 0
     _finite_json(out)
+
+
+def test_an_impossible_latitude_is_refused(tmp_path: Path) -> None:
+    """Local gravity comes from the latitude: 95° N is a typo to report, not a gravity to compute."""
+    df = pd.read_csv(REPO / "data" / "zhang2011_stops.csv")
+    df["lat_deg"] = 95.0
+    path = tmp_path / "lat.csv"
+    df.to_csv(path, index=False)
+    with pytest.raises(InputError, match="lat_deg within ±90°"):
+        read_stop_table(path)

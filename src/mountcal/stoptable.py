@@ -199,6 +199,14 @@ def stop_table_from_frame(
     def optional(name: str) -> FloatArray | None:
         return _numeric(df, [name], source)[:, 0] if name in df.columns else None
 
+    lat = optional(LAT)
+    if lat is not None and np.any(np.abs(lat) > 90):
+        raise InputError(
+            source,
+            f"{LAT} within ±90°",
+            f"{lat[np.argmax(np.abs(lat))]:g} in rows {_rows(np.flatnonzero(np.abs(lat) > 90))}",
+            "Fix the latitudes (degrees north), or drop the column to assume standard gravity.",
+        )
     return StopTable(
         acc_s=acc,
         beta_rad=beta,
@@ -207,7 +215,7 @@ def stop_table_from_frame(
         temperature_c=optional(TEMPERATURE),
         t_s=optional(TIME),
         site=df[SITE].astype(str).to_numpy() if SITE in df.columns else None,
-        lat_deg=optional(LAT),
+        lat_deg=lat,
         alt_m=optional(ALT),
         lon_deg=optional(LON),
         source=source,
