@@ -65,6 +65,7 @@ class StopCase:
     seed: int
     model: str = "auto"  # the --model flag
     method: str = "full"  # the --method flag
+    parquet: bool = False  # the table as Parquet (columns shuffled, an unknown column added), else CSV
 
 
 MODELS = (
@@ -117,6 +118,7 @@ def random_stop_case(rng: np.random.Generator) -> StopCase:
         seed=int(rng.integers(2**31)),
         model=str(rng.choice(MODELS)) if rng.random() < 0.3 else "auto",
         method="paper" if rng.random() < 0.15 else "full",
+        parquet=bool(rng.random() < 0.2),
     )
 
 
@@ -150,8 +152,13 @@ def write_stop_case(case: StopCase, folder: Path) -> tuple[Path, list[str], Rota
     if case.unit == "g":
         cols = [c for c in ("ax", "ay", "az", *STD) if c in df.columns]
         df[cols] = df[cols] / G_N
-    path = folder / f"stops_{case.seed}.csv"
-    df.to_csv(path, index=False, float_format="%.15g")
+    if case.parquet:
+        df = df.assign(comment="fuzz")[list(rng.permutation([*df.columns, "comment"]))]
+        path = folder / f"stops_{case.seed}.parquet"
+        df.to_parquet(path, index=False)
+    else:
+        path = folder / f"stops_{case.seed}.csv"
+        df.to_csv(path, index=False, float_format="%.15g")
     args = [str(path), "--unit", case.unit, "--headings", case.headings, "--model", case.model, "--method", case.method]
     return path, args, rot
 

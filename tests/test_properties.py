@@ -48,6 +48,7 @@ stop_cases = st.builds(
     seed=st.integers(0, 2**31 - 1),
     model=st.one_of(st.just("auto"), st.sampled_from(fuzz.MODELS)),
     method=st.sampled_from(["full", "full", "paper"]),
+    parquet=st.booleans(),
 )
 
 
