@@ -170,3 +170,12 @@ def test_an_impossible_latitude_is_refused(tmp_path: Path) -> None:
     df.to_csv(path, index=False)
     with pytest.raises(InputError, match="lat_deg within ±90°"):
         read_stop_table(path)
+
+
+@pytest.mark.parametrize("columns", [["sx"], ["sx", "sz", "n"], ["n"]])
+def test_noise_columns_given_in_part_are_refused_not_ignored(tmp_path: Path, columns: list[str]) -> None:
+    df = pd.read_csv(REPO / "data" / "zhang2011_stops.csv")[["beta_deg", "ax", "ay", "az", *columns]]
+    path = tmp_path / "part.csv"
+    df.to_csv(path, index=False)
+    with pytest.raises(InputError, match="together"):
+        read_stop_table(path)

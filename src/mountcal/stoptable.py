@@ -182,6 +182,14 @@ def stop_table_from_frame(
     if BETA in df.columns and headings != "none":
         beta = np.radians(_numeric(df, [BETA], source)[:, 0])
     cov = None
+    noise_columns = [c for c in (*STD, COUNT) if c in df.columns]
+    if noise_columns and not all(c in df.columns for c in STD):
+        raise InputError(
+            source,
+            f"the stop noise as {', '.join(STD)} together (and optionally {COUNT})",
+            f"only {', '.join(noise_columns)}",
+            f"Add the missing ones, or drop {', '.join(noise_columns)} to estimate the noise from the residuals.",
+        )
     if all(c in df.columns for c in STD):
         std = _numeric(df, list(STD), source) * scale
         count = _numeric(df, [COUNT], source)[:, 0] if COUNT in df.columns else np.ones(len(df))
