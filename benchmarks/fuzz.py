@@ -46,6 +46,7 @@ FAILURES = ("traceback", "nonfinite", "invalid", "wrong_confident")
 MAX_TILT_ERROR_DEG = 10.0
 MAX_YAW_ERROR_SIGMA = 5.0
 HEADINGS = ("uphill", "relative", "none")
+DBC = Path(__file__).resolve().parents[1] / "data" / "imu_mm5_10.dbc"  # the CAN logs' layout (Bosch MM5.10)
 
 
 @dataclass(frozen=True)
@@ -62,6 +63,21 @@ class StopCase:
     even_headings: bool  # β evenly spread, else drawn at random
     heading_offset_deg: float  # added to β with --headings relative
     seed: int
+    model: str = "auto"  # the --model flag
+    method: str = "full"  # the --method flag
+    parquet: bool = False  # the table as Parquet (columns shuffled, an unknown column added), else CSV
+
+
+MODELS = (
+    "auto",
+    "rotation,slope",
+    "rotation,slope,bias",
+    "rotation,slope,gravity",
+    "rotation,slope,bias,temperature",
+    "rotation,slope,site_slope",
+    "rotation,slope,scale",
+    "rotation,slope,bias,gravity,scale",
+)
 
 
 @dataclass
@@ -100,6 +116,9 @@ def random_stop_case(rng: np.random.Generator) -> StopCase:
         even_headings=bool(rng.random() < 0.6),
         heading_offset_deg=float(rng.uniform(-180.0, 180.0)),
         seed=int(rng.integers(2**31)),
+        model=str(rng.choice(MODELS)) if rng.random() < 0.3 else "auto",
+        method="paper" if rng.random() < 0.15 else "full",
+        parquet=bool(rng.random() < 0.2),
     )
 
 
@@ -133,9 +152,14 @@ def write_stop_case(case: StopCase, folder: Path) -> tuple[Path, list[str], Rota
     if case.unit == "g":
         cols = [c for c in ("ax", "ay", "az", *STD) if c in df.columns]
         df[cols] = df[cols] / G_N
-    path = folder / f"stops_{case.seed}.csv"
-    df.to_csv(path, index=False, float_format="%.15g")
-    args = [str(path), "--unit", case.unit, "--headings", case.headings]
+    if case.parquet:
+        df = df.assign(comment="fuzz")[list(rng.permutation([*df.columns, "comment"]))]
+        path = folder / f"stops_{case.seed}.parquet"
+        df.to_parquet(path, index=False)
+    else:
+        path = folder / f"stops_{case.seed}.csv"
+        df.to_csv(path, index=False, float_format="%.15g")
+    args = [str(path), "--unit", case.unit, "--headings", case.headings, "--model", case.model, "--method", case.method]
     return path, args, rot
 
 
@@ -257,16 +281,19 @@ def run_logs(count: int, seed: int, report: Report) -> None:
                 float(v) for v in Rotation.random(random_state=rng.integers(2**31)).as_euler("xyz", degrees=True)
             )
             slope = float(rng.uniform(0.5, 30.0))
-            suffix = str(rng.choice([".mcap", ".csv"]))
+            suffix = str(rng.choice([".mcap", ".blf", ".asc"]))
+            dbc = [] if suffix == ".mcap" else ["--dbc", str(DBC)]
             log, protocol, out = folder / f"log{i}{suffix}", folder / f"protocol{i}.csv", folder / f"log{i}.json"
             make = ["simulate", "--roll", f"{roll}", "--pitch", f"{pitch}", "--yaw", f"{yaw}", "--slope", f"{slope}"]
-            make += ["--seed", str(int(rng.integers(2**31))), "--log", str(log), "--protocol", str(protocol)]
+            make += ["--seed", str(int(rng.integers(2**31))), "--log", str(log), "--protocol", str(protocol), *dbc]
             code, message = run_cli(make)
             if code != 0:
                 report.add("traceback" if code is None else "invalid", f"simulate {make}: {message[-300:]}")
                 continue
             with_protocol = bool(rng.random() < 0.7)
-            args = ["calibrate", str(log), "-o", str(out)] + (["--protocol", str(protocol)] if with_protocol else [])
+            args = ["calibrate", str(log), "-o", str(out), *dbc] + (
+                ["--protocol", str(protocol)] if with_protocol else []
+            )
             code, message = run_cli(args)
             truth = Rotation.from_euler("xyz", [roll, pitch, yaw], degrees=True)
             kind, detail = judge(code, message, out, truth, "uphill" if with_protocol else "none")

@@ -149,3 +149,33 @@ def test_write_stop_table_round_trip_keeps_the_minimal_columns(tmp_path: Path) -
     path = tmp_path / "t.csv"
     write_stop_table(table, path)
     assert {"beta_deg", "ax", "ay", "az"} <= set(pd.read_csv(path).columns)
+
+
+def test_a_model_that_leaves_no_values_to_estimate_the_noise_is_refused(tmp_path: Path) -> None:
+    """3 stops without headings or noise columns: 9 values, and rotation, slope, bias has 9 parameters."""
+    table, _ = simulate_stops(beta_deg=[0.0, 120.0, 240.0], slope_deg=10.0, seed=1)
+    path, out = tmp_path / "three.csv", tmp_path / "r.json"
+    table.to_frame()[["ax", "ay", "az"]].to_csv(path, index=False)
+    assert main(["calibrate", str(path), "--model", "rotation,slope,bias", "-o", str(out)]) == 3
+    assert not out.exists()
+    assert main(["calibrate", str(path), "-o", str(out)]) == 0
+    _finite_json(out)
+
+
+def test_an_impossible_latitude_is_refused(tmp_path: Path) -> None:
+    """Local gravity comes from the latitude: 95° N is a typo to report, not a gravity to compute."""
+    df = pd.read_csv(REPO / "data" / "zhang2011_stops.csv")
+    df["lat_deg"] = 95.0
+    path = tmp_path / "lat.csv"
+    df.to_csv(path, index=False)
+    with pytest.raises(InputError, match="lat_deg within ±90°"):
+        read_stop_table(path)
+
+
+@pytest.mark.parametrize("columns", [["sx"], ["sx", "sz", "n"], ["n"]])
+def test_noise_columns_given_in_part_are_refused_not_ignored(tmp_path: Path, columns: list[str]) -> None:
+    df = pd.read_csv(REPO / "data" / "zhang2011_stops.csv")[["beta_deg", "ax", "ay", "az", *columns]]
+    path = tmp_path / "part.csv"
+    df.to_csv(path, index=False)
+    with pytest.raises(InputError, match="together"):
+        read_stop_table(path)

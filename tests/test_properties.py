@@ -46,6 +46,9 @@ stop_cases = st.builds(
     even_headings=st.booleans(),
     heading_offset_deg=st.floats(-180.0, 180.0),
     seed=st.integers(0, 2**31 - 1),
+    model=st.one_of(st.just("auto"), st.sampled_from(fuzz.MODELS)),
+    method=st.sampled_from(["full", "full", "paper"]),
+    parquet=st.booleans(),
 )
 
 

@@ -41,6 +41,9 @@ WITH_BIAS: tuple[str, ...] = ("rotation", "slope", "bias")
 MIN_DISTINCT_HEADINGS = 3
 GIVEN = "given by the user"
 NULL_TOL = 1e-8
+# "Confident" promises the answer is usable: tilt within 10° at 5σ, so its 1σ must stay under 2°.
+MAX_CONFIDENT_TILT_SIGMA_DEG = 2.0
+MIN_NOISE_DOF = 10  # a noise estimated from fewer residual values is itself too uncertain to vouch for the σ
 
 
 @dataclass(frozen=True)
@@ -151,8 +154,9 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
             + "; ".join(f"{u.what}: {u.size}" for u in loop.unexplained)
             + f"); the σ are widened ×{birge:.2f} (Birge ratio) and the result is not confident"
         )
-    if f.branch:
-        notes.append(f.branch + "; the result is not confident")
+    tilt_sigma = max(angles["roll_sigma_deg"], angles["pitch_sigma_deg"]) * birge
+    doubts = _doubts(f.branch, tilt_sigma, None if f.noise_known else f.dof)
+    notes += [d + "; the result is not confident" for d in doubts]
     pitch = angles["pitch_deg"]
     if abs(pitch) > GIMBAL_LOCK_PITCH_DEG:
         notes.append(
@@ -226,8 +230,27 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
         unexplained=[u.to_dict() for u in loop.unexplained],
         diagnostics=[d.to_dict() for d in loop.findings],
         effects=effect_values(f),
-        confident=not loop.unexplained and f.branch is None,
+        confident=not loop.unexplained and not doubts,
     )
+
+
+def _doubts(branch: str | None, tilt_sigma_deg: float, noise_dof: int | None) -> list[str]:
+    """Reasons, besides unexplained structure, why an answer is not to be trusted as it stands.
+
+    ``noise_dof``: the degrees of freedom the stop noise was estimated from (None: the table gave it).
+    """
+    out = [branch] if branch else []
+    if tilt_sigma_deg > MAX_CONFIDENT_TILT_SIGMA_DEG:
+        out.append(
+            f"the tilt is uncertain by {tilt_sigma_deg:.3g}° (1σ; over {MAX_CONFIDENT_TILT_SIGMA_DEG:g}°): more stops, "
+            "a steeper slope or a quieter sensor would pin it down"
+        )
+    if noise_dof is not None and noise_dof < MIN_NOISE_DOF:
+        out.append(
+            f"the stop noise is estimated from only {noise_dof} residual degrees of freedom, so the σ themselves are "
+            "uncertain: add stops, or give each stop's noise (sx, sy, sz, n)"
+        )
+    return out
 
 
 def _angles(table: StopTable, f: full.Fit, opts: Options) -> dict[str, Any]:
@@ -370,6 +393,8 @@ def _paper(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrat
     elif sig[2] > opts.max_yaw_sigma_deg:
         yaw_reason = f"yaw 1σ {sig[2]:.3g}° exceeds the limit {opts.max_yaw_sigma_deg:g}°: slope too small"
     slope = None if est.slope_rad is None else float(np.degrees(est.slope_rad))
+    doubts = _doubts(None, float(max(sig[0], sig[1])), None if table.cov_s is not None else 3 * len(table) - 4)
+    notes += [d + "; the result is not confident" for d in doubts]
     if est.slope_rad is None:
         notes.append(
             f"step 2 failed: cos α = {est.cos_slope:.6f} > 1 from the opposite-heading pairs (a vertical bias, scale "
@@ -407,6 +432,7 @@ def _paper(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrat
         model_selection={"mode": "fixed", "chosen": list(BASE)},
         provenance=_provenance(table, "paper", BASE),
         notes=tuple(notes),
+        confident=not doubts,
     )
 
 

@@ -190,6 +190,14 @@ def stop_table_from_frame(
     if BETA in df.columns and headings != "none":
         beta = np.radians(_numeric(df, [BETA], source)[:, 0])
     cov = None
+    noise_columns = [c for c in (*STD, COUNT) if c in df.columns]
+    if noise_columns and not all(c in df.columns for c in STD):
+        raise InputError(
+            source,
+            f"the stop noise as {', '.join(STD)} together (and optionally {COUNT})",
+            f"only {', '.join(noise_columns)}",
+            f"Add the missing ones, or drop {', '.join(noise_columns)} to estimate the noise from the residuals.",
+        )
     if all(c in df.columns for c in STD):
         std = _numeric(df, list(STD), source) * scale
         count = _numeric(df, [COUNT], source)[:, 0] if COUNT in df.columns else np.ones(len(df))
@@ -218,6 +226,14 @@ def stop_table_from_frame(
     def optional(name: str) -> FloatArray | None:
         return _numeric(df, [name], source)[:, 0] if name in df.columns else None
 
+    lat = optional(LAT)
+    if lat is not None and np.any(np.abs(lat) > 90):
+        raise InputError(
+            source,
+            f"{LAT} within ±90°",
+            f"{lat[np.argmax(np.abs(lat))]:g} in rows {_rows(np.flatnonzero(np.abs(lat) > 90))}",
+            "Fix the latitudes (degrees north), or drop the column to assume standard gravity.",
+        )
     return StopTable(
         acc_s=acc,
         beta_rad=beta,
@@ -226,7 +242,7 @@ def stop_table_from_frame(
         temperature_c=optional(TEMPERATURE),
         t_s=optional(TIME),
         site=df[SITE].astype(str).to_numpy() if SITE in df.columns else None,
-        lat_deg=optional(LAT),
+        lat_deg=lat,
         alt_m=optional(ALT),
         lon_deg=optional(LON),
         source=source,

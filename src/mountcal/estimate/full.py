@@ -23,7 +23,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from mountcal.conventions import FloatArray, skew
-from mountcal.errors import FitFailed
+from mountcal.errors import FitFailed, NotEnoughInformation
 from mountcal.estimate.geometry import in_plane_azimuth, level_rotation, phase_yaw, plane_normal, with_yaw
 from mountcal.stoptable import StopTable
 
@@ -235,6 +235,12 @@ def fit(
 ) -> Fit:
     """Maximum-likelihood estimate of the given terms (``rotation`` and ``slope`` always)."""
     model = StaticModel(table, terms, g_mps2)
+    if table.cov_s is None and 3 * len(table) <= len(model.names):
+        raise NotEnoughInformation(
+            f"{table.source}: {len(table)} stops give {3 * len(table)} values and the model {', '.join(terms)} has "
+            f"{len(model.names)} parameters, so none are left to estimate the stop noise from. Add stops, fit fewer "
+            "terms, or give each stop's noise (the sx, sy, sz, n columns)."
+        )
     state = adapt(start if start is not None else initial_state(table, g_mps2), table, terms, g_mps2)
     state, iterations = _levenberg_marquardt(model, state, max_iter)
     state = _canonical(state, table)
