@@ -1,6 +1,6 @@
 """Monte Carlo accuracy of the paper's method and the full estimator in the paper's scenario.
 
-MODEL.md §3 (γ = 5°, θ = 6°, φ = 7°, α = 5°, 12 headings 30° apart, stop noise 0.001 g per axis),
+docs/conventions.md §3 (γ = 5°, θ = 6°, φ = 7°, α = 5°, 12 headings 30° apart, stop noise 0.001 g per axis),
 without a bias and with an unknown 20 mg bias in a random direction. For each: RMS error of roll,
 pitch, yaw and slope beside the Cramér–Rao bound, coverage of the ±1.96σ intervals, and how often
 ``--model auto`` fits the bias.

@@ -1,6 +1,6 @@
 """Model choice at scale: calibrate time of ``--model auto`` against a fixed model, 10² to 10⁵ stops.
 
-The paper's scenario (MODEL.md §3) repeated around the circle until the table holds n stops, with
+The paper's scenario (docs/conventions.md §3) repeated around the circle until the table holds n stops, with
 a 20 mg bias and the temperature logged (a 20 °C ramp, no drift): the loop has to add ``bias``,
 then try ``temperature``, ``scale``, ``gravity`` and the outlier test against it and turn them
 down. With ``three sites`` the stops also carry a site column (a, b, c in turn, all on the one

@@ -48,7 +48,7 @@ def simulate_drive(n: int, rate_hz: float, seed: int = 0) -> dict[str, np.ndarra
     a_lat = 12.0 * yaw_rate
     f_v = np.stack([a_long, a_lat, np.full(n, 9.80665)], axis=1)
     f_v += 0.08 * np.sin(2 * np.pi * 31.0 * t)[:, None]  # engine vibration
-    # mounting: roll 5°, pitch 6°, yaw 7° (MODEL.md §3), R_vs = Rz Ry Rx; a_s = R_vsᵀ f_v
+    # mounting: roll 5°, pitch 6°, yaw 7° (docs/conventions.md §3), R_vs = Rz Ry Rx; a_s = R_vsᵀ f_v
     g, th, ph = np.radians([5.0, 6.0, 7.0])
     rx = np.array([[1, 0, 0], [0, np.cos(g), -np.sin(g)], [0, np.sin(g), np.cos(g)]])
     ry = np.array([[np.cos(th), 0, np.sin(th)], [0, 1, 0], [-np.sin(th), 0, np.cos(th)]])

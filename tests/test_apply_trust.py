@@ -44,7 +44,7 @@ def up_of(rot: Rotation) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def noyaw() -> Calibration:
-    """Stops with relative headings: tilt determined, yaw not (MODEL.md §4)."""
+    """Stops with relative headings: tilt determined, yaw not (docs/conventions.md §4)."""
     table, _ = simulate_stops(roll_deg=5.0, pitch_deg=6.0, yaw_deg=37.0, slope_deg=5.0, headings="relative", seed=2)
     cal = calibrate(table)
     assert cal.yaw_deg is None and cal.yaw_reason

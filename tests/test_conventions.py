@@ -1,4 +1,4 @@
-"""One test per physical fact of MODEL.md §1–2."""
+"""One test per physical fact of docs/conventions.md §1–2."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Recovery of a known truth by the paper's method and the full estimator (MODEL.md §3–5)."""
+"""Recovery of a known truth by the paper's method and the full estimator (docs/conventions.md §3–5)."""
 
 from __future__ import annotations
 

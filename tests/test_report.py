@@ -32,7 +32,7 @@ BIAS_20MG = np.array([20.0, -10.0, 15.0]) * 1e-3 * 9.80665
 
 @pytest.fixture(scope="module")
 def paper_scenario() -> tuple[StopTable, Calibration]:
-    """The paper's scenario (MODEL.md §3) with stop temperatures, calibrated by the full method."""
+    """The paper's scenario (docs/conventions.md §3) with stop temperatures, calibrated by the full method."""
     table, _ = simulate_stops(seed=1, temperature_c=np.linspace(5.0, 25.0, 12))
     return table, calibrate(table)
 
@@ -191,7 +191,7 @@ def _axes_labelled_with_units(fig: Figure) -> None:
 
 
 def test_fitted_circle_passes_through_the_fitted_stops() -> None:
-    """MODEL.md §2: the fitted stop positions lie on R_vsᵀ f_v(α, β) + b, the circle drawn in 3-D."""
+    """docs/conventions.md §2: the fitted stop positions lie on R_vsᵀ f_v(α, β) + b, the circle drawn in 3-D."""
     table, _ = simulate_stops(seed=5, slope_deg=12.0, bias_mps2=BIAS_20MG)
     cal = calibrate(table, Options(model="rotation,slope,bias"))
     on_circle = figures.fitted_circle_s(cal, table.beta_rad)  # type: ignore[arg-type]

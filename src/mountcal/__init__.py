@@ -1,6 +1,6 @@
 """mountcal: how an accelerometer or IMU is mounted in a vehicle, with honest uncertainties.
 
-Conventions (MODEL.md §1–2; the only code that converts angles is :mod:`mountcal.conventions`):
+Conventions (docs/conventions.md §1–2; the only code that converts angles is :mod:`mountcal.conventions`):
 
 - Sensor frame ``s``: the accelerometer axes as logged, right-handed, SI units (m/s², rad/s, s).
 - Vehicle frame ``v``: ISO 8855, x forward, y left, z up.

@@ -6,7 +6,7 @@
 - ``method="paper"``: the paper's closed form (:mod:`mountcal.estimate.paper`), for comparison.
 
 Yaw is reported only when the headings are measured from the uphill direction and the slope
-makes it precise enough (MODEL.md §4); otherwise it is None with the reason.
+makes it precise enough (docs/conventions.md §4); otherwise it is None with the reason.
 """
 
 from __future__ import annotations
@@ -143,7 +143,7 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
     if any(d["effect"] == "bias" and ("separable" in d["why"] or "confounded" in d["why"]) for d in loop.declined):
         notes.append(
             "a constant accelerometer bias cannot be told from a tilt with these stops: if the sensor has a "
-            "bias b, roll and pitch are off by up to b/g (20 mg → 1.1°) beyond their σ (MODEL.md §4)"
+            "bias b, roll and pitch are off by up to b/g (20 mg → 1.1°) beyond their σ (docs/conventions.md §4)"
         )
     birge = 1.0
     if loop.unexplained:

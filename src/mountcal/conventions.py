@@ -1,4 +1,4 @@
-"""Frames, angles, signs and gravity: MODEL.md §1–2, written once.
+"""Frames, angles, signs and gravity: docs/conventions.md §1–2, written once.
 
 This is the only module that converts between rotations and Euler angles.
 
@@ -37,7 +37,7 @@ CONVENTIONS = {
 
 
 def rot_vs_from_angles(roll_rad: float, pitch_rad: float, yaw_rad: float) -> Rotation:
-    """The mounting rotation from roll γ, pitch θ, yaw φ in radians (MODEL.md §1)."""
+    """The mounting rotation from roll γ, pitch θ, yaw φ in radians (docs/conventions.md §1)."""
     return Rotation.from_euler(EULER_SEQUENCE, [yaw_rad, pitch_rad, roll_rad])
 
 
@@ -76,7 +76,7 @@ def levelled(rot_vs: Rotation) -> Rotation:
 
 
 def specific_force_v(slope_rad: float, beta_rad: ArrayLike, g: float = G_N) -> FloatArray:
-    """Static specific force in the vehicle frame, parked at heading β on slope α (MODEL.md §2).
+    """Static specific force in the vehicle frame, parked at heading β on slope α (docs/conventions.md §2).
 
     Returns
     -------
@@ -89,7 +89,7 @@ def specific_force_v(slope_rad: float, beta_rad: ArrayLike, g: float = G_N) -> F
 
 
 def tilt_from_normal(normal_s: FloatArray) -> tuple[float, float]:
-    """Roll γ and pitch θ in radians from the vehicle's z axis in sensor coordinates (MODEL.md §3.3)."""
+    """Roll γ and pitch θ in radians from the vehicle's z axis in sensor coordinates (docs/conventions.md §3.3)."""
     n = normal_s / np.linalg.norm(normal_s)
     return float(np.arctan2(n[1], n[2])), float(-np.arcsin(np.clip(n[0], -1.0, 1.0)))
 

@@ -3,7 +3,7 @@
 Every test compares the whitened residuals with a structure they would show if an effect were
 missing — harmonics against heading, trends against time, temperature and stop order, offsets
 per site, the norm against g, single stops that the others do not predict — and returns its size
-and its p-value. MODEL.md §6 lists the effects these point at.
+and its p-value. docs/conventions.md §6 lists the effects these point at.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Closing the loop: from a residual to the effect the model lacks, and back (MODEL.md §6).
+"""Closing the loop: from a residual to the effect the model lacks, and back (docs/conventions.md §6).
 
 Starting from the base model (rotation, slope), each round tries every effect the table can
 support — ``bias``, ``temperature`` (needs temperatures), ``gravity`` (fitted only when no

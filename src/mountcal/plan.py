@@ -1,6 +1,6 @@
 """Plan a parking session from the Cramér–Rao bound: how many stops, which headings, how long, what slope.
 
-The bound of the chosen model (MODEL.md §5) is evaluated for evenly spaced headings at a nominal
+The bound of the chosen model (docs/conventions.md §5) is evaluated for evenly spaced headings at a nominal
 mounting (aligned sensor; the σ of roll, pitch and yaw about the vehicle axes hardly depend on it).
 Noise assumption: the accelerometer noise is white, so a stop mean averages it down to
 ``σ_mean = σ_sample / √(rate · t_avg)``, where ``t_avg = dwell − 2·trim`` is what stop detection keeps

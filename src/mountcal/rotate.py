@@ -1,4 +1,4 @@
-"""Apply a calibration: sensor-frame data into the vehicle frame and back (MODEL.md §1).
+"""Apply a calibration: sensor-frame data into the vehicle frame and back (docs/conventions.md §1).
 
 ``acc_v = R_vs · (acc_s − b)`` removes the fitted bias (when the calibration carries one) and
 rotates; ``acc_s = R_vsᵀ · acc_v + b`` undoes it. Angular rates are only rotated.

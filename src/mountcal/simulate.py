@@ -1,6 +1,6 @@
 """A simulator of static parking sessions: one truth generator for tests, notebooks and users.
 
-The measurement model is MODEL.md §2 with the optional effects of §6::
+The measurement model is docs/conventions.md §2 with the optional effects of §6::
 
     a_s,i = M · R_vsᵀ · f_v(α, β_i; g) + b + k · (T_i − T_ref) + d_i + n_i
 
@@ -18,7 +18,7 @@ from scipy.spatial.transform import Rotation
 from mountcal.conventions import G_N, FloatArray, angles_from_rot_vs, rot_vs_from_angles, specific_force_v
 from mountcal.stoptable import Headings, StopTable
 
-ZHANG2011 = {  # the paper's simulation (its Table 1), MODEL.md §3
+ZHANG2011 = {  # the paper's simulation (its Table 1), docs/conventions.md §3
     "roll_deg": 5.0,
     "pitch_deg": 6.0,
     "yaw_deg": 7.0,
@@ -78,7 +78,7 @@ def simulate_stops(
     Parameters
     ----------
     roll_deg, pitch_deg, yaw_deg : float
-        Mounting angles (MODEL.md §1); ignored when ``rot_vs`` is given.
+        Mounting angles (docs/conventions.md §1); ignored when ``rot_vs`` is given.
     slope_deg : float
         Slope α of the parking plane.
     beta_deg : array_like, shape (n,)

@@ -3,7 +3,7 @@
 A drive is a random but realistic sequence of manoeuvres — launches from standstill, cruising with
 gentle speed changes and curves, braking to a stop, slow 90° turns at junctions — on a road whose
 grade and cross slope vary with the distance travelled. The body pitches and rolls on its
-suspension with the longitudinal and lateral acceleration. The IMU sees (MODEL.md §1)::
+suspension with the longitudinal and lateral acceleration. The IMU sees (docs/conventions.md §1)::
 
     acc_s = R_vsᵀ · f_v + b + n,      gyro_s = R_vsᵀ · ω_v + b_ω + n_ω
 
@@ -125,7 +125,7 @@ def simulate_drive(
     Parameters
     ----------
     roll_deg, pitch_deg, yaw_deg : float
-        Mounting angles (MODEL.md §1); ignored when ``rot_vs`` is given.
+        Mounting angles (docs/conventions.md §1); ignored when ``rot_vs`` is given.
     duration_s, rate_hz : float
         Length of the drive and IMU sample rate (100–200 Hz is typical).
     noise_mps2, vibration_mps2 : float

@@ -59,7 +59,7 @@ class StopTable:
     beta_rad : ndarray, shape (n,), or None
         Heading of each stop in radians; None when unknown.
     headings : {"uphill", "relative", "none"}
-        "uphill": β is measured from the slope's uphill direction (MODEL.md §2), so yaw is
+        "uphill": β is measured from the slope's uphill direction (docs/conventions.md §2), so yaw is
         observable; "relative": β has an unknown common offset, so yaw is not; "none": no β.
     cov_s : ndarray, shape (n, 3, 3), or None
         Covariance of each stop mean, (m/s²)², when the table gives sample spreads and counts.

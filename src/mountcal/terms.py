@@ -1,6 +1,6 @@
 """The terms ``--model`` can name: the one list behind the parser, the CLI help, errors and README.
 
-Each term is an effect of the static model (MODEL.md §6, :mod:`mountcal.estimate.full`) with the
+Each term is an effect of the static model (docs/conventions.md §6, :mod:`mountcal.estimate.full`) with the
 stop-table column it needs, if any. ``surface`` (a random road tilt per stop) is not here: it
 changes the noise model, and only the automatic selection, which fits its size, adds it.
 """

@@ -1,4 +1,4 @@
-"""Cramér–Rao bounds of the angles for a stop set and a model (MODEL.md §5)."""
+"""Cramér–Rao bounds of the angles for a stop set and a model (docs/conventions.md §5)."""
 
 from __future__ import annotations
 

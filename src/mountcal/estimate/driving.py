@@ -7,7 +7,7 @@ vehicle's x axis exactly as much as the speed changes. The estimator:
 
 1. **Levels** the accelerometer with the tilt of a static calibration when one is given, else with
    the mean gravity direction while moving; yaw is the rotation about the vehicle's z axis after
-   that tilt, ``R_vs = Rz(yaw) · R_tilt`` (MODEL.md §1), so it is insensitive to small tilt errors
+   that tilt, ``R_vs = Rz(yaw) · R_tilt`` (docs/conventions.md §1), so it is insensitive to small tilt errors
    (they shift the horizontal components by constants, which step 3 removes).
 2. **Cuts the drive into intervals** between speed samples about ``interval_s`` apart. Over each,
    the speed change ``Δv/T`` and the mean levelled horizontal specific force ``ΔU/T`` (the exact
@@ -860,7 +860,7 @@ def driving_calibration(
         "whose σ assume the route's mean grade and cross slope are 0 ± "
         f"{fit.options.road_grade_sigma_deg:g}° and 0 ± {fit.options.road_cross_slope_sigma_deg:g}°",
         "an accelerometer bias b tilts the mean gravity by b/g (20 mg → 1.1°) and cannot be told from a tilt "
-        "while driving; parked stops on a slope can (MODEL.md §4)",
+        "while driving; parked stops on a slope can (docs/conventions.md §4)",
         "slope: not applicable (no parked stops)",
         *fit.notes,
     ]

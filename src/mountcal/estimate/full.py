@@ -1,6 +1,6 @@
-"""Maximum-likelihood fit of the static model on SO(3) (MODEL.md §2, §4–6).
+"""Maximum-likelihood fit of the static model on SO(3) (docs/conventions.md §2, §4–6).
 
-Model, with the optional effects of MODEL.md §6 (each a *term*)::
+Model, with the optional effects of docs/conventions.md §6 (each a *term*)::
 
     a_s,i = (I + E) · R_vsᵀ · f_v(α_site(i), β_i; g) + b + k · (T_i − T̄) + n_i,   n_i ~ N(0, Σ_i)
 
@@ -305,7 +305,7 @@ BRANCH_DCHI2 = 9.0  # a likelihood ratio of ~100:1 between the two branches
 
 
 def _unphysical(state: State) -> bool:
-    """A slope outside [0°, 90°): the vehicle's up axis pointing down (MODEL.md §1: +g up), or, with
+    """A slope outside [0°, 90°): the vehicle's up axis pointing down (docs/conventions.md §1: +g up), or, with
     headings from uphill, a negative slope (the headings would be measured from downhill)."""
     return bool(np.any(np.cos(state.slope_rad) <= 0) or np.any(state.slope_rad < 0))
 
@@ -356,7 +356,7 @@ def _nonnegative(state: State, table: StopTable) -> State:
 
 
 def _force(alpha: FloatArray, beta: FloatArray, g: float) -> FloatArray:
-    """f_v for per-stop slopes α_i, shape (n, 3) (MODEL.md §2)."""
+    """f_v for per-stop slopes α_i, shape (n, 3) (docs/conventions.md §2)."""
     sa, ca = np.sin(alpha), np.cos(alpha)
     return g * np.column_stack([sa * np.cos(beta), -sa * np.sin(beta), ca])
 

@@ -1,4 +1,4 @@
-"""Closed-form geometry of the stop circle (MODEL.md §2–3): plane normal, tilt, in-plane phase.
+"""Closed-form geometry of the stop circle (docs/conventions.md §2–3): plane normal, tilt, in-plane phase.
 
 Used by the paper's method and to start the maximum-likelihood fit.
 """

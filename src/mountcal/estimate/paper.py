@@ -1,4 +1,4 @@
-"""The paper's method (Zhang, Chai, Luo, Liu 2011), faithfully, in MODEL.md's conventions (§3).
+"""The paper's method (Zhang, Chai, Luo, Liu 2011), faithfully, in docs/conventions.md's conventions (§3).
 
 1. Algebraic least-squares plane ``A x + B y + C z = 1`` through the stop means → normal n_s.
 2. Slope from pairs of opposite headings: ``cos α = |a(β) + a(β+180°)| / (2g)``, averaged.

@@ -2,7 +2,7 @@
 
 When the stops point gravity along many sensor directions (the six-position test, a hand-held
 session) the mounting is not the question: each stop has its own orientation and only its
-magnitude is known. The model (MODEL.md §6, the M matrix) is
+magnitude is known. The model (docs/conventions.md §6, the M matrix) is
 
     | (I + E)⁻¹ (a_i − b) | = g,   E symmetric (its antisymmetric part is a rotation),
 

@@ -3,8 +3,8 @@
 Every function returns a :class:`matplotlib.figure.Figure` built without pyplot: no global state,
 no display; it renders with the Agg canvas (PNG) or as SVG. Axes carry units, angles are in
 degrees, residuals in mm/s² (with mg on the right-hand axis), and every estimate is drawn with its
-1σ error bar. Frames and signs follow MODEL.md: stop means are sensor-frame specific force, the
-fitted circle is ``R_vsᵀ f_v(α, β) + b`` (MODEL.md §2).
+1σ error bar. Frames and signs follow docs/conventions.md: stop means are sensor-frame specific force, the
+fitted circle is ``R_vsᵀ f_v(α, β) + b`` (docs/conventions.md §2).
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ _NICE = (1, 2, 5)
 
 
 def fitted_circle_s(cal: Calibration, beta_rad: FloatArray) -> FloatArray:
-    """Points of the fitted circle in the sensor frame, ``R_vsᵀ f_v(α, β) + b`` (MODEL.md §2).
+    """Points of the fitted circle in the sensor frame, ``R_vsᵀ f_v(α, β) + b`` (docs/conventions.md §2).
 
     Parameters
     ----------

@@ -200,8 +200,8 @@ def _angles_section(cal: Calibration) -> str:
     axes = ", ".join(f"{axis}: {'not determined' if s is None else f'{s:.3g}°'}" for axis, s in about.items())
     extra = (
         f'<p class="small">Rotation uncertainty about the vehicle axes (1σ) — {escape(axes)}. Angles follow '
-        "MODEL.md: <code>R_vs = Rz(yaw)·Ry(pitch)·Rx(roll)</code> maps sensor to vehicle coordinates "
-        "(ISO 8855: x forward, y left, z up).</p>"
+        "mountcal's conventions (docs/conventions.md): <code>R_vs = Rz(yaw)·Ry(pitch)·Rx(roll)</code> maps "
+        "sensor to vehicle coordinates (ISO 8855: x forward, y left, z up).</p>"
         if any(s is not None for s in cal.rotation_sigma_deg)
         else ""
     )
