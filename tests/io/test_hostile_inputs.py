@@ -383,3 +383,26 @@ def test_the_fuzzer_flips_that_crashed_asammdf_are_refused(
     args = ["--dbc", str(real_data / "canedge" / "dbc" / "gnss.dbc"), "-o", str(tmp_path / "out.csv")]
     assert_refused(*run_cli(command, str(log), *(args if command == "stops" else [])), str(log), "DataBytes")
     assert not (tmp_path / "out.csv").exists()
+
+
+@pytest.mark.parametrize("command", ["stops", "calibrate"])
+def test_the_desk_log_with_times_far_apart_finds_no_stop_and_says_why(
+    real_data: Path, tmp_path: Path, command: str
+) -> None:
+    """Found by benchmarks/fuzz_mutations.py --seed 2 (case 232): a size field of the desk log set
+    to 1.66·10¹⁸ leaves it readable with samples 10⁷ s apart; stop detection failed with an
+    IndexError (and, before that, took one-sample windows of zero spread for stops)."""
+    data = bytearray((real_data / DESK_MF4).read_bytes())
+    struct.pack_into("<Q", data, 5200, 1656215971714665311)
+    log = tmp_path / "sizes.MF4"
+    log.write_bytes(bytes(data))
+    out = tmp_path / "out"
+    code, stderr, peak = run_cli(
+        command, str(log), "--dbc", str(real_data / "canedge" / "dbc" / "gnss.dbc"), "-o", str(out)
+    )
+    assert code == 3, stderr  # not enough information, as for any log without parked periods
+    assert "Traceback" not in stderr, stderr
+    for word in (str(log), "no parked period", "not judged still"):
+        assert word in stderr, stderr
+    assert peak < RSS_BOUND_MB
+    assert not out.exists()
