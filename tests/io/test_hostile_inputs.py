@@ -406,3 +406,32 @@ def test_the_desk_log_with_times_far_apart_finds_no_stop_and_says_why(
         assert word in stderr, stderr
     assert peak < RSS_BOUND_MB
     assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("field", "fmt", "value"),
+    [(8, "<Q", 103), (80, "<Q", 127908 * 1000), (96, "<I", 1 << 20)],
+    ids=["block length 104 -> 103", "record count x1000", "record of 1 MiB"],
+)
+def test_mf4_channel_group_stating_more_records_than_its_data_is_refused(
+    tmp_path: Path, field: int, fmt: str, value: int
+) -> None:
+    """Found by benchmarks/fuzz_mutations.py --seed 3 (case 90): the CAN channel group block of
+    data/parking.mf4 (python-can's MF4Writer) one byte shorter made asammdf read a record size
+    of 1.3 GB and the count from the wrong bytes; it then allocated 1.4 GB over 24 s."""
+    from asammdf import MDF
+
+    source = REPO / "data" / "parking.mf4"
+    mdf = MDF(source)
+    cg = mdf.groups[0].channel_group
+    address, cycles, record = int(cg.address), int(cg.cycles_nr), int(cg.samples_byte_nr)
+    mdf.close()
+    data = bytearray(source.read_bytes())
+    assert data[address : address + 4] == b"##CG"
+    assert struct.unpack_from("<QI", data, address + 80)[0] == cycles
+    assert struct.unpack_from("<I", data, address + 96)[0] == record
+    struct.pack_into(fmt, data, address + field, value)
+    log = tmp_path / "cg.mf4"
+    log.write_bytes(bytes(data))
+    code, stderr, peak = run_cli("inspect", str(log))
+    assert_refused(code, stderr, peak, str(log), "channel group stating")

@@ -897,11 +897,20 @@ def _iter_mf4(path: Path, keep: _Filter, max_frames: int) -> Iterator[CanFrames]
 
 
 def _check_mf4_blocks(path: Path, group: Any) -> None:
-    """Refuse a data block stating more than the block limit before asammdf inflates it."""
+    """Refuse a data block stating more than the block limit before asammdf inflates it, and a
+    channel group stating more record bytes than its data blocks hold (a damaged record size or
+    count: asammdf would allocate what it states)."""
+    total = 0
     for block in group.get_data_blocks():
         if block.original_size > max_block_bytes():
             what = f"an MF4 data block (at byte {block.address})"
             raise block_too_large(str(path), what, f"one stating {block.original_size} bytes")
+        total += int(block.original_size)
+    cg = group.channel_group
+    record = int(cg.samples_byte_nr) + int(cg.invalidation_bytes_nr)
+    if int(cg.cycles_nr) * record > total:
+        found = f"a channel group stating {cg.cycles_nr} records of {record} bytes, with {total} bytes of record data"
+        raise _mf4_error(path, found)
 
 
 _VLSD = 1  # cn_type of a variable-length signal data channel (CANedge: DataBytes)
