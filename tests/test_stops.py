@@ -8,7 +8,7 @@ import pytest
 from mountcal.calibrate import calibrate
 from mountcal.io.samples import Channel, Samples
 from mountcal.simulate import ParkingLog, simulate_parking_log
-from mountcal.stops import StopDetection, beta_from_heading, detect_stops, stop_frame
+from mountcal.stops import StopDetection, beta_from_heading, detect_stops, find_stops, still_mask, stop_frame
 from mountcal.stoptable import stop_table_from_frame
 
 
@@ -80,3 +80,47 @@ def test_driving_only_gives_no_stop(log: ParkingLog) -> None:
     moving = log.speed_mps > 0.5
     s = Samples(log.t_s[moving], log.acc_s[moving], log.gyro_s[moving])
     assert detect_stops(s) == []
+
+
+def _quiet(t: np.ndarray, seed: int = 0) -> Samples:
+    """A parked sensor: gravity on z and a little noise, at times ``t``."""
+    rng = np.random.default_rng(seed)
+    return Samples(t, np.array([0.0, 0.0, 9.81]) + rng.normal(0.0, 0.01, (t.size, 3)))
+
+
+def test_a_gap_in_time_ends_a_stop(log: ParkingLog) -> None:
+    """A dropout (here 10⁷ s: damaged times) inside a parked period: no stop spans it, and the
+    samples whose window holds the gap are counted as not judged."""
+    lo, hi, _ = log.protocol[0]
+    mid = 0.5 * (lo + hi)
+    shifted = np.where(log.t_s > mid, log.t_s + 1e7, log.t_s)
+    samples = samples_of(log)
+    channels = {k: Channel(np.where(c.t_s > mid, c.t_s + 1e7, c.t_s), c.value) for k, c in samples.channels.items()}
+    search = find_stops(Samples(shifted, samples.acc_s, samples.gyro_s, channels))
+    assert search.stops
+    assert all(s.t_end_s <= mid or s.t_start_s > mid + 1e7 for s in search.stops)
+    assert any("not judged still" in k and v > 0 for k, v in search.counts.items()), search.counts
+    # the parked periods away from the gap are still found whole
+    assert len(search.stops) >= len(log.protocol) - 1
+
+
+def test_samples_far_apart_give_no_stop_and_say_why() -> None:
+    """Samples 10⁷ s apart (found by the fuzzer: a damaged MF4 size field) measure no spread over a
+    2 s window; before, every one-sample window had a spread of 0 and the whole log was a stop."""
+    samples = _quiet(np.arange(4724) * 1e7)
+    search = find_stops(samples)
+    assert search.stops == []
+    assert [v for k, v in search.counts.items() if "not judged still" in k] == [4724]
+
+
+@pytest.mark.parametrize("n", [1, 4, 50])
+def test_a_log_shorter_than_the_window_is_one_window(n: int) -> None:
+    """0.01 s steps, a 2 s window: the log is one window (it crashed with a shape error)."""
+    t = np.arange(n) * 0.01
+    quiet = still_mask(_quiet(t), StopDetection())
+    assert quiet.shape == (n,)
+    assert quiet.all() == (n >= 5)  # fewer than 5 samples measure no spread: not still
+    # one window is all the log has to set its rest noise from: a stated threshold judges motion
+    moving = Samples(t, _quiet(t).acc_s + np.random.default_rng(1).normal(0.0, 2.0, (n, 3)))
+    assert not still_mask(moving, StopDetection(max_acc_std_mps2=0.3)).any()
+    assert still_mask(_quiet(t), StopDetection(max_acc_std_mps2=0.3)).all() == (n >= 5)

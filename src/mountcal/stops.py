@@ -33,6 +33,8 @@ ACC_STD_FLOOR_WITH_SPEED = 0.3  # with a speed signal stillness rests on it: idl
 GYRO_STD_FLOOR = 0.01  # rad/s (0.57 °/s): a parked vehicle rotates less, a pulling-off one more
 GYRO_RATE_FLOOR = 0.02  # rad/s away from the gyro bias
 LSB_SAMPLES = 65_536  # samples searched for the quantisation step
+MIN_WINDOW_SAMPLES = 5  # fewer samples in a window measure no spread: nothing there is judged still
+MAX_WINDOW_SPAN = 2.0  # a window spanning more than this many window lengths holds a gap in time
 
 
 @dataclass(frozen=True)
@@ -119,13 +121,15 @@ class StopSearch:
 
 def still_mask(samples: Samples, cfg: StopDetection) -> np.ndarray:
     """Boolean mask, shape (n,), of the samples that look parked (equal stamps allowed; in time order)."""
-    return _stillness(samples, cfg, _lsb(samples.acc_s), None if samples.gyro_s is None else _lsb(samples.gyro_s))[0]
+    gyro_lsb = None if samples.gyro_s is None else _lsb(samples.gyro_s)
+    return _stillness(samples, cfg, _lsb(samples.acc_s), gyro_lsb)[0]
 
 
 def _stillness(
     samples: Samples, cfg: StopDetection, acc_lsb: FloatArray, gyro_lsb: FloatArray | None
-) -> tuple[np.ndarray, Thresholds]:
-    """The still mask and the thresholds it used.
+) -> tuple[np.ndarray, Thresholds, int]:
+    """The still mask, the thresholds it used, and how many samples could not be judged (their
+    window holds too few samples, or a gap in time: see :func:`_judged_blocks`).
 
     The moving statistics run on short blocks (≈ 1/40 of the window) rather than on every sample:
     stillness over seconds does not need the sample rate's resolution, and an hour at 200 Hz then
@@ -133,18 +137,17 @@ def _stillness(
     """
     t, acc = samples.t_s, samples.acc_s
     n = len(samples)
-    if n < 3:
-        return np.zeros(n, dtype=bool), Thresholds(cfg.max_acc_std_mps2 or ACC_STD_FLOOR, np.zeros(3), acc_lsb)
     steps = np.diff(t)
     steps = steps[steps > 0]  # stamps in pairs have a median step of 0; find_stops merges them first
-    if steps.size == 0:
-        return np.zeros(n, dtype=bool), Thresholds(cfg.max_acc_std_mps2 or ACC_STD_FLOOR, np.zeros(3), acc_lsb)
+    if n < MIN_WINDOW_SAMPLES or steps.size == 0:
+        return np.zeros(n, dtype=bool), Thresholds(cfg.max_acc_std_mps2 or ACC_STD_FLOOR, np.zeros(3), acc_lsb), n
     rate = 1.0 / float(np.median(steps))
     block = max(int(cfg.window_s * rate) // BLOCKS_PER_WINDOW, 1)
     starts = np.arange(0, n, block)
     count = np.diff(np.append(starts, n)).astype(float)[:, None]
-    w = max(round(cfg.window_s * rate / block), 1)
+    w = min(max(round(cfg.window_s * rate / block), 1), starts.size)  # a log shorter than the window: one window
     mc = _moving_mean(count, w)
+    judged = _judged_blocks(t, starts, count[:, 0], w, cfg.window_s)
 
     def moving(x: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Moving mean and std of each column over the window, per block."""
@@ -156,12 +159,13 @@ def _stillness(
     _, std = moving(acc)
     speed = samples.channels.get("speed_mps")
     has_speed = speed is not None and speed.t_s.size > 0
-    acc_rest = np.percentile(std, REST_QUANTILE, axis=0)
+    measured = judged if judged.any() else slice(None)  # the rest noise of windows that measure one
+    acc_rest = np.percentile(std[measured], REST_QUANTILE, axis=0)
     max_std = cfg.max_acc_std_mps2
     if max_std is None:  # above the rest noise, and above a quantised axis toggling between two codes (std ≤ q/2)
         floor = ACC_STD_FLOOR_WITH_SPEED if has_speed else ACC_STD_FLOOR
         max_std = max(floor, REST_FACTOR * float(acc_rest.max()), float(acc_lsb.max()))
-    still = std.max(axis=1) < max_std
+    still = (std.max(axis=1) < max_std) & judged
     if speed is not None and has_speed:
         # a block is still only if the speed is low at both of its ends
         still &= np.abs(_hold(speed, t[starts])) <= cfg.max_speed_mps
@@ -170,7 +174,7 @@ def _stillness(
     if samples.gyro_s is not None:
         g_mean, g_std = moving(samples.gyro_s)
         g_lsb = np.zeros(3) if gyro_lsb is None else gyro_lsb
-        g_rest = np.percentile(g_std, REST_QUANTILE, axis=0)
+        g_rest = np.percentile(g_std[measured], REST_QUANTILE, axis=0)
         max_g_std = cfg.max_gyro_std_rad_s
         if max_g_std is None:
             max_g_std = max(GYRO_STD_FLOOR, REST_FACTOR * float(g_rest.max()), float(g_lsb.max()))
@@ -181,7 +185,24 @@ def _stillness(
         bias = _gyro_bias(g_mean[quiet] if quiet.sum() >= w else g_mean, max_rate)
         still &= (g_std.max(axis=1) < max_g_std) & (np.linalg.norm(g_mean - bias, axis=1) < max_rate)
         found = Thresholds(max_std, acc_rest, acc_lsb, max_g_std, max_rate, bias, g_rest, g_lsb, found.speed_mps)
-    return np.repeat(still, count[:, 0].astype(int)), found
+    return np.repeat(still, count[:, 0].astype(int)), found, int(count[~judged, 0].sum())
+
+
+def _judged_blocks(t: FloatArray, starts: np.ndarray, count: FloatArray, w: int, window_s: float) -> np.ndarray:
+    """Blocks whose moving window (the ``w`` blocks :func:`_moving_mean` averages for it) holds at
+    least MIN_WINDOW_SAMPLES samples within MAX_WINDOW_SPAN window lengths of time.
+
+    A window of one or two samples has no spread, and one across a gap in the log (a dropout, or
+    damaged times) mixes moments the log does not connect: neither says the vehicle was still.
+    """
+    nb = starts.size
+    first = np.clip(np.arange(nb) - (w - 1) // 2, 0, nb - w)
+    last_block = first + w - 1
+    last_sample = np.append(starts[1:], t.size) - 1
+    span = t[last_sample[last_block]] - t[starts[first]]
+    total = np.concatenate([[0.0], np.cumsum(count)])
+    held = total[last_block + 1] - total[first]
+    return (held >= MIN_WINDOW_SAMPLES) & (span <= MAX_WINDOW_SPAN * window_s)
 
 
 def _gyro_bias(rates: FloatArray, radius: float) -> FloatArray:
@@ -227,7 +248,12 @@ def find_stops(
     logged = time_ordered(samples)  # every sample as logged, for the stops' statistics
     samples = increasing_times(logged)  # equal stamps merged, for the moving windows and the runs
     counts = {k: v - before.get(k, 0) for k, v in samples.dropped.items() if v != before.get(k, 0)}
-    still, thresholds = _stillness(samples, cfg, acc_lsb, gyro_lsb)
+    still, thresholds, unjudged = _stillness(samples, cfg, acc_lsb, gyro_lsb)
+    if unjudged:
+        counts[
+            f"samples whose {cfg.window_s:g} s window holds fewer than {MIN_WINDOW_SAMPLES} samples or a gap "
+            f"(spans over {MAX_WINDOW_SPAN * cfg.window_s:g} s): not judged still (--still-window-s)"
+        ] = unjudged
     runs = _runs(still)
     t = samples.t_s
     if windows is not None:
@@ -241,7 +267,7 @@ def find_stops(
     heading = samples.channels.get("heading_deg")
     lsb = thresholds.acc_lsb_mps2
     stops = []
-    split = pieces_dropped = 0
+    split = pieces_dropped = too_few = 0
     for i0, i1 in runs:
         pieces = [(float(t[i0]), float(t[i1 - 1]))]
         if heading is not None and heading.t_s.size:
@@ -252,6 +278,9 @@ def find_stops(
             if hi - lo < cfg.min_duration_s:
                 continue
             sel = slice(int(np.searchsorted(logged.t_s, lo)), int(np.searchsorted(logged.t_s, hi, side="right")))
+            if sel.stop - sel.start < MIN_WINDOW_SAMPLES:  # sparse samples: the trimmed span holds too few
+                too_few += 1
+                continue
             found.append(_stop_stats(logged, sel, lsb))
         if windows is not None and len(found) > 1:  # one stop per protocol row: its longest steady piece
             found = [max(found, key=lambda s: s.duration_s)]
@@ -264,6 +293,8 @@ def find_stops(
             f"still periods whose heading wandered > {cfg.max_heading_wander_deg:g}° (split; --max-heading-wander)"
         ] = split
         counts["pieces of those not kept as a stop (too short, or not the longest in a protocol row)"] = pieces_dropped
+    if too_few:
+        counts[f"still periods with fewer than {MIN_WINDOW_SAMPLES} samples once trimmed (not kept)"] = too_few
     return StopSearch(stops, thresholds, counts)
 
 
@@ -399,6 +430,8 @@ def _cov_of_mean(acc: FloatArray, lsb: FloatArray) -> FloatArray:
 
 
 def _moving_mean(x: FloatArray, w: int) -> FloatArray:
+    """Centred moving mean over ``w`` rows, the edges held; ``w`` is at most the number of rows."""
+    w = max(min(w, x.shape[0]), 1)
     c = np.cumsum(np.concatenate([np.zeros((1, *x.shape[1:])), x]), axis=0)
     m = (c[w:] - c[:-w]) / w
     pad_lo = (w - 1) // 2

@@ -290,3 +290,148 @@ def test_merging_mf4_groups_with_damaged_unsorted_times_ends_with_every_frame() 
     merged = CanFrames.concat(list(_merge_by_time([a, b])))
     assert len(merged) == 9
     assert sorted(merged.t_s[np.isfinite(merged.t_s)].tolist()) == [0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 7.0, 10.0]
+
+
+# --------------------------------------------------------------------------- MF4 variable-length data
+
+DESK_MF4 = Path("canedge") / "2F6913DB_desk_static_2022-01-06" / "00000001.MF4"
+
+
+@pytest.fixture(scope="module")
+def _desk_plain(tmp_path_factory: pytest.TempPathFactory) -> tuple[bytes, int, int] | None:
+    """The CANedge desk log saved uncompressed by asammdf (record bytes and DataBytes in the open),
+    the address of its CAN record data and of its DataBytes signal data; None without the log."""
+    from asammdf import MDF
+    from tests.conftest import REAL_DATA
+
+    if not (REAL_DATA / DESK_MF4).is_file():
+        return None
+    real_data = REAL_DATA
+    plain = tmp_path_factory.mktemp("mf4") / "desk.mf4"
+    mdf = MDF(real_data / DESK_MF4)
+    mdf.save(plain, overwrite=True, compression=0)
+    mdf.close()
+    mdf = MDF(plain)
+    try:
+        group = mdf.groups[0]
+        assert [c.name for c in group.channels][7] == "CAN_DataFrame.DataBytes"
+        assert group.channel_group.samples_byte_nr == 22 and group.channels[7].byte_offset == 14
+        (records,) = group.get_data_blocks()
+        (values,) = group.get_signal_data_blocks(7)
+        return plain.read_bytes(), int(records.address), int(values.address)
+    finally:
+        mdf.close()
+
+
+@pytest.fixture
+def desk_plain(real_data: Path, _desk_plain: tuple[bytes, int, int] | None) -> tuple[bytes, int, int]:
+    if _desk_plain is None:
+        pytest.skip(f"{DESK_MF4} not found in {real_data}")
+    return _desk_plain
+
+
+def _vlsd_offset(data: bytes | bytearray, records: int, k: int) -> int:
+    return int(struct.unpack_from("<Q", data, records + 22 * k + 14)[0])
+
+
+@pytest.mark.parametrize("damage", ["points back", "past the end", "value too long"])
+def test_mf4_data_bytes_pointing_outside_their_data_are_refused(
+    desk_plain: tuple[bytes, int, int], tmp_path: Path, damage: str
+) -> None:
+    """asammdf's C extract reads each DataBytes value where its record points, unchecked (a
+    segfault on a damaged file); mountcal checks the offsets and lengths first."""
+    plain, records, values = desk_plain
+    data = bytearray(plain)
+    k = 3000
+    if damage == "points back":
+        struct.pack_into("<Q", data, records + 22 * k + 14, _vlsd_offset(data, records, 10))
+    elif damage == "past the end":
+        struct.pack_into("<Q", data, records + 22 * k + 14, 1 << 40)
+    else:  # the value's 4-byte length field, in the signal data
+        struct.pack_into("<I", data, values + _vlsd_offset(data, records, k), 0xFFFFFF00)
+    log = tmp_path / "damaged.mf4"
+    log.write_bytes(bytes(data))
+    assert_refused(*run_cli("inspect", str(log)), str(log), "DataBytes", f"record {k}")
+
+
+def test_the_uncompressed_desk_log_reads_whole(desk_plain: tuple[bytes, int, int], tmp_path: Path) -> None:
+    """The check refuses damage only: the same file undamaged reads every frame, its payloads intact."""
+    plain, records, values = desk_plain
+    log = tmp_path / "desk.mf4"
+    log.write_bytes(plain)
+    frames = read_frames(log)
+    assert len(frames) == 5588
+    # frame 3000's payload is the bytes its record points to (records are in time order in this log)
+    offset = _vlsd_offset(plain, records, 3000)
+    (length,) = struct.unpack_from("<I", plain, values + offset)
+    k = int(np.argmin(np.abs(np.argsort(frames.t_s, kind="stable") - 3000)))
+    assert bytes(frames.data[k, :length]) == plain[values + offset + 4 : values + offset + 4 + length]
+
+
+@pytest.mark.parametrize("bits", [(822718, 1607624), (651235, 1072630)])
+@pytest.mark.parametrize("command", ["inspect", "stops"])
+def test_the_fuzzer_flips_that_crashed_asammdf_are_refused(
+    real_data: Path, tmp_path: Path, bits: tuple[int, int], command: str
+) -> None:
+    """Found by benchmarks/fuzz_mutations.py --seed 2 (cases 104 and 152): two flipped bits in the
+    desk log killed every command with SIGSEGV in asammdf's extract."""
+    data = bytearray((real_data / DESK_MF4).read_bytes())
+    for bit in bits:
+        data[bit // 8] ^= 1 << (bit % 8)
+    log = tmp_path / "flipped.MF4"
+    log.write_bytes(bytes(data))
+    args = ["--dbc", str(real_data / "canedge" / "dbc" / "gnss.dbc"), "-o", str(tmp_path / "out.csv")]
+    assert_refused(*run_cli(command, str(log), *(args if command == "stops" else [])), str(log), "DataBytes")
+    assert not (tmp_path / "out.csv").exists()
+
+
+@pytest.mark.parametrize("command", ["stops", "calibrate"])
+def test_the_desk_log_with_times_far_apart_finds_no_stop_and_says_why(
+    real_data: Path, tmp_path: Path, command: str
+) -> None:
+    """Found by benchmarks/fuzz_mutations.py --seed 2 (case 232): a size field of the desk log set
+    to 1.66·10¹⁸ leaves it readable with samples 10⁷ s apart; stop detection failed with an
+    IndexError (and, before that, took one-sample windows of zero spread for stops)."""
+    data = bytearray((real_data / DESK_MF4).read_bytes())
+    struct.pack_into("<Q", data, 5200, 1656215971714665311)
+    log = tmp_path / "sizes.MF4"
+    log.write_bytes(bytes(data))
+    out = tmp_path / "out"
+    code, stderr, peak = run_cli(
+        command, str(log), "--dbc", str(real_data / "canedge" / "dbc" / "gnss.dbc"), "-o", str(out)
+    )
+    assert code == 3, stderr  # not enough information, as for any log without parked periods
+    assert "Traceback" not in stderr, stderr
+    for word in (str(log), "no parked period", "not judged still"):
+        assert word in stderr, stderr
+    assert peak < RSS_BOUND_MB
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("field", "fmt", "value"),
+    [(8, "<Q", 103), (80, "<Q", 127908 * 1000), (96, "<I", 1 << 20)],
+    ids=["block length 104 -> 103", "record count x1000", "record of 1 MiB"],
+)
+def test_mf4_channel_group_stating_more_records_than_its_data_is_refused(
+    tmp_path: Path, field: int, fmt: str, value: int
+) -> None:
+    """Found by benchmarks/fuzz_mutations.py --seed 3 (case 90): the CAN channel group block of
+    data/parking.mf4 (python-can's MF4Writer) one byte shorter made asammdf read a record size
+    of 1.3 GB and the count from the wrong bytes; it then allocated 1.4 GB over 24 s."""
+    from asammdf import MDF
+
+    source = REPO / "data" / "parking.mf4"
+    mdf = MDF(source)
+    cg = mdf.groups[0].channel_group
+    address, cycles, record = int(cg.address), int(cg.cycles_nr), int(cg.samples_byte_nr)
+    mdf.close()
+    data = bytearray(source.read_bytes())
+    assert data[address : address + 4] == b"##CG"
+    assert struct.unpack_from("<QI", data, address + 80)[0] == cycles
+    assert struct.unpack_from("<I", data, address + 96)[0] == record
+    struct.pack_into(fmt, data, address + field, value)
+    log = tmp_path / "cg.mf4"
+    log.write_bytes(bytes(data))
+    code, stderr, peak = run_cli("inspect", str(log))
+    assert_refused(code, stderr, peak, str(log), "channel group stating")

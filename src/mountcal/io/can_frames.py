@@ -885,6 +885,7 @@ def _iter_mf4(path: Path, keep: _Filter, max_frames: int) -> Iterator[CanFrames]
             raise _mf4_error(path, "no CAN_DataFrame channel group (not a bus log)")
         for g in groups:
             _check_mf4_blocks(path, mdf.groups[g])
+            _check_mf4_vlsd(path, mdf, g)
         start = float(mdf.header.start_time.timestamp())
         sources = [_mf4_records(path, mdf, g, start, keep, max_frames) for g in groups]
         if len(sources) == 1:
@@ -896,11 +897,79 @@ def _iter_mf4(path: Path, keep: _Filter, max_frames: int) -> Iterator[CanFrames]
 
 
 def _check_mf4_blocks(path: Path, group: Any) -> None:
-    """Refuse a data block stating more than the block limit before asammdf inflates it."""
+    """Refuse a data block stating more than the block limit before asammdf inflates it, and a
+    channel group stating more record bytes than its data blocks hold (a damaged record size or
+    count: asammdf would allocate what it states)."""
+    total = 0
     for block in group.get_data_blocks():
         if block.original_size > max_block_bytes():
             what = f"an MF4 data block (at byte {block.address})"
             raise block_too_large(str(path), what, f"one stating {block.original_size} bytes")
+        total += int(block.original_size)
+    cg = group.channel_group
+    record = int(cg.samples_byte_nr) + int(cg.invalidation_bytes_nr)
+    if int(cg.cycles_nr) * record > total:
+        found = f"a channel group stating {cg.cycles_nr} records of {record} bytes, with {total} bytes of record data"
+        raise _mf4_error(path, found)
+
+
+_VLSD = 1  # cn_type of a variable-length signal data channel (CANedge: DataBytes)
+
+
+def _check_mf4_vlsd(path: Path, mdf: Any, index: int) -> None:
+    """Refuse variable-length data whose records point outside it, before asammdf reads it.
+
+    asammdf's C ``extract`` copies each value at the offset its record states without a bounds
+    check: a damaged offset or length would make it read past its buffer (a segfault). A sound
+    file has each record's offset, ascending, at a 4-byte length and that many bytes inside the
+    channel's signal data.
+    """
+    group = mdf.groups[index]
+    for ch_nr, channel in enumerate(group.channels):
+        if channel.channel_type != _VLSD:
+            continue
+        for block in group.get_signal_data_blocks(ch_nr):
+            if block.original_size > max_block_bytes():
+                what = f"an MF4 signal data block (at byte {block.address})"
+                raise block_too_large(str(path), what, f"one stating {block.original_size} bytes")
+        try:
+            with _asammdf_quiet():
+                data, offsets = _mf4_vlsd_arrays(mdf._mdf, group, ch_nr)  # the MDF4 object under MDF
+        except Exception as err:  # asammdf reports damaged data blocks with assorted exceptions
+            raise _mf4_error(path, f"unreadable {channel.name} ({type(err).__name__}: {err})") from err
+        if not offsets.shape[0]:
+            continue
+        name = f"{channel.name} (channel group {index})"
+        size = data.shape[0]
+        outside = np.flatnonzero(offsets > size - 4) if size >= 4 else np.arange(offsets.shape[0])
+        if outside.shape[0]:
+            k = int(outside[0])
+            raise _mf4_error(path, f"{name}: record {k} points to byte {offsets[k]} of {size} bytes of signal data")
+        starts = offsets.astype(np.int64)
+        ends = starts + 4 + _field(data, starts, "<u4").astype(np.int64)
+        beyond = np.flatnonzero(ends > size)
+        if beyond.shape[0]:
+            k = int(beyond[0])
+            raise _mf4_error(path, f"{name}: record {k}'s value ends at byte {ends[k]} of {size} bytes of signal data")
+        # asammdf reads a record range's values from the data between its first and last offsets
+        descending = np.flatnonzero(starts[1:] < starts[:-1])
+        if descending.shape[0]:
+            k = int(descending[0]) + 1
+            raise _mf4_error(path, f"{name}: record {k} points back, to byte {starts[k]} after {starts[k - 1]}")
+
+
+def _mf4_vlsd_arrays(mdf4: Any, group: Any, ch_nr: int) -> tuple[NDArray[np.uint8], NDArray[np.uint64]]:
+    """A VLSD channel's signal data, and the offset into it stated by each record (read a data
+    fragment at a time, 8 bytes per record kept)."""
+    data = np.frombuffer(mdf4._load_signal_data(group, ch_nr), np.uint8)
+    record = int(group.channel_group.samples_byte_nr) + int(group.channel_group.invalidation_bytes_nr)
+    at = int(group.channels[ch_nr].byte_offset)
+    parts = [np.empty(0, "<u8")]
+    for fragment in mdf4._load_data(group):
+        rows = np.frombuffer(fragment.data, np.uint8)
+        rows = rows[: rows.shape[0] // record * record].reshape(-1, record)
+        parts.append(np.ascontiguousarray(rows[:, at : at + 8]).view("<u8").ravel())
+    return data, np.concatenate(parts)
 
 
 def _merge_by_time(sources: list[Iterator[CanFrames]]) -> Iterator[CanFrames]:
