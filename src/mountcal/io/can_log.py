@@ -358,6 +358,17 @@ def _database(dbc: str | Path | Sequence[str | Path] | Any) -> Any:
     return load_dbcs(dbc) if isinstance(dbc, str | Path | list | tuple) else dbc
 
 
+def _setup(
+    dbc: str | Path | Any, mapping: str | Path | Mapping[str, Any] | None, channel: int | None
+) -> tuple[Any, dict[str, Any], int | None]:
+    """The database, the mapping as a dict, and the IMU's channel (given, else the mapping's)."""
+    db = _database(dbc)
+    spec = _mapping_dict(mapping)
+    if channel is None and spec.get("channel") is not None:
+        channel = _int_setting(spec["channel"], "channel")
+    return db, spec, channel
+
+
 def _dbc_name(dbc: Any) -> str:
     if isinstance(dbc, str | Path):
         return str(dbc)
@@ -371,12 +382,8 @@ def _plan(
 ) -> _Plan:
     log_format(path)
     check_regular_file(path, "CAN log")
-    db = _database(dbc)
-    dbc_name = _dbc_name(dbc)
-    spec = _mapping_dict(mapping)
-    if channel is None and spec.get("channel") is not None:
-        channel = _int_setting(spec["channel"], "channel")
-    where = f"{path} with {dbc_name}"
+    db, spec, channel = _setup(dbc, mapping, channel)
+    where = f"{path} with {_dbc_name(dbc)}"
     present = _Presence(path, channel, db)
     signals = spec.get("signals") or _detect(db, present, where)
     refs = {role: _resolve(db, text, role, present, where) for role, text in signals.items()}
@@ -822,11 +829,8 @@ def samples_from_frames(
     whole session) a mapped message without frames is an error, as it is for a log; otherwise a bus
     still waiting for it gives what it has.
     """
-    db = _database(dbc)
-    spec = _mapping_dict(mapping)
-    if channel is None and spec.get("channel") is not None:
-        channel = _int_setting(spec["channel"], "channel")
-    where = f"{source} with {dbc if isinstance(dbc, str | Path) else 'the DBC'}"
+    db, spec, channel = _setup(dbc, mapping, channel)
+    where = f"{source} with {_dbc_name(dbc)}"
     present = _Presence(None, channel, db)
     on_channel = frames if channel is None else frames.take(frames.channel == channel)
     pairs = np.unique(on_channel.arbitration_id.astype(np.int64) * 2 + on_channel.is_extended)
