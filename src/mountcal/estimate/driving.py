@@ -614,7 +614,8 @@ def _fit(iv: _Intervals, opts: DrivingOptions, where: str) -> _Fit:
     if iv.a_ref.size < MIN_INTERVALS:
         raise NotEnoughInformation(
             f"{where}: only {iv.a_ref.size} usable straight intervals at ≥ {opts.min_speed_mps:g} m/s "
-            f"(need {MIN_INTERVALS}); yaw from driving needs more driving with speed changes, or relax the gates"
+            f"(need {MIN_INTERVALS}); yaw from driving needs more straight driving with speed changes "
+            "(accelerating and braking), or stops on a slope with headings (--protocol)"
         )
     u, a, lat = iv.centred()
     saa = float(a @ a)
