@@ -42,7 +42,7 @@ from mountcal.result import Calibration
 from mountcal.simulate import simulate_stops
 from mountcal.stoptable import ALT, BETA, COUNT, LAT, LON, OPTIONAL, SITE, STD, TEMPERATURE
 
-FAILURES = ("traceback", "nonfinite", "invalid", "wrong_confident")
+FAILURES = ("traceback", "nonfinite", "invalid", "wrong_confident", "crash", "hang", "over_memory")
 MAX_TILT_ERROR_DEG = 10.0
 MAX_YAW_ERROR_SIGMA = 5.0
 HEADINGS = ("uphill", "relative", "none")
@@ -318,7 +318,17 @@ def main() -> int:
             mutations = importlib.import_module("fuzz_mutations")
         except ModuleNotFoundError:
             parser.error("--mutations needs benchmarks/fuzz_mutations.py")
-        suites.append(("log mutations", args.mutations, mutations.run))
+
+        def run_mutations(count: int, seed: int, report: Report) -> None:
+            """fuzz_mutations.run (each command in its own bounded process), its counts folded in."""
+            got = mutations.run(count, seed, lambda line: print(f"  {line}", flush=True))
+            for failure in got["failures"]:
+                for problem in failure["problems"]:  # traceback, crash, hang, memory
+                    report.add({"memory": "over_memory"}.get(problem, problem), f"{failure}"[:300])
+            clean = got["commands"] - len(got["failures"])
+            report.counts["mutated-log commands without failure"] += clean
+
+        suites.append(("log mutations", args.mutations, run_mutations))
     for name, count, run in suites:
         t0 = time.perf_counter()
         before = Counter(report.counts)

@@ -95,6 +95,25 @@ SCHEMA_VISIBLE = {
 LOADER_ONLY = {"condition number as text": _set("observability.condition_number", "x")}  # the schema leaves it open
 
 
+def test_a_huge_but_finite_sigma_is_what_calibrate_may_write_and_loads_back(tmp_path: Path) -> None:
+    """Three stops without headings at an odd orientation: σ of hundreds of degrees, not confident —
+    honest, and a file both validators accept (the fuzzer found the loader refusing it)."""
+    table = pd.DataFrame(
+        {
+            "beta_deg": [0.0, 120.0, 240.0],
+            "ax": [-2.9, -2.2, -3.6],
+            "ay": [8.1, 8.9, 8.6],
+            "az": [-4.7, -3.9, -3.1],
+        }
+    )
+    table.to_csv(tmp_path / "s.csv", index=False)
+    assert main(["calibrate", str(tmp_path / "s.csv"), "--headings", "none", "-o", str(tmp_path / "r.json")]) == 0
+    doc = json.loads((tmp_path / "r.json").read_text())
+    doc["uncertainty"]["roll_deg"] = doc["uncertainty"]["rotation_about_vehicle_xyz_deg"][1] = 483.65
+    jsonschema.validate(doc, schema())
+    assert not Calibration.from_dict(doc, "huge.json").confident
+
+
 @pytest.mark.parametrize("tamper", list(SCHEMA_VISIBLE), ids=list(SCHEMA_VISIBLE))
 def test_schema_visible_tampering_is_refused_by_both_validators(made: dict[str, Path], tamper: str) -> None:
     doc = json.loads(made["bias"].read_text())
