@@ -739,6 +739,7 @@ def _open_mdf(path: Path) -> Any:
         magic = f.read(8)
     if not magic.startswith((b"MDF", b"UnFinMF")):  # CANedge writes unfinalised files
         raise _mf4_error(path, f"no MDF file identification (the file starts {magic!r})")
+    _check_mf4_channel_groups(path)
     try:
         with _asammdf_quiet():
             return MDF(path)
@@ -746,6 +747,65 @@ def _open_mdf(path: Path) -> Any:
         cause = err
     _release_quietly(cause)
     raise _mf4_error(path, f"a file asammdf cannot open ({type(cause).__name__}: {cause})") from cause
+
+
+_CG_DATA_BYTES = 32  # an MDF 4.x channel group's data section: record id, cycles, flags, sizes
+_MAX_MF4_BLOCKS = 1 << 16
+
+
+def _check_mf4_channel_groups(path: Path) -> None:
+    """Refuse channel-group blocks that asammdf would misread into a huge allocation while opening.
+
+    asammdf sizes its buffers from each channel group's record size, read at offsets that depend on
+    the block's stated length: a damaged length (or record size) makes it allocate gigabytes before
+    any of our checks run. A 4.x channel group is 24 + 8·links + 32 bytes; its record must fit the
+    block limit. Walked from the header through the data-group and channel-group chains (small reads).
+    """
+    if path.stat().st_size < 64 + 24:
+        return  # asammdf says what is wrong with a file this short
+    seen: set[int] = set()
+
+    def block(offset: int, kind: bytes) -> tuple[list[int], bytes] | None:
+        if offset in seen or len(seen) > _MAX_MF4_BLOCKS:
+            raise _mf4_error(path, f"a block chain that loops or never ends (at byte {offset})")
+        seen.add(offset)
+        f.seek(offset)
+        head = f.read(24)
+        if len(head) < 24 or head[:4] != kind:
+            return None  # not this file's layout: left to asammdf's own checks
+        length, n_links = struct.unpack_from("<QQ", head, 8)
+        if kind == b"##CG" and length != 24 + 8 * n_links + _CG_DATA_BYTES:
+            raise _mf4_error(
+                path,
+                f"a channel group stating {length} bytes at byte {offset} (with {n_links} links a "
+                f"channel group is {24 + 8 * n_links + _CG_DATA_BYTES})",
+            )
+        rest = f.read(min(length, 4096) - 24) if length >= 24 else b""
+        if len(rest) < 8 * n_links:
+            raise _mf4_error(path, f"a {kind.decode()} block at byte {offset} cut short")
+        return list(struct.unpack_from(f"<{n_links}Q", rest)), rest[8 * n_links :]
+
+    with path.open("rb") as f:
+        header = block(64, b"##HD")
+        dg = header[0][0] if header and header[0] else 0
+        while dg:
+            data_group = block(dg, b"##DG")
+            if data_group is None or len(data_group[0]) < 2:
+                return
+            cg = data_group[0][1]
+            while cg:
+                group = block(cg, b"##CG")
+                if group is None or len(group[1]) < _CG_DATA_BYTES:
+                    return
+                data_bytes, inval_bytes = struct.unpack_from("<II", group[1], 24)
+                if data_bytes + inval_bytes > max_block_bytes():
+                    raise block_too_large(
+                        str(path),
+                        f"an MF4 record (channel group at byte {cg})",
+                        f"{data_bytes + inval_bytes} bytes per record",
+                    )
+                cg = group[0][0] if group[0] else 0
+            dg = data_group[0][0]
 
 
 @contextmanager
