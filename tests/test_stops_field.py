@@ -14,6 +14,7 @@ from mountcal.calibrate import calibrate
 from mountcal.errors import NotEnoughInformation
 from mountcal.io.samples import Channel, Samples
 from mountcal.io.timestamps import MERGED, increasing_times
+from mountcal.rotate_log import to_frame
 from mountcal.simulate import ParkingLog, simulate_parking_log
 from mountcal.stops import (
     RELAX,
@@ -122,20 +123,7 @@ def test_duplicate_and_backward_stamps_are_merged_counted_and_stop_detection_run
 def test_a_log_with_paired_stamps_calibrates_from_the_command_line(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
     log = field_log(2.0, seed=9)
     path = tmp_path / "paired.csv"
-    frame = pd.DataFrame(
-        {
-            "t_s": log.t_s,
-            "ax": log.acc_s[:, 0],
-            "ay": log.acc_s[:, 1],
-            "az": log.acc_s[:, 2],
-            "gx": log.gyro_s[:, 0],
-            "gy": log.gyro_s[:, 1],
-            "gz": log.gyro_s[:, 2],
-            "speed_mps": log.speed_mps,
-            "heading_deg": log.heading_deg,
-        }
-    )
-    frame.to_csv(path, index=False)
+    to_frame(samples_of(log)).to_csv(path, index=False)  # t_s, ax…gz, heading_deg, speed_mps
     out = tmp_path / "stops.csv"
     assert cli.main(["stops", str(path), "-o", str(out), "--uphill-azimuth-deg", str(log.uphill_azimuth_deg)]) == 0
     printed = capsys.readouterr().out
