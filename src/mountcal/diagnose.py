@@ -8,47 +8,15 @@ and its p-value. docs/conventions.md §6 lists the effects these point at.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
-from typing import Any
+from dataclasses import replace
 
 import numpy as np
 
 from mountcal.conventions import FloatArray
 from mountcal.estimate import full
 from mountcal.pvalues import chi2_logsf, f_logsf
+from mountcal.result import Finding
 from mountcal.stoptable import StopTable
-
-STRUCTURE_P = 1e-3  # a structure this improbable under the model counts as unexplained
-
-
-@dataclass(frozen=True)
-class Finding:
-    """One residual test: what it looks for, how big the structure is, and how improbable."""
-
-    test: str
-    what: str
-    size: str
-    statistic: float | None  # None (with ``reason``) when the test does not exist for these data
-    dof: int
-    p_value: float | None
-    log10_p: float | None
-    reason: str | None = None
-
-    @property
-    def significant(self) -> bool:
-        return self.p_value is not None and self.p_value < STRUCTURE_P
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "test": self.test,
-            "what": self.what,
-            "size": self.size,
-            "statistic": self.statistic,
-            "dof": self.dof,
-            "p_value": self.p_value,
-            "log10_p": self.log10_p,
-            **({"reason": self.reason} if self.reason else {}),
-        }
 
 
 def whitened(table: StopTable, fit: full.Fit) -> FloatArray:

@@ -22,10 +22,11 @@ import numpy as np
 from scipy import optimize
 from scipy.spatial.transform import Rotation
 
-from mountcal.diagnose import Finding, analyse, leave_one_out
+from mountcal.diagnose import analyse, leave_one_out
 from mountcal.errors import NotEnoughInformation
 from mountcal.estimate import full
 from mountcal.pvalues import chi2_logsf, f_logsf
+from mountcal.result import Finding
 from mountcal.stoptable import StopTable
 
 log = logging.getLogger(__name__)

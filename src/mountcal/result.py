@@ -28,6 +28,39 @@ LEVELLED_FRAME = (
 )
 
 
+STRUCTURE_P = 1e-3  # a residual structure (or a fit χ²) this improbable under the model counts as unexplained
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One residual test: what it looks for, how big the structure is, and how improbable."""
+
+    test: str
+    what: str
+    size: str
+    statistic: float | None  # None (with ``reason``) when the test does not exist for these data
+    dof: int
+    p_value: float | None
+    log10_p: float | None
+    reason: str | None = None
+
+    @property
+    def significant(self) -> bool:
+        return self.p_value is not None and self.p_value < STRUCTURE_P
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "test": self.test,
+            "what": self.what,
+            "size": self.size,
+            "statistic": self.statistic,
+            "dof": self.dof,
+            "p_value": self.p_value,
+            "log10_p": self.log10_p,
+            **({"reason": self.reason} if self.reason else {}),
+        }
+
+
 @dataclass(frozen=True)
 class Calibration:
     """A mounting calibration with its uncertainty.

@@ -21,11 +21,11 @@ from mountcal.conventions import GIMBAL_LOCK_PITCH_DEG
 from mountcal.errors import InputError, MountcalError
 from mountcal.fleet.inputs import FleetJob
 from mountcal.pipeline import calibrate_log
-from mountcal.result import Calibration
+from mountcal.result import STRUCTURE_P, Calibration
 from mountcal.stoptable import read_stop_table
 
 STOP_TABLE_MARKERS = {"beta_deg", "n", "sx"}
-MISFIT_P = 1e-3  # a fit χ² this improbable means the model misses an effect
+
 UNIX_TIME_S = (1.0e9, 4.1e9)  # a log clock in this range is Unix time (2001 … 2099)
 
 
@@ -136,7 +136,7 @@ def calibration_record(cal: Calibration) -> dict[str, Any]:
         flags.append("bias_fitted")
     chi2, dof = cal.fit.get("chi2"), cal.fit.get("dof")
     p_fit = cal.fit.get("p_value")  # None when the stop noise was estimated from the residuals
-    if p_fit is not None and p_fit < MISFIT_P:
+    if p_fit is not None and p_fit < STRUCTURE_P:
         flags.append("model_misfit")
     if not getattr(cal, "confident", True):
         flags.append("not_confident")

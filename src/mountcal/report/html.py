@@ -36,12 +36,11 @@ from mountcal.report.document import (
     model_steps,
     unexplained,
 )
-from mountcal.result import Calibration
+from mountcal.result import STRUCTURE_P, Calibration
 from mountcal.stoptable import StopTable
 
 ImageFormat = Literal["svg", "png"]
-BAD_FIT_P = 1e-3  # as mountcal.calibrate: a χ² this improbable means the model misses an effect
-STRUCTURE_P = 1e-3  # as mountcal.diagnose: a residual structure this improbable is unexplained
+
 
 _CSS = """
 body{font:15px/1.45 system-ui,-apple-system,"Segoe UI",Roboto,"DejaVu Sans",sans-serif;color:#1d2329;
@@ -161,7 +160,7 @@ def _confidence(cal: Calibration, doc: Mapping[str, Any]) -> str:
             '<p class="box"><b>Not a confident result.</b> The residuals show structure that the model does not '
             "explain (see <i>Closing the loop</i> below): the angles may be off by more than their σ.</p>"
         )
-    if isinstance(p, int | float) and p < BAD_FIT_P:
+    if isinstance(p, int | float) and p < STRUCTURE_P:
         return (
             f'<p class="box"><b>The model does not explain these stops</b> (χ² p = {p:.2g}). '
             f"{_sigma_caveat(cal.fit)}</p>"
@@ -305,9 +304,9 @@ def _fit_section(cal: Calibration) -> str:
         rows.append(("σ widened by", f"×{birge:.3g} (Birge ratio √(χ²/dof): the scatter the model leaves)"))
     if isinstance(p, int | float):
         verdict = (
-            f'<p class="bad">The model does not explain these stops (p = {p:.2g} &lt; {BAD_FIT_P:g}): an effect is '
+            f'<p class="bad">The model does not explain these stops (p = {p:.2g} &lt; {STRUCTURE_P:g}): an effect is '
             f"missing from it. {_sigma_caveat(fit)}</p>"
-            if p < BAD_FIT_P
+            if p < STRUCTURE_P
             else f'<p class="ok">The residuals are consistent with the stop noise (p = {p:.2g}).</p>'
         )
     else:
