@@ -383,9 +383,9 @@ def test_issue_repro_stops_and_driving_that_disagree_in_tilt_are_a_finding_not_c
     from mountcal.cli import summary
     from mountcal.estimate.driving import combine, estimate_driving
     from mountcal.io.logs import read_log
+    from mountcal.outputs.report import render
     from mountcal.pipeline import LogJob
     from mountcal.pipeline_drive import stops_with_drive
-    from mountcal.report import render
 
     path, table, static = drive_and_stops
     samples = read_log([path])

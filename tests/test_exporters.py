@@ -23,7 +23,7 @@ from scipy.spatial.transform import Rotation
 from mountcal.calibrate import calibrate
 from mountcal.cli import main
 from mountcal.errors import NotEnoughInformation
-from mountcal.exporters import FORMATS, Frames, export
+from mountcal.outputs.exporters import FORMATS, Frames, export
 from mountcal.result import Calibration
 from mountcal.simulate import simulate_stops
 

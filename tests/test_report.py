@@ -21,9 +21,9 @@ from matplotlib.figure import Figure
 from mountcal import Options, calibrate, simulate_stops
 from mountcal.cli import main
 from mountcal.errors import InputError
-from mountcal.report import figures, render
-from mountcal.report.document import angle_estimates, format_pm, model_steps
-from mountcal.report.html import embed_svg, short_source
+from mountcal.outputs.report import figures, render
+from mountcal.outputs.report.document import angle_estimates, format_pm, model_steps
+from mountcal.outputs.report.html import embed_svg, short_source
 from mountcal.result import Calibration
 from mountcal.stoptable import StopTable, write_stop_table
 

@@ -89,7 +89,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         cal.save(args.output)
         print(f"wrote {args.output}")
     if args.report is not None:
-        from mountcal.report import render  # matplotlib is needed for reports only
+        from mountcal.outputs.report import render  # matplotlib is needed for reports only
 
         with atomic_path(args.report) as tmp:
             tmp.write_text(render(cal.to_dict(), table), encoding="utf-8")
@@ -153,7 +153,7 @@ def cmd_rotate(args: argparse.Namespace) -> int:
 def cmd_report(args: argparse.Namespace) -> int:
     """``mountcal report RESULT.json [--stops STOPS]``: a self-contained HTML report of a calibration."""
     require("matplotlib", "report", "mountcal report")
-    from mountcal.report import render  # matplotlib is needed by this command only
+    from mountcal.outputs.report import render  # matplotlib is needed by this command only
 
     result = Path(args.result)
     output = Path(args.output) if args.output is not None else result.with_suffix(".html")
@@ -678,7 +678,7 @@ def _parser() -> argparse.ArgumentParser:
     liv.add_argument("--report", default=None, help="also write the HTML report here")
     liv.set_defaults(func=cmd_live)
 
-    from mountcal.exporters import add_parser as add_export_parser  # `mountcal export`: issue 16
+    from mountcal.outputs.exporters import add_parser as add_export_parser  # `mountcal export`: issue 16
 
     add_export_parser(sub)
     return parser

@@ -419,7 +419,7 @@ def run_live_command(args: Any) -> int:
 
     print(summary(session.calibration), file=out)
     if args.report and session.table is not None:
-        from mountcal.report import render
+        from mountcal.outputs.report import render
 
         with atomic_path(args.report) as tmp:
             tmp.write_text(render(session.calibration.to_dict(), session.table), encoding="utf-8")

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mountcal.conventions import angles_from_rot_vs
-from mountcal.exporters.common import Mounting, number, propagate_sigma
+from mountcal.outputs.exporters.common import Mounting, number, propagate_sigma
 
 
 @dataclass(frozen=True)

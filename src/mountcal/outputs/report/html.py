@@ -26,8 +26,8 @@ from matplotlib.figure import Figure
 
 from mountcal.conventions import G_N
 from mountcal.errors import InputError
-from mountcal.report import figures
-from mountcal.report.document import (
+from mountcal.outputs.report import figures
+from mountcal.outputs.report.document import (
     ANGLES,
     ModelStep,
     angle_estimates,

@@ -21,7 +21,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from mountcal.conventions import euler_angles
-from mountcal.exporters.common import Mounting, number, propagate_sigma
+from mountcal.outputs.exporters.common import Mounting, number, propagate_sigma
 
 INSTALLATION_FROM_ISO = np.diag([1.0, -1.0, -1.0])  # x forward, y right, z down
 KEYS = {  # name: (key ID, struct format of the value), from the interface description

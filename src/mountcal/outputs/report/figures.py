@@ -18,7 +18,7 @@ from matplotlib.figure import Figure
 from mpl_toolkits.mplot3d import Axes3D
 
 from mountcal.conventions import G_N, FloatArray, specific_force_v
-from mountcal.report.document import ANGLES, Estimate, angle_estimates
+from mountcal.outputs.report.document import ANGLES, Estimate, angle_estimates
 from mountcal.result import Calibration
 from mountcal.stoptable import StopTable
 

@@ -1,14 +1,14 @@
 """Pictures of a calibration: matplotlib figures for notebooks and a self-contained HTML report.
 
 - :func:`render` — the HTML report of a result (figures inline, no external assets, no scripts).
-- :mod:`mountcal.report.figures` — the figures, each a :class:`matplotlib.figure.Figure` made
+- :mod:`mountcal.outputs.report.figures` — the figures, each a :class:`matplotlib.figure.Figure` made
   without pyplot (Agg/SVG rendering, no display): :func:`stops_3d`, :func:`residual_vs_heading`,
   :func:`residual_trends`, :func:`uncertainty_vs_crb`, :func:`angles`, :func:`angles_over_time`.
 
 Needs matplotlib (the ``report`` extra).
 """
 
-from mountcal.report.figures import (
+from mountcal.outputs.report.figures import (
     angles,
     angles_over_time,
     residual_trends,
@@ -16,7 +16,7 @@ from mountcal.report.figures import (
     stops_3d,
     uncertainty_vs_crb,
 )
-from mountcal.report.html import render
+from mountcal.outputs.report.html import render
 
 __all__ = [
     "angles",

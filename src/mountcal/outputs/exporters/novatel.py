@@ -21,7 +21,7 @@ from scipy.spatial.transform import Rotation
 
 from mountcal.conventions import euler_angles
 from mountcal.errors import NotEnoughInformation
-from mountcal.exporters.common import Mounting, number, propagate_sigma
+from mountcal.outputs.exporters.common import Mounting, number, propagate_sigma
 
 ISO_FROM_NOVATEL = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # (right, fwd, up) → (fwd, left, up)
 SD_RANGE_DEG = (0.25, 45.0)

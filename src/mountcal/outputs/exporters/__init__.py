@@ -14,13 +14,13 @@ from pathlib import Path
 
 from mountcal.atomic import atomic_path
 from mountcal.errors import InputError
-from mountcal.exporters.autoware import DEFAULT_FRAMES as AUTOWARE_FRAMES
-from mountcal.exporters.autoware import autoware_yaml
-from mountcal.exporters.common import Mounting, YawPolicy, mounting
-from mountcal.exporters.novatel import novatel_rotation, novatel_text
-from mountcal.exporters.ros import Frames, static_transform_command, tf2_quaternion, urdf_joint
-from mountcal.exporters.rotation import rotation_json, rotation_yaml
-from mountcal.exporters.ublox import ublox_mount, ublox_text, ucenter_config, valset
+from mountcal.outputs.exporters.autoware import DEFAULT_FRAMES as AUTOWARE_FRAMES
+from mountcal.outputs.exporters.autoware import autoware_yaml
+from mountcal.outputs.exporters.common import Mounting, YawPolicy, mounting
+from mountcal.outputs.exporters.novatel import novatel_rotation, novatel_text
+from mountcal.outputs.exporters.ros import Frames, static_transform_command, tf2_quaternion, urdf_joint
+from mountcal.outputs.exporters.rotation import rotation_json, rotation_yaml
+from mountcal.outputs.exporters.ublox import ublox_mount, ublox_text, ucenter_config, valset
 from mountcal.result import Calibration
 
 Writer = Callable[[Mounting, Frames | None], str | bytes]

@@ -4,7 +4,7 @@ Autoware's sensor kit description loads this file with ``xacro.load_yaml`` and w
 as a URDF joint ``<origin xyz="x y z" rpy="roll pitch yaw"/>`` from the parent (the YAML's
 top-level key, ``sensor_kit_base_link``) to the sensor frame (Autoware documentation, "Creating
 vehicle and sensor description"; ``sample_sensor_kit_description``): metres and radians,
-fixed-axis roll, pitch, yaw, as in :mod:`mountcal.exporters.ros`. mountcal's rotation is from the
+fixed-axis roll, pitch, yaw, as in :mod:`mountcal.outputs.exporters.ros`. mountcal's rotation is from the
 IMU to ``base_link``: it is the entry under ``sensor_kit_base_link`` only when that frame's axes
 are parallel to ``base_link`` (zero roll, pitch, yaw in ``sensors_calibration.yaml``); otherwise
 export with ``--parent base_link`` into ``sensors_calibration.yaml``.
@@ -13,8 +13,8 @@ export with ``--parent base_link`` into ``sensors_calibration.yaml``.
 from __future__ import annotations
 
 from mountcal.conventions import angles_from_rot_vs
-from mountcal.exporters.common import Mounting, number
-from mountcal.exporters.ros import Frames, sigma_lines
+from mountcal.outputs.exporters.common import Mounting, number
+from mountcal.outputs.exporters.ros import Frames, sigma_lines
 
 DEFAULT_FRAMES = Frames(parent="sensor_kit_base_link", child="imu_link")
 
