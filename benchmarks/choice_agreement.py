@@ -59,8 +59,8 @@ def path(table: StopTable) -> dict[str, object]:
     cal = calibrate(table)
     return {
         "model": list(cal.model),
-        "steps": [(s["added"], s["excluded_stops"]) for s in cal.model_steps],
-        "reasons": [s["reason"] for s in cal.model_steps],
+        "steps": [(s.added, list(s.excluded_stops)) for s in cal.model_steps],
+        "reasons": [s.reason for s in cal.model_steps],
         "angles_deg": [cal.roll_deg, cal.pitch_deg, cal.yaw_deg],
     }
 

@@ -236,10 +236,10 @@ def real_canedge(root: Path) -> None:
             st = stops.calibration
             print(
                 f"- {drive}: stops alone ({len(stops.stops.frame) if stops.stops is not None else 0} stops, "
-                f"headings {st.fit.get('headings')}): roll {st.roll_deg:.2f}° ± {st.roll_sigma_deg:.2f}°, pitch "
+                f"headings {st.fit.headings}): roll {st.roll_deg:.2f}° ± {st.roll_sigma_deg:.2f}°, pitch "
                 f"{st.pitch_deg:.2f}° ± {st.pitch_sigma_deg:.2f}°, yaw {st.yaw_deg} ({st.yaw_reason})"
             )
-            check = both.calibration.fit["combination"].get("tilt_check", {})
+            check = (both.calibration.fit.combination or {}).get("tilt_check", {})
             up_s = st.rot_vs.inv().apply([0.0, 0.0, 1.0])
             print(
                 f"- {drive}: up axis, stops against mean gravity while driving: "
@@ -250,7 +250,7 @@ def real_canedge(root: Path) -> None:
             b = both.calibration
             print(
                 f"- {drive}: stops + driving: yaw {b.yaw_deg:.2f}° ± {b.yaw_sigma_deg:.2f}° (rotation σ about z "
-                f"{b.rotation_sigma_deg[2]:.3f}°), calibrated from {b.fit.get('calibrated_from')}"
+                f"{b.rotation_sigma_deg[2]:.3f}°), calibrated from {b.fit.calibrated_from}"
             )
     a, b = (rows[k][1].calibration.rot_vs for k in ("00000164", "00000165"))
     sa, sb = (rows[k][1].calibration.rotation_sigma_deg for k in ("00000164", "00000165"))

@@ -135,11 +135,11 @@ def run(s: Scenario, runs: int, seed: int) -> dict[str, object]:
     for r in range(runs):
         table, truth, params = simulate(s, rng)
         cal = calibrate(table)
-        path = [(st["added"], st["excluded_stops"]) for st in cal.model_steps]
+        path = [(st.added, list(st.excluded_stops)) for st in cal.model_steps]
         chosen.append({"model": list(cal.model), "steps": path})
         true = np.array(truth.angles_deg)
-        first = cal.model_steps[0]["angles"]
-        before[r] = [first["roll_deg"], first["pitch_deg"], first["yaw_deg"]] - true
+        first = cal.model_steps[0].angles
+        before[r] = np.array([first.roll_deg, first.pitch_deg, first.yaw_deg], dtype=float) - true
         after[r] = np.array([cal.roll_deg, cal.pitch_deg, cal.yaw_deg], dtype=float) - true
         sig = np.array([cal.roll_sigma_deg, cal.pitch_sigma_deg, cal.yaw_sigma_deg], dtype=float)
         covered[r] = np.abs(after[r]) <= 1.96 * sig

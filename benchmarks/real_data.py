@@ -41,18 +41,18 @@ def canedge_car(real: Path) -> str:
             "|---|---|---|---|---|---|---|",
         ]
         for s in cal.model_steps:
-            a = s["angles"]
+            a = s.angles
             out.append(
-                f"| {s['added']} | {s['reason']} | {s['chi2']:.1f} / {s['dof']} | {s['residual_rms_mps2']:.3f} | "
-                f"{_pm(a['roll_deg'], a['roll_sigma_deg'])} | {_pm(a['pitch_deg'], a['pitch_sigma_deg'])} | "
-                f"{_pm(a['slope_deg'], a['slope_sigma_deg'])} |"
+                f"| {s.added} | {s.reason} | {s.chi2:.1f} / {s.dof} | {s.residual_rms_mps2:.3f} | "
+                f"{_pm(a.roll_deg, a.roll_sigma_deg)} | {_pm(a.pitch_deg, a.pitch_sigma_deg)} | "
+                f"{_pm(a.slope_deg, a.slope_sigma_deg)} |"
             )
         out += [
             "",
             f"Final: model `{', '.join(cal.model)}`, confident: {cal.confident}; unexplained: "
-            + ("; ".join(f"{u['what']} ({u['size']})" for u in cal.unexplained) or "none"),
+            + ("; ".join(f"{u.what} ({u.size})" for u in cal.unexplained) or "none"),
             "",
-            "Declined: " + "; ".join(f"{d['effect']}: {d['why']}" for d in cal.model_selection["declined"]),
+            "Declined: " + "; ".join(f"{d.effect}: {d.why}" for d in cal.model_selection.declined),
             "",
         ]
         if len(drives) == 1:

@@ -390,16 +390,17 @@ def test_issue_repro_stops_and_driving_that_disagree_in_tilt_are_a_finding_not_c
     path, table, static = drive_and_stops
     samples = read_log([path])
     agree = combine(static, estimate_driving(samples, tilt_from=static))  # the same mounting: combined
-    assert agree.confident and agree.yaw_deg is not None and agree.fit["calibrated_from"] == "stops + driving"
+    assert agree.confident and agree.yaw_deg is not None and agree.fit.calibrated_from == "stops + driving"
     mirror = mirror_of(static)
     fit = estimate_driving(samples, tilt_from=mirror)
     assert fit.tilt_check is not None and fit.tilt_check["angle_deg"] > 170.0
     cal = stops_with_drive(mirror, table, fit, samples, LogJob(paths=(str(path),)))
     assert not cal.confident
-    assert [u["test"] for u in cal.unexplained if u["test"] == "stops_vs_driving"] == ["stops_vs_driving"]
-    assert "disagree" in cal.fit["calibrated_from"]
-    assert not str(cal.fit["driving"]["tilt_source"]).startswith("static")  # levelled by the drive itself
-    assert str(cal.fit["driving_levelled_with_stops"]["tilt_source"]).startswith("static")
+    assert [u.test for u in cal.unexplained if u.test == "stops_vs_driving"] == ["stops_vs_driving"]
+    assert cal.fit.calibrated_from is not None and "disagree" in cal.fit.calibrated_from
+    assert cal.fit.driving is not None and cal.fit.driving_levelled_with_stops is not None
+    assert not str(cal.fit.driving["tilt_source"]).startswith("static")  # levelled by the drive itself
+    assert str(cal.fit.driving_levelled_with_stops["tilt_source"]).startswith("static")
     text = summary(cal)
     assert "DISAGREE" in text and "NOT CONFIDENT" in text and "tilt by 1" in text
     assert "stops_vs_driving" in render(cal.to_dict(), None)
@@ -424,8 +425,8 @@ def test_stops_and_driving_that_disagree_in_yaw_are_not_combined(drive_and_stops
     wrong = replace(wrong, rot_vs=Rotation.from_euler("z", 20.0, degrees=True) * static.rot_vs)
     cal = combine(wrong, estimate_driving(read_log([path]), tilt_from=wrong))
     assert not cal.confident and cal.yaw_deg == wrong.yaw_deg  # not averaged with the drive's
-    finding = [u for u in cal.unexplained if u["test"] == "stops_vs_driving"]
-    assert len(finding) == 1 and "yaw by -2" in finding[0]["size"]
+    finding = [u for u in cal.unexplained if u.test == "stops_vs_driving"]
+    assert len(finding) == 1 and "yaw by -2" in finding[0].size
 
 
 @pytest.mark.real_data
@@ -438,9 +439,9 @@ def test_a_real_drive_with_stops_is_combined_only_when_they_agree_and_rotates_to
     opts = LogOptions(dbc=str(real_data / "canedge" / "dbc" / "gnss.dbc"), channel=2)
     done = calibrate_any(LogJob(paths=tuple(sorted(str(p) for p in car.glob("*.MF4"))), log=opts))
     cal = done.calibration
-    combination = cal.fit.get("combination", {})
+    combination = cal.fit.combination or {}
     if "disagreement" in combination:  # a finding: not combined, not confident, said everywhere
-        assert not cal.confident and any(u["test"] == "stops_vs_driving" for u in cal.unexplained)
+        assert not cal.confident and any(u.test == "stops_vs_driving" for u in cal.unexplained)
     else:
         tilt = combination["tilt_check"]  # combined: within 3σ about both horizontal axes (may be outside 2σ)
         z = max(abs(tilt["z_about_vehicle_x"]), abs(tilt["z_about_vehicle_y"]))

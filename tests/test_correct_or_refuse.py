@@ -127,9 +127,9 @@ def test_separable_fixed_terms_still_fit() -> None:
     temps = np.linspace(5.0, 35.0, 12)
     table, _ = simulate_stops(slope_deg=10.0, seed=1, temperature_c=temps, temp_coeff_mps2_per_c=np.full(3, 1e-3))
     cal = calibrate(table, Options(model="rotation,slope,bias,temperature"))
-    k = cal.effects["temperature_mps2_per_c"]
-    assert all(s > 0 for s in k["sigma"])
-    np.testing.assert_allclose(k["value"], 1e-3, atol=5 * max(k["sigma"]))
+    k = cal.effect("temperature_mps2_per_c")
+    assert k is not None and all(s is not None and s > 0 for s in k.sigma)
+    np.testing.assert_allclose(k.value, 1e-3, atol=5 * max(s or 0.0 for s in k.sigma))
 
 
 def test_the_terms_are_listed_one_way_everywhere(capsys: pytest.CaptureFixture[str]) -> None:

@@ -170,8 +170,8 @@ def test_driving_and_stops_agreeing_are_combined_by_inverse_variance(drive) -> N
     static = static_like(drive.truth.rot_vs, 7.1, 0.2)
     fit = estimate_driving(drive.to_samples(), tilt_from=static)
     cal = combine(static, fit)
-    c = cal.fit["combination"]
-    assert c["agree"] and abs(c["z"]) <= 2.0
+    c = cal.fit.combination
+    assert c is not None and c["agree"] and abs(c["z"]) <= 2.0
     s_d = fit.rotation_sigma_deg[2]
     assert s_d is not None and cal.rotation_sigma_deg[2] is not None
     assert cal.rotation_sigma_deg[2] < min(0.2, s_d)
@@ -185,8 +185,8 @@ def test_driving_and_stops_agreeing_are_combined_by_inverse_variance(drive) -> N
 def test_a_disagreement_beyond_the_uncertainties_is_reported(drive) -> None:  # type: ignore[no-untyped-def]
     static = static_like(drive.truth.rot_vs, 9.0, 0.2)  # 2° off
     cal = combine(static, estimate_driving(drive.to_samples(), tilt_from=static))
-    c = cal.fit["combination"]
-    assert not c["agree"] and c["disagreement"]["statistic"] > 5  # beyond 3σ: a finding, not combined
+    c = cal.fit.combination
+    assert c is not None and not c["agree"] and c["disagreement"]["statistic"] > 5  # beyond 3σ: a finding, not combined
     assert any("DISAGREE" in n for n in cal.notes) and not cal.confident
     assert cal.yaw_deg == static.yaw_deg and cal.rot_vs.approx_equal(static.rot_vs)
 
@@ -196,7 +196,7 @@ def test_stops_without_yaw_take_the_yaw_from_driving(drive) -> None:  # type: ig
     cal = combine(static, estimate_driving(drive.to_samples(), tilt_from=static))
     assert cal.yaw_deg is not None and cal.yaw_reason is None
     assert cal.yaw_deg == pytest.approx(7.0, abs=0.3)
-    assert cal.fit["calibrated_from"] == "stops + driving"
+    assert cal.fit.calibrated_from == "stops + driving"
 
 
 # --------------------------------------------------------------------------- the CLI
@@ -218,7 +218,7 @@ def test_calibrate_a_drive_log_uses_what_it_supports_and_says_so(
     assert "calibrated from: driving" in text and "driving method" in text
     cal = Calibration.load(out)
     assert cal.method == "driving" and cal.yaw_deg == pytest.approx(7.0, abs=0.3)
-    assert cal.fit["driving"]["segments"] > 10 and cal.slope_deg is None
+    assert cal.fit.driving is not None and cal.fit.driving["segments"] > 10 and cal.slope_deg is None
 
 
 def test_a_log_with_neither_stops_nor_speed_says_both_reasons(

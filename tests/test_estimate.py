@@ -64,9 +64,11 @@ def test_paper_scenario_monte_carlo_reaches_the_bound() -> None:
         table, _truth = simulate_preset("zhang2011", seed=rng)
         cal = calibrate(table, Options(model="rotation,slope"))
         err.append([cal.roll_deg - 5, cal.pitch_deg - 6, cal.yaw_deg - 7, cal.slope_deg - 5])  # type: ignore[operator]
-        crb = cal.observability["crb_1sigma"]["rotation,slope"]
+        assert cal.observability is not None
+        crb = cal.observability.crb_1sigma["rotation,slope"]
     rms = np.sqrt(np.mean(np.square(err), axis=0))
-    bound = np.array([crb["roll_deg"], crb["pitch_deg"], crb["yaw_deg"], crb["slope_deg"]])  # type: ignore[index]
+    assert crb is not None
+    bound = np.array([crb.roll_deg, crb.pitch_deg, crb.yaw_deg, crb.slope_deg], dtype=float)
     np.testing.assert_allclose(bound, [0.0166, 0.0166, 0.19, 0.0166], rtol=0.05)
     assert np.all(rms / bound > 0.75) and np.all(rms / bound < 1.25), rms / bound
 
@@ -139,9 +141,9 @@ def test_unknown_noise_is_estimated_from_the_residuals() -> None:
 
     table, _ = simulate_preset("zhang2011", seed=8)
     cal = calibrate(replace(table, cov_s=None))
-    assert cal.fit["noise_scale_mps2"] == pytest.approx(0.001 * G_N, rel=0.4)
+    assert cal.fit.noise_scale_mps2 == pytest.approx(0.001 * G_N, rel=0.4)
     assert cal.roll_sigma_deg == pytest.approx(0.0166, rel=0.4)
-    assert any("F(3," in d["why"] for d in cal.model_selection["declined"] if d["effect"] == "bias")
+    assert any("F(3," in d.why for d in cal.model_selection.declined if d.effect == "bias")
 
 
 def test_auto_model_fits_a_20mg_bias_and_no_phantom_one() -> None:
@@ -164,20 +166,23 @@ def test_level_ground_does_not_fit_a_bias_it_cannot_separate() -> None:
     table, _ = simulate_preset("zhang2011", slope_deg=0.05, bias_mps2=np.array([0.0, 0.2, 0.0]), seed=2)
     cal = calibrate(table)
     assert "bias" not in cal.model
-    assert any(d["effect"] == "bias" and "not separable" in d["why"] for d in cal.model_selection["declined"]), (
-        cal.model_selection["declined"]
+    assert any(d.effect == "bias" and "not separable" in d.why for d in cal.model_selection.declined), (
+        cal.model_selection.declined
     )
 
 
 def test_crb_report_matches_model_md_section_5() -> None:
     table, _ = simulate_preset("zhang2011", seed=9)
-    crb = calibrate(table).observability["crb_1sigma"]
+    obs = calibrate(table).observability
+    assert obs is not None
+    crb = obs.crb_1sigma["rotation,slope,bias"]
+    assert crb is not None
     np.testing.assert_allclose(
-        [crb["rotation,slope,bias"][k] for k in ("roll_deg", "pitch_deg", "yaw_deg")],
+        [crb.roll_deg, crb.pitch_deg, crb.yaw_deg],
         [0.27, 0.27, 0.19],
         rtol=0.06,
     )
-    assert calibrate(table).observability["fisher_rank"] == 4
+    assert obs.fisher_rank == 4
 
 
 def test_stop_weights_follow_the_stop_covariance() -> None:

@@ -282,7 +282,8 @@ def test_quantised_paired_stops_give_a_chi2_that_matches_their_covariance() -> N
         cal = calibrate(
             stop_table_from_frame(stop_frame(search.stops, beta_from_heading(heading, log.uphill_azimuth_deg)))
         )
-        ratios.append(cal.fit["chi2"] / cal.fit["dof"])
+        assert cal.fit.chi2 is not None and cal.fit.dof
+        ratios.append(cal.fit.chi2 / cal.fit.dof)
         roll, pitch, _ = log.truth.angles_deg
         assert (
             abs(cal.roll_deg - roll) < 4 * cal.roll_sigma_deg and abs(cal.pitch_deg - pitch) < 4 * cal.pitch_sigma_deg

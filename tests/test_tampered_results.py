@@ -20,7 +20,7 @@ import pytest
 
 from mountcal.cli import main
 from mountcal.errors import InputError
-from mountcal.result import Calibration
+from mountcal.result import FORMAT_VERSION, Calibration, schema_defs
 from mountcal.result_file import MAX_DEPTH, check_document, read_json, schema
 from mountcal.terminal import safe
 
@@ -91,8 +91,19 @@ SCHEMA_VISIBLE = {
     "quaternion of 3": _set("rotation.quaternion_xyzw", [0.0, 0.0, 1.0]),
     "residual row of 2": _set("stops.residual_s_mps2.0", [0.0, 0.0]),
     "boolean angle": _set("mounting.roll_deg", True),
+    # the typed parts: their schema and their loader are both derived from the dataclasses
+    "condition number as text": _set("observability.condition_number", "x"),
+    "chi2 as text": _set("fit.chi2", "12.5"),
+    "unknown key in the fit": _set("fit.chi_squared", 12.5),
+    "dof as a float": _set("fit.dof", 3.5),
+    "headings nobody defined": _set("fit.headings", "downhill"),
+    "step without its angles": _set("model_steps.0.angles", None),
+    "effect value as a number": _set("effects.0.value", 0.1),
+    "declined effect without a reason": _set("model_selection.declined", [{"effect": "scale"}]),
+    "fingerprint of 2 sums": _set("provenance.stops_fingerprint.acc_sum_mps2", [0.0, 9.8]),
+    "finding without its test": _set("diagnostics.0", {"what": "x", "size": "y"}),
 }
-LOADER_ONLY = {"condition number as text": _set("observability.condition_number", "x")}  # the schema leaves it open
+LOADER_ONLY = {"condition number below 1": _set("observability.condition_number", 0.5)}  # the schema leaves it open
 
 
 def test_a_huge_but_finite_sigma_is_what_calibrate_may_write_and_loads_back(tmp_path: Path) -> None:
@@ -128,8 +139,55 @@ def test_a_field_the_report_formats_is_checked_too(made: dict[str, Path]) -> Non
     for change in LOADER_ONLY.values():
         doc = json.loads(made["auto"].read_text())
         change(doc)
+        jsonschema.validate(doc, schema())
         with pytest.raises(InputError, match="condition_number"):
             Calibration.from_dict(doc, "tampered.json")
+
+
+def test_the_published_schema_follows_the_result_types() -> None:
+    """The typed parts of the schema are generated from the dataclasses: a field added, removed or
+    retyped without regenerating (``python -m mountcal.result``) fails here."""
+    published, derived = schema(), schema_defs()
+    assert published["$defs"] == derived["$defs"]
+    for name, part in derived["properties"].items():
+        assert published["properties"][name] == part, name
+    assert set(derived["properties"]) >= {"fit", "observability", "model_selection", "provenance", "model_steps"}
+
+
+def test_a_result_round_trips_through_its_json_unchanged(made: dict[str, Path]) -> None:
+    for name in ("auto", "bias", "paper", "none"):
+        cal = Calibration.load(made[name])
+        again = Calibration.from_dict(json.loads(json.dumps(cal.to_dict())))
+        before, after = cal.to_dict(), again.to_dict()
+        assert np.allclose(before.pop("rotation")["matrix_vs"], after.pop("rotation")["matrix_vs"], atol=1e-15)
+        assert after == before
+        assert again.fit == cal.fit and again.model_steps == cal.model_steps and again.provenance == cal.provenance
+
+
+def test_a_format_1_file_is_refused_saying_which_version_and_what_to_do(made: dict[str, Path]) -> None:
+    doc = json.loads(made["auto"].read_text())
+    doc["format_version"] = 1
+    with pytest.raises(InputError, match="format_version 1") as err:
+        Calibration.from_dict(doc, "old.json")
+    assert "Re-run `mountcal calibrate`" in str(err.value) and f"format_version {FORMAT_VERSION}" in str(err.value)
+
+
+def test_the_schema_check_of_every_test_finds_an_invalid_result(
+    made: dict[str, Path], tmp_path: Path, check_results: Callable[[list[Path]], list[str]]
+) -> None:
+    """The autouse fixture (tests/conftest.py) runs this check after every test: it must see a bad
+    result anywhere under the folder, and pass a good one."""
+    good = json.loads(made["bias"].read_text())
+    (tmp_path / "deep" / "er").mkdir(parents=True)
+    (tmp_path / "deep" / "er" / "good.json").write_text(json.dumps(good))
+    (tmp_path / "other.json").write_text(json.dumps({"format": "something else"}))
+    assert check_results([tmp_path]) == []
+    bad = json.loads(json.dumps(good))
+    bad["fit"]["chi2"] = "12.5"
+    (tmp_path / "deep" / "bad.json").write_text(json.dumps(bad))
+    problems = check_results([tmp_path])
+    assert len(problems) == 1 and "bad.json" in problems[0] and "fit/chi2" in problems[0]
+    (tmp_path / "deep" / "bad.json").unlink()  # leave only valid results for the fixture itself
 
 
 def _rotated_quaternion(doc: Doc) -> None:

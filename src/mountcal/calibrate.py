@@ -11,9 +11,10 @@ makes it precise enough (docs/conventions.md §4); otherwise it is None with the
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from datetime import UTC, datetime
-from typing import Any, Literal
+from typing import Literal
 
 import numpy as np
 
@@ -30,8 +31,20 @@ from mountcal.errors import InputError, NotEnoughInformation
 from mountcal.estimate import full, paper
 from mountcal.estimate.bound import crb_deg, euler_gradients
 from mountcal.estimate.geometry import span_ratio
-from mountcal.pvalues import chi2_sf
-from mountcal.result import Calibration
+from mountcal.pvalues import chi2_logsf, chi2_sf
+from mountcal.result import (
+    AngleChanges,
+    Angles,
+    Calibration,
+    CramerRao,
+    Declined,
+    EffectValue,
+    FitQuality,
+    ModelSelection,
+    ModelStep,
+    Observability,
+    Provenance,
+)
 from mountcal.stoptable import StopTable, fingerprint
 from mountcal.version import software_version
 
@@ -133,14 +146,15 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
     final = loop.final
     f = final.fit
     angles = _angles(final.table, f, opts)
-    if angles["roll_sigma_deg"] is None or angles["pitch_sigma_deg"] is None:
+    if angles.roll_sigma_deg is None or angles.pitch_sigma_deg is None:
         raise NotEnoughInformation(
             f"{table.source}: roll and pitch are not determined by these stops with the model "
             f"{', '.join(f.terms)} (the Fisher information is singular). On level ground a bias cannot be "
             "told from a tilt: park on a slope, or fit without a bias (--model rotation,slope)."
         )
     notes: list[str] = []
-    if any(d["effect"] == "bias" and ("separable" in d["why"] or "confounded" in d["why"]) for d in loop.declined):
+    declined = tuple(Declined(str(d["effect"]), str(d["why"])) for d in loop.declined)
+    if any(d.effect == "bias" and ("separable" in d.why or "confounded" in d.why) for d in declined):
         notes.append(
             "a constant accelerometer bias cannot be told from a tilt with these stops: if the sensor has a "
             "bias b, roll and pitch are off by up to b/g (20 mg → 1.1°) beyond their σ (docs/conventions.md §4)"
@@ -154,10 +168,10 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
             + "; ".join(f"{u.what}: {u.size}" for u in loop.unexplained)
             + f"); the σ are widened ×{birge:.2f} (Birge ratio) and the result is not confident"
         )
-    tilt_sigma = max(angles["roll_sigma_deg"], angles["pitch_sigma_deg"]) * birge
+    tilt_sigma = max(angles.roll_sigma_deg, angles.pitch_sigma_deg) * birge
     doubts = _doubts(f.branch, tilt_sigma, None if f.noise_known else f.dof)
     notes += [d + "; the result is not confident" for d in doubts]
-    pitch = angles["pitch_deg"]
+    pitch = angles.pitch_deg
     if abs(pitch) > GIMBAL_LOCK_PITCH_DEG:
         notes.append(
             f"pitch {pitch:.2f}° is within {90 - GIMBAL_LOCK_PITCH_DEG:g}° of ±90°: roll and yaw are not separately "
@@ -179,41 +193,44 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
         i_b = f.names.index("bias_x")
         bias = f.state.bias_s.copy()
         bias_sigma = np.sqrt(np.diag(f.cov)[i_b : i_b + 3]) * birge
-    fit_info = {
-        "chi2": f.chi2,
-        "dof": f.dof,
-        "p_value": float(chi2_sf(f.chi2, f.dof)) if f.noise_known and f.dof > 0 else None,
-        "noise": "per-stop covariance from the table" if f.noise_known else "common σ estimated from the residuals",
-        "noise_scale_mps2": None if f.noise_known else f.noise_scale,
-        "iterations": f.iterations,
-        "headings": table.headings,
-        "excluded_stops": [i + 1 for i in final.excluded],
-        "birge_ratio": birge,
-    }
-    selection = {
-        "mode": "fixed" if fixed else "auto",
-        "alpha": opts.selection_alpha,
-        "chosen": model,
-        "steps": [s.added for s in loop.steps],
-        "declined": loop.declined,
-    }
+    tested = f.noise_known and f.dof > 0
+    fit_info = FitQuality(
+        noise="per-stop covariance from the table" if f.noise_known else "common σ estimated from the residuals",
+        headings=table.headings,
+        chi2=f.chi2,
+        dof=f.dof,
+        p_value=float(chi2_sf(f.chi2, f.dof)) if tested else None,
+        log10_p=float(chi2_logsf(f.chi2, f.dof)) / math.log(10) if tested else None,
+        noise_scale_mps2=None if f.noise_known else f.noise_scale,
+        iterations=f.iterations,
+        excluded_stops=tuple(i + 1 for i in final.excluded),
+        birge_ratio=birge,
+        branch=f.branch,
+    )
+    selection = ModelSelection(
+        mode="fixed" if fixed else "auto",
+        chosen=tuple(model),
+        alpha=opts.selection_alpha,
+        steps=tuple(s.added for s in loop.steps),
+        declined=declined,
+    )
     return Calibration(
         method="full",
         model=tuple(model),
         rot_vs=f.state.rot_vs,
-        roll_deg=angles["roll_deg"],
+        roll_deg=angles.roll_deg,
         pitch_deg=pitch,
-        yaw_deg=angles["yaw_deg"],
-        roll_sigma_deg=angles["roll_sigma_deg"] * birge,
-        pitch_sigma_deg=angles["pitch_sigma_deg"] * birge,
-        yaw_sigma_deg=widened(angles["yaw_sigma_deg"]),
-        yaw_reason=angles["yaw_reason"],
-        slope_deg=angles["slope_deg"],
-        slope_sigma_deg=widened(angles["slope_sigma_deg"]),
+        yaw_deg=angles.yaw_deg,
+        roll_sigma_deg=angles.roll_sigma_deg * birge,
+        pitch_sigma_deg=angles.pitch_sigma_deg * birge,
+        yaw_sigma_deg=widened(angles.yaw_sigma_deg),
+        yaw_reason=angles.yaw_reason,
+        slope_deg=angles.slope_deg,
+        slope_sigma_deg=widened(angles.slope_sigma_deg),
         rotation_sigma_deg=(
             float(rot_sigma[0]),
             float(rot_sigma[1]),
-            float(rot_sigma[2]) if angles["yaw_deg"] is not None else None,
+            float(rot_sigma[2]) if angles.yaw_deg is not None else None,
         ),
         bias_mps2=bias,
         bias_sigma_mps2=bias_sigma,
@@ -227,9 +244,9 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
         provenance=_provenance(table, "full", tuple(model)),
         notes=tuple(notes),
         model_steps=_steps(loop, opts),
-        unexplained=[u.to_dict() for u in loop.unexplained],
-        diagnostics=[d.to_dict() for d in loop.findings],
-        effects=effect_values(f),
+        unexplained=tuple(loop.unexplained),
+        diagnostics=tuple(loop.findings),
+        effects=_effects(f),
         confident=not loop.unexplained and not doubts,
     )
 
@@ -253,7 +270,7 @@ def _doubts(branch: str | None, tilt_sigma_deg: float, noise_dof: int | None) ->
     return out
 
 
-def _angles(table: StopTable, f: full.Fit, opts: Options) -> dict[str, Any]:
+def _angles(table: StopTable, f: full.Fit, opts: Options) -> Angles:
     """Roll, pitch, yaw, slope in degrees with 1σ (None where the data cannot determine them)."""
     k = 3 if "rot_z" in f.names else 2
     grads = euler_gradients(f.state.rot_vs, k)  # rows roll, pitch, yaw over δ
@@ -271,50 +288,85 @@ def _angles(table: StopTable, f: full.Fit, opts: Options) -> dict[str, Any]:
     yaw_reason = _yaw_reason(table, None if s_yaw is None else np.radians(s_yaw), f, opts)
     slope_names = [i for i, n in enumerate(f.names) if n.startswith("slope")]
     single = len(slope_names) == 1
-    return {
-        "roll_deg": roll,
-        "roll_sigma_deg": sigma(grads[0], slice(0, k)),
-        "pitch_deg": pitch,
-        "pitch_sigma_deg": sigma(grads[1], slice(0, k)),
-        "yaw_deg": None if yaw_reason else yaw,
-        "yaw_sigma_deg": None if yaw_reason else s_yaw,
-        "yaw_reason": yaw_reason,
-        "slope_deg": float(np.degrees(f.state.slope_rad[0])) if single else None,
-        "slope_sigma_deg": sigma(np.ones(1), slope_names) if single else None,
-    }
+    return Angles(
+        roll_deg=roll,
+        roll_sigma_deg=sigma(grads[0], slice(0, k)),
+        pitch_deg=pitch,
+        pitch_sigma_deg=sigma(grads[1], slice(0, k)),
+        yaw_deg=None if yaw_reason else yaw,
+        yaw_sigma_deg=None if yaw_reason else s_yaw,
+        yaw_reason=yaw_reason,
+        slope_deg=float(np.degrees(f.state.slope_rad[0])) if single else None,
+        slope_sigma_deg=sigma(np.ones(1), slope_names) if single else None,
+    )
 
 
-def _steps(loop: Loop, opts: Options) -> list[dict[str, Any]]:
+def _steps(loop: Loop, opts: Options) -> tuple[ModelStep, ...]:
     """The before/after table: each model step with its fit quality, angles ± σ and what moved."""
-    out: list[dict[str, Any]] = []
-    prev: dict[str, Any] | None = None
+    out: list[ModelStep] = []
+    prev: Angles | None = None
     for step in loop.steps:
         f = step.fit
         a = _angles(step.table, f, opts)
         moved = None
         if prev is not None:
-            moved = {
-                key: (None if a[key] is None or prev[key] is None else float(a[key] - prev[key]))
-                for key in ("roll_deg", "pitch_deg", "yaw_deg", "slope_deg")
-            }
+            moved = AngleChanges(
+                *(
+                    None if now is None or before is None else float(now - before)
+                    for now, before in (
+                        (a.roll_deg, prev.roll_deg),
+                        (a.pitch_deg, prev.pitch_deg),
+                        (a.yaw_deg, prev.yaw_deg),
+                        (a.slope_deg, prev.slope_deg),
+                    )
+                )
+            )
         out.append(
-            {
-                "added": step.added,
-                "reason": step.reason,
-                "terms": list(f.terms),
-                "excluded_stops": [i + 1 for i in step.excluded],
-                "gravity_mps2": f.state.g_mps2,
-                "chi2": f.chi2,
-                "dof": f.dof,
-                "residual_rms_mps2": float(np.sqrt(np.mean(f.residual_s**2))),
-                "loo_rms_mps2": step.loo_rms_mps2,
-                "angles": a,
-                "moved": moved,
-                "effects": effect_values(f),
-            }
+            ModelStep(
+                added=step.added,
+                reason=step.reason,
+                terms=tuple(f.terms),
+                excluded_stops=tuple(i + 1 for i in step.excluded),
+                gravity_mps2=f.state.g_mps2,
+                chi2=f.chi2,
+                dof=f.dof,
+                residual_rms_mps2=float(np.sqrt(np.mean(f.residual_s**2))),
+                loo_rms_mps2=step.loo_rms_mps2,
+                angles=a,
+                moved=moved,
+                effects=_effects(f),
+            )
         )
         prev = a
-    return out
+    return tuple(out)
+
+
+_UNITS = {"_mps2_per_c": "m/s²/°C", "_mps2": "m/s²", "_deg": "°"}
+
+
+def _effects(f: full.Fit) -> tuple[EffectValue, ...]:
+    """The fitted effects of a fit, typed: a value ± σ per axis (a vector) or per named entry."""
+    out = []
+    for name, entry in effect_values(f).items():
+        unit = next((u for suffix, u in _UNITS.items() if name.endswith(suffix)), "")
+        if "value" not in entry:  # one {"value", "sigma"} per named entry (scale factors, site slopes)
+            labels = tuple(entry)
+            values = [entry[k]["value"] for k in labels]
+            sigmas = [entry[k]["sigma"] for k in labels]
+        elif isinstance(entry["value"], list):  # a vector on the sensor axes
+            labels, values, sigmas = ("x", "y", "z"), entry["value"], entry["sigma"]
+        else:
+            labels, values, sigmas = ("",), [entry["value"]], [entry["sigma"]]
+        out.append(
+            EffectValue(
+                name=name,
+                unit=unit,
+                components=labels,
+                value=tuple(float(v) for v in values),
+                sigma=tuple(None if s is None else float(s) for s in sigmas),
+            )
+        )
+    return tuple(out)
 
 
 def _all_residuals(table: StopTable, step: Step) -> FloatArray:
@@ -349,20 +401,22 @@ def _yaw_reason(table: StopTable, s_yaw: float | None, f: full.Fit, opts: Option
     return None
 
 
-def _observability(table: StopTable, f: full.Fit, g: float) -> dict[str, Any]:
+def _observability(table: StopTable, f: full.Fit, g: float) -> Observability:
     scale = np.sqrt(np.clip(np.diag(f.fisher), 1e-300, None))
     eig = np.linalg.eigvalsh(f.fisher / np.outer(scale, scale))
     rank = int(np.sum(eig > NULL_TOL * eig.max()))
-    crb = {",".join(t): crb_deg(table, f.state, t, g, f.noise_scale) for t in dict.fromkeys((BASE, WITH_BIAS, f.terms))}
-    return {
-        "parameters": list(f.names),
-        "n_parameters": len(f.names),
-        "fisher_rank": rank,
-        "condition_number": float(eig.max() / eig.min()) if eig.min() > 0 else None,
-        "crb_1sigma": crb,
-        "crb_note": "Cramér–Rao bounds for this stop set at the fitted point, per model"
+    crb = {}
+    for terms in dict.fromkeys((BASE, WITH_BIAS, f.terms)):
+        bound = crb_deg(table, f.state, terms, g, f.noise_scale)
+        crb[",".join(terms)] = None if bound is None else CramerRao(**bound)
+    return Observability(
+        parameters=tuple(f.names),
+        fisher_rank=rank,
+        condition_number=float(eig.max() / eig.min()) if eig.min() > 0 else None,
+        crb_1sigma=crb,
+        crb_note="Cramér–Rao bounds for this stop set at the fitted point, per model"
         + ("" if f.noise_known else ", with the noise σ estimated from the residuals"),
-    }
+    )
 
 
 def _null_space(fisher: FloatArray) -> FloatArray:
@@ -420,16 +474,16 @@ def _paper(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrat
         gravity_source=g_source,
         residual_rms_mps2=float(np.sqrt(np.mean(residual**2))),
         residual_s=residual,
-        fit={
-            "pairs": est.n_pairs,
-            "cos_slope": est.cos_slope,
-            "headings": table.headings,
-            "noise": "per-stop covariance from the table" if table.cov_s is not None else "common σ from residuals",
-            "noise_scale_mps2": None if table.cov_s is not None else noise_scale,
-            "uncertainty": "first-order propagation of the stop noise through the paper's steps",
-        },
-        observability={},
-        model_selection={"mode": "fixed", "chosen": list(BASE)},
+        fit=FitQuality(
+            noise="per-stop covariance from the table" if table.cov_s is not None else "common σ from residuals",
+            headings=table.headings,
+            noise_scale_mps2=None if table.cov_s is not None else noise_scale,
+            pairs=est.n_pairs,
+            cos_slope=est.cos_slope,
+            uncertainty="first-order propagation of the stop noise through the paper's steps",
+        ),
+        observability=None,
+        model_selection=ModelSelection(mode="fixed", chosen=BASE),
         provenance=_provenance(table, "paper", BASE),
         notes=tuple(notes),
         confident=not doubts,
@@ -467,14 +521,13 @@ def _gravity(table: StopTable, given: float | None) -> tuple[float, str]:
     )
 
 
-def _provenance(table: StopTable, method: str, terms: tuple[str, ...]) -> dict[str, Any]:
-    version = software_version()
-    return {
-        "input": table.source,
-        "input_sha256": table.sha256 or None,
-        "stops_fingerprint": fingerprint(table),  # lets `report --stops` check it has the right table
-        "software": f"mountcal {version}",
-        "method": method,
-        "model": list(terms),
-        "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
-    }
+def _provenance(table: StopTable, method: str, terms: tuple[str, ...]) -> Provenance:
+    return Provenance(
+        input=table.source,
+        software=f"mountcal {software_version()}",
+        method=method,
+        model=terms,
+        created_utc=datetime.now(UTC).isoformat(timespec="seconds"),
+        input_sha256=(table.sha256,) if table.sha256 else (),
+        stops_fingerprint=fingerprint(table),  # lets `report --stops` check it has the right table
+    )

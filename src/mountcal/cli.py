@@ -162,16 +162,13 @@ def cmd_report(args: argparse.Namespace) -> int:
     doc = read_json(result)  # the whole document: entries Calibration may not keep
     table = None
     if args.stops:
-        headings = cal.fit.get("headings")
-        table = read_stop_table(
-            args.stops, unit=args.unit, headings=headings if headings in ("uphill", "relative", "none") else "uphill"
-        )
-        stored = cal.provenance.get("stops_fingerprint")
-        if not isinstance(stored, dict) or not same_stops(stored, table):
+        table = read_stop_table(args.stops, unit=args.unit, headings=cal.fit.headings or "uphill")
+        stored = cal.provenance.stops_fingerprint
+        if stored is None or not same_stops(stored, table):
             raise InputError(
                 str(args.stops),
                 f"the stop table of this result (the one {result} was fitted to: same stops, order, headings, --unit)",
-                "a different table" if isinstance(stored, dict) else f"no record of that table in {result}",
+                "a different table" if stored is not None else f"no record of that table in {result}",
                 "Pass the table given to `mountcal calibrate` (or written by `mountcal stops` for its log), "
                 "or re-run calibrate on this one; omit --stops to report without it.",
             )
@@ -426,7 +423,7 @@ def summary(cal: Calibration) -> str:
         return f"{value:{fmt}}{unit} ± {sigma:{fmt}}{unit}" if sigma is not None else f"{value:{fmt}}{unit}"
 
     sel = cal.model_selection
-    how = "fixed by --model" if sel.get("mode") == "fixed" else "auto: " + " → ".join(sel.get("steps", []))
+    how = "fixed by --model" if sel.mode == "fixed" else "auto: " + " → ".join(sel.steps)
     how = how if cal.method == "full" else cal.method  # "paper", or "driving" when there were no stops
     lines = [
         f"mountcal — {cal.method} method, model: {', '.join(cal.model)} ({how})",
@@ -439,9 +436,9 @@ def summary(cal: Calibration) -> str:
         b = ", ".join(f"{v:+.4f} ± {s:.4f}" for v, s in zip(cal.bias_mps2, cal.bias_sigma_mps2, strict=True))
         lines.append(f"  bias   ({b}) m/s² (sensor x, y, z)")
     fit = cal.fit
-    chi = f", χ² = {fit['chi2']:.1f} on {fit['dof']} dof" if "chi2" in fit else ""
-    if fit.get("p_value") is not None:
-        chi += f" (p = {fit['p_value']:.2g})"
+    chi = f", χ² = {fit.chi2:.1f} on {fit.dof} dof" if fit.chi2 is not None else ""
+    if fit.p_value is not None:
+        chi += f" (p = {fit.p_value:.2g})"
     lines.append(f"  residual RMS {cal.residual_rms_mps2:.4g} m/s²{chi}")
     lines.append(f"  gravity {cal.gravity_mps2:.5f} m/s² ({cal.gravity_source})")
     if cal.yaw_reason:
@@ -450,7 +447,7 @@ def summary(cal: Calibration) -> str:
         lines.append("  slope not determined (see notes)")
     lines += [f"  note: {n}" for n in cal.notes]
     if not cal.confident:
-        found = "; ".join(f"{u.get('what')} ({u.get('size')})" for u in cal.unexplained) or "see the notes"
+        found = "; ".join(f"{u.what} ({u.size})" for u in cal.unexplained) or "see the notes"
         lines.append(f"  NOT CONFIDENT: {found}; rotate warns, --require-confident refuses")
     lines.append("  (uncertainties are 1σ)")
     return "\n".join(lines)

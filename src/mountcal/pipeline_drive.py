@@ -13,7 +13,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, Literal
+from typing import Literal
 
 import numpy as np
 
@@ -32,7 +32,7 @@ from mountcal.io.logs import read_log
 from mountcal.io.samples import Samples
 from mountcal.io.timestamps import increasing_times
 from mountcal.pipeline import LogJob
-from mountcal.result import Calibration
+from mountcal.result import Calibration, Provenance
 from mountcal.stops import StopTableFromLog, read_protocol, tabulate
 from mountcal.stoptable import StopTable, stop_table_from_frame
 from mountcal.version import software_version
@@ -105,9 +105,9 @@ def calibrate_any(job: LogJob, use: Use = "auto", driving: DrivingOptions | None
             skipped["driving"] = str(err)
     if static is not None and fit is not None:
         cal = stops_with_drive(static, table, fit, samples, job, driving)
-        if cal.fit.get("combination", {}).get("disagreement") is not None:
+        if (cal.fit.combination or {}).get("disagreement") is not None:
             skipped["combination"] = "the stops and the drive disagree beyond 3σ (see the notes)"
-        return LogResult(cal, samples, str(cal.fit["calibrated_from"]), static, fit, found, table, skipped)
+        return LogResult(cal, samples, str(cal.fit.calibrated_from), static, fit, found, table, skipped)
     if static is not None:
         return LogResult(static, samples, "stops", static, None, found, table, skipped)
     assert fit is not None
@@ -132,7 +132,7 @@ def stops_with_drive(
     mean gravity: either way the result is on the physical branch.
     """
     cal = combine(static, fit)
-    found = cal.fit.get("combination", {}).get("disagreement")
+    found = next((u for u in cal.unexplained if u.test == "stops_vs_driving"), None)
     if found is None or _up_is_up(static, table):
         return cal
     alone = estimate_driving(samples, driving)  # levelled by its own mean gravity: +g up by construction
@@ -144,12 +144,12 @@ def stops_with_drive(
     )
     return replace(
         cal,
-        fit={
-            **cal.fit,
-            "calibrated_from": "driving (the stops disagree and put −g up)",
-            "driving": alone.to_dict(),  # the fit used; the one levelled with the stops shows the disagreement
-            "driving_levelled_with_stops": fit.to_dict(),
-        },
+        fit=replace(
+            cal.fit,
+            calibrated_from="driving (the stops disagree and put −g up)",
+            driving=alone.to_dict(),  # the fit used; the one levelled with the stops shows the disagreement
+            driving_levelled_with_stops=fit.to_dict(),
+        ),
     )
 
 
@@ -203,16 +203,15 @@ def _gravity(samples: Samples, given: float | None) -> tuple[float, str]:
     return G_N, "assumed standard gravity 9.80665 m/s² (no position known); local gravity differs by up to ±0.27 %"
 
 
-def _provenance(paths: Sequence[str]) -> dict[str, Any]:
-    version = software_version()
-    return {
-        "input": " + ".join(str(Path(p)) for p in paths),
-        "input_sha256": [_sha256(Path(p)) for p in paths],
-        "software": f"mountcal {version}",
-        "method": "driving",
-        "model": ["rotation"],
-        "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
-    }
+def _provenance(paths: Sequence[str]) -> Provenance:
+    return Provenance(
+        input=" + ".join(str(Path(p)) for p in paths),
+        software=f"mountcal {software_version()}",
+        method="driving",
+        model=("rotation",),
+        created_utc=datetime.now(UTC).isoformat(timespec="seconds"),
+        input_sha256=tuple(_sha256(Path(p)) for p in paths),
+    )
 
 
 def _sha256(path: Path) -> str:

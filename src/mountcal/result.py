@@ -7,9 +7,9 @@ Computing a calibration (:mod:`mountcal.calibrate`) is separate from applying it
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass, is_dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal, get_args, get_type_hints
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -18,9 +18,10 @@ from mountcal.atomic import atomic_path
 from mountcal.conventions import CONVENTIONS, FloatArray, levelled
 from mountcal.errors import InputError
 from mountcal.result_file import check_document, read_json
+from mountcal.typed_json import from_plain, schema_of, to_plain
 
 FORMAT = "mountcal.calibration"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # 2: fit, observability, model selection, steps, effects, provenance typed (see Calibration)
 VEHICLE_FRAME = "vehicle (ISO 8855: x forward, y left, z up)"
 LEVELLED_FRAME = (
     "levelled (z up; x is the sensor's x axis on the horizontal: yaw not determined, so the heading is the "
@@ -39,26 +40,166 @@ class Finding:
     what: str
     size: str
     statistic: float | None  # None (with ``reason``) when the test does not exist for these data
-    dof: int
+    dof: int | None  # None for a test that is no χ²-type statistic (a z-score against ``z_limit``)
     p_value: float | None
     log10_p: float | None
     reason: str | None = None
+    z_limit: float | None = None  # a z-score test: beyond this many σ counts as structure
 
     @property
     def significant(self) -> bool:
         return self.p_value is not None and self.p_value < STRUCTURE_P
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "test": self.test,
-            "what": self.what,
-            "size": self.size,
-            "statistic": self.statistic,
-            "dof": self.dof,
-            "p_value": self.p_value,
-            "log10_p": self.log10_p,
-            **({"reason": self.reason} if self.reason else {}),
-        }
+        return dict(to_plain(self))
+
+
+@dataclass(frozen=True)
+class FitQuality:
+    """How well the model fits the stops, and the noise model behind the σ.
+
+    ``chi2``/``dof``/``p_value``/``log10_p`` test the model when the stop noise is known (from the
+    table); with the noise estimated from the residuals ``p_value`` is None and
+    ``noise_scale_mps2`` is that estimate. The paper's method fills ``pairs``/``cos_slope``; a
+    calibration that used driving says so in ``calibrated_from`` and keeps the driving fit's own
+    document in ``driving`` (and, with stops, how the two were combined in ``combination``).
+    """
+
+    noise: str | None = None
+    headings: Literal["uphill", "relative", "none"] | None = None
+    chi2: float | None = None
+    dof: int | None = None
+    p_value: float | None = None
+    log10_p: float | None = None
+    noise_scale_mps2: float | None = None
+    iterations: int | None = None
+    excluded_stops: tuple[int, ...] = ()  # 1-based stop numbers left out as outliers
+    birge_ratio: float = 1.0  # the σ are widened by this factor (>1 when structure is left unexplained)
+    branch: str | None = None  # why the physical branch of the rotation is in doubt
+    pairs: int | None = None
+    cos_slope: float | None = None
+    uncertainty: str | None = None  # how the σ were computed when not from the Fisher information
+    calibrated_from: str | None = None
+    driving: dict[str, Any] | None = None
+    combination: dict[str, Any] | None = None
+    driving_levelled_with_stops: dict[str, Any] | None = None  # when the drive alone is used (they disagreed)
+
+
+@dataclass(frozen=True)
+class Angles:
+    """Roll, pitch, yaw and slope in degrees with 1σ; None where the data do not determine them."""
+
+    roll_deg: float
+    roll_sigma_deg: float | None
+    pitch_deg: float
+    pitch_sigma_deg: float | None
+    yaw_deg: float | None
+    yaw_sigma_deg: float | None
+    yaw_reason: str | None
+    slope_deg: float | None
+    slope_sigma_deg: float | None
+
+
+@dataclass(frozen=True)
+class AngleChanges:
+    """How far each angle moved from the previous model step, degrees (None: not determined in both)."""
+
+    roll_deg: float | None
+    pitch_deg: float | None
+    yaw_deg: float | None
+    slope_deg: float | None
+
+
+@dataclass(frozen=True)
+class EffectValue:
+    """A fitted effect: one value ± 1σ per component (``x, y, z`` of a vector, or named entries)."""
+
+    name: str
+    unit: str
+    components: tuple[str, ...]
+    value: tuple[float, ...]
+    sigma: tuple[float | None, ...]
+
+
+@dataclass(frozen=True)
+class ModelStep:
+    """One step of the model loop: what it added and why, its fit, angles and effects."""
+
+    added: str
+    reason: str
+    terms: tuple[str, ...]
+    excluded_stops: tuple[int, ...]
+    gravity_mps2: float
+    chi2: float
+    dof: int
+    residual_rms_mps2: float
+    loo_rms_mps2: float | None
+    angles: Angles
+    moved: AngleChanges | None  # None for the first step
+    effects: tuple[EffectValue, ...] = ()
+
+
+@dataclass(frozen=True)
+class Declined:
+    """An effect the loop considered and did not add, with the reason."""
+
+    effect: str
+    why: str
+
+
+@dataclass(frozen=True)
+class ModelSelection:
+    """How the model was chosen: ``mode`` auto (the loop), fixed (by the user), or driving."""
+
+    mode: str
+    chosen: tuple[str, ...]
+    alpha: float | None = None
+    steps: tuple[str, ...] = ()
+    declined: tuple[Declined, ...] = ()
+
+
+@dataclass(frozen=True)
+class CramerRao:
+    """Cramér–Rao 1σ bounds of the angles (degrees) for one model; None where not determined."""
+
+    roll_deg: float | None
+    pitch_deg: float | None
+    yaw_deg: float | None
+    slope_deg: float | None
+
+
+@dataclass(frozen=True)
+class Observability:
+    """What the stops can determine: Fisher rank and conditioning, and the Cramér–Rao bounds per model."""
+
+    parameters: tuple[str, ...]
+    fisher_rank: int
+    condition_number: float | None  # None: singular (some direction unobservable)
+    crb_1sigma: dict[str, CramerRao | None]  # model (comma-joined terms) → bounds; None when singular
+    crb_note: str
+
+
+@dataclass(frozen=True)
+class StopsFingerprint:
+    """Sums that identify the stop table a result was fitted to (:func:`mountcal.stoptable.fingerprint`)."""
+
+    n: int
+    acc_sum_mps2: tuple[float, float, float]
+    acc_ranked_sum_mps2: tuple[float, float, float]
+    beta_ranked_sum_deg: float | None
+
+
+@dataclass(frozen=True)
+class Provenance:
+    """Where a result came from: the input (with the SHA-256 of each file), the software, when."""
+
+    input: str
+    software: str
+    method: str
+    model: tuple[str, ...]
+    created_utc: str
+    input_sha256: tuple[str, ...] = ()
+    stops_fingerprint: StopsFingerprint | None = None
 
 
 @dataclass(frozen=True)
@@ -88,15 +229,15 @@ class Calibration:
     gravity_source: str
     residual_rms_mps2: float
     residual_s: FloatArray  # shape (n, 3), per-stop residual, m/s², sensor frame
-    fit: dict[str, Any]
-    observability: dict[str, Any]
-    model_selection: dict[str, Any]
-    provenance: dict[str, Any]
-    notes: tuple[str, ...] = field(default=())
-    model_steps: list[dict[str, Any]] = field(default_factory=list)  # the before/after table of the loop
-    unexplained: list[dict[str, Any]] = field(default_factory=list)  # structure the model leaves
-    diagnostics: list[dict[str, Any]] = field(default_factory=list)  # every residual test of the final model
-    effects: dict[str, Any] = field(default_factory=dict)  # fitted effect values ± σ
+    fit: FitQuality
+    observability: Observability | None  # None: not computed for this method
+    model_selection: ModelSelection
+    provenance: Provenance
+    notes: tuple[str, ...] = ()
+    model_steps: tuple[ModelStep, ...] = ()  # the before/after table of the loop
+    unexplained: tuple[Finding, ...] = ()  # structure the model leaves
+    diagnostics: tuple[Finding, ...] = ()  # every residual test of the final model
+    effects: tuple[EffectValue, ...] = ()  # fitted effect values ± σ
     confident: bool = True  # False when the residual shows structure the model does not explain
 
     def __post_init__(self) -> None:
@@ -106,6 +247,25 @@ class Calibration:
     @property
     def yaw_determined(self) -> bool:
         return self.yaw_deg is not None
+
+    @property
+    def angles(self) -> Angles:
+        """Roll, pitch, yaw and slope with their σ, as a model step holds them."""
+        return Angles(
+            self.roll_deg,
+            self.roll_sigma_deg,
+            self.pitch_deg,
+            self.pitch_sigma_deg,
+            self.yaw_deg,
+            self.yaw_sigma_deg,
+            self.yaw_reason,
+            self.slope_deg,
+            self.slope_sigma_deg,
+        )
+
+    def effect(self, name: str) -> EffectValue | None:
+        """The fitted effect of that name (e.g. ``bias_mps2``), None when the model has no such effect."""
+        return next((e for e in self.effects if e.name == name), None)
 
     @property
     def frame(self) -> str:
@@ -118,7 +278,7 @@ class Calibration:
             "format": FORMAT,
             "format_version": FORMAT_VERSION,
             "conventions": CONVENTIONS,
-            "provenance": self.provenance,
+            "provenance": to_plain(self.provenance),
             "method": self.method,
             "model": list(self.model),
             "mounting": {"roll_deg": self.roll_deg, "pitch_deg": self.pitch_deg, "yaw_deg": self.yaw_deg},
@@ -142,18 +302,18 @@ class Calibration:
             "bias_mps2": _list(self.bias_mps2),
             "gravity": {"value_mps2": self.gravity_mps2, "source": self.gravity_source},
             "residual_rms_mps2": self.residual_rms_mps2,
-            "fit": self.fit,
-            "observability": self.observability,
-            "model_selection": self.model_selection,
+            "fit": to_plain(self.fit),
+            "observability": to_plain(self.observability),
+            "model_selection": to_plain(self.model_selection),
             "stops": {
                 "n": int(self.residual_s.shape[0]),
                 "residual_s_mps2": [[float(v) if np.isfinite(v) else None for v in row] for row in self.residual_s],
             },
-            "effects": self.effects,
-            "model_steps": self.model_steps,
-            "unexplained": self.unexplained,
+            "effects": to_plain(self.effects),
+            "model_steps": to_plain(self.model_steps),
+            "unexplained": to_plain(self.unexplained),
             "confident": self.confident,
-            "diagnostics": self.diagnostics,
+            "diagnostics": to_plain(self.diagnostics),
             "notes": list(self.notes),
         }
 
@@ -172,6 +332,13 @@ class Calibration:
                 f"a {FORMAT} JSON document",
                 f"format {doc.get('format')!r}",
                 "Pass a file written by `mountcal calibrate`.",
+            )
+        if doc.get("format_version") == 1:  # its free-form parts cannot be read as the typed ones without guessing
+            raise InputError(
+                where,
+                f"format_version {FORMAT_VERSION}",
+                "format_version 1 (written by mountcal before its result was typed)",
+                "Re-run `mountcal calibrate` on the same input (or its stop table) to write this version's file.",
             )
         if doc.get("format_version") != FORMAT_VERSION:
             raise InputError(
@@ -207,15 +374,8 @@ class Calibration:
                 residual_s=np.array(
                     [[np.nan if v is None else v for v in row] for row in doc["stops"]["residual_s_mps2"]], dtype=float
                 ).reshape(-1, 3),
-                fit=doc["fit"],
-                observability=doc["observability"],
-                model_selection=doc["model_selection"],
-                provenance=doc["provenance"],
+                **{name: from_plain(_TYPED[name], doc[name], name) for name in _TYPED if name in doc},
                 notes=tuple(doc.get("notes", ())),
-                model_steps=list(doc.get("model_steps", [])),
-                unexplained=list(doc.get("unexplained", [])),
-                diagnostics=list(doc.get("diagnostics", [])),
-                effects=dict(doc.get("effects", {})),
                 confident=bool(doc.get("confident", True)),
             )
         except (KeyError, TypeError, ValueError) as err:
@@ -223,7 +383,7 @@ class Calibration:
                 where,
                 "a complete calibration document",
                 f"a missing or malformed field ({err})",
-                "Re-create it with `mountcal calibrate`.",
+                "The file was altered or corrupted: re-create it with `mountcal calibrate`.",
             ) from err
 
     @classmethod
@@ -238,9 +398,38 @@ class Calibration:
         return cls.from_dict(doc, where=str(path))
 
 
+def _typed_fields() -> dict[str, Any]:
+    """The Calibration fields held as typed values (dataclasses), each with its type."""
+
+    def typed(tp: Any) -> bool:
+        return (isinstance(tp, type) and is_dataclass(tp)) or any(typed(a) for a in get_args(tp))
+
+    return {name: tp for name, tp in get_type_hints(Calibration).items() if typed(tp)}
+
+
+_TYPED = _typed_fields()
+
+
+def schema_defs() -> dict[str, Any]:
+    """The JSON Schema of the typed parts of a result (``$defs`` and the top-level properties using them).
+
+    The published schema (``mountcal/schema/calibration.schema.json``) holds exactly these; a test
+    fails when they drift apart (regenerate with ``python -m mountcal.result``).
+    """
+    defs: dict[str, Any] = {}
+    properties = {name: schema_of(tp, defs) for name, tp in _TYPED.items()}
+    return {"$defs": dict(sorted(defs.items())), "properties": properties}
+
+
 def _list(a: FloatArray | None) -> list[float] | None:
     return None if a is None else [float(x) for x in a]
 
 
 def _array(a: list[float] | None) -> FloatArray | None:
     return None if a is None else np.asarray(a, dtype=float)
+
+
+if __name__ == "__main__":  # regenerate the typed parts of the published schema
+    from mountcal.result_file import write_schema
+
+    write_schema(schema_defs())

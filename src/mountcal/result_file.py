@@ -6,8 +6,9 @@ contradicts its angles would rotate by something nobody reported.
 
 - :func:`read_json` parses with a size limit (:mod:`mountcal.paths`), a nesting-depth limit
   (a deep array would exhaust the parser's recursion), and no ``NaN``/``Infinity`` literals.
-- :func:`check_document` checks the fields a :class:`~mountcal.result.Calibration` uses: types,
-  finiteness, ranges, shapes, and that the rotation agrees with its angles within
+- :func:`check_document` checks the untyped fields a :class:`~mountcal.result.Calibration` uses
+  (the typed parts are checked by :func:`mountcal.typed_json.from_plain`): types, finiteness,
+  ranges, shapes, and that the rotation agrees with its angles within
   :data:`ROTATION_TOLERANCE_DEG`. The same rules are published as a JSON Schema
   (``mountcal/schema/calibration.schema.json``) for other tools; the consistency of the rotation
   with its angles is beyond JSON Schema and checked here only.
@@ -22,6 +23,7 @@ import json
 import math
 import re
 from importlib import resources
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -43,6 +45,15 @@ _STRINGS = re.compile(rb'"(?:[^"\\]|\\.)*"', re.DOTALL)
 def schema() -> dict[str, Any]:
     """The published JSON Schema of a result file."""
     return json.loads(resources.files("mountcal").joinpath(SCHEMA).read_text(encoding="utf-8"))
+
+
+def write_schema(typed: dict[str, Any]) -> None:
+    """Replace the typed parts of the published schema (``$defs``, their properties) with ``typed``."""
+    path = Path(str(resources.files("mountcal").joinpath(SCHEMA)))
+    doc = schema()
+    doc["$defs"] = typed["$defs"]
+    doc["properties"].update(typed["properties"])
+    path.write_text(json.dumps(doc, indent=2, ensure_ascii=False) + "\n", encoding="utf-8")
 
 
 def read_json(path: PathLike, what: str = "a calibration JSON file") -> Any:
@@ -105,12 +116,9 @@ def check_document(doc: dict[str, Any], where: str) -> None:
         for i in range(n):
             number(f"{path}.{i}", lo, hi, null=items_null)
 
-    for key, kind in (("method", str), ("model", list), ("fit", dict), ("provenance", dict)):
+    for key, kind in (("method", str), ("model", list)):
         if not isinstance(doc.get(key), kind):
             problems.append(f"{key} = {_show(doc.get(key))} (expected a {kind.__name__})")
-    for key in ("observability", "model_selection"):
-        if not isinstance(doc.get(key), dict):
-            problems.append(f"{key} = {_show(doc.get(key))} (expected an object)")
     if isinstance(doc.get("model"), list) and not all(isinstance(t, str) for t in doc["model"]):
         problems.append("model (expected a list of names)")
     roll = number("mounting.roll_deg", -180, 180)
@@ -126,7 +134,7 @@ def check_document(doc: dict[str, Any], where: str) -> None:
     vector("uncertainty.bias_mps2", 3, 0, math.inf, null=_get(doc, "bias_mps2") is None)  # a σ may be large: finite
     number("gravity.value_mps2", *GRAVITY_RANGE_MPS2)
     number("residual_rms_mps2", 0, 2 * G_N)
-    if isinstance(doc.get("observability"), dict) and "condition_number" in doc["observability"]:
+    if isinstance(doc.get("observability"), dict):
         number("observability.condition_number", 1 - 1e-9, math.inf, null=True)  # the report formats it
     if not isinstance(_get(doc, "gravity.source"), str):
         problems.append(f"gravity.source = {_show(_get(doc, 'gravity.source'))} (expected a text)")
@@ -169,11 +177,6 @@ def _check_notes(doc: dict[str, Any], problems: list[str]) -> None:
     notes = doc.get("notes", [])
     if not isinstance(notes, list) or not all(isinstance(x, str) for x in notes):
         problems.append(f"notes = {_show(notes)} (expected a list of texts)")
-    for key in ("model_steps", "unexplained", "diagnostics"):
-        if not isinstance(doc.get(key, []), list):
-            problems.append(f"{key} = {_show(doc.get(key))} (expected a list)")
-    if not isinstance(doc.get("effects", {}), dict):
-        problems.append(f"effects = {_show(doc.get('effects'))} (expected an object)")
     if not isinstance(doc.get("confident", True), bool):
         problems.append(f"confident = {_show(doc.get('confident'))} (expected true or false)")
 
@@ -232,4 +235,4 @@ def _show(value: Any) -> str:
     return text if len(text) <= 60 else text[:57] + "..."
 
 
-__all__ = ["MAX_DEPTH", "ROTATION_TOLERANCE_DEG", "check_document", "read_json", "schema"]
+__all__ = ["MAX_DEPTH", "ROTATION_TOLERANCE_DEG", "check_document", "read_json", "schema", "write_schema"]

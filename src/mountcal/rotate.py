@@ -39,7 +39,7 @@ def check_applicable(
         Yaw is not determined and ``level_only`` is False (the rotation would only level); the
         result is not confident and ``require_confident`` is True.
     """
-    where = where or f"calibration of {cal.provenance.get('input') or 'unknown input'}"
+    where = where or f"calibration of {cal.provenance.input or 'unknown input'}"
     if not cal.yaw_determined and not level_only:
         raise InputError(
             where,
@@ -50,7 +50,7 @@ def check_applicable(
         )
     found: list[str] = []
     if not cal.confident:
-        why = "; ".join(str(u.get("what", u)) for u in cal.unexplained) or "see the result's notes"
+        why = "; ".join(u.what for u in cal.unexplained) or "see the result's notes"
         if require_confident:
             raise InputError(
                 where,

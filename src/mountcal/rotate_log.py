@@ -247,7 +247,7 @@ def _metadata(cal: Calibration, files: Sequence[Path]) -> dict[str, str]:
                 "yaw_deg": cal.yaw_deg,
                 "bias_mps2": None if cal.bias_mps2 is None else cal.bias_mps2.tolist(),
                 "method": cal.method,
-                "input": cal.provenance.get("input"),
+                "input": cal.provenance.input,
             }
         ),
         "mountcal.inputs": json.dumps([str(f) for f in files]),

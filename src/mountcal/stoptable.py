@@ -16,7 +16,7 @@ import hashlib
 import io
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Literal
+from typing import Literal
 
 import numpy as np
 import pandas as pd
@@ -25,6 +25,7 @@ from mountcal.conventions import G_N, FloatArray
 from mountcal.errors import InputError, NotEnoughInformation
 from mountcal.io.inputs import check_parquet_rows
 from mountcal.paths import read_input_bytes
+from mountcal.result import StopsFingerprint
 
 # Column names of the stop table file.
 BETA = "beta_deg"
@@ -249,36 +250,39 @@ def stop_table_from_frame(
     )
 
 
-def fingerprint(table: StopTable) -> dict[str, Any]:
+def fingerprint(table: StopTable) -> StopsFingerprint:
     """Order-sensitive sums of the stop means and headings: they identify the table a result was
     fitted to. Not a file hash: a log's stop table never was a file, and CSV, Parquet or a
     rewrite of the same stops must match; :func:`same_stops` compares them to 1e-9 relative."""
     n = len(table)
     rank = np.arange(1, n + 1, dtype=float)[:, None] / max(n, 1)
-    beta = None if table.beta_rad is None else np.degrees(table.beta_rad)
-    return {
-        "n": n,
-        "acc_sum_mps2": table.acc_s.sum(axis=0).tolist(),
-        "acc_ranked_sum_mps2": (rank * table.acc_s).sum(axis=0).tolist(),
-        "beta_ranked_sum_deg": None if beta is None else float((rank[:, 0] * beta).sum()),
-    }
+    acc, ranked = table.acc_s.sum(axis=0), (rank * table.acc_s).sum(axis=0)
+    return StopsFingerprint(
+        n=n,
+        acc_sum_mps2=(float(acc[0]), float(acc[1]), float(acc[2])),
+        acc_ranked_sum_mps2=(float(ranked[0]), float(ranked[1]), float(ranked[2])),
+        beta_ranked_sum_deg=None if table.beta_rad is None else float((rank[:, 0] * np.degrees(table.beta_rad)).sum()),
+    )
 
 
-def same_stops(stored: dict[str, Any], table: StopTable) -> bool:
+def same_stops(stored: StopsFingerprint, table: StopTable) -> bool:
     """Whether ``table`` is the table of the :func:`fingerprint` ``stored`` (1e-9 relative)."""
     now = fingerprint(table)
-    with_beta = stored.get("beta_ranked_sum_deg") is not None
-    if stored.get("n") != now["n"] or with_beta != (now["beta_ranked_sum_deg"] is not None):
+    if stored.n != now.n or (stored.beta_ranked_sum_deg is None) != (now.beta_ranked_sum_deg is None):
         return False
-    tol = {"acc_sum_mps2": G_N, "acc_ranked_sum_mps2": G_N, "beta_ranked_sum_deg": 360.0}  # × n × 1e-9
-    try:
-        return all(
-            np.allclose(np.asarray(stored[k], dtype=float), np.asarray(now[k], dtype=float), rtol=0, atol=t * n)
-            for k, t, n in ((k, t * 1e-9, max(now["n"], 1)) for k, t in tol.items())
-            if now[k] is not None
+    atol = 1e-9 * max(now.n, 1)
+    beta_ok = (
+        now.beta_ranked_sum_deg is None
+        or stored.beta_ranked_sum_deg is None
+        or abs(now.beta_ranked_sum_deg - stored.beta_ranked_sum_deg) <= 360.0 * atol
+    )
+    return beta_ok and all(
+        np.allclose(stored_sum, now_sum, rtol=0, atol=G_N * atol)
+        for stored_sum, now_sum in (
+            (stored.acc_sum_mps2, now.acc_sum_mps2),
+            (stored.acc_ranked_sum_mps2, now.acc_ranked_sum_mps2),
         )
-    except (KeyError, TypeError, ValueError):
-        return False
+    )
 
 
 def write_stop_table(table: StopTable, path: str | Path) -> None:

@@ -48,7 +48,7 @@ from scipy.spatial.transform import Rotation
 from mountcal.conventions import FloatArray, angles_from_rot_vs, rot_vs_from_angles, tilt_from_normal
 from mountcal.errors import InputError, NotEnoughInformation
 from mountcal.io.samples import Channel, Samples
-from mountcal.result import Calibration
+from mountcal.result import Calibration, Finding, FitQuality, ModelSelection, Provenance
 
 IntArray = NDArray[np.int64]
 AGREE_Z = 2.0  # |z| above this: the two estimates disagree beyond their uncertainties (≈ 95 %)
@@ -848,7 +848,7 @@ def _tilt_check(
 
 
 def driving_calibration(
-    fit: DrivingFit, *, gravity_mps2: float, gravity_source: str, provenance: dict[str, Any]
+    fit: DrivingFit, *, gravity_mps2: float, gravity_source: str, provenance: Provenance
 ) -> Calibration:
     """A :class:`~mountcal.result.Calibration` from driving alone (no parked stops).
 
@@ -885,15 +885,15 @@ def driving_calibration(
         gravity_source=gravity_source,
         residual_rms_mps2=fit.longitudinal_rms_mps2,
         residual_s=np.zeros((0, 3)),
-        fit={"calibrated_from": "driving", "driving": fit.to_dict()},
-        observability={},
-        model_selection={"mode": "driving", "chosen": ["rotation"]},
+        fit=FitQuality(calibrated_from="driving", driving=fit.to_dict()),
+        observability=None,
+        model_selection=ModelSelection(mode="driving", chosen=("rotation",)),
         provenance=provenance,
         notes=tuple(notes),
     )
 
 
-def disagreement(static: Calibration, fit: DrivingFit) -> dict[str, Any] | None:
+def disagreement(static: Calibration, fit: DrivingFit) -> Finding | None:
     """The stops against the drive, beyond ``DISAGREE_Z`` σ in tilt or yaw: an ``unexplained`` entry, else None.
 
     Tilt: the drive's mean gravity against the stops' up axis (``fit.tilt_check``), about the
@@ -922,39 +922,41 @@ def disagreement(static: Calibration, fit: DrivingFit) -> dict[str, Any] | None:
             z_max = max(z_max, abs(z_yaw))
     if not parts:
         return None
-    return {
-        "test": "stops_vs_driving",
-        "what": "the parked stops and the drive disagree beyond their uncertainties (not combined)",
-        "size": "; ".join(parts),
-        "statistic": float(z_max) if np.isfinite(z_max) else None,
-        "z_limit": DISAGREE_Z,
-        "p_value": None,
-    }
+    return Finding(
+        test="stops_vs_driving",
+        what="the parked stops and the drive disagree beyond their uncertainties (not combined)",
+        size="; ".join(parts),
+        statistic=float(z_max) if np.isfinite(z_max) else None,
+        dof=None,
+        p_value=None,
+        log10_p=None,
+        z_limit=DISAGREE_Z,
+    )
 
 
-def not_combined(static: Calibration, fit: DrivingFit, found: dict[str, Any]) -> Calibration:
+def not_combined(static: Calibration, fit: DrivingFit, found: Finding) -> Calibration:
     """The stops' calibration, not confident, with the disagreement with the drive as a finding."""
     words = (
-        f"stops and driving DISAGREE: {found['size']}, beyond {DISAGREE_Z:g}σ; they are not combined and the "
+        f"stops and driving DISAGREE: {found.size}, beyond {DISAGREE_Z:g}σ; they are not combined and the "
         "result is not confident. One of them misses an effect (a remount between the stops and the drive, "
         "a wrong protocol heading or uphill azimuth, a speed channel not along the vehicle x axis, the stops' "
         "mirror solution)"
     )
     return replace(
         static,
-        fit={
-            **static.fit,
-            "calibrated_from": "stops (driving disagrees: not combined)",
-            "driving": fit.to_dict(),
-            "combination": {
+        fit=replace(
+            static.fit,
+            calibrated_from="stops (driving disagrees: not combined)",
+            driving=fit.to_dict(),
+            combination={
                 "used": "none: disagreement",
                 "agree": False,
-                "disagreement": found,
+                "disagreement": found.to_dict(),
                 "tilt_check": fit.tilt_check,
             },
-        },
+        ),
         notes=(*static.notes, words),
-        unexplained=[*static.unexplained, found],
+        unexplained=(*static.unexplained, found),
         confident=False,
     )
 
@@ -984,12 +986,9 @@ def combine(static: Calibration, fit: DrivingFit) -> Calibration:
         combination["used"] = "static"
         return replace(
             static,
-            fit={
-                **static.fit,
-                "calibrated_from": "stops (driving checked)",
-                "driving": fit.to_dict(),
-                "combination": combination,
-            },
+            fit=replace(
+                static.fit, calibrated_from="stops (driving checked)", driving=fit.to_dict(), combination=combination
+            ),
             notes=tuple(notes),
         )
     sx = static.rotation_sigma_deg[0] or static.roll_sigma_deg
@@ -1034,6 +1033,6 @@ def combine(static: Calibration, fit: DrivingFit) -> Calibration:
         yaw_sigma_deg=yaw_sigma,
         yaw_reason=None,
         rotation_sigma_deg=(static.rotation_sigma_deg[0], static.rotation_sigma_deg[1], s_z),
-        fit={**static.fit, "calibrated_from": "stops + driving", "driving": fit.to_dict(), "combination": combination},
+        fit=replace(static.fit, calibrated_from="stops + driving", driving=fit.to_dict(), combination=combination),
         notes=tuple(notes),
     )

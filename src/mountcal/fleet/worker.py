@@ -134,8 +134,8 @@ def calibration_record(cal: Calibration) -> dict[str, Any]:
         flags.append("slope_not_determined")
     if "bias" in cal.model:
         flags.append("bias_fitted")
-    chi2, dof = cal.fit.get("chi2"), cal.fit.get("dof")
-    p_fit = cal.fit.get("p_value")  # None when the stop noise was estimated from the residuals
+    chi2, dof = cal.fit.chi2, cal.fit.dof
+    p_fit = cal.fit.p_value  # None when the stop noise was estimated from the residuals
     if p_fit is not None and p_fit < STRUCTURE_P:
         flags.append("model_misfit")
     if not getattr(cal, "confident", True):

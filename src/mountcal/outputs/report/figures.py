@@ -19,7 +19,7 @@ from mpl_toolkits.mplot3d import Axes3D
 
 from mountcal.conventions import G_N, FloatArray, specific_force_v
 from mountcal.outputs.report.document import ANGLES, Estimate, angle_estimates
-from mountcal.result import Calibration
+from mountcal.result import Calibration, ModelStep
 from mountcal.stoptable import StopTable
 
 AXIS_COLOURS = ("tab:red", "tab:green", "tab:blue")  # x, y, z, the usual convention
@@ -319,9 +319,9 @@ def _stop_sigma(cal: Calibration, table: StopTable | None, frame: Frame) -> Floa
             m = cal.rot_vs.as_matrix()
             cov = m @ cov @ m.T
         return np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2), 0.0, None))
-    scale = cal.fit.get("noise_scale_mps2")
-    if isinstance(scale, int | float) and np.isfinite(scale) and scale > 0:
-        return np.full((n, 3), float(scale))
+    scale = cal.fit.noise_scale_mps2
+    if scale is not None and scale > 0:
+        return np.full((n, 3), scale)
     return None
 
 
@@ -330,10 +330,8 @@ def excluded_stops(cal: Calibration) -> np.ndarray:
     or a residual that is not finite)."""
     n = cal.residual_s.shape[0]
     mask = ~np.all(np.isfinite(cal.residual_s), axis=1)
-    listed = cal.fit.get("excluded_stops")
-    if isinstance(listed, list):
-        idx = np.array([int(k) - 1 for k in listed if isinstance(k, int | float) and 1 <= k <= n], dtype=int)
-        mask[idx] = True
+    idx = np.array([k - 1 for k in cal.fit.excluded_stops if 1 <= k <= n], dtype=int)
+    mask[idx] = True
     return mask
 
 
@@ -348,13 +346,13 @@ def _check_rows(cal: Calibration, table: StopTable) -> None:
 def uncertainty_vs_crb(cal: Calibration) -> Figure:
     """This fit's 1σ of each angle beside the Cramér–Rao bound of each model (log scale, degrees)."""
     est = angle_estimates(cal)
-    crb = cal.observability.get("crb_1sigma") or {}
+    crb = {} if cal.observability is None else cal.observability.crb_1sigma
     series: list[tuple[str, dict[str, float | None]]] = [
         (f"this fit ({', '.join(cal.model)})", {a: est[a].sigma if est[a].determined else None for a in ANGLES})
     ]
     for model, bounds in crb.items():
-        values = bounds if isinstance(bounds, Mapping) else {}
-        series.append((f"CRB {model.replace(',', ', ')}", {a: _positive(values.get(f"{a}_deg")) for a in ANGLES}))
+        bound = {a: None if bounds is None else _positive(getattr(bounds, f"{a}_deg")) for a in ANGLES}
+        series.append((f"CRB {model.replace(',', ', ')}", bound))
     fig = Figure(figsize=(7.5, 3.8), layout="constrained")
     ax = fig.add_subplot()
     height = 0.8 / len(series)
@@ -386,7 +384,7 @@ def _positive(x: Any) -> float | None:
 
 
 def angles(
-    entries: Mapping[str, Calibration | Mapping[str, Any]],
+    entries: Mapping[str, Calibration | ModelStep | Mapping[str, Estimate]],
     truth_deg: Mapping[str, float] | None = None,
     which: Sequence[str] = ANGLES,
 ) -> Figure:
@@ -394,7 +392,7 @@ def angles(
 
     Parameters
     ----------
-    entries : mapping of label to Calibration or model-step mapping
+    entries : mapping of label to Calibration, ModelStep, or angle name to Estimate
         In display order (e.g. ``{"paper": cal_paper, "full": cal_full}``).
     truth_deg : mapping, optional
         True values (``roll``, ``pitch``, ``yaw``, ``slope``, degrees), drawn as dashed lines.
@@ -427,7 +425,7 @@ def angles(
 
 def angles_over_time(
     x: Sequence[float] | FloatArray,
-    entries: Sequence[Calibration | Mapping[str, Any]],
+    entries: Sequence[Calibration | ModelStep | Mapping[str, Estimate]],
     xlabel: str,
     which: Sequence[str] = ("roll", "pitch", "yaw"),
     marks: Sequence[float] = (),
