@@ -235,7 +235,7 @@ def real_canedge(root: Path) -> None:
         if stops is not None:
             st = stops.calibration
             print(
-                f"- {drive}: stops alone ({len(stops.stops.frame) if stops.stops is not None else 0} stops, "
+                f"- {drive}: stops alone ({len(stops.stops.table) if stops.stops is not None else 0} stops, "
                 f"headings {st.fit.headings}): roll {st.roll_deg:.2f}° ± {st.roll_sigma_deg:.2f}°, pitch "
                 f"{st.pitch_deg:.2f}° ± {st.pitch_sigma_deg:.2f}°, yaw {st.yaw_deg} ({st.yaw_reason})"
             )

@@ -56,7 +56,7 @@ def canedge_car(real: Path) -> str:
             "",
         ]
         if len(drives) == 1:
-            out += ["Stop table:", "", _markdown(done.stops.frame), ""]
+            out += ["Stop table:", "", _markdown(done.stops.table.to_frame()), ""]
     return "\n".join(out)
 
 

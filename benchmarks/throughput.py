@@ -32,7 +32,6 @@ from mountcal.pipeline import LogJob, calibrate_log
 from mountcal.result import Calibration
 from mountcal.simulate import simulate_parking_log
 from mountcal.stops import read_protocol, tabulate
-from mountcal.stoptable import stop_table_from_frame
 
 REPO = Path(__file__).resolve().parents[1]
 DBC = REPO / "data" / "imu_mm5_10.dbc"
@@ -111,7 +110,7 @@ def conventional_blf(log: Path, protocol: Path) -> Calibration:
 
 def _calibrate(samples: Samples, protocol: Path) -> Calibration:
     found = tabulate(samples, None, read_protocol(str(protocol)))
-    return calibrate(stop_table_from_frame(found.frame, headings="uphill"))
+    return calibrate(found.table)
 
 
 def main() -> None:

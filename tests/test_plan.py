@@ -69,7 +69,8 @@ def test_calibrate_reads_the_sheet_and_finds_every_planned_stop(tmp_path: Path) 
     log = simulate_parking_log(slope_deg=4.0, beta_deg=tuple(protocol["beta_deg"]), stop_s=20.0, drive_s=60.0, seed=2)
     found = tabulate(Samples(log.t_s, log.acc_s, log.gyro_s), protocol=protocol)
     assert found.heading_source == "protocol sheet" and found.unmatched_protocol_rows == 0
-    assert np.allclose(found.frame["beta_deg"], protocol["beta_deg"])
+    assert found.table.beta_rad is not None
+    assert np.allclose(np.degrees(found.table.beta_rad), protocol["beta_deg"])
 
 
 def test_noise_from_a_log_is_the_simulated_white_noise(tmp_path: Path) -> None:

@@ -8,8 +8,7 @@ import pytest
 from mountcal.calibrate import calibrate
 from mountcal.io.samples import Channel, Samples
 from mountcal.simulate import ParkingLog, simulate_parking_log
-from mountcal.stops import StopDetection, beta_from_heading, detect_stops, find_stops, still_mask, stop_frame
-from mountcal.stoptable import stop_table_from_frame
+from mountcal.stops import StopDetection, beta_from_heading, detect_stops, find_stops, still_mask, stop_table
 
 
 @pytest.fixture(scope="module")
@@ -44,7 +43,7 @@ def test_headings_from_the_log_and_the_uphill_azimuth_give_beta(log: ParkingLog)
 def test_detected_stops_calibrate_to_the_truth_within_sigma(log: ParkingLog) -> None:
     stops = detect_stops(samples_of(log))
     heading = np.array([s.channels["heading_deg"] for s in stops])
-    table = stop_table_from_frame(stop_frame(stops, beta_from_heading(heading, log.uphill_azimuth_deg)))
+    table = stop_table(stops, beta_from_heading(heading, log.uphill_azimuth_deg))
     cal = calibrate(table)
     roll, pitch, yaw = log.truth.angles_deg
     assert abs(cal.roll_deg - roll) < 4 * cal.roll_sigma_deg

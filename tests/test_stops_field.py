@@ -25,7 +25,7 @@ from mountcal.stops import (
     detect_stops,
     find_stops,
     still_mask,
-    stop_frame,
+    stop_table,
     tabulate,
 )
 from mountcal.stoptable import stop_table_from_frame
@@ -148,7 +148,7 @@ def test_a_heading_that_wanders_splits_or_drops_the_stop_and_is_counted() -> Non
     assert len(split) == 1 and split[0] >= 1  # the wandering stop's still period(s): how many depends on the gyro gate
     heading = np.array([s.channels["heading_deg"] for s in search.stops])
     beta = beta_from_heading(heading, log.uphill_azimuth_deg)
-    table = stop_table_from_frame(stop_frame(search.stops, beta))
+    table = stop_table(search.stops, beta)
     cal = calibrate(table)
     roll, pitch, yaw = log.truth.angles_deg
     assert abs(cal.roll_deg - roll) < 4 * cal.roll_sigma_deg
@@ -176,7 +176,7 @@ def test_the_stop_mean_uncertainty_covers_the_quantisation_error(noise_lsb: floa
 def test_the_stop_table_gives_the_samples_std_and_the_means_sigma() -> None:
     log = field_log(2.0, seed=11, paired=False)  # merged pairs would halve the samples' variance
     stops = detect_stops(samples_of(log))
-    frame = stop_frame(stops)
+    frame = stop_table(stops).to_frame()
     for stop, (_, row) in zip(stops, frame.iterrows(), strict=True):
         sel = (log.t_s >= stop.t_start_s) & (log.t_s <= stop.t_end_s)
         std = log.acc_s[sel].std(axis=0)
@@ -252,7 +252,7 @@ def test_the_canedge_car_stop_table_is_honest_and_its_tilt_physical(real_data: P
     files = sorted((real_data / CANEDGE / "3BA199E2_car_DK_2021-07-26" / "00000165").glob("*.MF4"))
     job = LogJob(tuple(map(str, files)), LogOptions(dbc=str(real_data / CANEDGE / "dbc" / "gnss.dbc"), channel=2))
     done = calibrate_log(job)
-    frame = done.stops.frame
+    frame = done.stops.table.to_frame()
     assert len(frame) >= 5  # the drive parks six times for ≥ 8 s at zero speed; one is too short once trimmed
     s = frame[["sx", "sy", "sz"]].to_numpy()
     assert np.all(s < 0.3)  # the samples' spread at rest, not a floor times √n (was 1.65 m/s²)
@@ -279,9 +279,7 @@ def test_quantised_paired_stops_give_a_chi2_that_matches_their_covariance() -> N
         log = field_log(2.5, seed=30 + seed)
         search = find_stops(samples_of(log))
         heading = np.array([s.channels["heading_deg"] for s in search.stops])
-        cal = calibrate(
-            stop_table_from_frame(stop_frame(search.stops, beta_from_heading(heading, log.uphill_azimuth_deg)))
-        )
+        cal = calibrate(stop_table(search.stops, beta_from_heading(heading, log.uphill_azimuth_deg)))
         assert cal.fit.chi2 is not None and cal.fit.dof
         ratios.append(cal.fit.chi2 / cal.fit.dof)
         roll, pitch, _ = log.truth.angles_deg
@@ -297,5 +295,5 @@ def test_with_a_protocol_a_wandering_stop_keeps_one_piece_per_row() -> None:
     log = simulate_parking_log(seed=6, wander_deg=tuple(wander), stop_s=120.0)
     protocol = pd.DataFrame(log.protocol, columns=["t_start_s", "t_end_s", "beta_deg"])
     found = tabulate(samples_of(log), protocol=protocol)
-    assert len(found.frame) == 12 and found.unmatched_protocol_rows == 0
+    assert len(found.table) == 12 and found.unmatched_protocol_rows == 0
     assert any("wandered" in note for note in found.notes)

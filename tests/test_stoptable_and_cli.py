@@ -3,17 +3,20 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
+from scipy.spatial.transform import Rotation
 
+from mountcal.calibrate import calibrate
 from mountcal.cli import main
-from mountcal.errors import InputError
+from mountcal.errors import InputError, NotEnoughInformation
 from mountcal.result import FORMAT_VERSION, Calibration
 from mountcal.simulate import simulate_preset
-from mountcal.stoptable import read_stop_table, write_stop_table
+from mountcal.stoptable import StopTable, checked, read_stop_table, write_stop_table
 
 REPO = Path(__file__).resolve().parents[1]
 SAMPLE = REPO / "data" / "zhang2011_stops.csv"
@@ -192,3 +195,74 @@ def test_bundled_sample_is_the_simulator_output(tmp_path: Path) -> None:
     again = tmp_path / "again.csv"
     assert main(["simulate", "--preset", "zhang2011", "--seed", "2011", "-o", str(again)]) == 0
     assert again.read_bytes() == SAMPLE.read_bytes()
+
+
+# --- the stop table in memory: the full covariance of each stop mean --------------------------------
+
+
+def _correlated(seed: int = 4) -> StopTable:
+    """A simulated table whose stop means have strongly correlated axes (vibration along one direction)."""
+    table, _ = simulate_preset("zhang2011", seed=seed)
+    rng = np.random.default_rng(seed)
+    axes = Rotation.random(len(table), random_state=rng).as_matrix()
+    spread = np.diag([4e-3, 5e-4, 5e-4]) ** 2  # one direction ten times noisier than the others
+    cov = axes @ spread @ axes.transpose(0, 2, 1)
+    noise = np.einsum("nij,nj->ni", np.linalg.cholesky(cov), rng.standard_normal((len(table), 3)))
+    return replace(table, acc_s=table.acc_s + noise, cov_s=cov)
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".parquet"])
+def test_the_file_form_keeps_the_off_diagonal_covariance(tmp_path: Path, suffix: str) -> None:
+    table = _correlated()
+    path = tmp_path / f"stops{suffix}"
+    write_stop_table(table, path)
+    frame = pd.read_csv(path) if suffix == ".csv" else pd.read_parquet(path)
+    assert {"sx", "sy", "sz", "n", "rxy", "rxz", "ryz"} <= set(frame.columns)
+    back = read_stop_table(path)
+    assert back.cov_s is not None and table.cov_s is not None
+    np.testing.assert_allclose(back.cov_s, table.cov_s, rtol=1e-12, atol=0)
+    assert abs(back.cov_s[:, 0, 1]).max() > 0.1 * np.sqrt(back.cov_s[:, 0, 0] * back.cov_s[:, 1, 1]).max()
+    assert calibrate(back).fit.chi2 == pytest.approx(calibrate(table).fit.chi2, rel=1e-9)
+
+
+def test_the_fit_weighs_by_the_full_covariance() -> None:
+    """Turning the sensor frame turns the means and their covariances (Q C Qᵀ): χ² stays the same and
+    the rotation turns with it only if the fit uses the whole matrix, not its diagonal."""
+    table = _correlated()
+    assert table.cov_s is not None
+    q = Rotation.from_euler("xyz", [30.0, -50.0, 70.0], degrees=True)
+    m = q.as_matrix()
+    turned = replace(table, acc_s=table.acc_s @ m.T, cov_s=m @ table.cov_s @ m.T)
+    a, b = calibrate(table), calibrate(turned)
+    assert b.fit.chi2 == pytest.approx(a.fit.chi2, rel=1e-6)
+    assert float(np.degrees(((b.rot_vs * q) * a.rot_vs.inv()).magnitude())) < 1e-6
+    diagonal = np.zeros_like(table.cov_s)
+    diagonal[:, [0, 1, 2], [0, 1, 2]] = table.cov_s[:, [0, 1, 2], [0, 1, 2]]
+    assert calibrate(replace(table, cov_s=diagonal)).fit.chi2 != pytest.approx(a.fit.chi2, rel=1e-3)
+
+
+def test_impossible_correlations_are_refused_naming_the_rows(tmp_path: Path) -> None:
+    path = tmp_path / "stops.csv"
+    write_stop_table(_correlated(), path)
+    frame = pd.read_csv(path)
+    frame.loc[2, "rxy"] = 1.5
+    frame.to_csv(path, index=False)
+    with pytest.raises(InputError, match="rows 3"):
+        read_stop_table(path)
+    frame.drop(columns=["rxz"]).to_csv(path, index=False)
+    with pytest.raises(InputError, match="rxy, rxz, ryz together"):
+        read_stop_table(path)
+
+
+def test_a_stop_table_built_in_memory_is_checked_like_a_file() -> None:
+    table = _correlated()
+    assert checked(table) is table
+    with pytest.raises(NotEnoughInformation, match="at least 3 stops"):
+        checked(table.subset(np.arange(2)))
+    with pytest.raises(InputError, match="near gravity"):
+        checked(replace(table, acc_s=table.acc_s * 3.0))
+    assert table.cov_s is not None
+    flat = table.cov_s.copy()
+    flat[1] = 0.0
+    with pytest.raises(InputError, match="stops 2"):
+        checked(replace(table, cov_s=flat))

@@ -102,12 +102,8 @@ def cmd_stops(args: argparse.Namespace) -> int:
     check_outputs({"-o": args.output}, _log_inputs(args))
     samples, found = stops_of_log(_job(args))
     print(safe("\n".join(describe(samples, found, len(args.input))), keep="\n"))
-    with atomic_path(args.output) as tmp:
-        if Path(args.output).suffix.lower() in (".parquet", ".pq"):
-            found.frame.to_parquet(tmp, index=False)
-        else:
-            found.frame.to_csv(tmp, index=False, float_format="%.15g")
-    print(f"wrote {args.output} ({len(found.frame)} stops; headings: {found.heading_source})")
+    write_stop_table(found.table, args.output)
+    print(f"wrote {args.output} ({len(found.table)} stops; headings: {found.heading_source})")
     return 0
 
 

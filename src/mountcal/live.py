@@ -39,7 +39,7 @@ from mountcal.io.can_log import samples_from_frames
 from mountcal.io.samples import Samples
 from mountcal.result import Calibration
 from mountcal.stops import StopDetection, detect_stops, tabulate
-from mountcal.stoptable import StopTable, stop_table_from_frame
+from mountcal.stoptable import StopTable, write_stop_table
 
 CANDIDATES_DEG = tuple(float(b) for b in range(0, 360, 5))
 BASE_TERMS = ("rotation", "slope", "bias")  # the terms a bound for a suggestion may use
@@ -71,7 +71,6 @@ class Session:
     samples: Samples | None = None
     table: StopTable | None = None
     calibration: Calibration | None = None
-    stops_frame: pd.DataFrame | None = None
     protocol: pd.DataFrame | None = None
     suggestion_deg: float | None = None
     dropped: dict[str, int] = field(default_factory=dict)
@@ -241,14 +240,14 @@ class Live:
                 return False
         try:
             found = tabulate(samples, cfg, protocol, self.opts.uphill_azimuth_deg)
-            frame = found.frame if protocol is not None else found.frame.iloc[: len(stops)]
-            table = stop_table_from_frame(frame, headings=found.headings, source=str(self.recording))  # type: ignore[arg-type]
+            table = found.table if protocol is not None else found.table.subset(np.arange(len(stops)))
+            table = replace(table, source=str(self.recording))
             cal = calibrate(table, self.opts.options)
         except MountcalError as err:  # too few stops yet, one heading, ...
             self._waiting(str(err))
             self._suggest(None, None)
             return False
-        self.last.table, self.last.calibration, self.last.stops_frame = table, cal, frame
+        self.last.table, self.last.calibration = table, cal
         event: dict[str, Any] = {"event": "fit", "stops": len(table), "model": list(cal.model)}
         for a in ("roll", "pitch", "yaw"):
             event[f"{a}_deg"] = getattr(cal, f"{a}_deg")
@@ -322,10 +321,9 @@ def json_sink(stream: IO[str]) -> Callable[[dict[str, Any]], None]:
 def write_outputs(session: Session, prefix: Path) -> list[Path]:
     """The session's stop table, protocol sheet (log clock) and result, as ``calibrate`` writes them."""
     written = []
-    if session.stops_frame is not None:
+    if session.table is not None:
         path = prefix.with_name(prefix.name + "_stops.csv")
-        with atomic_path(path) as tmp:
-            session.stops_frame.to_csv(tmp, index=False, float_format="%.15g")
+        write_stop_table(session.table, path)
         written.append(path)
     if session.protocol is not None and not session.protocol.empty:
         path = prefix.with_name(prefix.name + "_protocol.csv")

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from mountcal.calibrate import Options, calibrate
@@ -11,7 +11,7 @@ from mountcal.io.logs import LogOptions, read_log
 from mountcal.io.samples import Samples
 from mountcal.result import Calibration
 from mountcal.stops import StopDetection, StopTableFromLog, read_protocol, tabulate
-from mountcal.stoptable import StopTable, stop_table_from_frame
+from mountcal.stoptable import StopTable
 
 
 @dataclass(frozen=True)
@@ -47,7 +47,7 @@ def calibrate_log(job: LogJob) -> LogCalibration:
     """Calibrate one log from its parked stops."""
     samples, found = stops_of_log(job)
     source = " + ".join(str(Path(p)) for p in job.paths)
-    table = stop_table_from_frame(found.frame, headings=found.headings, source=source)  # type: ignore[arg-type]
+    table = replace(found.table, source=source)
     return LogCalibration(calibrate(table, job.options), found, table, samples)
 
 
@@ -56,7 +56,7 @@ def describe(samples: Samples, found: StopTableFromLog, n_files: int) -> Sequenc
     dropped = ", ".join(f"{k}: {v}" for k, v in samples.dropped.items())
     return [
         f"read {len(samples)} samples from {n_files} file(s)" + (f"; dropped {dropped}" if dropped else ""),
-        f"found {len(found.frame)} stops; headings: {found.heading_source}"
+        f"found {len(found.table)} stops; headings: {found.heading_source}"
         + (f"; {found.unmatched_protocol_rows} protocol rows without a stop" if found.unmatched_protocol_rows else ""),
         *found.notes,
     ]

@@ -34,7 +34,7 @@ from mountcal.io.timestamps import increasing_times
 from mountcal.pipeline import LogJob
 from mountcal.result import Calibration, Provenance
 from mountcal.stops import StopTableFromLog, read_protocol, tabulate
-from mountcal.stoptable import StopTable, stop_table_from_frame
+from mountcal.stoptable import StopTable
 from mountcal.version import software_version
 
 Use = Literal["auto", "stops", "driving"]
@@ -84,7 +84,7 @@ def calibrate_any(job: LogJob, use: Use = "auto", driving: DrivingOptions | None
         try:
             protocol = read_protocol(job.protocol) if job.protocol else None
             found = tabulate(samples, job.detection, protocol, job.uphill_azimuth_deg)
-            table = stop_table_from_frame(found.frame, headings=found.headings, source=source)  # type: ignore[arg-type]
+            table = replace(found.table, source=source)
             static = calibrate(table, job.options)
         except NotEnoughInformation as err:
             if use == "stops":
@@ -161,7 +161,7 @@ def describe_any(result: LogResult, n_files: int) -> Sequence[str]:
     if result.stops is not None:
         found = result.stops
         lines.append(
-            f"found {len(found.frame)} stops; headings: {found.heading_source}"
+            f"found {len(found.table)} stops; headings: {found.heading_source}"
             + (
                 f"; {found.unmatched_protocol_rows} protocol rows without a stop"
                 if found.unmatched_protocol_rows

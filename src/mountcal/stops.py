@@ -23,6 +23,7 @@ from mountcal.conventions import FloatArray
 from mountcal.errors import NotEnoughInformation
 from mountcal.io.samples import Channel, Samples
 from mountcal.io.timestamps import increasing_times, time_ordered
+from mountcal.stoptable import Headings, StopTable, checked
 
 BATCHES = 10  # batch means for the variance of a stop mean
 BLOCKS_PER_WINDOW = 40
@@ -322,32 +323,40 @@ def _steady_heading(
     return pieces
 
 
-def stop_frame(stops: list[Stop], beta_deg: FloatArray | None = None) -> pd.DataFrame:
-    """The stop table (the columns :mod:`mountcal.stoptable` reads) of detected stops.
+def stop_table(
+    stops: list[Stop], beta_deg: FloatArray | None = None, headings: Headings = "uphill", source: str = "log"
+) -> StopTable:
+    """The stop table of detected stops (checked like a table read from a file).
 
-    ``sx, sy, sz`` are the standard deviations of the samples of each stop (what a user sees in the
-    data); ``sx_mean, sy_mean, sz_mean`` are the 1σ uncertainties of the stop means the fit uses:
-    correlated vibration and the quantisation floor make them larger than ``s/√n``.
+    ``std_s`` holds the standard deviations of the samples of each stop (what a user sees in the
+    data); ``cov_s`` the full covariance of each stop mean the fit uses: correlated vibration and
+    the quantisation floor make it larger than ``s²/n``, and vibration correlates the axes.
     """
     if not stops:
-        raise NotEnoughInformation("no stops to tabulate")
-    acc = np.array([s.acc_mean_s for s in stops])
-    n = np.array([s.n for s in stops])
-    var = np.array([np.diag(s.acc_cov_mean_s) for s in stops])
-    std = np.array([s.acc_std_s for s in stops])
-    df = pd.DataFrame({"ax": acc[:, 0], "ay": acc[:, 1], "az": acc[:, 2]})
-    if beta_deg is not None:
-        df.insert(0, "beta_deg", np.asarray(beta_deg) % 360.0)
-    df["sx"], df["sy"], df["sz"] = (std[:, k] for k in range(3))
-    df["n"] = n
-    df["sx_mean"], df["sy_mean"], df["sz_mean"] = (np.sqrt(var[:, k]) for k in range(3))
-    df["t_s"] = [s.t_start_s for s in stops]
-    df["duration_s"] = [s.duration_s for s in stops]
-    for key in ("temperature_c", "lat_deg", "lon_deg", "alt_m", "heading_deg"):
-        values = [s.channels.get(key, np.nan) for s in stops]
-        if np.any(np.isfinite(values)):
-            df[key] = values
-    return df
+        raise NotEnoughInformation(f"{source}: no stops to tabulate")
+
+    def channel(key: str) -> FloatArray | None:
+        values = np.array([s.channels.get(key, np.nan) for s in stops], dtype=float)
+        return values if np.any(np.isfinite(values)) else None
+
+    return checked(
+        StopTable(
+            acc_s=np.array([s.acc_mean_s for s in stops], dtype=float),
+            beta_rad=None if beta_deg is None else np.radians(np.asarray(beta_deg, dtype=float) % 360.0),
+            headings=headings if beta_deg is not None else "none",
+            cov_s=np.array([s.acc_cov_mean_s for s in stops], dtype=float),
+            temperature_c=channel("temperature_c"),
+            t_s=np.array([s.t_start_s for s in stops], dtype=float),
+            lat_deg=channel("lat_deg"),
+            alt_m=channel("alt_m"),
+            lon_deg=channel("lon_deg"),
+            std_s=np.array([s.acc_std_s for s in stops], dtype=float),
+            count=np.array([s.n for s in stops], dtype=float),
+            duration_s=np.array([s.duration_s for s in stops], dtype=float),
+            heading_deg=channel("heading_deg"),
+            source=source,
+        )
+    )
 
 
 def beta_from_heading(heading_deg: FloatArray, uphill_azimuth_deg: float) -> FloatArray:
@@ -455,8 +464,7 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
 class StopTableFromLog:
     """The stop table of a log and how its headings were found."""
 
-    frame: pd.DataFrame
-    headings: str  # "uphill", "relative" or "none"
+    table: StopTable
     heading_source: str
     unmatched_protocol_rows: int = 0
     notes: tuple[str, ...] = ()  # the thresholds used and what detection changed or dropped
@@ -513,7 +521,7 @@ def tabulate(
             )
         beta = protocol["beta_deg"].to_numpy()[kept]
         return StopTableFromLog(
-            stop_frame(stops, beta), "uphill", "protocol sheet", len(windows) - len(kept), tuple(search.lines())
+            stop_table(stops, beta, "uphill", where), "protocol sheet", len(windows) - len(kept), tuple(search.lines())
         )
     search = find_stops(samples, cfg)
     stops = search.stops
@@ -527,18 +535,16 @@ def tabulate(
     if np.all(np.isfinite(heading)):
         if uphill_azimuth_deg is not None:
             return StopTableFromLog(
-                stop_frame(stops, beta_from_heading(heading, uphill_azimuth_deg)),
-                "uphill",
+                stop_table(stops, beta_from_heading(heading, uphill_azimuth_deg), "uphill", where),
                 f"heading channel with uphill azimuth {uphill_azimuth_deg:g}°",
                 notes=notes,
             )
         return StopTableFromLog(
-            stop_frame(stops, beta_from_heading(heading, 0.0)),
-            "relative",
+            stop_table(stops, beta_from_heading(heading, 0.0), "relative", where),
             "heading channel without the uphill azimuth (relative)",
             notes=notes,
         )
-    return StopTableFromLog(stop_frame(stops), "none", "none", notes=notes)
+    return StopTableFromLog(stop_table(stops, None, "none", where), "none", notes=notes)
 
 
 # Advice naming the options that change stop detection (tests check that every one exists).

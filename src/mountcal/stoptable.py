@@ -1,22 +1,25 @@
 """The stop table: one row per static stop, the input of every estimator.
 
-On disk it is CSV or Parquet with the columns named in :data:`COLUMNS`; in memory a
-:class:`StopTable` of SI arrays. Reading validates everything a fit needs and says what is wrong.
+In memory it is a :class:`StopTable` of SI arrays with the full 3×3 covariance of each stop mean;
+on disk (only there) CSV or Parquet with the columns named in :data:`COLUMNS`. Reading validates
+everything a fit needs and says what is wrong; :func:`checked` applies the same checks to a table
+built in memory (:func:`mountcal.stops.tabulate`).
 
 The noise columns: ``sx, sy, sz`` are the standard deviations of each stop's samples and ``n`` their
 count, so ``s²/n`` is the variance of the mean for independent, unquantised samples.
 ``sx_mean, sy_mean, sz_mean`` (written by ``mountcal stops``) are the 1σ of each stop mean itself,
-including correlated vibration and the quantisation floor (:func:`mountcal.stops.stop_frame`); when
-present they are used instead of ``s/√n``.
+including correlated vibration and the quantisation floor (:mod:`mountcal.stops`); when present they
+are used instead of ``s/√n``. ``rxy, rxz, ryz`` (optional, with them) are the correlations between
+the axes of a stop mean: the off-diagonal of its covariance.
 """
 
 from __future__ import annotations
 
 import hashlib
 import io
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 import pandas as pd
@@ -33,6 +36,10 @@ ACC = ("ax", "ay", "az")
 STD = ("sx", "sy", "sz")  # standard deviation of the samples of a stop
 COUNT = "n"  # samples averaged
 STD_MEAN = ("sx_mean", "sy_mean", "sz_mean")  # 1σ of the stop mean; when given, it is used instead of s/√n
+CORR = ("rxy", "rxz", "ryz")  # correlations between the axes of a stop mean (with STD_MEAN)
+PAIRS = ((0, 1), (0, 2), (1, 2))  # the axes of each CORR column
+DURATION = "duration_s"
+HEADING = "heading_deg"
 TEMPERATURE = "temperature_c"
 TIME = "t_s"
 SITE = "site"
@@ -40,13 +47,14 @@ LAT = "lat_deg"
 LON = "lon_deg"
 ALT = "alt_m"
 REQUIRED = ACC
-OPTIONAL = (BETA, *STD, COUNT, *STD_MEAN, TEMPERATURE, TIME, SITE, LAT, LON, ALT)
-COLUMNS = (BETA, *ACC, *STD, COUNT, *STD_MEAN, TEMPERATURE, TIME, SITE, LAT, LON, ALT)
+OPTIONAL = (BETA, *STD, COUNT, *STD_MEAN, *CORR, TIME, DURATION, TEMPERATURE, SITE, LAT, LON, ALT, HEADING)
+COLUMNS = (BETA, *ACC, *OPTIONAL[1:])
 
 Headings = Literal["uphill", "relative", "none"]
 Unit = Literal["mps2", "g"]
 MIN_STOPS = 3
 GRAVITY_BAND = (0.7, 1.3)  # a static reading outside this fraction of g is not gravity
+_NO_GUESS = "Fill or remove those rows; mountcal does not guess missing stops."
 
 
 @dataclass(frozen=True)
@@ -64,7 +72,11 @@ class StopTable:
         observable; "relative": β has an unknown common offset, so yaw is not; "none": no β.
     cov_s : ndarray, shape (n, 3, 3), or None
         Covariance of each stop mean, (m/s²)², when the table gives sample spreads and counts.
-    temperature_c, t_s, lat_deg, lon_deg, alt_m : ndarray, shape (n,), or None
+    std_s : ndarray, shape (n, 3), or None
+        Standard deviation of each stop's samples (what a user sees in the data), m/s².
+    count : ndarray, shape (n,), or None
+        Samples averaged in each stop.
+    temperature_c, t_s, duration_s, heading_deg, lat_deg, lon_deg, alt_m : ndarray, shape (n,), or None
     site : ndarray of str, shape (n,), or None
     source : str
         Where the table came from; ``sha256`` is the hash of that file's bytes.
@@ -80,6 +92,10 @@ class StopTable:
     lat_deg: FloatArray | None = None
     alt_m: FloatArray | None = None
     lon_deg: FloatArray | None = None
+    std_s: FloatArray | None = None
+    count: FloatArray | None = None
+    duration_s: FloatArray | None = None
+    heading_deg: FloatArray | None = None
     source: str = "<memory>"
     sha256: str = ""
     notes: tuple[str, ...] = field(default=())
@@ -94,42 +110,44 @@ class StopTable:
     def subset(self, keep: np.ndarray) -> StopTable:
         """The table restricted to the rows where ``keep`` is true (or to the given indices)."""
 
-        def pick(a: np.ndarray | None) -> np.ndarray | None:
-            return None if a is None else a[keep]
-
-        return replace(
-            self,
-            acc_s=self.acc_s[keep],
-            beta_rad=pick(self.beta_rad),
-            cov_s=pick(self.cov_s),
-            temperature_c=pick(self.temperature_c),
-            t_s=pick(self.t_s),
-            site=pick(self.site),
-            lat_deg=pick(self.lat_deg),
-            alt_m=pick(self.alt_m),
-            lon_deg=pick(self.lon_deg),
-        )
+        n = len(self)
+        picked = {
+            f.name: getattr(self, f.name)[keep]
+            for f in fields(self)
+            if isinstance(getattr(self, f.name), np.ndarray) and getattr(self, f.name).shape[:1] == (n,)
+        }
+        return replace(self, **picked)
 
     def to_frame(self) -> pd.DataFrame:
-        """The table as a DataFrame with the file's column names (m/s², degrees)."""
-        df = pd.DataFrame(self.acc_s, columns=list(ACC))
+        """The table as a DataFrame with the file's column names (m/s², degrees), for writing it."""
+        columns: dict[str, Any] = {}
         if self.beta_rad is not None:
-            df.insert(0, BETA, np.degrees(self.beta_rad))
+            columns[BETA] = np.degrees(self.beta_rad)
+        columns |= dict(zip(ACC, self.acc_s.T, strict=True))
         if self.cov_s is not None:
-            for k, name in enumerate(STD):
-                df[name] = np.sqrt(self.cov_s[:, k, k])  # std of the mean, written with n = 1
-            df[COUNT] = 1
+            sigma = np.sqrt(np.diagonal(self.cov_s, axis1=1, axis2=2))
+            if self.std_s is not None and self.count is not None:
+                columns |= dict(zip(STD, self.std_s.T, strict=True)) | {COUNT: self.count}
+                columns |= dict(zip(STD_MEAN, sigma.T, strict=True))
+            else:  # the 1σ of the mean as the spread of one sample
+                columns |= dict(zip(STD, sigma.T, strict=True)) | {COUNT: 1}
+            if any(np.any(self.cov_s[:, i, j] != 0) for i, j in PAIRS):
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    corr = [self.cov_s[:, i, j] / (sigma[:, i] * sigma[:, j]) for i, j in PAIRS]
+                columns |= {name: np.nan_to_num(r) for name, r in zip(CORR, corr, strict=True)}
         for name, values in (
-            (TEMPERATURE, self.temperature_c),
             (TIME, self.t_s),
+            (DURATION, self.duration_s),
+            (TEMPERATURE, self.temperature_c),
             (SITE, self.site),
             (LAT, self.lat_deg),
             (LON, self.lon_deg),
             (ALT, self.alt_m),
+            (HEADING, self.heading_deg),
         ):
             if values is not None:
-                df[name] = values
-        return df
+                columns[name] = values
+        return pd.DataFrame(columns)
 
 
 def read_stop_table(path: str | Path, unit: Unit = "mps2", headings: Headings = "uphill") -> StopTable:
@@ -177,11 +195,7 @@ def stop_table_from_frame(
             f"no column {', '.join(missing)}; the columns are {', '.join(map(str, df.columns))}",
             "Rename the columns or write the stop table with `mountcal stops`.",
         )
-    if len(df) < MIN_STOPS:
-        raise NotEnoughInformation(
-            f"{source}: expected at least {MIN_STOPS} stops, found {len(df)}. "
-            "Park at more headings (12 evenly spread is the paper's protocol)."
-        )
+    _check_count(len(df), source)
     scale = G_N if unit == "g" else 1.0
     with np.errstate(over="ignore"):  # a huge value becomes inf here and is refused by the gravity check
         acc = _numeric(df, list(ACC), source) * scale
@@ -190,7 +204,7 @@ def stop_table_from_frame(
     beta = None
     if BETA in df.columns and headings != "none":
         beta = np.radians(_numeric(df, [BETA], source)[:, 0])
-    cov = None
+    cov = sample_std = sample_count = None
     noise_columns = [c for c in (*STD, COUNT) if c in df.columns]
     if noise_columns and not all(c in df.columns for c in STD):
         raise InputError(
@@ -212,6 +226,7 @@ def stop_table_from_frame(
             )
         cov = np.zeros((len(df), 3, 3))
         cov[:, [0, 1, 2], [0, 1, 2]] = std**2 / count[:, None]
+        sample_std, sample_count = std, (count if COUNT in df.columns else None)
     if all(c in df.columns for c in STD_MEAN):  # the mean's own uncertainty (correlation, quantisation)
         sigma = _numeric(df, list(STD_MEAN), source) * scale
         if np.any(sigma <= 0):
@@ -223,6 +238,8 @@ def stop_table_from_frame(
             )
         cov = np.zeros((len(df), 3, 3))
         cov[:, [0, 1, 2], [0, 1, 2]] = sigma**2
+    if any(c in df.columns for c in CORR):
+        cov = _with_correlations(cov, _numeric(df, [c for c in CORR if c in df.columns], source), df, source)
 
     def optional(name: str) -> FloatArray | None:
         return _numeric(df, [name], source)[:, 0] if name in df.columns else None
@@ -246,8 +263,74 @@ def stop_table_from_frame(
         lat_deg=lat,
         alt_m=optional(ALT),
         lon_deg=optional(LON),
+        std_s=sample_std,
+        count=sample_count,
+        duration_s=optional(DURATION),
+        heading_deg=optional(HEADING),
         source=source,
     )
+
+
+def checked(table: StopTable) -> StopTable:
+    """The checks of a table read from a file, for a table built in memory: enough stops, finite
+    means near gravity, covariances finite and positive definite."""
+    _check_count(len(table), table.source)
+    bad = np.flatnonzero(~np.all(np.isfinite(table.acc_s), axis=1))
+    if bad.size:
+        raise InputError(table.source, "finite stop means", f"non-finite values in stops {_rows(bad)}", _NO_GUESS)
+    _check_gravity(table.acc_s, "mps2", table.source)
+    if table.cov_s is not None:
+        finite = np.all(np.isfinite(table.cov_s), axis=(1, 2))
+        smallest = np.full(len(table), -1.0)
+        smallest[finite] = np.linalg.eigvalsh(table.cov_s[finite])[:, 0]
+        bad = np.flatnonzero(smallest <= 0)
+        if bad.size:
+            raise InputError(
+                table.source,
+                "a positive definite covariance of every stop mean",
+                f"a zero, negative or non-finite spread in stops {_rows(bad)}",
+                "The stops' samples do not vary (a stuck or constant sensor): check the log.",
+            )
+    return table
+
+
+def _check_count(n: int, source: str) -> None:
+    if n < MIN_STOPS:
+        raise NotEnoughInformation(
+            f"{source}: expected at least {MIN_STOPS} stops, found {n}. "
+            "Park at more headings (12 evenly spread is the paper's protocol)."
+        )
+
+
+def _with_correlations(cov: FloatArray | None, corr: FloatArray, df: pd.DataFrame, source: str) -> FloatArray:
+    """The covariances with the correlations ``rxy, rxz, ryz`` between axes; all three or none."""
+    if cov is None:
+        raise InputError(
+            source,
+            f"the correlations {', '.join(CORR)} with the spreads they correlate ({', '.join(STD)} or the _mean ones)",
+            "correlations without spreads",
+            "Add the spreads, or drop the correlations.",
+        )
+    if corr.shape[1] != len(CORR):
+        raise InputError(
+            source,
+            f"the correlations {', '.join(CORR)} together",
+            f"only {', '.join(c for c in CORR if c in df.columns)}",
+            "Add the missing ones, or drop them to treat the axes of a stop mean as independent.",
+        )
+    sigma = np.sqrt(np.diagonal(cov, axis1=1, axis2=2))
+    out = cov.copy()
+    for k, (i, j) in enumerate(PAIRS):
+        out[:, i, j] = out[:, j, i] = corr[:, k] * sigma[:, i] * sigma[:, j]
+    bad = np.flatnonzero((np.abs(corr) >= 1).any(axis=1) | (np.linalg.eigvalsh(out)[:, 0] <= 0))
+    if bad.size:
+        raise InputError(
+            source,
+            f"correlations {', '.join(CORR)} in (−1, 1) that make a positive definite covariance",
+            f"impossible correlations in rows {_rows(bad)}",
+            "Fix those rows, or drop the rxy, rxz, ryz columns.",
+        )
+    return out
 
 
 def fingerprint(table: StopTable) -> StopsFingerprint:
@@ -309,7 +392,7 @@ def _numeric(df: pd.DataFrame, cols: list[str], source: str) -> FloatArray:
             source,
             f"finite numbers in {', '.join(cols)}",
             f"missing or non-numeric values at {found}{more}",
-            "Fill or remove those rows; mountcal does not guess missing stops.",
+            _NO_GUESS,
         )
     return values
 

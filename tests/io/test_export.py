@@ -330,7 +330,7 @@ def test_stops_match_the_per_message_library_path(
     capsys.readouterr()
     fast = pd.read_parquet(out)
     reference = _mcap_library_samples(path) if fmt == "mcap" else _can_library_samples(path)
-    slow = tabulate(reference, StopDetection(), read_protocol(str(protocol))).frame
+    slow = tabulate(reference, StopDetection(), read_protocol(str(protocol))).table.to_frame()
     assert list(fast.columns) == list(slow.columns)
     assert fast["beta_deg"].tolist() == [0.0, 90.0, 180.0, 270.0]  # every stop inside its protocol row
     np.testing.assert_allclose(fast["t_s"], slow["t_s"], rtol=0, atol=1e-6)
