@@ -33,10 +33,9 @@ from mountcal.estimate.bound import crb_deg, euler_gradients
 from mountcal.estimate.geometry import span_ratio
 from mountcal.pvalues import chi2_logsf, chi2_sf
 from mountcal.result import (
-    AngleChanges,
     Angles,
+    AngleValues,
     Calibration,
-    CramerRao,
     Declined,
     EffectValue,
     FitQuality,
@@ -310,7 +309,7 @@ def _steps(loop: Loop, opts: Options) -> tuple[ModelStep, ...]:
         a = _angles(step.table, f, opts)
         moved = None
         if prev is not None:
-            moved = AngleChanges(
+            moved = AngleValues(
                 *(
                     None if now is None or before is None else float(now - before)
                     for now, before in (
@@ -408,7 +407,7 @@ def _observability(table: StopTable, f: full.Fit, g: float) -> Observability:
     crb = {}
     for terms in dict.fromkeys((BASE, WITH_BIAS, f.terms)):
         bound = crb_deg(table, f.state, terms, g, f.noise_scale)
-        crb[",".join(terms)] = None if bound is None else CramerRao(**bound)
+        crb[",".join(terms)] = None if bound is None else AngleValues(**bound)
     return Observability(
         parameters=tuple(f.names),
         fisher_rank=rank,

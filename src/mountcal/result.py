@@ -101,8 +101,9 @@ class Angles:
 
 
 @dataclass(frozen=True)
-class AngleChanges:
-    """How far each angle moved from the previous model step, degrees (None: not determined in both)."""
+class AngleValues:
+    """One value per angle, degrees, None where not determined: how far each angle moved from the
+    previous model step, or the Cramér–Rao bound of each."""
 
     roll_deg: float | None
     pitch_deg: float | None
@@ -135,7 +136,7 @@ class ModelStep:
     residual_rms_mps2: float
     loo_rms_mps2: float | None
     angles: Angles
-    moved: AngleChanges | None  # None for the first step
+    moved: AngleValues | None  # None for the first step
     effects: tuple[EffectValue, ...] = ()
 
 
@@ -159,23 +160,13 @@ class ModelSelection:
 
 
 @dataclass(frozen=True)
-class CramerRao:
-    """Cramér–Rao 1σ bounds of the angles (degrees) for one model; None where not determined."""
-
-    roll_deg: float | None
-    pitch_deg: float | None
-    yaw_deg: float | None
-    slope_deg: float | None
-
-
-@dataclass(frozen=True)
 class Observability:
     """What the stops can determine: Fisher rank and conditioning, and the Cramér–Rao bounds per model."""
 
     parameters: tuple[str, ...]
     fisher_rank: int
     condition_number: float | None  # None: singular (some direction unobservable)
-    crb_1sigma: dict[str, CramerRao | None]  # model (comma-joined terms) → bounds; None when singular
+    crb_1sigma: dict[str, AngleValues | None]  # model (comma-joined terms) → bounds; None when singular
     crb_note: str
 
 

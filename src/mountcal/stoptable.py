@@ -216,28 +216,23 @@ def stop_table_from_frame(
     if all(c in df.columns for c in STD):
         std = _numeric(df, list(STD), source) * scale
         count = _numeric(df, [COUNT], source)[:, 0] if COUNT in df.columns else np.ones(len(df))
-        if np.any(std <= 0) or np.any(count < 1):
-            bad = np.flatnonzero(np.any(std <= 0, axis=1) | (count < 1))
-            raise InputError(
-                source,
-                "sample standard deviations sx, sy, sz > 0 and counts n ≥ 1",
-                f"non-positive values in rows {_rows(bad)}",
-                "Fix those rows, or drop the sx, sy, sz, n columns to estimate the noise.",
-            )
-        cov = np.zeros((len(df), 3, 3))
-        cov[:, [0, 1, 2], [0, 1, 2]] = std**2 / count[:, None]
+        cov = _diagonal(
+            std**2 / count[:, None],
+            np.any(std <= 0, axis=1) | (count < 1),
+            source,
+            "sample standard deviations sx, sy, sz > 0 and counts n ≥ 1",
+            "Fix those rows, or drop the sx, sy, sz, n columns to estimate the noise.",
+        )
         sample_std, sample_count = std, (count if COUNT in df.columns else None)
     if all(c in df.columns for c in STD_MEAN):  # the mean's own uncertainty (correlation, quantisation)
         sigma = _numeric(df, list(STD_MEAN), source) * scale
-        if np.any(sigma <= 0):
-            raise InputError(
-                source,
-                "uncertainties of the stop means sx_mean, sy_mean, sz_mean > 0",
-                f"non-positive values in rows {_rows(np.flatnonzero(np.any(sigma <= 0, axis=1)))}",
-                "Fix those rows, or drop the sx_mean, sy_mean, sz_mean columns to use s/√n.",
-            )
-        cov = np.zeros((len(df), 3, 3))
-        cov[:, [0, 1, 2], [0, 1, 2]] = sigma**2
+        cov = _diagonal(
+            sigma**2,
+            np.any(sigma <= 0, axis=1),
+            source,
+            "uncertainties of the stop means sx_mean, sy_mean, sz_mean > 0",
+            "Fix those rows, or drop the sx_mean, sy_mean, sz_mean columns to use s/√n.",
+        )
     if any(c in df.columns for c in CORR):
         cov = _with_correlations(cov, _numeric(df, [c for c in CORR if c in df.columns], source), df, source)
 
@@ -300,6 +295,15 @@ def _check_count(n: int, source: str) -> None:
             f"{source}: expected at least {MIN_STOPS} stops, found {n}. "
             "Park at more headings (12 evenly spread is the paper's protocol)."
         )
+
+
+def _diagonal(variance: FloatArray, bad: np.ndarray, source: str, expected: str, todo: str) -> FloatArray:
+    """Covariances with the given variances on the diagonal, refusing the ``bad`` rows."""
+    if bad.any():
+        raise InputError(source, expected, f"non-positive values in rows {_rows(np.flatnonzero(bad))}", todo)
+    cov = np.zeros((variance.shape[0], 3, 3))
+    cov[:, [0, 1, 2], [0, 1, 2]] = variance
+    return cov
 
 
 def _with_correlations(cov: FloatArray | None, corr: FloatArray, df: pd.DataFrame, source: str) -> FloatArray:
