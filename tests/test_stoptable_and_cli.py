@@ -52,6 +52,8 @@ def test_calibrate_writes_a_result_with_every_documented_field(
     assert doc["conventions"]["euler"].startswith("rot_vs = Rz(yaw) Ry(pitch) Rx(roll)")
     assert [len(h) for h in doc["provenance"]["input_sha256"]] == [64]  # one file, its SHA-256
     assert doc["provenance"]["method"] == "full"
+    fit = doc["fit"]
+    assert fit["p_value"] is not None and fit["log10_p"] == pytest.approx(np.log10(fit["p_value"]), rel=1e-9)
     assert doc["slope_deg"] == pytest.approx(5.0, abs=0.1)
     assert doc["residual_rms_mps2"] > 0
     assert doc["observability"]["fisher_rank"] == 4
