@@ -15,6 +15,8 @@ from hypothesis import settings
 settings.register_profile("mountcal", derandomize=True, max_examples=60, deadline=None)
 settings.load_profile("mountcal")
 
+pytest_plugins = ["pytester"]  # a test runs a session with this conftest to check its schema fixture
+
 REPO = Path(__file__).resolve().parents[1]
 # beside the checkout, or where MOUNTCAL_REAL_DATA says (a worktree lives elsewhere)
 REAL_DATA = Path(os.environ.get("MOUNTCAL_REAL_DATA", REPO / ".." / "shared" / "data" / "real")).resolve()

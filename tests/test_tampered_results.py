@@ -190,6 +190,33 @@ def test_the_schema_check_of_every_test_finds_an_invalid_result(
     (tmp_path / "deep" / "bad.json").unlink()  # leave only valid results for the fixture itself
 
 
+def test_a_test_that_writes_an_invalid_result_fails(made: dict[str, Path], pytester: pytest.Pytester) -> None:
+    """The autouse fixture end to end: in a session with this conftest, a test that writes an invalid
+    result errors at teardown, one that writes a valid one passes, and the marker opts out."""
+    good = made["bias"].read_text()
+    bad = json.loads(good)
+    bad["fit"]["dof"] = "many"
+    pytester.makeconftest((Path(__file__).parent / "conftest.py").read_text())
+    pytester.makepyfile(
+        test_inner=f"""
+import pytest
+
+def test_valid(tmp_path):
+    (tmp_path / "r.json").write_text({good!r})
+
+def test_invalid(tmp_path):
+    (tmp_path / "r.json").write_text({json.dumps(bad)!r})
+
+@pytest.mark.invalid_results
+def test_invalid_on_purpose(tmp_path):
+    (tmp_path / "r.json").write_text({json.dumps(bad)!r})
+"""
+    )
+    outcome = pytester.runpytest_inprocess("-p", "no:cacheprovider")
+    outcome.assert_outcomes(passed=3, errors=1)
+    outcome.stdout.fnmatch_lines(["*results not valid against the published schema*", "*fit/dof*"])
+
+
 def _rotated_quaternion(doc: Doc) -> None:
     q = np.array(doc["rotation"]["quaternion_xyzw"])
     q = np.array([q[0] + 0.05, q[1], q[2], q[3]])  # about 6° away from the stored angles
