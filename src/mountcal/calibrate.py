@@ -25,10 +25,11 @@ from mountcal.conventions import (
     angles_from_rot_vs,
     normal_gravity,
 )
-from mountcal.effects import MIN_TEMPERATURE_SPAN_C, Loop, Step, close_the_loop, effect_values
+from mountcal.effects import Loop, Step, close_the_loop, effect_values
 from mountcal.errors import InputError, NotEnoughInformation
 from mountcal.estimate import full, paper
 from mountcal.estimate.bound import crb_deg, euler_gradients
+from mountcal.estimate.effects.temperature import MIN_TEMPERATURE_SPAN_C
 from mountcal.estimate.geometry import span_ratio
 from mountcal.pvalues import chi2_sf
 from mountcal.result import Calibration
@@ -40,7 +41,6 @@ BASE: tuple[str, ...] = ("rotation", "slope")
 WITH_BIAS: tuple[str, ...] = ("rotation", "slope", "bias")
 MIN_DISTINCT_HEADINGS = 3
 GIVEN = "given by the user"
-NULL_TOL = 1e-8
 # "Confident" promises the answer is usable: tilt within 10° at 5σ, so its 1σ must stay under 2°.
 MAX_CONFIDENT_TILT_SIGMA_DEG = 2.0
 MIN_NOISE_DOF = 10  # a noise estimated from fewer residual values is itself too uncertain to vouch for the σ
@@ -74,7 +74,8 @@ def parse_model(spec: str) -> tuple[str, ...] | None:
     terms = tuple(t.strip() for t in spec.split(",") if t.strip())
     if terms == ("auto",):
         return None
-    unknown = [t for t in terms if t not in model_terms.BY_NAME]
+    known = model_terms.by_name()
+    unknown = [t for t in terms if t not in known]
     if terms[:2] != model_terms.BASE or unknown or len(set(terms)) != len(terms):
         raise InputError(
             "--model",
@@ -87,8 +88,9 @@ def parse_model(spec: str) -> tuple[str, ...] | None:
 
 def check_model(table: StopTable, terms: tuple[str, ...]) -> None:
     """Refuse a fixed model whose terms need a column the table lacks, or values it does not vary."""
+    known = model_terms.by_name()
     for name in terms:
-        missing = [c for c in model_terms.BY_NAME[name].needs if getattr(table, _FIELD[c]) is None]
+        missing = [c for c in known[name].needs if getattr(table, _FIELD.get(c, c), None) is None]
         if missing:
             raise InputError(
                 f"{table.source} with --model {','.join(terms)}",
@@ -257,7 +259,7 @@ def _angles(table: StopTable, f: full.Fit, opts: Options) -> dict[str, Any]:
     """Roll, pitch, yaw, slope in degrees with 1σ (None where the data cannot determine them)."""
     k = 3 if "rot_z" in f.names else 2
     grads = euler_gradients(f.state.rot_vs, k)  # rows roll, pitch, yaw over δ
-    null = _null_space(f.fisher)
+    null = full.null_space(f.fisher)
 
     def sigma(grad: FloatArray, idx: slice | list[int]) -> float | None:
         c = np.zeros(len(f.names))
@@ -352,7 +354,7 @@ def _yaw_reason(table: StopTable, s_yaw: float | None, f: full.Fit, opts: Option
 def _observability(table: StopTable, f: full.Fit, g: float) -> dict[str, Any]:
     scale = np.sqrt(np.clip(np.diag(f.fisher), 1e-300, None))
     eig = np.linalg.eigvalsh(f.fisher / np.outer(scale, scale))
-    rank = int(np.sum(eig > NULL_TOL * eig.max()))
+    rank = full.fisher_rank(f.fisher)
     crb = {",".join(t): crb_deg(table, f.state, t, g, f.noise_scale) for t in dict.fromkeys((BASE, WITH_BIAS, f.terms))}
     return {
         "parameters": list(f.names),
@@ -363,13 +365,6 @@ def _observability(table: StopTable, f: full.Fit, g: float) -> dict[str, Any]:
         "crb_note": "Cramér–Rao bounds for this stop set at the fitted point, per model"
         + ("" if f.noise_known else ", with the noise σ estimated from the residuals"),
     }
-
-
-def _null_space(fisher: FloatArray) -> FloatArray:
-    scale = np.sqrt(np.clip(np.diag(fisher), 1e-300, None))
-    eig, vec = np.linalg.eigh(fisher / np.outer(scale, scale))
-    null = vec[:, eig < NULL_TOL * eig.max()]
-    return null / scale[:, None] if null.size else null  # back to parameter coordinates
 
 
 # --- the paper's method --------------------------------------------------------------------------

@@ -19,6 +19,7 @@ import pandas as pd
 
 from mountcal.conventions import G_N, FloatArray
 from mountcal.errors import InputError
+from mountcal.estimate.effects import apply_corrections
 from mountcal.result import Calibration
 
 ACC_COLUMNS = ("ax", "ay", "az")
@@ -98,8 +99,7 @@ def acc_to_vehicle(
     if check_units:
         _check_mps2(acc)
     matrix = _matrix(cal, level_only)
-    if cal.bias_mps2 is not None:
-        acc = acc - cal.bias_mps2
+    acc = apply_corrections(acc, cal)
     return _rotated(acc, matrix)
 
 

@@ -55,12 +55,6 @@ def true_state(
     scale_e: FloatArray | None = None,
 ) -> full.State:
     """A parameter-space point from true values (for bounds at the truth)."""
-    return full.State(
-        rot_vs,
-        np.array([np.radians(slope_deg)]),
-        np.zeros(3) if bias_mps2 is None else np.asarray(bias_mps2, dtype=float),
-        np.zeros(0),
-        np.zeros(3) if temp_coeff is None else np.asarray(temp_coeff, dtype=float),
-        g_mps2,
-        np.zeros(6) if scale_e is None else np.asarray(scale_e, dtype=float),
-    )
+    values = {"bias": bias_mps2, "temperature": temp_coeff, "scale": scale_e}
+    given = {k: np.asarray(v, dtype=float) for k, v in values.items() if v is not None}
+    return full.State(rot_vs, np.array([np.radians(slope_deg)]), np.zeros(0), g_mps2, given)

@@ -1,0 +1,108 @@
+"""The registry of effects: the built-in ones (one module each, here) and those of other packages.
+
+A package adds an effect by one class satisfying :class:`~mountcal.estimate.effects.base.Effect`,
+declared in its metadata under the entry-point group ``mountcal.effects``::
+
+    [project.entry-points."mountcal.effects"]
+    quadratic = "my_package.quadratic:Quadratic"
+
+The static model, the model-selection loop, ``--model``, the report and ``rotate`` then use it
+with no other change. This module imports no numerical library: the CLI lists the names to build
+its parser.
+"""
+
+from __future__ import annotations
+
+import importlib
+from functools import cache
+from importlib.metadata import entry_points
+from typing import TYPE_CHECKING
+
+from mountcal.estimate.effects.base import Effect
+
+if TYPE_CHECKING:
+    from mountcal.conventions import FloatArray
+    from mountcal.result import Calibration
+
+GROUP = "mountcal.effects"
+# Built-in effects, in the order --model lists them: module mountcal.estimate.effects.<name>, class EFFECT.
+BUILTIN = ("bias", "temperature", "gravity", "site_slope", "scale")
+
+
+def names() -> tuple[str, ...]:
+    """Every registered effect's name, without importing any of them."""
+    extra = tuple(ep.name for ep in entry_points(group=GROUP) if ep.name not in BUILTIN)
+    return BUILTIN + tuple(dict.fromkeys(extra))
+
+
+@cache
+def registered() -> dict[str, Effect]:
+    """Every effect by name: the built-in ones, then those of the ``mountcal.effects`` entry points."""
+    out: dict[str, Effect] = {}
+    for name in BUILTIN:
+        out[name] = importlib.import_module(f"{__name__}.{name}").EFFECT
+    for ep in entry_points(group=GROUP):
+        if ep.name in out:
+            continue  # a built-in name cannot be replaced from outside
+        obj = ep.load()
+        effect = obj() if isinstance(obj, type) else obj
+        if not isinstance(effect, Effect) or effect.name != ep.name:
+            raise TypeError(
+                f"the entry point {ep.name} = {ep.value} of group {GROUP} is not a mountcal effect named {ep.name!r} "
+                "(see mountcal.estimate.effects.base.Effect)"
+            )
+        out[ep.name] = effect
+    return out
+
+
+def get(name: str) -> Effect:
+    return registered()[name]
+
+
+def chain(terms: tuple[str, ...]) -> list[Effect]:
+    """The effects among ``terms``, in the order the prediction applies them."""
+    effects = registered()
+    chosen = [effects[t] for t in terms if t in effects]
+    return sorted(chosen, key=lambda e: e.order)
+
+
+def owner(param: str, table_parameters: dict[str, tuple[str, ...]]) -> str:
+    """The group a parameter belongs to (an effect's name, or rotation, slope, headings)."""
+    for prefix, group in (("rot_", "rotation"), ("slope", "slope"), ("beta_", "headings")):
+        if param.startswith(prefix):
+            return group
+    for name, params in table_parameters.items():
+        if param in params:
+            return name
+    return param
+
+
+def apply_corrections(acc_s: FloatArray, calibration: Calibration) -> FloatArray:
+    """Samples (n, 3, m/s², sensor frame) with every fitted sensor effect of ``calibration`` undone, in the
+    reverse order of the prediction (what ``rotate`` applies before the rotation).
+
+    Raises
+    ------
+    InputError
+        The calibration's ``effects`` cannot be applied (edited or damaged values).
+    """
+    from mountcal.errors import InputError
+
+    reported = dict(calibration.effects)
+    if calibration.bias_mps2 is not None:
+        reported.setdefault(get("bias").report_key, {"value": [float(v) for v in calibration.bias_mps2]})
+    for effect in sorted(registered().values(), key=lambda e: e.order, reverse=True):
+        if effect.report_key in reported:
+            try:
+                acc_s = effect.correct(acc_s, reported[effect.report_key])
+            except ValueError as err:
+                raise InputError(
+                    f"calibration of {calibration.provenance.get('input') or 'unknown input'}",
+                    f"fitted values of the effect {effect.name} that can be undone on samples",
+                    str(err),
+                    "Re-run calibrate to get an intact result file.",
+                ) from err
+    return acc_s
+
+
+__all__ = ["BUILTIN", "GROUP", "Effect", "apply_corrections", "chain", "get", "names", "registered"]
