@@ -214,7 +214,8 @@ def _next_step(
                 len(cur.excluded),
             )
         return None
-    if best.added not in ("outlier", "surface"):  # those change the noise model, not the prediction
+    if best.added not in NOISE_MODEL_STEPS:  # those change the noise model, not the prediction
+        best = _among_exclusive(best, [o for lp, o in options[1:] if lp < np.log(alpha)], g, declined)
         cur_loo, new_loo = _loo_rms(cur), _loo_rms(best)
         if not (new_loo < cur_loo):
             _decline(
@@ -338,6 +339,43 @@ def _without_beta(state: full.State, i: int) -> full.State:
     from dataclasses import replace
 
     return replace(state, beta_rad=np.delete(state.beta_rad, i))
+
+
+NOISE_MODEL_STEPS = ("outlier", "surface")
+
+
+def _among_exclusive(best: Step, rivals: list[Step], g: float, declined: list[dict[str, Any]]) -> Step:
+    """The best of the significant candidates that cannot be fitted together, by Akaike's criterion.
+
+    Nested tests cannot choose between two effects the stops cannot separate from each other (on two
+    slopes a bias and a scale error: E·g·e_z is a constant); greedily taking the more significant one
+    would then shut the other out for good, so the one whose model fits better for its size is taken.
+    """
+    exclusive = [
+        r
+        for r in rivals
+        if r.added not in NOISE_MODEL_STEPS
+        and _inseparable(best, (*best.terms, *(t for t in r.terms if t not in best.terms)), g) is not None
+    ]
+    if not exclusive:
+        return best
+    chosen = min([best, *exclusive], key=lambda s: _aic(s.fit))
+    for other in (s for s in [best, *exclusive] if s is not chosen):
+        _decline(
+            declined,
+            other.added,
+            f"it and {chosen.added} cannot both be fitted to these stops; {chosen.added} fits them better for its "
+            f"number of parameters (Akaike: {_aic(chosen.fit):.1f} vs {_aic(other.fit):.1f})",
+            len(best.excluded),
+        )
+    return chosen
+
+
+def _aic(fit: full.Fit) -> float:
+    """Akaike's criterion, −2 log L + 2p up to a constant shared by models of the same stops."""
+    n = fit.residual_s.size
+    fit_term = fit.chi2 if fit.noise_known else n * np.log(fit.chi2 / n)
+    return float(fit_term + 2 * len(fit.names))
 
 
 def _covers(cur: Step, term: str, names: list[str], g: float) -> bool:
