@@ -344,3 +344,47 @@ def test_an_effect_added_by_one_file_is_fitted_chosen_applied_and_used_by_the_fl
     _mountcal(plugin_env, "fleet", str(stops.parent), "-o", str(fleet_out), "-q", "--workers", "1")
     logs = pd.read_parquet(fleet_out)
     assert "quadratic" in logs["model"].iloc[0].split(",")
+
+
+# --- two slopes: scale and cross-axis become observable ---------------------------------------------
+
+SCALE_2_1 = np.eye(3) + np.array([[0.02, -0.01, 0.01], [-0.01, -0.02, 0.01], [0.01, 0.01, 0.02]])
+
+
+def _on_slopes(slopes_deg: tuple[float, ...], scale: np.ndarray | None, seed: int) -> tuple[StopTable, object]:
+    rng = np.random.default_rng(seed)
+    parts = [simulate_stops(slope_deg=a, scale_matrix=scale, seed=rng) for a in slopes_deg]
+    arrays = {k: np.concatenate([getattr(t, k) for t, _ in parts]) for k in ("acc_s", "beta_rad", "cov_s", "t_s")}
+    site = np.repeat([f"s{k}" for k in range(len(slopes_deg))], len(parts[0][0]))
+    return replace(parts[0][0], site=site, **arrays), parts[0][1]
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_two_slopes_separate_scale_and_cross_axis_and_the_loop_fits_them(seed: int) -> None:
+    table, truth = _on_slopes((5.0, 10.0), SCALE_2_1, seed)
+    cal = calibrate(table)
+    assert "scale" in cal.model
+    fitted = cal.effects["scale"]
+    assert abs(fitted["scale_xx"]["value"] - 0.02) < 5 * fitted["scale_xx"]["sigma"]
+    assert abs(fitted["cross_xy"]["value"] + 0.01) < 5 * fitted["cross_xy"]["sigma"]
+    for est, sig, true in zip(
+        (cal.roll_deg, cal.pitch_deg, cal.yaw_deg),
+        (cal.roll_sigma_deg, cal.pitch_sigma_deg, cal.yaw_sigma_deg),
+        truth.angles_deg,  # type: ignore[attr-defined]
+        strict=True,
+    ):
+        assert abs(est - true) < 5 * sig  # type: ignore[operator]
+    clean = calibrate(_on_slopes((5.0, 10.0), None, seed)[0])
+    assert set(clean.model) <= {"rotation", "slope", "site_slope"}
+
+
+def test_observability_names_the_protocol_that_would_separate_scale() -> None:
+    one, _ = simulate_stops(seed=4)
+    verdicts = {v["effect"]: v for v in calibrate(one, Options(model="rotation,slope")).observability["separability"]}
+    assert not verdicts["scale"]["separable"]
+    assert "two slopes of different inclination" in verdicts["scale"]["why"]
+    assert "three slopes" in verdicts["scale with bias"]["why"]
+    assert verdicts["bias"]["separable"]
+    # equal inclinations in different directions are the same cone of gravity in the vehicle frame: no help
+    same, _ = _on_slopes((5.0, 5.0), SCALE_2_1, 4)
+    assert "scale" not in calibrate(same).model

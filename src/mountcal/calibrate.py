@@ -31,6 +31,7 @@ from mountcal.estimate import full, paper
 from mountcal.estimate.bound import crb_deg, euler_gradients
 from mountcal.estimate.effects.temperature import MIN_TEMPERATURE_SPAN_C
 from mountcal.estimate.geometry import span_ratio
+from mountcal.estimate.observability import separability
 from mountcal.pvalues import chi2_sf
 from mountcal.result import Calibration
 from mountcal.stoptable import StopTable, fingerprint
@@ -364,6 +365,7 @@ def _observability(table: StopTable, f: full.Fit, g: float) -> dict[str, Any]:
         "crb_1sigma": crb,
         "crb_note": "Cramér–Rao bounds for this stop set at the fitted point, per model"
         + ("" if f.noise_known else ", with the noise σ estimated from the residuals"),
+        "separability": separability(table, f, g),
     }
 
 

@@ -30,10 +30,9 @@ def crb_deg(
     The table's stop covariances (times ``noise_scale²``) are the noise model.
     """
     info, names = full.information(table, state, terms, g_mps2)
-    try:
-        cov = np.linalg.inv(info) * noise_scale**2
-    except np.linalg.LinAlgError:
+    if full.null_space(info).size:
         return None
+    cov = np.linalg.inv(info) * noise_scale**2
     k = 3 if "rot_z" in names else 2
     grads = euler_gradients(state.rot_vs, k)
     sig = [float(np.degrees(np.sqrt(max(c @ cov[:k, :k] @ c, 0.0)))) for c in grads]
