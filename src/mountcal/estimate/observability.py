@@ -37,7 +37,7 @@ def separability(table: StopTable, fit: full.Fit, g_mps2: float) -> list[dict[st
         if missing:
             out.append({"effect": effect.name, "separable": False, "why": f"needs the {', '.join(missing)} column"})
             continue
-        sets = [(effect.name,)]
+        sets: list[tuple[str, ...]] = [(effect.name,)]
         if "bias" not in fit.terms and effect.name != "bias" and not effect.needs:
             sets.append(("bias", effect.name))
         for added in sets:
