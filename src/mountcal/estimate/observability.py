@@ -30,9 +30,15 @@ def separability(table: StopTable, fit: full.Fit, g_mps2: float) -> list[dict[st
     """Per effect not in the model (alone, and with a bias when the model has none): whether these stops
     separate it and, if not, the first protocol that would."""
     out = []
-    for effect in registry.registered().values():
-        if effect.name in fit.terms or effect.name == "site_slope":
-            continue
+    tried = [e for e in registry.registered().values() if e.name not in fit.terms and e.name != "site_slope"]
+    usable = [e for e in tried if all(getattr(table, c, None) is not None for c in e.needs)]
+    # One information matrix for the model with every usable effect: at their start (no effect) they leave
+    # the other columns as they are, so each smaller model's information is a block of it.
+    every = (*fit.terms, *(e.name for e in usable))
+    info, names = full.information(table, fit.state, every, g_mps2)
+    params = {e.name: e.parameters(table) for e in registry.chain(every)}
+    owner = [registry.owner(n, params) for n in names]
+    for effect in tried:
         missing = [c for c in effect.needs if getattr(table, c, None) is None]
         if missing:
             out.append({"effect": effect.name, "separable": False, "why": f"needs the {', '.join(missing)} column"})
@@ -42,12 +48,14 @@ def separability(table: StopTable, fit: full.Fit, g_mps2: float) -> list[dict[st
             sets.append(("bias", effect.name))
         for added in sets:
             terms = (*fit.terms, *(r for r in effect.requires if r not in fit.terms), *added)
-            out.append({"effect": " with ".join(reversed(added)), **_verdict(table, fit, terms, g_mps2)})
+            keep = [i for i, o in enumerate(owner) if o not in params or o in terms]
+            here = full.fisher_rank(info[np.ix_(keep, keep)]) == len(keep)
+            out.append({"effect": " with ".join(reversed(added)), **_verdict(here, fit, terms, g_mps2)})
     return out
 
 
-def _verdict(table: StopTable, fit: full.Fit, terms: tuple[str, ...], g: float) -> dict[str, Any]:
-    if _full_rank(table, fit.state, terms, g):
+def _verdict(here: bool, fit: full.Fit, terms: tuple[str, ...], g: float) -> dict[str, Any]:
+    if here:
         return {"separable": True, "why": "separable with these stops"}
     if effects_need_columns(terms):
         return {"separable": False, "why": "not separable with these stops"}
