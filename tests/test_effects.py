@@ -388,3 +388,44 @@ def test_observability_names_the_protocol_that_would_separate_scale() -> None:
     # equal inclinations in different directions are the same cone of gravity in the vehicle frame: no help
     same, _ = _on_slopes((5.0, 5.0), SCALE_2_1, 4)
     assert "scale" not in calibrate(same).model
+
+
+def test_rotate_undoes_a_fitted_scale_matrix_and_back() -> None:
+    from mountcal.rotate import acc_to_sensor, acc_to_vehicle
+
+    table, truth = _on_slopes((5.0, 10.0), SCALE_2_1, 0)
+    cal = calibrate(table)
+    assert "scale" in cal.model
+    # near gravity, where two slopes determine the matrix well (the horizontal scales only to ~2 %, 1σ)
+    f_v = np.array([[0.0, 0.0, G_N], [0.3, -0.2, 9.8], [-0.2, 0.3, 9.8]])
+    acc_s = truth.rot_vs.inv().apply(f_v) @ SCALE_2_1.T  # type: ignore[attr-defined]
+    acc_v = acc_to_vehicle(acc_s, cal)
+    assert np.max(np.abs(acc_v - f_v)) < 0.01  # the scale error (0.2 m/s² on the vertical) removed
+    assert np.max(np.abs(cal.rot_vs.apply(acc_s) - f_v)) > 0.1
+    assert np.allclose(acc_to_sensor(acc_v, cal), acc_s, atol=1e-12)
+
+
+def test_an_effect_that_cannot_be_loaded_is_refused_by_name(tmp_path: Path) -> None:
+    import os
+    import subprocess
+    import sys
+
+    info = tmp_path / "mc_broken-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: mc-broken\nVersion: 0.1\n", encoding="utf-8")
+    (info / "entry_points.txt").write_text("[mountcal.effects]\nbroken = mc_missing:Broken\n", encoding="utf-8")
+    table, _ = simulate_stops(seed=1)
+    write_stop_table(table, tmp_path / "stops.csv")
+    env = {
+        **os.environ,
+        "PYTHONPATH": os.pathsep.join([str(tmp_path), str(Path(__file__).resolve().parents[1] / "src")]),
+    }
+    done = subprocess.run(
+        [sys.executable, "-m", "mountcal", "calibrate", str(tmp_path / "stops.csv")],
+        env=env,
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode != 0
+    assert "broken = mc_missing:Broken" in done.stderr and "mc-broken" in done.stderr
+    assert "Traceback" not in done.stderr

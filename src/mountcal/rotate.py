@@ -106,7 +106,7 @@ def acc_to_vehicle(
 def acc_to_sensor(acc_v: FloatArray, cal: Calibration, *, level_only: bool = False) -> FloatArray:
     """The inverse of :func:`acc_to_vehicle`: vehicle-frame specific force as the sensor reads it."""
     acc = _rotated(_as_vectors(acc_v, "acc_v"), _matrix(cal, level_only).T)
-    return acc + cal.bias_mps2 if cal.bias_mps2 is not None else acc
+    return apply_corrections(acc, cal, inverse=True)
 
 
 def rate_to_vehicle(gyro_s: FloatArray, cal: Calibration, *, level_only: bool = False) -> FloatArray:

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import importlib
 from functools import cache
-from importlib.metadata import entry_points
+from importlib.metadata import EntryPoint, entry_points
 from typing import TYPE_CHECKING
 
 from mountcal.estimate.effects.base import Effect
@@ -44,15 +44,26 @@ def registered() -> dict[str, Effect]:
     for ep in entry_points(group=GROUP):
         if ep.name in out:
             continue  # a built-in name cannot be replaced from outside
+        out[ep.name] = _load(ep)
+    return out
+
+
+def _load(ep: EntryPoint) -> Effect:
+    """The effect an entry point names; a package whose effect cannot be used is refused by name."""
+    from mountcal.errors import InputError
+
+    where = f"the entry point {ep.name} = {ep.value} (group {GROUP}, package {ep.dist.name if ep.dist else '?'})"
+    todo = "Fix or uninstall that package; mountcal cannot fit a model with an effect it cannot load."
+    try:
         obj = ep.load()
         effect = obj() if isinstance(obj, type) else obj
-        if not isinstance(effect, Effect) or effect.name != ep.name:
-            raise TypeError(
-                f"the entry point {ep.name} = {ep.value} of group {GROUP} is not a mountcal effect named {ep.name!r} "
-                "(see mountcal.estimate.effects.base.Effect)"
-            )
-        out[ep.name] = effect
-    return out
+    except (ImportError, AttributeError, TypeError) as err:
+        raise InputError(where, "an importable mountcal effect", f"{type(err).__name__}: {err}", todo) from err
+    if not isinstance(effect, Effect) or effect.name != ep.name:
+        raise InputError(
+            where, f"a mountcal effect named {ep.name!r} (mountcal.estimate.effects.base.Effect)", repr(effect), todo
+        )
+    return effect
 
 
 def get(name: str) -> Effect:
@@ -77,9 +88,10 @@ def owner(param: str, table_parameters: dict[str, tuple[str, ...]]) -> str:
     return param
 
 
-def apply_corrections(acc_s: FloatArray, calibration: Calibration) -> FloatArray:
+def apply_corrections(acc_s: FloatArray, calibration: Calibration, *, inverse: bool = False) -> FloatArray:
     """Samples (n, 3, m/s², sensor frame) with every fitted sensor effect of ``calibration`` undone, in the
-    reverse order of the prediction (what ``rotate`` applies before the rotation).
+    reverse order of the prediction (what ``rotate`` applies before the rotation); with ``inverse``, put
+    back in the order of the prediction (corrected samples as the sensor reads them).
 
     Raises
     ------
@@ -91,10 +103,11 @@ def apply_corrections(acc_s: FloatArray, calibration: Calibration) -> FloatArray
     reported = dict(calibration.effects)
     if calibration.bias_mps2 is not None:
         reported.setdefault(get("bias").report_key, {"value": [float(v) for v in calibration.bias_mps2]})
-    for effect in sorted(registered().values(), key=lambda e: e.order, reverse=True):
+    for effect in sorted(registered().values(), key=lambda e: e.order, reverse=not inverse):
         if effect.report_key in reported:
+            undo = effect.restore if inverse else effect.correct
             try:
-                acc_s = effect.correct(acc_s, reported[effect.report_key])
+                acc_s = undo(acc_s, reported[effect.report_key])
             except ValueError as err:
                 raise InputError(
                     f"calibration of {calibration.provenance.get('input') or 'unknown input'}",

@@ -66,6 +66,10 @@ class Effect(Protocol):
         """Samples (n, 3) with the effect removed, from its ``report`` entry (what ``rotate`` applies)."""
         ...
 
+    def restore(self, acc_s: FloatArray, reported: Any) -> FloatArray:
+        """The inverse of :meth:`correct`: corrected samples as the sensor reads them."""
+        ...
+
 
 class BaseEffect:
     """Defaults for an effect: no columns, always a candidate, plausible, and nothing to undo on samples."""
@@ -96,6 +100,9 @@ class BaseEffect:
         return {"value": [float(v) for v in values], "sigma": [float(s) for s in sigma]}
 
     def correct(self, acc_s: FloatArray, reported: Any) -> FloatArray:
+        return acc_s
+
+    def restore(self, acc_s: FloatArray, reported: Any) -> FloatArray:
         return acc_s
 
 

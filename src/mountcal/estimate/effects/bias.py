@@ -40,5 +40,8 @@ class Bias(BaseEffect):
     def correct(self, acc_s: FloatArray, reported: Any) -> FloatArray:
         return acc_s - reported_vector(reported, 3, self.report_key)
 
+    def restore(self, acc_s: FloatArray, reported: Any) -> FloatArray:
+        return acc_s + reported_vector(reported, 3, self.report_key)
+
 
 EFFECT = Bias()

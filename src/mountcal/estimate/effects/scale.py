@@ -46,6 +46,13 @@ class Scale(BaseEffect):
         return {n: {"value": float(v), "sigma": float(s)} for n, v, s in zip(names, values, sigma, strict=True)}
 
     def correct(self, acc_s: FloatArray, reported: Any) -> FloatArray:
+        return np.asarray(np.linalg.solve(self._matrix(reported), acc_s.T).T)
+
+    def restore(self, acc_s: FloatArray, reported: Any) -> FloatArray:
+        return np.asarray(acc_s @ self._matrix(reported).T)
+
+    @staticmethod
+    def _matrix(reported: Any) -> FloatArray:
         try:
             e = np.array([float(reported[n]["value"]) for n in SCALE_NAMES])
         except (KeyError, TypeError, ValueError) as err:
@@ -53,7 +60,7 @@ class Scale(BaseEffect):
         m = scale_matrix(e)
         if not np.all(np.isfinite(m)) or abs(np.linalg.det(m)) < 0.5:
             raise ValueError(f"effects.scale gives a singular or non-finite scale matrix {m.tolist()}")
-        return np.asarray(np.linalg.solve(m, acc_s.T).T)
+        return m
 
 
 EFFECT = Scale()
