@@ -293,13 +293,13 @@ def plugin_env(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
     return {**os.environ, "PYTHONPATH": os.pathsep.join([str(root), str(src)])}
 
 
-def _mountcal(env: dict[str, str], *args: str) -> str:
+def _mountcal(env: dict[str, str], *args: str, code: int = 0) -> str:
     import subprocess
     import sys
 
     done = subprocess.run([sys.executable, "-m", "mountcal", *args], env=env, capture_output=True, text=True)
-    assert done.returncode == 0, done.stderr
-    return done.stdout
+    assert done.returncode == code, done.stderr
+    return done.stdout + done.stderr
 
 
 def test_an_effect_added_by_one_file_is_fitted_chosen_applied_and_used_by_the_fleet(
@@ -314,7 +314,8 @@ def test_an_effect_added_by_one_file_is_fitted_chosen_applied_and_used_by_the_fl
     stops = tmp_path / "car" / "stops.csv"
     stops.parent.mkdir()
     write_stop_table(table, stops)
-    assert "quadratic" in _mountcal(plugin_env, "calibrate", "--help")
+    refused = _mountcal(plugin_env, "calibrate", str(stops), "--model", "rotation,slope,nonsense", code=2)
+    assert "quadratic" in refused  # the refusal lists the installed effects
 
     for model in ("rotation,slope,quadratic", "auto"):
         out = tmp_path / f"{model.replace(',', '_')}.json"

@@ -80,7 +80,7 @@ def parse_model(spec: str) -> tuple[str, ...] | None:
     if terms[:2] != model_terms.BASE or unknown or len(set(terms)) != len(terms):
         raise InputError(
             "--model",
-            model_terms.help_text(),
+            f"{model_terms.help_text()} (installed: {', '.join(model_terms.optional())})",
             repr(spec) + (f" (unknown: {', '.join(unknown)})" if unknown else ""),
             "For example --model rotation,slope,bias.",
         )

@@ -44,8 +44,10 @@ def optional() -> tuple[str, ...]:
 
 
 def help_text() -> str:
-    """The ``--model`` help of every command that takes it."""
-    return f"auto (default: the stops choose), or {','.join(BASE)} followed by any of {', '.join(optional())}"
+    """The ``--model`` help of every command that takes it: the built-in effects (finding those other
+    packages register takes longer than a ``--help`` should; :func:`optional` lists them all)."""
+    effects = (*registry.BUILTIN, "or an effect another package registers")
+    return f"auto (default: the stops choose), or {','.join(BASE)} followed by any of {', '.join(effects)}"
 
 
 def markdown_list() -> str:

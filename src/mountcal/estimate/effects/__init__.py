@@ -7,20 +7,21 @@ declared in its metadata under the entry-point group ``mountcal.effects``::
     quadratic = "my_package.quadratic:Quadratic"
 
 The static model, the model-selection loop, ``--model``, the report and ``rotate`` then use it
-with no other change. This module imports no numerical library: the CLI lists the names to build
-its parser.
+with no other change. This module imports no numerical library, nor ``importlib.metadata`` until
+asked for the effects of other packages: the CLI builds its parser with :data:`BUILTIN`.
 """
 
 from __future__ import annotations
 
 import importlib
 from functools import cache
-from importlib.metadata import EntryPoint, entry_points
 from typing import TYPE_CHECKING
 
 from mountcal.estimate.effects.base import Effect
 
 if TYPE_CHECKING:
+    from importlib.metadata import EntryPoint
+
     from mountcal.conventions import FloatArray
     from mountcal.result import Calibration
 
@@ -31,6 +32,8 @@ BUILTIN = ("bias", "temperature", "gravity", "site_slope", "scale")
 
 def names() -> tuple[str, ...]:
     """Every registered effect's name, without importing any of them."""
+    from importlib.metadata import entry_points  # its import alone costs more than the CLI's help may take
+
     extra = tuple(ep.name for ep in entry_points(group=GROUP) if ep.name not in BUILTIN)
     return BUILTIN + tuple(dict.fromkeys(extra))
 
@@ -38,6 +41,8 @@ def names() -> tuple[str, ...]:
 @cache
 def registered() -> dict[str, Effect]:
     """Every effect by name: the built-in ones, then those of the ``mountcal.effects`` entry points."""
+    from importlib.metadata import entry_points
+
     out: dict[str, Effect] = {}
     for name in BUILTIN:
         out[name] = importlib.import_module(f"{__name__}.{name}").EFFECT
