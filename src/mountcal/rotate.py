@@ -1,7 +1,8 @@
 """Apply a calibration: sensor-frame data into the vehicle frame and back (docs/conventions.md §1).
 
-``acc_v = R_vs · (acc_s − b)`` removes the fitted bias (when the calibration carries one) and
-rotates; ``acc_s = R_vsᵀ · acc_v + b`` undoes it. Angular rates are only rotated.
+``acc_v = R_vs · (I + E)⁻¹ (acc_s − b)`` removes the fitted sensor effects (those the calibration
+carries: :func:`mountcal.estimate.effects.apply_corrections`) and rotates; ``acc_to_sensor`` undoes
+it. Angular rates are only rotated.
 
 A calibration without a determined yaw is refused (its rotation only levels: the heading would be
 the sensor's own), unless the caller asks for exactly that with ``level_only=True``
