@@ -351,10 +351,11 @@ def _among_exclusive(best: Step, rivals: list[Step], g: float, declined: list[di
     slopes a bias and a scale error: E·g·e_z is a constant); greedily taking the more significant one
     would then shut the other out for good, so the one whose model fits better for its size is taken.
     """
-    exclusive = [
+    exclusive = [  # only a rival that fits better for its size could be taken instead: the others need no check
         r
         for r in rivals
         if r.added not in NOISE_MODEL_STEPS
+        and _aic(r.fit) < _aic(best.fit)
         and _inseparable(best, (*best.terms, *(t for t in r.terms if t not in best.terms)), g) is not None
     ]
     if not exclusive:
