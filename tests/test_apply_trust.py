@@ -381,7 +381,8 @@ def test_issue_repro_stops_and_driving_that_disagree_in_tilt_are_a_finding_not_c
     drive_and_stops, capsys: pytest.CaptureFixture[str]
 ) -> None:  # type: ignore[no-untyped-def]
     from mountcal.cli import summary
-    from mountcal.estimate.driving import combine, estimate_driving
+    from mountcal.estimate.driving import estimate_driving
+    from mountcal.estimate.driving_combine import combine
     from mountcal.io.logs import read_log
     from mountcal.outputs.report import render
     from mountcal.pipeline import LogJob
@@ -414,7 +415,8 @@ def test_issue_repro_stops_and_driving_that_disagree_in_tilt_are_a_finding_not_c
 
 
 def test_stops_and_driving_that_disagree_in_yaw_are_not_combined(drive_and_stops) -> None:  # type: ignore[no-untyped-def]
-    from mountcal.estimate.driving import combine, estimate_driving
+    from mountcal.estimate.driving import estimate_driving
+    from mountcal.estimate.driving_combine import combine
     from mountcal.io.logs import read_log
 
     path, _, _ = drive_and_stops

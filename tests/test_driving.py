@@ -15,7 +15,8 @@ from mountcal import calibrate, simulate_preset
 from mountcal.cli import main
 from mountcal.conventions import G_N, angles_from_rot_vs, rot_vs_from_angles
 from mountcal.errors import NotEnoughInformation
-from mountcal.estimate.driving import DrivingOptions, combine, estimate_driving
+from mountcal.estimate.driving import DrivingOptions, estimate_driving
+from mountcal.estimate.driving_combine import combine
 from mountcal.io.samples import Channel, Samples
 from mountcal.result import Calibration
 from mountcal.rotate_log import to_frame

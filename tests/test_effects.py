@@ -236,3 +236,198 @@ def test_the_road_tilt_found_is_the_profile_likelihoods_optimum() -> None:
 
 def test_no_road_tilt_is_added_when_the_stops_share_one_surface() -> None:
     assert sum("surface" in calibrate(_at_three_sites(0.0, seed=s)).model for s in range(6)) == 0
+
+
+# --- an effect added by one file, from outside the package -----------------------------------------
+
+PLUGIN = '''
+"""An invented effect: a quadratic nonlinearity of the horizontal axes, a_k = p_k + q_k p_k² (k = x, y)."""
+import numpy as np
+from mountcal.estimate.effects.base import BaseEffect
+
+
+class Quadratic(BaseEffect):
+    name = "quadratic"
+    meaning = "a quadratic nonlinearity of the x and y axes, 2 values (1/(m/s²))"
+    order = 15
+    report_key = "quadratic_per_mps2"
+
+    def parameters(self, table):
+        return ("quad_x", "quad_y")
+
+    def initial(self, table, g_mps2):
+        return np.zeros(2)
+
+    def apply(self, table, values, p, g0_mps2):
+        q = np.array([values[0], values[1], 0.0])
+        d_values = np.zeros((len(p), 3, 2))
+        d_values[:, 0, 0], d_values[:, 1, 1] = p[:, 0] ** 2, p[:, 1] ** 2
+        d_p = np.eye(3) + 2 * (q * p)[:, :, None] * np.eye(3)
+        return p + q * p**2, d_values, d_p
+
+    def correct(self, acc_s, reported):
+        q = np.array([*reported["value"], 0.0])
+        out = acc_s.copy()
+        k = q != 0
+        out[:, k] = (np.sqrt(1 + 4 * q[k] * acc_s[:, k]) - 1) / (2 * q[k])
+        return out
+'''
+Q_TRUE = np.array([0.05, -0.04])  # 1/(m/s²): 2β harmonics of ~7 mg on a 10° slope
+
+
+def _quadratic(acc: np.ndarray, q: np.ndarray) -> np.ndarray:
+    return acc + np.array([*q, 0.0]) * acc**2
+
+
+@pytest.fixture(scope="module")
+def plugin_env(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
+    """A folder with one module and its distribution metadata, put on PYTHONPATH: nothing else edited."""
+    import os
+
+    root = tmp_path_factory.mktemp("plugin")
+    (root / "mc_quadratic.py").write_text(PLUGIN, encoding="utf-8")
+    info = root / "mc_quadratic-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: mc-quadratic\nVersion: 0.1\n", encoding="utf-8")
+    (info / "entry_points.txt").write_text("[mountcal.effects]\nquadratic = mc_quadratic:Quadratic\n", encoding="utf-8")
+    src = Path(__file__).resolve().parents[1] / "src"
+    return {**os.environ, "PYTHONPATH": os.pathsep.join([str(root), str(src)])}
+
+
+def _mountcal(env: dict[str, str], *args: str, code: int = 0) -> str:
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-m", "mountcal", *args], env=env, capture_output=True, text=True)
+    assert done.returncode == code, done.stderr
+    return done.stdout + done.stderr
+
+
+def test_an_effect_added_by_one_file_is_fitted_chosen_applied_and_used_by_the_fleet(
+    plugin_env: dict[str, str], tmp_path: Path
+) -> None:
+    import pandas as pd
+
+    from mountcal.result import Calibration
+
+    table, truth = simulate_stops(slope_deg=10.0, beta_deg=np.arange(0.0, 360.0, 15.0), seed=3)
+    table = replace(table, acc_s=_quadratic(table.acc_s, Q_TRUE))
+    stops = tmp_path / "car" / "stops.csv"
+    stops.parent.mkdir()
+    write_stop_table(table, stops)
+    refused = _mountcal(plugin_env, "calibrate", str(stops), "--model", "rotation,slope,nonsense", code=2)
+    assert "quadratic" in refused  # the refusal lists the installed effects
+
+    for model in ("rotation,slope,quadratic", "auto"):
+        out = tmp_path / f"{model.replace(',', '_')}.json"
+        _mountcal(plugin_env, "calibrate", str(stops), "--model", model, "-o", str(out))
+        cal = Calibration.load(out)
+        assert "quadratic" in cal.model, model
+        fitted = cal.effects["quadratic_per_mps2"]
+        assert np.all(np.abs(np.array(fitted["value"]) - Q_TRUE) < 5 * np.array(fitted["sigma"])), model
+        for est, true in zip((cal.roll_deg, cal.pitch_deg, cal.yaw_deg), truth.angles_deg, strict=True):
+            assert abs(est - true) < 0.1  # type: ignore[operator]
+
+    # rotate undoes the fitted nonlinearity before rotating: samples of known vehicle-frame force come out right
+    f_v = np.array([[0.0, 0.0, G_N], [1.5, -1.0, 9.6], [-2.0, 1.8, 9.5]] * 4)
+    acc_s = _quadratic(truth.rot_vs.inv().apply(f_v), Q_TRUE)
+    log = tmp_path / "drive.csv"
+    pd.DataFrame({"t_s": np.arange(len(f_v)) * 0.01, "ax": acc_s[:, 0], "ay": acc_s[:, 1], "az": acc_s[:, 2]}).to_csv(
+        log, index=False, float_format="%.15g"
+    )
+    rotated = tmp_path / "vehicle.csv"
+    _mountcal(plugin_env, "rotate", str(log), "--calibration", str(tmp_path / "auto.json"), "-o", str(rotated))
+    acc_v = pd.read_csv(rotated)[["ax", "ay", "az"]].to_numpy()
+    assert np.max(np.abs(acc_v - f_v)) < 0.02  # the fit's own error: mrad × g
+    uncorrected = truth.rot_vs.apply(acc_s)
+    assert np.max(np.abs(uncorrected - f_v)) > 0.15  # what leaving the nonlinearity in would cost
+
+    fleet_out = tmp_path / "fleet.parquet"
+    _mountcal(plugin_env, "fleet", str(stops.parent), "-o", str(fleet_out), "-q", "--workers", "1")
+    logs = pd.read_parquet(fleet_out)
+    assert "quadratic" in logs["model"].iloc[0].split(",")
+
+
+# --- two slopes: scale and cross-axis become observable ---------------------------------------------
+
+SCALE_2_1 = np.eye(3) + np.array([[0.02, -0.01, 0.01], [-0.01, -0.02, 0.01], [0.01, 0.01, 0.02]])
+
+
+def _on_slopes(slopes_deg: tuple[float, ...], scale: np.ndarray | None, seed: int) -> tuple[StopTable, object]:
+    rng = np.random.default_rng(seed)
+    parts = [simulate_stops(slope_deg=a, scale_matrix=scale, seed=rng) for a in slopes_deg]
+    arrays = {k: np.concatenate([getattr(t, k) for t, _ in parts]) for k in ("acc_s", "beta_rad", "cov_s", "t_s")}
+    site = np.repeat([f"s{k}" for k in range(len(slopes_deg))], len(parts[0][0]))
+    return replace(parts[0][0], site=site, **arrays), parts[0][1]
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_two_slopes_separate_scale_and_cross_axis_and_the_loop_fits_them(seed: int) -> None:
+    table, truth = _on_slopes((5.0, 10.0), SCALE_2_1, seed)
+    cal = calibrate(table)
+    assert "scale" in cal.model
+    fitted = cal.effects["scale"]
+    assert abs(fitted["scale_xx"]["value"] - 0.02) < 5 * fitted["scale_xx"]["sigma"]
+    assert abs(fitted["cross_xy"]["value"] + 0.01) < 5 * fitted["cross_xy"]["sigma"]
+    for est, sig, true in zip(
+        (cal.roll_deg, cal.pitch_deg, cal.yaw_deg),
+        (cal.roll_sigma_deg, cal.pitch_sigma_deg, cal.yaw_sigma_deg),
+        truth.angles_deg,  # type: ignore[attr-defined]
+        strict=True,
+    ):
+        assert abs(est - true) < 5 * sig  # type: ignore[operator]
+    clean = calibrate(_on_slopes((5.0, 10.0), None, seed)[0])
+    assert set(clean.model) <= {"rotation", "slope", "site_slope"}
+
+
+def test_observability_names_the_protocol_that_would_separate_scale() -> None:
+    one, _ = simulate_stops(seed=4)
+    verdicts = {v.effect: v for v in calibrate(one, Options(model="rotation,slope")).observability.separability}
+    assert not verdicts["scale"].separable
+    assert "two slopes of different inclination" in verdicts["scale"].why
+    assert "three slopes" in verdicts["scale with bias"].why
+    assert verdicts["bias"].separable
+    # equal inclinations in different directions are the same cone of gravity in the vehicle frame: no help
+    same, _ = _on_slopes((5.0, 5.0), SCALE_2_1, 4)
+    assert "scale" not in calibrate(same).model
+
+
+def test_rotate_undoes_a_fitted_scale_matrix_and_back() -> None:
+    from mountcal.rotate import acc_to_sensor, acc_to_vehicle
+
+    table, truth = _on_slopes((5.0, 10.0), SCALE_2_1, 0)
+    cal = calibrate(table)
+    assert "scale" in cal.model
+    # near gravity, where two slopes determine the matrix well (the horizontal scales only to ~2 %, 1σ)
+    f_v = np.array([[0.0, 0.0, G_N], [0.3, -0.2, 9.8], [-0.2, 0.3, 9.8]])
+    acc_s = truth.rot_vs.inv().apply(f_v) @ SCALE_2_1.T  # type: ignore[attr-defined]
+    acc_v = acc_to_vehicle(acc_s, cal)
+    assert np.max(np.abs(acc_v - f_v)) < 0.01  # the scale error (0.2 m/s² on the vertical) removed
+    assert np.max(np.abs(cal.rot_vs.apply(acc_s) - f_v)) > 0.1
+    assert np.allclose(acc_to_sensor(acc_v, cal), acc_s, atol=1e-12)
+
+
+def test_an_effect_that_cannot_be_loaded_is_refused_by_name(tmp_path: Path) -> None:
+    import os
+    import subprocess
+    import sys
+
+    info = tmp_path / "mc_broken-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: mc-broken\nVersion: 0.1\n", encoding="utf-8")
+    (info / "entry_points.txt").write_text("[mountcal.effects]\nbroken = mc_missing:Broken\n", encoding="utf-8")
+    table, _ = simulate_stops(seed=1)
+    write_stop_table(table, tmp_path / "stops.csv")
+    env = {
+        **os.environ,
+        "PYTHONPATH": os.pathsep.join([str(tmp_path), str(Path(__file__).resolve().parents[1] / "src")]),
+    }
+    done = subprocess.run(
+        [sys.executable, "-m", "mountcal", "calibrate", str(tmp_path / "stops.csv")],
+        env=env,
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode != 0
+    assert "broken = mc_missing:Broken" in done.stderr and "mc-broken" in done.stderr
+    assert "Traceback" not in done.stderr

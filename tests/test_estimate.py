@@ -197,3 +197,31 @@ def test_stop_weights_follow_the_stop_covariance() -> None:
     weighted = calibrate(replace(table, acc_s=acc, cov_s=cov), Options(model="rotation,slope"))
     unweighted = calibrate(replace(table, acc_s=acc, cov_s=None), Options(model="rotation,slope"))
     assert abs(weighted.yaw_deg - 7) < 0.05 < abs(unweighted.yaw_deg - 7)  # type: ignore[operator]
+
+
+@pytest.mark.parametrize("headings", ["uphill", "none"])
+def test_the_jacobian_of_every_registered_effect_matches_finite_differences(headings: str) -> None:
+    """The chain rule through the effects (gravity and scale scale the earlier columns) against central
+    differences of the residual along each parameter, at a point where every effect is non-zero."""
+    from dataclasses import replace as with_
+
+    from mountcal.estimate import effects as registry
+    from mountcal.estimate import full as ml
+
+    rng = np.random.default_rng(3)
+    temperature = np.linspace(15.0, 35.0, 12)
+    table, _ = simulate_stops(temperature_c=temperature, headings=headings, seed=rng)  # type: ignore[arg-type]
+    table = with_(table, site=np.array(["a", "b", "c"] * 4))
+    terms = ("rotation", "slope", *registry.registered())
+    model = ml.StaticModel(table, terms, 9.81)
+    start = ml.adapt(ml.initial_state(table, 9.81), table, terms, 9.81)
+    state = model.retract(start, 1e-2 * rng.normal(size=len(model.names)))  # every effect away from its start
+    moved = [np.all(v != s) for v, s in zip(state.values.values(), start.values.values(), strict=True) if v.size]
+    assert len(moved) == len(registry.registered()) - 1 and all(moved)  # site_slope's α are the base slopes
+    jac = model.jacobian(state)
+    h = 1e-6
+    for k in range(len(model.names)):
+        step = np.zeros(len(model.names))
+        step[k] = h
+        numeric = (model.residual(model.retract(state, step)) - model.residual(model.retract(state, -step))) / (2 * h)
+        assert np.allclose(jac[:, k], numeric, rtol=1e-4, atol=1e-6 * np.abs(jac).max()), model.names[k]

@@ -26,23 +26,25 @@ from mountcal.conventions import (
     angles_from_rot_vs,
     normal_gravity,
 )
-from mountcal.effects import MIN_TEMPERATURE_SPAN_C, Loop, Step, close_the_loop, effect_values
+from mountcal.effects import Loop, Step, close_the_loop, effect_values
 from mountcal.errors import InputError, NotEnoughInformation
 from mountcal.estimate import full, paper
 from mountcal.estimate.bound import crb_deg, euler_gradients
+from mountcal.estimate.effects.temperature import MIN_TEMPERATURE_SPAN_C
 from mountcal.estimate.geometry import span_ratio
+from mountcal.estimate.observability import separability
 from mountcal.pvalues import chi2_logsf, chi2_sf
 from mountcal.result import (
     Angles,
     AngleValues,
     Calibration,
     Declined,
-    EffectValue,
     FitQuality,
     ModelSelection,
     ModelStep,
     Observability,
     Provenance,
+    Separability,
 )
 from mountcal.stoptable import StopTable, fingerprint
 from mountcal.version import software_version
@@ -52,7 +54,6 @@ BASE: tuple[str, ...] = ("rotation", "slope")
 WITH_BIAS: tuple[str, ...] = ("rotation", "slope", "bias")
 MIN_DISTINCT_HEADINGS = 3
 GIVEN = "given by the user"
-NULL_TOL = 1e-8
 # "Confident" promises the answer is usable: tilt within 10° at 5σ, so its 1σ must stay under 2°.
 MAX_CONFIDENT_TILT_SIGMA_DEG = 2.0
 MIN_NOISE_DOF = 10  # a noise estimated from fewer residual values is itself too uncertain to vouch for the σ
@@ -86,11 +87,12 @@ def parse_model(spec: str) -> tuple[str, ...] | None:
     terms = tuple(t.strip() for t in spec.split(",") if t.strip())
     if terms == ("auto",):
         return None
-    unknown = [t for t in terms if t not in model_terms.BY_NAME]
+    known = model_terms.by_name()
+    unknown = [t for t in terms if t not in known]
     if terms[:2] != model_terms.BASE or unknown or len(set(terms)) != len(terms):
         raise InputError(
             "--model",
-            model_terms.help_text(),
+            f"{model_terms.help_text()} (installed: {', '.join(model_terms.optional())})",
             repr(spec) + (f" (unknown: {', '.join(unknown)})" if unknown else ""),
             "For example --model rotation,slope,bias.",
         )
@@ -99,8 +101,9 @@ def parse_model(spec: str) -> tuple[str, ...] | None:
 
 def check_model(table: StopTable, terms: tuple[str, ...]) -> None:
     """Refuse a fixed model whose terms need a column the table lacks, or values it does not vary."""
+    known = model_terms.by_name()
     for name in terms:
-        missing = [c for c in model_terms.BY_NAME[name].needs if getattr(table, _FIELD[c]) is None]
+        missing = [c for c in known[name].needs if getattr(table, _FIELD.get(c, c), None) is None]
         if missing:
             raise InputError(
                 f"{table.source} with --model {','.join(terms)}",
@@ -245,7 +248,7 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
         model_steps=_steps(loop, opts),
         unexplained=tuple(loop.unexplained),
         diagnostics=tuple(loop.findings),
-        effects=_effects(f),
+        effects=effect_values(f),
         confident=not loop.unexplained and not doubts,
     )
 
@@ -273,7 +276,7 @@ def _angles(table: StopTable, f: full.Fit, opts: Options) -> Angles:
     """Roll, pitch, yaw, slope in degrees with 1σ (None where the data cannot determine them)."""
     k = 3 if "rot_z" in f.names else 2
     grads = euler_gradients(f.state.rot_vs, k)  # rows roll, pitch, yaw over δ
-    null = _null_space(f.fisher)
+    null = full.null_space(f.fisher)
 
     def sigma(grad: FloatArray, idx: slice | list[int]) -> float | None:
         c = np.zeros(len(f.names))
@@ -333,38 +336,10 @@ def _steps(loop: Loop, opts: Options) -> tuple[ModelStep, ...]:
                 loo_rms_mps2=step.loo_rms_mps2,
                 angles=a,
                 moved=moved,
-                effects=_effects(f),
+                effects=effect_values(f),
             )
         )
         prev = a
-    return tuple(out)
-
-
-_UNITS = {"_mps2_per_c": "m/s²/°C", "_mps2": "m/s²", "_deg": "°"}
-
-
-def _effects(f: full.Fit) -> tuple[EffectValue, ...]:
-    """The fitted effects of a fit, typed: a value ± σ per axis (a vector) or per named entry."""
-    out = []
-    for name, entry in effect_values(f).items():
-        unit = next((u for suffix, u in _UNITS.items() if name.endswith(suffix)), "")
-        if "value" not in entry:  # one {"value", "sigma"} per named entry (scale factors, site slopes)
-            labels = tuple(entry)
-            values = [entry[k]["value"] for k in labels]
-            sigmas = [entry[k]["sigma"] for k in labels]
-        elif isinstance(entry["value"], list):  # a vector on the sensor axes
-            labels, values, sigmas = ("x", "y", "z"), entry["value"], entry["sigma"]
-        else:
-            labels, values, sigmas = ("",), [entry["value"]], [entry["sigma"]]
-        out.append(
-            EffectValue(
-                name=name,
-                unit=unit,
-                components=labels,
-                value=tuple(float(v) for v in values),
-                sigma=tuple(None if s is None else float(s) for s in sigmas),
-            )
-        )
     return tuple(out)
 
 
@@ -403,7 +378,7 @@ def _yaw_reason(table: StopTable, s_yaw: float | None, f: full.Fit, opts: Option
 def _observability(table: StopTable, f: full.Fit, g: float) -> Observability:
     scale = np.sqrt(np.clip(np.diag(f.fisher), 1e-300, None))
     eig = np.linalg.eigvalsh(f.fisher / np.outer(scale, scale))
-    rank = int(np.sum(eig > NULL_TOL * eig.max()))
+    rank = full.fisher_rank(f.fisher)
     crb = {}
     for terms in dict.fromkeys((BASE, WITH_BIAS, f.terms)):
         bound = crb_deg(table, f.state, terms, g, f.noise_scale)
@@ -415,14 +390,8 @@ def _observability(table: StopTable, f: full.Fit, g: float) -> Observability:
         crb_1sigma=crb,
         crb_note="Cramér–Rao bounds for this stop set at the fitted point, per model"
         + ("" if f.noise_known else ", with the noise σ estimated from the residuals"),
+        separability=tuple(Separability(**v) for v in separability(table, f, g)),
     )
-
-
-def _null_space(fisher: FloatArray) -> FloatArray:
-    scale = np.sqrt(np.clip(np.diag(fisher), 1e-300, None))
-    eig, vec = np.linalg.eigh(fisher / np.outer(scale, scale))
-    null = vec[:, eig < NULL_TOL * eig.max()]
-    return null / scale[:, None] if null.size else null  # back to parameter coordinates
 
 
 # --- the paper's method --------------------------------------------------------------------------

@@ -8,8 +8,6 @@ and its p-value. docs/conventions.md §6 lists the effects these point at.
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 
 from mountcal.conventions import FloatArray
@@ -139,7 +137,7 @@ def leave_one_out_refit(table: StopTable, fit: full.Fit) -> tuple[FloatArray, Fl
         if "temperature" in fit.terms and table.temperature_c is not None:
             # The refit's bias holds at the others' mean temperature; the prediction uses all stops' mean.
             shift = float(np.mean(table.temperature_c) - np.mean(sub.temperature_c))  # type: ignore[arg-type]
-            state = replace(state, bias_s=state.bias_s + state.temp_coeff_s * shift)
+            state = state.with_values(bias=state.bias_s + state.temp_coeff_s * shift)
         pred = full.StaticModel(table, fit.terms, fit.state.g_mps2).predict(state)[i]
         e = table.acc_s[i] - pred
         cov = (table.cov_s[i] if table.cov_s is not None else np.eye(3)) * (

@@ -1,8 +1,7 @@
 """Closing the loop: from a residual to the effect the model lacks, and back (docs/conventions.md §6).
 
-Starting from the base model (rotation, slope), each round tries every effect the table can
-support — ``bias``, ``temperature`` (needs temperatures), ``gravity`` (fitted only when no
-position gives it), ``site_slope`` (needs sites), ``scale`` (scale and cross-axis) — and the
+Starting from the base model (rotation, slope), each round tries every registered effect
+(:mod:`mountcal.estimate.effects`) the table can support — each says when it is a candidate — and the
 exclusion of the one stop the others predict worst (``outlier``). An effect is a candidate only
 when the data can separate it: its Fisher information must be full rank with the terms already in
 the model, and the tilt must stay determined; otherwise it is reported as confounded. The most
@@ -23,23 +22,20 @@ from scipy import optimize
 from scipy.spatial.transform import Rotation
 
 from mountcal.diagnose import analyse, leave_one_out
-from mountcal.errors import NotEnoughInformation
+from mountcal.errors import FitFailed, NotEnoughInformation
+from mountcal.estimate import effects as registry
 from mountcal.estimate import full
-from mountcal.pvalues import chi2_logsf, f_logsf
-from mountcal.result import Finding
+from mountcal.pvalues import chi2_logsf, nested_test
+from mountcal.result import EffectValue, Finding
 from mountcal.stoptable import StopTable
 
 log = logging.getLogger(__name__)
-BASE: tuple[str, ...] = ("rotation", "slope")
-NULL_TOL = 1e-10  # relative eigenvalue of the normalised Fisher information counted as zero
+BASE = full.BASE
 MAX_TILT_SIGMA_DEG = 5.0  # an effect that would leave the tilt this uncertain is not separable
-MIN_TEMPERATURE_SPAN_C = 2.0
 MAX_ROUNDS = 6
 MAX_SURFACE_TILT_DEG = 3.0  # roads and car parks: cross slopes and grades of a few degrees at most
 SAME_PLACE_M = 30.0  # stops farther apart than this may stand on different surfaces
-MAX_BIAS_G = 0.5  # an offset this large is not an accelerometer bias (consumer MEMS: < 0.1 g) but a sign or unit error
 PROGRESS_STOPS = 2000  # from this many stops a model choice takes seconds: its rounds are logged at INFO
-EARTH_GRAVITY_MPS2 = (9.77, 9.835)  # normal gravity: 9.780 (equator) to 9.832 (poles) at sea level, less with height
 
 
 @dataclass(frozen=True)
@@ -71,13 +67,7 @@ class Loop:
 
 def candidates(table: StopTable, terms: tuple[str, ...], gravity_known: bool) -> list[str]:
     """Effects the table's columns allow that are not yet in the model."""
-    out = ["bias", "scale"]
-    if table.temperature_c is not None and np.ptp(table.temperature_c) >= MIN_TEMPERATURE_SPAN_C:
-        out.append("temperature")
-    if not gravity_known:
-        out.append("gravity")
-    if table.site is not None and np.unique(table.site).size > 1:
-        out.append("site_slope")
+    out = [e.name for e in registry.registered().values() if e.candidate(table, gravity_known)]
     if table.cov_s is not None and _moved(table):
         out.append("surface")
     return [c for c in out if c not in terms]
@@ -176,58 +166,35 @@ def _next_step(
     options: list[tuple[float, Step]] = []
     names = candidates(cur.table, cur.terms, gravity_known)
     k = len(names) + 1  # the outlier test is one more candidate
-    bias_separable = "bias" in cur.terms or ("bias" in names and _inseparable(cur, (*cur.terms, "bias"), g) is None)
     for name in names:
-        terms = (*cur.terms, name)
-        if name == "temperature" and "bias" not in terms:
-            terms = (*cur.terms, "bias", name)  # a bias that drifts with temperature has an offset too
-        if name == "gravity" and bias_separable:
-            _decline(
-                declined,
-                name,
-                "with the position unknown, an offset of |a| from standard gravity is a "
-                "vertical bias as far as these stops can tell: the bias term covers it",
-                len(cur.excluded),
-            )
-            continue
         if name == "surface":
             option = _surface(cur, g, k)
             if option is not None:
                 options.append(option)
             continue
+        effect = registry.get(name)
+        terms = (*cur.terms, *(r for r in effect.requires if r not in cur.terms), name)
+        covered = effect.covered_by()
+        if covered is not None and _covers(cur, covered[0], names, g):
+            _decline(declined, name, covered[1], len(cur.excluded))
+            continue
         problem = _inseparable(cur, terms, g)
         if problem:
             _decline(declined, name, problem, len(cur.excluded))
             continue
-        if cur.fit.dof - _extra(cur.table, name) < 1:
+        if cur.fit.dof - effect.extra(cur.table) < 1:
             _decline(declined, name, "not enough stops to test it", len(cur.excluded))
             continue
         try:
             f = full.fit(cur.table, terms, g, cur.fit.state)
-        except Exception as err:  # a candidate that does not converge is not taken
+        except FitFailed as err:  # a candidate that does not converge is not taken
             _decline(declined, name, f"its fit failed ({err})", len(cur.excluded))
             continue
-        if name == "gravity" and not (EARTH_GRAVITY_MPS2[0] <= f.state.g_mps2 <= EARTH_GRAVITY_MPS2[1]):
-            _decline(
-                declined,
-                name,
-                f"the fitted g = {f.state.g_mps2:.4f} m/s² is outside Earth's range "
-                f"{EARTH_GRAVITY_MPS2[0]}–{EARTH_GRAVITY_MPS2[1]} m/s²: the offset is not gravity (a vertical "
-                "bias or a scale error?)",
-                len(cur.excluded),
-            )
+        odd = next((w for e in registry.chain(terms) if (w := e.implausible(f.state.values[e.name], g))), None)
+        if odd:
+            _decline(declined, name, odd, len(cur.excluded))
             continue
-        bias_g = float(np.linalg.norm(f.state.bias_s)) / f.state.g_mps2
-        if "bias" in terms and bias_g > MAX_BIAS_G:
-            _decline(
-                declined,
-                name,
-                f"the fitted bias |b| = {bias_g:.2f} g exceeds {MAX_BIAS_G:g} g: no accelerometer has such a bias "
-                "(a negated axis or a wrong unit?)",
-                len(cur.excluded),
-            )
-            continue
-        logp, test = _lrt(cur.fit, f)
+        logp, test = nested_test(cur.fit.chi2, f.chi2, len(f.names) - len(cur.fit.names), f.noise_known, f.dof)
         options.append(
             (logp + np.log(k), Step(name, f"{test}, p = {np.exp(logp):.3g}", terms, cur.excluded, cur.table, f))
         )
@@ -247,7 +214,8 @@ def _next_step(
                 len(cur.excluded),
             )
         return None
-    if best.added not in ("outlier", "surface"):  # those change the noise model, not the prediction
+    if best.added not in NOISE_MODEL_STEPS:  # those change the noise model, not the prediction
+        best = _among_exclusive(best, [o for lp, o in options[1:] if lp < np.log(alpha)], g, declined)
         cur_loo, new_loo = _loo_rms(cur), _loo_rms(best)
         if not (new_loo < cur_loo):
             _decline(
@@ -373,23 +341,56 @@ def _without_beta(state: full.State, i: int) -> full.State:
     return replace(state, beta_rad=np.delete(state.beta_rad, i))
 
 
-def _lrt(small: full.Fit, big: full.Fit) -> tuple[float, str]:
-    extra = len(big.names) - len(small.names)
-    if small.noise_known:
-        stat = max(small.chi2 - big.chi2, 0.0)
-        return float(chi2_logsf(stat, extra)), f"likelihood ratio χ²({extra}) = {stat:.1f}"
-    f_stat = ((small.chi2 - big.chi2) / extra) / (big.chi2 / max(big.dof, 1))
-    return float(f_logsf(max(f_stat, 0.0), extra, max(big.dof, 1))), f"F({extra}, {big.dof}) = {f_stat:.2f}"
+NOISE_MODEL_STEPS = ("outlier", "surface")
+
+
+def _among_exclusive(best: Step, rivals: list[Step], g: float, declined: list[dict[str, Any]]) -> Step:
+    """The best of the significant candidates that cannot be fitted together, by Akaike's criterion.
+
+    Nested tests cannot choose between two effects the stops cannot separate from each other (on two
+    slopes a bias and a scale error: E·g·e_z is a constant); greedily taking the more significant one
+    would then shut the other out for good, so the one whose model fits better for its size is taken.
+    """
+    exclusive = [  # only a rival that fits better for its size could be taken instead: the others need no check
+        r
+        for r in rivals
+        if r.added not in NOISE_MODEL_STEPS
+        and _aic(r.fit) < _aic(best.fit)
+        and _inseparable(best, (*best.terms, *(t for t in r.terms if t not in best.terms)), g) is not None
+    ]
+    if not exclusive:
+        return best
+    chosen = min([best, *exclusive], key=lambda s: _aic(s.fit))
+    for other in (s for s in [best, *exclusive] if s is not chosen):
+        _decline(
+            declined,
+            other.added,
+            f"it and {chosen.added} cannot both be fitted to these stops; {chosen.added} fits them better for its "
+            f"number of parameters (Akaike: {_aic(chosen.fit):.1f} vs {_aic(other.fit):.1f})",
+            len(best.excluded),
+        )
+    return chosen
+
+
+def _aic(fit: full.Fit) -> float:
+    """Akaike's criterion, −2 log L + 2p up to a constant shared by models of the same stops."""
+    n = fit.residual_s.size
+    fit_term = fit.chi2 if fit.noise_known else n * np.log(fit.chi2 / n)
+    return float(fit_term + 2 * len(fit.names))
+
+
+def _covers(cur: Step, term: str, names: list[str], g: float) -> bool:
+    """Is ``term`` in the model, or a candidate the stops separate?"""
+    return term in cur.terms or (term in names and _inseparable(cur, (*cur.terms, term), g) is None)
 
 
 def _inseparable(cur: Step, terms: tuple[str, ...], g: float) -> str | None:
     """Why the data cannot separate the new term from the model, or None when they can."""
     info, names = full.information(cur.table, cur.fit.state, terms, g)
-    scale = np.sqrt(np.clip(np.diag(info), 1e-300, None))
-    eig, vec = np.linalg.eigh(info / np.outer(scale, scale))
-    null = vec[:, eig < NULL_TOL * eig.max()]
+    null = full.null_space(info, normalised=True)
     if null.size:
-        groups = sorted({_group(names[j]) for j in np.flatnonzero(np.abs(null).max(axis=1) > 0.1)})
+        params = {e.name: e.parameters(cur.table) for e in registry.chain(terms)}
+        groups = sorted({registry.owner(names[j], params) for j in np.flatnonzero(np.abs(null).max(axis=1) > 0.1)})
         return f"confounded with {', '.join(g for g in groups if g != terms[-1]) or 'itself'} in these stops"
     cov = np.linalg.inv(info) * cur.fit.noise_scale**2
     tilt = float(np.degrees(np.sqrt(max(cov[0, 0], cov[1, 1]))))
@@ -409,28 +410,6 @@ def _refuse_inseparable(base: Step, fixed: tuple[str, ...], g: float) -> None:
             )
 
 
-def _group(name: str) -> str:
-    for prefix, group in (
-        ("rot_", "rotation"),
-        ("slope", "slope"),
-        ("bias_", "bias"),
-        ("temp_", "temperature"),
-        ("gravity", "gravity"),
-        ("scale_", "scale"),
-        ("cross_", "scale"),
-        ("beta_", "headings"),
-    ):
-        if name.startswith(prefix):
-            return group
-    return name
-
-
-def _extra(table: StopTable, name: str) -> int:
-    if name == "site_slope":
-        return len(np.unique(table.site)) - 1 if table.site is not None else 0
-    return {"bias": 3, "temperature": 6, "gravity": 1, "scale": 6, "surface": 1}.get(name, 0)
-
-
 def _loo_rms(step: Step) -> float:
     """RMS of the held-out misses; NaN when no stop can be held out (each alone sets a parameter),
     so a candidate is then declined: nothing shows it predicts better."""
@@ -443,34 +422,13 @@ def _decline(declined: list[dict[str, Any]], effect: str, why: str, round_: int)
     declined.append({"effect": effect, "why": why})
 
 
-def effect_values(fit: full.Fit) -> dict[str, Any]:
-    """The fitted values ± 1σ of every effect term of a fit (JSON-ready)."""
-    out: dict[str, Any] = {}
-
-    def vec(prefix: str) -> tuple[list[float], list[float]]:
-        idx = [fit.names.index(f"{prefix}{a}") for a in "xyz"]
-        vals = {"bias_": fit.state.bias_s, "temp_": fit.state.temp_coeff_s}[prefix]
-        return [float(v) for v in vals], [float(np.sqrt(max(fit.cov[i, i], 0.0))) for i in idx]
-
-    if "bias" in fit.terms:
-        v, s = vec("bias_")
-        out["bias_mps2"] = {"value": v, "sigma": s}
-    if "temperature" in fit.terms:
-        v, s = vec("temp_")
-        out["temperature_mps2_per_c"] = {"value": v, "sigma": s}
-    if "gravity" in fit.terms:
-        out["gravity_mps2"] = {"value": fit.state.g_mps2, "sigma": fit.sigma("gravity")}
-    if "scale" in fit.terms:
-        out["scale"] = {
-            n: {"value": float(fit.state.scale_e[i]), "sigma": fit.sigma(n)} for i, n in enumerate(full.SCALE_NAMES)
-        }
-    if "site_slope" in fit.terms:
-        out["site_slope_deg"] = {
-            n.removeprefix("slope_"): {
-                "value": float(np.degrees(fit.value(n))),
-                "sigma": float(np.degrees(fit.sigma(n))),
-            }
-            for n in fit.names
-            if n.startswith("slope_")
-        }
-    return out
+def effect_values(fit: full.Fit) -> tuple[EffectValue, ...]:
+    """The fitted values ± 1σ of every effect term of a fit, each as its effect reports it."""
+    out = []
+    flat = full.parameter_values(fit.state, fit.names)
+    sigma = np.sqrt(np.clip(np.diag(fit.cov), 0.0, None))
+    for effect in registry.chain(fit.terms):
+        idx = list(fit.owned[effect.name])
+        names = tuple(fit.names[i] for i in idx)
+        out.append(effect.report(flat[idx], sigma[idx], names))
+    return tuple(out)

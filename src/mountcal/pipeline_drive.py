@@ -3,7 +3,7 @@
 :func:`calibrate_any` reads the log once, tries the parked stops (:mod:`mountcal.pipeline`'s
 path: stops → headings → fit) and yaw from driving (:mod:`mountcal.estimate.driving`), and
 returns the stops' result, the driving result, or the stops' result with the driving's yaw folded
-in (:func:`mountcal.estimate.driving.combine`), saying which and why the others were not used.
+in (:func:`mountcal.estimate.driving_combine.combine`), saying which and why the others were not used.
 """
 
 from __future__ import annotations
@@ -20,14 +20,8 @@ import numpy as np
 from mountcal.calibrate import calibrate
 from mountcal.conventions import G_N, normal_gravity
 from mountcal.errors import NotEnoughInformation
-from mountcal.estimate.driving import (
-    DrivingFit,
-    DrivingOptions,
-    combine,
-    driving_calibration,
-    estimate_driving,
-    not_combined,
-)
+from mountcal.estimate.driving import DrivingFit, DrivingOptions, estimate_driving
+from mountcal.estimate.driving_combine import combine, driving_calibration, not_combined
 from mountcal.io.logs import read_log
 from mountcal.io.samples import Samples
 from mountcal.io.timestamps import increasing_times

@@ -42,6 +42,17 @@ def f_logsf(x: Any, dfn: Any, dfd: Any) -> Any:
     return _refine(out, lambda xi, m, d: _log_beta_lower(d / 2.0, m / 2.0, d / (d + m * xi)), x, dfn, dfd)
 
 
+def nested_test(small_chi2: float, big_chi2: float, extra: int, noise_known: bool, big_dof: int) -> tuple[float, str]:
+    """log p and its description for ``extra`` more parameters: the likelihood ratio χ²(extra) when the
+    noise is known, the F-test when it was estimated from the residuals (the one test of nested models)."""
+    if noise_known:
+        stat = max(small_chi2 - big_chi2, 0.0)
+        return float(chi2_logsf(stat, extra)), f"likelihood ratio χ²({extra}) = {stat:.1f}"
+    dof = max(big_dof, 1)
+    f_stat = ((small_chi2 - big_chi2) / extra) / (big_chi2 / dof)
+    return float(f_logsf(max(f_stat, 0.0), extra, dof)), f"F({extra}, {big_dof}) = {f_stat:.2f}"
+
+
 def _log_tail(sf: Any, cdf: Any) -> Any:
     """log(sf), from log1p(−cdf) where sf is near 1 (more accurate there), −inf where sf is 0."""
     with np.errstate(divide="ignore"):
@@ -104,4 +115,4 @@ def _log_beta_lower(a: float, b: float, z: float) -> float:
     return float(a * np.log(z) + b * np.log1p(-z) - np.log(a) - special.betaln(a, b) + np.log(h))
 
 
-__all__ = ["chi2_logsf", "chi2_sf", "f_logsf", "f_sf"]
+__all__ = ["chi2_logsf", "chi2_sf", "f_logsf", "f_sf", "nested_test"]

@@ -160,6 +160,15 @@ class ModelSelection:
 
 
 @dataclass(frozen=True)
+class Separability:
+    """Whether these stops separate an effect the model does not have and, if not, which protocol would."""
+
+    effect: str
+    separable: bool
+    why: str
+
+
+@dataclass(frozen=True)
 class Observability:
     """What the stops can determine: Fisher rank and conditioning, and the Cramér–Rao bounds per model."""
 
@@ -168,6 +177,7 @@ class Observability:
     condition_number: float | None  # None: singular (some direction unobservable)
     crb_1sigma: dict[str, AngleValues | None]  # model (comma-joined terms) → bounds; None when singular
     crb_note: str
+    separability: tuple[Separability, ...] = ()  # per effect not in the model
 
 
 @dataclass(frozen=True)

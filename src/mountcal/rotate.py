@@ -1,7 +1,8 @@
 """Apply a calibration: sensor-frame data into the vehicle frame and back (docs/conventions.md §1).
 
-``acc_v = R_vs · (acc_s − b)`` removes the fitted bias (when the calibration carries one) and
-rotates; ``acc_s = R_vsᵀ · acc_v + b`` undoes it. Angular rates are only rotated.
+``acc_v = R_vs · (I + E)⁻¹ (acc_s − b)`` removes the fitted sensor effects (those the calibration
+carries: :func:`mountcal.estimate.effects.apply_corrections`) and rotates; ``acc_to_sensor`` undoes
+it. Angular rates are only rotated.
 
 A calibration without a determined yaw is refused (its rotation only levels: the heading would be
 the sensor's own), unless the caller asks for exactly that with ``level_only=True``
@@ -19,6 +20,7 @@ import pandas as pd
 
 from mountcal.conventions import G_N, FloatArray
 from mountcal.errors import InputError
+from mountcal.estimate.effects import apply_corrections
 from mountcal.result import Calibration
 
 ACC_COLUMNS = ("ax", "ay", "az")
@@ -98,15 +100,14 @@ def acc_to_vehicle(
     if check_units:
         _check_mps2(acc)
     matrix = _matrix(cal, level_only)
-    if cal.bias_mps2 is not None:
-        acc = acc - cal.bias_mps2
+    acc = apply_corrections(acc, cal)
     return _rotated(acc, matrix)
 
 
 def acc_to_sensor(acc_v: FloatArray, cal: Calibration, *, level_only: bool = False) -> FloatArray:
     """The inverse of :func:`acc_to_vehicle`: vehicle-frame specific force as the sensor reads it."""
     acc = _rotated(_as_vectors(acc_v, "acc_v"), _matrix(cal, level_only).T)
-    return acc + cal.bias_mps2 if cal.bias_mps2 is not None else acc
+    return apply_corrections(acc, cal, inverse=True)
 
 
 def rate_to_vehicle(gyro_s: FloatArray, cal: Calibration, *, level_only: bool = False) -> FloatArray:

@@ -30,10 +30,9 @@ def crb_deg(
     The table's stop covariances (times ``noise_scale²``) are the noise model.
     """
     info, names = full.information(table, state, terms, g_mps2)
-    try:
-        cov = np.linalg.inv(info) * noise_scale**2
-    except np.linalg.LinAlgError:
+    if full.null_space(info).size:
         return None
+    cov = np.linalg.inv(info) * noise_scale**2
     k = 3 if "rot_z" in names else 2
     grads = euler_gradients(state.rot_vs, k)
     sig = [float(np.degrees(np.sqrt(max(c @ cov[:k, :k] @ c, 0.0)))) for c in grads]
@@ -55,12 +54,6 @@ def true_state(
     scale_e: FloatArray | None = None,
 ) -> full.State:
     """A parameter-space point from true values (for bounds at the truth)."""
-    return full.State(
-        rot_vs,
-        np.array([np.radians(slope_deg)]),
-        np.zeros(3) if bias_mps2 is None else np.asarray(bias_mps2, dtype=float),
-        np.zeros(0),
-        np.zeros(3) if temp_coeff is None else np.asarray(temp_coeff, dtype=float),
-        g_mps2,
-        np.zeros(6) if scale_e is None else np.asarray(scale_e, dtype=float),
-    )
+    values = {"bias": bias_mps2, "temperature": temp_coeff, "scale": scale_e}
+    given = {k: np.asarray(v, dtype=float) for k, v in values.items() if v is not None}
+    return full.State(rot_vs, np.array([np.radians(slope_deg)]), np.zeros(0), g_mps2, given)

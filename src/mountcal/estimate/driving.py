@@ -38,23 +38,31 @@ ends; no per-sample Python.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
-from mountcal.conventions import FloatArray, angles_from_rot_vs, rot_vs_from_angles, tilt_from_normal
-from mountcal.errors import InputError, NotEnoughInformation
-from mountcal.io.samples import Channel, Samples
-from mountcal.result import Calibration, Finding, FitQuality, ModelSelection, Provenance
+from mountcal.conventions import FloatArray, angles_from_rot_vs
+from mountcal.errors import NotEnoughInformation
+from mountcal.estimate.driving_intervals import (
+    MIN_INTERVALS,
+    Imu,
+    IntArray,
+    Intervals,
+    SegmentLines,
+    layout_intervals,
+    speed_channel,
+    tilt_rotation,
+    time_offset,
+    unit_vector,
+)
+from mountcal.io.samples import Samples
+from mountcal.result import Calibration
 
-IntArray = NDArray[np.int64]
 AGREE_Z = 2.0  # |z| above this: the two estimates disagree beyond their uncertainties (≈ 95 %)
 DISAGREE_Z = 3.0  # |z| above this (tilt or yaw): a finding; the stops and the drive are not combined
-GAP_FACTOR = 3.0  # an IMU step longer than this × the median step is a gap
-MIN_INTERVALS = 20
 
 
 @dataclass(frozen=True)
@@ -193,7 +201,7 @@ def estimate_driving(
         No speed channel, or too few usable straight intervals at speed.
     """
     opts = options or DrivingOptions()
-    speed = _speed_channel(samples)
+    speed = speed_channel(samples)
     t, acc = samples.t_s, samples.acc_s
     gyro = samples.gyro_s
     where = samples.source or "log"
@@ -209,24 +217,24 @@ def estimate_driving(
         tilt_source = f"static calibration ({tilt_from.method})"
     else:
         up_given = None
-        up = _unit(acc[moving].mean(axis=0))
+        up = unit_vector(acc[moving].mean(axis=0))
         tilt_source = "mean gravity while driving"
-    imu = _Imu.build(t, acc, gyro)
+    imu = Imu.build(t, acc, gyro)
     straight = "gyro" if gyro is not None else ("heading channel" if "heading_deg" in samples.channels else "")
     heading = samples.channels.get("heading_deg") if gyro is None else None
     notes: list[str] = []
 
     # A second pass refines what the first had to guess: the tilt (from driving) and, without a
     # yaw rate, the vehicle's y axis for the straightness gate.
-    rot_tilt = _tilt_rotation(up)
+    rot_tilt = tilt_rotation(up)
     last = tilt_from is not None and bool(straight)
-    layout = _intervals(imu, speed, rot_tilt, heading, opts, None)
-    offset, offset_sigma, searched = _time_offset(layout, opts, notes if last else [])
+    layout = layout_intervals(imu, speed, rot_tilt, heading, opts, None)
+    offset, offset_sigma, searched = time_offset(layout, opts, notes if last else [])
     fit = _fit(layout.at(offset), opts, where)
     if not last:
-        rot_tilt = rot_tilt if tilt_from is not None else _tilt_rotation(fit.up_s(rot_tilt))
-        layout = _intervals(imu, speed, rot_tilt, heading, opts, None if straight else fit.yaw_rad)
-        offset, offset_sigma, searched = _time_offset(layout, opts, notes)
+        rot_tilt = rot_tilt if tilt_from is not None else tilt_rotation(fit.up_s(rot_tilt))
+        layout = layout_intervals(imu, speed, rot_tilt, heading, opts, None if straight else fit.yaw_rad)
+        offset, offset_sigma, searched = time_offset(layout, opts, notes)
         fit = _fit(layout.at(offset), opts, where)
     if not straight:
         straight = f"lateral acceleration (|a_y| ≤ {opts.max_lateral_mps2:g} m/s² after a first pass)"
@@ -246,338 +254,6 @@ def estimate_driving(
         opts,
         notes,
     )
-
-
-def _speed_channel(samples: Samples) -> Channel:
-    where = samples.source or "log"
-    ch = samples.channels.get("speed_mps")
-    if ch is None or ch.t_s.size < 3:
-        raise NotEnoughInformation(
-            f"{where}: no vehicle speed channel (speed_mps); yaw from driving needs the speed (CAN/OBD, "
-            'wheel speed, GNSS or odometry). Map one (`speed = "MSG.SIGNAL"` in the CAN mapping, an '
-            "odometry topic in MCAP, a speed_mps column in a table)."
-        )
-    ok = np.isfinite(ch.t_s) & np.isfinite(ch.value)
-    order = np.argsort(ch.t_s[ok], kind="stable")
-    t_v, v = ch.t_s[ok][order], ch.value[ok][order]
-    keep = np.concatenate([[True], np.diff(t_v) > 0])  # one value per time
-    return Channel(t_v[keep], v[keep])
-
-
-def _unit(v: FloatArray) -> FloatArray:
-    n = float(np.linalg.norm(v))
-    if not np.isfinite(n) or n == 0.0:
-        raise InputError("acc_s", "finite, non-zero specific force", f"a mean of {v}", "Check the accelerometer data.")
-    return np.asarray(v / n, dtype=float)
-
-
-def _tilt_rotation(up_s: FloatArray) -> Rotation:
-    """``Ry(pitch) · Rx(roll)``: the tilt that maps the up axis ``up_s`` (sensor frame) onto z."""
-    roll, pitch = tilt_from_normal(up_s)
-    return rot_vs_from_angles(roll, pitch, 0.0)
-
-
-# --------------------------------------------------------------------------- the IMU as integrals
-
-
-@dataclass(frozen=True)
-class _Imu:
-    """Cumulative integrals of the IMU on its clock, to average any quantity over any interval."""
-
-    t_s: FloatArray
-    acc_s: FloatArray
-    gyro_s: FloatArray | None
-    gaps: IntArray  # cumulative count of gaps up to each sample
-
-    @classmethod
-    def build(cls, t: FloatArray, acc: FloatArray, gyro: FloatArray | None) -> _Imu:
-        if t.size < 10:
-            raise NotEnoughInformation("too few IMU samples for yaw from driving")
-        step = np.diff(t)
-        gap = step > GAP_FACTOR * float(np.median(step))
-        return cls(t, acc, gyro, np.concatenate([[0], np.cumsum(gap)]).astype(np.int64))
-
-    def integral(self, values: FloatArray) -> FloatArray:
-        """Trapezoid cumulative integral of ``values`` (n, k) over time, shape (n, k)."""
-        mid = 0.5 * (values[1:] + values[:-1]) * np.diff(self.t_s)[:, None]
-        return np.concatenate([np.zeros((1, values.shape[1])), np.cumsum(mid, axis=0)])
-
-
-def _interp_columns(x: FloatArray, xp: FloatArray, fp: FloatArray) -> FloatArray:
-    """``np.interp`` of every column of ``fp`` (n, k) at ``x`` (any shape) → shape (*x.shape, k)."""
-    return np.stack([np.interp(x, xp, fp[:, j]) for j in range(fp.shape[1])], axis=-1)
-
-
-@dataclass(frozen=True)
-class _Layout:
-    """Candidate intervals between speed samples and the integrals to evaluate them at any lag."""
-
-    t_a: FloatArray  # interval start and end on the speed clock, shape (m,)
-    t_b: FloatArray
-    v_a: FloatArray  # speed at the start and the end, m/s
-    v_b: FloatArray
-    base_ok: NDArray[np.bool_]  # gates that do not depend on the lag (speed, no speed gap)
-    imu_t: FloatArray
-    cum: FloatArray  # (n, 12) cumulative integrals: levelled horizontal (2), raw acc (3), gates (3), yaw rate,
-    # attitude change about the levelled x and y axes (2), heading change (1)
-    g_mps2: float
-    gaps: IntArray
-    index: IntArray  # position of each interval in the sequence (consecutive ones differ by 1)
-    opts: DrivingOptions
-    heading: Channel | None
-    lateral_yaw_rad: float | None
-    turn_known: bool  # the yaw rate comes from a gyro or a heading channel
-
-    def at(self, offset_s: float) -> _Intervals:
-        """The accepted intervals with the speed clock moved by ``offset_s``."""
-        a, b = self.t_a + offset_s, self.t_b + offset_s
-        ok = self.base_ok & (a >= self.imu_t[0]) & (b <= self.imu_t[-1])
-        ia = np.searchsorted(self.imu_t, a, side="left")
-        ib = np.searchsorted(self.imu_t, b, side="right")
-        ok &= self.gaps[np.clip(ib - 1, 0, None)] == self.gaps[np.clip(ia, 0, self.gaps.size - 1)]
-        width = self.t_b - self.t_a
-        mean = (_interp_columns(b, self.imu_t, self.cum) - _interp_columns(a, self.imu_t, self.cum)) / width[:, None]
-        u, acc3, gate = mean[:, :2], mean[:, 2:5], mean[:, 5:8]
-        yaw_rate = mean[:, 8]  # rad/s, counter-clockwise about the vehicle's up axis
-        # Gravity leaks into the horizontal as the body rolls and pitches (bank, grade, suspension):
-        # a small attitude change δ gives f ≈ f₀ − δ × (0, 0, g), so remove (−g·δ_y, g·δ_x).
-        attitude = mean[:, 9:11]
-        u_raw = u
-        u = u + self.g_mps2 * np.column_stack([attitude[:, 1], -attitude[:, 0]])
-        turned = mean[:, 11]  # heading change since the log's start (gyro), rad
-        o = self.opts
-        ok &= gate[:, 0] <= o.max_acc_mps2
-        ok &= gate[:, 1] <= np.radians(o.max_yaw_rate_deg_s)
-        ok &= gate[:, 2] <= np.radians(o.max_tilt_rate_deg_s)
-        if self.heading is not None:  # compass heading: clockwise, so the counter-clockwise rate is −dψ/dt
-            psi = np.unwrap(np.radians(self.heading.value))
-            yaw_rate = -(np.interp(b, self.heading.t_s, psi) - np.interp(a, self.heading.t_s, psi)) / width
-            ok &= np.abs(yaw_rate) <= np.radians(o.max_yaw_rate_deg_s)
-        if self.lateral_yaw_rad is not None:
-            c, s = np.cos(self.lateral_yaw_rad), np.sin(self.lateral_yaw_rad)
-            lateral = s * u[:, 0] + c * u[:, 1]
-            ok &= np.abs(lateral - np.median(lateral[ok])) <= o.max_lateral_mps2 if ok.any() else ok
-        turn = (yaw_rate * width)[ok] if self.turn_known else None
-        segment = _segments(self.index[ok], width[ok], turn, o)
-        keep = segment >= 0
-        sel = np.flatnonzero(ok)[keep]
-        return _Intervals(
-            index=sel,
-            u=u[sel],
-            u_raw=u_raw[sel],
-            acc_s=acc3[sel],
-            a_ref=(self.v_b[sel] - self.v_a[sel]) / width[sel],
-            a_lat=0.5 * (self.v_a[sel] + self.v_b[sel]) * yaw_rate[sel],
-            turned_rad=turned[sel],
-            width_s=width[sel],
-            segment=segment[keep],
-            t_mid_s=0.5 * (a[sel] + b[sel]),
-        )
-
-
-def _intervals(
-    imu: _Imu,
-    speed: Channel,
-    rot_tilt: Rotation,
-    heading: Channel | None,
-    opts: DrivingOptions,
-    lateral_yaw_rad: float | None,
-) -> _Layout:
-    """Intervals of about ``interval_s`` between speed samples, and the IMU integrals to judge them."""
-    t_v, v = speed.t_s, speed.value
-    step = float(np.median(np.diff(t_v)))
-    stride = max(1, round(opts.interval_s / step))
-    start = np.arange(0, t_v.size - stride, stride)
-    end = start + stride
-    width = t_v[end] - t_v[start]
-    base_ok = (v[start] >= opts.min_speed_mps) & (v[end] >= opts.min_speed_mps) & (width <= 1.5 * stride * step)
-    levelled = rot_tilt.apply(imu.acc_s)
-    gate_cols = [np.linalg.norm(levelled[:, :2], axis=1)]
-    if imu.gyro_s is not None:
-        w = rot_tilt.apply(imu.gyro_s)
-        # Attitude change from the levelled roll and pitch rates. A gyro bias (or a levelling error
-        # tipping the yaw rate into them) makes it drift about linearly within a straight segment,
-        # which the per-segment detrending removes.
-        attitude = imu.integral(w[:, :2])
-        turned = imu.integral(w[:, 2:3])[:, 0]
-        gate_cols += [
-            np.abs(w[:, 2]),
-            np.linalg.norm(w[:, :2], axis=1),
-            w[:, 2],
-            attitude[:, 0],
-            attitude[:, 1],
-            turned,
-        ]
-    else:
-        gate_cols += [np.zeros(imu.t_s.size)] * 6
-    values = np.column_stack([levelled[:, :2], imu.acc_s, *gate_cols])
-    return _Layout(
-        t_a=t_v[start],
-        t_b=t_v[end],
-        v_a=v[start],
-        v_b=v[end],
-        base_ok=base_ok,
-        imu_t=imu.t_s,
-        cum=imu.integral(values),
-        g_mps2=float(np.median(np.linalg.norm(imu.acc_s, axis=1))),
-        gaps=imu.gaps,
-        index=np.arange(start.size, dtype=np.int64),
-        opts=opts,
-        heading=heading,
-        lateral_yaw_rad=lateral_yaw_rad,
-        turn_known=imu.gyro_s is not None or heading is not None,
-    )
-
-
-def _segments(index: IntArray, width: FloatArray, turn_rad: FloatArray | None, opts: DrivingOptions) -> IntArray:
-    """Segment label of each accepted interval (−1: in a piece too short to use).
-
-    A segment is a run of consecutive intervals whose heading stays within ``max_segment_turn_deg``
-    (when the heading change ``turn_rad`` of each interval is known) and that lasts at most
-    ``segment_s`` (longer runs are cut into equal pieces). Within a straight segment the tilt the
-    road gives the body stays put in the body frame, so its gravity share is one constant.
-    """
-    if index.size == 0:
-        return np.empty(0, np.int64)
-    new = np.concatenate([[True], np.diff(index) != 1])
-    if turn_rad is not None:
-        heading_bin = np.floor(np.cumsum(turn_rad) / np.radians(opts.max_segment_turn_deg))
-        new |= np.concatenate([[True], np.diff(heading_bin) != 0])
-    run = np.cumsum(new) - 1
-    per = max(1, round(opts.segment_s / float(np.median(width))))
-    run_start = np.flatnonzero(new)
-    run_len = np.diff(np.concatenate([run_start, [index.size]]))
-    pieces = np.maximum(1, np.ceil(run_len / per)).astype(np.int64)
-    pos = np.arange(index.size) - run_start[run]
-    label = np.concatenate([[0], np.cumsum(pieces)[:-1]])[run] + (pos * pieces[run]) // run_len[run]
-    size = np.bincount(label)
-    usable = size >= opts.min_segment_intervals
-    remap = np.where(usable, np.cumsum(usable) - 1, -1)
-    return remap[label]
-
-
-@dataclass(frozen=True)
-class _Intervals:
-    """The accepted intervals: means over each (m/s²) and its segment."""
-
-    index: IntArray  # position in the layout's arrays
-    u: FloatArray  # (m, 2) levelled horizontal specific force, less the gravity the attitude change adds
-    u_raw: FloatArray  # (m, 2) levelled horizontal specific force as measured
-    acc_s: FloatArray  # (m, 3) raw specific force, sensor frame
-    a_ref: FloatArray  # (m,) speed change / duration
-    a_lat: FloatArray  # (m,) centripetal acceleration v·ω predicted from the speed and yaw rate (0 without)
-    turned_rad: FloatArray  # (m,) mean heading change since the log's start (gyro; 0 without)
-    width_s: FloatArray
-    segment: IntArray
-    t_mid_s: FloatArray
-
-    def centred(self) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """``u``, ``a_ref`` and ``a_lat`` less a straight line in time fitted per segment."""
-        fit = _SegmentLines(self.segment, self.t_mid_s)
-        return (
-            np.column_stack([fit.residual(self.u[:, 0]), fit.residual(self.u[:, 1])]),
-            fit.residual(self.a_ref),
-            fit.residual(self.a_lat),
-        )
-
-
-@dataclass(frozen=True)
-class _SegmentLines:
-    """Least-squares lines ``x ≈ α_k + β_k·t`` per segment k, to detrend anything on the intervals.
-
-    A segment's mean absorbs the road's constant tilt and a bias; its slope absorbs slow drifts: a
-    gyro bias integrated into the attitude, a levelling error tipping a gentle curve's yaw rate.
-    """
-
-    segment: IntArray
-    t_s: FloatArray
-
-    def _sums(self, x: FloatArray) -> FloatArray:
-        return np.bincount(self.segment, x, int(self.segment.max()) + 1).astype(np.float64)
-
-    def residual(self, x: FloatArray) -> FloatArray:
-        seg = self.segment
-        count = self._sums(np.ones_like(x))
-        t = self.t_s - (self._sums(self.t_s) / count)[seg]
-        x_c = x - (self._sums(x) / count)[seg]
-        stt = self._sums(t * t)
-        slope = np.divide(self._sums(t * x_c), stt, out=np.zeros_like(stt), where=stt > 0)
-        return x_c - slope[seg] * t
-
-    def mean(self, x: FloatArray) -> FloatArray:
-        return self._sums(x) / self._sums(np.ones_like(x))
-
-
-# --------------------------------------------------------------------------- time offset and fit
-
-
-def _time_offset(layout: _Layout, opts: DrivingOptions, notes: list[str]) -> tuple[float, float | None, bool]:
-    """The lag that best aligns the IMU with the speed change (jackknife σ over segments), or the given one.
-
-    The IMU's longitudinal specific force (along the direction of the cross covariance at lag 0,
-    so lateral accelerations that follow speed changes cannot pull the peak) is correlated with
-    d(speed)/dt, both detrended per segment; the lag of the largest correlation coefficient (not of
-    the largest covariance: the IMU's energy inside the fixed intervals changes with the lag) is
-    found on a coarse grid over ±``max_time_offset_s`` and refined on a fine one. The accepted
-    intervals are those of lag 0, so every lag is judged on the same intervals.
-    """
-    if opts.time_offset_s is not None:
-        return float(opts.time_offset_s), None, False
-    base = layout.at(0.0)
-    if base.a_ref.size < MIN_INTERVALS:
-        return 0.0, None, False
-    lines = _SegmentLines(base.segment, base.t_mid_s)
-    _, a_ref, _ = base.centred()
-    t_a, t_b = layout.t_a[base.index], layout.t_b[base.index]
-    cols = layout.cum[:, :2] + layout.g_mps2 * np.column_stack([layout.cum[:, 10], -layout.cum[:, 9]])
-    n_seg = int(base.segment.max()) + 1
-    u0 = (_interp_columns(t_b, layout.imu_t, cols) - _interp_columns(t_a, layout.imu_t, cols)) / (t_b - t_a)[:, None]
-    c0 = u0.T @ a_ref
-    direction = c0 / max(float(np.linalg.norm(c0)), 1e-300)
-
-    def sums(lags: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """Per segment Σ along·a_ref and Σ along², along detrended; shape (lags, segments) each."""
-        along = _interp_columns(t_b[None, :] + lags[:, None], layout.imu_t, cols)
-        along -= _interp_columns(t_a[None, :] + lags[:, None], layout.imu_t, cols)
-        along = (along[..., 0] * direction[0] + along[..., 1] * direction[1]) / (t_b - t_a)[None, :]
-        cross, energy = np.empty((lags.size, n_seg)), np.empty((lags.size, n_seg))
-        for k in range(lags.size):
-            x = lines.residual(along[k])
-            cross[k] = np.bincount(base.segment, x * a_ref, n_seg)
-            energy[k] = np.bincount(base.segment, x * x, n_seg)
-        return cross, energy
-
-    def correlation(cross: FloatArray, energy: FloatArray) -> FloatArray:
-        return cross / np.sqrt(np.maximum(energy, 1e-300))
-
-    limit, step = opts.max_time_offset_s, opts.time_offset_step_s
-    coarse: FloatArray = np.arange(-limit, limit + 0.5 * step * 5, step * 5, dtype=np.float64)
-    cross, energy = sums(coarse)
-    best = _peak(coarse, correlation(cross.sum(axis=1), energy.sum(axis=1)))
-    fine: FloatArray = best + np.arange(-10, 11, dtype=np.float64) * step
-    cross, energy = sums(fine)
-    best = _peak(fine, correlation(cross.sum(axis=1), energy.sum(axis=1)))
-    if abs(best) >= limit - step:
-        notes.append(
-            f"the time offset between the speed and IMU clocks is at the search limit ({best:+.2f} s): "
-            "it may be larger; widen max_time_offset_s"
-        )
-    sigma = None
-    if n_seg >= 3:
-        c_all, e_all = cross.sum(axis=1), energy.sum(axis=1)
-        loo = np.array([_peak(fine, correlation(c_all - cross[:, k], e_all - energy[:, k])) for k in range(n_seg)])
-        sigma = float(np.sqrt((n_seg - 1) / n_seg * np.sum((loo - loo.mean()) ** 2)))
-    return best, sigma, True
-
-
-def _peak(x: FloatArray, y: FloatArray) -> float:
-    """Location of the maximum of ``y(x)``, refined by a parabola through its neighbours."""
-    k = int(np.argmax(y))
-    if 0 < k < y.size - 1:
-        den = y[k - 1] - 2 * y[k] + y[k + 1]
-        if den < 0:
-            return float(x[k] + 0.5 * (y[k - 1] - y[k + 1]) / den * (x[1] - x[0]))
-    return float(x[k])
 
 
 @dataclass(frozen=True)
@@ -601,10 +277,10 @@ class _Fit:
         """The up axis from the mean specific force less the mean longitudinal acceleration."""
         x_s = rot_tilt.inv().apply([np.cos(self.yaw_rad), -np.sin(self.yaw_rad), 0.0])
         scale = self.scale if np.isfinite(self.scale) else 1.0
-        return _unit(self.mean_acc_s - self.mean_a_ref * scale * np.asarray(x_s))
+        return unit_vector(self.mean_acc_s - self.mean_a_ref * scale * np.asarray(x_s))
 
 
-def _fit(iv: _Intervals, opts: DrivingOptions, where: str) -> _Fit:
+def _fit(iv: Intervals, opts: DrivingOptions, where: str) -> _Fit:
     """Yaw from the intervals: the direction in which the levelled IMU follows the speed change.
 
     With ``A, B = Σ a·u_x, Σ a·u_y`` and ``C = Σ a·a_lat`` (segment-centred; ``a`` the speed
@@ -677,9 +353,9 @@ def _fit(iv: _Intervals, opts: DrivingOptions, where: str) -> _Fit:
     )
 
 
-def _turned_tilt_removed(iv: _Intervals, yaw: float) -> FloatArray:
+def _turned_tilt_removed(iv: Intervals, yaw: float) -> FloatArray:
     """Detrended ``u`` less the share of the body's road tilt that turning rotates into it."""
-    lines = _SegmentLines(iv.segment, iv.t_mid_s)
+    lines = SegmentLines(iv.segment, iv.t_mid_s)
     seg = iv.segment
     x_l = np.array([np.cos(yaw), -np.sin(yaw)])  # vehicle x and y in levelled coordinates
     y_l = np.array([np.sin(yaw), np.cos(yaw)])
@@ -747,7 +423,7 @@ def _result(
         sx, sy = road
     r, p, _ = angles_from_rot_vs(rot_vs)
     roll, pitch = float(np.degrees(r)), float(np.degrees(p))
-    roll_sigma, pitch_sigma, yaw_sigma = _euler_sigma(rot_vs, (sx, sy, 0.0 if yaw_reason else sigma_z))
+    roll_sigma, pitch_sigma, yaw_sigma = euler_sigma(rot_vs, (sx, sy, 0.0 if yaw_reason else sigma_z))
     if tilt_from is not None:  # the static fit's own marginals know its correlations
         roll_sigma, pitch_sigma = tilt_from.roll_sigma_deg, tilt_from.pitch_sigma_deg
     rot_sigma = (float(sx), float(sy))
@@ -802,7 +478,7 @@ def _result(
     )
 
 
-def _euler_sigma(rot_vs: Rotation, sigma_xyz_deg: tuple[float, float, float]) -> tuple[float, float, float]:
+def euler_sigma(rot_vs: Rotation, sigma_xyz_deg: tuple[float, float, float]) -> tuple[float, float, float]:
     """σ of roll, pitch, yaw from independent small rotations about the vehicle x, y, z axes (1σ, deg).
 
     Near pitch ±90° roll and yaw trade off, and their σ grow accordingly while the rotation stays
@@ -842,197 +518,3 @@ def _tilt_check(
         "z_about_vehicle_y": zy,
         "agree": bool(abs(zx) <= AGREE_Z and abs(zy) <= AGREE_Z),
     }
-
-
-# --------------------------------------------------------------------------- as a calibration, and combined
-
-
-def driving_calibration(
-    fit: DrivingFit, *, gravity_mps2: float, gravity_source: str, provenance: Provenance
-) -> Calibration:
-    """A :class:`~mountcal.result.Calibration` from driving alone (no parked stops).
-
-    Roll and pitch come from the mean gravity while driving (σ include the unknown mean road grade
-    and cross slope), yaw from the speed changes; slope and bias are not applicable (no stops) and
-    the result says so. The full driving fit is in ``fit["driving"]``.
-    """
-    notes = [
-        "from driving only: no parked stops; roll and pitch are the mean gravity direction while driving, "
-        "whose σ assume the route's mean grade and cross slope are 0 ± "
-        f"{fit.options.road_grade_sigma_deg:g}° and 0 ± {fit.options.road_cross_slope_sigma_deg:g}°",
-        "an accelerometer bias b tilts the mean gravity by b/g (20 mg → 1.1°) and cannot be told from a tilt "
-        "while driving; parked stops on a slope can (docs/conventions.md §4)",
-        "slope: not applicable (no parked stops)",
-        *fit.notes,
-    ]
-    return Calibration(
-        method="driving",
-        model=("rotation",),
-        rot_vs=fit.rot_vs,
-        roll_deg=fit.roll_deg,
-        pitch_deg=fit.pitch_deg,
-        yaw_deg=fit.yaw_deg,
-        roll_sigma_deg=fit.roll_sigma_deg,
-        pitch_sigma_deg=fit.pitch_sigma_deg,
-        yaw_sigma_deg=fit.yaw_sigma_deg,
-        yaw_reason=fit.yaw_reason,
-        slope_deg=None,
-        slope_sigma_deg=None,
-        rotation_sigma_deg=fit.rotation_sigma_deg,
-        bias_mps2=None,
-        bias_sigma_mps2=None,
-        gravity_mps2=gravity_mps2,
-        gravity_source=gravity_source,
-        residual_rms_mps2=fit.longitudinal_rms_mps2,
-        residual_s=np.zeros((0, 3)),
-        fit=FitQuality(calibrated_from="driving", driving=fit.to_dict()),
-        observability=None,
-        model_selection=ModelSelection(mode="driving", chosen=("rotation",)),
-        provenance=provenance,
-        notes=tuple(notes),
-    )
-
-
-def disagreement(static: Calibration, fit: DrivingFit) -> Finding | None:
-    """The stops against the drive, beyond ``DISAGREE_Z`` σ in tilt or yaw: an ``unexplained`` entry, else None.
-
-    Tilt: the drive's mean gravity against the stops' up axis (``fit.tilt_check``), about the
-    vehicle x and y axes. Yaw: the two yaws about the vehicle z axis, when both determine one.
-    """
-    parts: list[str] = []
-    z_max = 0.0
-    check = fit.tilt_check
-    if check is not None:
-        z_tilt = max(abs(check["z_about_vehicle_x"]), abs(check["z_about_vehicle_y"]))
-        if z_tilt > DISAGREE_Z or not np.isfinite(z_tilt):
-            parts.append(
-                f"tilt by {check['angle_deg']:.1f}° (z = {check['z_about_vehicle_x']:+.1f} about x, "
-                f"{check['z_about_vehicle_y']:+.1f} about y)"
-            )
-            z_max = max(z_max, z_tilt)
-    s_drive, s_static = fit.rotation_sigma_deg[2], static.rotation_sigma_deg[2] or static.yaw_sigma_deg
-    if fit.yaw_deg is not None and static.yaw_deg is not None and s_drive is not None and s_static is not None:
-        diff = float((fit.yaw_deg - static.yaw_deg + 180.0) % 360.0 - 180.0)
-        z_yaw = diff / float(np.hypot(s_drive, s_static))
-        if abs(z_yaw) > DISAGREE_Z:
-            parts.append(
-                f"yaw by {diff:+.1f}° (z = {z_yaw:+.1f}): {fit.yaw_deg:.2f}° from driving, "
-                f"{static.yaw_deg:.2f}° from the stops"
-            )
-            z_max = max(z_max, abs(z_yaw))
-    if not parts:
-        return None
-    return Finding(
-        test="stops_vs_driving",
-        what="the parked stops and the drive disagree beyond their uncertainties (not combined)",
-        size="; ".join(parts),
-        statistic=float(z_max) if np.isfinite(z_max) else None,
-        dof=None,
-        p_value=None,
-        log10_p=None,
-        z_limit=DISAGREE_Z,
-    )
-
-
-def not_combined(static: Calibration, fit: DrivingFit, found: Finding) -> Calibration:
-    """The stops' calibration, not confident, with the disagreement with the drive as a finding."""
-    words = (
-        f"stops and driving DISAGREE: {found.size}, beyond {DISAGREE_Z:g}σ; they are not combined and the "
-        "result is not confident. One of them misses an effect (a remount between the stops and the drive, "
-        "a wrong protocol heading or uphill azimuth, a speed channel not along the vehicle x axis, the stops' "
-        "mirror solution)"
-    )
-    return replace(
-        static,
-        fit=replace(
-            static.fit,
-            calibrated_from="stops (driving disagrees: not combined)",
-            driving=fit.to_dict(),
-            combination={
-                "used": "none: disagreement",
-                "agree": False,
-                "disagreement": found.to_dict(),
-                "tilt_check": fit.tilt_check,
-            },
-        ),
-        notes=(*static.notes, words),
-        unexplained=(*static.unexplained, found),
-        confident=False,
-    )
-
-
-def combine(static: Calibration, fit: DrivingFit) -> Calibration:
-    """The static calibration with the yaw from driving folded in.
-
-    ``fit`` must have been levelled with ``static`` (``estimate_driving(..., tilt_from=static)``) so
-    both yaws are about the same axis. When the static result has no yaw, yaw comes from driving;
-    when both have one, they are combined by inverse variance (of the rotation about the vehicle z
-    axis) and their difference is reported as a z-score, with a note when ``|z| > 2``: then they
-    disagree beyond their uncertainties and one of them misses an effect. Roll and pitch stay the
-    static ones; the driving's mean gravity is reported as a check (``tilt_check``). Beyond
-    ``DISAGREE_Z`` σ in tilt or yaw they are not combined (:func:`not_combined`): the stops'
-    result comes back not confident, the disagreement in its notes and ``unexplained``.
-    """
-    if not fit.tilt_source.startswith("static"):
-        raise ValueError("combine() needs a driving fit levelled with the static calibration (tilt_from=static)")
-    found = disagreement(static, fit)
-    if found is not None:
-        return not_combined(static, fit, found)
-    notes = list(static.notes)
-    combination: dict[str, Any] = {"static_yaw_deg": static.yaw_deg, "driving_yaw_deg": fit.yaw_deg}
-    s_drive = fit.rotation_sigma_deg[2]
-    if fit.yaw_deg is None or s_drive is None:
-        notes.append(f"yaw from driving not determined: {fit.yaw_reason}")
-        combination["used"] = "static"
-        return replace(
-            static,
-            fit=replace(
-                static.fit, calibrated_from="stops (driving checked)", driving=fit.to_dict(), combination=combination
-            ),
-            notes=tuple(notes),
-        )
-    sx = static.rotation_sigma_deg[0] or static.roll_sigma_deg
-    sy = static.rotation_sigma_deg[1] or static.pitch_sigma_deg
-    if static.yaw_deg is None or static.yaw_sigma_deg is None:
-        yaw, s_z = fit.yaw_deg, s_drive
-        combination.update(used="driving (the stops do not determine yaw)", static_yaw_reason=static.yaw_reason)
-        notes.append(f"yaw from driving; the stops alone could not give it ({static.yaw_reason})")
-    else:
-        s_static = static.rotation_sigma_deg[2] or static.yaw_sigma_deg
-        diff = float((fit.yaw_deg - static.yaw_deg + 180.0) % 360.0 - 180.0)
-        w_d, w_s = 1.0 / s_drive**2, 1.0 / s_static**2
-        yaw = float(static.yaw_deg + diff * w_d / (w_d + w_s))
-        s_z = float(1.0 / np.sqrt(w_d + w_s))
-        z = diff / float(np.hypot(s_drive, s_static))
-        agree = abs(z) <= AGREE_Z
-        words = (
-            f"driving and stops agree on yaw: {fit.yaw_deg:.3f}° ± {s_drive:.3f}° against {static.yaw_deg:.3f}° ± "
-            f"{s_static:.3f}° (z = {z:+.2f})"
-            if agree
-            else f"driving and stops DISAGREE on yaw beyond their uncertainties: {fit.yaw_deg:.3f}° ± {s_drive:.3f}° "
-            f"against {static.yaw_deg:.3f}° ± {s_static:.3f}° (z = {z:+.2f}); one of them misses an effect (a wrong "
-            "uphill azimuth or protocol heading, a speed channel that is not along the vehicle x axis), so the "
-            "combined yaw is not trustworthy"
-        )
-        combination.update(used="inverse-variance combination", difference_deg=diff, z=z, agree=agree, words=words)
-        notes.append(words)
-    rot_vs = Rotation.from_euler("z", np.radians(yaw)) * _tilt_rotation(
-        np.asarray(static.rot_vs.inv().apply([0.0, 0.0, 1.0]), dtype=float)
-    )
-    roll, pitch, yaw_e = (float(np.degrees(a)) for a in angles_from_rot_vs(rot_vs))
-    yaw_sigma = _euler_sigma(rot_vs, (sx, sy, s_z))[2]
-    combination.update(yaw_deg=yaw_e, yaw_sigma_about_vehicle_z_deg=s_z)
-    if fit.tilt_check is not None:
-        combination["tilt_check"] = fit.tilt_check
-    return replace(
-        static,
-        rot_vs=rot_vs,
-        roll_deg=roll,
-        pitch_deg=pitch,
-        yaw_deg=yaw_e,
-        yaw_sigma_deg=yaw_sigma,
-        yaw_reason=None,
-        rotation_sigma_deg=(static.rotation_sigma_deg[0], static.rotation_sigma_deg[1], s_z),
-        fit=replace(static.fit, calibrated_from="stops + driving", driving=fit.to_dict(), combination=combination),
-        notes=tuple(notes),
-    )

@@ -2,11 +2,12 @@
 
 Model, with the optional effects of docs/conventions.md §6 (each a *term*)::
 
-    a_s,i = (I + E) · R_vsᵀ · f_v(α_site(i), β_i; g) + b + k · (T_i − T̄) + n_i,   n_i ~ N(0, Σ_i)
+    a_s,i = effectₖ(… effect₁(R_vsᵀ · f_v(α_site(i), β_i; g)) …) + n_i,   n_i ~ N(0, Σ_i)
 
-terms: ``rotation`` and ``slope`` (always), ``site_slope`` (one α per site), ``bias`` (b),
-``temperature`` (k, bias drift per °C), ``gravity`` (g fitted), ``scale`` (E, symmetric: three
-scale errors and three cross-axis couplings; its antisymmetric part is a rotation).
+terms: ``rotation`` and ``slope`` (always), then the registered effects
+(:mod:`mountcal.estimate.effects`: ``bias``, ``temperature``, ``gravity``, ``site_slope``, ``scale``
+and any a package adds), applied in their ``order``; the model iterates over them and knows none by
+name except ``site_slope``, which gives each site its own α.
 
 The rotation is updated by a left perturbation in the vehicle frame, ``R ← exp([δ]×) R``, so
 δ = (δx, δy, δz) are small rotations about the vehicle's x, y and z axes; δz is a pure change of
@@ -17,38 +18,68 @@ exact Jacobians, re-linearised at every step).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from mountcal.conventions import FloatArray, skew
 from mountcal.errors import FitFailed, NotEnoughInformation
+from mountcal.estimate import effects as registry
+from mountcal.estimate.effects.scale import scale_matrix
 from mountcal.estimate.geometry import in_plane_azimuth, level_rotation, phase_yaw, plane_normal, with_yaw
 from mountcal.stoptable import StopTable
 
-# "surface" (a random road tilt per stop) lives in the stop covariances, not in the mean model.
-TERMS = ("rotation", "slope", "site_slope", "bias", "temperature", "gravity", "scale", "surface")
-SCALE_NAMES = ("scale_xx", "scale_yy", "scale_zz", "cross_xy", "cross_xz", "cross_yz")
+BASE: tuple[str, ...] = ("rotation", "slope")
+NULL_TOL = 1e-10  # relative eigenvalue of the normalised Fisher information counted as zero
+
+
+def known_terms() -> tuple[str, ...]:
+    """Every term a model may name. "surface" (a random road tilt per stop) lives in the stop covariances."""
+    return (*BASE, *registry.registered(), "surface")
 
 
 @dataclass(frozen=True)
 class State:
-    """A point of the parameter space (units in the names; sensor frame for vectors)."""
+    """A point of the parameter space (units in the names; sensor frame for vectors).
+
+    ``values`` holds each effect's parameters by effect name (absent: the effect is not in the model).
+    """
 
     rot_vs: Rotation
     slope_rad: FloatArray  # shape (n_sites,): one α, or one per site
-    bias_s: FloatArray  # shape (3,), m/s²
     beta_rad: FloatArray  # shape (n,), fitted only when the headings are unknown
-    temp_coeff_s: FloatArray  # shape (3,), m/s² per °C
-    g_mps2: float
-    scale_e: FloatArray  # shape (6,): E_xx, E_yy, E_zz, E_xy, E_xz, E_yz
+    g0_mps2: float  # the gravity of the base force
+    values: Mapping[str, FloatArray] = field(default_factory=dict)
+
+    def effect(self, name: str, size: int) -> FloatArray:
+        return self.values[name] if name in self.values else np.zeros(size)
+
+    @property
+    def g_mps2(self) -> float:
+        """Gravity in force: fitted when the model has ``gravity``, else the base one."""
+        return float(self.values["gravity"][0]) if "gravity" in self.values else self.g0_mps2
+
+    @property
+    def bias_s(self) -> FloatArray:
+        return self.effect("bias", 3)
+
+    @property
+    def temp_coeff_s(self) -> FloatArray:
+        return self.effect("temperature", 3)
+
+    @property
+    def scale_e(self) -> FloatArray:
+        return self.effect("scale", 6)
 
     @property
     def scale_matrix(self) -> FloatArray:
         """I + E, shape (3, 3)."""
-        e = self.scale_e
-        return np.eye(3) + np.array([[e[0], e[3], e[4]], [e[3], e[1], e[5]], [e[4], e[5], e[2]]])
+        return scale_matrix(self.scale_e)
+
+    def with_values(self, **values: FloatArray) -> State:
+        return replace(self, values={**self.values, **values})
 
 
 @dataclass(frozen=True)
@@ -56,8 +87,9 @@ class Fit:
     """The outcome of one maximum-likelihood fit.
 
     ``cov`` is the covariance of the parameter vector named by ``names`` (δ in radians about the
-    vehicle axes, α in radians, b in m/s², k in m/s²/°C, g in m/s², E unitless, β in radians),
-    scaled by ``noise_scale²`` when the stop noise had to be estimated from the residuals.
+    vehicle axes, α in radians, then each effect's parameters, β in radians), scaled by
+    ``noise_scale²`` when the stop noise had to be estimated from the residuals. ``jacobian`` is
+    that of the whitened residual at the optimum; ``fisher`` = JᵀJ.
     """
 
     state: State
@@ -72,10 +104,12 @@ class Fit:
     residual_s: FloatArray  # shape (n, 3), m/s²
     iterations: int
     branch: str | None = None  # why the physical branch is in doubt (None: it fits best, or is exactly equivalent)
+    jacobian: FloatArray | None = None  # shape (3n, p), of the whitened residual
+    owned: Mapping[str, tuple[int, ...]] = field(default_factory=dict)  # each effect's parameters (indexes)
 
     def value(self, name: str) -> float:
         """A fitted scalar by parameter name (as in ``names``)."""
-        return float(_flat(self.state, self.names)[self.names.index(name)])
+        return float(parameter_values(self.state, self.names)[self.names.index(name)])
 
     def sigma(self, name: str) -> float:
         i = self.names.index(name)
@@ -86,7 +120,7 @@ class StaticModel:
     """Residuals and Jacobians of the static model for one stop table and a set of terms."""
 
     def __init__(self, table: StopTable, terms: tuple[str, ...], g_mps2: float) -> None:
-        unknown = set(terms) - set(TERMS)
+        unknown = set(terms) - set(known_terms())
         if unknown:
             raise ValueError(f"unknown terms {sorted(unknown)}")
         self.table, self.terms, self.g = table, terms, g_mps2
@@ -94,39 +128,41 @@ class StaticModel:
         self.fit_yaw = table.headings != "none"
         self.fit_beta = table.headings == "none"
         self.site_index, self.sites = site_index(table) if "site_slope" in terms else (np.zeros(n, int), ["all"])
-        t = table.temperature_c
-        self.dtemp = (t - t.mean()) if ("temperature" in terms and t is not None) else np.zeros(n)
         if table.cov_s is not None:
             self.whiten = np.linalg.inv(np.linalg.cholesky(table.cov_s))  # e' = C⁻¹ e has unit covariance
         else:
             self.whiten = np.broadcast_to(np.eye(3), (n, 3, 3))
+        self.chain = registry.chain(terms)
         names = ["rot_x", "rot_y"] + (["rot_z"] if self.fit_yaw else [])
         names += ["slope"] if len(self.sites) == 1 else [f"slope_{s}" for s in self.sites]
-        if "bias" in terms:
-            names += ["bias_x", "bias_y", "bias_z"]
-        if "temperature" in terms:
-            names += ["temp_x", "temp_y", "temp_z"]
-        if "gravity" in terms:
-            names += ["gravity"]
-        if "scale" in terms:
-            names += list(SCALE_NAMES)
+        self.params = {e.name: e.parameters(table) for e in self.chain}
+        for e in self.chain:
+            names += self.params[e.name]
         if self.fit_beta:
             names += [f"beta_{i}" for i in range(n)]
         self.names = tuple(names)
+        # the parameters each effect reports: its own, and for site_slope the per-site slopes
+        self.owned = {e.name: tuple(self.names.index(p) for p in self.params[e.name]) for e in self.chain}
+        if "site_slope" in self.owned:
+            self.owned["site_slope"] = tuple(i for i, p in enumerate(self.names) if p.startswith("slope_"))
 
     def beta(self, state: State) -> FloatArray:
         return state.beta_rad if self.fit_beta else self.table.beta_rad  # type: ignore[return-value]
 
-    def _parts(self, state: State) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """Per-stop slope α_i, f_v,i and u_i = Rᵀ f_v,i."""
+    def _base(self, state: State) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Per-stop slope α_i, f_v,i (with the base gravity) and p_i = Rᵀ f_v,i."""
         alpha = state.slope_rad[self.site_index]
-        beta = self.beta(state)
-        f_v = _force(alpha, beta, state.g_mps2)
+        f_v = _force(alpha, self.beta(state), state.g0_mps2)
         return alpha, f_v, state.rot_vs.inv().apply(f_v)
 
+    def _values(self, state: State) -> list[FloatArray]:
+        return [state.values[e.name] if e.name in state.values else e.initial(self.table, self.g) for e in self.chain]
+
     def predict(self, state: State) -> FloatArray:
-        _, _, u = self._parts(state)
-        return u @ state.scale_matrix.T + state.bias_s + np.outer(self.dtemp, state.temp_coeff_s)
+        _, _, p = self._base(state)
+        for effect, values in zip(self.chain, self._values(state), strict=True):
+            p = effect.apply(self.table, values, p, state.g0_mps2)[0]
+        return p
 
     def residual(self, state: State) -> FloatArray:
         """Whitened residual, shape (3n,)."""
@@ -134,34 +170,32 @@ class StaticModel:
         return np.einsum("nij,nj->ni", self.whiten, e).ravel()
 
     def jacobian(self, state: State) -> FloatArray:
-        """Jacobian of the whitened residual, shape (3n, p), at δ = 0."""
+        """Jacobian of the whitened residual, shape (3n, p), at δ = 0: the base force's columns carried
+        through each effect (chain rule), then each effect's own."""
         n = len(self.table)
-        alpha, f_v, u = self._parts(state)
-        beta, g = self.beta(state), state.g_mps2
-        pm = state.scale_matrix
-        prt = pm @ state.rot_vs.inv().as_matrix()  # (I + E) Rᵀ
-        blocks = [prt @ skew(f_v)]  # ∂(Rᵀ f)/∂δ = Rᵀ [f]×
+        alpha, f_v, p = self._base(state)
+        beta, g = self.beta(state), state.g0_mps2
+        rt = state.rot_vs.inv().as_matrix()
+        rot = rt @ skew(f_v)  # ∂(Rᵀ f)/∂δ = Rᵀ [f]×
         if not self.fit_yaw:
-            blocks[0] = blocks[0][:, :, :2]
+            rot = rot[:, :, :2]
         df_da = g * np.column_stack([np.cos(alpha) * np.cos(beta), -np.cos(alpha) * np.sin(beta), -np.sin(alpha)])
         da = np.zeros((n, 3, len(self.sites)))
-        da[np.arange(n), :, self.site_index] = df_da @ prt.T
-        blocks.append(da)
-        if "bias" in self.terms:
-            blocks.append(np.broadcast_to(np.eye(3), (n, 3, 3)))
-        if "temperature" in self.terms:
-            blocks.append(self.dtemp[:, None, None] * np.eye(3))
-        if "gravity" in self.terms:
-            blocks.append(((f_v / g) @ prt.T)[:, :, None])
-        if "scale" in self.terms:
-            z = np.zeros(n)
-            ux, uy, uz = u.T
-            cols = [(ux, z, z), (z, uy, z), (z, z, uz), (uy, ux, z), (uz, z, ux), (z, uz, uy)]
-            blocks.append(np.stack([np.column_stack(c) for c in cols], axis=2))
-        jac = -np.einsum("nij,njk->nik", self.whiten, np.concatenate(blocks, axis=2)).reshape(3 * n, -1)
+        da[np.arange(n), :, self.site_index] = df_da @ rt.T
+        blocks = [np.concatenate([rot, da], axis=2)]
         if self.fit_beta:
             df_db = g * np.sin(alpha)[:, None] * np.column_stack([-np.sin(beta), -np.cos(beta), np.zeros(n)])
-            local = -np.einsum("nij,nj->ni", self.whiten, df_db @ prt.T)
+            db = (df_db @ rt.T)[:, :, None]
+        for effect, values in zip(self.chain, self._values(state), strict=True):
+            p, d_values, d_p = effect.apply(self.table, values, p, g)
+            if d_p is not None:
+                blocks = [d_p @ b for b in blocks]
+                if self.fit_beta:
+                    db = d_p @ db
+            blocks.append(d_values)
+        jac = -np.einsum("nij,njk->nik", self.whiten, np.concatenate(blocks, axis=2)).reshape(3 * n, -1)
+        if self.fit_beta:
+            local = -np.einsum("nij,nj->ni", self.whiten, db[:, :, 0])
             jb = np.zeros((3 * n, n))
             jb[np.arange(3 * n), np.repeat(np.arange(n), 3)] = local.ravel()
             jac = np.hstack([jac, jb])
@@ -176,17 +210,12 @@ class StaticModel:
         m = len(self.sites)
         slope = state.slope_rad + step[i : i + m]
         i += m
-        bias, temp, g, scale = state.bias_s, state.temp_coeff_s, state.g_mps2, state.scale_e
-        if "bias" in self.terms:
-            bias, i = bias + step[i : i + 3], i + 3
-        if "temperature" in self.terms:
-            temp, i = temp + step[i : i + 3], i + 3
-        if "gravity" in self.terms:
-            g, i = g + float(step[i]), i + 1
-        if "scale" in self.terms:
-            scale, i = scale + step[i : i + 6], i + 6
+        values = dict(state.values)
+        for effect, v in zip(self.chain, self._values(state), strict=True):
+            size = v.size
+            values[effect.name], i = v + step[i : i + size], i + size
         beta = state.beta_rad + step[i:] if self.fit_beta else state.beta_rad
-        return State(rot, slope, bias, beta, temp, g, scale)
+        return State(rot, slope, beta, state.g0_mps2, values)
 
 
 def site_index(table: StopTable) -> tuple[np.ndarray, list[str]]:
@@ -211,23 +240,17 @@ def initial_state(table: StopTable, g_mps2: float) -> State:
     up = acc @ normal
     radius = np.linalg.norm(acc - np.outer(up, normal), axis=1).mean()
     slope = max(float(np.arctan2(radius, up.mean())), 1e-3)  # sin α = 0 would hide yaw and β
-    return State(rot, np.array([slope]), np.zeros(3), beta, np.zeros(3), g_mps2, np.zeros(6))
+    return State(rot, np.array([slope]), beta, g_mps2)
 
 
 def adapt(state: State, table: StopTable, terms: tuple[str, ...], g_mps2: float) -> State:
-    """A start for ``terms`` from a fit of other terms: unused effects zeroed, slopes per site."""
+    """A start for ``terms`` from a fit of other terms: effects not in ``terms`` dropped, slopes per site."""
     n_sites = len(site_index(table)[1]) if "site_slope" in terms else 1
     slope = state.slope_rad
     if slope.size != n_sites:
         slope = np.full(n_sites, float(np.mean(slope)))
-    return replace(
-        state,
-        slope_rad=slope,
-        bias_s=state.bias_s if "bias" in terms else np.zeros(3),
-        temp_coeff_s=state.temp_coeff_s if "temperature" in terms else np.zeros(3),
-        g_mps2=state.g_mps2 if "gravity" in terms else g_mps2,
-        scale_e=state.scale_e if "scale" in terms else np.zeros(6),
-    )
+    values = {e.name: state.values.get(e.name, e.initial(table, g_mps2)) for e in registry.chain(terms)}
+    return replace(state, slope_rad=slope, g0_mps2=g_mps2, values=values)
 
 
 def fit(
@@ -267,6 +290,8 @@ def fit(
         residual_s=table.acc_s - model.predict(state),
         iterations=iterations,
         branch=branch,
+        jacobian=jac,
+        owned=model.owned,
     )
 
 
@@ -361,26 +386,12 @@ def _force(alpha: FloatArray, beta: FloatArray, g: float) -> FloatArray:
     return g * np.column_stack([sa * np.cos(beta), -sa * np.sin(beta), ca])
 
 
-def _flat(state: State, names: tuple[str, ...]) -> FloatArray:
+def parameter_values(state: State, names: tuple[str, ...]) -> FloatArray:
     """Parameter values in the order of ``names`` (δ as zero: the state is the reference)."""
-    out = []
-    slopes = iter(state.slope_rad)
-    for name in names:
-        if name.startswith("rot_"):
-            out.append(0.0)
-        elif name.startswith("slope"):
-            out.append(float(next(slopes)))
-        elif name.startswith("bias_"):
-            out.append(float(state.bias_s["xyz".index(name[-1])]))
-        elif name.startswith("temp_"):
-            out.append(float(state.temp_coeff_s["xyz".index(name[-1])]))
-        elif name == "gravity":
-            out.append(state.g_mps2)
-        elif name in SCALE_NAMES:
-            out.append(float(state.scale_e[SCALE_NAMES.index(name)]))
-        else:  # beta_i
-            out.append(float(state.beta_rad[int(name.split("_")[1])]))
-    return np.array(out)
+    k = sum(n.startswith("rot_") for n in names)
+    effects = [state.values[e.name] for e in registry.chain(tuple(state.values))]
+    beta = state.beta_rad if names[-1].startswith("beta_") else np.zeros(0)
+    return np.concatenate([np.zeros(k), state.slope_rad, *effects, beta])
 
 
 def _levenberg_marquardt(model: StaticModel, state: State, max_iter: int) -> tuple[State, int]:
@@ -420,6 +431,23 @@ def _levenberg_marquardt(model: StaticModel, state: State, max_iter: int) -> tup
             if lam > 1e16:
                 return state, it  # no descent direction left: at a minimum to machine precision
     raise FitFailed(f"no convergence in {max_iter} iterations (cost {cost:.6g})")
+
+
+def null_space(fisher: FloatArray, normalised: bool = False) -> FloatArray:
+    """Directions the information matrix does not see (columns; empty when it is full rank).
+
+    Judged on the information normalised to unit diagonal (units drop out); the directions are given
+    in those normalised coordinates, or (default) back in parameter coordinates.
+    """
+    scale = np.sqrt(np.clip(np.diag(fisher), 1e-300, None))
+    eig, vec = np.linalg.eigh(fisher / np.outer(scale, scale))
+    null = vec[:, eig < NULL_TOL * eig.max()]
+    return null if normalised or not null.size else null / scale[:, None]
+
+
+def fisher_rank(fisher: FloatArray) -> int:
+    """The rank of the information matrix, with the same threshold as :func:`null_space`."""
+    return int(fisher.shape[0] - null_space(fisher, normalised=True).shape[1])
 
 
 def inverse_information(fisher: FloatArray) -> FloatArray:

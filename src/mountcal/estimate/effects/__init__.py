@@ -1,0 +1,129 @@
+"""The registry of effects: the built-in ones (one module each, here) and those of other packages.
+
+A package adds an effect by one class satisfying :class:`~mountcal.estimate.effects.base.Effect`,
+declared in its metadata under the entry-point group ``mountcal.effects``::
+
+    [project.entry-points."mountcal.effects"]
+    quadratic = "my_package.quadratic:Quadratic"
+
+The static model, the model-selection loop, ``--model``, the report and ``rotate`` then use it
+with no other change. This module imports no numerical library, nor ``importlib.metadata`` until
+asked for the effects of other packages: the CLI builds its parser with :data:`BUILTIN`.
+"""
+
+from __future__ import annotations
+
+import importlib
+from functools import cache
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from mountcal.estimate.effects.base import Effect
+
+if TYPE_CHECKING:
+    from importlib.metadata import EntryPoint
+
+    from mountcal.conventions import FloatArray
+    from mountcal.result import Calibration
+
+GROUP = "mountcal.effects"
+# Built-in effects, in the order --model lists them: module mountcal.estimate.effects.<name>, class EFFECT.
+BUILTIN = ("bias", "temperature", "gravity", "site_slope", "scale")
+
+
+def names() -> tuple[str, ...]:
+    """Every registered effect's name, without importing any of them."""
+    from importlib.metadata import entry_points  # its import alone costs more than the CLI's help may take
+
+    extra = tuple(ep.name for ep in entry_points(group=GROUP) if ep.name not in BUILTIN)
+    return BUILTIN + tuple(dict.fromkeys(extra))
+
+
+@cache
+def registered() -> dict[str, Effect]:
+    """Every effect by name: the built-in ones, then those of the ``mountcal.effects`` entry points."""
+    from importlib.metadata import entry_points
+
+    out: dict[str, Effect] = {}
+    for name in BUILTIN:
+        out[name] = importlib.import_module(f"{__name__}.{name}").EFFECT
+    for ep in entry_points(group=GROUP):
+        if ep.name in out:
+            continue  # a built-in name cannot be replaced from outside
+        out[ep.name] = _load(ep)
+    return out
+
+
+def _load(ep: EntryPoint) -> Effect:
+    """The effect an entry point names; a package whose effect cannot be used is refused by name."""
+    from mountcal.errors import InputError
+
+    where = f"the entry point {ep.name} = {ep.value} (group {GROUP}, package {ep.dist.name if ep.dist else '?'})"
+    todo = "Fix or uninstall that package; mountcal cannot fit a model with an effect it cannot load."
+    try:
+        obj = ep.load()
+        effect = obj() if isinstance(obj, type) else obj
+    except (ImportError, AttributeError, TypeError) as err:
+        raise InputError(where, "an importable mountcal effect", f"{type(err).__name__}: {err}", todo) from err
+    if not isinstance(effect, Effect) or effect.name != ep.name:
+        raise InputError(
+            where, f"a mountcal effect named {ep.name!r} (mountcal.estimate.effects.base.Effect)", repr(effect), todo
+        )
+    return effect
+
+
+def get(name: str) -> Effect:
+    return registered()[name]
+
+
+def chain(terms: tuple[str, ...]) -> list[Effect]:
+    """The effects among ``terms``, in the order the prediction applies them."""
+    effects = registered()
+    chosen = [effects[t] for t in terms if t in effects]
+    return sorted(chosen, key=lambda e: e.order)
+
+
+def owner(param: str, table_parameters: dict[str, tuple[str, ...]]) -> str:
+    """The group a parameter belongs to (an effect's name, or rotation, slope, headings)."""
+    for prefix, group in (("rot_", "rotation"), ("slope", "slope"), ("beta_", "headings")):
+        if param.startswith(prefix):
+            return group
+    for name, params in table_parameters.items():
+        if param in params:
+            return name
+    return param
+
+
+def apply_corrections(acc_s: FloatArray, calibration: Calibration, *, inverse: bool = False) -> FloatArray:
+    """Samples (n, 3, m/s², sensor frame) with every fitted sensor effect of ``calibration`` undone, in the
+    reverse order of the prediction (what ``rotate`` applies before the rotation); with ``inverse``, put
+    back in the order of the prediction (corrected samples as the sensor reads them).
+
+    Raises
+    ------
+    InputError
+        The calibration's ``effects`` cannot be applied (edited or damaged values).
+    """
+    from mountcal.errors import InputError
+
+    reported = {e.name: e for e in calibration.effects}
+    bias = get("bias")
+    if calibration.bias_mps2 is not None and bias.report_key not in reported:
+        reported[bias.report_key] = bias.report(calibration.bias_mps2, np.zeros(3), ("x", "y", "z"))
+    for effect in sorted(registered().values(), key=lambda e: e.order, reverse=not inverse):
+        if effect.report_key in reported:
+            undo = effect.restore if inverse else effect.correct
+            try:
+                acc_s = undo(acc_s, reported[effect.report_key])
+            except ValueError as err:
+                raise InputError(
+                    f"calibration of {calibration.provenance.input or 'unknown input'}",
+                    f"fitted values of the effect {effect.name} that can be undone on samples",
+                    str(err),
+                    "Re-run calibrate to get an intact result file.",
+                ) from err
+    return acc_s
+
+
+__all__ = ["BUILTIN", "GROUP", "Effect", "apply_corrections", "chain", "get", "names", "registered"]
