@@ -266,7 +266,7 @@ class Quadratic(BaseEffect):
         return p + q * p**2, d_values, d_p
 
     def correct(self, acc_s, reported):
-        q = np.array([*reported["value"], 0.0])
+        q = np.array([*reported.value, 0.0])
         out = acc_s.copy()
         k = q != 0
         out[:, k] = (np.sqrt(1 + 4 * q[k] * acc_s[:, k]) - 1) / (2 * q[k])
@@ -323,8 +323,9 @@ def test_an_effect_added_by_one_file_is_fitted_chosen_applied_and_used_by_the_fl
         _mountcal(plugin_env, "calibrate", str(stops), "--model", model, "-o", str(out))
         cal = Calibration.load(out)
         assert "quadratic" in cal.model, model
-        fitted = cal.effects["quadratic_per_mps2"]
-        assert np.all(np.abs(np.array(fitted["value"]) - Q_TRUE) < 5 * np.array(fitted["sigma"])), model
+        fitted = cal.effect("quadratic_per_mps2")
+        assert fitted is not None, model
+        assert np.all(np.abs(np.array(fitted.value) - Q_TRUE) < 5 * np.array(fitted.sigma, dtype=float)), model
         for est, true in zip((cal.roll_deg, cal.pitch_deg, cal.yaw_deg), truth.angles_deg, strict=True):
             assert abs(est - true) < 0.1  # type: ignore[operator]
 
@@ -366,9 +367,11 @@ def test_two_slopes_separate_scale_and_cross_axis_and_the_loop_fits_them(seed: i
     table, truth = _on_slopes((5.0, 10.0), SCALE_2_1, seed)
     cal = calibrate(table)
     assert "scale" in cal.model
-    fitted = cal.effects["scale"]
-    assert abs(fitted["scale_xx"]["value"] - 0.02) < 5 * fitted["scale_xx"]["sigma"]
-    assert abs(fitted["cross_xy"]["value"] + 0.01) < 5 * fitted["cross_xy"]["sigma"]
+    scale = cal.effect("scale")
+    assert scale is not None
+    fitted = dict(zip(scale.components, zip(scale.value, scale.sigma, strict=True), strict=True))
+    assert abs(fitted["scale_xx"][0] - 0.02) < 5 * (fitted["scale_xx"][1] or 0.0)
+    assert abs(fitted["cross_xy"][0] + 0.01) < 5 * (fitted["cross_xy"][1] or 0.0)
     for est, sig, true in zip(
         (cal.roll_deg, cal.pitch_deg, cal.yaw_deg),
         (cal.roll_sigma_deg, cal.pitch_sigma_deg, cal.yaw_sigma_deg),
