@@ -12,11 +12,16 @@ from dataclasses import replace
 
 import numpy as np
 
-from mountcal.conventions import FloatArray
+from mountcal.conventions import G_N, FloatArray
 from mountcal.estimate import full
 from mountcal.pvalues import chi2_logsf, f_logsf
 from mountcal.result import Finding
 from mountcal.stoptable import StopTable
+
+FAMILY_ALPHA = 0.01  # all tests together flag a fit that explains the stops with at most this probability
+HARMONICS = (1, 2, 3, 4)
+DRIFT_MODES = 3  # cosine modes of stop order tested for slow drift (a random walk puts most of its power there)
+VARIANCE_DRAWS = 400  # simulated residual sets for the null of the variance test
 
 
 def whitened(table: StopTable, fit: full.Fit) -> FloatArray:
@@ -31,41 +36,195 @@ def vehicle_residual(fit: full.Fit) -> FloatArray:
 
 
 def analyse(table: StopTable, fit: full.Fit) -> list[Finding]:
-    """All residual tests that the table's columns allow."""
-    w = whitened(table, fit)
+    """Every residual test the table's columns allow (docs/effects.md, "Unexplained structure").
+
+    Each projection test asks whether adding a set of directions to the linearised model explains
+    significantly more of the whitened residual: the directions are first made orthogonal to the
+    model's Jacobian (what the fit can already absorb), so with known stop noise the explained part
+    is exactly χ²(rank) under the model, and F(rank, dof − rank) when the noise was estimated.
+    """
+    model = full.StaticModel(table, fit.terms, fit.state.g_mps2)
+    r = model.residual(fit.state)
+    basis = _span(model.jacobian(fit.state))
     n = len(table)
     findings = [_chi2(fit)]
+    tests: list[tuple[str, str, FloatArray]] = []
     beta = table.beta_rad if table.beta_rad is not None and table.headings != "none" else fit.state.beta_rad
+    harmonics = []
     if beta is not None and beta.size == n:
-        for k in (1, 2, 3):
-            findings.append(
-                _regression(
-                    w,
-                    np.column_stack([np.cos(k * beta), np.sin(k * beta)]),
-                    f"harmonic_{k}beta",
-                    f"residual varying as {k}β with heading",
-                    fit,
-                    table,
-                )
+        for k in HARMONICS:
+            x = np.column_stack([np.cos(k * beta), np.sin(k * beta)])
+            harmonics.append(_per_axis(model.whiten, x))
+            tests.append((f"harmonic_{k}beta", f"residual varying as {k}β with heading", harmonics[-1]))
+    u = model.predict(fit.state) / fit.state.g_mps2  # the gravity direction in the sensor frame, in g
+    pairs = [u[:, i] * u[:, j] for i in range(3) for j in range(i, 3)]
+    gravity_tests = (
+        ("gravity_linear", "residual linear in the gravity direction (scale, cross-axis, g-sensitive axes)", u),
+        ("gravity_quadratic", "residual quadratic in the gravity direction (nonlinearity)", np.column_stack(pairs)),
+    )
+    for name, what, x in gravity_tests:
+        d = _per_axis(model.whiten, x)
+        if _adds_to(d, [basis, *harmonics]):  # on one slope these are the harmonics again: not a new test
+            tests.append((name, what, d))
+    order = np.argsort(table.t_s, kind="stable") if table.t_s is not None else np.arange(n)
+    if n > 2 * DRIFT_MODES:
+        rank = np.empty(n)
+        rank[order] = np.arange(n)
+        x = np.cos(np.pi * np.outer(rank + 0.5, np.arange(1, DRIFT_MODES + 1)) / n)
+        tests.append(
+            (
+                "drift",
+                "slow drift across the session (the first cosine modes of stop order)",
+                _per_axis(model.whiten, x),
             )
-    for name, x in (("time", table.t_s), ("temperature", table.temperature_c), ("order", np.arange(n, dtype=float))):
-        if x is not None and np.ptp(x) > 0:
-            findings.append(
-                _regression(
-                    w,
-                    (x - x.mean())[:, None],
-                    f"trend_{name}",
-                    f"residual trend against {name.replace('order', 'stop order')}",
-                    fit,
-                    table,
-                )
-            )
+        )
+    if table.temperature_c is not None and np.ptp(table.temperature_c) > 0:
+        t = table.temperature_c - table.temperature_c.mean()
+        rising = np.sign(np.gradient(table.temperature_c[order]))
+        hyst = np.empty(n)
+        hyst[order] = rising
+        x = np.column_stack([t, t**2 - np.mean(t**2), hyst])
+        tests.append(
+            ("temperature", "residual against temperature (drift, curvature, hysteresis)", _per_axis(model.whiten, x))
+        )
     if table.site is not None and np.unique(table.site).size > 1:
         sites = np.unique(table.site)
         x = (table.site[:, None] == sites[None, 1:]).astype(float)
-        findings.append(_regression(w, x - x.mean(axis=0), "site_offsets", "residual offset per site", fit, table))
-    findings.append(_norm(table, fit))
+        tests.append(("site_offsets", "residual offset per site", _per_axis(model.whiten, x)))
+    along = np.einsum("nij,nj->ni", model.whiten, u / np.linalg.norm(u, axis=1, keepdims=True)).reshape(-1, 1)
+    tests.append(("norm", "common offset of |a| from the model's g", along))
+    unwhiten = np.linalg.cholesky(table.cov_s) if table.cov_s is not None else np.broadcast_to(np.eye(3), (n, 3, 3))
+    for name, what, d in tests:
+        findings.append(_projection(r, d, basis, name, what, fit, unwhiten))
+    if beta is not None and beta.size == n:
+        findings.append(
+            _variance(r, basis, np.column_stack([np.cos(beta), np.sin(beta), np.cos(2 * beta), np.sin(2 * beta)]))
+        )
+    findings.append(_single_stop(table, fit))
     return findings
+
+
+def unexplained(findings: list[Finding], alpha: float = FAMILY_ALPHA) -> list[Finding]:
+    """The findings Holm's step-down procedure rejects: all tests together flag a clean fit with probability ≤ α."""
+    tested = sorted((f for f in findings if f.p_value is not None), key=lambda f: f.p_value or 0.0)
+    out = []
+    for j, f in enumerate(tested):
+        if (f.p_value or 0.0) > alpha / (len(tested) - j):
+            break
+        out.append(f)
+    return out
+
+
+def _per_axis(whiten: FloatArray, x: FloatArray) -> FloatArray:
+    """Whitened directions of an effect ``x[:, c]`` along each sensor axis, shape (3n, 3·k)."""
+    n, k = x.shape
+    return np.einsum("nij,nc->nicj", whiten, x).reshape(3 * n, 3 * k)
+
+
+def _span(a: FloatArray, tol: float = 1e-8) -> FloatArray:
+    """Orthonormal basis of the column space of ``a``."""
+    if a.shape[1] == 0:
+        return np.zeros((a.shape[0], 0))
+    norms = np.linalg.norm(a, axis=0)
+    a = a[:, norms > 0] / norms[norms > 0]
+    u, s, _ = np.linalg.svd(a, full_matrices=False)
+    return u[:, s > tol * max(float(s[0]), 1e-300)] if s.size else u[:, :0]
+
+
+def _outside(d: FloatArray, basis: FloatArray) -> FloatArray:
+    """Orthonormal basis of what the directions ``d`` add to ``basis`` (dropping what is ≥ 99.99 % inside it)."""
+    norms = np.linalg.norm(d, axis=0)
+    d = d[:, norms > 0] / norms[norms > 0]
+    rest = d - basis @ (basis.T @ d)
+    return _span(rest, tol=1e-4) if np.max(np.linalg.norm(rest, axis=0), initial=0.0) > 1e-4 else rest[:, :0]
+
+
+def _adds_to(d: FloatArray, bases: list[FloatArray]) -> bool:
+    return _outside(d, _span(np.hstack(bases))).shape[1] > 0
+
+
+def _projection(
+    r: FloatArray, d: FloatArray, basis: FloatArray, test: str, what: str, fit: full.Fit, unwhiten: FloatArray
+) -> Finding:
+    """Δχ² of adding the directions ``d`` to the linearised model (exact χ² / F under it)."""
+    q = _outside(d, basis)
+    dof = q.shape[1]
+    if dof == 0:
+        why = "no test: the fitted model already absorbs these directions"
+        return Finding(test, what, why, None, 0, None, None, why)
+    coef = q.T @ r
+    explained = float(coef @ coef)
+    if fit.noise_known:
+        logp = float(chi2_logsf(explained, dof))
+    else:
+        resid_dof = fit.dof - dof
+        if resid_dof < 1:
+            why = "no test: too few degrees of freedom left to estimate the noise beside it"
+            return Finding(test, what, why, None, dof, None, None, why)
+        rest = max(float(r @ r) - explained, 1e-300)
+        logp = float(f_logsf((explained / dof) / (rest / resid_dof), dof, resid_dof))
+    # Size in physical units: the fitted structure's RMS length per stop, back in m/s².
+    fitted = np.einsum("nij,nj->ni", unwhiten, (q @ coef).reshape(-1, 3))
+    amp = float(np.sqrt(np.mean(np.sum(fitted**2, axis=1))))
+    return Finding(test, what, f"{amp * 1e3 / G_N:.3g} mg RMS", explained, dof, float(np.exp(logp)), logp / np.log(10))
+
+
+def _variance(r: FloatArray, basis: FloatArray, x: FloatArray) -> Finding:
+    """Residual variance against heading (Breusch–Pagan on the per-stop |w|²), null by simulation.
+
+    The per-stop squared residuals are not χ²-exact once the fit has absorbed part of them, so the
+    statistic's null is simulated under the linearised model (a fixed seed: the same answer every
+    time) and its tail taken from the scaled χ² with the simulated mean and variance.
+    """
+    n = x.shape[0]
+    design = np.column_stack([np.ones(n), x])
+
+    def stat(res: FloatArray) -> FloatArray:  # res shape (3n, S)
+        d2 = np.sum(res.reshape(n, 3, -1) ** 2, axis=1)
+        d2 = d2 / np.mean(d2, axis=0)
+        coef, *_ = np.linalg.lstsq(design, d2, rcond=None)
+        fitted = design @ coef
+        return np.asarray(np.sum((fitted - 1.0) ** 2, axis=0))
+
+    e = np.random.default_rng(0).standard_normal((r.size, VARIANCE_DRAWS))
+    null = stat(e - basis @ (basis.T @ e))
+    mean, var = float(np.mean(null)), float(np.var(null))
+    a, nu = var / (2 * mean), 2 * mean**2 / var
+    s = float(stat(r[:, None])[0])
+    logp = float(chi2_logsf(s / a, nu))
+    what = "residual scatter varying with heading (1β, 2β)"
+    return Finding(
+        "variance_heading",
+        what,
+        f"{np.sqrt(s / n):.2f} relative",
+        s,
+        x.shape[1],
+        float(np.exp(logp)),
+        logp / np.log(10),
+    )
+
+
+def _single_stop(table: StopTable, fit: full.Fit) -> Finding:
+    """The stop the others predict worst: held-out χ²(3) (3·F with estimated noise), Bonferroni over the stops."""
+    d2, _ = leave_one_out(table, fit)
+    what = "one stop the others do not predict"
+    ok = np.isfinite(d2)
+    dof_noise = fit.dof - 3 + (1 if fit.state.beta_rad.size else 0)
+    if not np.any(ok) or (not fit.noise_known and dof_noise < 1):
+        why = "no test: no stop can be predicted from the others"
+        return Finding("single_stop", what, why, None, 3, None, None, why)
+    worst = int(np.nanargmax(d2))
+    logp_one = float(chi2_logsf(d2[worst], 3) if fit.noise_known else f_logsf(d2[worst] / 3, 3, dof_noise))
+    logp = min(logp_one + np.log(int(np.sum(ok))), 0.0)
+    return Finding(
+        "single_stop",
+        what,
+        f"stop {worst + 1}: held-out χ² {d2[worst]:.1f}",
+        float(d2[worst]),
+        3,
+        float(np.exp(logp)),
+        logp / np.log(10),
+    )
 
 
 def leave_one_out(table: StopTable, fit: full.Fit) -> tuple[FloatArray, FloatArray]:
@@ -177,54 +336,6 @@ def _chi2(fit: full.Fit) -> Finding:
         f"χ²/dof = {fit.chi2 / fit.dof:.2f} ({fit.chi2:.1f} on {fit.dof})",
         fit.chi2,
         fit.dof,
-        float(np.exp(logp)),
-        logp / np.log(10),
-    )
-
-
-def _regression(w: FloatArray, x: FloatArray, test: str, what: str, fit: full.Fit, table: StopTable) -> Finding:
-    """Δχ² of regressing each whitened residual axis on the columns of x (3·k dof)."""
-    xx = np.column_stack([x])
-    coef, *_ = np.linalg.lstsq(xx, w, rcond=None)
-    explained = float(np.sum((xx @ coef) ** 2))
-    dof = coef.size
-    if fit.noise_known:
-        logp = float(chi2_logsf(explained, dof))
-    else:
-        rest = max(float(np.sum(w**2)) - explained, 1e-300)
-        resid_dof = max(fit.dof - dof, 1)
-        f_stat = (explained / dof) / (rest / resid_dof)
-        logp = float(f_logsf(f_stat, dof, resid_dof))
-    # Size in physical units: the fitted structure's RMS amplitude in the vehicle frame.
-    sigma = (
-        np.sqrt(np.mean(np.diagonal(table.cov_s, axis1=1, axis2=2), axis=1))
-        if table.cov_s is not None
-        else (np.full(len(table), fit.noise_scale))
-    )
-    amp = float(np.sqrt(np.mean(((xx @ coef) * sigma[:, None]) ** 2)) * np.sqrt(3))
-    return Finding(
-        test, what, f"{amp * 1e3 / 9.80665:.3g} mg RMS", explained, dof, float(np.exp(logp)), logp / np.log(10)
-    )
-
-
-def _norm(table: StopTable, fit: full.Fit) -> Finding:
-    """|a| against the model's g: a common offset points at gravity, scale or a vertical bias."""
-    mag = np.linalg.norm(table.acc_s, axis=1)
-    pred = np.linalg.norm(fit.residual_s * 0 + (table.acc_s - fit.residual_s), axis=1)
-    d = mag - pred
-    var = (
-        np.einsum("ni,nij,nj->n", table.acc_s / mag[:, None], table.cov_s, table.acc_s / mag[:, None])
-        if table.cov_s is not None
-        else np.full(len(table), fit.noise_scale**2)
-    )
-    stat = float(np.sum(d) ** 2 / np.sum(var))
-    logp = float(chi2_logsf(stat, 1))
-    return Finding(
-        "norm",
-        "common offset of |a| from the model's g",
-        f"{np.mean(d) * 1e3 / 9.80665:+.3g} mg",
-        stat,
-        1,
         float(np.exp(logp)),
         logp / np.log(10),
     )
