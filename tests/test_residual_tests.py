@@ -46,6 +46,7 @@ def test_every_test_fires_at_its_nominal_rate_under_the_model(noise_known: bool)
         for test, p in p_values(table).items():
             low[test] = low.get(test, 0) + (p < 0.05)
     expected = {"harmonic_2beta", "harmonic_3beta", "drift", "temperature", "norm", "variance_heading", "single_stop"}
+    expected |= {"stop_norm", "stop_heading"}
     assert expected | ({"chi2"} if noise_known else set()) <= set(low)
     for test, k in low.items():
         assert 0.015 <= k / runs <= 0.095, (test, k / runs)
@@ -142,3 +143,24 @@ def test_the_worst_stop_is_judged_against_all_the_stops() -> None:
     p = p_values(replace(table, acc_s=hit))["single_stop"]
     assert p < 1e-6
     assert p_values(table)["single_stop"] > 1e-3
+
+
+@pytest.mark.parametrize("terms", [BASE, (*BASE, "bias"), (*BASE, "bias", "gravity")])
+def test_the_per_stop_tests_equal_the_dense_projection(terms: tuple[str, ...]) -> None:
+    # The O(n p²) form against the plain one: project the n one-stop directions off the Jacobian.
+    from mountcal.diagnose import _outside, _span
+
+    rng = np.random.default_rng(14)
+    table = clean(rng, 18)
+    fit = full.fit(table, terms, G_N)
+    model = full.StaticModel(table, terms, G_N)
+    r, basis = model.residual(fit.state), _span(model.jacobian(fit.state))
+    u = model.predict(fit.state)
+    v = np.einsum("nij,nj->ni", model.whiten, u / np.linalg.norm(u, axis=1, keepdims=True))
+    dense = np.zeros((3 * len(table), len(table)))
+    for i, vi in enumerate(v):
+        dense[3 * i : 3 * i + 3, i] = vi
+    q = _outside(dense, basis)
+    found = next(f for f in analyse(table, fit) if f.test == "stop_norm")
+    assert found.dof == q.shape[1]
+    assert found.statistic == pytest.approx(float(np.sum((q.T @ r) ** 2)), rel=1e-5)  # r ⟂ J to the fit's tolerance

@@ -95,9 +95,18 @@ def analyse(table: StopTable, fit: full.Fit) -> list[Finding]:
         tests.append(("site_offsets", "residual offset per site", _per_axis(model.whiten, x)))
     along = np.einsum("nij,nj->ni", model.whiten, u / np.linalg.norm(u, axis=1, keepdims=True)).reshape(-1, 1)
     tests.append(("norm", "common offset of |a| from the model's g", along))
-    unwhiten = np.linalg.cholesky(table.cov_s) if table.cov_s is not None else np.broadcast_to(np.eye(3), (n, 3, 3))
+    eye = np.broadcast_to(np.eye(3), (n, 3, 3))
+    unwhiten: FloatArray = eye if table.cov_s is None else np.asarray(np.linalg.cholesky(table.cov_s), dtype=float)
     for name, what, d in tests:
         findings.append(_projection(r, d, basis, name, what, fit, unwhiten))
+    per_stop = [("stop_norm", "|a| of single stops off the model's g (vibration rectification, shocks)", along)]
+    if beta is not None and beta.size == n:
+        tangent_v = np.column_stack([-np.sin(beta), -np.cos(beta), np.zeros(n)])
+        tangent = fit.state.rot_vs.inv().apply(tangent_v) @ fit.state.scale_matrix.T
+        what = "single stops turned about the vertical (errors in the headings)"
+        per_stop.append(("stop_heading", what, np.einsum("nij,nj->ni", model.whiten, tangent).reshape(-1, 1)))
+    for name, what, v in per_stop:
+        findings.append(_per_stop(r, v.reshape(n, 3), basis, name, what, fit, unwhiten))
     if beta is not None and beta.size == n:
         findings.append(
             _variance(r, basis, np.column_stack([np.cos(beta), np.sin(beta), np.cos(2 * beta), np.sin(2 * beta)]))
@@ -163,6 +172,37 @@ def _projection(
         logp = float(f_logsf((explained / dof) / (rest / resid_dof), dof, resid_dof))
     # Size in physical units: the fitted structure's RMS length per stop, back in m/s².
     fitted = np.einsum("nij,nj->ni", unwhiten, (q @ coef).reshape(-1, 3))
+    amp = float(np.sqrt(np.mean(np.sum(fitted**2, axis=1))))
+    return Finding(test, what, f"{amp * 1e3 / G_N:.3g} mg RMS", explained, dof, float(np.exp(logp)), logp / np.log(10))
+
+
+def _per_stop(
+    r: FloatArray, v: FloatArray, basis: FloatArray, test: str, what: str, fit: full.Fit, unwhiten: FloatArray
+) -> Finding:
+    """Δχ² of a free offset at every stop along its own direction ``v[i]`` (whitened), as :func:`_projection`.
+
+    The n directions have disjoint supports, so the statistic ``cᵀ(I − BᵀB)⁻¹c`` (c = Dᵀr, B = QᵀD)
+    comes from the p×p matrix BBᵀ: O(n p²) where a dense projection would be O(n³). Directions the
+    fit absorbs (eigenvalues of BBᵀ at 1) leave the test with one degree of freedom fewer each.
+    """
+    n = v.shape[0]
+    v = v / np.linalg.norm(v, axis=1, keepdims=True)
+    c = np.einsum("ni,ni->n", v, r.reshape(n, 3))
+    b = np.einsum("nip,ni->pn", basis.reshape(n, 3, -1), v)
+    lam, vec = np.linalg.eigh(b @ b.T)
+    inside = lam > 1.0 - 1e-6
+    proj = vec[:, ~inside].T @ (b @ c)
+    explained = float(c @ c + np.sum(proj**2 / (1.0 - lam[~inside])))
+    dof = n - int(np.sum(inside))
+    if dof < 1 or (not fit.noise_known and fit.dof - dof < 1):
+        why = "no test: the fitted model already absorbs these directions, or no degrees of freedom are left"
+        return Finding(test, what, why, None, max(dof, 0), None, None, why)
+    if fit.noise_known:
+        logp = float(chi2_logsf(explained, dof))
+    else:
+        rest = max(float(r @ r) - explained, 1e-300)
+        logp = float(f_logsf((explained / dof) / (rest / (fit.dof - dof)), dof, fit.dof - dof))
+    fitted = np.einsum("nij,nj->ni", unwhiten, c[:, None] * v)
     amp = float(np.sqrt(np.mean(np.sum(fitted**2, axis=1))))
     return Finding(test, what, f"{amp * 1e3 / G_N:.3g} mg RMS", explained, dof, float(np.exp(logp)), logp / np.log(10))
 
