@@ -22,7 +22,7 @@ FAMILY_ALPHA = 0.01  # all tests together flag a fit that explains the stops wit
 HARMONICS = (1, 2, 3, 4)
 DRIFT_MODES = 3  # cosine modes of stop order tested for slow drift (a random walk puts most of its power there)
 VARIANCE_DRAWS = 400  # simulated residual sets for the null of the variance test
-VARIANCE_SIMULATED_STOPS = 300  # above this many stops its asymptotic null is used (no simulation)
+VARIANCE_SIMULATED_STOPS = 60  # above this many stops leverage is small: the asymptotic null (no simulation)
 
 
 def whitened(table: StopTable, fit: full.Fit) -> FloatArray:
@@ -63,11 +63,12 @@ def analyse(table: StopTable, fit: full.Fit) -> list[Finding]:
         ("gravity_linear", "residual linear in the gravity direction (scale, cross-axis, g-sensitive axes)", u),
         ("gravity_quadratic", "residual quadratic in the gravity direction (nonlinearity)", np.column_stack(pairs)),
     )
-    known = _span(np.hstack([basis, *harmonics]))
-    for name, what, x in gravity_tests:
-        d = _per_axis(model.whiten, x)
-        if _outside(d, known).shape[1] > 0:  # on one slope these are the harmonics again: not a new test
-            tests.append((name, what, d))
+    if fit.state.slope_rad.size > 1:  # on one slope u is affine in cos β, sin β: these are the harmonics again
+        known = _span(np.hstack([basis, *harmonics]))
+        for name, what, x in gravity_tests:
+            d = _per_axis(model.whiten, x)
+            if _outside(d, known).shape[1] > 0:
+                tests.append((name, what, d))
     order = np.argsort(table.t_s, kind="stable") if table.t_s is not None else np.arange(n)
     if n > 2 * DRIFT_MODES:
         rank = np.empty(n)
@@ -132,14 +133,21 @@ def _per_axis(whiten: FloatArray, x: FloatArray) -> FloatArray:
     return np.einsum("nij,nc->nicj", whiten, x).reshape(3 * n, 3 * k)
 
 
-def _span(a: FloatArray, tol: float = 1e-8) -> FloatArray:
-    """Orthonormal basis of the column space of ``a``."""
-    if a.shape[1] == 0:
-        return np.zeros((a.shape[0], 0))
+def _span(a: FloatArray, tol: float = 1e-6) -> FloatArray:
+    """Orthonormal basis of the column space of ``a`` (singular values below ``tol`` of the largest dropped).
+
+    From the eigenvectors of the small Gram matrix, twice (the second pass restores the orthogonality
+    the first loses to rounding): O(rows·cols²) without a dense SVD of the tall matrix.
+    """
     norms = np.linalg.norm(a, axis=0)
-    a = a[:, norms > 0] / norms[norms > 0]
-    u, s, _ = np.linalg.svd(a, full_matrices=False)
-    return u[:, s > tol * max(float(s[0]), 1e-300)] if s.size else u[:, :0]
+    q = a[:, norms > 0] / norms[norms > 0]
+    for cut in (tol, 1e-3):
+        if q.shape[1] == 0:
+            break
+        lam, vec = np.linalg.eigh(q.T @ q)
+        keep = lam > cut**2 * max(float(lam[-1]), 1e-300)
+        q = q @ (vec[:, keep] / np.sqrt(lam[keep]))
+    return np.ascontiguousarray(q)
 
 
 def _outside(d: FloatArray, basis: FloatArray) -> FloatArray:
