@@ -22,6 +22,7 @@ import argparse
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -224,8 +225,7 @@ def main() -> None:
     text = "\n".join(lines) + f"\n\n_{time.perf_counter() - t0:.0f} s._\n"
     print(text)
     if args.markdown:
-        with open(args.markdown, "w", encoding="utf-8") as fh:
-            fh.write(text)
+        Path(args.markdown).write_text(text, encoding="utf-8")
 
 
 if __name__ == "__main__":
