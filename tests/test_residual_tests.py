@@ -46,7 +46,7 @@ def test_every_test_fires_at_its_nominal_rate_under_the_model(noise_known: bool)
         for test, p in p_values(table).items():
             low[test] = low.get(test, 0) + (p < 0.05)
     expected = {"harmonic_2beta", "harmonic_3beta", "drift", "temperature", "norm", "variance_heading", "single_stop"}
-    expected |= {"stop_norm", "stop_heading"}
+    expected |= {"stop_norm", "stop_heading", "hysteresis"}
     assert expected | ({"chi2"} if noise_known else set()) <= set(low)
     for test, k in low.items():
         assert 0.015 <= k / runs <= 0.095, (test, k / runs)
@@ -120,7 +120,7 @@ def test_each_structure_is_seen_by_its_own_test() -> None:
     # a bias of ±4 mg as the sensor warms or cools: thermal hysteresis
     table = clean(rng, n)
     warming = np.sign(np.gradient(table.temperature_c))  # type: ignore[arg-type]
-    assert "temperature" in _flags(replace(table, acc_s=table.acc_s + np.outer(warming, [0, 4 * MG, 0])))
+    assert "hysteresis" in _flags(replace(table, acc_s=table.acc_s + np.outer(warming, [0, 4 * MG, 0])))
 
 
 def test_scatter_that_varies_with_heading_is_seen() -> None:
