@@ -55,7 +55,8 @@ def analyse(table: StopTable, fit: full.Fit) -> list[Finding]:
     beta = table.beta_rad if table.beta_rad is not None and table.headings != "none" else fit.state.beta_rad
     harmonics = []
     if beta is not None and beta.size == n:
-        for k in HARMONICS:
+        distinct = np.unique(np.round(np.mod(beta, 2 * np.pi), 6)).size
+        for k in (k for k in HARMONICS if 2 * k < distinct):  # above Nyquist kβ aliases a lower harmonic
             x = np.column_stack([np.cos(k * beta), np.sin(k * beta)])
             harmonics.append(_per_axis(model.whiten, x))
             tests.append((f"harmonic_{k}beta", f"residual varying as {k}β with heading", harmonics[-1]))
@@ -226,6 +227,10 @@ def _variance(r: FloatArray, basis: FloatArray, x: FloatArray) -> Finding:
     time) and its tail taken from the scaled χ² with the simulated mean and variance.
     """
     n = x.shape[0]
+    what = "residual scatter varying with heading (1β, 2β)"
+    if n < 2 * (x.shape[1] + 1):
+        why = "no test: too few stops to see how their scatter varies"
+        return Finding("variance_heading", what, why, None, x.shape[1], None, None, why)
     design = np.column_stack([np.ones(n), x])
 
     def stat(res: FloatArray) -> FloatArray:  # res shape (3n, S)
@@ -238,13 +243,12 @@ def _variance(r: FloatArray, basis: FloatArray, x: FloatArray) -> Finding:
     if n <= VARIANCE_SIMULATED_STOPS:
         e = np.random.default_rng(0).standard_normal((r.size, VARIANCE_DRAWS))
         null = stat(e - basis @ (basis.T @ e))
-        mean, var = float(np.mean(null)), float(np.var(null))
+        mean, var = float(np.mean(null)), max(float(np.var(null)), 1e-300)
         a, nu = var / (2 * mean), 2 * mean**2 / var
     else:  # leverage is negligible: |w_i|²/3 has variance 2/3, so the statistic is (2/3)·χ²(k)
         a, nu = 2.0 / 3.0, float(x.shape[1])
     s = float(stat(r[:, None])[0])
     logp = float(chi2_logsf(s / a, nu))
-    what = "residual scatter varying with heading (1β, 2β)"
     return Finding(
         "variance_heading",
         what,
