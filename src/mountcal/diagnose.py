@@ -165,14 +165,23 @@ def _outside(d: FloatArray, basis: FloatArray) -> FloatArray:
 def _projection(
     r: FloatArray, d: FloatArray, basis: FloatArray, test: str, what: str, fit: full.Fit, unwhiten: FloatArray
 ) -> Finding:
-    """Δχ² of adding the directions ``d`` to the linearised model (exact χ² / F under it)."""
-    q = _outside(d, basis)
-    dof = q.shape[1]
+    """Δχ² of adding the directions ``d`` to the linearised model (exact χ² / F under it).
+
+    From m×m Gram matrices (one pass over the 3n rows): with B = Qᵀd, the part of d outside the
+    model's span has Gram ``dᵀd − BᵀB`` and meets the residual in ``dᵀr − Bᵀ(Qᵀr)``; directions whose
+    outside part is below 10⁻⁴ of their length count as inside.
+    """
+    norms = np.sqrt(np.einsum("ij,ij->j", d, d))
+    d = d[:, norms > 0] / norms[norms > 0]
+    b = basis.T @ d
+    lam, vec = np.linalg.eigh(d.T @ d - b.T @ b)
+    keep = lam > 1e-8
+    dof = int(np.sum(keep))
     if dof == 0:
         why = "no test: the fitted model already absorbs these directions"
         return Finding(test, what, why, None, 0, None, None, why)
-    coef = q.T @ r
-    explained = float(coef @ coef)
+    c = vec[:, keep].T @ (d.T @ r - b.T @ (basis.T @ r))
+    explained = float(np.sum(c**2 / lam[keep]))
     if fit.noise_known:
         logp = float(chi2_logsf(explained, dof))
     else:
@@ -183,7 +192,9 @@ def _projection(
         rest = max(float(r @ r) - explained, 1e-300)
         logp = float(f_logsf((explained / dof) / (rest / resid_dof), dof, resid_dof))
     # Size in physical units: the fitted structure's RMS length per stop, back in m/s².
-    fitted = np.einsum("nij,nj->ni", unwhiten, (q @ coef).reshape(-1, 3))
+    coef = vec[:, keep] @ (c / lam[keep])
+    structure = d @ coef - basis @ (b @ coef)
+    fitted = np.einsum("nij,nj->ni", unwhiten, structure.reshape(-1, 3))
     amp = float(np.sqrt(np.mean(np.sum(fitted**2, axis=1))))
     return Finding(test, what, f"{amp * 1e3 / G_N:.3g} mg RMS", explained, dof, float(np.exp(logp)), logp / np.log(10))
 
@@ -270,11 +281,21 @@ def _single_stop(r: FloatArray, basis: FloatArray, fit: full.Fit) -> Finding:
     n = r.size // 3
     what = "one stop the others do not predict"
     q = basis.reshape(n, 3, -1)
-    lam, vec = np.linalg.eigh(np.eye(3) - np.einsum("nip,njp->nij", q, q))
-    keep = lam > 1e-9
-    proj = np.einsum("nij,ni->nj", vec, r.reshape(n, 3))
-    d2 = np.sum(np.where(keep, proj**2 / np.where(keep, lam, 1.0), 0.0), axis=1)
-    k = keep.sum(axis=1)
+    m = np.eye(3) - q @ q.transpose(0, 2, 1)
+    rs = r.reshape(n, 3)
+    if fit.state.beta_rad.size == 0:  # the blocks are regular unless one stop alone sets a parameter
+        k = np.where(np.linalg.det(m) > 1e-9, 3, 0)
+        d2 = np.zeros(n)
+        full_rank = k == 3
+        d2[full_rank] = np.einsum(
+            "ni,ni->n", rs[full_rank], np.linalg.solve(m[full_rank], rs[full_rank, :, None])[..., 0]
+        )
+    else:  # each stop's own heading is fitted: its block is singular along it
+        lam, vec = np.linalg.eigh(m)
+        keep = lam > 1e-9
+        proj = np.einsum("nij,ni->nj", vec, rs)
+        d2 = np.sum(np.where(keep, proj**2 / np.where(keep, lam, 1.0), 0.0), axis=1)
+        k = keep.sum(axis=1)
     ok = k > 0
     if not np.any(ok):
         why = "no test: no stop can be predicted from the others"
