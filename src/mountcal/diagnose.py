@@ -27,17 +27,6 @@ VARIANCE_DRAWS = 400  # simulated residual sets for the null of the variance tes
 VARIANCE_SIMULATED_STOPS = 60  # above this many stops leverage is small: the asymptotic null (no simulation)
 
 
-def whitened(table: StopTable, fit: full.Fit) -> FloatArray:
-    """Per-stop residuals in units of their σ, shape (n, 3) (noise scale applied when estimated)."""
-    model = full.StaticModel(table, fit.terms, fit.state.g_mps2)
-    return model.residual(fit.state).reshape(-1, 3) / fit.noise_scale
-
-
-def vehicle_residual(fit: full.Fit) -> FloatArray:
-    """Per-stop residuals rotated into the vehicle frame, m/s², shape (n, 3)."""
-    return fit.state.rot_vs.apply(fit.residual_s)
-
-
 def analyse(table: StopTable, fit: full.Fit) -> list[Finding]:
     """Every residual test the table's columns allow (docs/effects.md, "Unexplained structure").
 
