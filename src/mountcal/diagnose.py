@@ -1,69 +1,314 @@
 """Residual analysis after a fit: does the model explain the stops, and if not, how not?
 
 Every test compares the whitened residuals with a structure they would show if an effect were
-missing — harmonics against heading, trends against time, temperature and stop order, offsets
-per site, the norm against g, single stops that the others do not predict — and returns its size
-and its p-value. docs/conventions.md §6 lists the effects these point at.
+missing — harmonics against heading, the gravity direction, slow drift across the session,
+temperature and hysteresis, offsets per site, the norm against g, single stops off in |a| or in
+heading, scatter against heading, the one stop the others do not predict — and returns its size
+and its p-value; :func:`unexplained` holds the family's false-alarm rate (Holm). docs/effects.md
+("Unexplained structure") gives each test's null and what it points at.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from mountcal.conventions import FloatArray
+from mountcal.conventions import G_N, FloatArray
+from mountcal.errors import FitFailed, NotEnoughInformation
 from mountcal.estimate import full
 from mountcal.pvalues import chi2_logsf, f_logsf
 from mountcal.result import Finding
 from mountcal.stoptable import StopTable
 
-
-def whitened(table: StopTable, fit: full.Fit) -> FloatArray:
-    """Per-stop residuals in units of their σ, shape (n, 3) (noise scale applied when estimated)."""
-    model = full.StaticModel(table, fit.terms, fit.state.g_mps2)
-    return model.residual(fit.state).reshape(-1, 3) / fit.noise_scale
-
-
-def vehicle_residual(fit: full.Fit) -> FloatArray:
-    """Per-stop residuals rotated into the vehicle frame, m/s², shape (n, 3)."""
-    return fit.state.rot_vs.apply(fit.residual_s)
+FAMILY_ALPHA = 0.01  # all tests together flag a fit that explains the stops with at most this probability
+HARMONICS = (1, 2, 3, 4)
+DRIFT_MODES = 3  # cosine modes of stop order tested for slow drift (a random walk puts most of its power there)
+VARIANCE_DRAWS = 400  # simulated residual sets for the null of the variance test
+VARIANCE_SIMULATED_STOPS = 60  # above this many stops leverage is small: the asymptotic null (no simulation)
 
 
 def analyse(table: StopTable, fit: full.Fit) -> list[Finding]:
-    """All residual tests that the table's columns allow."""
-    w = whitened(table, fit)
+    """Every residual test the table's columns allow (docs/effects.md, "Unexplained structure").
+
+    Each projection test asks whether adding a set of directions to the linearised model explains
+    significantly more of the whitened residual: the directions are first made orthogonal to the
+    model's Jacobian (what the fit can already absorb), so with known stop noise the explained part
+    is exactly χ²(rank) under the model, and F(rank, dof − rank) when the noise was estimated.
+    """
+    model = full.StaticModel(table, fit.terms, fit.state.g_mps2)
+    r = model.residual(fit.state)
+    basis = _span(model.jacobian(fit.state))
     n = len(table)
     findings = [_chi2(fit)]
+    tests: list[tuple[str, str, FloatArray]] = []
     beta = table.beta_rad if table.beta_rad is not None and table.headings != "none" else fit.state.beta_rad
+    harmonics = []
     if beta is not None and beta.size == n:
-        for k in (1, 2, 3):
-            findings.append(
-                _regression(
-                    w,
-                    np.column_stack([np.cos(k * beta), np.sin(k * beta)]),
-                    f"harmonic_{k}beta",
-                    f"residual varying as {k}β with heading",
-                    fit,
-                    table,
-                )
+        distinct = np.unique(np.round(np.mod(beta, 2 * np.pi), 6)).size
+        for k in (k for k in HARMONICS if 2 * k < distinct):  # above Nyquist kβ aliases a lower harmonic
+            x = np.column_stack([np.cos(k * beta), np.sin(k * beta)])
+            harmonics.append(_per_axis(model.whiten, x))
+            tests.append((f"harmonic_{k}beta", f"residual varying as {k}β with heading", harmonics[-1]))
+    u = model.predict(fit.state) / fit.state.g_mps2  # the gravity direction in the sensor frame, in g
+    pairs = [u[:, i] * u[:, j] for i in range(3) for j in range(i, 3)]
+    gravity_tests = (
+        ("gravity_linear", "residual linear in the gravity direction (scale, cross-axis, g-sensitive axes)", u),
+        ("gravity_quadratic", "residual quadratic in the gravity direction (nonlinearity)", np.column_stack(pairs)),
+    )
+    if fit.state.slope_rad.size > 1:  # on one slope u is affine in cos β, sin β: these are the harmonics again
+        known = _span(np.hstack([basis, *harmonics]))
+        for name, what, x in gravity_tests:
+            d = _per_axis(model.whiten, x)
+            if _outside(d, known).shape[1] > 0:
+                tests.append((name, what, d))
+    order = np.argsort(table.t_s, kind="stable") if table.t_s is not None else np.arange(n)
+    if n > 2 * DRIFT_MODES:
+        rank = np.empty(n)
+        rank[order] = np.arange(n)
+        x = np.cos(np.pi * np.outer(rank + 0.5, np.arange(1, DRIFT_MODES + 1)) / n)
+        tests.append(
+            (
+                "drift",
+                "slow drift across the session (the first cosine modes of stop order)",
+                _per_axis(model.whiten, x),
             )
-    for name, x in (("time", table.t_s), ("temperature", table.temperature_c), ("order", np.arange(n, dtype=float))):
-        if x is not None and np.ptp(x) > 0:
-            findings.append(
-                _regression(
-                    w,
-                    (x - x.mean())[:, None],
-                    f"trend_{name}",
-                    f"residual trend against {name.replace('order', 'stop order')}",
-                    fit,
-                    table,
-                )
-            )
+        )
+    if table.temperature_c is not None and np.ptp(table.temperature_c) > 0:
+        t = table.temperature_c - table.temperature_c.mean()
+        rising = np.sign(np.gradient(table.temperature_c[order]))
+        hyst = np.empty(n)
+        hyst[order] = rising
+        x = np.column_stack([t, t**2 - np.mean(t**2)])
+        tests.append(("temperature", "residual against temperature (drift, curvature)", _per_axis(model.whiten, x)))
+        if np.ptp(hyst) > 0:  # the sensor both warmed and cooled: a bias that depends on which is hysteresis
+            what = "residual offset between warming and cooling stops (thermal hysteresis)"
+            tests.append(("hysteresis", what, _per_axis(model.whiten, hyst[:, None])))
     if table.site is not None and np.unique(table.site).size > 1:
         sites = np.unique(table.site)
         x = (table.site[:, None] == sites[None, 1:]).astype(float)
-        findings.append(_regression(w, x - x.mean(axis=0), "site_offsets", "residual offset per site", fit, table))
-    findings.append(_norm(table, fit))
+        tests.append(("site_offsets", "residual offset per site", _per_axis(model.whiten, x)))
+    along = np.einsum("nij,nj->ni", model.whiten, u / np.linalg.norm(u, axis=1, keepdims=True)).reshape(-1, 1)
+    tests.append(("norm", "common offset of |a| from the model's g", along))
+    eye = np.broadcast_to(np.eye(3), (n, 3, 3))
+    unwhiten: FloatArray = eye if table.cov_s is None else np.asarray(np.linalg.cholesky(table.cov_s), dtype=float)
+    for name, what, d in tests:
+        findings.append(_projection(r, d, basis, name, what, fit, unwhiten))
+    per_stop = [("stop_norm", "|a| of single stops off the model's g (vibration rectification, shocks)", along)]
+    if beta is not None and beta.size == n:
+        tangent_v = np.column_stack([-np.sin(beta), -np.cos(beta), np.zeros(n)])
+        tangent = fit.state.rot_vs.inv().apply(tangent_v) @ fit.state.scale_matrix.T
+        what = "single stops turned about the vertical (errors in the headings)"
+        per_stop.append(("stop_heading", what, np.einsum("nij,nj->ni", model.whiten, tangent).reshape(-1, 1)))
+    for name, what, v in per_stop:
+        findings.append(_per_stop(r, v.reshape(n, 3), basis, name, what, fit, unwhiten))
+    if beta is not None and beta.size == n:
+        findings.append(
+            _variance(r, basis, np.column_stack([np.cos(beta), np.sin(beta), np.cos(2 * beta), np.sin(2 * beta)]))
+        )
+    findings.append(_single_stop(r, basis, fit))
     return findings
+
+
+def unexplained(findings: list[Finding], alpha: float = FAMILY_ALPHA) -> list[Finding]:
+    """The findings Holm's step-down procedure rejects: all tests together flag a clean fit with probability ≤ α."""
+    tested = sorted((f for f in findings if f.p_value is not None), key=lambda f: f.p_value or 0.0)
+    out = []
+    for j, f in enumerate(tested):
+        if (f.p_value or 0.0) > alpha / (len(tested) - j):
+            break
+        out.append(f)
+    return out
+
+
+def _per_axis(whiten: FloatArray, x: FloatArray) -> FloatArray:
+    """Whitened directions of an effect ``x[:, c]`` along each sensor axis, shape (3n, 3·k)."""
+    n, k = x.shape
+    return np.einsum("nij,nc->nicj", whiten, x).reshape(3 * n, 3 * k)
+
+
+def _span(a: FloatArray, tol: float = 1e-6) -> FloatArray:
+    """Orthonormal basis of the column space of ``a`` (singular values below ``tol`` of the largest dropped).
+
+    From the eigenvectors of the small Gram matrix, twice (the second pass restores the orthogonality
+    the first loses to rounding): O(rows·cols²) without a dense SVD of the tall matrix.
+    """
+    norms = np.linalg.norm(a, axis=0)
+    q = a[:, norms > 0] / norms[norms > 0]
+    for cut in (tol, 1e-3):
+        if q.shape[1] == 0:
+            break
+        lam, vec = np.linalg.eigh(q.T @ q)
+        keep = lam > cut**2 * max(float(lam[-1]), 1e-300)
+        q = q @ (vec[:, keep] / np.sqrt(lam[keep]))
+    return np.ascontiguousarray(q)
+
+
+def _outside(d: FloatArray, basis: FloatArray) -> FloatArray:
+    """Orthonormal basis of what the directions ``d`` add to ``basis`` (dropping what is ≥ 99.99 % inside it)."""
+    norms = np.linalg.norm(d, axis=0)
+    d = d[:, norms > 0] / norms[norms > 0]
+    rest = d - basis @ (basis.T @ d)
+    return _span(rest, tol=1e-4) if np.max(np.linalg.norm(rest, axis=0), initial=0.0) > 1e-4 else rest[:, :0]
+
+
+def _projection(
+    r: FloatArray, d: FloatArray, basis: FloatArray, test: str, what: str, fit: full.Fit, unwhiten: FloatArray
+) -> Finding:
+    """Δχ² of adding the directions ``d`` to the linearised model (exact χ² / F under it).
+
+    From m×m Gram matrices (one pass over the 3n rows): with B = Qᵀd, the part of d outside the
+    model's span has Gram ``dᵀd − BᵀB`` and meets the residual in ``dᵀr − Bᵀ(Qᵀr)``; directions whose
+    outside part is below 10⁻⁴ of their length count as inside.
+    """
+    norms = np.sqrt(np.einsum("ij,ij->j", d, d))
+    d = d[:, norms > 0] / norms[norms > 0]
+    b = basis.T @ d
+    lam, vec = np.linalg.eigh(d.T @ d - b.T @ b)
+    keep = lam > 1e-8
+    dof = int(np.sum(keep))
+    if dof == 0:
+        why = "no test: the fitted model already absorbs these directions"
+        return Finding(test, what, why, None, 0, None, None, why)
+    c = vec[:, keep].T @ (d.T @ r - b.T @ (basis.T @ r))
+    explained = float(np.sum(c**2 / lam[keep]))
+    if fit.noise_known:
+        logp = float(chi2_logsf(explained, dof))
+    else:
+        resid_dof = fit.dof - dof
+        if resid_dof < 1:
+            why = "no test: too few degrees of freedom left to estimate the noise beside it"
+            return Finding(test, what, why, None, dof, None, None, why)
+        rest = max(float(r @ r) - explained, 1e-300)
+        logp = float(f_logsf((explained / dof) / (rest / resid_dof), dof, resid_dof))
+    # Size in physical units: the fitted structure's RMS length per stop, back in m/s².
+    coef = vec[:, keep] @ (c / lam[keep])
+    structure = d @ coef - basis @ (b @ coef)
+    fitted = np.einsum("nij,nj->ni", unwhiten, structure.reshape(-1, 3))
+    amp = float(np.sqrt(np.mean(np.sum(fitted**2, axis=1))))
+    return Finding(test, what, f"{amp * 1e3 / G_N:.3g} mg RMS", explained, dof, float(np.exp(logp)), logp / np.log(10))
+
+
+def _per_stop(
+    r: FloatArray, v: FloatArray, basis: FloatArray, test: str, what: str, fit: full.Fit, unwhiten: FloatArray
+) -> Finding:
+    """Δχ² of a free offset at every stop along its own direction ``v[i]`` (whitened), as :func:`_projection`.
+
+    The n directions have disjoint supports, so the statistic ``cᵀ(I − BᵀB)⁻¹c`` (c = Dᵀr, B = QᵀD)
+    comes from the p×p matrix BBᵀ: O(n p²) where a dense projection would be O(n³). Directions the
+    fit absorbs (eigenvalues of BBᵀ at 1) leave the test with one degree of freedom fewer each.
+    """
+    n = v.shape[0]
+    v = v / np.linalg.norm(v, axis=1, keepdims=True)
+    c = np.einsum("ni,ni->n", v, r.reshape(n, 3))
+    b = np.einsum("nip,ni->pn", basis.reshape(n, 3, -1), v)
+    lam, vec = np.linalg.eigh(b @ b.T)
+    inside = lam > 1.0 - 1e-6
+    proj = vec[:, ~inside].T @ (b @ c)
+    explained = float(c @ c + np.sum(proj**2 / (1.0 - lam[~inside])))
+    dof = n - int(np.sum(inside))
+    if dof < 1 or (not fit.noise_known and fit.dof - dof < 1):
+        why = "no test: the fitted model already absorbs these directions, or no degrees of freedom are left"
+        return Finding(test, what, why, None, max(dof, 0), None, None, why)
+    if fit.noise_known:
+        logp = float(chi2_logsf(explained, dof))
+    else:
+        rest = max(float(r @ r) - explained, 1e-300)
+        logp = float(f_logsf((explained / dof) / (rest / (fit.dof - dof)), dof, fit.dof - dof))
+    fitted = np.einsum("nij,nj->ni", unwhiten, c[:, None] * v)
+    amp = float(np.sqrt(np.mean(np.sum(fitted**2, axis=1))))
+    return Finding(test, what, f"{amp * 1e3 / G_N:.3g} mg RMS", explained, dof, float(np.exp(logp)), logp / np.log(10))
+
+
+def _variance(r: FloatArray, basis: FloatArray, x: FloatArray) -> Finding:
+    """Residual variance against heading (Breusch–Pagan on the per-stop |w|²), null by simulation.
+
+    The per-stop squared residuals are not χ²-exact once the fit has absorbed part of them, so the
+    statistic's null is simulated under the linearised model (a fixed seed: the same answer every
+    time) and its tail taken from the scaled χ² with the simulated mean and variance.
+    """
+    n = x.shape[0]
+    what = "residual scatter varying with heading (1β, 2β)"
+    if n < 2 * (x.shape[1] + 1):
+        why = "no test: too few stops to see how their scatter varies"
+        return Finding("variance_heading", what, why, None, x.shape[1], None, None, why)
+    design = np.column_stack([np.ones(n), x])
+
+    def stat(res: FloatArray) -> FloatArray:  # res shape (3n, S)
+        d2 = np.sum(res.reshape(n, 3, -1) ** 2, axis=1)
+        d2 = d2 / np.mean(d2, axis=0)
+        coef, *_ = np.linalg.lstsq(design, d2, rcond=None)
+        fitted = design @ coef
+        return np.asarray(np.sum((fitted - 1.0) ** 2, axis=0))
+
+    if n <= VARIANCE_SIMULATED_STOPS:
+        e = np.random.default_rng(0).standard_normal((r.size, VARIANCE_DRAWS))
+        null = stat(e - basis @ (basis.T @ e))
+        mean, var = float(np.mean(null)), max(float(np.var(null)), 1e-300)
+        a, nu = var / (2 * mean), 2 * mean**2 / var
+    else:  # leverage is negligible: |w_i|²/3 has variance 2/3, so the statistic is (2/3)·χ²(k)
+        a, nu = 2.0 / 3.0, float(x.shape[1])
+    s = float(stat(r[:, None])[0])
+    logp = float(chi2_logsf(s / a, nu))
+    return Finding(
+        "variance_heading",
+        what,
+        f"{np.sqrt(s / n):.2f} relative",
+        s,
+        x.shape[1],
+        float(np.exp(logp)),
+        logp / np.log(10),
+    )
+
+
+def _single_stop(r: FloatArray, basis: FloatArray, fit: full.Fit) -> Finding:
+    """The stop the others predict worst, Bonferroni over the stops.
+
+    Deleting stop i from the linearised fit leaves ``r_iᵀ (I − H_ii)⁻¹ r_i``, exactly χ²(rank) with
+    known noise (externally studentised, F, when the noise is estimated); ``H_ii`` is the stop's
+    block of the hat matrix (a stop whose own heading is fitted keeps two directions of three).
+    """
+    n = r.size // 3
+    what = "one stop the others do not predict"
+    q = basis.reshape(n, 3, -1)
+    m = np.eye(3) - q @ q.transpose(0, 2, 1)
+    rs = r.reshape(n, 3)
+    if fit.state.beta_rad.size == 0:  # the blocks are regular unless one stop alone sets a parameter
+        k = np.where(np.linalg.det(m) > 1e-9, 3, 0)
+        d2 = np.zeros(n)
+        full_rank = k == 3
+        d2[full_rank] = np.einsum(
+            "ni,ni->n", rs[full_rank], np.linalg.solve(m[full_rank], rs[full_rank, :, None])[..., 0]
+        )
+    else:  # each stop's own heading is fitted: its block is singular along it
+        lam, vec = np.linalg.eigh(m)
+        keep = lam > 1e-9
+        proj = np.einsum("nij,ni->nj", vec, rs)
+        d2 = np.sum(np.where(keep, proj**2 / np.where(keep, lam, 1.0), 0.0), axis=1)
+        k = keep.sum(axis=1)
+    ok = k > 0
+    if not np.any(ok):
+        why = "no test: no stop can be predicted from the others"
+        return Finding("single_stop", what, why, None, 3, None, None, why)
+    if fit.noise_known:
+        logp_each = chi2_logsf(d2[ok], k[ok])
+    else:
+        rest_dof = fit.dof - k[ok]
+        if np.any(rest_dof < 1):
+            why = "no test: too few degrees of freedom left to estimate the noise without a stop"
+            return Finding("single_stop", what, why, None, 3, None, None, why)
+        rest = np.maximum(float(r @ r) - d2[ok], 1e-300)
+        logp_each = f_logsf((d2[ok] / k[ok]) / (rest / rest_dof), k[ok], rest_dof)
+    worst = int(np.argmin(logp_each))
+    stop = int(np.flatnonzero(ok)[worst])
+    logp = min(float(logp_each[worst]) + float(np.log(np.sum(ok))), 0.0)
+    return Finding(
+        "single_stop",
+        what,
+        f"stop {stop + 1}: held-out χ² {d2[stop]:.1f} on {k[stop]}",
+        float(d2[stop]),
+        int(k[stop]),
+        float(np.exp(logp)),
+        logp / np.log(10),
+    )
 
 
 def leave_one_out(table: StopTable, fit: full.Fit) -> tuple[FloatArray, FloatArray]:
@@ -130,7 +375,7 @@ def leave_one_out_refit(table: StopTable, fit: full.Fit) -> tuple[FloatArray, Fl
         start = fit.state if fit.state.beta_rad.size == 0 else _drop_beta(fit.state, i)
         try:
             f = full.fit(sub, fit.terms, fit.state.g_mps2, start)
-        except Exception:  # a fit that cannot run without this stop cannot judge it either
+        except (FitFailed, NotEnoughInformation):  # a fit that cannot run without this stop cannot judge it either
             d2[i], press[i] = np.nan, np.nan
             continue
         state = f.state if fit.state.beta_rad.size == 0 else _put_beta(f.state, i, fit.state.beta_rad[i])
@@ -175,54 +420,6 @@ def _chi2(fit: full.Fit) -> Finding:
         f"χ²/dof = {fit.chi2 / fit.dof:.2f} ({fit.chi2:.1f} on {fit.dof})",
         fit.chi2,
         fit.dof,
-        float(np.exp(logp)),
-        logp / np.log(10),
-    )
-
-
-def _regression(w: FloatArray, x: FloatArray, test: str, what: str, fit: full.Fit, table: StopTable) -> Finding:
-    """Δχ² of regressing each whitened residual axis on the columns of x (3·k dof)."""
-    xx = np.column_stack([x])
-    coef, *_ = np.linalg.lstsq(xx, w, rcond=None)
-    explained = float(np.sum((xx @ coef) ** 2))
-    dof = coef.size
-    if fit.noise_known:
-        logp = float(chi2_logsf(explained, dof))
-    else:
-        rest = max(float(np.sum(w**2)) - explained, 1e-300)
-        resid_dof = max(fit.dof - dof, 1)
-        f_stat = (explained / dof) / (rest / resid_dof)
-        logp = float(f_logsf(f_stat, dof, resid_dof))
-    # Size in physical units: the fitted structure's RMS amplitude in the vehicle frame.
-    sigma = (
-        np.sqrt(np.mean(np.diagonal(table.cov_s, axis1=1, axis2=2), axis=1))
-        if table.cov_s is not None
-        else (np.full(len(table), fit.noise_scale))
-    )
-    amp = float(np.sqrt(np.mean(((xx @ coef) * sigma[:, None]) ** 2)) * np.sqrt(3))
-    return Finding(
-        test, what, f"{amp * 1e3 / 9.80665:.3g} mg RMS", explained, dof, float(np.exp(logp)), logp / np.log(10)
-    )
-
-
-def _norm(table: StopTable, fit: full.Fit) -> Finding:
-    """|a| against the model's g: a common offset points at gravity, scale or a vertical bias."""
-    mag = np.linalg.norm(table.acc_s, axis=1)
-    pred = np.linalg.norm(fit.residual_s * 0 + (table.acc_s - fit.residual_s), axis=1)
-    d = mag - pred
-    var = (
-        np.einsum("ni,nij,nj->n", table.acc_s / mag[:, None], table.cov_s, table.acc_s / mag[:, None])
-        if table.cov_s is not None
-        else np.full(len(table), fit.noise_scale**2)
-    )
-    stat = float(np.sum(d) ** 2 / np.sum(var))
-    logp = float(chi2_logsf(stat, 1))
-    return Finding(
-        "norm",
-        "common offset of |a| from the model's g",
-        f"{np.mean(d) * 1e3 / 9.80665:+.3g} mg",
-        stat,
-        1,
         float(np.exp(logp)),
         logp / np.log(10),
     )

@@ -21,7 +21,7 @@ import numpy as np
 from scipy import optimize
 from scipy.spatial.transform import Rotation
 
-from mountcal.diagnose import analyse, leave_one_out
+from mountcal.diagnose import analyse, leave_one_out, unexplained
 from mountcal.errors import FitFailed, NotEnoughInformation
 from mountcal.estimate import effects as registry
 from mountcal.estimate import full
@@ -157,7 +157,7 @@ def close_the_loop(
 def _finish(steps: list[Step], declined: list[dict[str, Any]]) -> Loop:
     last = steps[-1]
     findings = analyse(last.table, last.fit)
-    return Loop(steps, declined, findings, [f for f in findings if f.significant])
+    return Loop(steps, declined, findings, unexplained(findings))
 
 
 def _next_step(
