@@ -11,7 +11,7 @@ makes it precise enough (docs/conventions.md §4); otherwise it is None with the
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import UTC, datetime
 from typing import Any, Literal
 
@@ -32,7 +32,11 @@ from mountcal.estimate.bound import crb_deg, euler_gradients
 from mountcal.estimate.geometry import span_ratio
 from mountcal.pvalues import chi2_sf
 from mountcal.result import Calibration
+from mountcal.sensor_spec import DEFAULT as DEFAULT_SPEC
+from mountcal.sensor_spec import SensorSpec
 from mountcal.stoptable import StopTable, fingerprint
+from mountcal.systematic import assess, from_spec
+from mountcal.triad import Triad
 from mountcal.version import software_version
 
 Method = Literal["full", "paper"]
@@ -55,11 +59,15 @@ class Options:
     gravity_mps2: float | None = None
     max_yaw_sigma_deg: float = 5.0
     selection_alpha: float = 0.001
+    spec: SensorSpec = DEFAULT_SPEC  # the sensor's limits, for the systematic part of σ
+    triad: Triad | None = None  # a triad calibration: applied to the stops, its covariance replaces the spec's
 
 
 def calibrate(table: StopTable, options: Options | None = None) -> Calibration:
     """Estimate the mounting rotation (and slope, and bias when called for) from a stop table."""
     opts = options or Options()
+    if opts.triad is not None:
+        table = opts.triad.correct(table)
     _check_geometry(table)
     g, g_source = _gravity(table, opts.gravity_mps2)
     if opts.method == "paper":
@@ -197,7 +205,7 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
         "steps": [s.added for s in loop.steps],
         "declined": loop.declined,
     }
-    return Calibration(
+    cal = Calibration(
         method="full",
         model=tuple(model),
         rot_vs=f.state.rot_vs,
@@ -232,6 +240,17 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
         effects=effect_values(f),
         confident=not loop.unexplained and not doubts,
     )
+    return _with_systematic(cal, final.table, f, opts)
+
+
+def _with_systematic(cal: Calibration, table: StopTable, f: full.Fit, opts: Options) -> Calibration:
+    """The σ made total (statistical and systematic, :mod:`mountcal.systematic`); confident only if the total allows."""
+    errors = opts.triad.errors(opts.spec) if opts.triad is not None else from_spec(opts.spec)
+    out = assess(cal, table, f, errors)
+    doubts = _doubts(None, max(out.roll_sigma_deg, out.pitch_sigma_deg), None)
+    if doubts and max(cal.roll_sigma_deg, cal.pitch_sigma_deg) <= MAX_CONFIDENT_TILT_SIGMA_DEG:
+        out = replace(out, confident=False, notes=(*out.notes, *(d + "; the result is not confident" for d in doubts)))
+    return out
 
 
 def _doubts(branch: str | None, tilt_sigma_deg: float, noise_dof: int | None) -> list[str]:

@@ -18,6 +18,7 @@ from mountcal.atomic import atomic_path
 from mountcal.conventions import CONVENTIONS, FloatArray, levelled
 from mountcal.errors import InputError
 from mountcal.result_file import check_document, read_json
+from mountcal.systematic import Systematic
 
 FORMAT = "mountcal.calibration"
 FORMAT_VERSION = 1
@@ -98,6 +99,7 @@ class Calibration:
     diagnostics: list[dict[str, Any]] = field(default_factory=list)  # every residual test of the final model
     effects: dict[str, Any] = field(default_factory=dict)  # fitted effect values ± σ
     confident: bool = True  # False when the residual shows structure the model does not explain
+    systematic: Systematic | None = None  # the statistical and systematic parts of the σ above (their total)
 
     def __post_init__(self) -> None:
         if self.yaw_deg is None:  # a yaw nobody determined is never kept, whoever built the value
@@ -155,6 +157,7 @@ class Calibration:
             "confident": self.confident,
             "diagnostics": self.diagnostics,
             "notes": list(self.notes),
+            "systematic": None if self.systematic is None else self.systematic.to_dict(),
         }
 
     def save(self, path: str | Path) -> None:
@@ -217,6 +220,7 @@ class Calibration:
                 diagnostics=list(doc.get("diagnostics", [])),
                 effects=dict(doc.get("effects", {})),
                 confident=bool(doc.get("confident", True)),
+                systematic=Systematic.from_dict(doc["systematic"]) if doc.get("systematic") else None,
             )
         except (KeyError, TypeError, ValueError) as err:
             raise InputError(

@@ -1,0 +1,170 @@
+"""``mountcal triad``: a triad calibration (bias, scale, cross-axis ± covariance) from a multi-position session.
+
+The session's stops point gravity along many sensor directions; :mod:`mountcal.estimate.sphere`
+fits all three terms. With ``--imucal CAL.json`` the values are imucal's (its Ferraris JSON) and
+the covariance is mountcal's fit on the same session, after checking the two agree. The result
+is what ``mountcal calibrate --triad`` applies. Imports are deferred: building the parser stays light.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from mountcal.errors import InputError
+
+if TYPE_CHECKING:
+    from mountcal.calibrate import Options
+    from mountcal.conventions import FloatArray
+
+TABLE_SUFFIXES = (".csv", ".parquet", ".pq")
+MIN_STOPS = 12  # nine parameters and a few degrees of freedom to check them
+AGREE_SIGMA = 5.0  # imucal's values within this many σ of mountcal's fit of the same session
+
+
+def add_parser(subparsers: Any) -> None:
+    p = subparsers.add_parser("triad", help="fit bias, scale and cross-axis from a multi-position session")
+    p.add_argument("input", nargs="+", metavar="LOG_OR_STOPTABLE", help="the session's log(s), or its stop table")
+    p.add_argument("-o", "--output", required=True, help="triad JSON to write (for calibrate --triad)")
+    p.add_argument("--unit", choices=("mps2", "g"), default="mps2", help="unit of ax, ay, az in a stop table")
+    p.add_argument("--gravity", type=float, default=None, help="local gravity in m/s² (default 9.80665)")
+    p.add_argument("--imucal", default=None, help="imucal's Ferraris calibration JSON made from this session")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from mountcal.conventions import G_N
+    from mountcal.estimate import sphere
+    from mountcal.paths import check_outputs
+    from mountcal.triad import from_sphere
+
+    check_outputs({"-o": args.output}, {f"input {i + 1}": p for i, p in enumerate(args.input)})
+    acc, cov = session_stops(args.input, args.unit)
+    g = G_N if args.gravity is None else float(args.gravity)
+    source = " + ".join(str(Path(p)) for p in args.input)
+    for _, why in sphere.loop(acc, g, cov):
+        print(f"  {why}")
+    fit = fit_all(acc, g, cov, source)
+    triad = from_sphere(fit, source)
+    if args.imucal is not None:
+        triad = with_imucal_values(triad, args.imucal)
+    for line in describe(triad, fit):
+        print(line)
+    triad.save(args.output)
+    print(f"wrote {args.output}")
+    return 0
+
+
+def fit_all(acc: FloatArray, g: float, cov: FloatArray | None, where: str) -> Any:
+    """The sphere fit of bias, scale and cross-axis together; refused when the stops cannot separate them."""
+    import numpy as np
+
+    from mountcal.estimate import sphere
+
+    if acc.shape[0] < MIN_STOPS:
+        raise InputError(
+            where, f"≥ {MIN_STOPS} stops in different orientations", f"{acc.shape[0]} stops", _TODO_POSITIONS
+        )
+    fit = sphere.fit(acc, g, sphere.TERMS, cov)
+    sig = fit.sigma()
+    loose = [n for n, s, t in zip(fit.names, sig, np.repeat(sphere.TERMS, 3), strict=True) if s > sphere.PLAUSIBLE[t]]
+    if loose or not np.all(np.isfinite(sig)) or fit.dof < 3:
+        raise InputError(
+            where,
+            "stops that separate bias, scale and cross-axis",
+            f"{acc.shape[0]} stops leaving {', '.join(loose) or 'the fit'} undetermined",
+            _TODO_POSITIONS,
+        )
+    return fit
+
+
+_TODO_POSITIONS = (
+    "Hold the sensor still in many orientations (at least the six faces and some in between), e.g. "
+    "the six-position test of imucal or IMU-TK's hand-held session."
+)
+
+
+def session_stops(paths: list[str], unit: str) -> tuple[FloatArray, FloatArray | None]:
+    """Stop means (n, 3) in m/s² and their covariances, from a stop table or from logs."""
+    import numpy as np
+
+    from mountcal.stoptable import read_stop_table
+
+    if len(paths) == 1 and Path(paths[0]).suffix.lower() in TABLE_SUFFIXES:
+        table = read_stop_table(paths[0], unit=unit, headings="none")  # type: ignore[arg-type]
+        return table.acc_s, table.cov_s
+    from mountcal.io.logs import LogOptions, read_log
+    from mountcal.stops import detect_stops
+
+    stops = detect_stops(read_log(paths, LogOptions()))
+    if not stops:
+        raise InputError(" + ".join(paths), "a session with still periods", "no stop", _TODO_POSITIONS)
+    return np.array([s.acc_mean_s for s in stops]), np.array([s.acc_cov_mean_s for s in stops])
+
+
+def with_imucal_values(triad: Any, path: str) -> Any:
+    """imucal's bias and (symmetric part of the) scale/cross-axis matrix, with mountcal's covariance of the session.
+
+    imucal corrects ``a = R_a⁻¹ K_a⁻¹ (raw − b_a)``: raw = K_a R_a a + b_a. The left polar
+    decomposition K_a R_a = P U leaves P = I + E (symmetric) and a rotation U that the mounting
+    rotation absorbs.
+    """
+    import numpy as np
+    from scipy.linalg import polar
+
+    from mountcal.result_file import read_json
+    from mountcal.triad import Triad
+
+    doc = read_json(Path(path))
+    todo = "Pass the JSON imucal's FerrarisCalibrationInfo.to_json_file wrote (acc in m/s², acc_unit 'm/s^2')."
+    try:
+        ok = isinstance(doc, dict) and doc.get("cal_type") == "Ferraris" and doc.get("acc_unit") == "m/s^2"
+        k_a, r_a, b_a = (np.asarray(doc[k], dtype=float) for k in ("K_a", "R_a", "b_a"))
+        ok = ok and k_a.shape == (3, 3) and r_a.shape == (3, 3) and b_a.shape == (3,)
+        ok = ok and bool(np.all(np.isfinite(k_a)) and np.all(np.isfinite(r_a)) and np.all(np.isfinite(b_a)))
+    except (KeyError, TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise InputError(path, "an imucal Ferraris calibration JSON with K_a, R_a, b_a", "other content", todo)
+    _, p = polar(k_a @ r_a, side="left")
+    e = p - np.eye(3)
+    values = np.concatenate([b_a, np.diag(e), [e[0, 1], e[0, 2], e[1, 2]]])
+    ours = np.concatenate([triad.bias_mps2, triad.scale_e])
+    z = np.abs(values - ours) / np.sqrt(np.diag(triad.cov))
+    if np.max(z) > AGREE_SIGMA:
+        raise InputError(
+            path,
+            f"values within {AGREE_SIGMA:g}σ of this session's fit",
+            f"a difference of {np.max(z):.1f}σ",
+            "Pass the session the imucal calibration was made from (its covariance comes from that session).",
+        )
+    return Triad(values[:3], values[3:], triad.cov, f"imucal {path} (covariance from {triad.source})")
+
+
+def describe(triad: Any, fit: Any) -> list[str]:
+    import numpy as np
+
+    from mountcal.triad import NAMES
+
+    sig = np.sqrt(np.diag(triad.cov))
+    values = np.concatenate([triad.bias_mps2, triad.scale_e])
+    rms = float(np.sqrt(np.mean(fit.residual_mps2**2)))
+    lines = [f"mountcal triad — {len(fit.residual_mps2)} stops, |a| residual RMS {rms:.4g} m/s²"]
+    lines += [f"  {n:<9} {v:+.5f} ± {s:.5f}" for n, v, s in zip(NAMES, values, sig, strict=True)]
+    lines.append("  (bias in m/s², scale and cross-axis as fractions; 1σ)")
+    return lines
+
+
+def sensor_options(options: Options, spec: str | None, triad: str | None) -> Options:
+    """``options`` with the sensor's limits (``--sensor-spec``) and triad calibration (``--triad``) read in."""
+    from dataclasses import replace
+
+    from mountcal.sensor_spec import read_spec
+    from mountcal.triad import load
+
+    if spec is not None:
+        options = replace(options, spec=read_spec(spec))
+    if triad is not None:
+        options = replace(options, triad=load(triad))
+    return options
