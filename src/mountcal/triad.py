@@ -23,7 +23,7 @@ from mountcal.estimate import full, sphere
 from mountcal.result_file import read_json
 from mountcal.sensor_spec import SensorSpec
 from mountcal.stoptable import StopTable
-from mountcal.systematic import BIAS_NAMES, TEMP_NAMES, SensorErrors
+from mountcal.systematic import BIAS_NAMES, TEMP_NAMES, SensorErrors, from_spec
 
 FORMAT = "mountcal.triad"
 FORMAT_VERSION = 1
@@ -37,8 +37,9 @@ class Triad:
 
     bias_mps2: FloatArray
     scale_e: FloatArray
-    cov: FloatArray
+    cov: FloatArray  # rows and columns of names not in ``fitted`` are zero
     source: str
+    fitted: tuple[str, ...] = NAMES  # what the session determined; the others keep the sensor spec's limits
 
     @property
     def matrix(self) -> FloatArray:
@@ -56,11 +57,17 @@ class Triad:
         """What remains uncertain after the correction: the triad's covariance, and the spec's bias drift per °C."""
         cov = np.zeros((12, 12))
         cov[:9, :9] = self.cov
+        spec_u2 = from_spec(spec)  # names BIAS, TEMP, SCALE: the datasheet's rectangular variances
+        for i, name in enumerate(NAMES):
+            if name not in self.fitted:
+                j = spec_u2.names.index(name)
+                cov[i, i] = spec_u2.cov[j, j]
         cov[9:, 9:] = np.eye(3) * spec.bias_tempco_mps2_per_c**2 / 3.0
         sigma = np.sqrt(np.diag(self.cov))
         limits = {
             "source": f"triad calibration {self.source}",
-            "triad_sigma": {n: float(s) for n, s in zip(NAMES, sigma, strict=True)},
+            "triad_sigma": {n: float(s) for n, s in zip(NAMES, sigma, strict=True) if n in self.fitted},
+            "from_spec": {n: float(np.sqrt(cov[i, i])) for i, n in enumerate(NAMES) if n not in self.fitted},
             "bias_tempco_mps2_per_c": spec.bias_tempco_mps2_per_c,
         }
         return SensorErrors(NAMES + TEMP_NAMES, cov, f"triad calibration {self.source}", limits)
@@ -72,6 +79,7 @@ class Triad:
             "source": self.source,
             "model": "a_calibrated = (I + E)^-1 (a_raw - b), E symmetric",
             "names": list(NAMES),
+            "fitted": list(self.fitted),
             "values": [*map(float, self.bias_mps2), *map(float, self.scale_e)],
             "covariance": self.cov.tolist(),
         }
@@ -82,10 +90,20 @@ class Triad:
 
 
 def from_sphere(fit: sphere.SphereFit, source: str) -> Triad:
-    """A triad from a sphere fit of all three terms."""
-    if fit.terms != sphere.TERMS:
-        raise ValueError("a triad needs the fit of bias, scale and cross-axis together")
-    return Triad(fit.values[:3].copy(), fit.values[3:].copy(), fit.cov.copy(), source)
+    """A triad from a sphere fit (of bias and scale, or of all three terms)."""
+    values, cov = np.zeros(9), np.zeros((9, 9))
+    idx = [_SPHERE_TO_MODEL[n] for n in fit.names]
+    values[idx] = fit.values
+    cov[np.ix_(idx, idx)] = fit.cov
+    return Triad(values[:3], values[3:], cov, source, tuple(NAMES[i] for i in idx))
+
+
+# sphere.py names → positions in NAMES (bias_x…, scale_xx…, cross_xy…)
+_SPHERE_TO_MODEL = {
+    **{f"bias_{a}": i for i, a in enumerate("xyz")},
+    **{f"scale_{a}": 3 + i for i, a in enumerate("xyz")},
+    **{f"cross_{p}": 6 + i for i, p in enumerate(("xy", "xz", "yz"))},
+}
 
 
 def load(path: str | Path) -> Triad:
@@ -98,6 +116,8 @@ def load(path: str | Path) -> Triad:
     try:
         values = np.asarray(doc["values"], dtype=float)
         cov = np.asarray(doc["covariance"], dtype=float)
+        fitted = tuple(str(n) for n in doc.get("fitted", NAMES))
+        ok = set(fitted) <= set(NAMES)
         ok = (
             values.shape == (9,)
             and cov.shape == (9, 9)
@@ -109,4 +129,4 @@ def load(path: str | Path) -> Triad:
         ok = False
     if not ok:
         raise InputError(str(path), "9 finite values (|E| < 0.5) and a symmetric 9×9 covariance", "other values", todo)
-    return Triad(values[:3], values[3:], cov, str(doc.get("source", path)))
+    return Triad(values[:3], values[3:], cov, str(doc.get("source", path)), fitted)

@@ -19,7 +19,7 @@ if TYPE_CHECKING:
     from mountcal.conventions import FloatArray
 
 TABLE_SUFFIXES = (".csv", ".parquet", ".pq")
-MIN_STOPS = 12  # nine parameters and a few degrees of freedom to check them
+MIN_STOPS = 6  # six parameters (bias, scale): the six faces, with each stop's noise given
 AGREE_SIGMA = 5.0  # imucal's values within this many σ of mountcal's fit of the same session
 
 
@@ -57,26 +57,39 @@ def run(args: argparse.Namespace) -> int:
 
 
 def fit_all(acc: FloatArray, g: float, cov: FloatArray | None, where: str) -> Any:
-    """The sphere fit of bias, scale and cross-axis together; refused when the stops cannot separate them."""
+    """The sphere fit of bias, scale and cross-axis together, or of bias and scale when the stops see no
+    cross-axis (the six faces alone: the couplings then keep the sensor spec's limits); refused below that."""
+    for terms in (sphere_terms(), sphere_terms()[:2]):
+        fit, loose = _fit(acc, g, cov, terms)
+        if not loose:
+            return fit
+    raise InputError(
+        where,
+        f"stops that separate bias and scale (at least {MIN_STOPS} in different orientations)",
+        f"{acc.shape[0]} stops leaving {', '.join(loose)} undetermined",
+        _TODO_POSITIONS,
+    )
+
+
+def sphere_terms() -> tuple[str, ...]:
+    from mountcal.estimate import sphere
+
+    return sphere.TERMS
+
+
+def _fit(acc: FloatArray, g: float, cov: FloatArray | None, terms: tuple[str, ...]) -> tuple[Any, list[str]]:
     import numpy as np
 
     from mountcal.estimate import sphere
 
-    if acc.shape[0] < MIN_STOPS:
-        raise InputError(
-            where, f"≥ {MIN_STOPS} stops in different orientations", f"{acc.shape[0]} stops", _TODO_POSITIONS
-        )
-    fit = sphere.fit(acc, g, sphere.TERMS, cov)
+    n_par = 3 * len(terms)
+    if acc.shape[0] < n_par + (0 if cov is not None else 3):  # an estimated noise needs residual dof
+        return None, [f"{n_par} parameters from {acc.shape[0]} stops"]
+    fit = sphere.fit(acc, g, terms, cov)
     sig = fit.sigma()
-    loose = [n for n, s, t in zip(fit.names, sig, np.repeat(sphere.TERMS, 3), strict=True) if s > sphere.PLAUSIBLE[t]]
-    if loose or not np.all(np.isfinite(sig)) or fit.dof < 3:
-        raise InputError(
-            where,
-            "stops that separate bias, scale and cross-axis",
-            f"{acc.shape[0]} stops leaving {', '.join(loose) or 'the fit'} undetermined",
-            _TODO_POSITIONS,
-        )
-    return fit
+    kinds = np.repeat(terms, 3)
+    loose = [n for n, s, t in zip(fit.names, sig, kinds, strict=True) if not s <= sphere.PLAUSIBLE[t]]
+    return fit, loose
 
 
 _TODO_POSITIONS = (
@@ -114,7 +127,7 @@ def with_imucal_values(triad: Any, path: str) -> Any:
     from scipy.linalg import polar
 
     from mountcal.result_file import read_json
-    from mountcal.triad import Triad
+    from mountcal.triad import NAMES, Triad
 
     doc = read_json(Path(path))
     todo = "Pass the JSON imucal's FerrarisCalibrationInfo.to_json_file wrote (acc in m/s², acc_unit 'm/s^2')."
@@ -131,15 +144,17 @@ def with_imucal_values(triad: Any, path: str) -> Any:
     e = p - np.eye(3)
     values = np.concatenate([b_a, np.diag(e), [e[0, 1], e[0, 2], e[1, 2]]])
     ours = np.concatenate([triad.bias_mps2, triad.scale_e])
-    z = np.abs(values - ours) / np.sqrt(np.diag(triad.cov))
+    fitted = [NAMES.index(n) for n in triad.fitted]  # the couplings, when the session cannot see them, keep the spec
+    z = np.abs(values - ours)[fitted] / np.sqrt(np.diag(triad.cov)[fitted])
     if np.max(z) > AGREE_SIGMA:
         raise InputError(
             path,
             f"values within {AGREE_SIGMA:g}σ of this session's fit",
             f"a difference of {np.max(z):.1f}σ",
-            "Pass the session the imucal calibration was made from (its covariance comes from that session).",
+            "Pass the session the imucal calibration was made from (its covariance comes from that session), with "
+            "the gravity imucal used (--gravity 9.81 is its default).",
         )
-    return Triad(values[:3], values[3:], triad.cov, f"imucal {path} (covariance from {triad.source})")
+    return Triad(values[:3], values[3:], triad.cov, f"imucal {path} (covariance from {triad.source})", triad.fitted)
 
 
 def describe(triad: Any, fit: Any) -> list[str]:
@@ -151,7 +166,12 @@ def describe(triad: Any, fit: Any) -> list[str]:
     values = np.concatenate([triad.bias_mps2, triad.scale_e])
     rms = float(np.sqrt(np.mean(fit.residual_mps2**2)))
     lines = [f"mountcal triad — {len(fit.residual_mps2)} stops, |a| residual RMS {rms:.4g} m/s²"]
-    lines += [f"  {n:<9} {v:+.5f} ± {s:.5f}" for n, v, s in zip(NAMES, values, sig, strict=True)]
+    lines += [
+        f"  {n:<9} {v:+.5f} ± {s:.5f}" if n in triad.fitted else f"  {n:<9} not seen by these stops: the spec's limit"
+        for n, v, s in zip(NAMES, values, sig, strict=True)
+    ]
+    if fit.dof == 0:
+        lines.append("  note: as many stops as parameters: the values fit exactly and nothing checks the model")
     lines.append("  (bias in m/s², scale and cross-axis as fractions; 1σ)")
     return lines
 
