@@ -247,7 +247,10 @@ def _with_systematic(cal: Calibration, table: StopTable, f: full.Fit, opts: Opti
     """The σ made total (statistical and systematic, :mod:`mountcal.systematic`); confident only if the total allows."""
     errors = opts.triad.errors(opts.spec) if opts.triad is not None else from_spec(opts.spec)
     out = assess(cal, table, f, errors)
-    doubts = _doubts(None, max(out.roll_sigma_deg, out.pitch_sigma_deg), None)
+    # the tilt's own σ (about the vehicle's x and y axes): roll's σ grows as 1/cos(pitch) near ±90° without the
+    # tilt being any less known
+    tilt = max(s for s in out.rotation_sigma_deg[:2] if s is not None)
+    doubts = _doubts(None, tilt, None)
     if doubts and max(cal.roll_sigma_deg, cal.pitch_sigma_deg) <= MAX_CONFIDENT_TILT_SIGMA_DEG:
         out = replace(out, confident=False, notes=(*out.notes, *(d + "; the result is not confident" for d in doubts)))
     return out

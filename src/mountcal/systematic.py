@@ -106,7 +106,22 @@ def parameter_covariance(
     errors: SensorErrors,
     noise_scale: float = 1.0,
 ) -> tuple[FloatArray, tuple[str, ...]]:
-    """``K A Σ_δ Aᵀ Kᵀ`` over the fitted parameters ``fitted``, and the error names that entered.
+    """``K A Σ_δ Aᵀ Kᵀ`` over the fitted parameters ``fitted``, and the error names that entered (see _propagate)."""
+    cov, used, _ = _propagate(table, state, fitted, terms, g_mps2, errors, noise_scale)
+    return cov, used
+
+
+def _propagate(
+    table: StopTable,
+    state: full.State,
+    fitted: tuple[str, ...],
+    terms: tuple[str, ...],
+    g_mps2: float,
+    errors: SensorErrors,
+    noise_scale: float = 1.0,
+) -> tuple[FloatArray, tuple[str, ...], float]:
+    """``K A Σ_δ Aᵀ Kᵀ`` over the fitted parameters ``fitted``, the error names that entered, and the part of χ²
+    the errors' mean explains.
 
     An error the stops can see but the final model does not fit (a bias on a slope the selection
     loop found insignificant) is bounded by the data as well as by its limit: Σ_δ is updated with
@@ -121,7 +136,7 @@ def parameter_covariance(
         and not (name.startswith("temp_") and table.temperature_c is None)  # no temperatures: no drift to map
     ]
     if not keep:
-        return np.zeros((len(fitted), len(fitted))), ()
+        return np.zeros((len(fitted), len(fitted))), (), 0.0
     used = tuple(errors.names[i] for i in keep)
     extra = tuple(dict.fromkeys(_TERM_OF[n.split("_")[0]] for n in used))
     model = full.StaticModel(table, tuple(dict.fromkeys((*terms, *extra))), g_mps2)
@@ -132,7 +147,8 @@ def parameter_covariance(
     gain_a = full.inverse_information(j.T @ j) @ (j.T @ a)  # K A
     seen = (a - j @ gain_a) / noise_scale  # what of each error the residual shows (whitened, unit noise)
     post, mean = _updated(errors.cov[np.ix_(keep, keep)], seen, residual / noise_scale)
-    return gain_a @ (post + np.outer(mean, mean)) @ gain_a.T, used
+    explained = float(np.sum((seen @ mean) ** 2)) if np.isfinite(noise_scale) else 0.0
+    return gain_a @ (post + np.outer(mean, mean)) @ gain_a.T, used, explained
 
 
 def _updated(prior: FloatArray, seen: FloatArray, residual: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -221,9 +237,30 @@ def combine(
 def assess(cal: Calibration, table: StopTable, fit: full.Fit, errors: SensorErrors) -> Calibration:
     """Propagate ``errors`` through the final fit and fold them into ``cal``'s σ."""
     state = fit.state
-    cov, used = parameter_covariance(table, state, fit.names, fit.terms, state.g_mps2, errors, fit.noise_scale)
+    cov, used, explained = _propagate(table, state, fit.names, fit.terms, state.g_mps2, errors, fit.noise_scale)
+    birge = float(cal.fit.get("birge_ratio", 1.0))
+    if birge > 1.0 and fit.noise_known and fit.dof > 0:  # the structure the sensor errors explain is in sys already
+        rest = float(np.sqrt(max(1.0, (fit.chi2 - explained) / fit.dof)))
+        cal = _rescaled(cal, rest / birge, rest)
     sig = angle_sigmas(cov, fit.names, state.rot_vs, cal.yaw_deg is not None, cal.slope_deg is not None)
     return combine(cal, sig, errors, used)
+
+
+def _rescaled(cal: Calibration, factor: float, birge: float) -> Calibration:
+    """The statistical σ with the Birge ratio of what the sensor errors leave unexplained."""
+
+    def times(x: float | None) -> float | None:
+        return None if x is None else x * factor
+
+    return replace(
+        cal,
+        roll_sigma_deg=cal.roll_sigma_deg * factor,
+        pitch_sigma_deg=cal.pitch_sigma_deg * factor,
+        yaw_sigma_deg=times(cal.yaw_sigma_deg),
+        slope_sigma_deg=times(cal.slope_sigma_deg),
+        rotation_sigma_deg=tuple(times(x) for x in cal.rotation_sigma_deg),  # type: ignore[arg-type]
+        fit={**cal.fit, "birge_ratio": birge, "birge_note": "χ² less what the sensor errors' mean explains"},
+    )
 
 
 def _short(names: tuple[str, ...]) -> list[str]:

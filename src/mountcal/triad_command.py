@@ -30,6 +30,8 @@ def add_parser(subparsers: Any) -> None:
     p.add_argument("--unit", choices=("mps2", "g"), default="mps2", help="unit of ax, ay, az in a stop table")
     p.add_argument("--gravity", type=float, default=None, help="local gravity in m/s² (default 9.80665)")
     p.add_argument("--imucal", default=None, help="imucal's Ferraris calibration JSON made from this session")
+    p.add_argument("--min-stop-s", type=float, default=3.0, help="shortest still period in a log (s; hand-held: short)")
+    p.add_argument("--trim-s", type=float, default=0.5, help="cut from each end of a still period in a log (s)")
     p.set_defaults(func=run)
 
 
@@ -40,7 +42,7 @@ def run(args: argparse.Namespace) -> int:
     from mountcal.triad import from_sphere
 
     check_outputs({"-o": args.output}, {f"input {i + 1}": p for i, p in enumerate(args.input)})
-    acc, cov = session_stops(args.input, args.unit)
+    acc, cov = session_stops(args.input, args.unit, args.min_stop_s, args.trim_s)
     g = G_N if args.gravity is None else float(args.gravity)
     source = " + ".join(str(Path(p)) for p in args.input)
     for _, why in sphere.loop(acc, g, cov):
@@ -59,10 +61,12 @@ def run(args: argparse.Namespace) -> int:
 def fit_all(acc: FloatArray, g: float, cov: FloatArray | None, where: str) -> Any:
     """The sphere fit of bias, scale and cross-axis together, or of bias and scale when the stops see no
     cross-axis (the six faces alone: the couplings then keep the sensor spec's limits); refused below that."""
+    from dataclasses import replace
+
     for terms in (sphere_terms(), sphere_terms()[:2]):
         fit, loose = _fit(acc, g, cov, terms)
-        if not loose:
-            return fit
+        if not loose:  # a χ² beyond its dof (stops less still, or a model short of the sensor) widens the σ
+            return replace(fit, cov=fit.cov * max(1.0, fit.chi2 / fit.dof)) if fit.dof > 0 else fit
     raise InputError(
         where,
         f"stops that separate bias and scale (at least {MIN_STOPS} in different orientations)",
@@ -98,22 +102,39 @@ _TODO_POSITIONS = (
 )
 
 
-def session_stops(paths: list[str], unit: str) -> tuple[FloatArray, FloatArray | None]:
+def session_stops(
+    paths: list[str], unit: str, min_stop_s: float = 3.0, trim_s: float = 0.5
+) -> tuple[FloatArray, FloatArray | None]:
     """Stop means (n, 3) in m/s² and their covariances, from a stop table or from logs."""
     import numpy as np
 
     from mountcal.stoptable import read_stop_table
 
-    if len(paths) == 1 and Path(paths[0]).suffix.lower() in TABLE_SUFFIXES:
+    if len(paths) == 1 and Path(paths[0]).suffix.lower() in TABLE_SUFFIXES and not _is_sample_table(paths[0]):
         table = read_stop_table(paths[0], unit=unit, headings="none")  # type: ignore[arg-type]
         return table.acc_s, table.cov_s
     from mountcal.io.logs import LogOptions, read_log
-    from mountcal.stops import detect_stops
+    from mountcal.stops import StopDetection, detect_stops
 
-    stops = detect_stops(read_log(paths, LogOptions()))
+    stops = detect_stops(read_log(paths, LogOptions()), StopDetection(min_duration_s=min_stop_s, trim_s=trim_s))
     if not stops:
         raise InputError(" + ".join(paths), "a session with still periods", "no stop", _TODO_POSITIONS)
     return np.array([s.acc_mean_s for s in stops]), np.array([s.acc_cov_mean_s for s in stops])
+
+
+def _is_sample_table(path: str) -> bool:
+    """A table of samples (``t_s, ax, ay, az``: a log) rather than of stops."""
+    import pandas as pd
+    import pyarrow.parquet as pq
+
+    try:
+        if Path(path).suffix.lower() == ".csv":
+            columns = list(pd.read_csv(path, nrows=0).columns)
+        else:
+            columns = list(pq.read_schema(path).names)
+    except (OSError, ValueError, UnicodeDecodeError):
+        return False  # the stop-table reader names what is wrong
+    return "t_s" in columns
 
 
 def with_imucal_values(triad: Any, path: str) -> Any:
@@ -165,7 +186,11 @@ def describe(triad: Any, fit: Any) -> list[str]:
     sig = np.sqrt(np.diag(triad.cov))
     values = np.concatenate([triad.bias_mps2, triad.scale_e])
     rms = float(np.sqrt(np.mean(fit.residual_mps2**2)))
-    lines = [f"mountcal triad — {len(fit.residual_mps2)} stops, |a| residual RMS {rms:.4g} m/s²"]
+    birge = np.sqrt(max(1.0, fit.chi2 / fit.dof)) if fit.dof > 0 else 1.0
+    lines = [
+        f"mountcal triad — {len(fit.residual_mps2)} stops, |a| residual RMS {rms:.4g} m/s², "
+        f"χ² = {fit.chi2:.1f} on {fit.dof} dof (σ widened ×{birge:.2f})"
+    ]
     lines += [
         f"  {n:<9} {v:+.5f} ± {s:.5f}" if n in triad.fitted else f"  {n:<9} not seen by these stops: the spec's limit"
         for n, v, s in zip(NAMES, values, sig, strict=True)
