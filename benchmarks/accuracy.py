@@ -113,10 +113,15 @@ def main() -> None:
     ):
         res = run(args.runs, with_bias, args.seed + with_bias)
         parts.append(table_md(title, res, crb_deg(crb_terms), args.runs))
-    text = "\n\n".join(parts) + f"\n\n_{time.perf_counter() - t0:.0f} s, seed {args.seed}._\n"
+    publish(parts, t0, args.seed, args.markdown)
+
+
+def publish(parts: list[str], t0: float, seed: int, markdown: str | None) -> None:
+    """Print the tables with the time and seed, and write them to ``markdown`` when given."""
+    text = "\n\n".join(parts) + f"\n\n_{time.perf_counter() - t0:.0f} s, seed {seed}._\n"
     print(text)
-    if args.markdown:
-        with open(args.markdown, "w", encoding="utf-8") as fh:
+    if markdown:
+        with open(markdown, "w", encoding="utf-8") as fh:
             fh.write(text)
 
 

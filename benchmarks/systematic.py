@@ -16,6 +16,7 @@ import argparse
 import time
 
 import numpy as np
+from accuracy import publish
 
 from mountcal.calibrate import Options, calibrate
 from mountcal.conventions import G_N
@@ -92,11 +93,7 @@ def main() -> None:
         SensorSpec(bias_tempco_mps2_per_c=0.0, source="the default class (no temperatures in these runs)"),
     ]
     parts = [table_md(spec, run(spec, args.runs, args.seed + i), args.runs) for i, spec in enumerate(specs)]
-    text = "\n\n".join(parts) + f"\n\n_{time.perf_counter() - t0:.0f} s, seed {args.seed}._\n"
-    print(text)
-    if args.markdown:
-        with open(args.markdown, "w", encoding="utf-8") as fh:
-            fh.write(text)
+    publish(parts, t0, args.seed, args.markdown)
 
 
 if __name__ == "__main__":

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import real_sessions
+from accuracy import publish
 
 from mountcal.calibrate import Options, calibrate
 from mountcal.cli import main as cli
@@ -29,7 +30,7 @@ from mountcal.conventions import G_N
 from mountcal.estimate import bound, full
 from mountcal.sensor_spec import SensorSpec
 from mountcal.simulate import simulate_preset
-from mountcal.systematic import angle_sigmas, parameter_covariance
+from mountcal.systematic import angle_sigmas, propagate
 from mountcal.triad import NAMES, Triad, load
 
 KEYS = ("roll_deg", "pitch_deg", "yaw_deg", "slope_deg")
@@ -74,7 +75,7 @@ def bound_deg(triad: Triad, noise_g: float) -> dict[str, float]:
     names = full.StaticModel(table, MODEL, truth.g_mps2).names
     # noise_scale = ∞: no residual narrows the limits. Over the sensors drawn, the narrowed limits plus the mean
     # the residual shows (what calibrate reports) average to this: E[Σ_post + μμᵀ] = Σ_δ
-    cov, _ = parameter_covariance(table, state, names, MODEL, truth.g_mps2, triad.errors(SPEC), noise_scale=np.inf)
+    cov, _, _ = propagate(table, state, names, MODEL, truth.g_mps2, triad.errors(SPEC), noise_scale=np.inf)
     sys = angle_sigmas(cov, names, state.rot_vs, yaw=True, slope=True)
     return {k: float(np.hypot(crb[k] or 0.0, sys[k] or 0.0)) for k in KEYS}
 
@@ -136,11 +137,7 @@ def main() -> None:
     for i, (name, triad) in enumerate(triads.items()):
         rows = [(n, bound_deg(triad, n), run(triad, args.runs, n, args.seed + i)) for n in (1e-3, 1e-4)]
         parts.append(table_md(name, rows, args.runs))
-    text = "\n\n".join(parts) + f"\n\n_{time.perf_counter() - t0:.0f} s, seed {args.seed}._\n"
-    print(text)
-    if args.markdown:
-        with open(args.markdown, "w", encoding="utf-8") as fh:
-            fh.write(text)
+    publish(parts, t0, args.seed, args.markdown)
 
 
 if __name__ == "__main__":

@@ -77,7 +77,7 @@ def test_the_systematic_part_is_the_shift_a_real_fit_makes_for_a_cross_axis_erro
     # limit stands, where it sees it (xy) the limit narrows and what it sees counts in full
     noisy, _ = simulate_stops(3.0, -2.0, 20.0, slope_deg=6.0, noise_g=1e-3, seed=2, scale_matrix=e)
     f = full.fit(noisy, ("rotation", "slope", "bias"), G_N)
-    cov, used = systematic.parameter_covariance(noisy, f.state, f.names, f.terms, f.state.g_mps2, errors)
+    cov, used, _ = systematic.propagate(noisy, f.state, f.names, f.terms, f.state.g_mps2, errors)
     assert used == (names[pair],)
     predicted = systematic.angle_sigmas(cov, f.names, f.state.rot_vs, yaw=True, slope=True)
     for key in ("roll_deg", "pitch_deg", "yaw_deg"):

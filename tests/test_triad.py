@@ -24,6 +24,12 @@ needs_ferraris = pytest.mark.skipif(
 )
 
 
+def _fitted(inputs: Path, tmp_path: Path) -> Triad:
+    """``mountcal triad`` run on a session, its output read back."""
+    assert main(["triad", str(inputs), "-o", str(tmp_path / "t.json")]) == 0
+    return load(tmp_path / "t.json")
+
+
 def _triad(scale_e: tuple[float, ...], sigma: float) -> Triad:
     return Triad(np.array([0.3, -0.2, 0.5]), np.array(scale_e), np.eye(9) * sigma**2, "test")
 
@@ -32,8 +38,7 @@ def _triad(scale_e: tuple[float, ...], sigma: float) -> Triad:
 @needs_xsens
 def test_the_hand_held_session_gives_every_term_and_a_calibrated_sensor_reads_g(tmp_path: Path) -> None:
     session = real_sessions.xsens_samples(tmp_path / "xsens.parquet")
-    assert main(["triad", str(session), "-o", str(tmp_path / "t.json")]) == 0
-    triad = load(tmp_path / "t.json")
+    triad = _fitted(session, tmp_path)
     assert triad.fitted == NAMES  # 34 orientations separate bias, scale and cross-axis
     sigma = np.sqrt(np.diag(triad.cov))
     assert np.all(sigma[:3] < 0.01) and np.all(sigma[3:] < 1e-3)
@@ -49,9 +54,7 @@ def test_the_hand_held_session_gives_every_term_and_a_calibrated_sensor_reads_g(
 @pytest.mark.real_data
 @needs_ferraris
 def test_six_faces_give_bias_and_scale_and_leave_the_couplings_to_the_spec(tmp_path: Path) -> None:
-    faces = real_sessions.ferraris_stops(tmp_path / "faces.csv")
-    assert main(["triad", str(faces), "-o", str(tmp_path / "t.json")]) == 0
-    triad = load(tmp_path / "t.json")
+    triad = _fitted(real_sessions.ferraris_stops(tmp_path / "faces.csv"), tmp_path)
     assert triad.fitted == NAMES[:6]
     errors = triad.errors(Options().spec)
     i = errors.names.index("cross_xz")

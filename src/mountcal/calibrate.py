@@ -417,6 +417,10 @@ def _paper(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrat
     slope = None if est.slope_rad is None else float(np.degrees(est.slope_rad))
     doubts = _doubts(None, float(max(sig[0], sig[1])), None if table.cov_s is not None else 3 * len(table) - 4)
     notes += [d + "; the result is not confident" for d in doubts]
+    notes.append(
+        "--method paper reports the statistical σ only: the sensor's systematic part (scale, cross-axis, bias the "
+        "stops cannot see) is propagated by --method full"
+    )
     if est.slope_rad is None:
         notes.append(
             f"step 2 failed: cos α = {est.cos_slope:.6f} > 1 from the opposite-heading pairs (a vertical bias, scale "

@@ -97,21 +97,7 @@ class Systematic:
         )
 
 
-def parameter_covariance(
-    table: StopTable,
-    state: full.State,
-    fitted: tuple[str, ...],
-    terms: tuple[str, ...],
-    g_mps2: float,
-    errors: SensorErrors,
-    noise_scale: float = 1.0,
-) -> tuple[FloatArray, tuple[str, ...]]:
-    """``K A Σ_δ Aᵀ Kᵀ`` over the fitted parameters ``fitted``, and the error names that entered (see _propagate)."""
-    cov, used, _ = _propagate(table, state, fitted, terms, g_mps2, errors, noise_scale)
-    return cov, used
-
-
-def _propagate(
+def propagate(
     table: StopTable,
     state: full.State,
     fitted: tuple[str, ...],
@@ -237,7 +223,7 @@ def combine(
 def assess(cal: Calibration, table: StopTable, fit: full.Fit, errors: SensorErrors) -> Calibration:
     """Propagate ``errors`` through the final fit and fold them into ``cal``'s σ."""
     state = fit.state
-    cov, used, explained = _propagate(table, state, fit.names, fit.terms, state.g_mps2, errors, fit.noise_scale)
+    cov, used, explained = propagate(table, state, fit.names, fit.terms, state.g_mps2, errors, fit.noise_scale)
     birge = float(cal.fit.get("birge_ratio", 1.0))
     if birge > 1.0 and fit.noise_known and fit.dof > 0:  # the structure the sensor errors explain is in sys already
         rest = float(np.sqrt(max(1.0, (fit.chi2 - explained) / fit.dof)))
