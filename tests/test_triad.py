@@ -126,3 +126,20 @@ def test_triad_refuses_a_session_in_one_orientation(tmp_path: Path, capsys: pyte
     out = tmp_path / "t.json"
     assert main(["triad", str(stops), "-o", str(out)]) != 0
     assert "orientations" in capsys.readouterr().err and not out.exists()
+
+
+def test_cli_calibrate_with_triad_writes_both_parts(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from mountcal.stoptable import write_stop_table
+
+    triad = _triad((0.02, -0.01, 0.015, 0.01, -0.005, 0.008), 2e-4)
+    table, truth = simulate_stops(seed=5, bias_mps2=triad.bias_mps2, scale_matrix=triad.matrix)
+    write_stop_table(table, tmp_path / "stops.csv")
+    triad.save(tmp_path / "triad.json")
+    out = tmp_path / "r.json"
+    assert (
+        main(["calibrate", str(tmp_path / "stops.csv"), "--triad", str(tmp_path / "triad.json"), "-o", str(out)]) == 0
+    )
+    assert "triad calibration" in capsys.readouterr().out
+    doc = json.loads(out.read_text(encoding="utf-8"))
+    assert "triad" in doc["systematic"]["source"] and doc["systematic"]["default_spec"] is False
+    assert abs(doc["mounting"]["roll_deg"] - truth.angles_deg[0]) < 3 * doc["uncertainty"]["roll_deg"]
