@@ -118,6 +118,16 @@ def test_the_target_ends_the_session_early(sim_blf: Path, tmp_path: Path) -> Non
     assert_same(session.calibration, offline(tmp_path / "rec.blf", session, log, options=tight))  # type: ignore[arg-type]
 
 
+def test_a_target_below_the_sensor_s_systematic_part_is_said_to_be_unreachable(sim_blf: Path, tmp_path: Path) -> None:
+    bus = replay(sim_blf, "unreachable")
+    opts = LiveOptions(DBC, MAPPING, target_deg={"roll": 0.1, "pitch": 0.1}, plan_beta_deg=BETA, silence_s=0.5)
+    session, events = run_session(bus, opts, tmp_path / "rec.blf")  # the default class: ~0.6° of tilt
+    told = [e for e in events if e["event"] == "target_unreachable"]
+    assert len(told) == 1 and set(told[0]["systematic_deg"]) == {"roll", "pitch"}
+    assert all(v > 0.1 for v in told[0]["systematic_deg"].values())
+    assert session.reason == "bus silent" and not any(e["event"] == "target_met" for e in events)
+
+
 def test_frames_with_a_wrong_dlc_are_counted_and_recorded(sim_blf: Path, tmp_path: Path) -> None:
     with can.LogReader(str(sim_blf)) as reader:
         first = next(m for m in reader if m.arbitration_id == 0x70)  # MM5_10_TX1: AY1 in 8 bytes
