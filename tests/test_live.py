@@ -25,6 +25,7 @@ from mountcal.io import export
 from mountcal.io.logs import LogOptions
 from mountcal.live import CANDIDATES_DEG, Live, LiveOptions, Session, fail_if_empty, next_heading
 from mountcal.pipeline import LogJob, calibrate_log
+from mountcal.sensor_spec import SensorSpec
 from mountcal.simulate import simulate_parking_log, simulate_stops
 from mountcal.stops import StopDetection
 from mountcal.stoptable import StopTable
@@ -63,14 +64,16 @@ def run_session(bus: can.BusABC, opts: LiveOptions, recording: Path) -> tuple[Se
         bus.shutdown()
 
 
-def offline(recording: Path, session: Session, log: LogOptions, uphill: float | None = None) -> Calibration:
+def offline(
+    recording: Path, session: Session, log: LogOptions, uphill: float | None = None, options: Options | None = None
+) -> Calibration:
     """`calibrate` on the recording, with the protocol sheet the session wrote on the log's clock."""
     sheet = None
     if session.protocol is not None:
         sheet = recording.with_suffix(".protocol.csv")
         session.protocol.to_csv(sheet, index=False, float_format="%.17g")
     job = LogJob(paths=(str(recording),), log=log, protocol=None if sheet is None else str(sheet),
-                 uphill_azimuth_deg=uphill, options=Options())  # fmt: skip
+                 uphill_azimuth_deg=uphill, options=options or Options())  # fmt: skip
     done = calibrate_log(job)
     assert session.table is not None
     assert len(done.table) == len(session.table)
@@ -103,11 +106,26 @@ def test_a_replayed_simulated_session_gives_calibrate_on_its_recording(sim_blf: 
 
 def test_the_target_ends_the_session_early(sim_blf: Path, tmp_path: Path) -> None:
     bus = replay(sim_blf, "early")
-    opts = LiveOptions(DBC, MAPPING, target_deg={"roll": 0.5, "pitch": 0.5}, plan_beta_deg=BETA, silence_s=0.5)
+    # a calibrated sensor's limits: with the default class's (±3 % scale) no number of stops gets the tilt to 0.5°
+    tight = Options(spec=SensorSpec(scale=1e-3, cross_axis=1e-3, bias_mps2=0.01, source="test: a calibrated part"))
+    opts = LiveOptions(
+        DBC, MAPPING, target_deg={"roll": 0.5, "pitch": 0.5}, options=tight, plan_beta_deg=BETA, silence_s=0.5
+    )
     session, events = run_session(bus, opts, tmp_path / "rec.blf")
     assert session.reason == "target met" and events[-2]["event"] == "target_met"
     assert session.table is not None and len(session.table) < len(BETA)
-    assert_same(session.calibration, offline(tmp_path / "rec.blf", session, LogOptions(dbc=DBC, mapping=MAPPING)))  # type: ignore[arg-type]
+    log = LogOptions(dbc=DBC, mapping=MAPPING)
+    assert_same(session.calibration, offline(tmp_path / "rec.blf", session, log, options=tight))  # type: ignore[arg-type]
+
+
+def test_a_target_below_the_sensor_s_systematic_part_is_said_to_be_unreachable(sim_blf: Path, tmp_path: Path) -> None:
+    bus = replay(sim_blf, "unreachable")
+    opts = LiveOptions(DBC, MAPPING, target_deg={"roll": 0.1, "pitch": 0.1}, plan_beta_deg=BETA, silence_s=0.5)
+    session, events = run_session(bus, opts, tmp_path / "rec.blf")  # the default class: ~0.6° of tilt
+    told = [e for e in events if e["event"] == "target_unreachable"]
+    assert len(told) == 1 and set(told[0]["systematic_deg"]) == {"roll", "pitch"}
+    assert all(v > 0.1 for v in told[0]["systematic_deg"].values())
+    assert session.reason == "bus silent" and not any(e["event"] == "target_met" for e in events)
 
 
 def test_frames_with_a_wrong_dlc_are_counted_and_recorded(sim_blf: Path, tmp_path: Path) -> None:

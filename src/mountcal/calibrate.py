@@ -12,7 +12,7 @@ makes it precise enough (docs/conventions.md §4); otherwise it is None with the
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import UTC, datetime
 from typing import Literal
 
@@ -46,7 +46,11 @@ from mountcal.result import (
     Provenance,
     Separability,
 )
+from mountcal.sensor_spec import DEFAULT as DEFAULT_SPEC
+from mountcal.sensor_spec import SensorSpec
 from mountcal.stoptable import StopTable, fingerprint
+from mountcal.systematic import assess, from_spec
+from mountcal.triad import Triad
 from mountcal.version import software_version
 
 Method = Literal["full", "paper"]
@@ -68,11 +72,15 @@ class Options:
     gravity_mps2: float | None = None
     max_yaw_sigma_deg: float = 5.0
     selection_alpha: float = 0.001
+    spec: SensorSpec = DEFAULT_SPEC  # the sensor's limits, for the systematic part of σ
+    triad: Triad | None = None  # a triad calibration: applied to the stops, its covariance replaces the spec's
 
 
 def calibrate(table: StopTable, options: Options | None = None) -> Calibration:
     """Estimate the mounting rotation (and slope, and bias when called for) from a stop table."""
     opts = options or Options()
+    if opts.triad is not None:
+        table = opts.triad.correct(table)
     _check_geometry(table)
     g, g_source = _gravity(table, opts.gravity_mps2)
     if opts.method == "paper":
@@ -216,7 +224,7 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
         steps=tuple(s.added for s in loop.steps),
         declined=declined,
     )
-    return Calibration(
+    cal = Calibration(
         method="full",
         model=tuple(model),
         rot_vs=f.state.rot_vs,
@@ -251,6 +259,20 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
         effects=effect_values(f),
         confident=not loop.unexplained and not doubts,
     )
+    return _with_systematic(cal, final.table, f, opts)
+
+
+def _with_systematic(cal: Calibration, table: StopTable, f: full.Fit, opts: Options) -> Calibration:
+    """The σ made total (statistical and systematic, :mod:`mountcal.systematic`); confident only if the total allows."""
+    errors = opts.triad.errors(opts.spec) if opts.triad is not None else from_spec(opts.spec)
+    out = assess(cal, table, f, errors)
+    # the tilt's own σ (about the vehicle's x and y axes): roll's σ grows as 1/cos(pitch) near ±90° without the
+    # tilt being any less known
+    tilt = max(s for s in out.rotation_sigma_deg[:2] if s is not None)
+    doubts = _doubts(None, tilt, None)
+    if doubts and max(cal.roll_sigma_deg, cal.pitch_sigma_deg) <= MAX_CONFIDENT_TILT_SIGMA_DEG:
+        out = replace(out, confident=False, notes=(*out.notes, *(d + "; the result is not confident" for d in doubts)))
+    return out
 
 
 def _doubts(branch: str | None, tilt_sigma_deg: float, noise_dof: int | None) -> list[str]:
@@ -417,6 +439,10 @@ def _paper(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrat
     slope = None if est.slope_rad is None else float(np.degrees(est.slope_rad))
     doubts = _doubts(None, float(max(sig[0], sig[1])), None if table.cov_s is not None else 3 * len(table) - 4)
     notes += [d + "; the result is not confident" for d in doubts]
+    notes.append(
+        "the paper's method reports the statistical σ only: the sensor's systematic part (scale, cross-axis, bias the "
+        "stops cannot see) is propagated by --method full"
+    )
     if est.slope_rad is None:
         notes.append(
             f"step 2 failed: cos α = {est.cos_slope:.6f} > 1 from the opposite-heading pairs (a vertical bias, scale "

@@ -27,6 +27,7 @@ from mountcal.simulate import PRESETS, simulate_stops
 from mountcal.stops import StopDetection
 from mountcal.stoptable import read_stop_table, same_stops, write_stop_table
 from mountcal.terminal import safe
+from mountcal.triad_command import sensor_options
 from mountcal.version import software_version
 
 
@@ -75,6 +76,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     options = Options(
         method=args.method, model=args.model, gravity_mps2=args.gravity, max_yaw_sigma_deg=args.max_yaw_sigma
     )
+    options = sensor_options(options, args.sensor_spec, args.triad)
     if len(inputs) == 1 and _is_stop_table(inputs[0], args):
         table = read_stop_table(inputs[0], unit=args.unit, headings=args.headings)
         cal = calibrate(table, options)
@@ -428,6 +430,10 @@ def summary(cal: Calibration) -> str:
         f"  yaw    {pm(cal.yaw_deg, cal.yaw_sigma_deg)}",
         f"  slope  {pm(cal.slope_deg, cal.slope_sigma_deg)}",
     ]
+    if cal.systematic is not None:
+        from mountcal.systematic import summary_line
+
+        lines.append("  " + summary_line(cal.systematic))
     if cal.bias_mps2 is not None and cal.bias_sigma_mps2 is not None:
         b = ", ".join(f"{v:+.4f} ± {s:.4f}" for v, s in zip(cal.bias_mps2, cal.bias_sigma_mps2, strict=True))
         lines.append(f"  bias   ({b}) m/s² (sensor x, y, z)")
@@ -530,6 +536,8 @@ def _parser() -> argparse.ArgumentParser:
     )
     cal.add_argument("-o", "--output", default=None, help="result JSON to write")
     cal.add_argument("--report", default=None, help="also write a self-contained HTML report here")
+    cal.add_argument("--sensor-spec", default=None, help="the sensor's datasheet limits (TOML/JSON; default class)")
+    cal.add_argument("--triad", default=None, help="triad calibration from `mountcal triad`, applied to the stops")
     cal.set_defaults(func=cmd_calibrate)
 
     stp = sub.add_parser("stops", help="detect the parked periods of a log and write the stop table")
@@ -674,6 +682,9 @@ def _parser() -> argparse.ArgumentParser:
     from mountcal.outputs.exporters import add_parser as add_export_parser  # `mountcal export`: issue 16
 
     add_export_parser(sub)
+    from mountcal import triad_command  # `mountcal triad`: issue 15
+
+    triad_command.add_parser(sub)
     return parser
 
 

@@ -126,6 +126,14 @@ def target_met(cal: Calibration, target_deg: dict[str, float]) -> bool:
     return all((s := sigma_of(cal, a)) is not None and s <= t for a, t in target_deg.items())
 
 
+def unreachable(cal: Calibration, target_deg: dict[str, float]) -> dict[str, float]:
+    """Targets below the systematic part of their σ (mountcal.systematic): more stops cannot reach them."""
+    part = cal.systematic
+    if part is None:
+        return {}
+    return {a: s for a, t in target_deg.items() if (s := part.systematic.get(f"{a}_deg")) is not None and s > t}
+
+
 class Live:
     """One session: feed it a bus; it calls ``emit`` with each event (a dict)."""
 
@@ -138,6 +146,7 @@ class Live:
         self.n_closed = 0
         self.why = ""
         self.last: Session = Session("not started", recording)
+        self.told_unreachable = False
 
     def run(self, bus: Any) -> Session:
         writer = recorder(self.recording)
@@ -258,6 +267,11 @@ class Live:
         if met:
             self.emit({"event": "target_met", "target_deg": self.opts.target_deg})
             return True
+        beyond = unreachable(cal, self.opts.target_deg)
+        if beyond and not self.told_unreachable:  # said once: the sensor's part does not change with stops
+            self.told_unreachable = True
+            source = cal.systematic.source if cal.systematic is not None else None
+            self.emit({"event": "target_unreachable", "systematic_deg": beyond, "source": source})
         self._suggest(table, cal)
         return False
 
@@ -299,6 +313,12 @@ def line_of(event: dict[str, Any]) -> str:
         return f">>> DRIVE TO β = {event['beta_deg']:g}° (from uphill) and park"
     if kind == "target_met":
         return "TARGET MET: you can stop"
+    if kind == "target_unreachable":
+        parts = ", ".join(f"{a} {s:.3g}°" for a, s in event["systematic_deg"].items())
+        return (
+            f"TARGET NOT REACHABLE BY MORE STOPS: the sensor's systematic part ({parts}; {event['source']}) exceeds "
+            "it; give the sensor's spec or a triad calibration, or accept a looser target"
+        )
     if kind == "waiting":
         return f"  (not yet: {event['why']})"
     if kind == "silent":

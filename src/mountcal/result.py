@@ -75,6 +75,7 @@ class FitQuality:
     iterations: int | None = None
     excluded_stops: tuple[int, ...] = ()  # 1-based stop numbers left out as outliers
     birge_ratio: float = 1.0  # the σ are widened by this factor (>1 when structure is left unexplained)
+    birge_note: str | None = None  # what the ratio was computed from, when not the whole χ²
     branch: str | None = None  # why the physical branch of the rotation is in doubt
     pairs: int | None = None
     cos_slope: float | None = None
@@ -204,6 +205,20 @@ class Provenance:
 
 
 @dataclass(frozen=True)
+class Systematic:
+    """The two parts of every σ the result reports (1σ, degrees; the σ fields hold the total
+    √(statistical² + systematic²)): the stop noise, and the sensor's limits the stops cannot see."""
+
+    statistical: dict[str, float | None]
+    systematic: dict[str, float | None]
+    source: str  # what the sensor limits are: a default class, a spec file, a triad calibration
+    limits: dict[str, Any]
+    propagated: tuple[str, ...]  # the sensor errors mapped into the angles (those the final model does not fit)
+    default_spec: bool
+    dominant: bool  # the systematic part exceeds the statistical one for an angle
+
+
+@dataclass(frozen=True)
 class Calibration:
     """A mounting calibration with its uncertainty.
 
@@ -240,6 +255,7 @@ class Calibration:
     diagnostics: tuple[Finding, ...] = ()  # every residual test of the final model
     effects: tuple[EffectValue, ...] = ()  # fitted effect values ± σ
     confident: bool = True  # False when the residual shows structure the model does not explain
+    systematic: Systematic | None = None  # the statistical and systematic parts of the σ above (their total)
 
     def __post_init__(self) -> None:
         if self.yaw_deg is None:  # a yaw nobody determined is never kept, whoever built the value
@@ -316,6 +332,7 @@ class Calibration:
             "confident": self.confident,
             "diagnostics": to_plain(self.diagnostics),
             "notes": list(self.notes),
+            "systematic": to_plain(self.systematic),
         }
 
     def save(self, path: str | Path) -> None:

@@ -24,7 +24,7 @@ its weight about z is zero.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -470,11 +470,15 @@ def _segment_row(
     seg: Segment, s: int, n_segments: int, usable: pd.DataFrame, index: pd.Index, disagree: np.ndarray, order: str
 ) -> dict[str, Any]:
     cons = seg.consensus
+    part = usable.loc[index]
+    if "rot_sys_sigma_x_deg" in part:  # the sensor's systematic part, common to its logs: added once
+        cols = part[[f"rot_sys_sigma_{a}_deg" for a in "xyz"]].to_numpy(float).T
+        sys = np.array([np.median(c[np.isfinite(c)]) if np.isfinite(c).any() else 0.0 for c in cols])
+        cons = replace(cons, cov_rad2=cons.cov_rad2 + np.diag(np.radians(sys) ** 2))
     angles, sigma = angles_with_sigma(cons)
     # Without yaw the consensus stores the levelling rotation: its yaw was arbitrary, never invented.
     quat = (cons.rot_vs if cons.observed[2] else levelled(cons.rot_vs)).as_quat()
     rot_sigma = np.degrees(np.sqrt(np.clip(np.diagonal(cons.cov_rad2), 0.0, None)))
-    part = usable.loc[index]
     yaw_reason = None
     if not cons.observed[2]:
         reasons = part["yaw_reason"].dropna()

@@ -127,9 +127,15 @@ def calibration_record(cal: Calibration) -> dict[str, Any]:
         # the paper's method gives σ of the angles only; near level they are the σ about the axes
         rot_sigma = [cal.roll_sigma_deg, cal.pitch_sigma_deg, cal.yaw_sigma_deg]
         flags.append("axis_sigma_from_angles")
+    sys_sigma: list[float | None] = [None] * 3
+    if cal.systematic is not None and rot_sigma[0] is not None:
+        # the logs of one sensor share its systematic error: they are compared, and averaged, on the statistical
+        # part; the vehicle's consensus adds the systematic part once (fleet.vehicles)
+        rot_sigma = [cal.systematic.statistical[f"rotation_{a}_deg"] for a in "xyz"]
+        sys_sigma = [cal.systematic.systematic[f"rotation_{a}_deg"] for a in "xyz"]
     if cal.yaw_deg is None:
         flags.append("yaw_not_determined")
-        rot_sigma[2] = None
+        rot_sigma[2] = sys_sigma[2] = None
     if cal.slope_deg is None:
         flags.append("slope_not_determined")
     if "bias" in cal.model:
@@ -157,6 +163,9 @@ def calibration_record(cal: Calibration) -> dict[str, Any]:
         "rot_sigma_x_deg": rot_sigma[0],
         "rot_sigma_y_deg": rot_sigma[1],
         "rot_sigma_z_deg": rot_sigma[2],
+        "rot_sys_sigma_x_deg": sys_sigma[0],
+        "rot_sys_sigma_y_deg": sys_sigma[1],
+        "rot_sys_sigma_z_deg": sys_sigma[2],
         "quat_x": float(quat[0]),
         "quat_y": float(quat[1]),
         "quat_z": float(quat[2]),

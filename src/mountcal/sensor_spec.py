@@ -1,0 +1,86 @@
+"""An accelerometer's datasheet limits: what the sensor may be off by, before any calibration.
+
+The limits are the ± bounds a datasheet states. mountcal reads them as rectangular
+distributions (GUM 4.3.7: a limit ±a with no further knowledge is a standard uncertainty
+a/√3) and propagates them in :mod:`mountcal.systematic`.
+
+The default class is an uncalibrated consumer MEMS accelerometer, from the InvenSense
+MPU-6000/6050 product specification (rev. 3.4, §6.2, ±2 g range): sensitivity "initial
+calibration tolerance ±3 %", "cross-axis sensitivity ±2 %", zero-g "initial calibration
+tolerance ±80 mg" (Z; ±50 mg X, Y), zero-g change over 0–70 °C ±60 mg (Z; ±35 mg X, Y), i.e.
+0.86 mg/°C. Other consumer parts state limits of the same order (a few % in scale and
+cross-axis, tens of mg in offset).
+
+A spec file (TOML or JSON) gives any of these keys; the others keep the default::
+
+    scale = 0.03                 # ± fraction of the reading
+    cross_axis = 0.02            # ± fraction of the other axis' reading
+    bias_mps2 = 0.785            # ± m/s² (or bias_mg = 80)
+    bias_tempco_mps2_per_c = 0.0084   # ± m/s² per °C (or bias_tempco_mg_per_c = 0.86)
+"""
+
+from __future__ import annotations
+
+import json
+import tomllib
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from mountcal.errors import InputError
+
+MG = 9.80665e-3  # m/s² per mg
+
+
+@dataclass(frozen=True)
+class SensorSpec:
+    """± limits of the sensor errors (fractions, m/s², m/s² per °C) and where they come from."""
+
+    scale: float = 0.03
+    cross_axis: float = 0.02
+    bias_mps2: float = 80 * MG
+    bias_tempco_mps2_per_c: float = 60 * MG / 70
+    source: str = "default class: uncalibrated consumer MEMS (MPU-6050 datasheet limits)"
+
+    @property
+    def is_default(self) -> bool:
+        return self.source == DEFAULT.source
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+DEFAULT = SensorSpec()
+_KEYS = {
+    "scale": ("scale", 1.0),
+    "cross_axis": ("cross_axis", 1.0),
+    "bias_mps2": ("bias_mps2", 1.0),
+    "bias_mg": ("bias_mps2", MG),
+    "bias_tempco_mps2_per_c": ("bias_tempco_mps2_per_c", 1.0),
+    "bias_tempco_mg_per_c": ("bias_tempco_mps2_per_c", MG),
+}
+
+
+def read_spec(path: str | Path) -> SensorSpec:
+    """A spec from a TOML or JSON datasheet file; unknown keys or bad values are refused."""
+    path = Path(path)
+    todo = f"Give a TOML or JSON file with any of {', '.join(_KEYS)} (non-negative numbers)."
+    try:
+        text = path.read_text(encoding="utf-8")
+        doc = json.loads(text) if path.suffix.lower() == ".json" else tomllib.loads(text)
+    except (OSError, UnicodeDecodeError, ValueError) as err:
+        raise InputError(str(path), "a readable TOML or JSON sensor spec", str(err), todo) from err
+    if not isinstance(doc, dict):
+        raise InputError(str(path), "a table of limits", type(doc).__name__, todo)
+    unknown = sorted(set(doc) - set(_KEYS))
+    if unknown:
+        raise InputError(str(path), f"keys among {', '.join(_KEYS)}", f"unknown keys {', '.join(unknown)}", todo)
+    values: dict[str, Any] = {}
+    for key, value in doc.items():
+        if isinstance(value, bool) or not isinstance(value, int | float) or not 0 <= value < 1e3:
+            raise InputError(str(path), f"{key}: a non-negative number", repr(value), todo)
+        field, unit = _KEYS[key]
+        values[field] = float(value) * unit
+    if values.get("scale", 0) >= 0.5 or values.get("cross_axis", 0) >= 0.5:
+        raise InputError(str(path), "scale and cross_axis as fractions (0.03 for 3 %)", repr(doc), todo)
+    return replace(DEFAULT, **values, source=f"sensor spec {path}")

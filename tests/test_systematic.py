@@ -1,0 +1,135 @@
+"""Systematic (Type B) uncertainty: the sensor's limits through the final fit, beside and inside the σ."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mountcal import systematic
+from mountcal.calibrate import Options, calibrate
+from mountcal.cli import main
+from mountcal.conventions import G_N
+from mountcal.estimate import full
+from mountcal.result import Calibration
+from mountcal.sensor_spec import DEFAULT, SensorSpec, read_spec
+from mountcal.simulate import simulate_stops
+from mountcal.stoptable import StopTable, write_stop_table
+
+BIAS_ONLY = SensorSpec(scale=0.0, cross_axis=0.0, bias_mps2=0.5, bias_tempco_mps2_per_c=0.0, source="test: bias only")
+
+
+@pytest.fixture(scope="module")
+def table() -> StopTable:
+    return simulate_stops(12.0, -4.0, 33.0, slope_deg=7.0, noise_g=0.002, seed=11)[0]
+
+
+def _parts(cal: Calibration, key: str) -> tuple[float, float]:
+    assert cal.systematic is not None
+    stat, sys = cal.systematic.statistical[key], cal.systematic.systematic[key]
+    assert stat is not None and sys is not None
+    return stat, sys
+
+
+def test_the_sigma_fields_hold_the_root_sum_of_squares_of_both_parts(table: StopTable) -> None:
+    cal = calibrate(table)
+    for key in ("roll_deg", "pitch_deg", "yaw_deg", "slope_deg"):
+        stat, sys = _parts(cal, key)
+        assert getattr(cal, key.replace("_deg", "_sigma_deg")) == pytest.approx(np.hypot(stat, sys), rel=1e-12)
+        assert sys > 0  # the default class: one slope cannot see scale and cross-axis
+
+
+def test_duplicating_stops_shrinks_only_the_statistical_part(table: StopTable) -> None:
+    opts = Options(model="rotation,slope,bias")
+    a, b = calibrate(table, opts), calibrate(table.subset(np.repeat(np.arange(len(table)), 2)), opts)
+    for key in ("roll_deg", "pitch_deg", "yaw_deg"):
+        (sa, ya), (sb, yb) = _parts(a, key), _parts(b, key)
+        assert sb == pytest.approx(sa / np.sqrt(2), rel=1e-6)
+        assert yb == pytest.approx(ya, rel=0.01)  # only what the residual sees of the errors narrows
+
+
+def test_an_error_the_model_fits_contributes_nothing(table: StopTable) -> None:
+    fitted = calibrate(table, Options(model="rotation,slope,bias", spec=BIAS_ONLY))
+    unfitted = calibrate(table, Options(model="rotation,slope", spec=BIAS_ONLY))
+    for key in ("roll_deg", "pitch_deg", "yaw_deg", "slope_deg"):
+        assert _parts(fitted, key)[1] == pytest.approx(0.0, abs=1e-9)
+    assert _parts(unfitted, "roll_deg")[1] > 1e-3  # the same bias, not fitted, moves the tilt
+    assert fitted.systematic is not None and "bias_x" not in fitted.systematic.propagated
+
+
+@pytest.mark.parametrize("pair", [(0, 2), (1, 2), (0, 1)])
+def test_the_systematic_part_is_the_shift_a_real_fit_makes_for_a_cross_axis_error(pair: tuple[int, int]) -> None:
+    """A cross-axis coupling c in a (nearly noise-free) session moves the fitted angles by what K A δ predicts."""
+    c = 0.003
+    e = np.eye(3)
+    e[pair] = e[pair[::-1]] = c
+    clean, _ = simulate_stops(3.0, -2.0, 20.0, slope_deg=6.0, noise_g=1e-7, seed=2)
+    skewed, _ = simulate_stops(3.0, -2.0, 20.0, slope_deg=6.0, noise_g=1e-7, seed=2, scale_matrix=e)
+    # spec: this one coupling, with a limit a such that its standard uncertainty a/√3 is c
+    names = {(0, 1): "cross_xy", (0, 2): "cross_xz", (1, 2): "cross_yz"}
+    opts = Options(model="rotation,slope,bias", gravity_mps2=G_N)
+    a, b = calibrate(clean, opts), calibrate(skewed, opts)
+    errors = systematic.SensorErrors((names[pair],), np.array([[c**2]]), "test", {})
+    # assessed on an ordinary session (1 mg noise) with the coupling: where its residual sees nothing of it the
+    # limit stands, where it sees it (xy) the limit narrows and what it sees counts in full
+    noisy, _ = simulate_stops(3.0, -2.0, 20.0, slope_deg=6.0, noise_g=1e-3, seed=2, scale_matrix=e)
+    f = full.fit(noisy, ("rotation", "slope", "bias"), G_N)
+    cov, used, _ = systematic.propagate(noisy, f.state, f.names, f.terms, f.state.g_mps2, errors)
+    assert used == (names[pair],)
+    predicted = systematic.angle_sigmas(cov, f.names, f.state.rot_vs, yaw=True, slope=True)
+    for key in ("roll_deg", "pitch_deg", "yaw_deg"):
+        shift = abs(getattr(b, key) - getattr(a, key))
+        assert predicted[key] == pytest.approx(shift, rel=0.1, abs=0.01 * np.degrees(c))  # second order: c²
+
+
+def test_a_large_systematic_part_withdraws_confidence_and_says_so(table: StopTable) -> None:
+    loose = SensorSpec(scale=0.2, cross_axis=0.2, source="test: a loose sensor")
+    cal = calibrate(table, Options(model="rotation,slope,bias", spec=loose))
+    assert not cal.confident
+    assert any("dominated by sensor errors" in n for n in cal.notes)
+    assert any("uncertain by" in n for n in cal.notes)
+    tight = calibrate(table, Options(model="rotation,slope,bias", spec=BIAS_ONLY))
+    assert tight.confident and not any("dominated" in n for n in tight.notes)
+
+
+def test_the_default_class_is_stated_in_the_result_and_a_spec_replaces_it(table: StopTable, tmp_path: Path) -> None:
+    cal = calibrate(table)
+    assert cal.systematic is not None and cal.systematic.default_spec
+    assert any("default class" in n for n in cal.notes)
+    spec = tmp_path / "sensor.toml"
+    spec.write_text("scale = 0.01\ncross_axis = 0.005\nbias_mg = 20\n", encoding="utf-8")
+    read = read_spec(spec)
+    assert read.scale == 0.01 and read.bias_mps2 == pytest.approx(20 * 9.80665e-3)
+    assert read.bias_tempco_mps2_per_c == DEFAULT.bias_tempco_mps2_per_c  # not given: the default's
+    own = calibrate(table, Options(spec=read))
+    assert own.systematic is not None and not own.systematic.default_spec
+    assert not any("default class" in n for n in own.notes)
+    assert _parts(own, "roll_deg")[1] < _parts(cal, "roll_deg")[1]
+
+
+def test_the_result_file_keeps_both_parts(table: StopTable, tmp_path: Path) -> None:
+    cal = calibrate(table)
+    cal.save(tmp_path / "r.json")
+    back = Calibration.load(tmp_path / "r.json")
+    assert back.systematic == cal.systematic
+    doc = json.loads((tmp_path / "r.json").read_text(encoding="utf-8"))
+    assert doc["systematic"]["dominant"] is True
+    assert doc["uncertainty"]["roll_deg"] == pytest.approx(np.hypot(*_parts(cal, "roll_deg")))
+
+
+def test_cli_summary_shows_both_parts_and_refuses_a_bad_spec(
+    table: StopTable, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    stops = tmp_path / "stops.csv"
+    write_stop_table(replace(table, cov_s=None), stops)
+    assert main(["calibrate", str(stops)]) == 0
+    out = capsys.readouterr().out
+    assert "σ statistical / systematic" in out and "default class" in out
+    bad = tmp_path / "bad.toml"
+    bad.write_text("scale = 3\n", encoding="utf-8")  # a percentage where a fraction belongs
+    assert main(["calibrate", str(stops), "--sensor-spec", str(bad)]) != 0
+    err = capsys.readouterr().err
+    assert "bad.toml" in err and "Traceback" not in err
