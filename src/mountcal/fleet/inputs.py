@@ -70,7 +70,7 @@ class FleetJob:
     log : str
         The log as the results name it: its path as found (split files joined with ``" + "``).
     job : LogJob
-        What :func:`mountcal.pipeline.calibrate_log` needs, with absolute paths, so that a worker
+        What :func:`mountcal.pipeline.calibrate_job` needs, with absolute paths, so that a worker
         on another machine of a shared file system finds the files.
     headings : {"uphill", "relative", "none"}
         What ``beta_deg`` of a stop table is measured from (logs find their own headings).

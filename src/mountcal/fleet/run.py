@@ -185,9 +185,9 @@ def _run_locked(jobs: Sequence[FleetJob], output: str | Path, options: FleetOpti
     if doubtful and options.require_confident:
         raise InputError(
             str(output),
-            "a confident calibration of every log (--require-confident)",
+            "a confident calibration of every log (require_confident)",
             f"{len(doubtful)} not confident: {', '.join(doubtful[:5])}" + (" …" if len(doubtful) > 5 else ""),
-            "Check those logs (their results are kept for the next run), or drop --require-confident.",
+            "Check those logs (their results are kept for the next run), or accept results that are not confident.",
         )
     said = {"mountcal.confident": json.dumps(not doubtful), "mountcal.not_confident_logs": json.dumps(doubtful)}
     write_table(vehicles, schema(VEHICLE_COLUMNS, "vehicles"), vehicles_path, said)

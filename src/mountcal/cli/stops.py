@@ -1,0 +1,55 @@
+"""``mountcal stops LOG… -o STOPS``: detect the parked periods and write the stop table (``-o -``: CSV on stdout)."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from pathlib import Path
+from typing import Any
+
+from mountcal.cli.options import STDOUT, add_command, add_log_options, log_inputs, log_job, print_json, working
+from mountcal.terminal import safe
+
+log = logging.getLogger("mountcal")
+
+
+def add_parser(sub: Any) -> None:
+    p = add_command(
+        sub,
+        "stops",
+        "detect the parked periods of a log and write the stop table",
+        json_help="a summary (stops, headings, output) on stdout",
+    )
+    p.add_argument("input", nargs="+", metavar="LOG", help="log file(s); splits of one log are joined")
+    p.add_argument("-o", "--output", required=True, help="stop table to write (CSV or .parquet; '-': CSV on stdout)")
+    add_log_options(p)
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from mountcal.atomic import atomic_path
+    from mountcal.calibrate import Options
+    from mountcal.paths import check_outputs
+    from mountcal.pipeline import describe, stops_of_log
+
+    to_stdout = args.output == STDOUT
+    check_outputs({"-o": None if to_stdout else args.output}, log_inputs(args))
+    with working(args, "reading the log and finding its stops"):
+        samples, found = stops_of_log(log_job(args, Options()))
+    for line in describe((samples, found), len(args.input)):
+        log.info("%s", safe(line))
+    if to_stdout:
+        found.frame.to_csv(sys.stdout, index=False, float_format="%.15g")
+    else:
+        with atomic_path(args.output) as tmp:
+            if Path(args.output).suffix.lower() in (".parquet", ".pq"):
+                found.frame.to_parquet(tmp, index=False)
+            else:
+                found.frame.to_csv(tmp, index=False, float_format="%.15g")
+        log.info("wrote %s (%d stops; headings: %s)", safe(args.output), len(found.frame), found.heading_source)
+    if args.json and not to_stdout:
+        print_json(
+            {"output": args.output, "stops": len(found.frame), "headings": found.headings, "samples": len(samples)}
+        )
+    return 0
