@@ -13,7 +13,6 @@ from mountcal.cli.options import (
     add_log_options,
     detection,
     fit_options,
-    log_inputs,
     log_options,
     print_json,
     progress_wanted,
@@ -52,7 +51,6 @@ def add_parser(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from mountcal.fleet import FleetOptions, JobDefaults, collect_jobs, outputs_of, run_fleet, summary_lines
-    from mountcal.paths import check_outputs
 
     if args.scheduler is not None:
         require("distributed", "fleet", "fleet --scheduler")  # before any log is read or hashed
@@ -63,8 +61,6 @@ def run(args: argparse.Namespace) -> int:
         options=fit_options(args),
         headings=args.headings,
     )
-    table, vehicles, _ = outputs_of(args.output)
-    check_outputs({"-o": table, "its vehicles table": vehicles}, log_inputs(args))
     ours: list[Path] = []
     jobs = collect_jobs(args.input, defaults, exclude=outputs_of(args.output), set_aside=ours)
     if ours:
