@@ -33,11 +33,9 @@ def add_parser(sub: Any) -> None:
         "calibrate",
         "estimate the mounting from a stop table or a log",
         json_help="write the result JSON on stdout (the summary goes to stderr)",
+        inputs=("STOPS|LOG", "stop table (beta_deg, ax, ay, az, ...; '-': CSV on stdin) or log file(s)"),
+        output="result JSON to write ('-': stdout)",
     )
-    p.add_argument(
-        "input", nargs="+", metavar="STOPS|LOG", help="stop table (beta_deg, ax, ay, az, ...) or log file(s)"
-    )
-    p.add_argument("-o", "--output", default=None, help="result JSON to write ('-': stdout)")
     p.add_argument("--report", default=None, help="also write a self-contained HTML report here")
     add_log_options(p)
     g = p.add_argument_group("fit")

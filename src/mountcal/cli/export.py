@@ -29,10 +29,15 @@ log = logging.getLogger("mountcal")
 
 
 def add_parser(sub: Any) -> None:
-    p = add_command(sub, "export", "write the mounting for u-blox, NovAtel, ROS 2, Autoware, or as JSON/YAML")
-    p.add_argument("result", metavar="RESULT.json", help="result written by `mountcal calibrate -o`")
+    p = add_command(
+        sub,
+        "export",
+        "write the mounting for u-blox, NovAtel, ROS 2, Autoware, or as JSON/YAML",
+        inputs=("RESULT.json", "result written by `mountcal calibrate -o`"),
+        many=False,
+        output="file to write; none or '-' writes to stdout",
+    )
     p.add_argument("--to", required=True, choices=FORMAT_NAMES, help="target format (see docs/exporters.md)")
-    p.add_argument("-o", "--output", default=None, help="file to write; none or '-' writes to stdout")
     p.add_argument(
         "--yaw-undetermined",
         choices=("refuse", "zero"),
@@ -61,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
     from mountcal.paths import check_outputs
     from mountcal.result import Calibration
 
-    result = Path(args.result)
+    result = Path(args.input)
     to_stdout = args.output in (None, STDOUT)
     check_outputs({"-o": None if to_stdout else args.output}, {"RESULT.json": result})
     cal = Calibration.load(result)

@@ -29,11 +29,10 @@ def add_parser(sub: Any) -> None:
         "fleet",
         "calibrate many logs of many vehicles: consensus per vehicle, remounts",
         json_help="the run's summary (logs, vehicles, failures, outputs) as JSON on stdout",
+        inputs=("INPUTS", "folders of logs (vehicle = parent folder), globs, manifest CSVs"),
+        output="per-log Parquet table (vehicles go to <stem>_vehicles)",
+        output_required=True,
     )
-    p.add_argument(
-        "input", nargs="+", metavar="INPUTS", help="folders of logs (vehicle = parent folder), globs, manifest CSVs"
-    )
-    p.add_argument("-o", "--output", required=True, help="per-log Parquet table (vehicles go to <stem>_vehicles)")
     p.add_argument("--workers", type=int, default=None, help="local worker processes (default: all cores)")
     p.add_argument("--scheduler", default=None, help="run on this Dask scheduler, tcp://HOST:PORT")
     p.add_argument("--retry-failed", action="store_true", help="recalculate logs an earlier run recorded as failed")

@@ -11,8 +11,14 @@ from mountcal.terminal import safe
 
 
 def add_parser(sub: Any) -> None:
-    p = add_command(sub, "inspect", "list what a log holds", json_help="the listing as JSON on stdout")
-    p.add_argument("input", metavar="LOG")
+    p = add_command(
+        sub,
+        "inspect",
+        "list what a log holds",
+        json_help="the listing as JSON on stdout",
+        inputs=("LOG", "the log"),
+        many=False,
+    )
     p.add_argument("--dbc", action="append", default=None, help="DBC naming the CAN messages (repeat for several)")
     p.set_defaults(run=run, mapping=None, channel=None, topic=None)
 

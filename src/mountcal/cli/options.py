@@ -74,9 +74,24 @@ def common_options() -> argparse.ArgumentParser:
     return common
 
 
-def add_command(sub: Any, name: str, help_text: str, *, json_help: str | None = None) -> argparse.ArgumentParser:
-    """A subcommand with the common options (and ``--json`` when it has a machine-readable result)."""
+def add_command(
+    sub: Any,
+    name: str,
+    help_text: str,
+    *,
+    json_help: str | None = None,
+    inputs: tuple[str, str] | None = None,
+    many: bool = True,
+    output: str | None = None,
+    output_required: bool = False,
+) -> argparse.ArgumentParser:
+    """A subcommand with the common options; its inputs (``args.input``: metavar, help), its ``-o`` and,
+    when it has a machine-readable result, ``--json``."""
     p: argparse.ArgumentParser = sub.add_parser(name, help=help_text, description=help_text, parents=[common_options()])
+    if inputs is not None:
+        p.add_argument("input", nargs="+" if many else None, metavar=inputs[0], help=inputs[1])
+    if output is not None:
+        p.add_argument("-o", "--output", required=output_required, default=None, help=output)
     if json_help is not None:
         p.add_argument("--json", action="store_true", help=json_help)
     return p

@@ -19,14 +19,15 @@ def add_parser(sub: Any) -> None:
         "report",
         "write a self-contained HTML report of a calibration result",
         json_help="the output and its figures as JSON on stdout",
+        inputs=("RESULT.json", "result written by `mountcal calibrate -o`"),
+        many=False,
+        output="HTML file to write (default: RESULT with .html; '-': stdout)",
     )
-    p.add_argument("result", metavar="RESULT.json", help="result written by `mountcal calibrate -o`")
     p.add_argument(
         "--stops", default=None, help="the stop table the result was fitted to (adds the 3-D figure, headings, σ)"
     )
     p.add_argument("--unit", choices=("mps2", "g"), default="mps2", help="unit of ax, ay, az in --stops")
     p.add_argument("--figures", choices=("svg", "png"), default="svg", help="inline SVG (default) or base64 PNG")
-    p.add_argument("-o", "--output", default=None, help="HTML file to write (default: RESULT with .html; '-': stdout)")
     p.set_defaults(run=run)
 
 
@@ -40,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
     from mountcal.result_file import read_json
     from mountcal.stoptable import read_stop_table, same_stops
 
-    result = Path(args.result)
+    result = Path(args.input)
     to_stdout = args.output == STDOUT
     output = Path(args.output) if args.output is not None else result.with_suffix(".html")
     check_outputs({"-o": None if to_stdout else output}, {"result": result, "--stops": args.stops})

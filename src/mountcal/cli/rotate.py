@@ -19,10 +19,11 @@ def add_parser(sub: Any) -> None:
         "rotate",
         "write a log's samples in the vehicle frame (Parquet, CSV or MCAP)",
         json_help="what was read, written and dropped, as JSON on stdout",
+        inputs=("LOG", "log file(s); splits of one log are joined"),
+        output="file to write (.parquet, .csv or .mcap)",
+        output_required=True,
     )
-    p.add_argument("input", nargs="+", metavar="LOG", help="log file(s); splits of one log are joined")
     p.add_argument("--calibration", required=True, help="result JSON written by `mountcal calibrate`")
-    p.add_argument("-o", "--output", required=True, help="file to write (.parquet, .csv or .mcap)")
     p.add_argument(
         "--format", choices=("parquet", "csv", "mcap"), default=None, help="default: from -o's suffix, else parquet"
     )

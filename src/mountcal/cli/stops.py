@@ -20,9 +20,10 @@ def add_parser(sub: Any) -> None:
         "stops",
         "detect the parked periods of a log and write the stop table",
         json_help="a summary (stops, headings, output) on stdout",
+        inputs=("LOG", "log file(s); splits of one log are joined"),
+        output="stop table to write (CSV or .parquet; '-': CSV on stdout)",
+        output_required=True,
     )
-    p.add_argument("input", nargs="+", metavar="LOG", help="log file(s); splits of one log are joined")
-    p.add_argument("-o", "--output", required=True, help="stop table to write (CSV or .parquet; '-': CSV on stdout)")
     add_log_options(p)
     p.set_defaults(run=run)
 
