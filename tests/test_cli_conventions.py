@@ -83,3 +83,19 @@ def test_inspect_json_lists_the_streams(capsys: pytest.CaptureFixture[str]) -> N
     assert main(["inspect", str(PARKING), "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["format"] == "mcap" and doc["streams"] and all("count" in s for s in doc["streams"])
+
+
+def test_an_empty_csv_is_refused_alike_by_calibrate_and_by_fleet(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """One stop-table sniffer: the same message whether one log is calibrated or a fleet of them."""
+    import pandas as pd
+
+    empty = tmp_path / "van" / "empty.csv"
+    empty.parent.mkdir()
+    empty.write_bytes(b"")
+    assert main(["calibrate", str(empty)]) == 2
+    assert "an empty file (0 bytes)" in capsys.readouterr().err
+    assert main(["fleet", str(empty.parent), "-o", str(tmp_path / "f.parquet")]) == 0
+    row = pd.read_parquet(tmp_path / "f.parquet").iloc[0]
+    assert row["status"] == "failed" and "an empty file (0 bytes)" in row["error"]

@@ -14,7 +14,7 @@ def summary(cal: Calibration) -> str:
         return f"{value:{fmt}}{unit} ± {sigma:{fmt}}{unit}" if sigma is not None else f"{value:{fmt}}{unit}"
 
     sel = cal.model_selection
-    how = "fixed by --model" if sel.get("mode") == "fixed" else "auto: " + " → ".join(sel.get("steps", []))
+    how = "fixed, not chosen" if sel.get("mode") == "fixed" else "auto: " + " → ".join(sel.get("steps", []))
     how = how if cal.method == "full" else cal.method  # "paper", or "driving" when there were no stops
     lines = [
         f"mountcal — {cal.method} method, model: {', '.join(cal.model)} ({how})",
@@ -39,7 +39,7 @@ def summary(cal: Calibration) -> str:
     lines += [f"  note: {n}" for n in cal.notes]
     if not cal.confident:
         found = "; ".join(f"{u.get('what')} ({u.get('size')})" for u in cal.unexplained) or "see the notes"
-        lines.append(f"  NOT CONFIDENT: {found}; rotate warns, --require-confident refuses")
+        lines.append(f"  NOT CONFIDENT: {found}; rotating with it warns, requiring a confident result refuses it")
     lines.append("  (uncertainties are 1σ)")
     return "\n".join(lines)
 
