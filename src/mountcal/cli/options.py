@@ -47,8 +47,11 @@ class _Stderr(logging.Handler):
     """Status lines of ``mountcal.*`` loggers on the current stderr (never stdout), prefixed ``mountcal:``."""
 
     def emit(self, record: logging.LogRecord) -> None:
+        from tqdm import tqdm  # writes above a progress bar being drawn, instead of through it
+
         level = "" if record.levelno in (logging.INFO, logging.ERROR) else f"{record.levelname.lower()}: "
-        print(f"mountcal: {level}{record.getMessage()}", file=sys.stderr, flush=True)
+        tqdm.write(f"mountcal: {level}{record.getMessage()}", file=sys.stderr)
+        sys.stderr.flush()
 
 
 def configure_logging(verbosity: int) -> None:
@@ -218,10 +221,18 @@ def progress_wanted(args: argparse.Namespace) -> bool:
 
 
 def bar(args: argparse.Namespace, total: int | None, label: str, unit: str = "it") -> tqdm[Any]:
-    """A tqdm progress bar on stderr (disabled under -q or off a terminal unless --progress)."""
+    """A tqdm progress bar on stderr (disabled under -q or off a terminal unless --progress); without a
+    total, the elapsed time."""
     from tqdm import tqdm
 
-    return tqdm(total=total, desc=f"mountcal: {label}", unit=unit, file=sys.stderr, disable=not progress_wanted(args))
+    return tqdm(
+        total=total,
+        desc=f"mountcal: {label}",
+        unit=unit,
+        file=sys.stderr,
+        disable=not progress_wanted(args),
+        bar_format=None if total is not None else "{desc} … {elapsed}",
+    )
 
 
 @contextmanager
