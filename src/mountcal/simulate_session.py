@@ -1,7 +1,8 @@
 """Simulated sessions written to files: a stop table, or a parking session as logs (``mountcal simulate``).
 
-The command line only parses; this module checks the outputs, simulates, writes and says what it
-wrote (lines for the user). The truth goes to a JSON file when asked.
+The command line parses and checks that no output lands on an input (:func:`mountcal.paths.check_outputs`
+with its option names); this module simulates, writes atomically and says what it wrote (lines for the
+user). The truth goes to a JSON file when asked.
 """
 
 from __future__ import annotations
@@ -18,7 +19,6 @@ import numpy as np
 from mountcal.atomic import atomic_path
 from mountcal.conventions import G_N, normal_gravity
 from mountcal.errors import InputError
-from mountcal.paths import check_outputs
 from mountcal.simulate import PRESETS, simulate_parking_log, simulate_stops
 from mountcal.stoptable import Headings, write_stop_table
 
@@ -60,7 +60,6 @@ def write_stop_session(
     truth: PathLike | None = None,
 ) -> list[str]:
     """Simulate stops and write the stop table (and the truth); return lines for the user."""
-    check_outputs({"the stop table": output, "the truth": truth}, {})
     table, found = simulate_stops(headings=headings, heading_offset_deg=heading_offset_deg, seed=seed, **params)
     write_stop_table(table, Path(output))
     roll, pitch, yaw = found.angles_deg
@@ -105,8 +104,6 @@ def write_log_session(
     """
     from mountcal.io import export
 
-    named = {f"log #{i + 1}" if len(logs) > 1 else "the log": p for i, p in enumerate(logs)}
-    check_outputs(named | {"the protocol sheet": protocol, "the truth": truth}, {"the DBC": dbc})
     formats = [export.check_log_path(p, dbc) for p in logs]
     if protocol is not None and "asc" in formats and len(formats) > 1:
         raise InputError(

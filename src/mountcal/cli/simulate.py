@@ -48,6 +48,7 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from mountcal.paths import check_outputs
     from mountcal.simulate_session import FieldEffects, session_params, write_log_session, write_stop_session
 
     overrides = {k: getattr(args, k) for k in ("roll_deg", "pitch_deg", "yaw_deg", "slope_deg", "noise_g")}
@@ -60,6 +61,8 @@ def run(args: argparse.Namespace) -> int:
                 "-o",
                 "Name the logs with --log, and the protocol sheet and the truth with their options.",
             )
+        logs = {f"--log #{i + 1}" if len(args.log) > 1 else "--log": p for i, p in enumerate(args.log)}
+        check_outputs(logs | {"--protocol": args.protocol, "--truth": args.truth}, {"--dbc": args.dbc})
         session = {k: getattr(args, k) for k in ("stop_s", "drive_s", "rate_hz") if getattr(args, k) is not None}
         effects = FieldEffects(
             gyro_bias_dps=None if args.gyro_bias_dps is None else tuple(args.gyro_bias_dps),
@@ -82,6 +85,7 @@ def run(args: argparse.Namespace) -> int:
                 each_log=lambda _: shown.update(),
             )
     elif args.output is not None:
+        check_outputs({"-o": args.output, "--truth": args.truth}, {})
         lines = write_stop_session(
             args.output,
             params,

@@ -218,7 +218,7 @@ def _check_output(output: Path, jobs: Sequence[FleetJob]) -> None:
         )
     table, vehicles, _ = outputs_of(output)
     check_outputs(
-        {"the fleet table": table, "its vehicles table": vehicles},
+        {"fleet table": table, "vehicles table": vehicles},
         {
             "log": [p for job in jobs for p in job.job.paths],
             "DBC, mapping or protocol sheet": [p for job in jobs for p in _settings_files(job)],
