@@ -61,12 +61,15 @@ def add_parser(sub: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     from mountcal.atomic import atomic_path
     from mountcal.calibrate import calibrate
+    from mountcal.errors import InputError
     from mountcal.paths import check_outputs
     from mountcal.pipeline import calibrate_job, describe, is_stop_table
     from mountcal.stoptable import read_stop_table
     from mountcal.summary import summary
 
     to_stdout = args.json or args.output == STDOUT
+    if args.input == [STDOUT] and sys.stdin.isatty():
+        raise InputError("-", "a CSV stop table piped on stdin", "a terminal", "Pipe one in, or name the file.")
     check_outputs({"-o": None if args.output == STDOUT else args.output, "--report": args.report}, log_inputs(args))
     if args.report is not None:
         require("matplotlib", "report", "calibrate --report")  # before any work: nothing is written without it
