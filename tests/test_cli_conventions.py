@@ -99,3 +99,19 @@ def test_an_empty_csv_is_refused_alike_by_calibrate_and_by_fleet(
     assert main(["fleet", str(empty.parent), "-o", str(tmp_path / "f.parquet")]) == 0
     row = pd.read_parquet(tmp_path / "f.parquet").iloc[0]
     assert row["status"] == "failed" and "an empty file (0 bytes)" in row["error"]
+
+
+def test_a_library_refusal_names_no_option_and_the_cli_names_its_own(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from mountcal.errors import NotEnoughInformation
+    from mountcal.exporters import export
+
+    result = tmp_path / "level.json"
+    assert main(["calibrate", str(STOPS), "--headings", "relative", "-o", str(result)]) == 0  # yaw not determined
+    with pytest.raises(NotEnoughInformation) as err:
+        export(Calibration.load(result), "json")
+    assert "--" not in str(err.value) and "yaw='zero'" in str(err.value)
+    capsys.readouterr()
+    assert main(["export", str(result), "--to", "json"]) == 3
+    assert "--yaw-undetermined zero" in capsys.readouterr().err
