@@ -49,12 +49,6 @@ def add_parser(sub: Any) -> None:
         default=None,
         help="local gravity in m/s² (default: from lat_deg/alt_m when the data have them, else 9.80665)",
     )
-    g.add_argument(
-        "--use",
-        choices=("auto", "stops", "driving"),
-        default="auto",
-        help="for a log: its parked stops, its driving (speed changes), or whatever it supports (default)",
-    )
     p.set_defaults(run=run)
 
 

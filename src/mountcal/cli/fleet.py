@@ -59,6 +59,7 @@ def run(args: argparse.Namespace) -> int:
         uphill_azimuth_deg=args.uphill_azimuth_deg,
         options=fit_options(args),
         headings=args.headings,
+        use=args.use,
     )
     ours: list[Path] = []
     jobs = collect_jobs(args.input, defaults, exclude=outputs_of(args.output), set_aside=ours)

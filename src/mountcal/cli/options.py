@@ -146,6 +146,12 @@ def add_fit_options(g: argparse.ArgumentParser | argparse._ArgumentGroup, *, hea
     g.add_argument("--model", default="auto", help=MODEL_HELP)
     g.add_argument("--headings", choices=HEADINGS, default="uphill", help=headings_help)
     g.add_argument("--max-yaw-sigma", type=float, default=5.0, help="report yaw only below this 1σ (deg)")
+    g.add_argument(
+        "--use",
+        choices=("auto", "stops", "driving"),
+        default="auto",
+        help="for a log: its parked stops, its driving (speed changes), or whatever it supports (default)",
+    )
 
 
 def log_options(args: argparse.Namespace) -> LogOptions:
