@@ -204,19 +204,18 @@ def real_canedge(root: Path) -> None:
 
     from mountcal.errors import NotEnoughInformation
     from mountcal.io.logs import LogOptions
-    from mountcal.pipeline import LogJob
-    from mountcal.pipeline_drive import calibrate_any
+    from mountcal.pipeline import calibrate_log
 
     base = root / "canedge" / "3BA199E2_car_DK_2021-07-26"
     opts = LogOptions(dbc=str(root / "canedge" / "dbc" / "gnss.dbc"), channel=2)
     print("## CANedge car (3BA199E2), CAN channel 2, speed from gnss_speed\n")
     rows: dict[str, Any] = {}
     for drive in ("00000164", "00000165"):
-        job = LogJob(paths=tuple(sorted(glob.glob(str(base / drive / "*.MF4")))), log=opts)
-        driving = calibrate_any(job, use="driving")
-        both = calibrate_any(job)
+        files = sorted(glob.glob(str(base / drive / "*.MF4")))
+        driving = calibrate_log(files, log=opts, use="driving")
+        both = calibrate_log(files, log=opts)
         try:
-            stops = calibrate_any(job, use="stops")
+            stops = calibrate_log(files, log=opts, use="stops")
         except NotEnoughInformation as err:
             stops = None
             print(f"- {drive}: stops alone: {err}".replace(str(base) + "/", ""))

@@ -116,7 +116,7 @@ def test_level_only_writes_a_frame_whose_metadata_and_columns_say_yaw_is_the_sen
     capsys.readouterr()
     assert main(["rotate", str(PARKING), "--calibration", str(result), "-o", str(out), "--level-only"]) == 0
     captured = capsys.readouterr()
-    assert "levelled" in captured.err and "levelled-frame samples" in captured.out
+    assert "levelled" in captured.err and "levelled-frame samples" in captured.err
     schema = pq.read_schema(out)
     meta = {k.decode(): v.decode() for k, v in (schema.metadata or {}).items()}
     assert meta["mountcal.frame"].startswith("levelled") and "sensor's own" in meta["mountcal.frame"]
@@ -165,10 +165,9 @@ def test_the_python_api_refuses_an_undetermined_yaw_unless_level_only(noyaw: Cal
 
 def test_a_drive_that_does_not_determine_yaw_stores_no_yaw_and_is_refused(drive_csv: Path, tmp_path: Path) -> None:
     from mountcal.estimate.driving import DrivingOptions
-    from mountcal.pipeline import LogJob
-    from mountcal.pipeline_drive import calibrate_any
+    from mountcal.pipeline import calibrate_log
 
-    done = calibrate_any(LogJob(paths=(str(drive_csv),)), use="driving", driving=DrivingOptions(max_yaw_sigma_deg=1e-6))
+    done = calibrate_log(drive_csv, use="driving", driving=DrivingOptions(max_yaw_sigma_deg=1e-6))
     cal = done.calibration
     assert cal.yaw_deg is None and "determines yaw only" in str(cal.yaw_reason)
     assert abs(np.degrees(angles_from_rot_vs(cal.rot_vs)[2])) < 1e-9
@@ -294,8 +293,8 @@ def test_issue_repro_fleet_never_takes_its_own_outputs_as_logs(
     first.rename(van / "day4.parquet")
     capsys.readouterr()
     second = tmp_path / "second.parquet"
-    assert main(["fleet", str(tmp_path), "-o", str(second), "--workers", "1", "-q"]) == 0
-    out = capsys.readouterr().out
+    assert main(["fleet", str(tmp_path), "-o", str(second), "--workers", "1"]) == 0
+    out = capsys.readouterr().err  # status lines go to stderr
     logs = pd.read_parquet(second)
     assert [Path(p).name for p in logs["log"]] == ["parking.mcap"] and (logs["status"] == "ok").all()
     assert "set aside 4 file(s) mountcal wrote" in out  # day2, day3, day4 and the first run's vehicles table
@@ -380,13 +379,12 @@ def mirror_of(cal: Calibration) -> Calibration:
 def test_issue_repro_stops_and_driving_that_disagree_in_tilt_are_a_finding_not_combined(
     drive_and_stops, capsys: pytest.CaptureFixture[str]
 ) -> None:  # type: ignore[no-untyped-def]
-    from mountcal.cli import summary
     from mountcal.estimate.driving import estimate_driving
     from mountcal.estimate.driving_combine import combine
     from mountcal.io.logs import read_log
     from mountcal.outputs.report import render
-    from mountcal.pipeline import LogJob
-    from mountcal.pipeline_drive import stops_with_drive
+    from mountcal.pipeline import LogJob, stops_with_drive
+    from mountcal.summary import summary
 
     path, table, static = drive_and_stops
     samples = read_log([path])
@@ -434,12 +432,11 @@ def test_stops_and_driving_that_disagree_in_yaw_are_not_combined(drive_and_stops
 @pytest.mark.real_data
 def test_a_real_drive_with_stops_is_combined_only_when_they_agree_and_rotates_to_plus_g_up(real_data: Path) -> None:
     from mountcal.io.logs import LogOptions
-    from mountcal.pipeline import LogJob
-    from mountcal.pipeline_drive import calibrate_any
+    from mountcal.pipeline import calibrate_log
 
     car = real_data / "canedge" / "3BA199E2_car_DK_2021-07-26" / "00000165"
     opts = LogOptions(dbc=str(real_data / "canedge" / "dbc" / "gnss.dbc"), channel=2)
-    done = calibrate_any(LogJob(paths=tuple(sorted(str(p) for p in car.glob("*.MF4"))), log=opts))
+    done = calibrate_log(sorted(car.glob("*.MF4")), log=opts)
     cal = done.calibration
     combination = cal.fit.combination or {}
     if "disagreement" in combination:  # a finding: not combined, not confident, said everywhere

@@ -212,11 +212,11 @@ def test_calibrate_a_drive_log_uses_what_it_supports_and_says_so(
     to_frame(drive.to_samples()).to_parquet(log, index=False)
     # The drive waits at junctions: parked stops (no headings) give the tilt, driving the yaw.
     assert main(["calibrate", str(log)]) == 0
-    assert "calibrated from: stops + driving" in capsys.readouterr().out
+    assert "calibrated from: stops + driving" in capsys.readouterr().err  # status goes to stderr
     out = tmp_path / "result.json"
     assert main(["calibrate", str(log), "--use", "driving", "-o", str(out)]) == 0
-    text = capsys.readouterr().out
-    assert "calibrated from: driving" in text and "driving method" in text
+    captured = capsys.readouterr()
+    assert "calibrated from: driving" in captured.err and "driving method" in captured.out  # status, result
     cal = Calibration.load(out)
     assert cal.method == "driving" and cal.yaw_deg == pytest.approx(7.0, abs=0.3)
     assert cal.fit.driving is not None and cal.fit.driving["segments"] > 10 and cal.slope_deg is None

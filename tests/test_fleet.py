@@ -27,6 +27,7 @@ from mountcal.fleet.progress import Progress
 from mountcal.fleet.store import PartStore, job_hash
 from mountcal.fleet.worker import run_job
 from mountcal.io import export
+from mountcal.result import Calibration
 from mountcal.simulate import ParkingLog, simulate_parking_log, simulate_stops
 from mountcal.stoptable import write_stop_table
 
@@ -356,7 +357,7 @@ class _Terminal(io.StringIO):
         return True
 
 
-def test_the_progress_line_shows_done_failed_remaining_and_eta() -> None:
+def test_the_progress_bar_shows_done_failed_and_reused() -> None:
     stream = _Terminal()
     progress = Progress(total=6, stream=stream)
     progress.reuse()
@@ -365,10 +366,17 @@ def test_the_progress_line_shows_done_failed_remaining_and_eta() -> None:
     progress.update(ok=False)
     progress.finish()
     text = stream.getvalue()
-    assert text.startswith("\rfleet: 1/6 logs done (0 failed, 1 reused), 5 remaining")
     last = text.rsplit("\r", 1)[1]
-    assert "4/6 logs done (1 failed, 2 reused), 2 remaining" in last and "ETA 0:00:0" in last
+    assert "mountcal: fleet" in last and "4/6" in last and "1 failed, 2 reused" in last
     assert text.endswith("\n")
+
+
+def test_a_disabled_progress_bar_writes_nothing() -> None:
+    stream = _Terminal()
+    progress = Progress(total=2, stream=stream, enabled=False)
+    progress.update(ok=True)
+    progress.finish()
+    assert stream.getvalue() == "" and progress.done == 1
 
 
 # --- real recordings -----------------------------------------------------------------------------------
@@ -409,3 +417,27 @@ def test_a_manifest_of_real_canedge_logs_runs_to_the_end(real_data: Path, tmp_pa
     vehicles = pd.read_parquet(outputs_of(output)[1])
     assert set(vehicles["vehicle_id"]) == {"3BA199E2", "2F6913DB"}
     assert vehicles["status"].isin(["ok", "no calibration"]).all()
+
+
+@pytest.mark.real_data
+def test_fleet_calibrates_a_real_drive_exactly_as_calibrate_does(real_data: Path, tmp_path: Path) -> None:
+    """One pipeline: the CANedge car's drive (stops that do not determine yaw, and driving that does)
+    gives the same roll, pitch, yaw and σ from `mountcal fleet` as from `mountcal calibrate`."""
+    canedge = real_data / "canedge"
+    drive = sorted((canedge / "3BA199E2_car_DK_2021-07-26" / "00000165").glob("*.MF4"))
+    dbc = str(canedge / "dbc" / "gnss.dbc")
+    result = tmp_path / "result.json"
+    assert main(["calibrate", *map(str, drive), "--dbc", dbc, "--channel", "2", "-o", str(result)]) == 0
+    single = Calibration.load(result)
+    manifest = tmp_path / "manifest.csv"
+    pd.DataFrame(
+        {"vehicle_id": ["3BA199E2"], "log": [str(drive[0].parent / "*.MF4")], "dbc": [dbc], "channel": [2]}
+    ).to_csv(manifest, index=False)
+    output = tmp_path / "fleet.parquet"
+    assert main(["fleet", str(manifest), "-o", str(output), "--workers", "1"]) == 0
+    row = pd.read_parquet(output).iloc[0]
+    assert row["status"] == "ok" and row["calibrated_from"] == single.fit["calibrated_from"]
+    assert single.yaw_deg is not None  # the drive determines yaw: the fleet must not lose it
+    for angle in ("roll", "pitch", "yaw"):
+        assert row[f"{angle}_deg"] == pytest.approx(getattr(single, f"{angle}_deg"), abs=1e-9)
+        assert row[f"{angle}_sigma_deg"] == pytest.approx(getattr(single, f"{angle}_sigma_deg"), abs=1e-9)

@@ -24,7 +24,7 @@ from mountcal.estimate.bound import crb_deg, true_state
 from mountcal.io import export
 from mountcal.io.logs import LogOptions
 from mountcal.live import CANDIDATES_DEG, Live, LiveOptions, Session, fail_if_empty, next_heading
-from mountcal.pipeline import LogJob, calibrate_log
+from mountcal.pipeline import LogJob, calibrate_job
 from mountcal.sensor_spec import SensorSpec
 from mountcal.simulate import simulate_parking_log, simulate_stops
 from mountcal.stops import StopDetection
@@ -74,7 +74,7 @@ def offline(
         session.protocol.to_csv(sheet, index=False, float_format="%.17g")
     job = LogJob(paths=(str(recording),), log=log, protocol=None if sheet is None else str(sheet),
                  uphill_azimuth_deg=uphill, options=options or Options())  # fmt: skip
-    done = calibrate_log(job)
+    done = calibrate_job(job)
     assert session.table is not None
     assert len(done.table) == len(session.table)
     assert np.array_equal(done.table.acc_s, session.table.acc_s)  # the same stops, sample for sample
@@ -230,7 +230,7 @@ def test_ctrl_c_keeps_the_recording_and_what_was_measured(sim_blf: Path, tmp_pat
     result = Calibration.load(prefix.with_suffix(".json"))
     job = LogJob(paths=(str(prefix.with_suffix(".blf")),), log=LogOptions(dbc=DBC, mapping=MAPPING),
                  protocol=str(prefix.with_name("session_protocol.csv")))  # fmt: skip
-    assert_same(result, calibrate_log(job).calibration)
+    assert_same(result, calibrate_job(job).calibration)
 
 
 def test_a_replayed_real_canedge_log_gives_calibrate_on_its_recording(real_data: Path, tmp_path: Path) -> None:
@@ -256,4 +256,4 @@ def test_a_mapped_message_missing_from_the_whole_session_gives_no_result_as_offl
     with pytest.raises(NotEnoughInformation, match="the recording is kept"):
         fail_if_empty(session)
     with pytest.raises(InputError, match="SIM_GNSS_POSITION"):
-        calibrate_log(LogJob(paths=(str(tmp_path / "rec.blf"),), log=LogOptions(dbc=DBC, mapping=MAPPING)))
+        calibrate_job(LogJob(paths=(str(tmp_path / "rec.blf"),), log=LogOptions(dbc=DBC, mapping=MAPPING)))

@@ -72,3 +72,63 @@ def test_version_is_the_installed_distributions() -> None:
         assert mountcal.__version__ == importlib.metadata.version("mountcal")
     except importlib.metadata.PackageNotFoundError:  # a source tree on the path, not installed
         assert mountcal.__version__ == "unknown"
+
+
+COMMANDS = ("calibrate", "stops", "inspect", "rotate", "report", "fleet", "simulate", "plan", "live", "export")
+
+
+@pytest.mark.parametrize("command", [None, *COMMANDS])
+def test_help_imports_no_numerical_library(command: str | None) -> None:
+    """`mountcal --help` and `mountcal CMD --help` build the parser without numpy, pandas or scipy."""
+    args = [] if command is None else [command]
+    code = (
+        "import sys, contextlib, io\n"
+        "from mountcal.__main__ import main\n"
+        "with contextlib.redirect_stdout(io.StringIO()) as out, contextlib.suppress(SystemExit):\n"
+        f"    main({args!r} + ['--help'])\n"
+        "heavy = sorted(m for m in ('numpy', 'pandas', 'scipy', 'pyarrow', 'matplotlib') if m in sys.modules)\n"
+        "print(','.join(heavy)); print('usage: mountcal' in out.getvalue())"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert done.stdout.splitlines() == ["", "True"], done.stdout + done.stderr
+
+
+def test_every_command_has_the_common_options_and_the_cli_knows_them_all() -> None:
+    from mountcal.cli import COMMANDS as known
+    from mountcal.cli import build_parser
+
+    assert set(known) == set(COMMANDS)
+    parser = build_parser()
+    for command in COMMANDS:
+        args = parser.parse_args([command, "-q", "-v", "-v", "--progress", *_required(command)])
+        assert (args.quiet, args.verbose, args.progress) == (1, 2, True)
+
+
+def test_the_help_documents_the_exit_codes() -> None:
+    from mountcal.cli import build_parser
+    from mountcal.cli.options import EXIT_CODES
+
+    text = build_parser().format_help()
+    for code in EXIT_CODES:
+        assert f"\n  {code:<4} " in text
+
+
+def test_the_export_formats_of_the_light_parser_are_the_library_s() -> None:
+    from mountcal.cli.export import FORMAT_NAMES
+    from mountcal.outputs.exporters import FORMATS
+
+    assert FORMAT_NAMES == tuple(FORMATS)
+
+
+def _required(command: str) -> list[str]:
+    return {
+        "calibrate": ["s.csv"],
+        "stops": ["l.mcap", "-o", "s.csv"],
+        "inspect": ["l.mcap"],
+        "rotate": ["l.mcap", "--calibration", "r.json", "-o", "o.parquet"],
+        "report": ["r.json"],
+        "fleet": ["logs", "-o", "f.parquet"],
+        "plan": ["--target", "roll=0.1"],
+        "live": ["--interface", "virtual", "--channel", "0", "--dbc", "b.dbc"],
+        "export": ["r.json", "--to", "json"],
+    }.get(command, [])

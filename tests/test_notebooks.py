@@ -5,6 +5,7 @@ Running them top to bottom is nbmake's job: ``python -m pytest --nbmake notebook
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import nbformat
@@ -40,3 +41,15 @@ def test_real_data_notebooks_skip_where_the_recordings_are_absent(name: str) -> 
     assert using, "the notebook should read the real recordings"
     for source in using:  # every cell that touches them is guarded
         assert "is None" in source or "is not None" in source or "if REAL" in source, source[:200]
+
+
+@pytest.mark.parametrize("name", EXPECTED)
+def test_notebook_uses_the_public_api_and_carries_no_work_markers(name: str) -> None:
+    nb = nbformat.read(NOTEBOOKS / f"{name}.ipynb", as_version=4)
+    assert not any("▶ ISSUE" in c.source for c in nb.cells), "a leftover work marker"
+    code = "\n".join(c.source for c in nb.cells if c.cell_type == "code")
+    modules = re.findall(r"^\s*(?:from|import)\s+(mountcal[\w.]*)", code, re.M)
+    assert modules, "the notebook should use mountcal"
+    for module in modules:  # no private module, no command-line internals
+        assert not any(part.startswith("_") for part in module.split(".")) and not module.startswith("mountcal.cli")
+    assert not re.search(r"\bmountcal\.\w*\._|\bmountcal\._", code)

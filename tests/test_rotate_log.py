@@ -333,7 +333,7 @@ def test_dropped_rows_are_counted_and_reported(cal: Calibration, tmp_path: Path,
     result = tmp_path / "result.json"
     cal.save(result)
     assert main(["rotate", str(src), "--calibration", str(result), "-o", str(tmp_path / "v.csv")]) == 0
-    text = capsys.readouterr().out
+    text = capsys.readouterr().err  # status goes to stderr
     assert "non-finite sample rows: 3" in text and f"wrote {len(df) - 3} vehicle-frame samples" in text
     assert len(pd.read_csv(tmp_path / "v.csv")) == len(df) - 3
 

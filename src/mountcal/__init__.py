@@ -12,9 +12,10 @@ Conventions (docs/conventions.md §1–2; the only code that converts angles is 
 Names carry frames and units: ``acc_s`` (sensor-frame specific force, m/s²), ``rot_vs``,
 ``slope_deg``, ``t_s``. Angles in results are degrees; every estimate carries its 1σ.
 
-Pipeline: stop table (:mod:`mountcal.stoptable`) → fit (:mod:`mountcal.calibrate`, with
-:mod:`mountcal.estimate`) → result (:mod:`mountcal.result`) → apply (:mod:`mountcal.rotate`);
-:mod:`mountcal.simulate` is the shared truth generator.
+Pipeline: a log → :func:`calibrate_log` (:mod:`mountcal.pipeline`: stops and/or driving, what
+``mountcal calibrate LOG`` and ``mountcal fleet`` run); a stop table (:mod:`mountcal.stoptable`) →
+fit (:mod:`mountcal.calibrate`, with :mod:`mountcal.estimate`) → result (:mod:`mountcal.result`) →
+apply (:mod:`mountcal.rotate`); :mod:`mountcal.simulate` is the shared truth generator.
 """
 
 from __future__ import annotations
@@ -27,11 +28,13 @@ if TYPE_CHECKING:
     from mountcal.calibrate import Options, calibrate
     from mountcal.estimate.driving import estimate_driving
     from mountcal.io.logs import LogOptions, read_log
+    from mountcal.pipeline import calibrate_log
     from mountcal.result import Calibration
     from mountcal.rotate import acc_to_sensor, acc_to_vehicle, frame_to_sensor, frame_to_vehicle
     from mountcal.rotate_log import to_frame
     from mountcal.simulate import simulate_preset, simulate_stops
     from mountcal.stoptable import StopTable, read_stop_table, stop_table_from_frame
+    from mountcal.summary import summary
 
 # Exported names, imported on first use (PEP 562): `import mountcal` and the command line start in
 # a fraction of a second; each name comes from the module that defines it.
@@ -44,6 +47,7 @@ _HOMES = {
     "acc_to_sensor": "mountcal.rotate",
     "acc_to_vehicle": "mountcal.rotate",
     "calibrate": "mountcal.calibrate",
+    "calibrate_log": "mountcal.pipeline",
     "estimate_driving": "mountcal.estimate.driving",
     "frame_to_sensor": "mountcal.rotate",
     "frame_to_vehicle": "mountcal.rotate",
@@ -52,6 +56,7 @@ _HOMES = {
     "simulate_preset": "mountcal.simulate",
     "simulate_stops": "mountcal.simulate",
     "stop_table_from_frame": "mountcal.stoptable",
+    "summary": "mountcal.summary",
     "to_frame": "mountcal.rotate_log",
 }
 
@@ -67,6 +72,7 @@ __all__ = [
     "acc_to_sensor",
     "acc_to_vehicle",
     "calibrate",
+    "calibrate_log",
     "estimate_driving",
     "frame_to_sensor",
     "frame_to_vehicle",
@@ -75,5 +81,6 @@ __all__ = [
     "simulate_preset",
     "simulate_stops",
     "stop_table_from_frame",
+    "summary",
     "to_frame",
 ]

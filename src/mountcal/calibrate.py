@@ -82,7 +82,7 @@ def calibrate(table: StopTable, options: Options | None = None) -> Calibration:
     if opts.triad is not None:
         table = opts.triad.correct(table)
     _check_geometry(table)
-    g, g_source = _gravity(table, opts.gravity_mps2)
+    g, g_source = local_gravity(table.lat_deg, table.alt_m, opts.gravity_mps2)
     if opts.method == "paper":
         return _paper(table, g, g_source, opts)
     if opts.method != "full":
@@ -502,12 +502,15 @@ def _check_geometry(table: StopTable) -> None:
         )
 
 
-def _gravity(table: StopTable, given: float | None) -> tuple[float, str]:
+def local_gravity(
+    lat_deg: FloatArray | None, alt_m: FloatArray | None, given: float | None
+) -> tuple[float, str]:
+    """Gravity and its source: ``given``, else WGS 84 normal gravity at the mean position, else standard."""
     if given is not None:
         return float(given), GIVEN
-    if table.lat_deg is not None and np.all(np.isfinite(table.lat_deg)):
-        lat = float(np.mean(table.lat_deg))
-        alt = float(np.mean(table.alt_m)) if table.alt_m is not None else 0.0
+    if lat_deg is not None and lat_deg.size and np.all(np.isfinite(lat_deg)):
+        lat = float(np.mean(lat_deg))
+        alt = float(np.mean(alt_m)) if alt_m is not None and alt_m.size else 0.0
         return normal_gravity(lat, alt), f"WGS 84 normal gravity at latitude {lat:.4f}°, height {alt:.0f} m"
     return (
         G_N,

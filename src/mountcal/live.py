@@ -34,7 +34,7 @@ from mountcal.calibrate import Options, calibrate
 from mountcal.conventions import specific_force_v
 from mountcal.errors import InputError, MountcalError, NotEnoughInformation
 from mountcal.estimate.bound import crb_deg, true_state
-from mountcal.io.can_bus import BUS_ERRORS, BusFrames, open_bus, recorder
+from mountcal.io.can_bus import BusFrames, recorder
 from mountcal.io.can_log import samples_from_frames
 from mountcal.io.samples import Samples
 from mountcal.result import Calibration
@@ -369,80 +369,6 @@ def fail_if_empty(session: Session) -> None:
             f"{session.recording}: no result ({no_result_reason(session)}); the recording is kept: "
             f"`mountcal calibrate {session.recording} --dbc …` re-runs it offline."
         )
-
-
-def run_live_command(args: Any) -> int:
-    """``mountcal live``: the CLI's body (argparse namespace in, exit code out)."""
-    import sys
-
-    from mountcal.plan import parse_target
-    from mountcal.stops import read_protocol
-
-    prefix = Path(args.output)
-    recording = prefix.with_name(prefix.name + ".blf")
-    plan_beta = tuple(float(b) for b in read_protocol(args.plan)["beta_deg"]) if args.plan else None
-    opts = LiveOptions(
-        dbc=args.dbc,
-        mapping=args.mapping,
-        can_channel=args.can_channel,
-        target_deg=parse_target(args.target),
-        options=Options(model=args.model),
-        detection=StopDetection(max_acc_std_mps2=args.max_acc_std, min_duration_s=args.min_stop_s),
-        uphill_azimuth_deg=args.uphill_azimuth_deg,
-        plan_beta_deg=plan_beta,
-        silence_s=args.timeout,
-    )
-    try:
-        bus = open_bus(args.interface, args.channel)
-    except BUS_ERRORS as err:
-        raise InputError(
-            f"--interface {args.interface} --channel {args.channel}",
-            "a CAN bus python-can can open",
-            str(err),
-            "Check the interface name, the channel and that the device is up.",
-        ) from err
-    sinks: list[Callable[[dict[str, Any]], None]] = [lambda e: print(line_of(e), flush=True)]
-    events_file = None
-    if args.json_events == "-":
-        sinks = [json_sink(sys.stdout)]
-    elif args.json_events:
-        try:
-            events_file = open(args.json_events, "w", encoding="utf-8")  # open for the session
-        except OSError as err:
-            bus.shutdown()
-            raise InputError(str(args.json_events), "a writable events file", str(err), "Check the path.") from err
-        sinks.append(json_sink(events_file))
-
-    def emit(event: dict[str, Any]) -> None:
-        for sink in sinks:
-            sink(event)
-
-    try:
-        session = Live(opts, recording, emit).run(bus)
-    finally:
-        bus.shutdown()
-        if events_file is not None:
-            events_file.close()
-    dropped = ", ".join(f"{k}: {v}" for k, v in session.dropped.items())
-    out = sys.stderr if args.json_events == "-" else sys.stdout
-    if dropped:
-        print(f"dropped frames/rows: {dropped}", file=out)
-    if session.ignored_frames:
-        print(f"error/remote frames recorded but not decoded: {session.ignored_frames}", file=out)
-    for path in write_outputs(session, prefix):
-        print(f"wrote {path}", file=out)
-    fail_if_empty(session)
-    assert session.calibration is not None
-    from mountcal.cli import summary
-
-    print(summary(session.calibration), file=out)
-    if args.report and session.table is not None:
-        from mountcal.outputs.report import render
-
-        with atomic_path(args.report) as tmp:
-            tmp.write_text(render(session.calibration.to_dict(), session.table), encoding="utf-8")
-        print(f"wrote {args.report}", file=out)
-    return 130 if session.reason == "interrupted" else 0
 
 
 @contextlib.contextmanager

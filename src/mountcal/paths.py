@@ -17,6 +17,7 @@ import errno
 import fcntl
 import os
 import stat
+import sys
 from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
 
@@ -54,6 +55,9 @@ def _todo(code: int | None) -> str:
         errno.EIO: "The device reported an I/O error: check the disk, then retry.",
     }
     return todo.get(code or 0, "Check the path and the system, then retry.")
+
+
+STDIN = "-"
 
 
 def small_input_limit() -> int:
@@ -116,9 +120,14 @@ def input_file(path: PathLike, what: str, *, limit: int | None = None) -> Path:
 
 
 def read_input_bytes(path: PathLike, what: str, *, limit: int | None = None) -> bytes:
-    """The bytes of a small input, after :func:`input_file`; never more than the limit."""
-    path = input_file(path, what, limit=limit)
+    """The bytes of a small input, after :func:`input_file`; never more than the limit. ``-`` is stdin."""
     limit = small_input_limit() if limit is None else limit
+    if str(path) == STDIN:
+        data = sys.stdin.buffer.read(limit + 1)
+        if len(data) > limit:
+            raise InputError(STDIN, f"{what} of at most {limit / 2**20:g} MiB", "more on stdin", "Pass a file.")
+        return data
+    path = input_file(path, what, limit=limit)
     try:
         with path.open("rb") as f:
             data = f.read(limit + 1)

@@ -1,22 +1,48 @@
-"""From log files to a calibration: read → stops → headings → fit. The CLI and the fleet runner share it."""
+"""From log files to a calibration: the one pipeline of ``mountcal calibrate``, ``mountcal fleet`` and the API.
+
+:func:`calibrate_log` reads the log once, tries its parked stops (stops → headings → fit,
+:func:`mountcal.calibrate.calibrate`) and yaw from driving (:mod:`mountcal.estimate.driving`), and
+returns the stops' result, the driving result, or the stops' result with the driving's yaw folded
+in (:func:`mountcal.estimate.driving.combine`), saying which and why the others were not used.
+"""
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
+from datetime import UTC, datetime
 from pathlib import Path
+from typing import Any, Literal
 
-from mountcal.calibrate import Options, calibrate
+import numpy as np
+
+from mountcal.calibrate import Options, calibrate, local_gravity
+from mountcal.errors import InputError, NotEnoughInformation
+from mountcal.estimate.driving import DrivingFit, DrivingOptions, estimate_driving
+from mountcal.estimate.driving_combine import combine, driving_calibration, not_combined
 from mountcal.io.logs import LogOptions, read_log
 from mountcal.io.samples import Samples
-from mountcal.result import Calibration
+from mountcal.io.timestamps import increasing_times
+from mountcal.paths import special_kind
+from mountcal.result import Calibration, Provenance
 from mountcal.stops import StopDetection, StopTableFromLog, read_protocol, tabulate
 from mountcal.stoptable import StopTable
+from mountcal.version import software_version
+
+Use = Literal["auto", "stops", "driving"]
+STOP_TABLE_SUFFIXES = (".csv", ".parquet", ".pq")
+STOP_TABLE_MARKERS = {"beta_deg", "n", "sx"}
 
 
 @dataclass(frozen=True)
 class LogJob:
-    """Everything needed to calibrate one log (one file or several splits)."""
+    """Everything needed to calibrate one log (one file or several splits).
+
+    ``use`` is ``"auto"`` (whatever the log supports), ``"stops"`` or ``"driving"`` (insist on one
+    source; fail with the reason when the log does not support it); ``driving`` holds the gates of
+    yaw from driving.
+    """
 
     paths: tuple[str, ...]
     log: LogOptions = field(default_factory=LogOptions)
@@ -24,39 +50,271 @@ class LogJob:
     protocol: str | None = None
     uphill_azimuth_deg: float | None = None
     options: Options = field(default_factory=Options)
+    use: Use = "auto"
+    driving: DrivingOptions | None = None
 
 
 @dataclass(frozen=True)
-class LogCalibration:
-    """A log's calibration with what led to it."""
+class LogResult:
+    """A log's calibration, what it was made from, and what was left out and why.
+
+    ``used`` is ``"stops"``, ``"driving"`` or ``"stops + driving"``; ``skipped`` maps a source that
+    was not used to the reason.
+    """
 
     calibration: Calibration
-    stops: StopTableFromLog
-    table: StopTable
     samples: Samples
+    used: str
+    static: Calibration | None = None
+    driving: DrivingFit | None = None
+    stops: StopTableFromLog | None = None
+    table: StopTable | None = None
+    skipped: dict[str, str] = field(default_factory=dict)
+
+
+def calibrate_log(
+    paths: str | Path | Sequence[str | Path],
+    *,
+    log: LogOptions | None = None,
+    detection: StopDetection | None = None,
+    protocol: str | Path | None = None,
+    uphill_azimuth_deg: float | None = None,
+    options: Options | None = None,
+    use: Use = "auto",
+    driving: DrivingOptions | None = None,
+) -> LogResult:
+    """Calibrate one log (a file, or the splits of one recording) from its parked stops, its driving, or both.
+
+    This is what ``mountcal calibrate LOG`` and ``mountcal fleet`` do with each log.
+
+    Parameters
+    ----------
+    paths : path or sequence of paths
+        The log; splits of one recording are joined in the order given.
+    log : LogOptions, optional
+        How to read it (DBC, mapping, channel, topic).
+    detection : StopDetection, optional
+        Thresholds of stop detection.
+    protocol : path, optional
+        Protocol sheet (``t_start_s, t_end_s, beta_deg``) giving the stops' headings.
+    uphill_azimuth_deg : float, optional
+        Compass azimuth of the slope's uphill direction, with a heading signal in the log.
+    options : Options, optional
+        Method, model, gravity and yaw threshold of the fit.
+    use : {"auto", "stops", "driving"}
+        ``"auto"`` uses whatever the log supports; the others insist on one source.
+    driving : DrivingOptions, optional
+        Gates and settings of yaw from driving.
+
+    Raises
+    ------
+    NotEnoughInformation
+        When the log supports neither source (the message gives both reasons).
+    """
+    given = [paths] if isinstance(paths, str | Path) else list(paths)
+    job = LogJob(
+        paths=tuple(str(p) for p in given),
+        log=log or LogOptions(),
+        detection=detection or StopDetection(),
+        protocol=None if protocol is None else str(protocol),
+        uphill_azimuth_deg=uphill_azimuth_deg,
+        options=options or Options(),
+        use=use,
+        driving=driving,
+    )
+    return calibrate_job(job)
+
+
+def calibrate_job(job: LogJob) -> LogResult:
+    """:func:`calibrate_log` of a prepared job (the fleet's and the command line's form)."""
+    samples = read_log(list(job.paths), job.log)
+    source = _source(job.paths)
+    skipped: dict[str, str] = {}
+    static = found = table = None
+    if job.use in ("auto", "stops"):
+        try:
+            found = _tabulate(samples, job)
+            table = replace(found.table, source=source)
+            static = calibrate(table, job.options)
+        except NotEnoughInformation as err:
+            if job.use == "stops":
+                raise
+            skipped["stops"] = str(err)
+    fit = None
+    if job.use in ("auto", "driving"):
+        try:
+            fit = estimate_driving(increasing_times(samples), job.driving, tilt_from=static)  # duplicate stamps merged
+        except NotEnoughInformation as err:
+            if job.use == "driving":
+                raise
+            if static is None:
+                raise NotEnoughInformation(
+                    f"{source}: the log supports neither a calibration from parked stops ({skipped.get('stops')}) "
+                    f"nor one from driving ({err})"
+                ) from err
+            skipped["driving"] = str(err)
+    if static is not None and fit is not None:
+        cal = stops_with_drive(static, table, fit, samples, job)
+        if (cal.fit.combination or {}).get("disagreement") is not None:
+            skipped["combination"] = "the stops and the drive disagree beyond 3σ (see the notes)"
+        return LogResult(cal, samples, str(cal.fit.calibrated_from), static, fit, found, table, skipped)
+    if static is not None:
+        return LogResult(static, samples, "stops", static, None, found, table, skipped)
+    assert fit is not None
+    cal = _driving_alone(fit, samples, job)
+    return LogResult(cal, increasing_times(samples), "driving", None, fit, None, None, skipped)  # counts merged stamps
 
 
 def stops_of_log(job: LogJob) -> tuple[Samples, StopTableFromLog]:
-    """Read the log and tabulate its stops with their headings."""
+    """Read the log and tabulate its stops with their headings (``mountcal stops``)."""
     samples = read_log(list(job.paths), job.log)
-    protocol = read_protocol(job.protocol) if job.protocol else None
-    return samples, tabulate(samples, job.detection, protocol, job.uphill_azimuth_deg)
+    return samples, _tabulate(samples, job)
 
 
-def calibrate_log(job: LogJob) -> LogCalibration:
-    """Calibrate one log from its parked stops."""
-    samples, found = stops_of_log(job)
-    source = " + ".join(str(Path(p)) for p in job.paths)
-    table = replace(found.table, source=source)
-    return LogCalibration(calibrate(table, job.options), found, table, samples)
+def stops_with_drive(
+    static: Calibration, table: StopTable | None, fit: DrivingFit, samples: Samples, job: LogJob
+) -> Calibration:
+    """The stops' calibration with the drive's yaw folded in, or — when they disagree — not combined.
+
+    ``fit`` is the drive levelled with ``static``. On a disagreement beyond 3σ the result is not
+    confident and carries the finding; it is the stops' result when their rotation puts the
+    stops' specific force +g up, else (their mirror solution) the drive's own, levelled by its
+    mean gravity: either way the result is on the physical branch.
+    """
+    cal = combine(static, fit)
+    found = next((u for u in cal.unexplained if u.test == "stops_vs_driving"), None)
+    if found is None or _up_is_up(static, table):
+        return cal
+    alone = estimate_driving(samples, job.driving)  # levelled by its own mean gravity: +g up by construction
+    cal = not_combined(_driving_alone(alone, samples, job), fit, found)
+    return replace(
+        cal,
+        fit=replace(
+            cal.fit,
+            calibrated_from="driving (the stops disagree and put −g up)",
+            driving=alone.to_dict(),  # the fit used; the one levelled with the stops shows the disagreement
+            driving_levelled_with_stops=fit.to_dict(),
+        ),
+    )
 
 
-def describe(samples: Samples, found: StopTableFromLog, n_files: int) -> Sequence[str]:
-    """Lines for the user: what was read, dropped and found."""
+def is_stop_table(path: str | Path, has_dbc: bool = False) -> bool:
+    """Whether a CSV/Parquet file is a stop table (``beta_deg``, ``n`` or ``sx``, or no ``t_s``).
+
+    A CSV read with a DBC is a CAN log. A FIFO or a device counts as a stop table, so that the
+    stop-table reader refuses it without opening it.
+
+    Raises
+    ------
+    InputError
+        The file is missing, empty, unreadable or does not parse as CSV or Parquet.
+    """
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in STOP_TABLE_SUFFIXES or (has_dbc and suffix == ".csv"):
+        return False
+    if special_kind(path) is not None:
+        return True
+    try:
+        if path.stat().st_size == 0:
+            found = "an empty file (0 bytes)"
+        elif suffix == ".csv":
+            import pandas as pd
+
+            return _stop_columns(pd.read_csv(path, nrows=0, comment="#", skipinitialspace=True).columns)
+        else:
+            import pyarrow.parquet as pq
+
+            return _stop_columns(pq.read_schema(path).names)
+    except FileNotFoundError:
+        found = "no such file"
+    except OSError as err:
+        found = f"a file that cannot be read ({err.strerror or err})"
+    except Exception as err:  # pandas and pyarrow raise many types for malformed files
+        found = f"a file that does not parse ({type(err).__name__}: {err})"
+    raise InputError(
+        str(path),
+        "a CSV or Parquet stop table (beta_deg, ax, ay, az) or sample table (t_s, ax, ay, az)",
+        found,
+        "Check the path, or replace the file.",
+    )
+
+
+def describe(result: LogResult | tuple[Samples, StopTableFromLog], n_files: int) -> Sequence[str]:
+    """Lines for the user: what was read and dropped, the stops found, which sources were used and why not others."""
+    done = None if isinstance(result, tuple) else result
+    samples = result[0] if isinstance(result, tuple) else result.samples
+    found = result[1] if isinstance(result, tuple) else result.stops
     dropped = ", ".join(f"{k}: {v}" for k, v in samples.dropped.items())
-    return [
-        f"read {len(samples)} samples from {n_files} file(s)" + (f"; dropped {dropped}" if dropped else ""),
-        f"found {len(found.table)} stops; headings: {found.heading_source}"
-        + (f"; {found.unmatched_protocol_rows} protocol rows without a stop" if found.unmatched_protocol_rows else ""),
-        *found.notes,
-    ]
+    lines = [f"read {len(samples)} samples from {n_files} file(s)" + (f"; dropped {dropped}" if dropped else "")]
+    if found is not None:
+        unmatched = found.unmatched_protocol_rows
+        lines.append(
+            f"found {len(found.table)} stops; headings: {found.heading_source}"
+            + (f"; {unmatched} protocol rows without a stop" if unmatched else "")
+        )
+        lines += found.notes
+    if done is None:
+        return lines
+    if done.driving is not None:
+        d = done.driving
+        offset = f"{d.time_offset_s:+.3f} s" + (
+            f" ± {d.time_offset_sigma_s:.3f} s" if d.time_offset_sigma_s is not None else ""
+        )
+        lines.append(
+            f"driving: {d.usable_s:.0f} s usable of {d.moving_s:.0f} s moving, in {d.n_segments} straight segments; "
+            f"speed clock offset {offset} ({'found' if d.time_offset_searched else 'given'}); "
+            f"straightness from the {d.straightness_source}"
+        )
+    lines.append(f"calibrated from: {done.used}")
+    lines += [f"not used: {k} — {v}" for k, v in done.skipped.items()]
+    return lines
+
+
+def _tabulate(samples: Samples, job: LogJob) -> StopTableFromLog:
+    protocol = read_protocol(job.protocol) if job.protocol else None
+    return tabulate(samples, job.detection, protocol, job.uphill_azimuth_deg)
+
+
+def _stop_columns(columns: Any) -> bool:
+    names = {str(c).strip() for c in columns}
+    return bool(names & STOP_TABLE_MARKERS) or "t_s" not in names
+
+
+def _driving_alone(fit: DrivingFit, samples: Samples, job: LogJob) -> Calibration:
+    lat, alt = samples.channels.get("lat_deg"), samples.channels.get("alt_m")
+    g, g_source = local_gravity(
+        None if lat is None else lat.value, None if alt is None else alt.value, job.options.gravity_mps2
+    )
+    return driving_calibration(fit, gravity_mps2=g, gravity_source=g_source, provenance=_provenance(job.paths))
+
+
+def _up_is_up(cal: Calibration, table: StopTable | None) -> bool:
+    """Whether the calibration rotates the parked stops' specific force to +g up (the physical branch)."""
+    if table is None:
+        return cal.slope_deg is None or cal.slope_deg < 90.0
+    acc = table.acc_s - (cal.bias_mps2 if cal.bias_mps2 is not None else 0.0)
+    return bool(np.median(cal.rot_vs.apply(acc)[:, 2]) > 0.0)
+
+
+def _source(paths: Sequence[str]) -> str:
+    return " + ".join(str(Path(p)) for p in paths)
+
+
+def _provenance(paths: Sequence[str]) -> Provenance:
+    return Provenance(
+        input=_source(paths),
+        software=f"mountcal {software_version()}",
+        method="driving",
+        model=("rotation",),
+        created_utc=datetime.now(UTC).isoformat(timespec="seconds"),
+        input_sha256=tuple(_sha256(Path(p)) for p in paths),
+    )
+
+
+def _sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with path.open("rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()

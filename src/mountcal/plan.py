@@ -136,14 +136,14 @@ def parse_target(spec: str) -> dict[str, float]:
             number = float("nan")
         if name.strip() not in ANGLES or not np.isfinite(number) or number <= 0 or name.strip() in out:
             raise InputError(
-                "--target",
+                "the target",
                 "a comma list of roll=σ, pitch=σ, yaw=σ (1σ in degrees, positive, each at most once)",
                 repr(spec),
-                "For example --target roll=0.1,pitch=0.1,yaw=0.5.",
+                "For example roll=0.1,pitch=0.1,yaw=0.5.",
             )
         out[name.strip()] = number
     if not out:
-        raise InputError("--target", "at least one of roll=σ, pitch=σ, yaw=σ", repr(spec), "Name a target.")
+        raise InputError("the target", "at least one of roll=σ, pitch=σ, yaw=σ", repr(spec), "Name a target.")
     return out
 
 
@@ -152,7 +152,7 @@ def plan_terms(model: str) -> tuple[str, ...]:
     terms = parse_model(model)
     if terms not in (("rotation", "slope"), ("rotation", "slope", "bias")):
         raise InputError(
-            "--model",
+            "the model of the plan",
             "rotation,slope (no bias) or rotation,slope,bias (an unknown constant bias)",
             repr(model),
             "A plan needs a fixed model; choose the one you will calibrate with.",
@@ -199,16 +199,16 @@ def make_plan(req: Request) -> Plan:
     shortest = cfg.min_duration_s + 2 * cfg.trim_s
     if req.stop_s is not None and req.stop_s < shortest:
         raise InputError(
-            "--stop-s",
+            "the dwell of each stop",
             f"a dwell of at least {shortest:g} s (stop detection trims {cfg.trim_s:g} s at both ends and keeps "
             f"stops of ≥ {cfg.min_duration_s:g} s)",
             f"{req.stop_s:g} s",
             "Plan longer stops.",
         )
     if req.max_stops < MIN_STOPS:
-        raise InputError("--max-stops", f"at least {MIN_STOPS}", str(req.max_stops), "Allow more stops.")
+        raise InputError("the most stops", f"at least {MIN_STOPS}", str(req.max_stops), "Allow more stops.")
     if req.slope_deg is not None and not 0.0 <= req.slope_deg < 45.0:
-        raise InputError("--slope-deg", "a slope in [0°, 45°)", f"{req.slope_deg:g}°", "Give the slope in degrees.")
+        raise InputError("the slope", "a slope in [0°, 45°)", f"{req.slope_deg:g}°", "Give the slope in degrees.")
     dwells = (req.stop_s,) if req.stop_s is not None else tuple(d for d in DWELLS_S if d >= shortest)
     slopes = (req.slope_deg,) if req.slope_deg is not None else SLOPES_DEG
     best_miss: tuple[float, Plan] | None = None
@@ -273,7 +273,7 @@ def _why_not(req: Request, plan: Plan, dwells: tuple[float, ...]) -> str:
         why += " (yaw precision grows as 1/sin(slope): on level ground yaw is unobservable)"
     if "bias" in req.terms and any(a in over for a in ("roll", "pitch")):
         why += " (with an unknown bias, roll and pitch come from the circle's radius g·sin(slope) only)"
-    return why + ". Allow more or longer stops (--max-stops, --stop-s), a steeper slope, or a quieter sensor."
+    return why + ". Allow more or longer stops, a steeper slope, or a quieter sensor."
 
 
 def _slope_needed(req: Request, angle: str, dwells: tuple[float, ...]) -> float | None:
@@ -293,7 +293,7 @@ def noise_from_log(paths: list[str], options: LogOptions, detection: StopDetecti
     if not stops:
         raise NotEnoughInformation(
             f"{where}: no parked period found to measure the noise on; record a log with the vehicle parked "
-            "(engine as in the session), or give --noise."
+            "(engine as in the session), or give the sensor's noise."
         )
     rate = 1.0 / float(np.median(np.diff(samples.t_s)))
     equivalent = [float(np.sqrt(np.mean(np.diag(s.acc_cov_mean_s)) * s.n)) for s in stops]
@@ -343,46 +343,3 @@ def monte_carlo_rms(plan: Plan, runs: int, seed: int, bias_mg: float = 20.0) -> 
             if a in req.target_deg:
                 errors[a].append(np.nan if got is None else float((got - true + 180.0) % 360.0 - 180.0))
     return {a: float(np.sqrt(np.mean(np.square(e)))) for a, e in errors.items() if e}
-
-
-def run_plan_command(
-    target: str,
-    model: str,
-    noise_mg: float | None,
-    rate_hz: float,
-    from_log: list[str] | None,
-    log_options: LogOptions,
-    slope_deg: float | None,
-    max_stops: int,
-    stop_s: float | None,
-    drive_s: float,
-    output: str | None,
-) -> int:
-    """``mountcal plan``: print the plan, write its protocol sheet; exit 0, or 3 when not reachable."""
-    if (noise_mg is None) == (from_log is None):
-        raise InputError(
-            "mountcal plan",
-            "exactly one of --noise MG or --from-log LOG",
-            "both" if noise_mg else "neither",
-            "Give the sensor's per-sample noise in mg, or a log with parked periods to measure it on.",
-        )
-    if noise_mg is not None:
-        if not (np.isfinite(noise_mg) and noise_mg > 0 and np.isfinite(rate_hz) and rate_hz > 0):
-            raise InputError(
-                "--noise/--rate-hz",
-                "positive numbers",
-                f"{noise_mg:g} mg at {rate_hz:g} Hz",
-                "Give the sensor's values.",
-            )
-        noise = Noise(noise_mg * 1e-3 * G_N, rate_hz, "given by --noise and --rate-hz")
-    else:
-        noise = noise_from_log(list(from_log or []), log_options)
-    req = Request(parse_target(target), noise, plan_terms(model), slope_deg, max_stops, stop_s, drive_s)
-    plan = make_plan(req)
-    print("\n".join(plan.lines()))
-    if not plan.reachable:
-        return NotEnoughInformation.exit_code
-    if output is not None:
-        plan.write_protocol(output)
-        print(f"wrote {output} (protocol sheet for calibrate --protocol; replace the placeholder times)")
-    return 0

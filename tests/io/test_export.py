@@ -352,7 +352,7 @@ def test_bundled_sample_calibrates_to_its_truth(name: str, tmp_path: Path, capsy
     can_args = [] if name.endswith(".mcap") else ["--dbc", str(DBC), "--mapping", str(MAPPING)]
     protocol = str(DATA / "parking_protocol.csv")
     assert main(["calibrate", str(DATA / name), *can_args, "--protocol", protocol, "-o", str(result)]) == 0
-    assert "found 12 stops; headings: protocol sheet" in capsys.readouterr().out
+    assert "found 12 stops; headings: protocol sheet" in capsys.readouterr().err  # status goes to stderr
     cal, truth = Calibration.load(result), _truth()
     for angle in ("roll", "pitch", "yaw"):
         estimate, sigma = getattr(cal, f"{angle}_deg"), getattr(cal, f"{angle}_sigma_deg")
@@ -385,8 +385,8 @@ def test_bundled_samples_are_what_the_documented_command_writes(
     args = [str(tmp_path / Path(a).name) if a.startswith("data/parking") else a for a in command[1:]]
     args = [str(REPO / a) if a.startswith("data/") else a for a in args]
     assert main(args) == 0
-    out = capsys.readouterr().out
-    assert "saturated at the DBC range" not in out  # the simulated rates stay inside the MM5.10's range
+    err = capsys.readouterr().err  # what was written, on stderr
+    assert "wrote" in err and "saturated at the DBC range" not in err  # the rates stay inside the MM5.10's range
     for name in ("parking.mcap", "parking.blf", "parking_protocol.csv", "parking_truth.json"):
         assert (tmp_path / name).read_bytes() == (DATA / name).read_bytes(), name
     assert _mf4_content(tmp_path / "parking.mf4") == _mf4_content(DATA / "parking.mf4")

@@ -83,7 +83,7 @@ class LocalEngine:
 
     def __init__(self, workers: int | None = None) -> None:
         if workers is not None and workers < 1:
-            raise InputError("--workers", "a number of worker processes ≥ 1", str(workers), "Pass --workers 1 or more.")
+            raise InputError("workers", "a number of worker processes ≥ 1", str(workers), "Ask for 1 or more.")
         available = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
         self.workers = workers or available or 1
         self.name = f"local, {self.workers} worker process{'es' if self.workers > 1 else ''}"
@@ -241,17 +241,17 @@ class DaskEngine:
             self._distributed = importlib.import_module("distributed")  # optional: mountcal[fleet]
         except ImportError as err:
             raise InputError(
-                "--scheduler",
+                f"the Dask scheduler {self.address}",
                 "the Dask distributed package",
                 "it is not installed",
-                "Install it: pip install 'mountcal[fleet]'; or run without --scheduler on the local cores.",
+                "Install it: pip install 'mountcal[fleet]'; or run on the local cores (no scheduler).",
             ) from err
         self._check_address()
         try:
             self._client = self._distributed.Client(self.address, timeout=self.timeout_s, set_as_default=False)
         except (OSError, TimeoutError, ValueError) as err:
             raise InputError(
-                f"--scheduler {self.address}",
+                f"the Dask scheduler {self.address}",
                 "a reachable Dask scheduler (tcp://HOST:PORT)",
                 f"no connection ({type(err).__name__}: {err})",
                 "Start one (`dask scheduler`, then `dask worker ADDRESS` on each machine) or check the address.",
@@ -268,7 +268,7 @@ class DaskEngine:
                 parse_host_port(location)
         except ValueError as err:
             raise InputError(
-                f"--scheduler {self.address}",
+                f"the Dask scheduler {self.address}",
                 "a Dask scheduler address, tcp://HOST:PORT",
                 f"not an address ({err})",
                 "Write it as tcp://HOST:PORT, e.g. tcp://10.0.0.5:8786 (the port `dask scheduler` prints).",
@@ -299,7 +299,7 @@ class DaskEngine:
                 yield from self._collect(finished.next_batch(block=True), futures)
         except CancelledError as err:
             raise MountcalError(
-                f"--scheduler {self.address}: lost the Dask scheduler ({err}); the logs finished so far are "
+                f"{self.address}: lost the Dask scheduler ({err}); the logs finished so far are "
                 "kept: run the same command again to resume."
             ) from err
         finally:

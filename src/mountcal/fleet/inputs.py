@@ -29,7 +29,7 @@ from mountcal.errors import InputError
 from mountcal.io.logs import CAN_SUFFIXES, LogOptions
 from mountcal.io.writers import written_by_mountcal
 from mountcal.paths import input_file, special_kind
-from mountcal.pipeline import LogJob
+from mountcal.pipeline import LogJob, Use
 from mountcal.stops import StopDetection
 from mountcal.stoptable import Headings
 
@@ -58,6 +58,7 @@ class JobDefaults:
     uphill_azimuth_deg: float | None = None
     options: Options = field(default_factory=Options)
     headings: Headings = "uphill"  # what a stop table's beta_deg is measured from
+    use: Use = "auto"  # a log's parked stops, its driving, or whatever it supports (as `mountcal calibrate`)
 
 
 @dataclass(frozen=True)
@@ -70,7 +71,7 @@ class FleetJob:
     log : str
         The log as the results name it: its path as found (split files joined with ``" + "``).
     job : LogJob
-        What :func:`mountcal.pipeline.calibrate_log` needs, with absolute paths, so that a worker
+        What :func:`mountcal.pipeline.calibrate_job` needs, with absolute paths, so that a worker
         on another machine of a shared file system finds the files.
     headings : {"uphill", "relative", "none"}
         What ``beta_deg`` of a stop table is measured from (logs find their own headings).
@@ -209,6 +210,7 @@ def _file_job(path: Path, defaults: JobDefaults, origin: str) -> FleetJob:
             protocol=str(sheet.resolve()) if sheet.is_file() else None,
             uphill_azimuth_deg=defaults.uphill_azimuth_deg,
             options=defaults.options,
+            use=defaults.use,
         ),
         headings=defaults.headings,
         origin=origin,
@@ -283,6 +285,7 @@ def read_manifest(path: str | Path, defaults: JobDefaults | None = None) -> list
                     protocol=_rel(cells.get("protocol_sheet"), base),
                     uphill_azimuth_deg=azimuth,
                     options=defaults.options,
+                    use=defaults.use,
                 ),
                 headings=defaults.headings,
                 start_time=parse_start_time(cells["start_time"], where) if cells.get("start_time") else None,

@@ -1,21 +1,21 @@
-"""A plain-text progress line on stderr: logs done, failed, remaining, rate and ETA.
+"""The fleet's progress bar on stderr (tqdm): logs done of the total, failed, reused, rate and ETA.
 
-On a terminal the line is redrawn in place with ``\\r`` (at most :data:`TTY_PERIOD_S` apart);
-elsewhere (a CI log, a file) a full line is written at most every :data:`PIPE_PERIOD_S`.
+On a terminal the bar is redrawn in place; elsewhere (a CI log, a file) at most every
+:data:`PIPE_PERIOD_S`.
 """
 
 from __future__ import annotations
 
 import sys
-import time
 from typing import TextIO
 
-TTY_PERIOD_S = 0.1
+from tqdm import tqdm
+
 PIPE_PERIOD_S = 10.0
 
 
 class Progress:
-    """Counts finished logs and draws the progress line.
+    """Counts finished logs and draws the bar.
 
     Parameters
     ----------
@@ -29,59 +29,33 @@ class Progress:
     def __init__(self, total: int, stream: TextIO | None = None, enabled: bool = True) -> None:
         self.total = total
         self.done = self.failed = self.reused = 0
-        self.stream = stream if stream is not None else sys.stderr
-        self.enabled = enabled
-        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
-        self.started = time.monotonic()
-        self._last_draw = -float("inf")
-        self._width = 0
+        stream = stream if stream is not None else sys.stderr
+        tty = bool(getattr(stream, "isatty", lambda: False)())
+        self.bar = tqdm(
+            total=total,
+            desc="mountcal: fleet",
+            unit="log",
+            file=stream,
+            disable=not enabled,
+            mininterval=0.1 if tty else PIPE_PERIOD_S,
+        )
 
     def update(self, ok: bool) -> None:
         """Count one log finished by this run."""
         self.done += 1
         self.failed += 0 if ok else 1
-        self._draw(final=False)
+        self._step()
 
     def reuse(self) -> None:
         """Count one log whose result is already known: stored by an earlier run, or the same files
-        and options as a log of this run (not in the rate)."""
+        and options as a log of this run."""
         self.reused += 1
-        self._draw(final=False)
+        self._step()
 
     def finish(self) -> None:
         """Draw the last state and end the line."""
-        self._draw(final=True)
+        self.bar.close()
 
-    def line(self) -> str:
-        """The progress text."""
-        elapsed = time.monotonic() - self.started
-        left = self.total - self.done - self.reused
-        rate = self.done / elapsed if elapsed > 0 else 0.0
-        eta = "0:00:00" if left <= 0 else (_clock(left / rate) if rate > 0 else "?")
-        reused = f", {self.reused} reused" if self.reused else ""
-        return (
-            f"fleet: {self.done + self.reused}/{self.total} logs done ({self.failed} failed{reused}), "
-            f"{left} remaining, {rate:.2f} logs/s, ETA {eta}"
-        )
-
-    def _draw(self, final: bool) -> None:
-        if not self.enabled:
-            return
-        now = time.monotonic()
-        period = TTY_PERIOD_S if self.tty else PIPE_PERIOD_S
-        if not final and now - self._last_draw < period:
-            return
-        self._last_draw = now
-        text = self.line()
-        if self.tty:
-            pad = max(self._width - len(text), 0)
-            self._width = len(text)
-            self.stream.write("\r" + text + " " * pad + ("\n" if final else ""))
-        else:
-            self.stream.write(text + "\n")
-        self.stream.flush()
-
-
-def _clock(seconds: float) -> str:
-    s = round(seconds)
-    return f"{s // 3600}:{s % 3600 // 60:02d}:{s % 60:02d}"
+    def _step(self) -> None:
+        self.bar.set_postfix_str(f"{self.failed} failed, {self.reused} reused", refresh=False)
+        self.bar.update(1)

@@ -31,7 +31,7 @@ from mountcal.fleet.store import (
     write_table,
 )
 from mountcal.fleet.vehicles import ALPHA, analyse_fleet
-from mountcal.paths import output_lock
+from mountcal.paths import check_outputs, output_lock
 from mountcal.version import software_version
 
 HASH_THREADS = 4
@@ -185,9 +185,9 @@ def _run_locked(jobs: Sequence[FleetJob], output: str | Path, options: FleetOpti
     if doubtful and options.require_confident:
         raise InputError(
             str(output),
-            "a confident calibration of every log (--require-confident)",
+            "a confident calibration of every log (require_confident)",
             f"{len(doubtful)} not confident: {', '.join(doubtful[:5])}" + (" …" if len(doubtful) > 5 else ""),
-            "Check those logs (their results are kept for the next run), or drop --require-confident.",
+            "Check those logs (their results are kept for the next run), or accept results that are not confident.",
         )
     said = {"mountcal.confident": json.dumps(not doubtful), "mountcal.not_confident_logs": json.dumps(doubtful)}
     write_table(vehicles, schema(VEHICLE_COLUMNS, "vehicles"), vehicles_path, said)
@@ -216,16 +216,22 @@ def _check_output(output: Path, jobs: Sequence[FleetJob]) -> None:
         raise InputError(
             str(output), "an output path ending in .parquet", output.suffix or "no suffix", "Name it fleet.parquet."
         )
-    inputs = {Path(p) for job in jobs for p in job.job.paths}
-    for table in outputs_of(output)[:2]:
-        if table.resolve() in inputs:
-            raise InputError(
-                str(table),
-                "an output path other than the inputs",
-                "one of the logs",
-                "Choose another -o path; mountcal never overwrites its input.",
-            )
-        check_overwritable(table)
+    table, vehicles, _ = outputs_of(output)
+    check_outputs(
+        {"fleet table": table, "vehicles table": vehicles},
+        {
+            "log": [p for job in jobs for p in job.job.paths],
+            "DBC, mapping or protocol sheet": [p for job in jobs for p in _settings_files(job)],
+        },
+    )
+    for path in (table, vehicles):
+        check_overwritable(path)
+
+
+def _settings_files(job: FleetJob) -> list[str]:
+    dbc = job.job.log.dbc
+    given = [dbc] if isinstance(dbc, str) else list(dbc or ())
+    return [p for p in (*given, job.job.log.mapping, job.job.protocol) if p]
 
 
 def _hash_or_failure(job: FleetJob) -> tuple[str | None, dict[str, Any]]:

@@ -86,6 +86,8 @@ def job_hash(job: FleetJob) -> str:
         "detection": asdict(lj.detection),
         "uphill_azimuth_deg": lj.uphill_azimuth_deg,
         "options": asdict(lj.options),
+        "use": lj.use,
+        "driving": None if lj.driving is None else asdict(lj.driving),
         "headings": job.headings,
     }
     return hashlib.sha256(json.dumps(spec, sort_keys=True, default=str).encode()).hexdigest()
@@ -199,6 +201,7 @@ LOG_COLUMNS: tuple[tuple[str, pa.DataType, str], ...] = (
     ("start_time", _T, "start of the log (manifest, or the log's clock when it is Unix time)"),
     ("start_time_source", _S, "manifest, log clock, or null"),
     ("input_kind", _S, "log or stop table"),
+    ("calibrated_from", _S, "stops, driving or stops + driving (logs); null for a stop table"),
     ("roll_deg", _F, "roll γ (deg)"),
     ("roll_sigma_deg", _F, "1σ of roll (deg)"),
     ("pitch_deg", _F, "pitch θ (deg)"),

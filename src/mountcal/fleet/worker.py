@@ -14,17 +14,14 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pandas as pd
 
 from mountcal.calibrate import calibrate
 from mountcal.conventions import GIMBAL_LOCK_PITCH_DEG
-from mountcal.errors import InputError, MountcalError
+from mountcal.errors import MountcalError
 from mountcal.fleet.inputs import FleetJob
-from mountcal.pipeline import calibrate_log
+from mountcal.pipeline import calibrate_job, is_stop_table
 from mountcal.result import STRUCTURE_P, Calibration
 from mountcal.stoptable import read_stop_table
-
-STOP_TABLE_MARKERS = {"beta_deg", "n", "sx"}
 
 UNIX_TIME_S = (1.0e9, 4.1e9)  # a log clock in this range is Unix time (2001 … 2099)
 
@@ -55,61 +52,24 @@ def _calibrate(job: FleetJob) -> dict[str, Any]:
         if table.t_s is not None and table.t_s.size:
             record["log_start_time"] = _unix_time(float(np.min(table.t_s)))
         return record
-    done = calibrate_log(lj)
+    done = calibrate_job(lj)  # the pipeline of `mountcal calibrate LOG`: stops, driving, or both
     record = calibration_record(done.calibration)
     samples = done.samples
     record.update(
         input_kind="log",
-        n_stops=len(done.table),
-        headings=done.table.headings,
-        heading_source=done.stops.heading_source,
+        calibrated_from=done.used,
+        n_stops=0 if done.table is None else len(done.table),
+        headings=None if done.table is None else done.table.headings,
+        heading_source=None if done.stops is None else done.stops.heading_source,
         n_samples=len(samples),
         dropped="; ".join(f"{k}: {v}" for k, v in samples.dropped.items()) or None,
         log_start_time=_unix_time(float(samples.t_s[0])) if len(samples) else None,
     )
     if samples.dropped:
         record["flags"].append("samples_dropped")
-    if done.stops.unmatched_protocol_rows:
+    if done.stops is not None and done.stops.unmatched_protocol_rows:
         record["flags"].append("protocol_rows_without_stop")
     return record
-
-
-def is_stop_table(path: Path, has_dbc: bool) -> bool:
-    """Whether a CSV/Parquet file is a stop table (``beta_deg``, ``n`` or ``sx``, or no ``t_s``).
-
-    Raises
-    ------
-    InputError
-        The file is empty or does not parse as CSV or Parquet.
-    """
-    suffix = path.suffix.lower()
-    if suffix not in (".csv", ".parquet", ".pq") or (has_dbc and suffix == ".csv"):
-        return False
-    try:
-        if path.stat().st_size == 0:
-            found = "an empty file (0 bytes)"
-        elif suffix == ".csv":
-            columns = pd.read_csv(path, nrows=0, comment="#", skipinitialspace=True).columns
-            return _stop_columns(columns)
-        else:
-            import pyarrow.parquet as pq
-
-            return _stop_columns(pq.read_schema(path).names)
-    except OSError as err:
-        found = f"a file that cannot be read ({err.strerror or err})"
-    except Exception as err:  # pandas and pyarrow raise many types for malformed files
-        found = f"a file that does not parse ({type(err).__name__}: {err})"
-    raise InputError(
-        str(path),
-        "a CSV or Parquet stop table (beta_deg, ax, ay, az) or sample table (t_s, ax, ay, az)",
-        found,
-        "Replace or remove the file; the other logs are calibrated regardless.",
-    )
-
-
-def _stop_columns(columns: Any) -> bool:
-    names = {str(c).strip() for c in columns}
-    return bool(names & STOP_TABLE_MARKERS) or "t_s" not in names
 
 
 def _unix_time(t_s: float) -> str | None:

@@ -37,7 +37,7 @@ class Mounting:
         """Lines every text format states first (as comments)."""
         lines = ["written by `mountcal export`; sensor frame = the IMU axes mountcal was calibrated on"]
         if self.yaw_assumed_zero:
-            lines.append("YAW NOT DETERMINED by the calibration: yaw set to 0 on request (--yaw-undetermined zero)")
+            lines.append("YAW NOT DETERMINED by the calibration: yaw set to 0 on request (yaw policy: zero)")
         return lines + list(self.notes)
 
 
@@ -52,8 +52,8 @@ def mounting(cal: Calibration, yaw: YawPolicy = "refuse", accept_unconfident: bo
         if not accept_unconfident:
             raise NotEnoughInformation(
                 "the calibration is not confident: its residual shows structure the model does not explain "
-                "(see `unexplained` in the result). Re-run the calibration, or pass --accept-unconfident "
-                "to export it anyway."
+                "(see `unexplained` in the result). Re-run the calibration, or export it anyway "
+                "(accept_unconfident=True)."
             )
         notes.append("the calibration is NOT confident (unexplained residual structure); exported on request")
     sx, sy = _radians(cal.rotation_sigma_deg[0]), _radians(cal.rotation_sigma_deg[1])
@@ -62,7 +62,7 @@ def mounting(cal: Calibration, yaw: YawPolicy = "refuse", accept_unconfident: bo
             raise NotEnoughInformation(
                 f"yaw is not determined by this calibration ({cal.yaw_reason or 'no reason given'}); every "
                 "exported format needs all three angles. Calibrate with headings from the uphill direction "
-                "or driving data, or pass --yaw-undetermined zero to write yaw = 0 (the tilt stays exact)."
+                "or driving data, or write yaw = 0 (yaw='zero'; the tilt stays exact)."
             )
         rot = rot_vs_from_angles(np.radians(cal.roll_deg), np.radians(cal.pitch_deg), 0.0)
         return Mounting(rot, (sx, sy, None), True, tuple(notes))

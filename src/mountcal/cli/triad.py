@@ -9,10 +9,14 @@ is what ``mountcal calibrate --triad`` applies. Imports are deferred: building t
 from __future__ import annotations
 
 import argparse
+import json
+import logging
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from mountcal.cli.options import add_command, print_json
 from mountcal.errors import InputError
+from mountcal.terminal import safe
 
 if TYPE_CHECKING:
     from mountcal.calibrate import Options
@@ -20,19 +24,26 @@ if TYPE_CHECKING:
 
 TABLE_SUFFIXES = (".csv", ".parquet", ".pq")
 MIN_STOPS = 6  # six parameters (bias, scale): the six faces, with each stop's noise given
+log = logging.getLogger("mountcal")
 AGREE_SIGMA = 5.0  # imucal's values within this many σ of mountcal's fit of the same session
 
 
 def add_parser(subparsers: Any) -> None:
-    p = subparsers.add_parser("triad", help="fit bias, scale and cross-axis from a multi-position session")
-    p.add_argument("input", nargs="+", metavar="LOG_OR_STOPTABLE", help="the session's log(s), or its stop table")
-    p.add_argument("-o", "--output", required=True, help="triad JSON to write (for calibrate --triad)")
+    p = add_command(
+        subparsers,
+        "triad",
+        "fit bias, scale and cross-axis from a multi-position session",
+        json_help="write the triad JSON on stdout as well",
+        inputs=("LOG_OR_STOPTABLE", "the session's log(s), or its stop table"),
+        output="triad JSON to write (for calibrate --triad)",
+        output_required=True,
+    )
     p.add_argument("--unit", choices=("mps2", "g"), default="mps2", help="unit of ax, ay, az in a stop table")
     p.add_argument("--gravity", type=float, default=None, help="local gravity in m/s² (default 9.80665)")
     p.add_argument("--imucal", default=None, help="imucal's Ferraris calibration JSON made from this session")
     p.add_argument("--min-stop-s", type=float, default=3.0, help="shortest still period in a log (s; hand-held: short)")
     p.add_argument("--trim-s", type=float, default=0.5, help="cut from each end of a still period in a log (s)")
-    p.set_defaults(func=run)
+    p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -46,15 +57,17 @@ def run(args: argparse.Namespace) -> int:
     g = G_N if args.gravity is None else float(args.gravity)
     source = " + ".join(str(Path(p)) for p in args.input)
     for _, why in sphere.loop(acc, g, cov):
-        print(f"  {why}")
+        log.info("  %s", why)
     fit = fit_all(acc, g, cov, source)
     triad = from_sphere(fit, source)
     if args.imucal is not None:
         triad = with_imucal_values(triad, args.imucal)
     for line in describe(triad, fit):
-        print(line)
+        log.info("%s", line)
     triad.save(args.output)
-    print(f"wrote {args.output}")
+    log.info("wrote %s", safe(args.output))
+    if args.json:
+        print_json(json.loads(Path(args.output).read_text(encoding="utf-8")))
     return 0
 
 

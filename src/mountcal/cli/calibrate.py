@@ -1,0 +1,98 @@
+"""``mountcal calibrate STOPS|LOG…``: estimate the mounting; the result JSON to -o (``-o -``: stdout)."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from typing import TYPE_CHECKING, Any
+
+from mountcal.cli.options import (
+    STDOUT,
+    add_command,
+    add_fit_options,
+    add_log_options,
+    fit_options,
+    log_inputs,
+    log_job,
+    print_json,
+    require,
+    working,
+)
+from mountcal.terminal import safe
+
+if TYPE_CHECKING:
+    from mountcal.stoptable import StopTable
+
+log = logging.getLogger("mountcal")
+
+
+def add_parser(sub: Any) -> None:
+    p = add_command(
+        sub,
+        "calibrate",
+        "estimate the mounting from a stop table or a log",
+        json_help="write the result JSON on stdout (the summary goes to stderr)",
+        inputs=("STOPS|LOG", "stop table (beta_deg, ax, ay, az, ...; '-': CSV on stdin) or log file(s)"),
+        output="result JSON to write ('-': stdout)",
+    )
+    p.add_argument("--report", default=None, help="also write a self-contained HTML report here")
+    add_log_options(p)
+    g = p.add_argument_group("fit")
+    add_fit_options(
+        g, headings_help="a stop table's beta_deg is from the uphill direction (default), relative, or none"
+    )
+    g.add_argument("--unit", choices=("mps2", "g"), default="mps2", help="unit of a stop table's ax, ay, az")
+    g.add_argument(
+        "--gravity",
+        type=float,
+        default=None,
+        help="local gravity in m/s² (default: from lat_deg/alt_m when the data have them, else 9.80665)",
+    )
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from mountcal.atomic import atomic_path
+    from mountcal.calibrate import calibrate
+    from mountcal.errors import InputError
+    from mountcal.paths import check_outputs
+    from mountcal.pipeline import calibrate_job, describe, is_stop_table
+    from mountcal.stoptable import read_stop_table
+    from mountcal.summary import summary
+
+    to_stdout = args.json or args.output == STDOUT
+    if args.input == [STDOUT] and sys.stdin.isatty():
+        raise InputError("-", "a CSV stop table piped on stdin", "a terminal", "Pipe one in, or name the file.")
+    check_outputs({"-o": None if args.output == STDOUT else args.output, "--report": args.report}, log_inputs(args))
+    if args.report is not None:
+        require("matplotlib", "report", "calibrate --report")  # before any work: nothing is written without it
+    table: StopTable | None
+    if args.input == [STDOUT] or (len(args.input) == 1 and is_stop_table(args.input[0], bool(args.dbc))):
+        table = read_stop_table(args.input[0], unit=args.unit, headings=args.headings)
+        with working(args, "fitting"):
+            cal = calibrate(table, fit_options(args))
+    else:
+        with working(args, "reading and fitting the log"):
+            done = calibrate_job(log_job(args))
+        for line in describe(done, len(args.input)):
+            log.info("%s", safe(line))
+        cal, table = done.calibration, done.table  # no stop table: calibrated from driving alone
+    if to_stdout:
+        log.info("%s", summary(cal))
+        print_json(cal.to_dict())
+    else:
+        print(summary(cal))
+    if args.output not in (None, STDOUT):
+        cal.save(args.output)
+        log.info("wrote %s", safe(args.output))
+    if args.report is not None:
+        from mountcal.outputs.report import render  # matplotlib is needed for reports only
+
+        with working(args, "writing the report"):
+            html = render(cal.to_dict(), table)
+        with atomic_path(args.report) as tmp:
+            tmp.write_text(html, encoding="utf-8")
+        log.info("wrote %s", safe(args.report))
+    sys.stdout.flush()
+    return 0

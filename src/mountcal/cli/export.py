@@ -1,0 +1,111 @@
+"""``mountcal export RESULT.json --to FORMAT [-o FILE]``: the mounting in a vendor's format (default: stdout)."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from pathlib import Path
+from typing import Any
+
+from mountcal.cli.options import STDOUT, add_command
+from mountcal.terminal import safe
+
+# the keys of mountcal.outputs.exporters.FORMATS (a test keeps them equal), here so that `--help` stays light
+FORMAT_NAMES = (
+    "ublox",
+    "ublox-ucenter",
+    "ublox-ubx",
+    "novatel",
+    "ros2-static-tf",
+    "urdf",
+    "tf2",
+    "autoware",
+    "json",
+    "yaml",
+)
+
+# the library's words for a choice → this command's option (library messages name no option)
+OPTIONS = {"yaw='zero'": "--yaw-undetermined zero", "accept_unconfident=True": "--accept-unconfident"}
+
+log = logging.getLogger("mountcal")
+
+
+def add_parser(sub: Any) -> None:
+    p = add_command(
+        sub,
+        "export",
+        "write the mounting for u-blox, NovAtel, ROS 2, Autoware, or as JSON/YAML",
+        inputs=("RESULT.json", "result written by `mountcal calibrate -o`"),
+        many=False,
+        output="file to write; none or '-' writes to stdout",
+    )
+    p.add_argument("--to", required=True, choices=FORMAT_NAMES, help="target format (see docs/exporters.md)")
+    p.add_argument(
+        "--yaw-undetermined",
+        choices=("refuse", "zero"),
+        default="refuse",
+        help="when the result's yaw is not determined: refuse (default) or write yaw = 0, marked in the output",
+    )
+    p.add_argument("--accept-unconfident", action="store_true", help="export a result marked not confident")
+    p.add_argument("--parent", default=None, help="parent frame (ROS: base_link; Autoware: sensor_kit_base_link)")
+    p.add_argument("--child", default=None, help="the IMU's frame (default imu_link)")
+    p.add_argument(
+        "--translation",
+        type=float,
+        nargs=3,
+        metavar=("X", "Y", "Z"),
+        default=None,
+        help="the IMU's position in the parent frame, m (ROS, Autoware; mountcal does not estimate it; default 0)",
+    )
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from mountcal.atomic import atomic_path
+    from mountcal.errors import InputError, NotEnoughInformation
+    from mountcal.outputs.exporters import Frames, export
+    from mountcal.outputs.exporters.autoware import DEFAULT_FRAMES as AUTOWARE_FRAMES
+    from mountcal.paths import check_outputs
+    from mountcal.result import Calibration
+
+    result = Path(args.input)
+    to_stdout = args.output in (None, STDOUT)
+    check_outputs({"-o": None if to_stdout else args.output}, {"RESULT.json": result})
+    cal = Calibration.load(result)
+    frames = None
+    if args.parent or args.child or args.translation:
+        base = AUTOWARE_FRAMES if args.to == "autoware" else Frames()
+        frames = Frames(
+            parent=args.parent or base.parent,
+            child=args.child or base.child,
+            translation_m=tuple(args.translation) if args.translation else base.translation_m,
+        )
+    try:
+        out = export(cal, args.to, yaw=args.yaw_undetermined, accept_unconfident=args.accept_unconfident, frames=frames)
+    except NotEnoughInformation as err:
+        text = str(err)
+        for words, option in OPTIONS.items():
+            text = text.replace(words, option)
+        raise NotEnoughInformation(text) from err
+    if to_stdout:
+        if isinstance(out, bytes):
+            if sys.stdout.isatty():
+                raise InputError(
+                    "mountcal export --to ublox-ubx",
+                    "-o FILE or a pipe for the binary message",
+                    "a terminal",
+                    "Pass -o FILE.ubx (the text format `--to ublox` shows the message in hex).",
+                )
+            sys.stdout.buffer.write(out)
+            sys.stdout.flush()
+        else:
+            sys.stdout.write(out)
+        return 0
+    with atomic_path(args.output) as tmp:
+        if isinstance(out, bytes):
+            tmp.write_bytes(out)
+        else:
+            tmp.write_text(out, encoding="utf-8")
+    log.info("wrote %s (%s)", safe(args.output), args.to)
+    return 0

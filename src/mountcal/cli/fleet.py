@@ -1,0 +1,116 @@
+"""``mountcal fleet INPUTS… -o fleet.parquet``: calibrate many logs of many vehicles, resumably."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+from pathlib import Path
+from typing import Any
+
+from mountcal.cli.options import (
+    add_command,
+    add_fit_options,
+    add_log_options,
+    detection,
+    fit_options,
+    log_options,
+    print_json,
+    progress_wanted,
+    require,
+)
+from mountcal.terminal import safe
+
+log = logging.getLogger("mountcal")
+
+
+def add_parser(sub: Any) -> None:
+    p = add_command(
+        sub,
+        "fleet",
+        "calibrate many logs of many vehicles: consensus per vehicle, remounts",
+        json_help="the run's summary (logs, vehicles, failures, outputs) as JSON on stdout",
+        inputs=("INPUTS", "folders of logs (vehicle = parent folder), globs, manifest CSVs"),
+        output="per-log Parquet table (vehicles go to <stem>_vehicles)",
+        output_required=True,
+    )
+    p.add_argument("--workers", type=int, default=None, help="local worker processes (default: all cores)")
+    p.add_argument("--scheduler", default=None, help="run on this Dask scheduler, tcp://HOST:PORT")
+    p.add_argument("--retry-failed", action="store_true", help="recalculate logs an earlier run recorded as failed")
+    p.add_argument(
+        "--floor-deg", type=float, default=0.0, help="mounting scatter between logs added to each log's σ (deg)"
+    )
+    p.add_argument(
+        "--require-confident", action="store_true", help="refuse (write no table) if a log's result is not confident"
+    )
+    add_log_options(p, repeat_dbc=False, protocol=False)
+    g = p.add_argument_group("fit of every log (a manifest's cells take precedence)")
+    add_fit_options(g, headings_help="beta_deg of stop tables: from uphill (default), relative, or none")
+    p.set_defaults(run=run, protocol=None)
+
+
+def run(args: argparse.Namespace) -> int:
+    from mountcal.fleet import FleetOptions, JobDefaults, collect_jobs, outputs_of, run_fleet, summary_lines
+
+    if args.scheduler is not None:
+        require("distributed", "fleet", "fleet --scheduler")  # before any log is read or hashed
+    defaults = JobDefaults(
+        log=log_options(args),
+        detection=detection(args),
+        uphill_azimuth_deg=args.uphill_azimuth_deg,
+        options=fit_options(args),
+        headings=args.headings,
+        use=args.use,
+    )
+    ours: list[Path] = []
+    jobs = collect_jobs(args.input, defaults, exclude=outputs_of(args.output), set_aside=ours)
+    if ours:
+        listed = ", ".join(map(str, ours[:5])) + (" …" if len(ours) > 5 else "")
+        log.info("%s", safe(f"set aside {len(ours)} file(s) mountcal wrote (fleet tables, rotated logs): {listed}"))
+    options = FleetOptions(
+        workers=args.workers,
+        scheduler=args.scheduler,
+        retry_failed=args.retry_failed,
+        progress=progress_wanted(args),
+        floor_deg=args.floor_deg,
+        require_confident=args.require_confident,
+    )
+    try:
+        result = run_fleet(jobs, args.output, options)
+    except KeyboardInterrupt:
+        log.error(
+            "interrupted; the logs finished so far are kept in %s: run the same command again to resume",
+            outputs_of(args.output)[2],
+        )
+        return 130
+    if result.not_confident:
+        listed = ", ".join(result.not_confident[:5]) + (" …" if len(result.not_confident) > 5 else "")
+        log.warning(
+            "%s",
+            safe(
+                f"{len(result.not_confident)} log(s) not confident (flag not_confident; recorded "
+                f"in the tables' metadata, mountcal.not_confident_logs): {listed}"
+            ),
+        )
+    lines = summary_lines(result)
+    if args.json:
+        for line in lines:
+            log.info("%s", safe(line))
+        status = result.logs["status"].value_counts().to_dict()
+        print_json(
+            {
+                "output": str(result.output),
+                "vehicles_output": str(result.vehicles_path),
+                "logs": len(result.logs),
+                "status": {str(k): int(v) for k, v in status.items()},
+                "vehicles": len(result.vehicles),
+                "computed": result.computed,
+                "reused": result.reused,
+                "engine": result.engine,
+                "elapsed_s": result.elapsed_s,
+                "discarded": result.discarded,
+                "not_confident": list(result.not_confident),
+            }
+        )
+    else:
+        print(safe("\n".join(lines), keep="\n"))
+    return 0

@@ -1,0 +1,39 @@
+"""``mountcal inspect LOG``: list what the log holds (streams, signals, counts, rates)."""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import asdict
+from typing import Any
+
+from mountcal.cli.options import add_command, log_options, print_json, working
+from mountcal.terminal import safe
+
+
+def add_parser(sub: Any) -> None:
+    p = add_command(
+        sub,
+        "inspect",
+        "list what a log holds",
+        json_help="the listing as JSON on stdout",
+        inputs=("LOG", "the log"),
+        many=False,
+    )
+    p.add_argument("--dbc", action="append", default=None, help="DBC naming the CAN messages (repeat for several)")
+    p.set_defaults(run=run, mapping=None, channel=None, topic=None)
+
+
+def run(args: argparse.Namespace) -> int:
+    from mountcal.io.logs import inspect_log
+
+    with working(args, "reading the log"):
+        info = inspect_log(args.input, log_options(args))
+    if args.json:
+        print_json(asdict(info))
+        return 0
+    print(safe(f"{info.source}: {info.format}, {info.duration_s:.1f} s"))
+    for st in info.streams:  # names come from the file: shown escaped (no terminal control, no bidi)
+        fields = f"  [{', '.join(map(safe, st.fields))}]" if st.fields else ""
+        fields += f"  DLC {','.join(map(str, st.dlcs))}" if st.dlcs else ""
+        print(f"  {safe(st.name):<32} {safe(st.kind):<28} {st.count:>9} msgs {st.rate_hz:>9.2f} Hz{fields}")
+    return 0

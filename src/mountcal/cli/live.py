@@ -1,0 +1,113 @@
+"""``mountcal live --interface … --channel … --dbc …``: a session on a live CAN bus (record, refit, suggest)."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import IO, Any
+
+from mountcal.cli.options import STDOUT, add_command
+from mountcal.terminal import safe
+
+log = logging.getLogger("mountcal")
+
+
+def add_parser(sub: Any) -> None:
+    p = add_command(sub, "live", "run a session on a live CAN bus: record, refit at each stop, suggest")
+    p.add_argument("--interface", required=True, help="python-can interface: socketcan, virtual, pcan, vector, …")
+    p.add_argument("--channel", required=True, help="bus channel, e.g. can0")
+    p.add_argument("--dbc", required=True, help="DBC describing the bus")
+    p.add_argument("--mapping", default=None, help="TOML naming the accelerometer signals")
+    p.add_argument("--can-channel", type=int, default=None, help="channel number of the IMU frames (recorded)")
+    p.add_argument("--target", default="roll=0.1,pitch=0.1,yaw=0.5", help="stop when every 1σ is below (deg)")
+    p.add_argument("--model", default="auto", help="auto (default), rotation,slope or rotation,slope,bias")
+    p.add_argument("--plan", default=None, help="protocol sheet from `mountcal plan`: stops take its β in order")
+    p.add_argument("--uphill-azimuth-deg", type=float, default=None, help="β from the bus's heading signal")
+    p.add_argument("--timeout", type=float, default=10.0, help="a bus silent this long ends the session (s)")
+    p.add_argument("--max-acc-std", type=float, default=None, help="stillness (m/s²; default: StopDetection's)")
+    p.add_argument("--min-stop-s", type=float, default=None, help="shortest stop (s; default: StopDetection's)")
+    p.add_argument("--json-events", default=None, help="also write the events as JSON lines here ('-': stdout)")
+    p.add_argument("-o", "--output", default="session", help="prefix: PREFIX.blf, PREFIX.json, PREFIX_stops.csv")
+    p.add_argument("--report", default=None, help="also write the HTML report here")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from mountcal.atomic import atomic_path
+    from mountcal.calibrate import Options
+    from mountcal.errors import InputError
+    from mountcal.io.can_bus import BUS_ERRORS, open_bus
+    from mountcal.live import Live, LiveOptions, fail_if_empty, json_sink, line_of, write_outputs
+    from mountcal.plan import parse_target
+    from mountcal.stops import StopDetection, read_protocol
+    from mountcal.summary import summary
+
+    prefix = Path(args.output)
+    recording = prefix.with_name(prefix.name + ".blf")
+    plan_beta = tuple(float(b) for b in read_protocol(args.plan)["beta_deg"]) if args.plan else None
+    stillness = {"max_acc_std_mps2": args.max_acc_std, "min_duration_s": args.min_stop_s}
+    opts = LiveOptions(
+        dbc=args.dbc,
+        mapping=args.mapping,
+        can_channel=args.can_channel,
+        target_deg=parse_target(args.target),
+        options=Options(model=args.model),
+        detection=StopDetection(**{k: v for k, v in stillness.items() if v is not None}),
+        uphill_azimuth_deg=args.uphill_azimuth_deg,
+        plan_beta_deg=plan_beta,
+        silence_s=args.timeout,
+    )
+    try:
+        bus = open_bus(args.interface, args.channel)
+    except BUS_ERRORS as err:
+        raise InputError(
+            f"--interface {args.interface} --channel {args.channel}",
+            "a CAN bus python-can can open",
+            str(err),
+            "Check the interface name, the channel and that the device is up.",
+        ) from err
+    sinks: list[Callable[[dict[str, Any]], None]] = [lambda e: print(line_of(e), flush=True)]
+    events_file: IO[str] | None = None
+    if args.json_events == STDOUT:
+        sinks = [json_sink(sys.stdout)]
+    elif args.json_events:
+        try:
+            events_file = open(args.json_events, "w", encoding="utf-8")  # open for the session
+        except OSError as err:
+            bus.shutdown()
+            raise InputError(str(args.json_events), "a writable events file", str(err), "Check the path.") from err
+        sinks.append(json_sink(events_file))
+
+    def emit(event: dict[str, Any]) -> None:
+        for sink in sinks:
+            sink(event)
+
+    try:
+        session = Live(opts, recording, emit).run(bus)
+    finally:
+        bus.shutdown()
+        if events_file is not None:
+            events_file.close()
+    dropped = ", ".join(f"{k}: {v}" for k, v in session.dropped.items())
+    if dropped:
+        log.info("dropped frames/rows: %s", dropped)
+    if session.ignored_frames:
+        log.info("error/remote frames recorded but not decoded: %d", session.ignored_frames)
+    for path in write_outputs(session, prefix):
+        log.info("wrote %s", safe(path))
+    fail_if_empty(session)
+    assert session.calibration is not None
+    if args.json_events == STDOUT:
+        log.info("%s", summary(session.calibration))
+    else:
+        print(summary(session.calibration))
+    if args.report and session.table is not None:
+        from mountcal.outputs.report import render
+
+        with atomic_path(args.report) as tmp:
+            tmp.write_text(render(session.calibration.to_dict(), session.table), encoding="utf-8")
+        log.info("wrote %s", safe(args.report))
+    return 130 if session.reason == "interrupted" else 0

@@ -1,0 +1,267 @@
+"""What the commands share: option groups, logging, progress bars, ``-`` for stdout, optional packages.
+
+Nothing here imports a numerical library at module level: the parser is built from it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import logging
+import sys
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from typing import TYPE_CHECKING, Any
+
+from mountcal.errors import InputError
+
+if TYPE_CHECKING:
+    from tqdm import tqdm
+
+    from mountcal.calibrate import Options
+    from mountcal.io.logs import LogOptions
+    from mountcal.pipeline import LogJob
+    from mountcal.stops import StopDetection
+
+EXIT_CODES = {
+    0: "success",
+    2: "bad input or usage (the message names the file or option, what was expected and what to do)",
+    3: "not enough information in the data for an answer (e.g. too few headings)",
+    4: "the fit failed",
+    5: "the system refused a read or a write",
+    130: "interrupted (nothing partial is written)",
+}
+STDOUT = "-"
+MODEL_HELP = (
+    "auto (default: the data choose the terms), or rotation,slope followed by optional terms "
+    "(listed in the README and in the message for an unknown one)"
+)
+HEADINGS = ("uphill", "relative", "none")
+
+log = logging.getLogger("mountcal")
+
+
+class _Stderr(logging.Handler):
+    """Status lines of ``mountcal.*`` loggers on the current stderr (never stdout), prefixed ``mountcal:``."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        from tqdm import tqdm  # writes above a progress bar being drawn, instead of through it
+
+        level = "" if record.levelno in (logging.INFO, logging.ERROR) else f"{record.levelname.lower()}: "
+        tqdm.write(f"mountcal: {level}{record.getMessage()}", file=sys.stderr)
+        sys.stderr.flush()
+
+
+def configure_logging(verbosity: int) -> None:
+    """One logging set-up for every command: -q (warnings and errors), default (status), -v (detail)."""
+    root = logging.getLogger("mountcal")
+    if not any(isinstance(h, _Stderr) for h in root.handlers):
+        root.addHandler(_Stderr())
+    root.propagate = False
+    root.setLevel(logging.WARNING if verbosity < 0 else logging.INFO if verbosity == 0 else logging.DEBUG)
+
+
+def common_options() -> argparse.ArgumentParser:
+    """-q/-v/--progress: a parent parser of every command."""
+    common = argparse.ArgumentParser(add_help=False)
+    g = common.add_argument_group("output")
+    g.add_argument("-q", "--quiet", action="count", default=0, help="only warnings and errors on stderr")
+    g.add_argument("-v", "--verbose", action="count", default=0, help="more detail on stderr")
+    g.add_argument(
+        "--progress",
+        action="store_true",
+        help="progress bars on stderr even when it is not a terminal (never with -q)",
+    )
+    return common
+
+
+def add_command(
+    sub: Any,
+    name: str,
+    help_text: str,
+    *,
+    json_help: str | None = None,
+    inputs: tuple[str, str] | None = None,
+    many: bool = True,
+    output: str | None = None,
+    output_required: bool = False,
+) -> argparse.ArgumentParser:
+    """A subcommand with the common options; its inputs (``args.input``: metavar, help), its ``-o`` and,
+    when it has a machine-readable result, ``--json``."""
+    p: argparse.ArgumentParser = sub.add_parser(name, help=help_text, description=help_text, parents=[common_options()])
+    if inputs is not None:
+        p.add_argument("input", nargs="+" if many else None, metavar=inputs[0], help=inputs[1])
+    if output is not None:
+        p.add_argument("-o", "--output", required=output_required, default=None, help=output)
+    if json_help is not None:
+        p.add_argument("--json", action="store_true", help=json_help)
+    return p
+
+
+def add_log_options(
+    p: argparse.ArgumentParser, *, repeat_dbc: bool = True, stops: bool = True, protocol: bool = True
+) -> None:
+    """How to read a log (and, with ``stops``, how to find its stops and their headings)."""
+    g = p.add_argument_group("logs")
+    if repeat_dbc:
+        g.add_argument("--dbc", action="append", default=None, help="DBC to decode a CAN log (repeat for several)")
+    else:
+        g.add_argument("--dbc", default=None, help="DBC to decode CAN logs")
+    g.add_argument("--mapping", default=None, help="TOML naming the accelerometer signals (CAN)")
+    g.add_argument("--channel", type=int, default=None, help="CAN channel of the IMU")
+    g.add_argument("--topic", default=None, help="IMU topic (MCAP)")
+    if not stops:
+        return
+    if protocol:
+        g.add_argument("--protocol", default=None, help="protocol sheet CSV: t_start_s, t_end_s, beta_deg")
+    g.add_argument(
+        "--uphill-azimuth-deg",
+        type=float,
+        default=None,
+        help="compass azimuth of the slope's uphill direction, with a heading signal in the log",
+    )
+    d = p.add_argument_group("stop detection (default: mountcal.stops.StopDetection, some from the log)")
+    for flag, text in _DETECTION.values():
+        d.add_argument(flag, type=float, default=None, help=text)
+
+
+# StopDetection field → (flag, help); unset flags keep the library's defaults
+_DETECTION = {
+    "max_acc_std_mps2": ("--max-acc-std", "stillness: moving std of each axis below this (m/s²)"),
+    "max_gyro_std_rad_s": ("--max-gyro-std", "stillness: moving std of each gyro axis below this (rad/s)"),
+    "max_gyro_rad_s": ("--max-gyro-rate", "stillness: angular rate within this of the gyro's bias (rad/s)"),
+    "max_speed_mps": ("--max-speed", "stillness: speed at most this (m/s)"),
+    "window_s": ("--still-window-s", "window of the moving statistics (s)"),
+    "min_duration_s": ("--min-stop-s", "shortest stop (s)"),
+    "trim_s": ("--trim-s", "settling cut from both ends of a stop (s)"),
+    "max_heading_wander_deg": ("--max-heading-wander", "a stop whose heading wanders more is split (deg)"),
+}
+
+
+def add_fit_options(g: argparse.ArgumentParser | argparse._ArgumentGroup, *, headings_help: str) -> None:
+    """Method, model, headings and the yaw threshold of the fit."""
+    g.add_argument("--method", choices=("full", "paper"), default="full")
+    g.add_argument("--model", default="auto", help=MODEL_HELP)
+    g.add_argument("--headings", choices=HEADINGS, default="uphill", help=headings_help)
+    g.add_argument("--max-yaw-sigma", type=float, default=5.0, help="report yaw only below this 1σ (deg)")
+    g.add_argument("--sensor-spec", default=None, help="the sensor's datasheet limits (TOML/JSON; default class)")
+    g.add_argument("--triad", default=None, help="triad calibration from `mountcal triad`, applied to the stops")
+    g.add_argument(
+        "--use",
+        choices=("auto", "stops", "driving"),
+        default="auto",
+        help="for a log: its parked stops, its driving (speed changes), or whatever it supports (default)",
+    )
+
+
+def log_options(args: argparse.Namespace) -> LogOptions:
+    from mountcal.io.logs import LogOptions
+
+    dbc = args.dbc
+    if isinstance(dbc, list):  # --dbc given once (a path) or repeated (their messages together)
+        dbc = None if not dbc else dbc[0] if len(dbc) == 1 else tuple(dbc)
+    return LogOptions(dbc=dbc, mapping=args.mapping, channel=args.channel, topic=args.topic)
+
+
+def detection(args: argparse.Namespace) -> StopDetection:
+    from mountcal.stops import StopDetection
+
+    given = {field: getattr(args, flag[2:].replace("-", "_")) for field, (flag, _) in _DETECTION.items()}
+    return StopDetection(**{k: v for k, v in given.items() if v is not None})
+
+
+def fit_options(args: argparse.Namespace) -> Options:
+    from mountcal.calibrate import Options
+    from mountcal.cli.triad import sensor_options
+
+    options = Options(
+        method=args.method,
+        model=args.model,
+        gravity_mps2=getattr(args, "gravity", None),
+        max_yaw_sigma_deg=args.max_yaw_sigma,
+    )
+    return sensor_options(options, getattr(args, "sensor_spec", None), getattr(args, "triad", None))
+
+
+def log_job(args: argparse.Namespace, options: Options | None = None) -> LogJob:
+    from mountcal.pipeline import LogJob
+
+    return LogJob(
+        paths=tuple(args.input),
+        log=log_options(args),
+        detection=detection(args),
+        protocol=args.protocol,
+        uphill_azimuth_deg=args.uphill_azimuth_deg,
+        options=options if options is not None else fit_options(args),
+        use=getattr(args, "use", "auto"),
+    )
+
+
+def log_inputs(args: argparse.Namespace) -> dict[str, Any]:
+    """Every file a log command reads, by option name (for :func:`mountcal.paths.check_outputs`)."""
+    return {"input": args.input, **{f"--{k}": getattr(args, k, None) for k in ("dbc", "mapping", "protocol")}}
+
+
+def require(module: str, extra: str, needed_by: str) -> None:
+    """Refuse, before any work, an option whose optional dependency is not installed; name the extra."""
+    try:
+        importlib.import_module(module)
+    except ImportError as err:
+        raise InputError(
+            needed_by,
+            f"the optional package {module} installed",
+            f"it missing ({err})",
+            f"Install it: pip install 'mountcal[{extra}]'. Nothing was written.",
+        ) from err
+
+
+def print_json(document: Any) -> None:
+    """A machine-readable result on stdout (one JSON document)."""
+    sys.stdout.write(json.dumps(document, indent=2, allow_nan=False, default=str) + "\n")
+    sys.stdout.flush()
+
+
+def progress_wanted(args: argparse.Namespace) -> bool:
+    """Bars on stderr: on a terminal, or with --progress; never with -q."""
+    if args.quiet > 0:
+        return False
+    return bool(args.progress) or bool(getattr(sys.stderr, "isatty", lambda: False)())
+
+
+def bar(args: argparse.Namespace, total: int | None, label: str, unit: str = "it") -> tqdm[Any]:
+    """A tqdm progress bar on stderr (disabled under -q or off a terminal unless --progress); without a
+    total, the elapsed time."""
+    from tqdm import tqdm
+
+    return tqdm(
+        total=total,
+        desc=f"mountcal: {label}",
+        unit=unit,
+        file=sys.stderr,
+        disable=not progress_wanted(args),
+        bar_format=None if total is not None else "{desc} … {elapsed}",
+    )
+
+
+@contextmanager
+def working(args: argparse.Namespace, label: str) -> Iterator[None]:
+    """A bar for one long step that reports no progress of its own: the elapsed time, redrawn while it runs."""
+    with bar(args, None, label) as shown:
+        if shown.disable:
+            yield
+            return
+        done = threading.Event()
+
+        def tick() -> None:
+            while not done.wait(0.2):
+                shown.refresh()
+
+        ticker = threading.Thread(target=tick, daemon=True)
+        ticker.start()
+        try:
+            yield
+        finally:
+            done.set()
+            ticker.join()

@@ -1,0 +1,73 @@
+"""``mountcal plan --target …``: the smallest session reaching the target; exit 0, or 3 when not reachable."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import math
+from typing import Any
+
+from mountcal.cli.options import add_command, add_log_options, log_options, working
+from mountcal.terminal import safe
+
+log = logging.getLogger("mountcal")
+
+
+def add_parser(sub: Any) -> None:
+    p = add_command(sub, "plan", "plan a session from the bound: stops, headings, dwell, slope")
+    p.add_argument("--target", required=True, help="1σ targets in degrees, e.g. roll=0.1,pitch=0.1,yaw=0.5")
+    p.add_argument("--noise", type=float, default=None, help="accelerometer noise per sample, 1σ per axis (mg)")
+    p.add_argument("--rate-hz", type=float, default=100.0, help="sample rate with --noise (Hz; default 100)")
+    p.add_argument("--from-log", nargs="+", default=None, metavar="LOG", help="measure noise and rate on a log")
+    p.add_argument("--slope-deg", type=float, default=None, help="the slope available (default: find one)")
+    p.add_argument("--model", default="rotation,slope,bias", help="rotation,slope,bias (default) or rotation,slope")
+    p.add_argument("--max-stops", type=int, default=24, help="most stops to plan (default 24)")
+    p.add_argument("--stop-s", type=float, default=None, help="dwell of each stop (s; default: chosen)")
+    p.add_argument("--drive-s", type=float, default=60.0, help="time between stops, for the session length (s)")
+    p.add_argument("-o", "--output", default=None, help="protocol sheet CSV to write")
+    add_log_options(p, repeat_dbc=False, stops=False)
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from mountcal.conventions import G_N
+    from mountcal.errors import InputError, NotEnoughInformation
+    from mountcal.plan import Noise, Request, make_plan, noise_from_log, parse_target, plan_terms
+
+    if (args.noise is None) == (args.from_log is None):
+        raise InputError(
+            "mountcal plan",
+            "exactly one of --noise MG or --from-log LOG",
+            "both" if args.noise else "neither",
+            "Give the sensor's per-sample noise in mg, or a log with parked periods to measure it on.",
+        )
+    if args.noise is not None:
+        if not (math.isfinite(args.noise) and args.noise > 0 and math.isfinite(args.rate_hz) and args.rate_hz > 0):
+            raise InputError(
+                "--noise/--rate-hz",
+                "positive numbers",
+                f"{args.noise:g} mg at {args.rate_hz:g} Hz",
+                "Give the sensor's values.",
+            )
+        noise = Noise(args.noise * 1e-3 * G_N, args.rate_hz, "given by --noise and --rate-hz")
+    else:
+        with working(args, "measuring the noise on the log"):
+            noise = noise_from_log(list(args.from_log), log_options(args))
+    req = Request(
+        parse_target(args.target),
+        noise,
+        plan_terms(args.model),
+        args.slope_deg,
+        args.max_stops,
+        args.stop_s,
+        args.drive_s,
+    )
+    with working(args, "planning"):
+        plan = make_plan(req)
+    print("\n".join(plan.lines()))
+    if not plan.reachable:
+        return NotEnoughInformation.exit_code
+    if args.output is not None:
+        plan.write_protocol(args.output)
+        log.info("wrote %s (protocol sheet for calibrate --protocol; replace the placeholder times)", safe(args.output))
+    return 0

@@ -1,0 +1,72 @@
+"""``mountcal rotate LOG… --calibration result.json -o OUT``: the log's samples in the vehicle frame."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+from dataclasses import asdict
+from typing import Any
+
+from mountcal.cli.options import add_command, add_log_options, log_inputs, log_options, print_json, working
+from mountcal.terminal import safe
+
+log = logging.getLogger("mountcal")
+
+
+def add_parser(sub: Any) -> None:
+    p = add_command(
+        sub,
+        "rotate",
+        "write a log's samples in the vehicle frame (Parquet, CSV or MCAP)",
+        json_help="what was read, written and dropped, as JSON on stdout",
+        inputs=("LOG", "log file(s); splits of one log are joined"),
+        output="file to write (.parquet, .csv or .mcap)",
+        output_required=True,
+    )
+    p.add_argument("--calibration", required=True, help="result JSON written by `mountcal calibrate`")
+    p.add_argument(
+        "--format", choices=("parquet", "csv", "mcap"), default=None, help="default: from -o's suffix, else parquet"
+    )
+    p.add_argument("--chunk", type=int, default=100_000, help="samples per chunk: bounds the memory (default 100000)")
+    p.add_argument(
+        "--level-only",
+        action="store_true",
+        help="accept a calibration without yaw: write a levelled frame (z up, heading the sensor's own)",
+    )
+    p.add_argument("--require-confident", action="store_true", help="refuse a calibration that is not confident")
+    add_log_options(p, stops=False)
+    p.set_defaults(run=run, protocol=None)
+
+
+def run(args: argparse.Namespace) -> int:
+    from mountcal.errors import InputError
+    from mountcal.paths import check_outputs
+    from mountcal.result import Calibration
+    from mountcal.rotate import check_applicable
+    from mountcal.rotate_log import rotate_log
+
+    check_outputs({"-o": args.output}, log_inputs(args) | {"--calibration": args.calibration})
+    if args.chunk < 1:
+        raise InputError("--chunk", "a number of samples ≥ 1", str(args.chunk), "Pass --chunk 100000 (the default).")
+    cal = Calibration.load(args.calibration)
+    check_applicable(  # refused before any reading, naming the calibration file
+        cal, level_only=args.level_only, require_confident=args.require_confident, where=str(args.calibration)
+    )
+    with working(args, "rotating"):
+        report = rotate_log(
+            args.input,
+            cal,
+            args.output,
+            fmt=args.format,
+            options=log_options(args),
+            chunk_samples=args.chunk,
+            level_only=args.level_only,
+            require_confident=args.require_confident,
+        )
+    for text in report.warnings:
+        log.warning("%s (recorded in %s's metadata)", text, safe(args.output))
+    for line in report.lines():
+        log.info("%s", safe(line))
+    if args.json:
+        print_json(asdict(report))
+    return 0

@@ -1,0 +1,117 @@
+"""The command line's conventions: results on stdout or in the file, status on stderr, --json, -q/-v, '-'."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from mountcal.cli import main
+from mountcal.result import Calibration
+
+REPO = Path(__file__).resolve().parents[1]
+STOPS = REPO / "data" / "zhang2011_stops.csv"
+PARKING, PROTOCOL = REPO / "data" / "parking.mcap", REPO / "data" / "parking_protocol.csv"
+
+
+def test_dash_o_dash_writes_the_result_json_to_stdout_and_no_file_named_dash(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    assert main(["calibrate", str(STOPS), "-o", "-"]) == 0
+    out, err = capsys.readouterr()
+    cal = Calibration.from_dict(json.loads(out))  # stdout is the result document, nothing else
+    assert cal.roll_sigma_deg is not None and "roll" in err  # the summary went to stderr
+    assert not (tmp_path / "-").exists()
+
+
+def test_json_and_a_file_give_the_same_result(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    result = tmp_path / "r.json"
+    assert main(["calibrate", str(STOPS), "--json", "-o", str(result)]) == 0
+    out = capsys.readouterr().out
+    assert json.loads(out)["mounting"] == json.loads(result.read_text(encoding="utf-8"))["mounting"]
+
+
+def test_a_log_s_status_goes_to_stderr_and_the_summary_to_stdout(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    result = tmp_path / "r.json"
+    assert main(["calibrate", str(PARKING), "--protocol", str(PROTOCOL), "-o", str(result)]) == 0
+    out, err = capsys.readouterr()
+    assert out.startswith("mountcal — full method") and "read " not in out and "wrote" not in out
+    assert "mountcal: read 39600 samples" in err and f"mountcal: wrote {result}" in err
+
+
+def test_quiet_keeps_stderr_free_of_status_and_verbose_keeps_it(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    args = ["stops", str(PARKING), "--protocol", str(PROTOCOL), "-o", str(tmp_path / "s.csv")]
+    assert main([*args, "-q"]) == 0
+    assert capsys.readouterr() == ("", "")
+    assert main([*args, "-v"]) == 0
+    assert "found 12 stops" in capsys.readouterr().err
+
+
+def test_stops_to_stdout_read_back_by_calibrate_from_stdin(tmp_path: Path) -> None:
+    """`mountcal stops LOG -o - | mountcal calibrate - -o -`: the stop table through a pipe."""
+    cmd = [sys.executable, "-m", "mountcal"]
+    stops = subprocess.run(
+        [*cmd, "stops", str(PARKING), "--protocol", str(PROTOCOL), "-o", "-", "-q"],
+        capture_output=True,
+        check=True,
+    )
+    assert stops.stderr == b"" and b"beta_deg" in stops.stdout.split(b"\n")[0]  # -q: nothing but the table
+    done = subprocess.run([*cmd, "calibrate", "-", "-o", "-"], input=stops.stdout, capture_output=True, check=True)
+    piped = Calibration.from_dict(json.loads(done.stdout))
+    direct = tmp_path / "direct.json"
+    assert main(["calibrate", str(PARKING), "--protocol", str(PROTOCOL), "--use", "stops", "-o", str(direct)]) == 0
+    alone = Calibration.load(direct)
+    assert piped.roll_deg == pytest.approx(alone.roll_deg, abs=1e-9)
+    assert piped.yaw_deg == pytest.approx(alone.yaw_deg, abs=1e-9)
+
+
+def test_a_user_error_is_one_line_on_stderr_with_its_exit_code(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["calibrate", "no-such-stops.csv"]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.startswith("mountcal: error: no-such-stops.csv") and "Traceback" not in err
+
+
+def test_inspect_json_lists_the_streams(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["inspect", str(PARKING), "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["format"] == "mcap" and doc["streams"] and all("count" in s for s in doc["streams"])
+
+
+def test_an_empty_csv_is_refused_alike_by_calibrate_and_by_fleet(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """One stop-table sniffer: the same message whether one log is calibrated or a fleet of them."""
+    import pandas as pd
+
+    empty = tmp_path / "van" / "empty.csv"
+    empty.parent.mkdir()
+    empty.write_bytes(b"")
+    assert main(["calibrate", str(empty)]) == 2
+    assert "an empty file (0 bytes)" in capsys.readouterr().err
+    assert main(["fleet", str(empty.parent), "-o", str(tmp_path / "f.parquet")]) == 0
+    row = pd.read_parquet(tmp_path / "f.parquet").iloc[0]
+    assert row["status"] == "failed" and "an empty file (0 bytes)" in row["error"]
+
+
+def test_a_library_refusal_names_no_option_and_the_cli_names_its_own(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from mountcal.errors import NotEnoughInformation
+    from mountcal.outputs.exporters import export
+
+    result = tmp_path / "level.json"
+    assert main(["calibrate", str(STOPS), "--headings", "relative", "-o", str(result)]) == 0  # yaw not determined
+    with pytest.raises(NotEnoughInformation) as err:
+        export(Calibration.load(result), "json")
+    assert "--" not in str(err.value) and "yaw='zero'" in str(err.value)
+    capsys.readouterr()
+    assert main(["export", str(result), "--to", "json"]) == 3
+    assert "--yaw-undetermined zero" in capsys.readouterr().err
