@@ -126,7 +126,7 @@ def test_a_log_with_paired_stamps_calibrates_from_the_command_line(tmp_path: Pat
     to_frame(samples_of(log)).to_csv(path, index=False)  # t_s, ax…gz, heading_deg, speed_mps
     out = tmp_path / "stops.csv"
     assert cli.main(["stops", str(path), "-o", str(out), "--uphill-azimuth-deg", str(log.uphill_azimuth_deg)]) == 0
-    printed = capsys.readouterr().out
+    printed = capsys.readouterr().err  # status lines go to stderr
     assert f"{MERGED}: {len(log.t_s) // 2}" in printed and "gyro bias" in printed
     table = pd.read_csv(out)
     assert len(table) == len(log.protocol)

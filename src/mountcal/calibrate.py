@@ -48,7 +48,7 @@ from mountcal.result import (
 )
 from mountcal.sensor_spec import DEFAULT as DEFAULT_SPEC
 from mountcal.sensor_spec import SensorSpec
-from mountcal.stoptable import StopTable, fingerprint
+from mountcal.stoptable import StopTable, check_count, fingerprint
 from mountcal.systematic import assess, from_spec
 from mountcal.triad import Triad
 from mountcal.version import software_version
@@ -488,6 +488,7 @@ def _paper(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrat
 
 
 def _check_geometry(table: StopTable) -> None:
+    check_count(len(table), table.source)
     if table.beta_rad is not None and table.headings != "none":
         distinct = np.unique(np.round(np.degrees(table.beta_rad) % 360.0, 3))
         if distinct.size < MIN_DISTINCT_HEADINGS:

@@ -355,7 +355,8 @@ def stop_table(
             duration_s=np.array([s.duration_s for s in stops], dtype=float),
             heading_deg=channel("heading_deg"),
             source=source,
-        )
+        ),
+        min_stops=1,  # a log may hold fewer stops than a fit needs: calibrate says so
     )
 
 

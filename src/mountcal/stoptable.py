@@ -195,7 +195,7 @@ def stop_table_from_frame(
             f"no column {', '.join(missing)}; the columns are {', '.join(map(str, df.columns))}",
             "Rename the columns or write the stop table with `mountcal stops`.",
         )
-    _check_count(len(df), source)
+    check_count(len(df), source)
     scale = G_N if unit == "g" else 1.0
     with np.errstate(over="ignore"):  # a huge value becomes inf here and is refused by the gravity check
         acc = _numeric(df, list(ACC), source) * scale
@@ -266,10 +266,11 @@ def stop_table_from_frame(
     )
 
 
-def checked(table: StopTable) -> StopTable:
-    """The checks of a table read from a file, for a table built in memory: enough stops, finite
-    means near gravity, covariances finite and positive definite."""
-    _check_count(len(table), table.source)
+def checked(table: StopTable, min_stops: int = MIN_STOPS) -> StopTable:
+    """The checks of a table read from a file, for a table built in memory: enough stops (a log's
+    table may hold fewer than a fit needs: ``min_stops``), finite means near gravity, covariances
+    finite and positive definite."""
+    check_count(len(table), table.source, min_stops)
     bad = np.flatnonzero(~np.all(np.isfinite(table.acc_s), axis=1))
     if bad.size:
         raise InputError(table.source, "finite stop means", f"non-finite values in stops {_rows(bad)}", _NO_GUESS)
@@ -289,10 +290,11 @@ def checked(table: StopTable) -> StopTable:
     return table
 
 
-def _check_count(n: int, source: str) -> None:
-    if n < MIN_STOPS:
+def check_count(n: int, source: str, min_stops: int = MIN_STOPS) -> None:
+    """Refuse a table with fewer than ``min_stops`` stops (a fit needs ``MIN_STOPS``)."""
+    if n < min_stops:
         raise NotEnoughInformation(
-            f"{source}: expected at least {MIN_STOPS} stops, found {n}. "
+            f"{source}: expected at least {min_stops} stops, found {n}. "
             "Park at more headings (12 evenly spread is the paper's protocol)."
         )
 
