@@ -131,7 +131,7 @@ def test_a_log_with_paired_stamps_calibrates_from_the_command_line(tmp_path: Pat
     table = pd.read_csv(out)
     assert len(table) == len(log.protocol)
     assert cli.main(["calibrate", str(path), "--uphill-azimuth-deg", str(log.uphill_azimuth_deg)]) == 0  # and driving
-    assert "calibrated from: stops" in capsys.readouterr().out
+    assert "calibrated from: stops" in capsys.readouterr().err
 
 
 def test_a_heading_that_wanders_splits_or_drops_the_stop_and_is_counted() -> None:
