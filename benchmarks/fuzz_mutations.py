@@ -227,9 +227,9 @@ def run(count: int, seed: int, report: Callable[[str], None]) -> dict[str, objec
     each is listed with the source, the mutation and the command, to reproduce it.
     """
     import mountcal.cli  # imported once here, inherited by every forked command
-    import mountcal.io.can_frames
-    import mountcal.io.can_log
-    import mountcal.io.mcap_log  # noqa: F401
+    import mountcal.io.can.frames
+    import mountcal.io.can.read
+    import mountcal.io.mcap.read  # noqa: F401
 
     rng = random.Random(seed)
     pool = sources()

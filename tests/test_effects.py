@@ -15,7 +15,7 @@ from mountcal.conventions import G_N
 from mountcal.diagnose import leave_one_out, leave_one_out_refit
 from mountcal.effects import BASE, PROGRESS_STOPS, close_the_loop, with_surface
 from mountcal.estimate import full
-from mountcal.simulate import random_bias, simulate_preset, simulate_stops
+from mountcal.simulate.stops import random_bias, simulate_preset, simulate_stops
 from mountcal.stoptable import StopTable, write_stop_table
 
 MG = 1e-3 * G_N

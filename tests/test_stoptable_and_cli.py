@@ -12,7 +12,7 @@ import pytest
 from mountcal.cli import main
 from mountcal.errors import InputError
 from mountcal.result import FORMAT_VERSION, Calibration
-from mountcal.simulate import simulate_preset
+from mountcal.simulate.stops import simulate_preset
 from mountcal.stoptable import read_stop_table, write_stop_table
 
 REPO = Path(__file__).resolve().parents[1]

@@ -23,7 +23,7 @@ from mountcal.paths import SystemFailure, check_outputs, special_kind
 from mountcal.pipeline import LogJob, describe, stops_of_log
 from mountcal.result import Calibration
 from mountcal.result_file import read_json
-from mountcal.simulate import PRESETS, simulate_stops
+from mountcal.simulate.stops import PRESETS, simulate_stops
 from mountcal.stops import StopDetection
 from mountcal.stoptable import read_stop_table, same_stops, write_stop_table
 from mountcal.terminal import safe
@@ -124,8 +124,8 @@ def cmd_inspect(args: argparse.Namespace) -> int:
 
 def cmd_rotate(args: argparse.Namespace) -> int:
     """``mountcal rotate LOG… --calibration result.json -o OUT``: the log's samples in the vehicle frame."""
-    from mountcal.rotate import check_applicable
-    from mountcal.rotate_log import rotate_log
+    from mountcal.apply.rotate import check_applicable
+    from mountcal.apply.rotate_log import rotate_log
 
     check_outputs({"-o": args.output}, _log_inputs(args) | {"--calibration": args.calibration})
     if args.chunk < 1:
@@ -298,8 +298,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         params["bias_mps2"] = np.array(args.bias_mg) * 1e-3 * 9.80665
     if args.log:
         from mountcal.conventions import G_N, normal_gravity
-        from mountcal.io import export
-        from mountcal.simulate import simulate_parking_log
+        from mountcal.simulate import logs as export
+        from mountcal.simulate.stops import simulate_parking_log
 
         if args.output is not None:
             raise InputError(

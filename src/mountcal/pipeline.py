@@ -8,8 +8,8 @@ from pathlib import Path
 
 from mountcal.calibrate import Options, calibrate
 from mountcal.io.logs import LogOptions, read_log
-from mountcal.io.samples import Samples
 from mountcal.result import Calibration
+from mountcal.samples import Samples
 from mountcal.stops import StopDetection, StopTableFromLog, read_protocol, tabulate
 from mountcal.stoptable import StopTable, stop_table_from_frame
 

@@ -29,10 +29,10 @@ from mountcal.estimate.driving import (
     not_combined,
 )
 from mountcal.io.logs import read_log
-from mountcal.io.samples import Samples
 from mountcal.io.timestamps import increasing_times
 from mountcal.pipeline import LogJob
 from mountcal.result import Calibration
+from mountcal.samples import Samples
 from mountcal.stops import StopTableFromLog, read_protocol, tabulate
 from mountcal.stoptable import StopTable, stop_table_from_frame
 from mountcal.version import software_version

@@ -25,10 +25,10 @@ import zstandard
 from mcap.writer import CompressionType, Writer
 
 from mountcal.errors import InputError
-from mountcal.io.can_frames import read_frames
+from mountcal.io.can.frames import read_frames
 from mountcal.io.inputs import check_regular_file
 from mountcal.io.logs import read_table_samples
-from mountcal.io.mcap_log import inspect_mcap, read_mcap
+from mountcal.io.mcap.read import inspect_mcap, read_mcap
 
 REPO = Path(__file__).resolve().parents[2]
 DBC = REPO / "data" / "imu_mm5_10.dbc"
@@ -276,7 +276,7 @@ def test_a_limit_that_is_not_a_positive_number_is_refused(monkeypatch: pytest.Mo
 
 def test_merging_mf4_groups_with_damaged_unsorted_times_ends_with_every_frame() -> None:
     """Found by benchmarks/fuzz_mutations.py: a spliced MF4 whose times run backwards hung the merge."""
-    from mountcal.io.can_frames import CanFrames, _merge_by_time
+    from mountcal.io.can.frames import CanFrames, _merge_by_time
 
     def frames(t: list[float]) -> CanFrames:
         n = len(t)

@@ -47,8 +47,8 @@ from scipy.spatial.transform import Rotation
 
 from mountcal.conventions import FloatArray, angles_from_rot_vs, rot_vs_from_angles, tilt_from_normal
 from mountcal.errors import InputError, NotEnoughInformation
-from mountcal.io.samples import Channel, Samples
 from mountcal.result import Calibration
+from mountcal.samples import Channel, Samples
 
 IntArray = NDArray[np.int64]
 AGREE_Z = 2.0  # |z| above this: the two estimates disagree beyond their uncertainties (≈ 95 %)

@@ -27,7 +27,7 @@ import pandas as pd
 from mountcal.calibrate import Options
 from mountcal.errors import InputError
 from mountcal.io.logs import CAN_SUFFIXES, LogOptions
-from mountcal.io.writers import written_by_mountcal
+from mountcal.io.mcap.write import written_by_mountcal
 from mountcal.paths import input_file, special_kind
 from mountcal.pipeline import LogJob
 from mountcal.stops import StopDetection

@@ -12,7 +12,7 @@ holding ``t`` (boot-time seconds) and ``value`` (NumPy ``.npy`` files without a 
   ``lat_deg``, ``lon_deg``, ``alt_m``.
 - ``processed_log/CAN/raw_can`` (``t, src, address, data``; ``data`` is ``|S8``, read as bytes so
   trailing NULs survive): the car's ``KINEMATICS`` message (0x24 on bus ``src`` 0) decoded with the
-  DBC beside the segment (``toyota_new_mc_pt_generated.dbc``) by :func:`mountcal.io.dbc.decode`:
+  DBC beside the segment (``toyota_new_mc_pt_generated.dbc``) by :func:`mountcal.io.can.dbc.decode`:
   ``ACCEL_X``, ``ACCEL_Y`` (m/s²) and ``YAW_RATE`` (deg/s), as the car sends them.
 
 The car's signs are not ISO 8855's: on this segment ``ACCEL_X`` follows −d(speed)/dt and ``ACCEL_Y``
@@ -30,9 +30,9 @@ from pathlib import Path
 import numpy as np
 
 from mountcal.errors import InputError
-from mountcal.io.can_frames import DATA_WIDTH, CanFrames
-from mountcal.io.dbc import decode, load_dbc
-from mountcal.io.samples import Channel, FloatArray, Samples
+from mountcal.io.can.dbc import decode, load_dbc
+from mountcal.io.can.frames import DATA_WIDTH, CanFrames
+from mountcal.samples import Channel, FloatArray, Samples
 
 AXIS_MAP = "x,-y,-z"  # sensor [forward, left, up] from device [forward, right, down]
 _DEVICE_TO_SENSOR = np.array([1.0, -1.0, -1.0])  # the diagonal of the 180° turn about x

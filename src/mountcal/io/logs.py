@@ -1,8 +1,8 @@
 """One entry point for every log format: pick the reader by the file, join split logs.
 
-- ``.mcap``: :mod:`mountcal.io.mcap_log` (ROS 2 Imu, CDR or JSON).
+- ``.mcap``: :mod:`mountcal.io.mcap.read` (ROS 2 Imu, CDR or JSON).
 - CAN logs (``.blf .asc .log .trc .mf4 .mdf``, and ``.csv`` when a DBC is given):
-  :mod:`mountcal.io.can_log`, decoded with the DBC.
+  :mod:`mountcal.io.can.read`, decoded with the DBC.
 - Sample tables (``.csv``/``.parquet`` with ``t_s, ax, ay, az`` and optionally ``gx, gy, gz``
   in rad/s, ``speed_mps``, ``heading_deg``, ``temperature_c``, ``lat_deg``, ``alt_m``).
 
@@ -24,7 +24,7 @@ import pandas as pd
 
 from mountcal.errors import InputError
 from mountcal.io.inputs import check_parquet_rows, check_regular_file
-from mountcal.io.samples import Channel, LogSummary, Samples
+from mountcal.samples import Channel, LogSummary, Samples
 
 CAN_SUFFIXES = {".blf", ".asc", ".log", ".trc", ".mf4", ".mdf"}
 TABLE_CHANNELS = ("speed_mps", "heading_deg", "temperature_c", "lat_deg", "lon_deg", "alt_m")
@@ -57,15 +57,15 @@ def inspect_log(path: str | Path, options: LogOptions | None = None) -> LogSumma
     # a CAN log is listed without a DBC too: ids per channel with counts, rates and DLCs
     kind = "can" if path.suffix.lower() in CAN_SUFFIXES else log_kind(path, opts)
     if kind == "mcap":
-        from mountcal.io.mcap_log import inspect_mcap
+        from mountcal.io.mcap.read import inspect_mcap
 
         return inspect_mcap(path)
     if kind == "can":
-        from mountcal.io.can_log import inspect_can
+        from mountcal.io.can.read import inspect_can
 
         return inspect_can(path, opts.dbc)
     s = read_table_samples(path)
-    from mountcal.io.samples import Stream
+    from mountcal.samples import Stream
 
     dur = float(s.t_s[-1] - s.t_s[0]) if len(s) > 1 else 0.0
     rate = (len(s) - 1) / dur if dur > 0 else 0.0
@@ -212,11 +212,11 @@ def log_kind(path: Path, opts: LogOptions) -> str:
 def _read_one(path: Path, opts: LogOptions) -> Samples:
     kind = log_kind(path, opts)
     if kind == "mcap":
-        from mountcal.io.mcap_log import read_mcap
+        from mountcal.io.mcap.read import read_mcap
 
         return read_mcap(path, topic=opts.topic)
     if kind == "can":
-        from mountcal.io.can_log import read_can
+        from mountcal.io.can.read import read_can
 
         return read_can(path, opts.dbc, mapping=opts.mapping, channel=opts.channel)
     return read_table_samples(path)

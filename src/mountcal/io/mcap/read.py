@@ -3,7 +3,7 @@
 The reader walks the MCAP records itself and decodes whole chunks at a time with numpy: for each
 chunk it locates the message records from the chunk's message index (checked to tile the chunk
 exactly), or from a fixed stride, or — only when neither holds — by a plain loop over the records;
-then every field is gathered for all messages of a topic at once (:mod:`mountcal.io.cdr`). There is
+then every field is gathered for all messages of a topic at once (:mod:`mountcal.io.ros2.cdr`). There is
 no per-message Python on this path; JSON-encoded channels are the exception (one ``json.loads`` per
 message). Chunks are decompressed and CRC-checked on one background thread, a few chunks ahead of
 the decoding, so memory stays bounded (see ``docs/performance-mcap.md`` for figures).
@@ -15,7 +15,7 @@ Conventions of every function here:
   rule is applied per message and identically on every topic, so all channels share one clock when
   the senders stamp their messages. Times are float64 seconds (sub-microsecond resolution at
   Unix-epoch magnitudes).
-- **Units**: SI as in :class:`~mountcal.io.samples.Samples`; vectors in the IMU message's
+- **Units**: SI as in :class:`~mountcal.samples.Samples`; vectors in the IMU message's
   ``frame_id`` frame, taken as the sensor frame ``s`` (``axis_map`` ``"x,y,z"``).
 - **Drops**: samples with a NaN or infinite value are dropped and counted in ``Samples.dropped``;
   so are GNSS fixes with ``status < 0`` (no fix) and odometry orientations that are not a rotation.
@@ -47,9 +47,9 @@ import zstandard
 from numpy.typing import NDArray
 
 from mountcal.errors import InputError
-from mountcal.io import cdr
 from mountcal.io.inputs import block_too_large, check_regular_file, max_block_bytes, max_rows, too_many_rows
-from mountcal.io.samples import Channel, FloatArray, LogSummary, Samples, Stream
+from mountcal.io.ros2 import cdr
+from mountcal.samples import Channel, FloatArray, LogSummary, Samples, Stream
 from mountcal.threads import helpers_allowed
 
 I64Array = NDArray[np.int64]
@@ -1165,7 +1165,7 @@ def inspect_mcap(path: str | os.PathLike[str]) -> LogSummary:
     Returns
     -------
     LogSummary
-        One :class:`~mountcal.io.samples.Stream` per topic: ``kind`` is the schema name,
+        One :class:`~mountcal.samples.Stream` per topic: ``kind`` is the schema name,
         ``rate_hz`` = (count − 1) / (last − first log time), ``fields`` the top-level fields of a
         ``ros2msg`` schema. ``duration_s`` spans the first to the last message's log time.
     """

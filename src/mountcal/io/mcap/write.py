@@ -52,8 +52,8 @@ from mcap.records import (
 from numpy.typing import NDArray
 
 from mountcal.errors import InputError
-from mountcal.io import cdr
-from mountcal.io.export import ros2_definition
+from mountcal.io.ros2 import cdr
+from mountcal.io.ros2.definitions import ros2_definition
 
 FloatArray = NDArray[np.float64]
 U8Array = NDArray[np.uint8]

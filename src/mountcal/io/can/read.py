@@ -43,7 +43,7 @@ the clock of the message carrying ``ax``: each of its frames takes, from every o
 frame nearest in time (the earlier one on a tie) if it lies within one period of that message (the
 median interval of its first 1000 frames); rows without such a partner are dropped and counted.
 
-Output is float64 SI in the sensor frame, as :class:`~mountcal.io.samples.Samples` states; the
+Output is float64 SI in the sensor frame, as :class:`~mountcal.samples.Samples` states; the
 auxiliary channels are ``temperature_c``, ``speed_mps``, ``heading_deg`` (compass, as the DBC
 gives it), ``lat_deg``, ``lon_deg``, ``alt_m``, each on its own message's clock. ``dropped`` counts
 frames of the selected messages that were unusable: too short, flagged invalid, non-finite, or
@@ -52,7 +52,6 @@ without a partner in time. Frames of other messages or channels are simply not s
 
 from __future__ import annotations
 
-import math
 import re
 import tomllib
 from collections import Counter
@@ -65,13 +64,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mountcal.errors import InputError
-from mountcal.io.can_frames import CanFrames, iter_frames, log_format
-from mountcal.io.dbc import decode, frame_id_text, id_match, load_dbcs, payload_bytes, raw_values
+from mountcal.io.can.dbc import decode, frame_id_text, id_match, load_dbcs, payload_bytes, raw_values
+from mountcal.io.can.frames import CanFrames, iter_frames, log_format
+from mountcal.io.can.signals import UNIT_HINT, UNIT_KIND, message_refs, si_scale
 from mountcal.io.inputs import check_regular_file, hold
-from mountcal.io.samples import Channel, FloatArray, LogSummary, Samples, Stream
 from mountcal.paths import input_file
+from mountcal.samples import Channel, FloatArray, LogSummary, Samples, Stream
 
-G_N = 9.80665  # standard gravity, m/s², for signals in g
 ACCEL_ROLES = ("ax", "ay", "az")
 GYRO_ROLES = ("gx", "gy", "gz")
 AUX_KEYS = {
@@ -85,57 +84,6 @@ AUX_KEYS = {
 _PERIOD_FRAMES = 1000  # frames used to measure a message's period
 _FRAMES_PER_CHUNK = 100_000  # frames decoded at a time by read_can (≈ 9 MB)
 
-# unit spellings (lower case, spaces removed, ² → ^2, ° → deg) → (scale, offset) to SI
-_UNITS: dict[str, dict[str, tuple[float, float]]] = {
-    "accel": {
-        **dict.fromkeys(("m/s^2", "m/s2", "m/s/s", "ms^-2", "ms-2", "mps2", "m/sec^2", "m/sec2"), (1.0, 0.0)),
-        **dict.fromkeys(("g", "gn", "g0"), (G_N, 0.0)),
-        "mg": (G_N / 1000.0, 0.0),
-    },
-    "gyro": {
-        **dict.fromkeys(("deg/s", "degs^-1", "dps", "degree/s", "degrees/s", "deg/sec"), (math.pi / 180.0, 0.0)),
-        **dict.fromkeys(("rad/s", "rads^-1", "rad/sec"), (1.0, 0.0)),
-        "mrad/s": (1e-3, 0.0),
-    },
-    "speed": {
-        **dict.fromkeys(("m/s", "mps", "m/sec"), (1.0, 0.0)),
-        **dict.fromkeys(("km/h", "kmh", "kph", "km/hr"), (1.0 / 3.6, 0.0)),
-        "mph": (0.44704, 0.0),
-        **dict.fromkeys(("kn", "kt", "knot", "knots"), (1852.0 / 3600.0, 0.0)),
-    },
-    "angle": {
-        **dict.fromkeys(("deg", "degree", "degrees"), (1.0, 0.0)),
-        **dict.fromkeys(("rad", "radian", "radians"), (180.0 / math.pi, 0.0)),
-    },
-    "length": {"m": (1.0, 0.0), "km": (1000.0, 0.0), "ft": (0.3048, 0.0)},
-    "temperature": {
-        **dict.fromkeys(("degc", "c", "celsius", "degreec", "degreesc"), (1.0, 0.0)),
-        "k": (1.0, -273.15),
-        **dict.fromkeys(("degf", "f", "fahrenheit"), (5.0 / 9.0, -32.0 * 5.0 / 9.0)),
-    },
-}
-_UNIT_KIND = {
-    "ax": "accel",
-    "ay": "accel",
-    "az": "accel",
-    "gx": "gyro",
-    "gy": "gyro",
-    "gz": "gyro",
-    "temperature": "temperature",
-    "speed": "speed",
-    "heading": "angle",
-    "latitude": "angle",
-    "longitude": "angle",
-    "altitude": "length",
-}
-_UNIT_HINT = {
-    "accel": "m/s^2 or g",
-    "gyro": "deg/s or rad/s",
-    "speed": "m/s, km/h, mph or kn",
-    "angle": "deg or rad",
-    "length": "m, km or ft",
-    "temperature": "degC, K or degF",
-}
 
 # signal-name patterns, matched against the lower-case name without separators and trailing digits
 _ACC = "(?:a|acc|accel|acceleration|linacc|linearaccel|linearacceleration)"
@@ -431,7 +379,7 @@ def _check_keys(table: Mapping[str, Any], allowed: set[str], where: str, prefix:
             where,
             "keys among " + ", ".join(prefix + k for k in sorted(allowed)),
             "unknown " + ", ".join(prefix + k for k in unknown),
-            "Check the spelling against the mapping format in mountcal.io.can_log.",
+            "Check the spelling against the mapping format in mountcal.io.can.read.",
         )
 
 
@@ -495,7 +443,7 @@ def _detect(db: Any, present: _Presence, where: str) -> dict[str, str]:
                 if names
                 else "none"
             ),
-            "Write a mapping naming ax, ay, az as message.signal (see mountcal.io.can_log)"
+            "Write a mapping naming ax, ay, az as message.signal (see mountcal.io.can.read)"
             + ("." if present.channel is None else ", or check the channel."),
         )
     found = {role: f"0x{m.frame_id:X}.{sig}" for role, (m, sig) in accel.items()}
@@ -557,18 +505,6 @@ def _choose_triple(
     return chosen
 
 
-def _message_refs(db: Any, text: str) -> list[Any]:
-    """Messages named ``text``: a name (possibly defined twice) or an id, hex 0x.. or decimal."""
-    by_name = [m for m in db.messages if m.name == text]
-    if by_name:
-        return by_name
-    try:
-        ident = int(text, 0)
-    except ValueError:
-        return []
-    return [m for m in db.messages if int(m.frame_id) == ident]
-
-
 def _resolve(db: Any, text: Any, role: str, present: _Presence, where: str) -> _Ref:
     """A ``message.signal`` string as a DBC message and signal name."""
     if not isinstance(text, str) or "." not in text:
@@ -576,7 +512,7 @@ def _resolve(db: Any, text: Any, role: str, present: _Presence, where: str) -> _
             where, f'signals.{role} as "message.signal"', repr(text), 'E.g. ax = "gnss_imu.AccelerationX".'
         )
     message_text, signal = text.split(".", 1)
-    messages = _message_refs(db, message_text)
+    messages = message_refs(db, message_text)
     if not messages:
         known = ", ".join(sorted({m.name for m in db.messages})[:40])
         raise InputError(
@@ -611,17 +547,17 @@ def _resolve(db: Any, text: Any, role: str, present: _Presence, where: str) -> _
 
 def _unit_scale(ref: _Ref, role: str, units: Mapping[str, Any], where: str) -> tuple[float, float]:
     """Scale and offset from the signal's unit (the mapping's, else the DBC's) to SI."""
-    kind = _UNIT_KIND[role]
+    kind = UNIT_KIND[role]
     key = "accel" if kind == "accel" else "gyro" if kind == "gyro" else role
     given = units.get(key)
     unit = str(given) if given is not None else str(ref.message.get_signal_by_name(ref.signal).unit or "")
-    norm = unit.strip().lower().replace(" ", "").replace("²", "^2").replace("°", "deg")
-    if norm in _UNITS[kind]:
-        return _UNITS[kind][norm]
+    scale = si_scale(role, unit)
+    if scale is not None:
+        return scale
     source = "the mapping's units." + key if given is not None else f"the DBC unit of {ref.label}"
     raise InputError(
         where,
-        f"{'an acceleration' if kind == 'accel' else 'a ' + kind} unit ({_UNIT_HINT[kind]}) for {role}",
+        f"{'an acceleration' if kind == 'accel' else 'a ' + kind} unit ({UNIT_HINT[kind]}) for {role}",
         f"{unit!r} ({source})",
         f"Check the mapping; if the DBC's unit is missing or wrong, set units.{key} in the mapping.",
     )
@@ -673,7 +609,7 @@ def _placements(table: Any, db: Any, where: str) -> dict[str, tuple[int | None, 
         raise InputError(where, "a [messages] table", repr(table), "Write `[messages]` then `NAME = { id = 0x174 }`.")
     out: dict[str, tuple[int | None, bool | None, int | None]] = {}
     for name, place in table.items():
-        messages = _message_refs(db, str(name))
+        messages = message_refs(db, str(name))
         if not messages:
             raise InputError(
                 where, f"a DBC message {name!r} in [messages]", "no message of that name or id", "Fix the mapping."

@@ -1,10 +1,10 @@
 """Whole logs into the vehicle frame, streamed; and the notebook API around it.
 
 :func:`rotate_log` reads a log in bounded chunks (:func:`iter_log`: ``iter_mcap``, ``iter_can``, or
-batches of a CSV/Parquet table), applies a calibration to each (:mod:`mountcal.rotate`: bias
+batches of a CSV/Parquet table), applies a calibration to each (:mod:`mountcal.apply.rotate`: bias
 removed, then ``acc_v = R_vs · (acc_s − b)``; angular rates only rotated) and writes the
 vehicle-frame samples with their original timestamps to Parquet (default), CSV or MCAP
-(:mod:`mountcal.io.writers`). The output appears only when complete (a process killed mid-write
+(:mod:`mountcal.io.mcap.write`). The output appears only when complete (a process killed mid-write
 leaves no file), never over an input; every sample read is written, and whatever a reader dropped
 is counted in the report.
 
@@ -19,8 +19,8 @@ Notebook use — read a log into a table, load a calibration, apply it:
 >>> import tempfile, pathlib
 >>> from mountcal import Calibration, calibrate, frame_to_vehicle, simulate_preset
 >>> from mountcal.io.logs import read_log
->>> from mountcal.rotate_log import rotate_log, to_frame
->>> from mountcal.simulate_drive import simulate_drive
+>>> from mountcal.apply.rotate_log import rotate_log, to_frame
+>>> from mountcal.simulate.drive import simulate_drive
 >>> folder = pathlib.Path(tempfile.mkdtemp())
 >>> drive = simulate_drive(duration_s=60.0, seed=1)
 >>> to_frame(drive.to_samples()).to_csv(folder / "drive.csv", index=False)
@@ -55,12 +55,12 @@ import pyarrow.csv as pa_csv
 import pyarrow.parquet as pq
 from scipy.spatial.transform import Rotation
 
+from mountcal.apply.rotate import acc_to_vehicle, check_applicable, rate_to_vehicle
 from mountcal.atomic import atomic_output
 from mountcal.conventions import CONVENTIONS, FloatArray
 from mountcal.errors import InputError
 from mountcal.io.logs import TABLE_CHANNELS, LogOptions, log_kind, overlap_error
-from mountcal.io.samples import Channel, Samples
-from mountcal.io.writers import (
+from mountcal.io.mcap.write import (
     CsvSamples,
     ImuMessages,
     McapImuSamples,
@@ -68,7 +68,7 @@ from mountcal.io.writers import (
     copy_mcap_with_imu,
 )
 from mountcal.result import VEHICLE_FRAME, Calibration
-from mountcal.rotate import acc_to_vehicle, check_applicable, rate_to_vehicle
+from mountcal.samples import Channel, Samples
 from mountcal.threads import helpers_allowed
 from mountcal.version import software_version
 
@@ -265,8 +265,8 @@ def iter_log(
 ) -> Iterator[Samples]:
     """The samples of a log in chunks of at most ``max_samples``, files in time order.
 
-    MCAP through :func:`~mountcal.io.mcap_log.iter_mcap`, CAN logs through
-    :func:`~mountcal.io.can_log.iter_can`, CSV and Parquet tables (``t_s, ax, ay, az`` and
+    MCAP through :func:`~mountcal.io.mcap.read.iter_mcap`, CAN logs through
+    :func:`~mountcal.io.can.read.iter_can`, CSV and Parquet tables (``t_s, ax, ay, az`` and
     optionally ``gx, gy, gz``) in batches. Each chunk's ``dropped`` counts what its reader
     discarded. Splits of one log are ordered by their first sample.
     """
@@ -290,11 +290,11 @@ def iter_log(
 def _iter_one(path: Path, opts: LogOptions, max_samples: int) -> Iterator[Samples]:
     kind = log_kind(path, opts)
     if kind == "mcap":
-        from mountcal.io.mcap_log import iter_mcap
+        from mountcal.io.mcap.read import iter_mcap
 
         return iter_mcap(path, topic=opts.topic, max_samples=max_samples)
     if kind == "can":
-        from mountcal.io.can_log import iter_can
+        from mountcal.io.can.read import iter_can
 
         return iter_can(path, opts.dbc, mapping=opts.mapping, channel=opts.channel, max_samples=max_samples)
     return _iter_table(path, max_samples)
