@@ -17,13 +17,12 @@ import pandas as pd
 import pytest
 from cantools import j1939
 
-from mountcal.apply.rotate_log import iter_log
 from mountcal.cli import main
 from mountcal.errors import InputError
 from mountcal.io.can.dbc import decode, load_dbcs, select_frames
 from mountcal.io.can.frames import read_frames
 from mountcal.io.can.read import inspect_can, read_can
-from mountcal.io.logs import LogOptions, read_log
+from mountcal.io.logs import LogOptions, iter_log, read_log
 
 REPO = Path(__file__).resolve().parents[2]
 IMU_DBC = REPO / "tests" / "data" / "mm5_imu.dbc"

@@ -27,8 +27,8 @@ from mcap.writer import CompressionType, Writer
 from mountcal.errors import InputError
 from mountcal.io.can.frames import read_frames
 from mountcal.io.inputs import check_regular_file
-from mountcal.io.logs import read_table_samples
 from mountcal.io.mcap.read import inspect_mcap, read_mcap
+from mountcal.io.table.read import read_table
 
 REPO = Path(__file__).resolve().parents[2]
 DBC = REPO / "data" / "imu_mm5_10.dbc"
@@ -235,7 +235,7 @@ def test_check_regular_file_names_the_role(tmp_path: Path) -> None:
     with pytest.raises(InputError, match="no such file"):
         check_regular_file(tmp_path / "absent", "DBC")
     with pytest.raises(InputError, match="directory"):
-        read_table_samples(tmp_path / "dir")
+        read_table(tmp_path / "dir")
 
 
 def test_a_recording_still_reads_whole(tmp_path: Path) -> None:
