@@ -70,7 +70,7 @@ def _registry() -> tuple[tuple[LogReader, ...], tuple[InputError, ...]]:
         try:
             readers.append(_as_reader(plugin.load(), where))
         except InputError as err:
-            _log.warning("mountcal: a log-format plugin is left out: %s", err)
+            _log.warning("a log-format plugin is left out: %s", err)
             broken.append(err)
     return tuple(readers), tuple(broken)
 
