@@ -266,7 +266,7 @@ def test_nan_imu_messages_are_kept_one_for_one_and_counted(cal: Calibration, tmp
 
 KILL_SCRIPT = """
 import sys, time
-import mountcal.io.mcap.write as writers
+import mountcal.io.table.write as writers
 real_write = writers.ParquetSamples.write
 def slow_write(self, *args):
     real_write(self, *args)

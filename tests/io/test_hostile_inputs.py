@@ -27,7 +27,8 @@ from mcap.writer import CompressionType, Writer
 from mountcal.errors import InputError
 from mountcal.io.can.frames import read_frames
 from mountcal.io.inputs import check_regular_file
-from mountcal.io.mcap.read import inspect_mcap, read_mcap
+from mountcal.io.mcap.inspect import inspect_mcap
+from mountcal.io.mcap.read import read_mcap
 from mountcal.io.table.read import read_table
 
 REPO = Path(__file__).resolve().parents[2]

@@ -29,7 +29,7 @@ class McapReader(LogReader):
         return iter_mcap(path, topic=options.topic, max_samples=max_samples)
 
     def inspect(self, path: Path, options: LogOptions) -> LogSummary:
-        from mountcal.io.mcap.read import inspect_mcap
+        from mountcal.io.mcap.inspect import inspect_mcap
 
         return inspect_mcap(path)
 

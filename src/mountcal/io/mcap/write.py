@@ -1,12 +1,5 @@
-"""Streaming, atomic output of vehicle-frame samples: Parquet, CSV and MCAP.
+"""Streaming MCAP output of vehicle-frame samples (tables: :mod:`mountcal.io.table.write`).
 
-Every writer takes one chunk of samples at a time, so memory does not grow with the log:
-
-- :class:`ParquetSamples`: ``pyarrow.parquet.ParquetWriter``, one row group per chunk; columns
-  ``t_s, ax, ay, az`` (and ``gx, gy, gz``) in s, m/s², rad/s; the frame and the calibration in the
-  file's key-value metadata.
-- :class:`CsvSamples`: the same columns as CSV (pyarrow's writer: shortest round-trip decimal, so
-  the numbers read back exactly).
 - :class:`McapOut`: an MCAP file written record by record. It either copies an input MCAP through
   — every chunk, message index, schema, channel, attachment and metadata record byte for byte,
   so every message keeps its channel, schema, sequence, log and publish time — and adds a
@@ -30,8 +23,6 @@ from typing import Any, BinaryIO
 
 import lz4.frame
 import numpy as np
-import pyarrow as pa
-import pyarrow.csv as pa_csv
 import pyarrow.parquet as pq
 import zstandard
 from mcap.data_stream import RecordBuilder
@@ -54,13 +45,12 @@ from numpy.typing import NDArray
 from mountcal.errors import InputError
 from mountcal.io.ros2 import cdr
 from mountcal.io.ros2.definitions import ros2_definition
+from mountcal.io.ros2.imu import ImuMessages, decode_imu_messages, encode_imu_messages
 
 FloatArray = NDArray[np.float64]
 U8Array = NDArray[np.uint8]
 
 MAGIC = b"\x89MCAP0\r\n"
-ACC_COLUMNS = ("ax", "ay", "az")
-GYRO_COLUMNS = ("gx", "gy", "gz")
 IMU_SCHEMA_NAME = "sensor_msgs/msg/Imu"
 IMU_DEFINITION = ros2_definition(IMU_SCHEMA_NAME)  # the one ROS 2 definition text mountcal writes
 _MESSAGE_HEAD = 22  # channel id u16, sequence u32, log time u64, publish time u64
@@ -70,194 +60,7 @@ _RECORD_HEAD = 9  # opcode u8, length u64
 # --------------------------------------------------------------------------- tables
 
 
-def _table(t_s: FloatArray, acc: FloatArray, gyro: FloatArray | None, schema: pa.Schema) -> pa.Table:
-    columns = [t_s, acc[:, 0], acc[:, 1], acc[:, 2]]
-    if gyro is not None:
-        columns += [gyro[:, 0], gyro[:, 1], gyro[:, 2]]
-    return pa.Table.from_arrays([pa.array(np.ascontiguousarray(c, dtype=np.float64)) for c in columns], schema=schema)
-
-
-def _schema(gyro: bool, metadata: Mapping[str, str], descriptions: Mapping[str, str] | None = None) -> pa.Schema:
-    names = ["t_s", *ACC_COLUMNS, *(GYRO_COLUMNS if gyro else ())]
-    said = descriptions or {}
-    return pa.schema(
-        [pa.field(n, pa.float64(), metadata={"description": said[n]} if n in said else None) for n in names],
-        metadata=dict(metadata),
-    )
-
-
-class ParquetSamples:
-    """Samples to a Parquet file, one row group per :meth:`write` call.
-
-    Parameters
-    ----------
-    file : binary file
-        Where to write (from :func:`mountcal.atomic.atomic_output`).
-    gyro : bool
-        Whether the rows carry ``gx, gy, gz``.
-    metadata : mapping of str to str
-        Stored in the file's key-value metadata (frame, conventions, calibration).
-    descriptions : mapping of column name to str, optional
-        Each column's meaning, stored in its field metadata under ``description``.
-    """
-
-    def __init__(
-        self,
-        file: BinaryIO,
-        gyro: bool,
-        metadata: Mapping[str, str],
-        descriptions: Mapping[str, str] | None = None,
-    ) -> None:
-        self.schema = _schema(gyro, metadata, descriptions)
-        self.gyro = gyro
-        # Float columns: no dictionary (it only costs time), byte-stream split + zstd (fast, small).
-        self._writer = pq.ParquetWriter(
-            file, self.schema, compression="zstd", use_dictionary=False, use_byte_stream_split=True
-        )
-
-    def write(self, t_s: FloatArray, acc: FloatArray, gyro: FloatArray | None) -> None:
-        """Append rows: ``t_s`` (m,) s, ``acc`` (m, 3) m/s², ``gyro`` (m, 3) rad/s."""
-        self._writer.write_table(_table(t_s, acc, gyro if self.gyro else None, self.schema))
-
-    def close(self) -> None:
-        self._writer.close()
-
-
-class CsvSamples:
-    """Samples to a CSV file (header line, then rows), written chunk by chunk."""
-
-    def __init__(self, file: BinaryIO, gyro: bool, metadata: Mapping[str, str]) -> None:
-        self.schema = _schema(gyro, {})
-        self.gyro = gyro
-        self._writer = pa_csv.CSVWriter(file, self.schema)
-
-    def write(self, t_s: FloatArray, acc: FloatArray, gyro: FloatArray | None) -> None:
-        """Append rows: ``t_s`` (m,) s, ``acc`` (m, 3) m/s², ``gyro`` (m, 3) rad/s."""
-        self._writer.write_table(_table(t_s, acc, gyro if self.gyro else None, self.schema))
-
-    def close(self) -> None:
-        self._writer.close()
-
-
 # --------------------------------------------------------------------------- CDR sensor_msgs/msg/Imu
-
-
-@dataclass(frozen=True)
-class ImuMessages:
-    """Fields of n ``sensor_msgs/msg/Imu`` messages (ROS units: s, rad/s, m/s²).
-
-    ``orientation`` is (x, y, z, w); covariances are row-major 3×3, shape (n, 9).
-    """
-
-    sec: NDArray[np.int64]
-    nanosec: NDArray[np.int64]
-    orientation: FloatArray  # (n, 4)
-    orientation_covariance: FloatArray  # (n, 9)
-    angular_velocity: FloatArray  # (n, 3)
-    angular_velocity_covariance: FloatArray  # (n, 9)
-    linear_acceleration: FloatArray  # (n, 3)
-    linear_acceleration_covariance: FloatArray  # (n, 9)
-
-    def __len__(self) -> int:
-        return int(self.sec.shape[0])
-
-    @classmethod
-    def unknown_orientation(cls, t_ns: NDArray[np.int64], gyro: FloatArray | None, acc: FloatArray) -> ImuMessages:
-        """Messages without orientation (``orientation_covariance[0] = −1``, as REP 145 asks) or
-        covariances; the gyro's covariance is −1 too when there is no gyro."""
-        n = t_ns.shape[0]
-        unknown = np.zeros((n, 9))
-        unknown[:, 0] = -1.0
-        return cls(
-            sec=t_ns // 1_000_000_000,
-            nanosec=t_ns % 1_000_000_000,
-            orientation=np.zeros((n, 4)),
-            orientation_covariance=unknown,
-            angular_velocity=np.zeros((n, 3)) if gyro is None else gyro,
-            angular_velocity_covariance=unknown.copy() if gyro is None else np.zeros((n, 9)),
-            linear_acceleration=acc,
-            linear_acceleration_covariance=np.zeros((n, 9)),
-        )
-
-
-def _align(at: NDArray[np.int64] | int, size: int) -> Any:
-    return (at + (size - 1)) // size * size
-
-
-def decode_imu_messages(buf: U8Array, start: NDArray[np.int64], size: NDArray[np.int64]) -> ImuMessages:
-    """Every field of CDR ``sensor_msgs/msg/Imu`` messages ``buf[start[i] : start[i] + size[i]]``.
-
-    Raises
-    ------
-    cdr.CdrError
-        When a message is not little-endian CDR or is too short for its layout.
-    """
-    if np.any(size < cdr.HEADER_BYTES + 12):
-        raise cdr.CdrError("message(s) shorter than a CDR header and a std_msgs/Header")
-    head = cdr.gather(buf, start, 2)
-    if np.any((head[:, 0] != cdr.CDR_LE[0]) | (head[:, 1] != cdr.CDR_LE[1])):
-        raise cdr.CdrError("an encapsulation header other than 00 01 (little-endian CDR)")
-    body = start + cdr.HEADER_BYTES
-    stamp = cdr.gather(buf, body, 8).view("<i4").astype(np.int64)
-    name_len = cdr.gather(buf, body + 8, 4).view("<u4")[:, 0].astype(np.int64)
-    orientation = _align(12 + name_len, 8)
-    short = size - cdr.HEADER_BYTES < orientation + 296
-    if np.any(short):
-        raise cdr.CdrError(f"{int(short.sum())} message(s) too short for the Imu fields after the header")
-
-    def f8(offset: int, count: int) -> FloatArray:
-        return cdr.gather(buf, body + orientation + offset, 8 * count).view("<f8").astype(np.float64)
-
-    return ImuMessages(
-        sec=stamp[:, 0],
-        nanosec=stamp[:, 1] & 0xFFFFFFFF,
-        orientation=f8(0, 4),
-        orientation_covariance=f8(32, 9),
-        angular_velocity=f8(104, 3),
-        angular_velocity_covariance=f8(128, 9),
-        linear_acceleration=f8(200, 3),
-        linear_acceleration_covariance=f8(224, 9),
-    )
-
-
-def encode_imu_messages(msgs: ImuMessages, frame_id: str) -> U8Array:
-    """CDR payloads of ``sensor_msgs/msg/Imu`` messages, one row each, shape (n, L) uint8.
-
-    All rows share one ``frame_id``, so they share one layout: built with a structured array.
-    """
-    name = frame_id.encode() + b"\x00"
-    orientation = _align(12 + len(name), 8)
-    base = cdr.HEADER_BYTES + orientation
-    fields = {
-        "encapsulation": ("u1", (4,), 0),
-        "sec": ("<i4", (), 4),
-        "nanosec": ("<u4", (), 8),
-        "name_len": ("<u4", (), 12),
-        "name": ("u1", (len(name),), 16),
-        "orientation": ("<f8", (4,), base),
-        "orientation_covariance": ("<f8", (9,), base + 32),
-        "angular_velocity": ("<f8", (3,), base + 104),
-        "angular_velocity_covariance": ("<f8", (9,), base + 128),
-        "linear_acceleration": ("<f8", (3,), base + 200),
-        "linear_acceleration_covariance": ("<f8", (9,), base + 224),
-    }
-    dtype = np.dtype(
-        {
-            "names": list(fields),
-            "formats": [(f, s) if s else f for f, s, _ in fields.values()],
-            "offsets": [o for _, _, o in fields.values()],
-            "itemsize": base + 296,
-        }
-    )
-    rows = np.zeros(len(msgs), dtype=dtype)
-    rows["encapsulation"] = (0, 1, 0, 0)
-    rows["sec"] = msgs.sec
-    rows["nanosec"] = msgs.nanosec
-    rows["name_len"] = len(name)
-    rows["name"] = np.frombuffer(name, np.uint8)
-    for key in list(fields)[5:]:
-        rows[key] = getattr(msgs, key)
-    return rows.view(np.uint8).reshape(len(msgs), dtype.itemsize)
 
 
 # --------------------------------------------------------------------------- MCAP, record by record
