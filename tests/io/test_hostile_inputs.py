@@ -277,7 +277,8 @@ def test_a_limit_that_is_not_a_positive_number_is_refused(monkeypatch: pytest.Mo
 
 def test_merging_mf4_groups_with_damaged_unsorted_times_ends_with_every_frame() -> None:
     """Found by benchmarks/fuzz_mutations.py: a spliced MF4 whose times run backwards hung the merge."""
-    from mountcal.io.can.frames import CanFrames, _merge_by_time
+    from mountcal.io.can.frames import CanFrames
+    from mountcal.io.can.mf4 import _merge_by_time
 
     def frames(t: list[float]) -> CanFrames:
         n = len(t)

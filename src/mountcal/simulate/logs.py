@@ -49,7 +49,6 @@ from mountcal.errors import InputError
 from mountcal.io.can.dbc import load_dbc
 from mountcal.io.can.signals import UNIT_KIND
 from mountcal.io.can.write import (
-    CAN_FORMATS,
     EncodedMessage,
     can_format,
     encode,
@@ -560,16 +559,9 @@ def write_protocol(path: str | os.PathLike[str], log: ParkingLog, *, start_time_
 
 def check_log_path(path: str | os.PathLike[str], dbc_path: str | os.PathLike[str] | None) -> str:
     """The format a log path will be written in; InputError before anything is simulated or written."""
-    suffix = Path(path).suffix.lower()
-    if suffix == ".mcap":
+    if Path(path).suffix.lower() == ".mcap":
         return "mcap"
-    if suffix not in CAN_FORMATS:
-        raise InputError(
-            str(path),
-            "a log name ending in .mcap, " + ", ".join(CAN_FORMATS),
-            f"a name ending in {suffix or '(nothing)'}",
-            "Name the file by the format to write.",
-        )
+    fmt = can_format(path, others=(".mcap",))
     if dbc_path is None:
         raise InputError(
             str(path),
@@ -578,7 +570,7 @@ def check_log_path(path: str | os.PathLike[str], dbc_path: str | os.PathLike[str
             "Pass the DBC (e.g. --dbc data/imu_mm5_10.dbc, the Bosch MM5.10 layout).",
         )
     load_dbc(Path(dbc_path))
-    return CAN_FORMATS[suffix]
+    return fmt
 
 
 def write_log(

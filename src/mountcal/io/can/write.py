@@ -66,13 +66,14 @@ def signal_unit(signal: Any, role: str, where: str) -> tuple[float, float]:
 CAN_FORMATS = {".blf": "blf", ".asc": "asc", ".log": "log", ".trc": "trc", ".csv": "csv", ".mf4": "mf4"}
 
 
-def can_format(path: str | os.PathLike[str]) -> str:
-    """The CAN log format a path's suffix asks for; InputError when there is none."""
+def can_format(path: str | os.PathLike[str], others: tuple[str, ...] = ()) -> str:
+    """The CAN log format a path's suffix asks for; InputError when there is none (naming the
+    ``others`` suffixes the caller also writes)."""
     suffix = Path(path).suffix.lower()
     if suffix not in CAN_FORMATS:
         raise InputError(
             str(path),
-            "a CAN log name ending in " + ", ".join(CAN_FORMATS),
+            f"a {'' if others else 'CAN '}log name ending in " + ", ".join((*others, *CAN_FORMATS)),
             f"a name ending in {suffix or '(nothing)'}",
             "Name the file by the format to write.",
         )
