@@ -52,11 +52,8 @@ without a partner in time. Frames of other messages or channels are simply not s
 
 from __future__ import annotations
 
-import re
-import tomllib
 from collections import Counter
-from collections.abc import Iterable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -64,46 +61,27 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mountcal.errors import InputError
-from mountcal.io.can.dbc import decode, frame_id_text, id_match, load_dbcs, payload_bytes, raw_values
+from mountcal.io.can.dbc import decode, frame_id_text, payload_bytes, raw_values
 from mountcal.io.can.frames import CanFrames, iter_frames, log_format
-from mountcal.io.can.signals import UNIT_HINT, UNIT_KIND, message_refs, si_scale
-from mountcal.io.inputs import check_regular_file, hold
-from mountcal.paths import input_file
+from mountcal.io.can.mapping import (
+    AUX_KEYS,
+    Plan,
+    Presence,
+    Source,
+    build_plan,
+    database,
+    dbc_name,
+    detect,
+    make_plan,
+    resolve,
+    setup_plan,
+)
+from mountcal.io.can.mismatch import SHOWN, Want, id_stats, log_mismatch
+from mountcal.io.inputs import hold
 from mountcal.samples import Channel, FloatArray, LogSummary, Samples, Stream
 
-ACCEL_ROLES = ("ax", "ay", "az")
-GYRO_ROLES = ("gx", "gy", "gz")
-AUX_KEYS = {
-    "temperature": "temperature_c",
-    "speed": "speed_mps",
-    "heading": "heading_deg",
-    "latitude": "lat_deg",
-    "longitude": "lon_deg",
-    "altitude": "alt_m",
-}
 _PERIOD_FRAMES = 1000  # frames used to measure a message's period
 _FRAMES_PER_CHUNK = 100_000  # frames decoded at a time by read_can (≈ 9 MB)
-
-
-# signal-name patterns, matched against the lower-case name without separators and trailing digits
-_ACC = "(?:a|acc|accel|acceleration|linacc|linearaccel|linearacceleration)"
-_RATE = "(?:g|w|gyr|gyro|gyrorate|rate|angrate|angularrate|angularvelocity|omega)"
-_NAME_PATTERNS = {
-    "ax": rf"{_ACC}(?:x|long|longitudinal)|(?:long|longitudinal){_ACC}",
-    "ay": rf"{_ACC}(?:y|lat|lateral)|(?:lat|lateral){_ACC}",
-    "az": rf"{_ACC}(?:z|vert|vertical)|(?:vert|vertical){_ACC}",
-    "gx": rf"{_RATE}(?:x|roll)|(?:x|roll){_RATE}",
-    "gy": rf"{_RATE}(?:y|pitch)|(?:y|pitch){_RATE}",
-    "gz": rf"{_RATE}(?:z|yaw)|(?:z|yaw){_RATE}",
-    "temperature": "(?:imu|sensor|internal)?temp(?:erature)?",
-    "speed": "(?:vehicle|veh|gnss|gps|ground)?speed|speedoverground|sog",
-    "heading": "(?:gnss|gps)?heading|course|courseoverground|cog",
-    "latitude": "(?:gnss|gps|pos)?lat(?:itude)?",
-    "longitude": "(?:gnss|gps|pos)?lon(?:gitude)?",
-    "altitude": "(?:gnss|gps|pos)?alt(?:itude)?",
-}
-_MAPPING_KEYS = {"channel", "axes", "allow_left_handed", "valid", "signals", "units", "messages"}
-_UNIT_KEYS = {"accel", "gyro", *AUX_KEYS}
 
 
 # ---------------------------------------------------------------------------------------------
@@ -143,7 +121,7 @@ def read_can(
         Unreadable or empty log, wrong DBC, missing message or signal, bad mapping or unit.
     """
     path = Path(path)
-    plan = _plan(path, dbc, mapping, channel)
+    plan = make_plan(path, dbc, mapping, channel)
     return _concat(hold(_pieces(path, plan, _FRAMES_PER_CHUNK), str(path), "samples"), plan, str(path))
 
 
@@ -168,7 +146,7 @@ def iter_can(
     if max_samples < 1:
         raise ValueError(f"max_samples must be >= 1; got {max_samples}")
     path = Path(path)
-    plan = _plan(path, dbc, mapping, channel)
+    plan = make_plan(path, dbc, mapping, channel)
     held: list[Samples] = []  # pieces without rows but with auxiliary samples or drop counts
     for piece in _pieces(path, plan, max(2 * max_samples, 1000)):
         if not len(piece):
@@ -204,9 +182,9 @@ def inspect_can(path: str | Path, dbc: str | Path | Any | None = None) -> LogSum
     """
     path = Path(path)
     fmt = log_format(path)
-    db = _database(dbc) if dbc is not None else None
-    stats = _id_stats(path)
-    wants = [(_Want.of(m, None), m) for m in db.messages] if db is not None else []
+    db = database(dbc) if dbc is not None else None
+    stats = id_stats(path)
+    wants = [(Want.of(m, None), m) for m in db.messages] if db is not None else []
     streams = []
     for (chan, ident, ext), entry in sorted(stats.items()):
         message = next((m for w, m in wants if w.matches(ident, ext)), None)
@@ -224,494 +202,10 @@ def inspect_can(path: str | Path, dbc: str | Path | Any | None = None) -> LogSum
 
 
 # ---------------------------------------------------------------------------------------------
-# The plan: what to read and how to convert it
-
-
-@dataclass(frozen=True)
-class _Ref:
-    """One mapped signal of one DBC message."""
-
-    message: Any
-    signal: str
-
-    @property
-    def label(self) -> str:
-        return f"{self.message.name}.{self.signal}"
-
-
-@dataclass
-class _Source:
-    """A message (and multiplexer value set) whose frames carry some of the mapped signals."""
-
-    message: Any
-    mux: tuple[int, ...] | None
-    signals: list[str] = field(default_factory=list)
-    valid: list[str] = field(default_factory=list)
-    channels: set[int] = field(default_factory=set)
-    ids: set[int] = field(default_factory=set)  # ids seen, for a message matched by J1939 PGN
-    # where its frames are: arbitration_id & mask == value, the id kind, the channel (None: any one)
-    value: int = 0
-    mask: int = 0x1FFFFFFF
-    extended: bool = False
-    channel: int | None = None
-
-    def place(self, placements: Mapping[str, tuple[int | None, bool | None, int | None]], channel: int | None) -> None:
-        """Where the frames are: the mapping's placement of the message, else the DBC's id (J1939
-        messages by PGN) on ``channel``."""
-        ident, extended, on = placements.get(self.message.name, (None, None, None))
-        if ident is None:
-            self.value, self.mask = id_match(self.message)
-            self.extended = bool(self.message.is_extended_frame)
-        else:
-            self.value, self.mask = ident, 0x1FFFFFFF
-            self.extended = ident > 0x7FF if extended is None else extended
-        self.channel = channel if on is None else on
-
-    @property
-    def name(self) -> str:
-        mux = "" if self.mux is None else f"[mux {'/'.join(map(str, self.mux))}]"
-        return f"{self.message.name}{mux}"
-
-
-@dataclass
-class _Plan:
-    where: str  # the log and the DBC, for messages
-    db: Any
-    imu: list[_Source]  # sources of the accel/gyro signals; imu[0] carries ax and sets the clock
-    columns: list[tuple[int, str, float]]  # per output column: (source index, signal, scale to SI)
-    has_gyro: bool
-    aux: dict[str, tuple[_Source, str, float, float]]  # channel key → source, signal, scale, offset
-    aux_required: set[str]
-    axes: NDArray[np.float64]  # (3, 3): sensor axis i = axes[i] · device axes
-    axis_map: str
-    channel: int | None
-
-    def sources(self) -> list[_Source]:
-        return self.imu + [a[0] for a in self.aux.values()]
-
-    def ids(self) -> list[int] | None:
-        """The ids to read, or None when a source matches a range of them (J1939 PGN)."""
-        if any(s.mask != 0x1FFFFFFF for s in self.sources()):
-            return None
-        return sorted({s.value for s in self.sources()})
-
-    def read_channel(self) -> int | None:
-        """The channel to read, when every source is on the same one."""
-        channels = {s.channel for s in self.sources()}
-        return channels.pop() if len(channels) == 1 else None
-
-
-def _database(dbc: str | Path | Sequence[str | Path] | Any) -> Any:
-    """A cantools database from one DBC path, several, or the database itself."""
-    return load_dbcs(dbc) if isinstance(dbc, str | Path | list | tuple) else dbc
-
-
-def _setup(
-    dbc: str | Path | Any, mapping: str | Path | Mapping[str, Any] | None, channel: int | None
-) -> tuple[Any, dict[str, Any], int | None]:
-    """The database, the mapping as a dict, and the IMU's channel (given, else the mapping's)."""
-    db = _database(dbc)
-    spec = _mapping_dict(mapping)
-    if channel is None and spec.get("channel") is not None:
-        channel = _int_setting(spec["channel"], "channel")
-    return db, spec, channel
-
-
-def _dbc_name(dbc: Any) -> str:
-    if isinstance(dbc, str | Path):
-        return str(dbc)
-    if isinstance(dbc, list | tuple):
-        return " + ".join(map(str, dbc))
-    return "the DBC"
-
-
-def _plan(
-    path: Path, dbc: str | Path | Any, mapping: str | Path | Mapping[str, Any] | None, channel: int | None
-) -> _Plan:
-    log_format(path)
-    check_regular_file(path, "CAN log")
-    db, spec, channel = _setup(dbc, mapping, channel)
-    where = f"{path} with {_dbc_name(dbc)}"
-    present = _Presence(path, channel, db)
-    signals = spec.get("signals") or _detect(db, present, where)
-    refs = {role: _resolve(db, text, role, present, where) for role, text in signals.items()}
-    units = spec.get("units", {})
-    explicit = "signals" in spec and bool(spec["signals"])
-    return _build_plan(where, db, refs, units, spec, channel, explicit, present)
-
-
-def _mapping_dict(mapping: str | Path | Mapping[str, Any] | None) -> dict[str, Any]:
-    """The mapping as a dict, checked for unknown keys."""
-    if mapping is None:
-        return {}
-    where = "the mapping"
-    if isinstance(mapping, str | Path):
-        where = str(mapping)
-        input_file(mapping, "a mapping TOML file")  # not a FIFO or a device: reading ends
-        try:
-            with Path(mapping).open("rb") as f:
-                spec = tomllib.load(f)
-        except OSError as err:
-            raise InputError(where, "a mapping TOML file", f"an unreadable path ({err})", "Check the path.") from err
-        except tomllib.TOMLDecodeError as err:
-            raise InputError(where, "valid TOML", f"a syntax error ({err})", "Fix the mapping file.") from err
-    else:
-        spec = dict(mapping)
-    _check_keys(spec, _MAPPING_KEYS, where, "")
-    signals = spec.get("signals", {})
-    if not isinstance(signals, Mapping):
-        raise InputError(where, "a [signals] table", f"{signals!r}", 'Write `[signals]` then `ax = "msg.sig"`.')
-    _check_keys(signals, {*ACCEL_ROLES, *GYRO_ROLES, *AUX_KEYS}, where, "signals.")
-    if signals and not set(ACCEL_ROLES) <= set(signals):
-        missing = ", ".join(r for r in ACCEL_ROLES if r not in signals)
-        raise InputError(where, "signals ax, ay and az", f"no {missing}", "Map all three accelerometer axes.")
-    gyro = [r for r in GYRO_ROLES if r in signals]
-    if gyro and len(gyro) < 3:
-        raise InputError(where, "all of gx, gy, gz or none", "only " + ", ".join(gyro), "Map three or none.")
-    _check_keys(spec.get("units", {}), _UNIT_KEYS, where, "units.")
-    return spec
-
-
-def _check_keys(table: Mapping[str, Any], allowed: set[str], where: str, prefix: str) -> None:
-    unknown = sorted(set(table) - allowed)
-    if unknown:
-        raise InputError(
-            where,
-            "keys among " + ", ".join(prefix + k for k in sorted(allowed)),
-            "unknown " + ", ".join(prefix + k for k in unknown),
-            "Check the spelling against the mapping format in mountcal.io.can.read.",
-        )
-
-
-def _int_setting(value: Any, name: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise InputError("the mapping", f"an integer {name}", repr(value), f"Write e.g. `{name} = 2`.")
-    return value
-
-
-class _Presence:
-    """Which (id, extended) pairs of the DBC occur in the log on the channel; one pass, on first use."""
-
-    def __init__(self, path: Path | None, channel: int | None, db: Any) -> None:
-        self.path, self.channel, self.db = path, channel, db  # path None: the keys are set by the caller
-        self.keys: set[tuple[int, bool]] | None = None
-
-    def filter(self, messages: list[Any]) -> list[Any]:
-        """The messages among ``messages`` that occur in the log."""
-        if self.keys is None:
-            assert self.path is not None  # a bus sets its keys itself
-            wants = [_Want.of(m, None) for m in self.db.messages]
-            # a J1939 message matches a range of ids: then every id is read
-            ids = sorted({w.value for w in wants}) if all(w.mask == 0x1FFFFFFF for w in wants) else None
-            self.keys = set()
-            for frames in iter_frames(self.path, ids=ids, channel=self.channel, max_frames=1 << 18):
-                pairs = np.unique(frames.arbitration_id.astype(np.int64) * 2 + frames.is_extended)
-                self.keys.update((int(p) // 2, bool(p % 2)) for p in pairs)
-        keys = self.keys
-        return [m for m in messages if _Want.of(m, None).matches_any(keys)]
-
-
-def _normalise(name: str) -> str:
-    return re.sub(r"\d+$", "", re.sub(r"[^a-z0-9]", "", name.lower()))
-
-
-def _matches(role: str, signal_name: str) -> bool:
-    return re.fullmatch(_NAME_PATTERNS[role], _normalise(signal_name)) is not None
-
-
-def _detect(db: Any, present: _Presence, where: str) -> dict[str, str]:
-    """Signals for ax..az (required), gx..gz and the auxiliary channels, found by name."""
-    accel = _detect_triple(db, ACCEL_ROLES, present, [])
-    if accel is None:
-        mismatch = _log_mismatch(present.path, db, where, present.channel, [])
-        if mismatch is not None:
-            raise mismatch
-        hits = [(m, s.name) for m in db.messages for s in m.signals if _matches_any(s.name, ACCEL_ROLES)]
-        logged = present.filter(list({id(m): m for m, _ in hits}.values())) if hits else []
-        absent = " (not in the log)" if present.channel is None else f" (not on channel {present.channel})"
-        names = [
-            f"{m.name}.{sig} [{frame_id_text(m.frame_id, m.is_extended_frame)}]" + ("" if m in logged else absent)
-            for m, sig in hits
-        ]
-        raise InputError(
-            where,
-            "one unambiguous set of accelerometer signals (AccelerationX/Y/Z, AccX.., AX/AY/AZ, "
-            "Accel_Longitudinal/Lateral/Vertical) in messages present in the log",
-            "candidates "
-            + (
-                ", ".join(names[:_SHOWN]) + (f" and {len(names) - _SHOWN} more" if len(names) > _SHOWN else "")
-                if names
-                else "none"
-            ),
-            "Write a mapping naming ax, ay, az as message.signal (see mountcal.io.can.read)"
-            + ("." if present.channel is None else ", or check the channel."),
-        )
-    found = {role: f"0x{m.frame_id:X}.{sig}" for role, (m, sig) in accel.items()}
-    accel_messages = [m for m, _ in accel.values()]
-    gyro = _detect_triple(db, GYRO_ROLES, present, accel_messages)
-    if gyro is not None:
-        found.update({role: f"0x{m.frame_id:X}.{sig}" for role, (m, sig) in gyro.items()})
-    for role in AUX_KEYS:
-        # a temperature is the IMU's only when it sits in the IMU's own message (not a tyre or a battery)
-        messages = accel_messages if role == "temperature" else db.messages
-        hits = [(m, s.name) for m in messages for s in m.signals if _matches(role, s.name) and not s.multiplexer_ids]
-        if len(hits) > 1:
-            present_messages = present.filter([m for m, _ in hits])
-            hits = [h for h in hits if h[0] in present_messages]
-        if len(hits) == 1:
-            found[role] = f"0x{hits[0][0].frame_id:X}.{hits[0][1]}"
-    return found
-
-
-def _matches_any(name: str, roles: Sequence[str]) -> bool:
-    return any(_matches(role, name) for role in roles)
-
-
-def _detect_triple(
-    db: Any, roles: Sequence[str], present: _Presence, prefer: list[Any]
-) -> dict[str, tuple[Any, str]] | None:
-    """One message with all three roles, else one signal per role across messages; None if unclear.
-
-    The log is consulted (one extra pass) only when the DBC alone leaves a choice.
-    """
-    per_message: dict[Any, dict[str, list[str]]] = {}
-    for m in db.messages:
-        hits = {role: [s.name for s in m.signals if _matches(role, s.name)] for role in roles}
-        if any(hits.values()):
-            per_message[m] = hits
-    counts = [sum(len(hits[r]) for hits in per_message.values()) for r in roles]
-    if min(counts, default=0) == 0:
-        return None  # some axis has no candidate at all: the log cannot help
-    candidates = list(per_message) if max(counts) == 1 else present.filter(list(per_message))
-    return _choose_triple(per_message, candidates, roles, prefer)
-
-
-def _choose_triple(
-    per_message: dict[Any, dict[str, list[str]]], candidates: list[Any], roles: Sequence[str], prefer: list[Any]
-) -> dict[str, tuple[Any, str]] | None:
-    whole = [m for m in candidates if all(len(per_message[m][r]) == 1 for r in roles)]
-    if len(whole) > 1 and prefer:
-        whole = [m for m in whole if m in prefer] or whole
-    if len(whole) == 1:
-        return {r: (whole[0], per_message[whole[0]][r][0]) for r in roles}
-    if whole:
-        return None
-    chosen: dict[str, tuple[Any, str]] = {}
-    for role in roles:
-        pairs = [(m, s) for m in candidates for s in per_message[m][role]]
-        if len(pairs) != 1:
-            return None
-        chosen[role] = pairs[0]
-    return chosen
-
-
-def _resolve(db: Any, text: Any, role: str, present: _Presence, where: str) -> _Ref:
-    """A ``message.signal`` string as a DBC message and signal name."""
-    if not isinstance(text, str) or "." not in text:
-        raise InputError(
-            where, f'signals.{role} as "message.signal"', repr(text), 'E.g. ax = "gnss_imu.AccelerationX".'
-        )
-    message_text, signal = text.split(".", 1)
-    messages = message_refs(db, message_text)
-    if not messages:
-        known = ", ".join(sorted({m.name for m in db.messages})[:40])
-        raise InputError(
-            where, f"a DBC message {message_text!r} for {role}", f"none; the DBC has {known}", "Fix the mapping."
-        )
-    messages = [m for m in messages if any(s.name == signal for s in m.signals)] or messages
-    if not any(s.name == signal for s in messages[0].signals):
-        names = ", ".join(s.name for s in messages[0].signals)
-        raise InputError(
-            where,
-            f"signal {signal!r} in message {messages[0].name} for {role}",
-            f"only {names}",
-            "Fix the signal name in the mapping (names are case-sensitive).",
-        )
-    if len(messages) > 1:
-        logged = present.filter(messages)
-        wants = [_Want.of(m, present.channel) for m in messages]
-        mismatch = None if logged else _log_mismatch(present.path, db, where, present.channel, wants)
-        if mismatch is not None:
-            raise mismatch
-        messages = logged or messages
-        if len(messages) > 1:
-            ids = ", ".join(f"0x{m.frame_id:X}" for m in messages)
-            raise InputError(
-                where,
-                f"one message named {message_text!r} in the log",
-                f"several with that name ({ids})",
-                'Name the message by its id in the mapping, e.g. "0x9.AccelerationX".',
-            )
-    return _Ref(messages[0], signal)
-
-
-def _unit_scale(ref: _Ref, role: str, units: Mapping[str, Any], where: str) -> tuple[float, float]:
-    """Scale and offset from the signal's unit (the mapping's, else the DBC's) to SI."""
-    kind = UNIT_KIND[role]
-    key = "accel" if kind == "accel" else "gyro" if kind == "gyro" else role
-    given = units.get(key)
-    unit = str(given) if given is not None else str(ref.message.get_signal_by_name(ref.signal).unit or "")
-    scale = si_scale(role, unit)
-    if scale is not None:
-        return scale
-    source = "the mapping's units." + key if given is not None else f"the DBC unit of {ref.label}"
-    raise InputError(
-        where,
-        f"{'an acceleration' if kind == 'accel' else 'a ' + kind} unit ({UNIT_HINT[kind]}) for {role}",
-        f"{unit!r} ({source})",
-        f"Check the mapping; if the DBC's unit is missing or wrong, set units.{key} in the mapping.",
-    )
-
-
-def _build_plan(
-    where: str,
-    db: Any,
-    refs: dict[str, _Ref],
-    units: Mapping[str, Any],
-    spec: Mapping[str, Any],
-    channel: int | None,
-    explicit: bool,
-    present: _Presence,
-) -> _Plan:
-    has_gyro = all(r in refs for r in GYRO_ROLES)
-    sources: list[_Source] = []
-    columns = []
-    for role in ACCEL_ROLES + (GYRO_ROLES if has_gyro else ()):
-        ref = refs[role]
-        source = _source_for(sources, ref)
-        source.signals.append(ref.signal)
-        columns.append((sources.index(source), ref.signal, _unit_scale(ref, role, units, where)[0]))
-    aux: dict[str, tuple[_Source, str, float, float]] = {}
-    for role, key in AUX_KEYS.items():
-        if role in refs:
-            try:
-                scale, offset = _unit_scale(refs[role], role, units, where)
-            except InputError:
-                if explicit:
-                    raise
-                continue  # an auto-detected optional channel with an unknown unit is left out
-            source = _Source(refs[role].message, _mux_of(refs[role]), [refs[role].signal])
-            aux[key] = (source, refs[role].signal, scale, offset)
-    _assign_validity(sources + [a[0] for a in aux.values()], spec.get("valid"), db, where, present)
-    axes, axis_map = _axes(spec.get("axes", "x,y,z"), spec.get("allow_left_handed", False))
-    aux_required = {AUX_KEYS[r] for r in refs if r in AUX_KEYS} if explicit else set()
-    placements = _placements(spec.get("messages", {}), db, where)
-    for source in sources + [a[0] for a in aux.values()]:
-        source.place(placements, channel)
-    return _Plan(where, db, sources, columns, has_gyro, aux, aux_required, axes, axis_map, channel)
-
-
-def _placements(table: Any, db: Any, where: str) -> dict[str, tuple[int | None, bool | None, int | None]]:
-    """The mapping's ``[messages]``: a DBC message placed at another id and/or channel, e.g.
-    ``MM5_10_TX1 = { id = 0x174, channel = 1 }`` (``extended = true`` for a 29-bit id at or
-    below 0x7FF)."""
-    if not isinstance(table, Mapping):
-        raise InputError(where, "a [messages] table", repr(table), "Write `[messages]` then `NAME = { id = 0x174 }`.")
-    out: dict[str, tuple[int | None, bool | None, int | None]] = {}
-    for name, place in table.items():
-        messages = message_refs(db, str(name))
-        if not messages:
-            raise InputError(
-                where, f"a DBC message {name!r} in [messages]", "no message of that name or id", "Fix the mapping."
-            )
-        if not isinstance(place, Mapping):
-            raise InputError(where, f"messages.{name} as a table", repr(place), "Write `{ id = 0x174, channel = 1 }`.")
-        _check_keys(place, {"id", "channel", "extended"}, where, f"messages.{name}.")
-        ident = place.get("id")
-        if ident is not None and (isinstance(ident, bool) or not isinstance(ident, int)):
-            raise InputError(
-                where, f"messages.{name}.id as a TOML integer", repr(ident), f"Write `{name} = {{ id = 0x174 }}`."
-            )
-        if ident is not None and not 0 <= ident <= 0x1FFFFFFF:
-            raise InputError(where, "an id from 0 to 0x1FFFFFFF", f"{ident:#x}", f"Fix messages.{name}.id.")
-        extended = place.get("extended")
-        if extended is not None and not isinstance(extended, bool):
-            raise InputError(where, f"messages.{name}.extended as true or false", repr(extended), "Fix the mapping.")
-        channel = None if place.get("channel") is None else _int_setting(place["channel"], f"messages.{name}.channel")
-        for message in messages:
-            out[message.name] = (ident, extended, channel)
-    return out
-
-
-def _mux_of(ref: _Ref) -> tuple[int, ...] | None:
-    ids = ref.message.get_signal_by_name(ref.signal).multiplexer_ids
-    return tuple(sorted(ids)) if ids else None
-
-
-def _source_for(sources: list[_Source], ref: _Ref) -> _Source:
-    mux = _mux_of(ref)
-    for source in sources:
-        if source.message is ref.message and source.mux == mux:
-            return source
-    sources.append(_Source(ref.message, mux))
-    return sources[-1]
-
-
-def _assign_validity(sources: list[_Source], valid: Any, db: Any, where: str, present: _Presence) -> None:
-    """Validity signals per source: the mapping's list, else 1-bit signals named like *valid*."""
-    if valid is None:
-        for source in sources:
-            source.valid = [
-                s.name
-                for s in source.message.signals
-                if "valid" in s.name.lower() and s.length == 1 and not s.multiplexer_ids
-            ]
-        return
-    if isinstance(valid, str):
-        valid = [valid]
-    if not isinstance(valid, list):
-        raise InputError(
-            where, 'valid as a list of "message.signal"', repr(valid), 'E.g. valid = ["gnss_imu.ImuValid"].'
-        )
-    for text in valid:
-        ref = _resolve(db, text, "valid", present, where)
-        targets = [s for s in sources if s.message is ref.message]
-        if not targets:
-            raise InputError(
-                where,
-                f"validity signal {text!r} in a message the mapping uses",
-                "a message that carries none of the mapped signals",
-                "Remove it from `valid` or map a signal of that message.",
-            )
-        for source in targets:
-            source.valid.append(ref.signal)
-
-
-def _axes(text: Any, allow: Any) -> tuple[NDArray[np.float64], str]:
-    """The signed permutation "-y,x,z" as a matrix (row i: device components of sensor axis i)."""
-    tokens = [t.strip().lower() for t in str(text).split(",")]
-    parsed = [re.fullmatch(r"([+-]?)([xyz])", t) for t in tokens]
-    letters = [m.group(2) for m in parsed if m]
-    if len(tokens) != 3 or not all(parsed) or sorted(letters) != ["x", "y", "z"]:
-        raise InputError(
-            "the mapping",
-            'axes as a signed permutation of x, y, z such as "-y,x,z"',
-            repr(text),
-            "List, for sensor axes x, y, z in turn, the device axis (with its sign) that points along it.",
-        )
-    matrix = np.zeros((3, 3))
-    for row, match in enumerate(parsed):
-        assert match is not None
-        matrix[row, "xyz".index(match.group(2))] = -1.0 if match.group(1) == "-" else 1.0
-    canonical = ",".join(t.lstrip("+") for t in tokens)
-    if np.linalg.det(matrix) > 0:
-        return matrix, canonical
-    if allow is False or allow is None or allow == "":
-        raise InputError(
-            "the mapping",
-            "axes that keep the frame right-handed (an even number of swaps and sign flips)",
-            f"{canonical!r}, a reflection that makes it left-handed",
-            'Flip one more sign, or set allow_left_handed = "<reason>" if the device itself is left-handed.',
-        )
-    reason = allow if isinstance(allow, str) else "by the mapping"
-    return matrix, f"{canonical} (reflection allowed: {reason})"
-
-
-# ---------------------------------------------------------------------------------------------
 # Streaming: frames → decoded, validated source samples → aligned rows
 
 
-def _pieces(path: Path, plan: _Plan, frames_per_chunk: int) -> Iterator[Samples]:
+def _pieces(path: Path, plan: Plan, frames_per_chunk: int) -> Iterator[Samples]:
     """Samples pieces, one per chunk of frames, then the final flush; raises on missing data."""
     decoder = _Decoder(plan, str(path))
     for frames in iter_frames(path, ids=plan.ids(), channel=plan.read_channel(), max_frames=frames_per_chunk):
@@ -724,7 +218,7 @@ def _pieces(path: Path, plan: _Plan, frames_per_chunk: int) -> Iterator[Samples]
 class _Decoder:
     """Chunks of frames → aligned Samples pieces, with the counts of what was seen and dropped."""
 
-    def __init__(self, plan: _Plan, source: str) -> None:
+    def __init__(self, plan: Plan, source: str) -> None:
         self.plan, self.source = plan, source
         self.aligner = _Aligner([len(s.signals) for s in plan.imu], [s.name for s in plan.imu])
         self.seen = Counter[str]()  # frames selected per source, before validation
@@ -765,16 +259,16 @@ def samples_from_frames(
     whole session) a mapped message without frames is an error, as it is for a log; otherwise a bus
     still waiting for it gives what it has.
     """
-    db, spec, channel = _setup(dbc, mapping, channel)
-    where = f"{source} with {_dbc_name(dbc)}"
-    present = _Presence(None, channel, db)
+    db, spec, channel = setup_plan(dbc, mapping, channel)
+    where = f"{source} with {dbc_name(dbc)}"
+    present = Presence(None, channel, db)
     on_channel = frames if channel is None else frames.take(frames.channel == channel)
     pairs = np.unique(on_channel.arbitration_id.astype(np.int64) * 2 + on_channel.is_extended)
     present.keys = {(int(p) // 2, bool(p % 2)) for p in pairs}
-    signals = spec.get("signals") or _detect(db, present, where)
-    refs = {role: _resolve(db, text, role, present, where) for role, text in signals.items()}
+    signals = spec.get("signals") or detect(db, present, where)
+    refs = {role: resolve(db, text, role, present, where) for role, text in signals.items()}
     explicit = "signals" in spec and bool(spec["signals"])
-    plan = _build_plan(where, db, refs, spec.get("units", {}), spec, channel, explicit, present)
+    plan = build_plan(where, db, refs, spec.get("units", {}), spec, channel, explicit, present)
     ids, read_channel = plan.ids(), plan.read_channel()  # ids None: a J1939 PGN matches a range of ids
     keep = np.ones(len(frames), bool) if ids is None else np.isin(frames.arbitration_id, np.asarray(ids, np.uint32))
     if read_channel is not None:
@@ -793,7 +287,7 @@ def samples_from_frames(
     return samples
 
 
-def _select(frames: CanFrames, source: _Source, plan: _Plan) -> CanFrames:
+def _select(frames: CanFrames, source: Source, plan: Plan) -> CanFrames:
     ids = frames.arbitration_id if source.mask == 0x1FFFFFFF else frames.arbitration_id & np.uint32(source.mask)
     wanted = (ids == source.value) & (frames.is_extended == source.extended)
     if source.channel is not None:
@@ -813,7 +307,7 @@ def _select(frames: CanFrames, source: _Source, plan: _Plan) -> CanFrames:
         if source.mask != 0x1FFFFFFF:  # matched by J1939 PGN: one sender, or two streams would mix
             source.ids.update(np.unique(chosen.arbitration_id).tolist())
             if len(source.ids) > 1:
-                found = ", ".join(frame_id_text(i, True) for i in sorted(source.ids)[:_SHOWN])
+                found = ", ".join(frame_id_text(i, True) for i in sorted(source.ids)[:SHOWN])
                 raise InputError(
                     plan.where,
                     f"message {source.message.name} (J1939 PGN 0x{source.value >> 8:05X}) from one sender",
@@ -824,7 +318,7 @@ def _select(frames: CanFrames, source: _Source, plan: _Plan) -> CanFrames:
 
 
 def _take(
-    frames: CanFrames, source: _Source, plan: _Plan, dropped: Counter[str], seen: Counter[str]
+    frames: CanFrames, source: Source, plan: Plan, dropped: Counter[str], seen: Counter[str]
 ) -> tuple[FloatArray, NDArray[np.float64]]:
     """Times (m,) and values (m, k) of one source's usable frames; the unusable ones counted."""
     chosen = _select(frames, source, plan)
@@ -860,7 +354,7 @@ def _count(dropped: Counter[str], reason: str, rows: NDArray[np.bool_]) -> None:
         dropped[reason] += n
 
 
-def _aux_piece(frames: CanFrames, plan: _Plan, dropped: Counter[str], seen: Counter[str]) -> dict[str, Channel]:
+def _aux_piece(frames: CanFrames, plan: Plan, dropped: Counter[str], seen: Counter[str]) -> dict[str, Channel]:
     channels = {}
     for key, (source, signal, scale, offset) in plan.aux.items():
         t_s, values = _take(frames, source, plan, dropped, seen)
@@ -956,7 +450,7 @@ def _to_samples(
     rows: list[NDArray[np.float64]],
     channels: dict[str, Channel],
     dropped: Counter[str],
-    plan: _Plan,
+    plan: Plan,
     source: str,
 ) -> Samples:
     """Scaled device-axis columns, permuted by the axis map, as one Samples piece."""
@@ -973,7 +467,7 @@ def _to_samples(
     return Samples(np.asarray(t_s, np.float64), acc_s, gyro_s, channels, source, plan.axis_map, dict(dropped))
 
 
-def _concat(pieces: list[Samples], plan: _Plan, source: str) -> Samples:
+def _concat(pieces: list[Samples], plan: Plan, source: str) -> Samples:
     """One Samples from consecutive pieces: rows, auxiliary samples and drop counts joined."""
     t_s = np.concatenate([p.t_s for p in pieces]) if pieces else np.empty(0)
     acc_s = np.concatenate([p.acc_s for p in pieces]) if pieces else np.empty((0, 3))
@@ -1016,15 +510,15 @@ def _split(samples: Samples, n: int) -> tuple[Samples, Samples]:
 # Errors that need a look at the whole log
 
 
-def _check_found(path: Path, plan: _Plan, seen: Counter[str], total_rows: int, dropped: Counter[str]) -> None:
+def _check_found(path: Path, plan: Plan, seen: Counter[str], total_rows: int, dropped: Counter[str]) -> None:
     """Raise when the log lacks the mapped messages, or none of their samples survived."""
     missing_aux = sorted(k for k in plan.aux_required if not seen[plan.aux[k][0].name])
     silent = [s for s in plan.imu if not seen[s.name]]
     if not silent and not missing_aux and total_rows:
         return
     sources = silent + [plan.aux[k][0] for k in missing_aux]
-    wanted = [_Want(s.message.name, s.value, s.mask, s.extended, s.channel) for s in sources]
-    mismatch = _log_mismatch(path, plan.db, plan.where, plan.channel, wanted)
+    wanted = [Want(s.message.name, s.value, s.mask, s.extended, s.channel) for s in sources]
+    mismatch = log_mismatch(path, plan.db, plan.where, plan.channel, wanted)
     if mismatch is not None:
         raise mismatch
     raise InputError(
@@ -1033,126 +527,6 @@ def _check_found(path: Path, plan: _Plan, seen: Counter[str], total_rows: int, d
         "every row dropped (" + ", ".join(f"{k}: {v}" for k, v in dropped.items()) + ")",
         "Check the validity flags and the DBC layout against the log.",
     )
-
-
-@dataclass(frozen=True)
-class _Want:
-    """A message looked for in the log: its name and where its frames would be."""
-
-    name: str
-    value: int
-    mask: int
-    extended: bool
-    channel: int | None
-
-    @classmethod
-    def of(cls, message: Any, channel: int | None) -> _Want:
-        value, mask = id_match(message)
-        return cls(message.name, value, mask, bool(message.is_extended_frame), channel)
-
-    def matches(self, ident: int, extended: bool) -> bool:
-        return extended == self.extended and ident & self.mask == self.value
-
-    def matches_any(self, keys: Iterable[tuple[int, bool]]) -> bool:
-        return any(self.matches(i, e) for i, e in keys)
-
-    @property
-    def text(self) -> str:
-        pgn = f", J1939 PGN 0x{self.value >> 8:05X}" if self.mask != 0x1FFFFFFF else ""
-        return f"{self.name} ({frame_id_text(self.value, self.extended)}{pgn})"
-
-
-_SHOWN = 10  # ids, channels and near matches an error lists: it has to fit on a screen
-
-
-def _log_mismatch(
-    path: Path | None, db: Any, where: str, channel: int | None, wanted: list[_Want]
-) -> InputError | None:
-    """The error for an empty log, a log the DBC does not describe, or one lacking ``wanted`` (None for a bus)."""
-    if path is None:
-        return None
-    stats = _id_stats(path)
-    if not stats:
-        return InputError(str(path), "CAN frames", "an empty log (no data frames)", "Check the logger's output.")
-    per_id = Counter[tuple[int, bool]]()
-    for (_, ident, ext), entry in stats.items():
-        per_id[(ident, ext)] += entry.count
-    known = [_Want.of(m, None) for m in db.messages]
-    if not any(w.matches_any(per_id) for w in known):
-        examples = ", ".join(w.text for w in known[:_SHOWN]) + (", ..." if len(known) > _SHOWN else "")
-        return InputError(
-            where,
-            f"frames of messages of the DBC ({len(known)} messages: {examples})",
-            "no frame of any of them; the log has " + _seen(stats),
-            "Use the DBC that describes this bus (29-bit ids print with 8 hex digits).",
-        )
-    if not wanted:
-        return None
-    names = ", ".join(w.text + ("" if w.channel is None else f" on channel {w.channel}") for w in wanted)
-    return InputError(
-        where,
-        f"frames of {names}",
-        "none; the log has " + _seen(stats) + "".join(_closest(w, stats) for w in wanted),
-        "Check the mapping (its [messages] table places a message at another id or channel), the channel "
-        "and that the logger recorded this message.",
-    )
-
-
-def _seen(stats: dict[tuple[int, int, bool], _IdStat]) -> str:
-    """The channels and the most frequent ids of a log, with frame counts, in a few lines."""
-    per_channel = Counter[int]()
-    per_id = Counter[tuple[int, bool]]()
-    for (chan, ident, ext), entry in stats.items():
-        per_channel[chan] += entry.count
-        per_id[(ident, ext)] += entry.count
-    channels = ", ".join(f"{c} ({n} frames)" for c, n in per_channel.most_common(_SHOWN))
-    more = f" and {len(per_channel) - _SHOWN} more" if len(per_channel) > _SHOWN else ""
-    top = ", ".join(f"{frame_id_text(i, e)} ({n})" for (i, e), n in per_id.most_common(_SHOWN))
-    return f"{len(per_id)} ids on channels {channels}{more}; the most frequent: {top}"
-
-
-def _closest(want: _Want, stats: dict[tuple[int, int, bool], _IdStat]) -> str:
-    """Where the log has the wanted id on other channels, else its ids nearest to it."""
-    elsewhere = [(c, e.count) for (c, i, x), e in stats.items() if want.matches(i, x)]
-    if elsewhere:
-        where = ", ".join(f"channel {c} ({n} frames)" for c, n in sorted(elsewhere)[:_SHOWN])
-        return f". {want.name} is on {where}"
-    same_kind = sorted({(i, x) for (_, i, x) in stats if x == want.extended}, key=lambda k: abs(k[0] - want.value))
-    if not same_kind:
-        return f". No {'29' if want.extended else '11'}-bit id in the log for {want.name}"
-    near = ", ".join(frame_id_text(i, x) for i, x in same_kind[:3])
-    return f". Nearest ids to {want.name}'s: {near}"
-
-
-@dataclass
-class _IdStat:
-    """One (channel, id, extended) of a log: frames, first and last time, the DLCs seen."""
-
-    count: int
-    first: float
-    last: float
-    dlcs: set[int]
-
-
-def _id_stats(path: Path) -> dict[tuple[int, int, bool], _IdStat]:
-    """Per (channel, id, extended): frame count, first and last time, DLCs, in one streamed pass."""
-    stats: dict[tuple[int, int, bool], _IdStat] = {}
-    for frames in iter_frames(path, max_frames=1 << 18):
-        key = (frames.channel * (1 << 33)) + frames.arbitration_id.astype(np.int64) * 2 + frames.is_extended
-        uniq, first, counts = np.unique(key, return_index=True, return_counts=True)
-        last = len(key) - 1 - np.unique(key[::-1], return_index=True)[1]
-        pairs = np.unique(key * 128 + frames.dlc)  # the DLCs of each id
-        dlcs: dict[int, set[int]] = {}
-        for pair in pairs.tolist():
-            dlcs.setdefault(pair // 128, set()).add(pair % 128)
-        for u, f, c, la in zip(uniq.tolist(), first, counts, last, strict=True):
-            chan, rest = u // (1 << 33), u % (1 << 33)
-            k = (chan, rest // 2, bool(rest % 2))
-            entry = stats.setdefault(k, _IdStat(0, float(frames.t_s[f]), 0.0, set()))
-            entry.count += int(c)
-            entry.last = float(frames.t_s[la])
-            entry.dlcs |= dlcs[u]
-    return stats
 
 
 __all__ = ["inspect_can", "iter_can", "read_can", "samples_from_frames"]
