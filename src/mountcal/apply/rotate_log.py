@@ -57,7 +57,8 @@ from mountcal.atomic import atomic_output
 from mountcal.conventions import CONVENTIONS, FloatArray
 from mountcal.errors import InputError
 from mountcal.io.logs import CHUNK_SAMPLES, LogOptions, iter_log
-from mountcal.io.mcap.write import McapImuSamples, copy_mcap_with_imu
+from mountcal.io.mcap.copy import copy_mcap_with_imu
+from mountcal.io.mcap.write import McapImuSamples
 from mountcal.io.ros2.imu import ImuMessages
 from mountcal.io.table.write import CsvSamples, ParquetSamples
 from mountcal.result import VEHICLE_FRAME, Calibration

@@ -76,9 +76,9 @@ def _decompress(job: _Job) -> U8Array:
     """The records of a chunk, decompressed and checked against the chunk's size and CRC."""
     try:
         if job.compression == "zstd" and job.out is not None:
-            records = _unzstd(job.data, job.out)
+            records = unzstd(job.data, job.out)
         elif job.compression == "lz4":
-            records = _unlz4(job.data, job.size)
+            records = unlz4(job.data, job.size)
         else:
             records = np.frombuffer(job.data, dtype=np.uint8)
     except (zstandard.ZstdError, RuntimeError, ValueError) as err:
@@ -88,7 +88,7 @@ def _decompress(job: _Job) -> U8Array:
     return records
 
 
-def _unlz4(data: bytes | memoryview, size: int) -> U8Array:
+def unlz4(data: bytes | memoryview, size: int) -> U8Array:
     """Decompress an lz4 frame, stopping one byte past ``size``: a frame inflating to more than
     the chunk states is refused without inflating the rest."""
     out = lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=size + 1)
@@ -97,7 +97,7 @@ def _unlz4(data: bytes | memoryview, size: int) -> U8Array:
     return np.frombuffer(out, dtype=np.uint8)
 
 
-def _unzstd(data: bytes | memoryview, out: U8Array) -> U8Array:
+def unzstd(data: bytes | memoryview, out: U8Array) -> U8Array:
     """Decompress a zstd frame into ``out`` (allocated by the reading thread: see :func:`_prefetch`).
 
     Returns the filled part of ``out``; a frame shorter or longer than ``out`` shows as a size
@@ -166,7 +166,7 @@ def _messages_by_stride(data: U8Array, what: str) -> Unit | None:
     return Unit(data, at, np.full(at.size, length, dtype=np.int64), others, what)
 
 
-def _messages_by_walk(data: U8Array, what: str) -> Unit:
+def messages_by_walk(data: U8Array, what: str) -> Unit:
     """The unit found by stepping through the records one by one (the slow, general way).
 
     Message offsets and lengths go to compact arrays (each message record is at least 31 bytes,
@@ -190,7 +190,7 @@ def _messages_by_walk(data: U8Array, what: str) -> Unit:
 def _unit(data: U8Array, index: I64Array | None, what: str) -> Unit:
     """Locate the message records of ``data``: by its index, by stride, or by walking them."""
     unit = _messages_from_index(data, np.sort(index), what) if index is not None else None
-    return unit or _messages_by_stride(data, what) or _messages_by_walk(data, what)
+    return unit or _messages_by_stride(data, what) or messages_by_walk(data, what)
 
 
 @dataclass(frozen=True)

@@ -22,7 +22,7 @@ I64Array = NDArray[np.int64]
 U8Array = NDArray[np.uint8]
 
 
-_MAGIC = b"\x89MCAP0\r\n"
+MAGIC = b"\x89MCAP0\r\n"
 OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK = 0x01, 0x02, 0x03, 0x04, 0x05, 0x06
 OP_MESSAGE_INDEX, OP_STATISTICS, OP_DATA_END = 0x07, 0x0B, 0x0F
 RECORD_HEAD = struct.Struct("<BQ")  # opcode, body length
@@ -189,17 +189,17 @@ def read_layout(file: BinaryIO, where: str) -> Log:
         raise InputError(
             where, "an MCAP file", "an empty file (0 bytes)", "Check the path and that the recording was written."
         )
-    head = file.read(len(_MAGIC))
-    if head != _MAGIC[: len(head)]:
+    head = file.read(len(MAGIC))
+    if head != MAGIC[: len(head)]:
         raise InputError(
             where,
             "an MCAP file (magic 89 4D 43 41 50 30 0D 0A)",
             f"a file starting {head.hex(' ')}",
             "Pass an .mcap file.",
         )
-    tail_bytes = len(_MAGIC) + _FOOTER.size
-    file.seek(max(0, size - len(_MAGIC)))
-    if size < 2 * len(_MAGIC) + tail_bytes or file.read(len(_MAGIC)) != _MAGIC:
+    tail_bytes = len(MAGIC) + _FOOTER.size
+    file.seek(max(0, size - len(MAGIC)))
+    if size < 2 * len(MAGIC) + tail_bytes or file.read(len(MAGIC)) != MAGIC:
         raise Corrupt(f"a file of {size} bytes without the closing MCAP magic: it is truncated")
     file.seek(size - tail_bytes)
     footer = file.read(_FOOTER.size)
@@ -260,7 +260,7 @@ def chunk_others(records: Iterator[tuple[int, int, int]], what: str, found: int 
 
 def walk_file(log: Log) -> Iterator[tuple[int, int, int]]:
     """Top-level records (opcode, body offset, body length) of the data section, in file order."""
-    pos = len(_MAGIC)
+    pos = len(MAGIC)
     while pos < log.data_end:
         log.file.seek(pos)
         head = log.file.read(RECORD_HEAD.size)
@@ -272,7 +272,7 @@ def walk_file(log: Log) -> Iterator[tuple[int, int, int]]:
             raise Corrupt(
                 f"a record (opcode 0x{opcode:02x}) at byte {pos} claiming {length} bytes, past the data section"
             )
-        if pos == len(_MAGIC) and opcode != OP_HEADER:
+        if pos == len(MAGIC) and opcode != OP_HEADER:
             raise Corrupt(f"opcode 0x{opcode:02x} where the header record belongs (byte {pos})")
         if opcode == OP_DATA_END:
             return
