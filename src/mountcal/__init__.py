@@ -14,7 +14,7 @@ Names carry frames and units: ``acc_s`` (sensor-frame specific force, m/s²), ``
 
 Pipeline: stop table (:mod:`mountcal.stoptable`) → fit (:mod:`mountcal.calibrate`, with
 :mod:`mountcal.estimate`) → result (:mod:`mountcal.result`) → apply (:mod:`mountcal.apply.rotate`);
-:mod:`mountcal.simulate.stops` is the shared truth generator.
+:mod:`mountcal.simulate` is the shared truth generator.
 """
 
 from __future__ import annotations

@@ -37,9 +37,11 @@ from mountcal.io.mcap.records import (
     READ_AHEAD_BYTES,
     RECORD_HEAD,
     Corrupt,
+    I64Array,
     Log,
     McapChannel,
     Schema,
+    U8Array,
     chunk_others,
     damaged,
     parse_channel,
@@ -50,10 +52,6 @@ from mountcal.io.mcap.records import (
     walk_records,
 )
 from mountcal.threads import helpers_allowed
-
-I64Array = NDArray[np.int64]
-U8Array = NDArray[np.uint8]
-
 
 # --------------------------------------------------------------------------- chunks → record tables
 

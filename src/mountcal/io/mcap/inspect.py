@@ -25,9 +25,6 @@ from mountcal.io.mcap.records import (
 )
 from mountcal.samples import LogSummary, Stream
 
-I64Array = NDArray[np.int64]
-U8Array = NDArray[np.uint8]
-
 
 def inspect_mcap(path: str | os.PathLike[str]) -> LogSummary:
     """What an MCAP log holds: topics, types, message counts, rates and duration.

@@ -49,17 +49,15 @@ from mountcal.io.mcap.records import (
     RECORD_HEAD,
     TYPE_NAME,
     Corrupt,
+    I64Array,
     Log,
     McapChannel,
+    U8Array,
     damaged,
     record_field,
 )
 from mountcal.io.ros2 import cdr
 from mountcal.samples import Channel, FloatArray, Samples
-
-I64Array = NDArray[np.int64]
-U8Array = NDArray[np.uint8]
-
 
 # --------------------------------------------------------------------------- choosing topics
 

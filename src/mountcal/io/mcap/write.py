@@ -41,12 +41,11 @@ from mcap.records import (
 )
 from numpy.typing import NDArray
 
-from mountcal.io.mcap.records import MAGIC, MESSAGE_HEAD, RECORD_HEAD
+from mountcal.io.mcap.records import MAGIC, MESSAGE_HEAD, RECORD_HEAD, U8Array
 from mountcal.io.ros2.definitions import ros2_definition
 from mountcal.io.ros2.imu import ImuMessages, encode_imu_messages
 
 FloatArray = NDArray[np.float64]
-U8Array = NDArray[np.uint8]
 
 IMU_SCHEMA_NAME = "sensor_msgs/msg/Imu"
 IMU_DEFINITION = ros2_definition(IMU_SCHEMA_NAME)  # the one ROS 2 definition text mountcal writes
