@@ -59,6 +59,7 @@ from mountcal.errors import InputError
 from mountcal.io.logs import CHUNK_SAMPLES, LogOptions, iter_log
 from mountcal.io.mcap.copy import copy_mcap_with_imu
 from mountcal.io.mcap.write import McapImuSamples
+from mountcal.io.registry import reader_for
 from mountcal.io.ros2.imu import ImuMessages
 from mountcal.io.table.write import CsvSamples, ParquetSamples
 from mountcal.result import VEHICLE_FRAME, Calibration
@@ -197,7 +198,7 @@ def rotate_log(
         frame_id = LEVELLED_FRAME_ID if frame_id == VEHICLE_FRAME_ID else frame_id
     if chunk_samples < 1:
         raise ValueError(f"chunk_samples must be at least 1, got {chunk_samples}")
-    if kind == "mcap" and any(f.suffix.lower() == ".mcap" for f in files):
+    if kind == "mcap" and any(reader_for(f, opts).name == "mcap" for f in files):  # copied through
         if len(files) != 1:
             raise InputError(
                 " + ".join(map(str, files)),
