@@ -427,6 +427,7 @@ def run_live_command(args: Any) -> int:
     return 130 if session.reason == "interrupted" else 0
 
 
+
 @contextlib.contextmanager
 def _ctrl_c_sets(flag: threading.Event) -> Iterator[None]:
     """Ctrl-C (SIGINT) sets ``flag`` instead of raising wherever the main thread happens to be.
