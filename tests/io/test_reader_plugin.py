@@ -138,3 +138,30 @@ def test_a_broken_plugin_is_named_not_a_traceback(
     pd.DataFrame({"t_s": [0.0, 0.01], "ax": [0.0, 0.0], "ay": [0.0, 0.0], "az": [9.8, 9.8]}).to_csv(table, index=False)
     done = mountcal(env, "inspect", table)
     assert done.returncode == 0 and "mountcal_broken" in done.stderr
+
+
+def test_the_registry_picks_readers_by_path_and_options(tmp_path: Path) -> None:
+    from mountcal.errors import InputError
+    from mountcal.io.logs import LogOptions
+    from mountcal.io.registry import reader_for
+
+    plain, with_dbc = LogOptions(), LogOptions(dbc="x.dbc")
+    assert reader_for(Path("a.mcap"), plain).name == "mcap"
+    assert reader_for(Path("a.BLF"), plain).name == "can"  # listed without a DBC; read with one
+    assert reader_for(Path("a.csv"), plain).name == "table"
+    assert reader_for(Path("a.csv"), with_dbc).name == "can"
+    segment = tmp_path / "seg" / "processed_log" / "IMU" / "accelerometer"
+    segment.mkdir(parents=True)
+    assert reader_for(tmp_path / "seg", plain).name == "comma2k19"
+    with pytest.raises(InputError, match=r"\(\.mcap\).*found a file ending in \.xyz"):
+        reader_for(Path("a.xyz"), plain)
+
+
+def test_the_log_front_loads_no_numerical_library() -> None:
+    code = (
+        "import sys, mountcal.io.logs, mountcal.io.registry\n"
+        "print(sorted(m for m in ('numpy', 'pandas', 'scipy') if m in sys.modules))"
+    )
+    env = {**os.environ, "PYTHONPATH": str(SRC)}
+    done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    assert done.stdout.strip() == "[]"

@@ -18,12 +18,13 @@ from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from itertools import pairwise
 from pathlib import Path
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from mountcal.errors import InputError
 from mountcal.io.registry import reader_for
-from mountcal.samples import Channel, LogSummary, Samples
+
+if TYPE_CHECKING:  # numpy and the readers load when a log is read: `mountcal --help` needs neither
+    from mountcal.samples import LogSummary, Samples
 
 CHUNK_SAMPLES = 100_000  # samples per chunk of iter_log: its memory bound
 
@@ -105,6 +106,10 @@ def join(parts: Sequence[Samples]) -> Samples:
     InputError
         When two files' clocks overlap: they are not consecutive splits of one log.
     """
+    import numpy as np
+
+    from mountcal.samples import Channel, Samples
+
     parts = sorted(parts, key=lambda s: float(s.t_s[0]) if len(s) else np.inf)
     _check_consecutive([p for p in parts if len(p)])
     gyro = None
