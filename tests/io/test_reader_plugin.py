@@ -157,6 +157,13 @@ def test_the_registry_picks_readers_by_path_and_options(tmp_path: Path) -> None:
         reader_for(Path("a.xyz"), plain)
 
 
+def test_the_can_readers_gravity_is_the_conventions() -> None:
+    from mountcal.conventions import G_N
+    from mountcal.io.can import signals
+
+    assert signals.G_N == G_N and signals.si_scale("ax", "g") == (G_N, 0.0)
+
+
 def test_the_log_front_loads_no_numerical_library() -> None:
     code = (
         "import sys, mountcal.io.logs, mountcal.io.registry\n"

@@ -10,7 +10,9 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from mountcal.conventions import G_N
+# standard gravity, m/s², for signals in g: the value of mountcal.conventions.G_N (a test checks it),
+# not imported from there, which would load scipy into every CAN read
+G_N = 9.80665
 
 # unit spellings (lower case, spaces removed, ² → ^2, ° → deg) → (scale, offset) to SI
 UNITS: dict[str, dict[str, tuple[float, float]]] = {
