@@ -21,7 +21,7 @@ from mountcal.conventions import G_N
 from mountcal.estimate import bound
 from mountcal.estimate.bound import true_state
 from mountcal.result import Calibration
-from mountcal.simulate import ZHANG2011, random_bias, simulate_preset
+from mountcal.simulate.stops import ZHANG2011, random_bias, simulate_preset
 
 QUANTITIES = ("roll", "pitch", "yaw", "slope")
 BIAS_MPS2 = 0.020 * G_N

@@ -22,7 +22,7 @@ from scipy.spatial.transform import Rotation
 
 from mountcal.calibrate import calibrate
 from mountcal.conventions import G_N
-from mountcal.simulate import random_bias, simulate_stops
+from mountcal.simulate.stops import random_bias, simulate_stops
 from mountcal.stoptable import StopTable
 
 MG = 1e-3 * G_N

@@ -1,6 +1,6 @@
 """Accuracy of yaw from driving on simulated 20-minute mixed drives, and whether its σ covers the error.
 
-For each scenario, ``--seeds`` drives are simulated (:func:`mountcal.simulate_drive.simulate_drive`:
+For each scenario, ``--seeds`` drives are simulated (:func:`mountcal.simulate.drive.simulate_drive`:
 launches, braking, junction turns, curves, grades, crowned roads, suspension pitch and roll,
 vibration and noise; speed on its own clock with a delay) with a random mounting, and
 :func:`mountcal.estimate.driving.estimate_driving` is run on what a logger would record. Reported
@@ -36,8 +36,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from mountcal.estimate.driving import estimate_driving
-from mountcal.io.samples import Channel, Samples
-from mountcal.simulate_drive import simulate_drive
+from mountcal.samples import Channel, Samples
+from mountcal.simulate.drive import simulate_drive
 
 
 @dataclass(frozen=True)

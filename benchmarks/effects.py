@@ -24,7 +24,7 @@ from scipy.spatial.transform import Rotation
 from mountcal.calibrate import calibrate
 from mountcal.conventions import G_N
 from mountcal.estimate import bound
-from mountcal.simulate import ZHANG2011, Truth, random_bias, simulate_stops
+from mountcal.simulate.stops import ZHANG2011, Truth, random_bias, simulate_stops
 from mountcal.stoptable import StopTable
 
 MG = 1e-3 * G_N

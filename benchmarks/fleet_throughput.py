@@ -59,7 +59,7 @@ RATE_HZ = 200.0
 
 def write_log(path: str, kind: str, angles: tuple[float, float, float], seed: int, day: int) -> None:
     """One 5.5-minute parking session as a sample table or an MCAP log (with its protocol sheet)."""
-    from mountcal.simulate import simulate_parking_log
+    from mountcal.simulate.stops import simulate_parking_log
 
     log = simulate_parking_log(
         *angles, beta_deg=tuple(range(0, 360, 30)), stop_s=20.0, drive_s=8.0, rate_hz=RATE_HZ, seed=seed
@@ -84,7 +84,7 @@ def write_log(path: str, kind: str, angles: tuple[float, float, float], seed: in
         else:
             frame.to_parquet(path)
         return
-    from mountcal.io import export
+    from mountcal.simulate import logs as export
 
     start_s = T0_UNIX_S + day * 86_400
     export.write_mcap(path, log, with_temperature=False, with_odometry=False, start_time_s=start_s)

@@ -39,7 +39,7 @@ from scipy.spatial.transform import Rotation
 from mountcal.cli import main as cli_main
 from mountcal.conventions import G_N, normal_gravity
 from mountcal.result import Calibration
-from mountcal.simulate import simulate_stops
+from mountcal.simulate.stops import simulate_stops
 from mountcal.stoptable import ALT, BETA, COUNT, LAT, LON, OPTIONAL, SITE, STD, TEMPERATURE
 
 FAILURES = ("traceback", "nonfinite", "invalid", "wrong_confident", "crash", "hang", "over_memory")

@@ -226,13 +226,6 @@ def run(count: int, seed: int, report: Callable[[str], None]) -> dict[str, objec
     A failure is a traceback, a hang past ``TIME_BOUND_S`` or a peak RSS above ``RSS_BOUND_MB``;
     each is listed with the source, the mutation and the command, to reproduce it.
     """
-    # imported once here (the commands import what they run when they run), inherited by every forked command
-    import mountcal.cli
-    import mountcal.io.can_frames
-    import mountcal.io.can_log
-    import mountcal.io.mcap_log
-    import mountcal.pipeline
-    import mountcal.rotate_log  # noqa: F401
 
     rng = random.Random(seed)
     pool = sources()

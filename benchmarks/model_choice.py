@@ -21,7 +21,7 @@ import numpy as np
 
 from mountcal.calibrate import Options, calibrate
 from mountcal.conventions import G_N
-from mountcal.simulate import ZHANG2011, simulate_stops
+from mountcal.simulate.stops import ZHANG2011, simulate_stops
 from mountcal.stoptable import StopTable
 
 FIXED = "rotation,slope,bias"

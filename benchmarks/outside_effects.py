@@ -30,7 +30,7 @@ from scipy.spatial.transform import Rotation
 from mountcal.calibrate import calibrate
 from mountcal.conventions import G_N, FloatArray, specific_force_v
 from mountcal.result import Calibration
-from mountcal.simulate import Truth, simulate_stops
+from mountcal.simulate.stops import Truth, simulate_stops
 from mountcal.stoptable import StopTable
 
 MG = 1e-3 * G_N

@@ -16,10 +16,10 @@ import pandas as pd
 
 from mountcal.conventions import G_N, normal_gravity
 from mountcal.estimate import sphere
-from mountcal.io.can_frames import read_frames
+from mountcal.io.can.frames import read_frames
 from mountcal.io.logs import LogOptions, read_log
-from mountcal.io.samples import Samples
 from mountcal.pipeline import LogJob, calibrate_log
+from mountcal.samples import Samples
 from mountcal.stops import StopDetection, detect_stops
 
 REAL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real"

@@ -2,7 +2,7 @@
 conventional per-message path, on hours-long logs written by the real writers.
 
 Logs (generated once into ``--workdir`` and reused): a simulated drive
-(:func:`mountcal.simulate_drive.simulate_drive`) as
+(:func:`mountcal.simulate.drive.simulate_drive`) as
 
 - ROS 2 MCAP, ``sensor_msgs/msg/Imu`` at 200 Hz, written with ``mcap_ros2.writer.Writer`` (zstd
   chunks of 1 MiB, its default);
@@ -12,7 +12,7 @@ Logs (generated once into ``--workdir`` and reused): a simulated drive
 
 Methods, each run in a fresh subprocess so its peak RSS is its own:
 
-- ``mountcal``: :func:`mountcal.rotate_log.rotate_log` — streamed in chunks of 100 000 samples,
+- ``mountcal``: :func:`mountcal.apply.rotate_log.rotate_log` — streamed in chunks of 100 000 samples,
   vectorized decoding, one Parquet row group per chunk;
 - ``conventional``: the libraries' per-message path — MCAP: ``mcap`` reader with the
   ``mcap_ros2`` decoder (``iter_decoded_messages``); BLF: ``can.BLFReader`` + cantools
@@ -48,7 +48,7 @@ T0_NS = 1_714_557_600_000_000_000
 
 
 def drive(hours: float, rate_hz: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    from mountcal.simulate_drive import simulate_drive
+    from mountcal.simulate.drive import simulate_drive
 
     d = simulate_drive(duration_s=hours * 3600.0, rate_hz=rate_hz, seed=0)
     return d.t_s, d.acc_s, d.gyro_s
@@ -57,7 +57,7 @@ def drive(hours: float, rate_hz: float) -> tuple[np.ndarray, np.ndarray, np.ndar
 def write_mcap(path: Path, hours: float) -> None:
     from mcap_ros2.writer import Writer
 
-    from mountcal.io.writers import IMU_DEFINITION
+    from mountcal.io.mcap.write import IMU_DEFINITION
 
     t, acc, gyro = drive(hours, 200.0)
     tmp = path.with_suffix(".part")
@@ -166,9 +166,9 @@ def prepare(workdir: Path, hours: list[float], bus_hz: float) -> tuple[dict[tupl
 
 
 def run_mountcal(src: Path, out: Path, cal_path: Path, dbc: Path) -> int:
+    from mountcal.apply.rotate_log import rotate_log
     from mountcal.io.logs import LogOptions
     from mountcal.result import Calibration
-    from mountcal.rotate_log import rotate_log
 
     opts = LogOptions(dbc=str(dbc)) if src.suffix == ".blf" else LogOptions()
     return rotate_log(src, Calibration.load(cal_path), out, options=opts).samples_out
@@ -228,9 +228,9 @@ def child(method: str, src: Path, out: Path, cal: Path, dbc: Path) -> None:
         "mcap_ros2.decoder",
         "pandas",
         "pyarrow.parquet",
-        "mountcal.rotate_log",
-        "mountcal.io.can_log",
-        "mountcal.io.mcap_log",
+        "mountcal.apply.rotate_log",
+        "mountcal.io.can.read",
+        "mountcal.io.mcap.read",
     ):
         importlib.import_module(name)
 

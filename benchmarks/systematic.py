@@ -21,7 +21,7 @@ from accuracy import publish
 from mountcal.calibrate import Options, calibrate
 from mountcal.conventions import G_N
 from mountcal.sensor_spec import SensorSpec
-from mountcal.simulate import simulate_preset
+from mountcal.simulate.stops import simulate_preset
 
 KEYS = ("roll_deg", "pitch_deg", "yaw_deg", "slope_deg")
 

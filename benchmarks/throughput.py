@@ -25,12 +25,12 @@ from mcap_ros2.decoder import DecoderFactory
 
 from mountcal.calibrate import calibrate
 from mountcal.conventions import normal_gravity
-from mountcal.io import export
 from mountcal.io.logs import LogOptions
-from mountcal.io.samples import Channel, Samples
 from mountcal.pipeline import LogJob, calibrate_log
 from mountcal.result import Calibration
-from mountcal.simulate import simulate_parking_log
+from mountcal.samples import Channel, Samples
+from mountcal.simulate import logs as export
+from mountcal.simulate.stops import simulate_parking_log
 from mountcal.stops import read_protocol, tabulate
 
 REPO = Path(__file__).resolve().parents[1]

@@ -93,7 +93,7 @@ def generate(path: Path, minutes: float) -> None:
 
 
 def run_mountcal(log: Path, dbc: Path) -> np.ndarray:
-    from mountcal.io.can_log import read_can
+    from mountcal.io.can.read import read_can
 
     return read_can(log, dbc).acc_s
 
@@ -142,7 +142,7 @@ def _child(which: str, log: Path, dbc: Path, out: Path | None) -> None:
     import can  # noqa: F401  # imports (≈ 0.3 s, the same libraries for both paths) are not timed
     import cantools  # noqa: F401
 
-    import mountcal.io.can_log  # noqa: F401
+    import mountcal.io.can.read  # noqa: F401
 
     baseline_mib = _peak_mib()
     start = time.perf_counter()

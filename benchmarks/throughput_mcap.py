@@ -4,7 +4,7 @@ Writes one hour (by default) of ROS 2 ``sensor_msgs/msg/Imu`` at 200 Hz with the
 writer (zstd chunks of the default 1 MiB), then times, each in a fresh subprocess so peak memory is
 per method:
 
-(a) ``mountcal.io.mcap_log.read_mcap(path).acc_s`` → (n, 3) array;
+(a) ``mountcal.io.mcap.read.read_mcap(path).acc_s`` → (n, 3) array;
 (b) ``mcap`` + ``mcap_ros2`` ``iter_decoded_messages`` collecting ``linear_acceleration``
     into an (n, 3) array.
 
@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mountcal.io.writers import IMU_DEFINITION
+from mountcal.io.mcap.write import IMU_DEFINITION
 
 TOPIC = "/imu/data"
 
@@ -89,7 +89,7 @@ def write_log(path: Path, n: int, rate_hz: float) -> None:
 
 def read_mountcal(path: Path) -> np.ndarray:
     """(a) mountcal's vectorized reader."""
-    from mountcal.io.mcap_log import read_mcap
+    from mountcal.io.mcap.read import read_mcap
 
     return read_mcap(path).acc_s
 
@@ -116,7 +116,7 @@ def run_one(method: str, path: Path) -> None:
     import mcap.reader  # noqa: F401  (import cost is not part of the measured read)
     import mcap_ros2.decoder  # noqa: F401
 
-    import mountcal.io.mcap_log  # noqa: F401
+    import mountcal.io.mcap.read  # noqa: F401
 
     rss_before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     t0 = time.perf_counter()

@@ -29,7 +29,7 @@ from mountcal.cli import main as cli
 from mountcal.conventions import G_N
 from mountcal.estimate import bound, full
 from mountcal.sensor_spec import SensorSpec
-from mountcal.simulate import simulate_preset
+from mountcal.simulate.stops import simulate_preset
 from mountcal.systematic import angle_sigmas, propagate
 from mountcal.triad import NAMES, Triad, load
 

@@ -22,7 +22,7 @@ import numpy as np
 from mountcal.calibrate import calibrate
 from mountcal.conventions import G_N
 from mountcal.estimate import bound, full
-from mountcal.simulate import ZHANG2011, Truth, simulate_stops
+from mountcal.simulate.stops import ZHANG2011, Truth, simulate_stops
 from mountcal.stoptable import StopTable
 
 ANGLES = ("roll", "pitch", "yaw")

@@ -22,14 +22,14 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from mountcal import calibrate
+from mountcal.apply.rotate import acc_to_vehicle, check_applicable, frame_to_vehicle
+from mountcal.apply.rotate_log import rotate_log, to_frame
 from mountcal.cli import main
 from mountcal.conventions import angles_from_rot_vs
 from mountcal.errors import InputError
 from mountcal.result import Calibration
-from mountcal.rotate import acc_to_vehicle, check_applicable, frame_to_vehicle
-from mountcal.rotate_log import rotate_log, to_frame
-from mountcal.simulate import simulate_stops
-from mountcal.simulate_drive import simulate_drive
+from mountcal.simulate.drive import simulate_drive
+from mountcal.simulate.stops import simulate_stops
 from mountcal.stoptable import write_stop_table as write_table
 
 REPO = Path(__file__).resolve().parents[1]

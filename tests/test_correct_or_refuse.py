@@ -14,7 +14,7 @@ from mountcal import terms
 from mountcal.calibrate import Options, calibrate
 from mountcal.cli import main
 from mountcal.errors import InputError, NotEnoughInformation
-from mountcal.simulate import simulate_stops
+from mountcal.simulate.stops import simulate_stops
 from mountcal.stoptable import read_stop_table, write_stop_table
 
 REPO = Path(__file__).resolve().parents[1]

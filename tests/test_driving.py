@@ -12,15 +12,15 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from mountcal import calibrate, simulate_preset
+from mountcal.apply.rotate_log import to_frame
 from mountcal.cli import main
 from mountcal.conventions import G_N, angles_from_rot_vs, rot_vs_from_angles
 from mountcal.errors import NotEnoughInformation
 from mountcal.estimate.driving import DrivingOptions, estimate_driving
 from mountcal.estimate.driving_combine import combine
-from mountcal.io.samples import Channel, Samples
 from mountcal.result import Calibration
-from mountcal.rotate_log import to_frame
-from mountcal.simulate_drive import simulate_drive
+from mountcal.samples import Channel, Samples
+from mountcal.simulate.drive import simulate_drive
 
 
 @pytest.fixture(scope="module")

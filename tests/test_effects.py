@@ -15,7 +15,7 @@ from mountcal.conventions import G_N
 from mountcal.diagnose import leave_one_out, leave_one_out_refit
 from mountcal.effects import BASE, PROGRESS_STOPS, close_the_loop, with_surface
 from mountcal.estimate import full
-from mountcal.simulate import random_bias, simulate_preset, simulate_stops
+from mountcal.simulate.stops import random_bias, simulate_preset, simulate_stops
 from mountcal.stoptable import StopTable, write_stop_table
 
 MG = 1e-3 * G_N
@@ -396,7 +396,7 @@ def test_observability_names_the_protocol_that_would_separate_scale() -> None:
 
 
 def test_rotate_undoes_a_fitted_scale_matrix_and_back() -> None:
-    from mountcal.rotate import acc_to_sensor, acc_to_vehicle
+    from mountcal.apply.rotate import acc_to_sensor, acc_to_vehicle
 
     table, truth = _on_slopes((5.0, 10.0), SCALE_2_1, 0)
     cal = calibrate(table)

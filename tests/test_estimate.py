@@ -13,7 +13,7 @@ from mountcal.calibrate import Options, calibrate
 from mountcal.conventions import G_N, rot_vs_from_angles
 from mountcal.estimate.paper import opposite_pairs
 from mountcal.result import Calibration
-from mountcal.simulate import Truth, random_bias, simulate_preset, simulate_stops
+from mountcal.simulate.stops import Truth, random_bias, simulate_preset, simulate_stops
 
 CHI2_3_99_99 = stats.chi2.ppf(0.9999, 3)
 

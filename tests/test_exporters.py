@@ -25,7 +25,7 @@ from mountcal.cli import main
 from mountcal.errors import NotEnoughInformation
 from mountcal.outputs.exporters import FORMATS, Frames, export
 from mountcal.result import Calibration
-from mountcal.simulate import simulate_stops
+from mountcal.simulate.stops import simulate_stops
 
 G = 9.80665
 TOL = 1e-9

@@ -26,9 +26,9 @@ from mountcal.fleet import FleetOptions, JobDefaults, LocalEngine, collect_jobs,
 from mountcal.fleet.progress import Progress
 from mountcal.fleet.store import PartStore, job_hash
 from mountcal.fleet.worker import run_job
-from mountcal.io import export
 from mountcal.result import Calibration
-from mountcal.simulate import ParkingLog, simulate_parking_log, simulate_stops
+from mountcal.simulate import logs as export
+from mountcal.simulate.stops import ParkingLog, simulate_parking_log, simulate_stops
 from mountcal.stoptable import write_stop_table
 
 TRUTH = (5.0, 6.0, 7.0)

@@ -20,7 +20,7 @@ from mountcal.fleet.vehicles import (
     tangent_residuals,
 )
 from mountcal.fleet.worker import calibration_record
-from mountcal.simulate import simulate_stops
+from mountcal.simulate.stops import simulate_stops
 
 TRUTH = (5.0, 6.0, 7.0)
 

@@ -21,12 +21,12 @@ from mountcal.calibrate import Calibration, Options, calibrate
 from mountcal.cli import main
 from mountcal.errors import InputError, NotEnoughInformation
 from mountcal.estimate.bound import crb_deg, true_state
-from mountcal.io import export
 from mountcal.io.logs import LogOptions
 from mountcal.live import CANDIDATES_DEG, Live, LiveOptions, Session, fail_if_empty, next_heading
 from mountcal.pipeline import LogJob, calibrate_job
 from mountcal.sensor_spec import SensorSpec
-from mountcal.simulate import simulate_parking_log, simulate_stops
+from mountcal.simulate import logs as export
+from mountcal.simulate.stops import simulate_parking_log, simulate_stops
 from mountcal.stops import StopDetection
 from mountcal.stoptable import StopTable
 

@@ -10,9 +10,9 @@ import pytest
 from mountcal.cli import main
 from mountcal.conventions import G_N
 from mountcal.io.logs import LogOptions
-from mountcal.io.samples import Samples
 from mountcal.plan import Noise, Request, bound_of_headings, make_plan, monte_carlo_rms, noise_from_log
-from mountcal.simulate import simulate_parking_log
+from mountcal.samples import Samples
+from mountcal.simulate.stops import simulate_parking_log
 from mountcal.stops import read_protocol, tabulate
 
 TARGET = {"roll": 0.1, "pitch": 0.1, "yaw": 0.5}
@@ -74,7 +74,7 @@ def test_calibrate_reads_the_sheet_and_finds_every_planned_stop(tmp_path: Path) 
 
 
 def test_noise_from_a_log_is_the_simulated_white_noise(tmp_path: Path) -> None:
-    from mountcal.io import export
+    from mountcal.simulate import logs as export
 
     log = simulate_parking_log(noise_mps2=0.04, rate_hz=100.0, seed=5)
     path = tmp_path / "parked.mcap"

@@ -27,7 +27,7 @@ from mountcal.calibrate import Options, calibrate
 from mountcal.cli import main
 from mountcal.conventions import G_N
 from mountcal.result import Calibration
-from mountcal.simulate import simulate_stops
+from mountcal.simulate.stops import simulate_stops
 from mountcal.stoptable import OPTIONAL, StopTable
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))

@@ -13,7 +13,7 @@ from mountcal.diagnose import FAMILY_ALPHA, analyse, unexplained
 from mountcal.effects import BASE
 from mountcal.estimate import full
 from mountcal.result import Finding
-from mountcal.simulate import simulate_stops
+from mountcal.simulate.stops import simulate_stops
 from mountcal.stoptable import StopTable
 
 MG = 1e-3 * G_N

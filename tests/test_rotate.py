@@ -8,10 +8,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from mountcal.calibrate import Options, calibrate
-from mountcal.conventions import G_N, specific_force_v
-from mountcal.errors import InputError
-from mountcal.rotate import (
+from mountcal.apply.rotate import (
     acc_to_sensor,
     acc_to_vehicle,
     frame_to_sensor,
@@ -19,7 +16,10 @@ from mountcal.rotate import (
     rate_to_sensor,
     rate_to_vehicle,
 )
-from mountcal.simulate import simulate_preset
+from mountcal.calibrate import Options, calibrate
+from mountcal.conventions import G_N, specific_force_v
+from mountcal.errors import InputError
+from mountcal.simulate.stops import simulate_preset
 
 
 @pytest.fixture(scope="module")

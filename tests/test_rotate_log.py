@@ -23,17 +23,17 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from mcap_ros2.writer import Writer as Ros2Writer
 
+import mountcal.apply.rotate_log
 import mountcal.errors
-import mountcal.rotate_log
 from mountcal import calibrate, simulate_preset
+from mountcal.apply.rotate import acc_to_sensor, rate_to_sensor
+from mountcal.apply.rotate_log import rotate_log, to_frame
 from mountcal.calibrate import Options
 from mountcal.cli import main
 from mountcal.io.logs import LogOptions, read_log
-from mountcal.io.writers import IMU_DEFINITION
+from mountcal.io.mcap.write import IMU_DEFINITION
 from mountcal.result import Calibration
-from mountcal.rotate import acc_to_sensor, rate_to_sensor
-from mountcal.rotate_log import rotate_log, to_frame
-from mountcal.simulate_drive import simulate_drive
+from mountcal.simulate.drive import simulate_drive
 
 T0_NS = 1_714_557_600_000_000_000
 DBC = Path(__file__).resolve().parent / "data" / "imu_acc_gyro.dbc"  # two 6-byte messages, 16-bit signals
@@ -266,7 +266,7 @@ def test_nan_imu_messages_are_kept_one_for_one_and_counted(cal: Calibration, tmp
 
 KILL_SCRIPT = """
 import sys, time
-import mountcal.io.writers as writers
+import mountcal.io.table.write as writers
 real_write = writers.ParquetSamples.write
 def slow_write(self, *args):
     real_write(self, *args)
@@ -398,7 +398,7 @@ def test_an_mcap_output_from_several_mcap_files_is_refused(logs, cal: Calibratio
 
 
 def test_the_notebook_examples_run_as_doctests() -> None:
-    result = doctest.testmod(mountcal.rotate_log, optionflags=doctest.ELLIPSIS)
+    result = doctest.testmod(mountcal.apply.rotate_log, optionflags=doctest.ELLIPSIS)
     assert result.attempted >= 10 and result.failed == 0
 
 

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from mountcal.calibrate import calibrate
-from mountcal.io.samples import Channel, Samples
-from mountcal.simulate import ParkingLog, simulate_parking_log
+from mountcal.samples import Channel, Samples
+from mountcal.simulate.stops import ParkingLog, simulate_parking_log
 from mountcal.stops import StopDetection, beta_from_heading, detect_stops, find_stops, still_mask, stop_table
 
 

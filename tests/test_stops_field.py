@@ -10,12 +10,12 @@ import pandas as pd
 import pytest
 
 from mountcal import cli
+from mountcal.apply.rotate_log import to_frame
 from mountcal.calibrate import calibrate
 from mountcal.errors import NotEnoughInformation
-from mountcal.io.samples import Channel, Samples
 from mountcal.io.timestamps import MERGED, increasing_times
-from mountcal.rotate_log import to_frame
-from mountcal.simulate import ParkingLog, simulate_parking_log
+from mountcal.samples import Channel, Samples
+from mountcal.simulate.stops import ParkingLog, simulate_parking_log
 from mountcal.stops import (
     RELAX,
     StopDetection,

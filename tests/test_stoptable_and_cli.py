@@ -15,7 +15,7 @@ from mountcal.calibrate import calibrate
 from mountcal.cli import main
 from mountcal.errors import InputError, NotEnoughInformation
 from mountcal.result import FORMAT_VERSION, Calibration
-from mountcal.simulate import simulate_preset
+from mountcal.simulate.stops import simulate_preset
 from mountcal.stoptable import StopTable, checked, read_stop_table, write_stop_table
 
 REPO = Path(__file__).resolve().parents[1]

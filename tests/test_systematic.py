@@ -16,7 +16,7 @@ from mountcal.conventions import G_N
 from mountcal.estimate import full
 from mountcal.result import Calibration
 from mountcal.sensor_spec import DEFAULT, SensorSpec, read_spec
-from mountcal.simulate import simulate_stops
+from mountcal.simulate.stops import simulate_stops
 from mountcal.stoptable import StopTable, write_stop_table
 
 BIAS_ONLY = SensorSpec(scale=0.0, cross_axis=0.0, bias_mps2=0.5, bias_tempco_mps2_per_c=0.0, source="test: bias only")

@@ -12,7 +12,7 @@ import pytest
 from mountcal.calibrate import Options, calibrate
 from mountcal.cli import main
 from mountcal.conventions import G_N
-from mountcal.simulate import simulate_stops
+from mountcal.simulate.stops import simulate_stops
 from mountcal.triad import NAMES, Triad, load
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))

@@ -15,7 +15,7 @@ Names carry frames and units: ``acc_s`` (sensor-frame specific force, m/s²), ``
 Pipeline: a log → :func:`calibrate_log` (:mod:`mountcal.pipeline`: stops and/or driving, what
 ``mountcal calibrate LOG`` and ``mountcal fleet`` run); a stop table (:mod:`mountcal.stoptable`) →
 fit (:mod:`mountcal.calibrate`, with :mod:`mountcal.estimate`) → result (:mod:`mountcal.result`) →
-apply (:mod:`mountcal.rotate`); :mod:`mountcal.simulate` is the shared truth generator.
+apply (:mod:`mountcal.apply.rotate`); :mod:`mountcal.simulate` is the shared truth generator.
 """
 
 from __future__ import annotations
@@ -25,14 +25,14 @@ from typing import TYPE_CHECKING
 from mountcal import lazy
 
 if TYPE_CHECKING:
+    from mountcal.apply.rotate import acc_to_sensor, acc_to_vehicle, frame_to_sensor, frame_to_vehicle
+    from mountcal.apply.rotate_log import to_frame
     from mountcal.calibrate import Options, calibrate
     from mountcal.estimate.driving import estimate_driving
     from mountcal.io.logs import LogOptions, read_log
     from mountcal.pipeline import calibrate_log
     from mountcal.result import Calibration
-    from mountcal.rotate import acc_to_sensor, acc_to_vehicle, frame_to_sensor, frame_to_vehicle
-    from mountcal.rotate_log import to_frame
-    from mountcal.simulate import simulate_preset, simulate_stops
+    from mountcal.simulate.stops import simulate_preset, simulate_stops
     from mountcal.stoptable import StopTable, read_stop_table, stop_table_from_frame
     from mountcal.summary import summary
 
@@ -44,20 +44,20 @@ _HOMES = {
     "LogOptions": "mountcal.io.logs",
     "Options": "mountcal.calibrate",
     "StopTable": "mountcal.stoptable",
-    "acc_to_sensor": "mountcal.rotate",
-    "acc_to_vehicle": "mountcal.rotate",
+    "acc_to_sensor": "mountcal.apply.rotate",
+    "acc_to_vehicle": "mountcal.apply.rotate",
     "calibrate": "mountcal.calibrate",
     "calibrate_log": "mountcal.pipeline",
     "estimate_driving": "mountcal.estimate.driving",
-    "frame_to_sensor": "mountcal.rotate",
-    "frame_to_vehicle": "mountcal.rotate",
+    "frame_to_sensor": "mountcal.apply.rotate",
+    "frame_to_vehicle": "mountcal.apply.rotate",
     "read_log": "mountcal.io.logs",
     "read_stop_table": "mountcal.stoptable",
-    "simulate_preset": "mountcal.simulate",
-    "simulate_stops": "mountcal.simulate",
+    "simulate_preset": "mountcal.simulate.stops",
+    "simulate_stops": "mountcal.simulate.stops",
     "stop_table_from_frame": "mountcal.stoptable",
     "summary": "mountcal.summary",
-    "to_frame": "mountcal.rotate_log",
+    "to_frame": "mountcal.apply.rotate_log",
 }
 
 

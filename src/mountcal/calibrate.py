@@ -503,9 +503,7 @@ def _check_geometry(table: StopTable) -> None:
         )
 
 
-def local_gravity(
-    lat_deg: FloatArray | None, alt_m: FloatArray | None, given: float | None
-) -> tuple[float, str]:
+def local_gravity(lat_deg: FloatArray | None, alt_m: FloatArray | None, given: float | None) -> tuple[float, str]:
     """Gravity and its source: ``given``, else WGS 84 normal gravity at the mean position, else standard."""
     if given is not None:
         return float(given), GIVEN

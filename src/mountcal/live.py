@@ -3,7 +3,7 @@
 Every frame is received one by one (unavoidable on a bus) and written at once to a BLF recording
 (python-can's ``BLFWriter``); the frames are kept as arrays, and at each evaluation the whole
 session so far is decoded with the readers' vectorised DBC decoding
-(:func:`mountcal.io.can_log.samples_from_frames`) and the *batch* stop detection runs on it. So
+(:func:`mountcal.io.can.read.samples_from_frames`) and the *batch* stop detection runs on it. So
 the session's answer is, by construction, what ``calibrate`` gives on the recording: the
 timestamps are kept exactly as the BLF file will return them (ms start, ns ticks).
 
@@ -34,10 +34,10 @@ from mountcal.calibrate import Options, calibrate
 from mountcal.conventions import specific_force_v
 from mountcal.errors import InputError, MountcalError, NotEnoughInformation
 from mountcal.estimate.bound import crb_deg, true_state
-from mountcal.io.can_bus import BusFrames, recorder
-from mountcal.io.can_log import samples_from_frames
-from mountcal.io.samples import Samples
+from mountcal.io.can.bus import BusFrames, recorder
+from mountcal.io.can.read import samples_from_frames
 from mountcal.result import Calibration
+from mountcal.samples import Samples
 from mountcal.stops import StopDetection, detect_stops, tabulate
 from mountcal.stoptable import StopTable, write_stop_table
 

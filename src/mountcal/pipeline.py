@@ -22,10 +22,10 @@ from mountcal.errors import InputError, NotEnoughInformation
 from mountcal.estimate.driving import DrivingFit, DrivingOptions, estimate_driving
 from mountcal.estimate.driving_combine import combine, driving_calibration, not_combined
 from mountcal.io.logs import LogOptions, read_log
-from mountcal.io.samples import Samples
 from mountcal.io.timestamps import increasing_times
 from mountcal.paths import special_kind
 from mountcal.result import Calibration, Provenance
+from mountcal.samples import Samples
 from mountcal.stops import StopDetection, StopTableFromLog, read_protocol, tabulate
 from mountcal.stoptable import StopTable
 from mountcal.version import software_version

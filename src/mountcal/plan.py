@@ -23,7 +23,7 @@ from mountcal.conventions import G_N, FloatArray
 from mountcal.errors import InputError, NotEnoughInformation
 from mountcal.estimate.bound import crb_deg, true_state
 from mountcal.io.logs import LogOptions, read_log
-from mountcal.simulate import simulate_stops
+from mountcal.simulate.stops import simulate_stops
 from mountcal.stops import StopDetection, detect_stops
 from mountcal.stoptable import StopTable
 
@@ -315,7 +315,7 @@ def monte_carlo_rms(plan: Plan, runs: int, seed: int, bias_mg: float = 20.0) -> 
     bias of ``bias_mg`` in a random direction; the stop means carry the noise the plan assumes.
     """
     from mountcal.calibrate import Options, calibrate
-    from mountcal.simulate import random_bias
+    from mountcal.simulate.stops import random_bias
 
     rng = np.random.default_rng(seed)
     req = plan.request

@@ -1,7 +1,7 @@
 """The calibration result: a versioned value, saved as JSON, refused on load when unknown.
 
 Computing a calibration (:mod:`mountcal.calibrate`) is separate from applying it
-(:mod:`mountcal.rotate`). The JSON states its conventions, units and provenance.
+(:mod:`mountcal.apply.rotate`). The JSON states its conventions, units and provenance.
 """
 
 from __future__ import annotations

@@ -21,8 +21,8 @@ import pandas as pd
 
 from mountcal.conventions import FloatArray
 from mountcal.errors import NotEnoughInformation
-from mountcal.io.samples import Channel, Samples
 from mountcal.io.timestamps import increasing_times, time_ordered
+from mountcal.samples import Channel, Samples
 from mountcal.stoptable import Headings, StopTable, checked
 
 BATCHES = 10  # batch means for the variance of a stop mean

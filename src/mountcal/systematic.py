@@ -173,7 +173,8 @@ def combine(
         notes.append(
             f"the error is dominated by sensor errors these stops cannot see ({', '.join(_short(used))}): "
             f"{worst.split('_')[0]} σ {stat[worst]:.3g}° statistical, {sys_sigma[worst]:.3g}° systematic; a triad "
-            "calibration (`mountcal triad`, then --triad) or stops on two slopes of different inclination would remove it"
+            "calibration (`mountcal triad`, then --triad) or stops on two slopes of different inclination would "
+            "remove it"
         )
     rot = cal.rotation_sigma_deg
     return replace(

@@ -15,7 +15,7 @@ import pytest
 from can.io import blf
 
 from mountcal.errors import InputError
-from mountcal.io.can_frames import CanFrames, iter_frames, read_frames
+from mountcal.io.can.frames import CanFrames, iter_frames, read_frames
 
 FORMATS = ["blf", "asc", "log", "trc", "csv", "mf4"]
 T0 = 1_600_000_000.0

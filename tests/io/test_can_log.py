@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from mountcal.errors import InputError
-from mountcal.io.can_log import inspect_can, iter_can, read_can
-from mountcal.io.samples import Samples
+from mountcal.io.can.read import inspect_can, iter_can, read_can
+from mountcal.samples import Samples
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 OWN_DBC = DATA / "mm5_imu.dbc"
@@ -391,7 +391,7 @@ def test_the_documented_mapping_example_works(real_data: Path, tmp_path: Path) -
     """The TOML example of the can_log module docstring, run against the real CANedge DBC."""
     import textwrap
 
-    import mountcal.io.can_log as can_log
+    import mountcal.io.can.read as can_log
 
     lines = (can_log.__doc__ or "").split("::\n", 1)[1].splitlines()
     block = []

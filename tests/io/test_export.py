@@ -29,12 +29,13 @@ from mcap_ros2.decoder import DecoderFactory
 from mountcal.cli import main
 from mountcal.conventions import G_N, normal_gravity
 from mountcal.errors import InputError
-from mountcal.io import export
-from mountcal.io.can_log import read_can
-from mountcal.io.mcap_log import read_mcap
-from mountcal.io.samples import Channel, Samples
+from mountcal.io.can.read import read_can
+from mountcal.io.mcap.read import read_mcap
+from mountcal.io.ros2.definitions import ros2_definition
 from mountcal.result import Calibration
-from mountcal.simulate import ParkingLog, simulate_parking_log
+from mountcal.samples import Channel, Samples
+from mountcal.simulate import logs as export
+from mountcal.simulate.stops import ParkingLog, simulate_parking_log
 from mountcal.stops import StopDetection, read_protocol, tabulate
 
 REPO = Path(__file__).resolve().parents[2]
@@ -101,7 +102,7 @@ def _circular_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def test_ros2_definitions_are_concatenated_as_rosbag2_does() -> None:
     """Top-level text first, then each dependency once, depth first, in sorted order."""
-    text = export.ros2_definition("nav_msgs/msg/Odometry")
+    text = ros2_definition("nav_msgs/msg/Odometry")
     assert text.startswith("std_msgs/Header header\n")
     names = [line[5:] for line in text.splitlines() if line.startswith("MSG: ")]
     assert names == [
@@ -117,7 +118,7 @@ def test_ros2_definitions_are_concatenated_as_rosbag2_does() -> None:
     ]
     separators = [i for i, line in enumerate(text.splitlines()) if line == "=" * 80]
     assert len(separators) == len(names)
-    imu = export.ros2_definition("sensor_msgs/msg/Imu")
+    imu = ros2_definition("sensor_msgs/msg/Imu")
     assert [line[5:] for line in imu.splitlines() if line.startswith("MSG: ")] == [
         "geometry_msgs/Quaternion",
         "geometry_msgs/Vector3",

@@ -19,11 +19,10 @@ from cantools import j1939
 
 from mountcal.cli import main
 from mountcal.errors import InputError
-from mountcal.io.can_frames import read_frames
-from mountcal.io.can_log import inspect_can, read_can
-from mountcal.io.dbc import decode, load_dbcs, select_frames
-from mountcal.io.logs import LogOptions, read_log
-from mountcal.rotate_log import iter_log
+from mountcal.io.can.dbc import decode, load_dbcs, select_frames
+from mountcal.io.can.frames import read_frames
+from mountcal.io.can.read import inspect_can, read_can
+from mountcal.io.logs import LogOptions, iter_log, read_log
 
 REPO = Path(__file__).resolve().parents[2]
 IMU_DBC = REPO / "tests" / "data" / "mm5_imu.dbc"

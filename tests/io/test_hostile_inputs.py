@@ -25,10 +25,11 @@ import zstandard
 from mcap.writer import CompressionType, Writer
 
 from mountcal.errors import InputError
-from mountcal.io.can_frames import read_frames
+from mountcal.io.can.frames import read_frames
 from mountcal.io.inputs import check_regular_file
-from mountcal.io.logs import read_table_samples
-from mountcal.io.mcap_log import inspect_mcap, read_mcap
+from mountcal.io.mcap.inspect import inspect_mcap
+from mountcal.io.mcap.read import read_mcap
+from mountcal.io.table.read import read_table
 
 REPO = Path(__file__).resolve().parents[2]
 DBC = REPO / "data" / "imu_mm5_10.dbc"
@@ -235,7 +236,7 @@ def test_check_regular_file_names_the_role(tmp_path: Path) -> None:
     with pytest.raises(InputError, match="no such file"):
         check_regular_file(tmp_path / "absent", "DBC")
     with pytest.raises(InputError, match="directory"):
-        read_table_samples(tmp_path / "dir")
+        read_table(tmp_path / "dir")
 
 
 def test_a_recording_still_reads_whole(tmp_path: Path) -> None:
@@ -276,7 +277,8 @@ def test_a_limit_that_is_not_a_positive_number_is_refused(monkeypatch: pytest.Mo
 
 def test_merging_mf4_groups_with_damaged_unsorted_times_ends_with_every_frame() -> None:
     """Found by benchmarks/fuzz_mutations.py: a spliced MF4 whose times run backwards hung the merge."""
-    from mountcal.io.can_frames import CanFrames, _merge_by_time
+    from mountcal.io.can.frames import CanFrames
+    from mountcal.io.can.mf4 import _merge_by_time
 
     def frames(t: list[float]) -> CanFrames:
         n = len(t)

@@ -24,7 +24,8 @@ from mcap_ros2.decoder import DecoderFactory
 from mcap_ros2.writer import Writer as Ros2Writer
 
 from mountcal.errors import InputError
-from mountcal.io.mcap_log import inspect_mcap, iter_mcap, read_mcap
+from mountcal.io.mcap.inspect import inspect_mcap
+from mountcal.io.mcap.read import iter_mcap, read_mcap
 
 # --------------------------------------------------------------------------- message definitions
 

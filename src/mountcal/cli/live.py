@@ -39,7 +39,7 @@ def run(args: argparse.Namespace) -> int:
     from mountcal.atomic import atomic_path
     from mountcal.calibrate import Options
     from mountcal.errors import InputError
-    from mountcal.io.can_bus import BUS_ERRORS, open_bus
+    from mountcal.io.can.bus import BUS_ERRORS, open_bus
     from mountcal.live import Live, LiveOptions, fail_if_empty, json_sink, line_of, write_outputs
     from mountcal.plan import parse_target
     from mountcal.stops import StopDetection, read_protocol

@@ -39,11 +39,11 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from mountcal.apply.rotate import check_applicable
+    from mountcal.apply.rotate_log import rotate_log
     from mountcal.errors import InputError
     from mountcal.paths import check_outputs
     from mountcal.result import Calibration
-    from mountcal.rotate import check_applicable
-    from mountcal.rotate_log import rotate_log
 
     check_outputs({"-o": args.output}, log_inputs(args) | {"--calibration": args.calibration})
     if args.chunk < 1:

@@ -49,7 +49,7 @@ def add_parser(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from mountcal.paths import check_outputs
-    from mountcal.simulate_session import FieldEffects, session_params, write_log_session, write_stop_session
+    from mountcal.simulate.session import FieldEffects, session_params, write_log_session, write_stop_session
 
     overrides = {k: getattr(args, k) for k in ("roll_deg", "pitch_deg", "yaw_deg", "slope_deg", "noise_g")}
     params = session_params(args.preset, overrides, args.bias_mg)

@@ -58,8 +58,8 @@ from mountcal.estimate.driving_intervals import (
     time_offset,
     unit_vector,
 )
-from mountcal.io.samples import Samples
 from mountcal.result import Calibration
+from mountcal.samples import Samples
 
 AGREE_Z = 2.0  # |z| above this: the two estimates disagree beyond their uncertainties (≈ 95 %)
 DISAGREE_Z = 3.0  # |z| above this (tilt or yaw): a finding; the stops and the drive are not combined

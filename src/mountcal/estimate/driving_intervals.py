@@ -14,7 +14,7 @@ from scipy.spatial.transform import Rotation
 
 from mountcal.conventions import FloatArray, rot_vs_from_angles, tilt_from_normal
 from mountcal.errors import InputError, NotEnoughInformation
-from mountcal.io.samples import Channel, Samples
+from mountcal.samples import Channel, Samples
 
 if TYPE_CHECKING:
     from mountcal.estimate.driving import DrivingOptions

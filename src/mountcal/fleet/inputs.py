@@ -1,7 +1,9 @@
 """Fleet inputs: folders, globs and manifest CSVs → one :class:`FleetJob` per log.
 
-- A **folder** is searched recursively (hidden files and folders skipped); every file with a log
-  suffix is one log and its vehicle id is its parent folder's name. A sheet named
+- A **folder** is searched recursively (hidden files and folders skipped); every file a reader
+  takes (:func:`mountcal.io.registry.is_log`: the suffixes of the built-in and plugin formats) is
+  one log and its vehicle id is its parent folder's name. A folder a reader takes itself (a
+  comma2k19 segment) is one log. A sheet named
   ``<log name>.protocol.csv`` beside a log is that log's protocol sheet.
 - A **glob** (``'fleet/*/*.mcap'``, quoted so that mountcal expands it) names logs the same way.
 - A **manifest** is a CSV with the columns :data:`MANIFEST_COLUMNS` (``vehicle_id`` and ``log``
@@ -26,14 +28,14 @@ import pandas as pd
 
 from mountcal.calibrate import Options
 from mountcal.errors import InputError
-from mountcal.io.logs import CAN_SUFFIXES, LogOptions
-from mountcal.io.writers import written_by_mountcal
+from mountcal.io.logs import LogOptions
+from mountcal.io.mcap.write import written_by_mountcal
+from mountcal.io.registry import is_log, log_suffixes
 from mountcal.paths import input_file, special_kind
 from mountcal.pipeline import LogJob, Use
 from mountcal.stops import StopDetection
 from mountcal.stoptable import Headings
 
-LOG_SUFFIXES = frozenset({".mcap", ".csv", ".parquet", ".pq", *CAN_SUFFIXES})
 PROTOCOL_SUFFIX = ".protocol.csv"
 MANIFEST_REQUIRED = ("vehicle_id", "log")
 MANIFEST_COLUMNS = (
@@ -122,7 +124,7 @@ def collect_jobs(
     if not jobs:
         raise InputError(
             ", ".join(map(str, inputs)) or "INPUTS",
-            "log files (" + ", ".join(sorted(LOG_SUFFIXES)) + "), folders of them, globs or a manifest CSV",
+            "log files (" + ", ".join(sorted(log_suffixes())) + "), folders of them, globs or a manifest CSV",
             "no log",
             "Check the paths; a folder is searched recursively for files with those suffixes.",
         )
@@ -131,8 +133,10 @@ def collect_jobs(
 
 def _jobs_of_input(item: str, defaults: JobDefaults, skip: set[Path], ours: list[Path]) -> Iterator[FleetJob]:
     path = Path(item)
-    if path.is_dir():
-        for file in _walk_logs(path, skip):
+    if path.is_dir() and is_log(path, defaults.log):  # a log that is a folder (a comma2k19 segment)
+        yield _file_job(path, defaults, origin=item)
+    elif path.is_dir():
+        for file in _walk_logs(path, skip, defaults.log):
             if written_by_mountcal(file):
                 ours.append(file)
                 continue
@@ -176,7 +180,7 @@ def _jobs_of_input(item: str, defaults: JobDefaults, skip: set[Path], ours: list
         )
 
 
-def _walk_logs(folder: Path, skip: set[Path]) -> Iterator[Path]:
+def _walk_logs(folder: Path, skip: set[Path], options: LogOptions) -> Iterator[Path]:
     for root, dirs, files in os.walk(folder):
         here = Path(root)
         dirs[:] = sorted(
@@ -186,7 +190,7 @@ def _walk_logs(folder: Path, skip: set[Path]) -> Iterator[Path]:
             file = here / name
             if (
                 not name.startswith(".")
-                and file.suffix.lower() in LOG_SUFFIXES
+                and is_log(file, options)
                 and not _is_protocol(file)
                 and file.resolve() not in skip
             ):

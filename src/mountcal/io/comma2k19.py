@@ -12,7 +12,7 @@ holding ``t`` (boot-time seconds) and ``value`` (NumPy ``.npy`` files without a 
   ``lat_deg``, ``lon_deg``, ``alt_m``.
 - ``processed_log/CAN/raw_can`` (``t, src, address, data``; ``data`` is ``|S8``, read as bytes so
   trailing NULs survive): the car's ``KINEMATICS`` message (0x24 on bus ``src`` 0) decoded with the
-  DBC beside the segment (``toyota_new_mc_pt_generated.dbc``) by :func:`mountcal.io.dbc.decode`:
+  DBC beside the segment (``toyota_new_mc_pt_generated.dbc``) by :func:`mountcal.io.can.dbc.decode`:
   ``ACCEL_X``, ``ACCEL_Y`` (m/s²) and ``YAW_RATE`` (deg/s), as the car sends them.
 
 The car's signs are not ISO 8855's: on this segment ``ACCEL_X`` follows −d(speed)/dt and ``ACCEL_Y``
@@ -26,13 +26,18 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from mountcal.errors import InputError
-from mountcal.io.can_frames import DATA_WIDTH, CanFrames
-from mountcal.io.dbc import decode, load_dbc
-from mountcal.io.samples import Channel, FloatArray, Samples
+from mountcal.io.can.dbc import decode, load_dbc
+from mountcal.io.can.frames import DATA_WIDTH, CanFrames
+from mountcal.io.reader import LogReader
+from mountcal.samples import Channel, FloatArray, Samples
+
+if TYPE_CHECKING:
+    from mountcal.io.logs import LogOptions
 
 AXIS_MAP = "x,-y,-z"  # sensor [forward, left, up] from device [forward, right, down]
 _DEVICE_TO_SENSOR = np.array([1.0, -1.0, -1.0])  # the diagonal of the 180° turn about x
@@ -108,6 +113,12 @@ def read_comma2k19(folder: str | os.PathLike[str], dbc: str | os.PathLike[str] |
         A missing or unreadable array, or no DBC.
     """
     root = Path(folder)
+    return Comma2k19Segment(read_segment_samples(root), read_kinematics(root, dbc))
+
+
+def read_segment_samples(folder: str | os.PathLike[str]) -> Samples:
+    """The phone's samples of a comma2k19 segment folder, with speed and position channels (no DBC needed)."""
+    root = Path(folder)
     t_acc, acc = _signal(root, "processed_log", "IMU", "accelerometer")
     t_gyro, gyro = _signal(root, "processed_log", "IMU", "gyro")
     if acc.ndim != 2 or acc.shape[1] != 3 or gyro.shape != acc.shape or not np.array_equal(t_acc, t_gyro):
@@ -125,7 +136,7 @@ def read_comma2k19(folder: str | os.PathLike[str], dbc: str | os.PathLike[str] |
     t_gnss, gnss = _signal(root, "processed_log", "GNSS", "live_gnss_ublox")
     for key, column in (("lat_deg", 0), ("lon_deg", 1), ("alt_m", 4)):
         channels[key] = _channel(t_gnss, gnss[:, column])
-    samples = Samples(
+    return Samples(
         t_acc[ok][order],
         acc[ok][order] * _DEVICE_TO_SENSOR,
         gyro[ok][order] * _DEVICE_TO_SENSOR,
@@ -134,7 +145,19 @@ def read_comma2k19(folder: str | os.PathLike[str], dbc: str | os.PathLike[str] |
         axis_map=AXIS_MAP,
         dropped={"non-finite IMU samples": int((~ok).sum())} if not ok.all() else {},
     )
-    return Comma2k19Segment(samples, read_kinematics(root, dbc))
+
+
+class Comma2k19Reader(LogReader):
+    """comma2k19 segment folders in the registry: the phone's IMU as a log (``mountcal calibrate SEGMENT``)."""
+
+    name = "comma2k19"
+    description = "comma2k19 segment folder (processed_log/IMU)"
+
+    def claims(self, path: Path, options: LogOptions) -> bool:
+        return (path / "processed_log" / "IMU" / "accelerometer").is_dir()
+
+    def read(self, path: Path, options: LogOptions) -> Samples:
+        return read_segment_samples(path)
 
 
 def _channel(t: FloatArray, value: FloatArray) -> Channel:

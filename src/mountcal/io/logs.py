@@ -1,10 +1,9 @@
-"""One entry point for every log format: pick the reader by the file, join split logs.
+"""One entry point for every log format: the reader is picked by :mod:`mountcal.io.registry`.
 
-- ``.mcap``: :mod:`mountcal.io.mcap_log` (ROS 2 Imu, CDR or JSON).
-- CAN logs (``.blf .asc .log .trc .mf4 .mdf``, and ``.csv`` when a DBC is given):
-  :mod:`mountcal.io.can_log`, decoded with the DBC.
-- Sample tables (``.csv``/``.parquet`` with ``t_s, ax, ay, az`` and optionally ``gx, gy, gz``
-  in rad/s, ``speed_mps``, ``heading_deg``, ``temperature_c``, ``lat_deg``, ``alt_m``).
+Built in: MCAP (ROS 2 Imu, CDR or JSON), CAN logs (``.blf .asc .log .trc .mf4 .mdf``, and ``.csv``
+when a DBC is given) decoded with the DBC, CSV/Parquet sample tables (``t_s, ax, ay, az`` and
+optionally ``gx, gy, gz`` in rad/s and the channels of :data:`mountcal.io.table.read.TABLE_CHANNELS`),
+comma2k19 segment folders; and the formats of installed plugins (entry points ``mountcal.readers``).
 
 A log split over several files (a logger's 10-minute MF4 splits) is read file by file and joined
 in time order. Files whose clocks overlap are not splits of one log (two loggers, or one session
@@ -13,21 +12,21 @@ given twice): joining them would interleave two recordings, so they are refused.
 
 from __future__ import annotations
 
+import os
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from itertools import pairwise
 from pathlib import Path
-
-import numpy as np
-import pandas as pd
+from typing import TYPE_CHECKING
 
 from mountcal.errors import InputError
-from mountcal.io.inputs import check_parquet_rows, check_regular_file
-from mountcal.io.samples import Channel, LogSummary, Samples
+from mountcal.io.registry import reader_for
 
-CAN_SUFFIXES = {".blf", ".asc", ".log", ".trc", ".mf4", ".mdf"}
-TABLE_CHANNELS = ("speed_mps", "heading_deg", "temperature_c", "lat_deg", "lon_deg", "alt_m")
+if TYPE_CHECKING:  # numpy and the readers load when a log is read: `mountcal --help` needs neither
+    from mountcal.samples import LogSummary, Samples
+
+CHUNK_SAMPLES = 100_000  # samples per chunk of iter_log: its memory bound
 
 
 @dataclass(frozen=True)
@@ -46,92 +45,57 @@ def read_log(paths: str | Path | Sequence[str | Path], options: LogOptions | Non
     files = [Path(p) for p in ([paths] if isinstance(paths, str | Path) else paths)]
     if not files:
         raise InputError("LOG", "at least one log file", "none", "Name the log file(s).")
-    parts = [_read_one(f, opts) for f in files]
+    parts = [reader_for(f, opts).read(f, opts) for f in files]
     return parts[0] if len(parts) == 1 else join(parts)
 
 
 def inspect_log(path: str | Path, options: LogOptions | None = None) -> LogSummary:
-    """What a log holds: topics or messages, signals, rates, duration."""
+    """What a log holds: topics or messages, signals, rates, duration (a CAN log without a DBC too:
+    ids per channel with counts, rates and DLCs)."""
     opts = options or LogOptions()
     path = Path(path)
-    # a CAN log is listed without a DBC too: ids per channel with counts, rates and DLCs
-    kind = "can" if path.suffix.lower() in CAN_SUFFIXES else log_kind(path, opts)
-    if kind == "mcap":
-        from mountcal.io.mcap_log import inspect_mcap
-
-        return inspect_mcap(path)
-    if kind == "can":
-        from mountcal.io.can_log import inspect_can
-
-        return inspect_can(path, opts.dbc)
-    s = read_table_samples(path)
-    from mountcal.io.samples import Stream
-
-    dur = float(s.t_s[-1] - s.t_s[0]) if len(s) > 1 else 0.0
-    rate = (len(s) - 1) / dur if dur > 0 else 0.0
-    fields = ("ax", "ay", "az", *(("gx", "gy", "gz") if s.gyro_s is not None else ()), *s.channels)
-    return LogSummary(
-        str(path), path.suffix.lstrip(".").lower(), dur, (Stream("samples", "table", len(s), rate, fields),)
-    )
+    return reader_for(path, opts).inspect(path, opts)
 
 
-def read_table_samples(path: Path) -> Samples:
-    """A CSV or Parquet table of samples: ``t_s, ax, ay, az`` in s and m/s²."""
-    check_regular_file(path, "sample table")
-    parquet = path.suffix.lower() in (".parquet", ".pq")
-    if parquet:
-        check_parquet_rows(path)
+def iter_log(
+    paths: str | os.PathLike[str] | Sequence[str | os.PathLike[str]],
+    options: LogOptions | None = None,
+    max_samples: int = CHUNK_SAMPLES,
+) -> Iterator[Samples]:
+    """The samples of a log in chunks of at most ``max_samples``, files in time order.
+
+    Each file through its reader's :meth:`~mountcal.io.reader.LogReader.iter_chunks` (MCAP, CAN
+    and tables stream in bounded memory). Each chunk's ``dropped`` counts what its reader
+    discarded. Splits of one log are ordered by their first sample; overlapping ones are refused.
+    """
+    opts = options or LogOptions()
+    files = [Path(p) for p in ([paths] if isinstance(paths, str | os.PathLike) else paths)]
+    if not files:
+        raise InputError("LOG", "at least one log file", "none", "Name the log file(s).")
+    if len(files) > 1:
+        files = sorted(files, key=lambda f: _first_time(f, opts))
+    previous: tuple[str, float] | None = None  # the file before and its last time
+    for f in files:
+        first = True
+        for chunk in reader_for(f, opts).iter_chunks(f, opts, max_samples):
+            if len(chunk):
+                if first and previous is not None and float(chunk.t_s[0]) < previous[1]:
+                    raise overlap_error(previous[0], previous[1], str(f), float(chunk.t_s[0]))
+                first, previous = False, (str(f), float(chunk.t_s[-1]))
+            yield chunk
+
+
+def _first_time(path: Path, opts: LogOptions) -> float:
+    chunks = reader_for(path, opts).iter_chunks(path, opts, 1)
     try:
-        df = pd.read_parquet(path) if parquet else pd.read_csv(path)
-    except FileNotFoundError as err:
-        raise InputError(str(path), "a readable sample table", "no such file", "Check the path.") from err
-    except Exception as err:  # pandas raises many types for malformed files
-        raise InputError(
-            str(path),
-            "a CSV or Parquet sample table",
-            f"a file that does not parse ({err})",
-            "Write columns t_s, ax, ay, az (s, m/s²).",
-        ) from err
-    missing = [c for c in ("t_s", "ax", "ay", "az") if c not in df.columns]
-    if missing:
-        raise InputError(
-            str(path),
-            "columns t_s, ax, ay, az",
-            f"no {', '.join(missing)}",
-            "Rename the columns; a CAN log in CSV needs --dbc.",
-        )
-    values = df[["t_s", "ax", "ay", "az"]].apply(pd.to_numeric, errors="coerce").to_numpy(dtype=float)
-    ok = np.all(np.isfinite(values), axis=1)
-    gyro = (
-        df[["gx", "gy", "gz"]].apply(pd.to_numeric, errors="coerce").to_numpy(dtype=float)
-        if {"gx", "gy", "gz"} <= set(df.columns)
-        else None
-    )
-    if gyro is not None:
-        ok &= np.all(np.isfinite(gyro), axis=1)
-    dropped = {"rows with missing or non-numeric values": int((~ok).sum())} if not ok.all() else {}
-    if not ok.any():
-        raise InputError(
-            str(path),
-            "numeric t_s, ax, ay, az",
-            "no row with numbers in all of them",
-            "Check the table's columns and units.",
-        )
-    order = np.argsort(values[ok, 0], kind="stable")
-    channels = {}
-    for name in TABLE_CHANNELS:
-        if name in df.columns:
-            v = pd.to_numeric(df[name], errors="coerce").to_numpy(dtype=float)
-            good = np.isfinite(v) & np.isfinite(df["t_s"].to_numpy(dtype=float))
-            channels[name] = Channel(df["t_s"].to_numpy(dtype=float)[good], v[good])
-    return Samples(
-        values[ok, 0][order],
-        values[ok, 1:][order],
-        None if gyro is None else gyro[ok][order],
-        channels,
-        source=str(path),
-        dropped=dropped,
-    )
+        for chunk in chunks:
+            if len(chunk):
+                return float(chunk.t_s[0])
+        return float("inf")
+    finally:
+        close = getattr(chunks, "close", None)
+        if close is not None:
+            close()
 
 
 def join(parts: Sequence[Samples]) -> Samples:
@@ -142,6 +106,10 @@ def join(parts: Sequence[Samples]) -> Samples:
     InputError
         When two files' clocks overlap: they are not consecutive splits of one log.
     """
+    import numpy as np
+
+    from mountcal.samples import Channel, Samples
+
     parts = sorted(parts, key=lambda s: float(s.t_s[0]) if len(s) else np.inf)
     _check_consecutive([p for p in parts if len(p)])
     gyro = None
@@ -183,40 +151,3 @@ def overlap_error(before: str, end: float, after: str, start: float) -> InputErr
         "Give the files of one recording session at a time (two loggers, or a file given twice, "
         "cannot be joined into one log).",
     )
-
-
-def log_kind(path: Path, opts: LogOptions) -> str:
-    """``"mcap"``, ``"can"`` or ``"table"``: which reader a log file needs (a CAN log needs a DBC)."""
-    suffix = path.suffix.lower()
-    if suffix == ".mcap":
-        return "mcap"
-    if suffix in CAN_SUFFIXES or (suffix == ".csv" and opts.dbc is not None):
-        if opts.dbc is None:
-            raise InputError(
-                str(path),
-                "a DBC to decode this CAN log",
-                "no --dbc",
-                "Pass --dbc FILE (and --mapping FILE when the signals are not named plainly).",
-            )
-        return "can"
-    if suffix in (".csv", ".parquet", ".pq"):
-        return "table"
-    raise InputError(
-        str(path),
-        "an MCAP, CAN (BLF, ASC, log, TRC, CSV, MF4) or CSV/Parquet log",
-        f"a file ending in {suffix or '(nothing)'}",
-        "Convert it, or name it by its format.",
-    )
-
-
-def _read_one(path: Path, opts: LogOptions) -> Samples:
-    kind = log_kind(path, opts)
-    if kind == "mcap":
-        from mountcal.io.mcap_log import read_mcap
-
-        return read_mcap(path, topic=opts.topic)
-    if kind == "can":
-        from mountcal.io.can_log import read_can
-
-        return read_can(path, opts.dbc, mapping=opts.mapping, channel=opts.channel)
-    return read_table_samples(path)

@@ -17,14 +17,11 @@ import importlib
 from functools import cache
 from typing import TYPE_CHECKING
 
-import numpy as np
-
 from mountcal.estimate.effects.base import Effect
 
 if TYPE_CHECKING:
-    from importlib.metadata import EntryPoint
-
     from mountcal.conventions import FloatArray
+    from mountcal.plugins import Plugin
     from mountcal.result import Calibration
 
 GROUP = "mountcal.effects"
@@ -34,41 +31,41 @@ BUILTIN = ("bias", "temperature", "gravity", "site_slope", "scale")
 
 def names() -> tuple[str, ...]:
     """Every registered effect's name, without importing any of them."""
-    from importlib.metadata import entry_points  # its import alone costs more than the CLI's help may take
+    from mountcal.plugins import entry_points_of  # importlib.metadata: more than the CLI's help may take
 
-    extra = tuple(ep.name for ep in entry_points(group=GROUP) if ep.name not in BUILTIN)
-    return BUILTIN + tuple(dict.fromkeys(extra))
+    extra = tuple(p.name for p in entry_points_of(GROUP) if p.name not in BUILTIN)
+    return BUILTIN + extra
 
 
 @cache
 def registered() -> dict[str, Effect]:
     """Every effect by name: the built-in ones, then those of the ``mountcal.effects`` entry points."""
-    from importlib.metadata import entry_points
+    from mountcal.plugins import entry_points_of
 
     out: dict[str, Effect] = {}
     for name in BUILTIN:
         out[name] = importlib.import_module(f"{__name__}.{name}").EFFECT
-    for ep in entry_points(group=GROUP):
-        if ep.name in out:
-            continue  # a built-in name cannot be replaced from outside
-        out[ep.name] = _load(ep)
+    for plugin in entry_points_of(GROUP):
+        if plugin.name not in out:  # a built-in name cannot be replaced from outside
+            out[plugin.name] = _effect(plugin)
     return out
 
 
-def _load(ep: EntryPoint) -> Effect:
-    """The effect an entry point names; a package whose effect cannot be used is refused by name."""
+def _effect(plugin: Plugin) -> Effect:
+    """The effect a plugin names; a package whose effect cannot be used is refused by name."""
     from mountcal.errors import InputError
 
-    where = f"the entry point {ep.name} = {ep.value} (group {GROUP}, package {ep.dist.name if ep.dist else '?'})"
-    todo = "Fix or uninstall that package; mountcal cannot fit a model with an effect it cannot load."
+    obj = plugin.load()  # an import failure is refused by name there
     try:
-        obj = ep.load()
         effect = obj() if isinstance(obj, type) else obj
-    except (ImportError, AttributeError, TypeError) as err:
-        raise InputError(where, "an importable mountcal effect", f"{type(err).__name__}: {err}", todo) from err
-    if not isinstance(effect, Effect) or effect.name != ep.name:
+    except TypeError as err:
+        effect = err
+    if not isinstance(effect, Effect) or effect.name != plugin.name:
         raise InputError(
-            where, f"a mountcal effect named {ep.name!r} (mountcal.estimate.effects.base.Effect)", repr(effect), todo
+            f"plugin {plugin.name!r} ({plugin.value}) of the package {plugin.package or '?'}",
+            f"a mountcal effect named {plugin.name!r} (mountcal.estimate.effects.base.Effect)",
+            repr(effect),
+            "Fix or uninstall that package; mountcal cannot fit a model with an effect it cannot load.",
         )
     return effect
 
@@ -105,6 +102,8 @@ def apply_corrections(acc_s: FloatArray, calibration: Calibration, *, inverse: b
     InputError
         The calibration's ``effects`` cannot be applied (edited or damaged values).
     """
+    import numpy as np
+
     from mountcal.errors import InputError
 
     reported = {e.name: e for e in calibration.effects}

@@ -1,10 +1,10 @@
 """Whole logs into the vehicle frame, streamed; and the notebook API around it.
 
-:func:`rotate_log` reads a log in bounded chunks (:func:`iter_log`: ``iter_mcap``, ``iter_can``, or
-batches of a CSV/Parquet table), applies a calibration to each (:mod:`mountcal.rotate`: bias
+:func:`rotate_log` reads a log in bounded chunks (:func:`~mountcal.io.logs.iter_log`: each
+format's reader, streaming), applies a calibration to each (:mod:`mountcal.apply.rotate`: bias
 removed, then ``acc_v = R_vs · (acc_s − b)``; angular rates only rotated) and writes the
 vehicle-frame samples with their original timestamps to Parquet (default), CSV or MCAP
-(:mod:`mountcal.io.writers`). The output appears only when complete (a process killed mid-write
+(:mod:`mountcal.io.mcap.write`). The output appears only when complete (a process killed mid-write
 leaves no file), never over an input; every sample read is written, and whatever a reader dropped
 is counted in the report.
 
@@ -19,8 +19,8 @@ Notebook use — read a log into a table, load a calibration, apply it:
 >>> import tempfile, pathlib
 >>> from mountcal import Calibration, calibrate, frame_to_vehicle, simulate_preset
 >>> from mountcal.io.logs import read_log
->>> from mountcal.rotate_log import rotate_log, to_frame
->>> from mountcal.simulate_drive import simulate_drive
+>>> from mountcal.apply.rotate_log import rotate_log, to_frame
+>>> from mountcal.simulate.drive import simulate_drive
 >>> folder = pathlib.Path(tempfile.mkdtemp())
 >>> drive = simulate_drive(duration_s=60.0, seed=1)
 >>> to_frame(drive.to_samples()).to_csv(folder / "drive.csv", index=False)
@@ -50,32 +50,26 @@ from typing import Any, BinaryIO
 
 import numpy as np
 import pandas as pd
-import pyarrow as pa
-import pyarrow.csv as pa_csv
-import pyarrow.parquet as pq
 from scipy.spatial.transform import Rotation
 
+from mountcal.apply.rotate import acc_to_vehicle, check_applicable, rate_to_vehicle
 from mountcal.atomic import atomic_output
 from mountcal.conventions import CONVENTIONS, FloatArray
 from mountcal.errors import InputError
-from mountcal.io.logs import TABLE_CHANNELS, LogOptions, log_kind, overlap_error
-from mountcal.io.samples import Channel, Samples
-from mountcal.io.writers import (
-    CsvSamples,
-    ImuMessages,
-    McapImuSamples,
-    ParquetSamples,
-    copy_mcap_with_imu,
-)
+from mountcal.io.logs import CHUNK_SAMPLES, LogOptions, iter_log
+from mountcal.io.mcap.copy import copy_mcap_with_imu
+from mountcal.io.mcap.write import McapImuSamples
+from mountcal.io.registry import reader_for
+from mountcal.io.ros2.imu import ImuMessages
+from mountcal.io.table.write import CsvSamples, ParquetSamples
 from mountcal.result import VEHICLE_FRAME, Calibration
-from mountcal.rotate import acc_to_vehicle, check_applicable, rate_to_vehicle
+from mountcal.samples import Samples
 from mountcal.threads import helpers_allowed
 from mountcal.version import software_version
 
 FORMATS = {".parquet": "parquet", ".pq": "parquet", ".csv": "csv", ".mcap": "mcap"}
 VEHICLE_FRAME_ID = "base_link"  # REP 103's body frame: x forward, y left, z up = ISO 8855
 LEVELLED_FRAME_ID = "mountcal_levelled"  # z up, heading the sensor's own: not REP 103's base_link
-CHUNK_SAMPLES = 100_000
 
 
 @dataclass(frozen=True)
@@ -204,7 +198,7 @@ def rotate_log(
         frame_id = LEVELLED_FRAME_ID if frame_id == VEHICLE_FRAME_ID else frame_id
     if chunk_samples < 1:
         raise ValueError(f"chunk_samples must be at least 1, got {chunk_samples}")
-    if kind == "mcap" and any(f.suffix.lower() == ".mcap" for f in files):
+    if kind == "mcap" and any(reader_for(f, opts).name == "mcap" for f in files):  # copied through
         if len(files) != 1:
             raise InputError(
                 " + ".join(map(str, files)),
@@ -253,131 +247,6 @@ def _metadata(cal: Calibration, files: Sequence[Path]) -> dict[str, str]:
         "mountcal.inputs": json.dumps([str(f) for f in files]),
         "mountcal.software": f"mountcal {version}",
     }
-
-
-# --------------------------------------------------------------------------- any log, streamed
-
-
-def iter_log(
-    paths: str | os.PathLike[str] | Sequence[str | os.PathLike[str]],
-    options: LogOptions | None = None,
-    max_samples: int = CHUNK_SAMPLES,
-) -> Iterator[Samples]:
-    """The samples of a log in chunks of at most ``max_samples``, files in time order.
-
-    MCAP through :func:`~mountcal.io.mcap_log.iter_mcap`, CAN logs through
-    :func:`~mountcal.io.can_log.iter_can`, CSV and Parquet tables (``t_s, ax, ay, az`` and
-    optionally ``gx, gy, gz``) in batches. Each chunk's ``dropped`` counts what its reader
-    discarded. Splits of one log are ordered by their first sample.
-    """
-    opts = options or LogOptions()
-    files = [Path(p) for p in ([paths] if isinstance(paths, str | os.PathLike) else paths)]
-    if not files:
-        raise InputError("LOG", "at least one log file", "none", "Name the log file(s).")
-    if len(files) > 1:
-        files = sorted(files, key=lambda f: _first_time(f, opts))
-    previous: tuple[str, float] | None = None  # the file before and its last time
-    for f in files:
-        first = True
-        for chunk in _iter_one(f, opts, max_samples):
-            if len(chunk):
-                if first and previous is not None and float(chunk.t_s[0]) < previous[1]:
-                    raise overlap_error(previous[0], previous[1], str(f), float(chunk.t_s[0]))
-                first, previous = False, (str(f), float(chunk.t_s[-1]))
-            yield chunk
-
-
-def _iter_one(path: Path, opts: LogOptions, max_samples: int) -> Iterator[Samples]:
-    kind = log_kind(path, opts)
-    if kind == "mcap":
-        from mountcal.io.mcap_log import iter_mcap
-
-        return iter_mcap(path, topic=opts.topic, max_samples=max_samples)
-    if kind == "can":
-        from mountcal.io.can_log import iter_can
-
-        return iter_can(path, opts.dbc, mapping=opts.mapping, channel=opts.channel, max_samples=max_samples)
-    return _iter_table(path, max_samples)
-
-
-def _first_time(path: Path, opts: LogOptions) -> float:
-    chunks = _iter_one(path, opts, 1)
-    try:
-        for chunk in chunks:
-            if len(chunk):
-                return float(chunk.t_s[0])
-        return float("inf")
-    finally:
-        close = getattr(chunks, "close", None)
-        if close is not None:
-            close()
-
-
-_REQUIRED = ("t_s", "ax", "ay", "az")
-
-
-def _iter_table(path: Path, max_samples: int) -> Iterator[Samples]:
-    """A CSV or Parquet sample table in batches; rows with a non-finite value dropped and counted."""
-    where = str(path)
-    if not path.is_file():
-        raise InputError(where, "a readable sample table", "no such file", "Check the path.")
-    try:
-        if path.suffix.lower() == ".csv":
-            names = pa_csv.open_csv(path).schema.names
-            wanted = [c for c in (*_REQUIRED, "gx", "gy", "gz", *TABLE_CHANNELS) if c in names]
-            reader: Any = pa_csv.open_csv(
-                path,
-                read_options=pa_csv.ReadOptions(block_size=1 << 22),
-                convert_options=pa_csv.ConvertOptions(
-                    include_columns=wanted, column_types=dict.fromkeys(wanted, pa.float64())
-                ),
-            )
-        else:
-            parquet = pq.ParquetFile(path)
-            names = parquet.schema_arrow.names
-            wanted = [c for c in (*_REQUIRED, "gx", "gy", "gz", *TABLE_CHANNELS) if c in names]
-            reader = parquet.iter_batches(batch_size=max_samples, columns=wanted)
-    except (pa.ArrowInvalid, OSError) as err:
-        raise InputError(
-            where, "a CSV or Parquet sample table", f"a file that does not parse ({err})", "Check the file."
-        ) from err
-    missing = [c for c in _REQUIRED if c not in names]
-    if missing:
-        raise InputError(
-            where,
-            "columns t_s, ax, ay, az",
-            f"no {', '.join(missing)}",
-            "Rename the columns; a CAN log in CSV needs --dbc.",
-        )
-    gyro = all(c in names for c in ("gx", "gy", "gz"))
-    try:
-        for batch in reader:
-            for start in range(0, batch.num_rows, max_samples):
-                yield _table_samples(batch.slice(start, max_samples), gyro, where)
-    except pa.ArrowInvalid as err:
-        raise InputError(
-            where, "numbers in every sample column", f"a value that is not one ({err})", "Fix or remove that row."
-        ) from err
-
-
-def _table_samples(batch: pa.RecordBatch, gyro: bool, where: str) -> Samples:
-    def col(name: str) -> FloatArray:
-        return np.asarray(batch.column(name).to_numpy(zero_copy_only=False), dtype=np.float64)
-
-    t = col("t_s")
-    acc = np.column_stack([col(c) for c in ("ax", "ay", "az")])
-    g = np.column_stack([col(c) for c in ("gx", "gy", "gz")]) if gyro else None
-    ok = np.isfinite(t) & np.isfinite(acc).all(axis=1)
-    if g is not None:
-        ok &= np.isfinite(g).all(axis=1)
-    channels = {}
-    for name in TABLE_CHANNELS:
-        if name in batch.schema.names:
-            v = col(name)
-            good = np.isfinite(v) & np.isfinite(t)
-            channels[name] = Channel(t[good], v[good])
-    dropped = {"non-finite sample rows": int((~ok).sum())} if not ok.all() else {}
-    return Samples(t[ok], acc[ok], None if g is None else g[ok], channels, source=where, dropped=dropped)
 
 
 # --------------------------------------------------------------------------- Parquet, CSV, MCAP from a stream

@@ -10,7 +10,7 @@ import can
 import numpy as np
 from can.util import channel2int
 
-from mountcal.io.can_frames import CanFrames
+from mountcal.io.can.frames import CanFrames
 
 BUS_ERRORS = (can.CanError, OSError, ValueError, ImportError)
 

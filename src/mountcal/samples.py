@@ -6,7 +6,8 @@ reader's axis mapping, which is recorded in ``axis_map``).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from collections.abc import Iterator
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -84,3 +85,40 @@ class LogSummary:
     format: str  # "mcap", "blf", "asc", "log", "trc", "csv", "mf4", "parquet"
     duration_s: float
     streams: tuple[Stream, ...]
+
+
+def slices(samples: Samples, max_samples: int) -> Iterator[Samples]:
+    """``samples`` in consecutive pieces of at most ``max_samples`` (views, not copies).
+
+    Each auxiliary sample goes with the piece whose time span holds it (the first and last piece
+    take those before and after the IMU samples); ``dropped`` goes with the first piece.
+    """
+    if max_samples < 1:
+        raise ValueError(f"max_samples must be >= 1; got {max_samples}")
+    n = len(samples)
+    starts = list(range(0, n, max_samples)) or [0]
+    for k, start in enumerate(starts):
+        stop = min(start + max_samples, n)
+        lo = -np.inf if k == 0 else samples.t_s[start]
+        hi = np.inf if k == len(starts) - 1 else samples.t_s[stop]
+        channels = {}
+        for key, ch in samples.channels.items():
+            i, j = np.searchsorted(ch.t_s, [lo, hi], side="left")
+            channels[key] = Channel(ch.t_s[i:j], ch.value[i:j])
+        yield replace(
+            samples,
+            t_s=samples.t_s[start:stop],
+            acc_s=samples.acc_s[start:stop],
+            gyro_s=None if samples.gyro_s is None else samples.gyro_s[start:stop],
+            channels=channels,
+            dropped=samples.dropped if k == 0 else {},
+        )
+
+
+def summary(samples: Samples, fmt: str, kind: str) -> LogSummary:
+    """A log of one stream of samples (of type ``kind``) as `mountcal inspect` lists it."""
+    n = len(samples)
+    dur = float(samples.t_s[-1] - samples.t_s[0]) if n > 1 else 0.0
+    rate = (n - 1) / dur if dur > 0 else 0.0
+    fields = ("ax", "ay", "az", *(("gx", "gy", "gz") if samples.gyro_s is not None else ()), *samples.channels)
+    return LogSummary(samples.source, fmt, dur, (Stream("samples", kind, n, rate, fields),))

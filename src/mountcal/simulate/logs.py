@@ -39,21 +39,30 @@ from collections import Counter
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from mountcal.conventions import G_N
 from mountcal.errors import InputError
-from mountcal.io.dbc import load_dbc
-from mountcal.io.samples import FloatArray, Samples
+from mountcal.io.can.dbc import load_dbc
+from mountcal.io.can.signals import UNIT_KIND
+from mountcal.io.can.write import (
+    EncodedMessage,
+    can_format,
+    encode,
+    physical,
+    resolve_signal,
+    signal_unit,
+    write_frames,
+)
+from mountcal.io.ros2.definitions import ros2_definition
 from mountcal.paths import SystemFailure
+from mountcal.samples import FloatArray, Samples
 
 if TYPE_CHECKING:
-    from mountcal.simulate import ParkingLog
+    from mountcal.simulate.stops import ParkingLog
 
 START_TIME_S = 1_714_557_600.0  # 2024-05-01 10:00:00 UTC: the default absolute start of a written log
 AUX_RATE_HZ = {"speed_mps": 10.0, "heading_deg": 10.0, "temperature_c": 1.0}  # simulated channels, thinned
@@ -61,90 +70,6 @@ FIX_RATE_HZ = 1.0
 FRAME_SPACING_S = 250e-6  # an 8-byte frame at 500 kbit/s: the IMU's messages of one sample follow each other
 
 # --------------------------------------------------------------------------- ROS 2 message definitions
-
-_SEPARATOR = "=" * 80
-_MSG = {
-    "builtin_interfaces/Time": "int32 sec\nuint32 nanosec\n",
-    "std_msgs/Header": "builtin_interfaces/Time stamp\nstring frame_id\n",
-    "geometry_msgs/Quaternion": "float64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n",
-    "geometry_msgs/Vector3": "float64 x\nfloat64 y\nfloat64 z\n",
-    "geometry_msgs/Point": "float64 x\nfloat64 y\nfloat64 z\n",
-    "geometry_msgs/Pose": "Point position\nQuaternion orientation\n",
-    "geometry_msgs/PoseWithCovariance": "Pose pose\nfloat64[36] covariance\n",
-    "geometry_msgs/Twist": "Vector3  linear\nVector3  angular\n",
-    "geometry_msgs/TwistWithCovariance": "Twist twist\nfloat64[36] covariance\n",
-    "sensor_msgs/Imu": (
-        "std_msgs/Header header\n\n"
-        "geometry_msgs/Quaternion orientation\n"
-        "float64[9] orientation_covariance\n\n"
-        "geometry_msgs/Vector3 angular_velocity\n"
-        "float64[9] angular_velocity_covariance\n\n"
-        "geometry_msgs/Vector3 linear_acceleration\n"
-        "float64[9] linear_acceleration_covariance\n"
-    ),
-    "sensor_msgs/Temperature": "std_msgs/Header header\n\nfloat64 temperature\nfloat64 variance\n",
-    "sensor_msgs/NavSatStatus": (
-        "int8 STATUS_NO_FIX =  -1\nint8 STATUS_FIX =      0\nint8 STATUS_SBAS_FIX = 1\nint8 STATUS_GBAS_FIX = 2\n\n"
-        "int8 status\n\n"
-        "uint16 SERVICE_GPS =     1\nuint16 SERVICE_GLONASS = 2\nuint16 SERVICE_COMPASS = 4\n"
-        "uint16 SERVICE_GALILEO = 8\n\n"
-        "uint16 service\n"
-    ),
-    "sensor_msgs/NavSatFix": (
-        "std_msgs/Header header\n\n"
-        "NavSatStatus status\n\n"
-        "float64 latitude\nfloat64 longitude\nfloat64 altitude\n\n"
-        "float64[9] position_covariance\n\n"
-        "uint8 COVARIANCE_TYPE_UNKNOWN = 0\nuint8 COVARIANCE_TYPE_APPROXIMATED = 1\n"
-        "uint8 COVARIANCE_TYPE_DIAGONAL_KNOWN = 2\nuint8 COVARIANCE_TYPE_KNOWN = 3\n\n"
-        "uint8 position_covariance_type\n"
-    ),
-    "nav_msgs/Odometry": (
-        "std_msgs/Header header\n\n"
-        "string child_frame_id\n\n"
-        "geometry_msgs/PoseWithCovariance pose\n\n"
-        "geometry_msgs/TwistWithCovariance twist\n"
-    ),
-}
-_PRIMITIVES = {"bool", "byte", "char", "float32", "float64", "string", "wstring"} | {
-    f"{s}int{b}" for s in ("", "u") for b in (8, 16, 32, 64)
-}
-
-
-def _dependencies(name: str) -> list[str]:
-    """Non-primitive field types of a definition, package-qualified, sorted (rosbag2's std::set)."""
-    package = name.split("/", 1)[0]
-    deps = set()
-    for line in _MSG[name].splitlines():
-        words = line.split("#", 1)[0].split()
-        if len(words) < 2:
-            continue
-        base = words[0].split("[", 1)[0]
-        if base not in _PRIMITIVES:
-            deps.add(base if "/" in base else f"{package}/{base}")
-    return sorted(deps)
-
-
-def ros2_definition(type_name: str) -> str:
-    """The complete ``ros2msg`` definition of a message type, concatenated as rosbag2 does.
-
-    Parameters
-    ----------
-    type_name : str
-        ``"sensor_msgs/msg/Imu"``, ``"sensor_msgs/msg/Temperature"``, ``"sensor_msgs/msg/NavSatFix"``
-        or ``"nav_msgs/msg/Odometry"``.
-    """
-    seen: set[str] = set()
-
-    def text(name: str) -> str:
-        out = _MSG[name]
-        for dep in _dependencies(name):
-            if dep not in seen:
-                seen.add(dep)
-                out += f"\n{_SEPARATOR}\nMSG: {dep}\n" + text(dep)
-        return out
-
-    return text(type_name.replace("/msg/", "/"))
 
 
 # --------------------------------------------------------------------------- what gets written
@@ -462,7 +387,6 @@ MM5_10_SIGNALS: dict[str, str] = {  # role → "message.signal" in data/imu_mm5_
     "longitude": "SIM_GNSS_POSITION.Longitude",
     "altitude": "SIM_GNSS_ALTITUDE.Altitude",
 }
-CAN_FORMATS = {".blf": "blf", ".asc": "asc", ".log": "log", ".trc": "trc", ".csv": "csv", ".mf4": "mf4"}
 _IMU_ROLES = ("ax", "ay", "az", "gx", "gy", "gz")
 _CHANNEL_OF_ROLE = {
     "speed": "speed_mps",
@@ -472,34 +396,6 @@ _CHANNEL_OF_ROLE = {
     "longitude": "lon_deg",
     "altitude": "alt_m",
 }
-_KIND_OF_ROLE = {
-    **dict.fromkeys(("ax", "ay", "az"), "accel"),
-    **dict.fromkeys(("gx", "gy", "gz"), "gyro"),
-    "speed": "speed",
-    "heading": "angle",
-    "latitude": "angle",
-    "longitude": "angle",
-    "temperature": "temperature",
-    "altitude": "length",
-}
-# (scale, offset) with SI = value · scale + offset, for unit spellings normalised as the reader does
-_UNITS: dict[str, dict[str, tuple[float, float]]] = {
-    "accel": {"m/s^2": (1.0, 0.0), "m/s2": (1.0, 0.0), "g": (G_N, 0.0), "mg": (G_N / 1000.0, 0.0)},
-    "gyro": {"deg/s": (math.pi / 180.0, 0.0), "rad/s": (1.0, 0.0)},
-    "speed": {"m/s": (1.0, 0.0), "km/h": (1.0 / 3.6, 0.0), "kph": (1.0 / 3.6, 0.0), "mph": (0.44704, 0.0)},
-    "angle": {"deg": (1.0, 0.0), "rad": (180.0 / math.pi, 0.0)},
-    "length": {"m": (1.0, 0.0)},
-    "temperature": {"degc": (1.0, 0.0), "c": (1.0, 0.0), "k": (1.0, -273.15)},
-}
-
-
-@dataclass
-class _Encoded:
-    """One CAN message's frames: times on the log's clock (s, before ``start_time_s``) and payloads."""
-
-    message: Any  # cantools Message
-    t_s: FloatArray
-    data: list[bytes]
 
 
 @dataclass
@@ -508,19 +404,6 @@ class _Layout:
 
     imu: dict[Any, dict[str, str]] = field(default_factory=dict)  # message → {signal: role}
     aux: dict[Any, dict[str, str]] = field(default_factory=dict)
-
-
-def can_format(path: str | os.PathLike[str]) -> str:
-    """The CAN log format a path's suffix asks for; InputError when there is none."""
-    suffix = Path(path).suffix.lower()
-    if suffix not in CAN_FORMATS:
-        raise InputError(
-            str(path),
-            "a CAN log name ending in " + ", ".join(CAN_FORMATS),
-            f"a name ending in {suffix or '(nothing)'}",
-            "Name the file by the format to write.",
-        )
-    return CAN_FORMATS[suffix]
 
 
 def write_can_log(
@@ -580,44 +463,20 @@ def write_can_log(
     encoded = _encode_imu(series, layout, saturated, skipped, str(dbc_path))
     encoded += _encode_aux(series, layout, saturated, skipped, str(dbc_path))
     with _output(path) as tmp:
-        _write_frames(tmp, fmt, encoded, start_time_s, Path(dbc_path), channel)
+        write_frames(tmp, fmt, encoded, start_time_s, Path(dbc_path), channel)
     first = min(float(e.t_s.min()) for e in encoded if e.t_s.size)
     clock = -first if fmt == "asc" else start_time_s  # python-can reads ASC from its first frame on
     messages = {e.message.name: len(e.data) for e in encoded}
     return WrittenLog(str(path), fmt, clock, messages, dict(saturated), dict(skipped))
 
 
-def _resolve(db: Any, text: str, role: str, where: str) -> tuple[Any, Any]:
-    """The cantools message and signal of ``"message.signal"`` (message by name or id)."""
-    message_text, _, signal_name = str(text).partition(".")
-    messages = [m for m in db.messages if m.name == message_text]
-    if not messages:
-        try:
-            ident = int(message_text, 0)
-        except ValueError:
-            ident = -1
-        messages = [m for m in db.messages if int(m.frame_id) == ident]
-    signal = next((s for m in messages for s in m.signals if s.name == signal_name), None)
-    if signal is None:
-        raise InputError(
-            where,
-            f'a signal "{text}" for {role}',
-            "no such message.signal in the DBC",
-            "Pass the DBC the layout was made for, or name the signals with signals= (message.signal).",
-        )
-    message = next(m for m in messages if signal in m.signals)
-    if signal.multiplexer_ids or message.is_multiplexed():
-        raise InputError(where, f"a plain (not multiplexed) message for {role}", f"{message.name}", "Map another.")
-    return message, signal
-
-
 def _layout(db: Any, signals: dict[str, str], where: str, series: _Series) -> _Layout:
     """Which signals of which messages to write; roles the log has no data for are left out."""
-    unknown = sorted(set(signals) - set(_KIND_OF_ROLE))
+    unknown = sorted(set(signals) - set(UNIT_KIND))
     if unknown or not {"ax", "ay", "az"} <= signals.keys():
         raise InputError(
             "signals",
-            "roles ax, ay, az and optionally " + ", ".join(r for r in _KIND_OF_ROLE if r not in ("ax", "ay", "az")),
+            "roles ax, ay, az and optionally " + ", ".join(r for r in UNIT_KIND if r not in ("ax", "ay", "az")),
             f"unknown roles {unknown}" if unknown else f"only {sorted(signals)}",
             "Fix the role names.",
         )
@@ -627,8 +486,8 @@ def _layout(db: Any, signals: dict[str, str], where: str, series: _Series) -> _L
             continue
         if role in _CHANNEL_OF_ROLE and _CHANNEL_OF_ROLE[role] not in series.channels:
             continue
-        message, signal = _resolve(db, text, role, where)
-        _unit(signal, role, where)  # fail early on a unit the writer cannot convert to
+        message, signal = resolve_signal(db, text, role, where)
+        signal_unit(signal, role, where)  # fail early on a unit the writer cannot convert to
         group = layout.imu if role in _IMU_ROLES else layout.aux
         if message in (layout.aux if role in _IMU_ROLES else layout.imu):
             raise InputError(where, f"IMU and auxiliary signals in separate messages ({role})", message.name, "Remap.")
@@ -636,67 +495,9 @@ def _layout(db: Any, signals: dict[str, str], where: str, series: _Series) -> _L
     return layout
 
 
-def _unit(signal: Any, role: str, where: str) -> tuple[float, float]:
-    kind = _KIND_OF_ROLE[role]
-    unit = str(signal.unit or "").strip().lower().replace(" ", "").replace("²", "^2").replace("°", "deg")
-    if unit not in _UNITS[kind]:
-        raise InputError(
-            where,
-            f"a unit among {', '.join(_UNITS[kind])} for {role} ({signal.name})",
-            repr(signal.unit),
-            "Use a DBC whose signal has one of these units.",
-        )
-    return _UNITS[kind][unit]
-
-
-def _range(signal: Any) -> tuple[float, float]:
-    """The physical range a signal can be encoded in: its DBC minimum/maximum, else its raw range."""
-    raw_lo = -(2 ** (signal.length - 1)) if signal.is_signed else 0
-    raw_hi = 2 ** (signal.length - 1) - 1 if signal.is_signed else 2**signal.length - 1
-    ends = sorted((raw_lo * signal.scale + signal.offset, raw_hi * signal.scale + signal.offset))
-    lo = ends[0] if signal.minimum is None else max(float(signal.minimum), ends[0])
-    hi = ends[1] if signal.maximum is None else min(float(signal.maximum), ends[1])
-    return lo, hi
-
-
-def _physical(signal: Any, role: str, si: FloatArray, saturated: Counter[str], message: Any) -> FloatArray:
-    """SI values in the signal's unit, clipped to its range (the clipped ones counted)."""
-    scale, offset = _unit(signal, role, "")
-    value = (si - offset) / scale
-    if role == "heading":
-        value = np.mod(value, 360.0 if scale == 1.0 else 2.0 * math.pi)  # a compass heading, not a count of turns
-    lo, hi = _range(signal)
-    out = (value < lo) | (value > hi)
-    if out.any():
-        saturated[f"{message.name}.{signal.name}"] += int(out.sum())
-    return np.clip(value, lo, hi)
-
-
-def _fill(signal: Any) -> float:
-    lo, hi = _range(signal)
-    return float(np.clip(0.0, lo, hi))
-
-
-def _encode(message: Any, columns: dict[str, FloatArray], n: int, where: str) -> list[bytes]:
-    """cantools-encoded payloads of n frames; signals without a column get their fill value."""
-    names = [s.name for s in message.signals]
-    values = [
-        columns[name].tolist() if name in columns else [_fill(message.get_signal_by_name(name))] * n for name in names
-    ]
-    try:
-        return [
-            bytes(message.encode(dict(zip(names, row, strict=True)), scaling=True, strict=True))
-            for row in zip(*values, strict=True)
-        ]
-    except Exception as err:  # cantools raises EncodeError, ValueError, KeyError, ... for layouts it cannot fill
-        raise InputError(
-            where, f"a message {message.name} cantools can encode", f"{type(err).__name__}: {err}", "Check the DBC."
-        ) from err
-
-
 def _encode_imu(
     series: _Series, layout: _Layout, saturated: Counter[str], skipped: Counter[str], where: str
-) -> list[_Encoded]:
+) -> list[EncodedMessage]:
     rows = np.column_stack([series.acc_s] + ([series.gyro_s] if series.gyro_s is not None else []))
     ok = np.isfinite(rows).all(axis=1)
     if not ok.all():
@@ -707,17 +508,17 @@ def _encode_imu(
     out = []
     for rank, message in enumerate(messages):
         columns = {
-            name: _physical(message.get_signal_by_name(name), role, rows[:, _IMU_ROLES.index(role)], saturated, message)
+            name: physical(message.get_signal_by_name(name), role, rows[:, _IMU_ROLES.index(role)], saturated, message)
             for name, role in layout.imu[message].items()
         }
         t_frames = t_s + (rank - ax_rank) * FRAME_SPACING_S
-        out.append(_Encoded(message, t_frames, _encode(message, columns, t_s.size, where)))
+        out.append(EncodedMessage(message, t_frames, encode(message, columns, t_s.size, where)))
     return out
 
 
 def _encode_aux(
     series: _Series, layout: _Layout, saturated: Counter[str], skipped: Counter[str], where: str
-) -> list[_Encoded]:
+) -> list[EncodedMessage]:
     out = []
     for message, roles in sorted(layout.aux.items(), key=lambda item: int(item[0].frame_id)):
         first = _CHANNEL_OF_ROLE[next(iter(roles.values()))]
@@ -727,65 +528,11 @@ def _encode_aux(
         if not ok.all():
             skipped[f"{message.name}: non-finite value"] += int((~ok).sum())
         columns = {
-            name: _physical(message.get_signal_by_name(name), roles[name], v[ok], saturated, message)
+            name: physical(message.get_signal_by_name(name), roles[name], v[ok], saturated, message)
             for name, v in si.items()
         }
-        out.append(_Encoded(message, t_ch[ok], _encode(message, columns, int(ok.sum()), where)))
+        out.append(EncodedMessage(message, t_ch[ok], encode(message, columns, int(ok.sum()), where)))
     return out
-
-
-def _write_frames(
-    tmp: Path, fmt: str, encoded: list[_Encoded], start_time_s: float, dbc_path: Path, channel: int
-) -> None:
-    """Feed every frame, in time order (ties in message order), to python-can's writer for ``fmt``."""
-    import can
-
-    relative = np.concatenate([e.t_s for e in encoded])
-    order = np.argsort(relative, kind="stable")
-    t_s = (relative + start_time_s).tolist()
-    ids = [int(e.message.frame_id) for e in encoded for _ in e.data]
-    extended = [bool(e.message.is_extended_frame) for e in encoded for _ in e.data]
-    data = [d for e in encoded for d in e.data]
-    writers: dict[str, Any] = {
-        "blf": can.BLFWriter,
-        "asc": can.ASCWriter,
-        "log": can.CanutilsLogWriter,
-        "trc": can.TRCWriter,
-        "csv": can.CSVWriter,
-    }
-    if fmt == "mf4":
-        writer = can.MF4Writer(tmp, database=dbc_path)
-        _pin_mf4_start(writer, math.floor(min(t_s, default=0.0) * 1000.0) / 1000.0)
-    else:
-        writer = writers[fmt](tmp)
-    try:
-        for i in order.tolist():
-            frame = can.Message(
-                timestamp=t_s[i],
-                arbitration_id=ids[i],
-                is_extended_id=extended[i],
-                channel=channel,
-                dlc=len(data[i]),
-                data=data[i],
-            )
-            writer.on_message_received(frame)
-    finally:
-        writer.stop()
-
-
-def _pin_mf4_start(writer: Any, start_s: float) -> None:
-    """Give python-can's MF4Writer the log's start instead of the wall-clock time of writing.
-
-    MF4Writer stamps the file with ``datetime.now()`` and stores frame times relative to it. Pinned
-    to the log's first frame (truncated to the millisecond, as python-can's BLFWriter does) the
-    header says when the log began and the file depends on the data alone — but for asammdf's
-    file-history time stamps.
-    """
-    if not all(hasattr(writer, name) for name in ("_mdf", "_start_time", "last_timestamp")):
-        return  # another python-can: its own start stays, frame times are still right, the file is not repeatable
-    start = datetime.fromtimestamp(start_s, UTC)
-    writer._mdf.header.start_time = start
-    writer._start_time = writer.last_timestamp = start.timestamp()  # the very float the reader adds back
 
 
 # --------------------------------------------------------------------------- protocol sheet
@@ -812,16 +559,9 @@ def write_protocol(path: str | os.PathLike[str], log: ParkingLog, *, start_time_
 
 def check_log_path(path: str | os.PathLike[str], dbc_path: str | os.PathLike[str] | None) -> str:
     """The format a log path will be written in; InputError before anything is simulated or written."""
-    suffix = Path(path).suffix.lower()
-    if suffix == ".mcap":
+    if Path(path).suffix.lower() == ".mcap":
         return "mcap"
-    if suffix not in CAN_FORMATS:
-        raise InputError(
-            str(path),
-            "a log name ending in .mcap, " + ", ".join(CAN_FORMATS),
-            f"a name ending in {suffix or '(nothing)'}",
-            "Name the file by the format to write.",
-        )
+    fmt = can_format(path, others=(".mcap",))
     if dbc_path is None:
         raise InputError(
             str(path),
@@ -830,7 +570,7 @@ def check_log_path(path: str | os.PathLike[str], dbc_path: str | os.PathLike[str
             "Pass the DBC (e.g. --dbc data/imu_mm5_10.dbc, the Bosch MM5.10 layout).",
         )
     load_dbc(Path(dbc_path))
-    return CAN_FORMATS[suffix]
+    return fmt
 
 
 def write_log(
@@ -871,13 +611,10 @@ def session_truth(
 
 
 __all__ = [
-    "CAN_FORMATS",
     "MM5_10_SIGNALS",
     "START_TIME_S",
     "WrittenLog",
-    "can_format",
     "check_log_path",
-    "ros2_definition",
     "session_truth",
     "write_can_log",
     "write_log",

@@ -164,12 +164,12 @@ class Rows:
 
     def string_end(self, at: Offset, what: str) -> Offset:
         """Offset just after the CDR string whose uint32 length prefix is at (aligned) ``at``."""
-        at = _align(at, 4)
+        at = align(at, 4)
         length = self.take(at, "<u4", 1, what)[:, 0].astype(np.int64)
         return as_offset(at + 4 + length)
 
 
-def _align(at: Offset, size: int) -> Offset:
+def align(at: Offset, size: int) -> Offset:
     """Round offsets (relative to the byte after the encapsulation header) up to ``size``."""
     return (at + (size - 1)) // size * size
 
@@ -199,6 +199,28 @@ def _header(rows: Rows) -> tuple[I64Array, I64Array, Offset]:
     return sec, nanosec, rows.string_end(8, "header.frame_id")
 
 
+# sensor_msgs/msg/Imu after the header, from the (8-aligned) quaternion: field → (offset, float64 count)
+IMU_FIELDS = {
+    "orientation": (0, 4),
+    "orientation_covariance": (32, 9),
+    "angular_velocity": (104, 3),
+    "angular_velocity_covariance": (128, 9),
+    "linear_acceleration": (200, 3),
+    "linear_acceleration_covariance": (224, 9),
+}
+IMU_BYTES = 296  # the quaternion and everything after it
+
+
+def imu_rows(buf: U8Array, start: I64Array, size: I64Array) -> tuple[Rows, I64Array, I64Array, Offset]:
+    """Imu messages as rows checked to hold every field: rows, ``header.stamp`` (sec, nanosec) and the
+    offset of the quaternion (the first field after the header, 8-aligned)."""
+    rows = _cdr_rows(buf, start, size)
+    sec, nanosec, end = _header(rows)
+    orientation = align(end, 8)  # quaternion (32 B), then a 3x3 covariance (72 B)
+    rows.need(orientation + IMU_BYTES, "the Imu fields after header")
+    return rows, sec, nanosec, orientation
+
+
 def decode_imu(buf: U8Array, start: I64Array, size: I64Array) -> Decoded:
     """``sensor_msgs/msg/Imu`` messages ``buf[start[i] : start[i] + size[i]]``.
 
@@ -210,13 +232,12 @@ def decode_imu(buf: U8Array, start: I64Array, size: I64Array) -> Decoded:
         ``gyro_unknown`` (n,), 1.0 where ``angular_velocity_covariance[0]`` is −1: REP 145's mark
         of a field the device does not provide.
     """
-    rows = _cdr_rows(buf, start, size)
-    sec, nanosec, end = _header(rows)
-    orientation = _align(end, 8)  # quaternion (32 B), then a 3x3 covariance (72 B)
-    rows.need(orientation + 296, "the Imu fields after header")
-    gyro = rows.read(orientation + 104, "<f8", 3)
-    gyro_unknown = (rows.read(orientation + 128, "<f8", 1)[:, 0] == -1.0).astype(np.float64)
-    acc = rows.read(orientation + 200, "<f8", 3)
+    rows, sec, nanosec, at = imu_rows(buf, start, size)
+    gyro = rows.read(at + IMU_FIELDS["angular_velocity"][0], "<f8", 3)
+    gyro_unknown = (rows.read(at + IMU_FIELDS["angular_velocity_covariance"][0], "<f8", 1)[:, 0] == -1.0).astype(
+        np.float64
+    )
+    acc = rows.read(at + IMU_FIELDS["linear_acceleration"][0], "<f8", 3)
     return Decoded(sec, nanosec, {"acc": acc, "gyro": gyro, "gyro_unknown": gyro_unknown})
 
 
@@ -224,7 +245,7 @@ def decode_temperature(buf: U8Array, start: I64Array, size: I64Array) -> Decoded
     """``sensor_msgs/msg/Temperature``: column ``temperature`` (n,) in °C."""
     rows = _cdr_rows(buf, start, size)
     sec, nanosec, end = _header(rows)
-    temperature = rows.take(_align(end, 8), "<f8", 1, "temperature")[:, 0]
+    temperature = rows.take(align(end, 8), "<f8", 1, "temperature")[:, 0]
     return Decoded(sec, nanosec, {"temperature": temperature})
 
 
@@ -237,7 +258,7 @@ def decode_navsatfix(buf: U8Array, start: I64Array, size: I64Array) -> Decoded:
     rows = _cdr_rows(buf, start, size)
     sec, nanosec, end = _header(rows)
     status = rows.take(end, "i1", 1, "status.status")[:, 0].astype(np.float64)
-    latitude = _align(_align(end + 1, 2) + 2, 8)  # after int8 status and uint16 service
+    latitude = align(align(end + 1, 2) + 2, 8)  # after int8 status and uint16 service
     lla = rows.take(latitude, "<f8", 3, "latitude, longitude, altitude")
     return Decoded(sec, nanosec, {"status": status, "lat": lla[:, 0], "lon": lla[:, 1], "alt": lla[:, 2]})
 
@@ -250,7 +271,7 @@ def decode_odometry(buf: U8Array, start: I64Array, size: I64Array) -> Decoded:
     """
     rows = _cdr_rows(buf, start, size)
     sec, nanosec, end = _header(rows)
-    position = _align(rows.string_end(end, "child_frame_id"), 8)
+    position = align(rows.string_end(end, "child_frame_id"), 8)
     # pose: position (24 B) + orientation (32 B) + 6x6 covariance (288 B), then twist.linear
     rows.need(position + 352, "pose and twist.twist.linear.x")
     quat = rows.read(position + 24, "<f8", 4)

@@ -19,7 +19,7 @@ import numpy as np
 from mountcal.atomic import atomic_path
 from mountcal.conventions import G_N, normal_gravity
 from mountcal.errors import InputError
-from mountcal.simulate import PRESETS, simulate_parking_log, simulate_stops
+from mountcal.simulate.stops import PRESETS, simulate_parking_log, simulate_stops
 from mountcal.stoptable import Headings, write_stop_table
 
 PathLike = str | os.PathLike[str]
@@ -102,7 +102,7 @@ def write_log_session(
     ``session`` may set ``stop_s``, ``drive_s``, ``rate_hz``; ``each_log`` is called with every
     log's path once it is written (a progress bar). Returns lines for the user.
     """
-    from mountcal.io import export
+    from mountcal.simulate import logs as export
 
     formats = [export.check_log_path(p, dbc) for p in logs]
     if protocol is not None and "asc" in formats and len(formats) > 1:

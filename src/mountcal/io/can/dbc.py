@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mountcal.errors import InputError
-from mountcal.io.can_frames import DATA_WIDTH, CanFrames
+from mountcal.io.can.frames import DATA_WIDTH, CanFrames
 from mountcal.paths import input_file
 
 FloatArray = NDArray[np.float64]

@@ -1,0 +1,572 @@
+"""Read IMU samples (and temperature, GNSS fix, odometry) from MCAP logs, vectorized.
+
+The reader walks the MCAP records itself and decodes whole chunks at a time with numpy: for each
+chunk it locates the message records from the chunk's message index (checked to tile the chunk
+exactly), or from a fixed stride, or — only when neither holds — by a plain loop over the records;
+then every field is gathered for all messages of a topic at once (:mod:`mountcal.io.ros2.cdr`). There is
+no per-message Python on this path; JSON-encoded channels are the exception (one ``json.loads`` per
+message). Chunks are decompressed and CRC-checked on one background thread, a few chunks ahead of
+the decoding, so memory stays bounded (see ``docs/performance-mcap.md`` for figures).
+
+Conventions of every function here:
+
+- **Time**: a message's time is its ``header.stamp`` (``sec + nanosec·1e-9``, seconds); where the
+  stamp is zero (unset) the MCAP ``log_time`` (the recorder's receive time) is used instead. The
+  rule is applied per message and identically on every topic, so all channels share one clock when
+  the senders stamp their messages. Times are float64 seconds (sub-microsecond resolution at
+  Unix-epoch magnitudes).
+- **Units**: SI as in :class:`~mountcal.samples.Samples`; vectors in the IMU message's
+  ``frame_id`` frame, taken as the sensor frame ``s`` (``axis_map`` ``"x,y,z"``).
+- **Drops**: samples with a NaN or infinite value are dropped and counted in ``Samples.dropped``;
+  so are GNSS fixes with ``status < 0`` (no fix) and odometry orientations that are not a rotation.
+- **Gyro**: ``angular_velocity_covariance[0] = −1`` (REP 145: not provided) in any message of a read
+  or chunk means no gyro (``gyro_s`` None), counted as ``imu_gyro_marked_unknown``; its zeros
+  would otherwise read as a vehicle that never turns.
+- **Errors**: anything wrong with the file or the request raises
+  :class:`~mountcal.errors.InputError` naming the file, what was expected, what was found and what to
+  do. The input file is only read.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections import Counter
+from collections.abc import Generator, Iterator, Sequence
+from contextlib import closing
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from mountcal.errors import InputError
+from mountcal.io.inputs import max_rows, too_many_rows
+from mountcal.io.mcap.chunks import Unit, chunk_units, open_log
+from mountcal.io.mcap.records import (
+    ARGUMENT,
+    ENCODINGS,
+    MESSAGE_HEAD,
+    RECORD_HEAD,
+    TYPE_NAME,
+    Corrupt,
+    I64Array,
+    Log,
+    McapChannel,
+    U8Array,
+    damaged,
+    record_field,
+)
+from mountcal.io.ros2 import cdr
+from mountcal.samples import Channel, FloatArray, Samples
+
+# --------------------------------------------------------------------------- choosing topics
+
+
+@dataclass(frozen=True)
+class _Selection:
+    kind: str  # "imu", "temperature", "fix", "odom"
+    topic: str
+    channel_ids: frozenset[int]
+    encoding: str  # "cdr" or "json"
+
+
+def schema_fields(text: str) -> tuple[tuple[str, str], ...]:
+    """Top-level (type base name, field name) of a ``ros2msg`` definition; constants skipped."""
+    out = []
+    for line in text.split("\n=====", 1)[0].splitlines():
+        words = line.split("#", 1)[0].split()
+        if len(words) < 2 or "=" in words[1] or (len(words) > 2 and words[2].startswith("=")):
+            continue
+        out.append((words[0].rsplit("/", 1)[-1], words[1]))
+    return tuple(out)
+
+
+def _select(log: Log, kind: str, topic: str | None) -> _Selection | None:
+    """The topic to read for ``kind``: the one named, else the only one of that type."""
+    topics = log.topics()
+    argument, flag = ARGUMENT[kind], f"--{ARGUMENT[kind].replace('_', '-')}"
+    candidates = [t for t, chs in topics.items() if log.kind(chs[0]) == kind]
+    names = ", ".join(map(repr, candidates))
+    if topic is not None:
+        if topic not in topics:
+            raise InputError(
+                log.where,
+                f"a topic named {topic!r}",
+                f"topics {log.listing()}",
+                f"Pass one of the {TYPE_NAME[kind]} topics ({names}) as {argument}= (CLI: {flag})."
+                if candidates
+                else f"The log has no {TYPE_NAME[kind]} topic to pass as {argument}= (CLI: {flag}).",
+            )
+        chosen = topics[topic]
+        if any(log.kind(ch) != kind for ch in chosen):
+            raise InputError(
+                log.where,
+                f"topic {topic!r} of type {TYPE_NAME[kind]}",
+                f"type {log.type_name(chosen[0])}",
+                f"Pass a {TYPE_NAME[kind]} topic as {argument}= (CLI: {flag})"
+                + (f": {names}." if candidates else "; the log has none."),
+            )
+    else:
+        if len(candidates) != 1:
+            if kind != "imu" and not candidates:
+                return None
+            raise InputError(
+                log.where,
+                f"exactly one {TYPE_NAME[kind]} topic",
+                f"{len(candidates)}: {names}" if candidates else f"none; the topics are {log.listing()}",
+                f"Name the topic to read with {argument}= (CLI: {flag}).",
+            )
+        topic = candidates[0]
+        chosen = topics[topic]
+    return _Selection(kind, topic, frozenset(ch.id for ch in chosen), _check_encoding(log, kind, topic, chosen))
+
+
+def _check_encoding(log: Log, kind: str, topic: str, channels: Sequence[McapChannel]) -> str:
+    encodings = {ch.message_encoding for ch in channels}
+    encoding = encodings.pop()
+    if encodings or encoding not in ENCODINGS:
+        raise InputError(
+            log.where,
+            f"topic {topic!r} encoded as CDR (ROS 2) or JSON",
+            f"message encoding {encoding!r}",
+            "Convert the log to ROS 2 CDR (for example with rosbags-convert) or export it to CSV.",
+        )
+    schema = log.schemas.get(channels[0].schema_id)
+    if encoding == "cdr" and schema is not None and schema.encoding == "ros2msg":
+        declared = schema_fields(schema.data.decode(errors="replace"))
+        if declared != cdr.FIELDS[kind]:
+            raise InputError(
+                log.where,
+                f"topic {topic!r} with the standard {TYPE_NAME[kind]} fields "
+                f"({', '.join(name for _, name in cdr.FIELDS[kind])})",
+                f"a schema declaring {', '.join(f'{t} {n}' for t, n in declared) or 'no fields'}",
+                "Export this topic to CSV, or convert it to the standard message.",
+            )
+    return encoding
+
+
+# --------------------------------------------------------------------------- decoding
+
+
+@dataclass
+class _Piece:
+    """Decoded, finite, time-sorted values of one kind from one unit."""
+
+    t_s: FloatArray
+    columns: dict[str, FloatArray]
+
+
+_JSON_PATHS: dict[str, dict[str, list[tuple[str, ...]]]] = {
+    "imu": {
+        "acc": [("linear_acceleration", c) for c in "xyz"],
+        "gyro": [("angular_velocity", c) for c in "xyz"],
+    },
+    "temperature": {"temperature": [("temperature",)]},
+    "fix": {
+        "status": [("status", "status")],
+        "lat": [("latitude",)],
+        "lon": [("longitude",)],
+        "alt": [("altitude",)],
+    },
+    "odom": {
+        "vx": [("twist", "twist", "linear", "x")],
+        "quat": [("pose", "pose", "orientation", c) for c in "xyzw"],
+    },
+}
+
+
+def _json_value(message: object, path: tuple[str, ...]) -> float:
+    value = message
+    for key in path:
+        if not isinstance(value, dict) or key not in value:
+            raise cdr.CdrError(f"a JSON message without the field {'.'.join(path)}")
+        value = value[key]
+    if value is None:
+        return float("nan")  # JSON has no NaN; writers emit null
+    if not isinstance(value, int | float):
+        raise cdr.CdrError(f"a JSON message whose {'.'.join(path)} is not a number")
+    return float(value)
+
+
+def _json_stamp(message: object) -> tuple[int, int]:
+    """``header.stamp`` as (sec, nanosec) — ``nsec`` also accepted — or (0, 0) when absent."""
+    header = message.get("header") if isinstance(message, dict) else None
+    stamp = header.get("stamp") if isinstance(header, dict) else None
+    if not isinstance(stamp, dict):
+        return 0, 0
+    sec, nanosec = stamp.get("sec", 0), stamp.get("nanosec", stamp.get("nsec", 0))
+    if not isinstance(sec, int) or not isinstance(nanosec, int):
+        raise cdr.CdrError("a JSON message whose header.stamp is not a pair of integers")
+    return sec, nanosec
+
+
+def _decode_json(kind: str, data: U8Array, start: I64Array, size: I64Array) -> cdr.Decoded:
+    """Per-message JSON decoding (the one non-vectorized path), same result shape as CDR's."""
+    paths = _JSON_PATHS[kind]
+    rows, stamps, unknown = [], [], []
+    raw = data.tobytes()
+    for s, n in zip(start.tolist(), size.tolist(), strict=True):
+        try:
+            message = json.loads(raw[s : s + n])
+        except (json.JSONDecodeError, UnicodeDecodeError) as err:
+            raise cdr.CdrError(f"a message that is not JSON ({err})") from err
+        stamps.append(_json_stamp(message))
+        unknown.append(_json_gyro_unknown(message))
+        rows.append([_json_value(message, p) for col in paths.values() for p in col])
+    table = np.array(rows, dtype=np.float64).reshape(len(rows), -1)
+    sec, nanosec = np.array(stamps, dtype=np.int64).reshape(-1, 2).T
+    columns, i = {}, 0
+    for name, col in paths.items():
+        block = table[:, i : i + len(col)]
+        columns[name] = block[:, 0] if len(col) == 1 else block
+        i += len(col)
+    if kind == "imu":
+        columns["gyro_unknown"] = np.array(unknown, np.float64)
+    return cdr.Decoded(sec, nanosec, columns)
+
+
+def _json_gyro_unknown(message: object) -> bool:
+    """Whether ``angular_velocity_covariance[0]`` is −1 (the field may be absent in JSON)."""
+    cov = message.get("angular_velocity_covariance") if isinstance(message, dict) else None
+    return isinstance(cov, list) and bool(cov) and cov[0] == -1
+
+
+def _times(decoded: cdr.Decoded, log_ns: NDArray[np.uint64]) -> FloatArray:
+    """Header stamp in seconds, or the log time where the stamp is zero (see the module doc)."""
+    sec, nanosec = decoded.sec, decoded.nanosec
+    unset = (sec == 0) & (nanosec == 0)
+    if unset.any():
+        sec = np.where(unset, (log_ns // np.uint64(10**9)).astype(np.int64), sec)
+        nanosec = np.where(unset, (log_ns % np.uint64(10**9)).astype(np.int64), nanosec)
+    return sec.astype(np.float64) + nanosec.astype(np.float64) * 1e-9
+
+
+def _decode(unit: Unit, mine: NDArray[np.bool_], sel: _Selection) -> cdr.Decoded:
+    """Fields of the unit's messages selected by ``mine`` (``sel``'s topic), with ``t`` in seconds."""
+    at, size = unit.messages, unit.lengths - MESSAGE_HEAD
+    if not mine.all():
+        at, size = at[mine], size[mine]
+    start = at + RECORD_HEAD.size + MESSAGE_HEAD
+    if sel.encoding == "cdr":
+        decoded = cdr.DECODERS[sel.kind](unit.data, start, size)
+    else:
+        decoded = _decode_json(sel.kind, unit.data, start, size)
+    log_ns = record_field(unit.data, at, RECORD_HEAD.size + 6, "<u8")
+    return cdr.Decoded(decoded.sec, decoded.nanosec, {"t": _times(decoded, log_ns), **decoded.columns})
+
+
+def _sorted(t: FloatArray) -> bool:
+    return bool(np.all(t[1:] >= t[:-1]))
+
+
+def _keep(t: FloatArray, columns: dict[str, FloatArray], ok: NDArray[np.bool_]) -> _Piece:
+    """Rows where ``ok``, stably sorted by time (copies skipped when there is nothing to do)."""
+    if not ok.all():
+        t, columns = t[ok], {k: v[ok] for k, v in columns.items()}
+    if not _sorted(t):
+        order = np.argsort(t, kind="stable")
+        t, columns = t[order], {k: v[order] for k, v in columns.items()}
+    return _Piece(t, columns)
+
+
+def _finite(*arrays: FloatArray) -> NDArray[np.bool_]:
+    """Rows where every value is finite (times need no check: they come from integers)."""
+    ok = np.ones(arrays[0].shape[0], dtype=bool)
+    with np.errstate(all="ignore"):  # a finite sum proves every term finite: the usual, cheap case
+        if all(np.isfinite(a.sum()) for a in arrays):
+            return ok
+    for a in arrays:
+        ok &= np.isfinite(a).reshape(a.shape[0], -1).all(axis=1)
+    return ok
+
+
+def _heading_deg(quat: FloatArray) -> FloatArray:
+    """Compass heading (clockwise from north, [0, 360)) from an ENU orientation (x, y, z, w)."""
+    x, y, z, w = quat.T
+    yaw = np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))  # counter-clockwise from east
+    heading = np.mod(90.0 - np.degrees(yaw), 360.0)
+    return np.where(heading >= 360.0, heading - 360.0, heading)
+
+
+def _pieces(decoded: cdr.Decoded, kind: str, dropped: Counter[str]) -> dict[str, _Piece]:
+    """Finite, sorted samples (``"imu"``) or channels (keyed like ``Samples.channels``)."""
+    c = decoded.columns
+    t = c["t"]
+    if kind == "imu":
+        unknown = c["gyro_unknown"] > 0  # the gyro of these messages is not used (see _gyro)
+        ok = _finite(c["acc"]) & (unknown | _finite(c["gyro"]))
+        dropped["imu_nonfinite"] += int((~ok).sum())
+        return {"imu": _keep(t, {"acc": c["acc"], "gyro": c["gyro"], "gyro_unknown": c["gyro_unknown"]}, ok)}
+    if kind == "temperature":
+        ok = _finite(c["temperature"])
+        dropped["temperature_c_nonfinite"] += int((~ok).sum())
+        return {"temperature_c": _keep(t, {"value": c["temperature"]}, ok)}
+    if kind == "fix":
+        fix = c["status"] >= 0
+        ok = fix & _finite(c["lat"], c["lon"], c["alt"])
+        dropped["fix_no_fix"] += int((~fix).sum())
+        dropped["fix_nonfinite"] += int((fix & ~ok).sum())
+        return {
+            key: _keep(t, {"value": c[col]}, ok)
+            for key, col in (("lat_deg", "lat"), ("lon_deg", "lon"), ("alt_m", "alt"))
+        }
+    speed_ok = _finite(c["vx"])
+    norm = np.linalg.norm(c["quat"], axis=1)
+    heading_ok = _finite(c["quat"]) & (np.abs(norm - 1.0) < 0.1)  # else not a rotation
+    dropped["speed_mps_nonfinite"] += int((~speed_ok).sum())
+    dropped["heading_deg_invalid_orientation"] += int((~heading_ok).sum())
+    return {
+        "speed_mps": _keep(t, {"value": c["vx"]}, speed_ok),
+        "heading_deg": _keep(t, {"value": _heading_deg(c["quat"])}, heading_ok),
+    }
+
+
+def _decode_unit(unit: Unit, selections: Sequence[_Selection], where: str) -> tuple[dict[str, _Piece], Counter[str]]:
+    """One unit's finite, time-sorted pieces of every selection, and what was dropped."""
+    channel = record_field(unit.data, unit.messages, RECORD_HEAD.size, "<u2")
+    pieces: dict[str, _Piece] = {}
+    dropped: Counter[str] = Counter()
+    for sel in selections:
+        ids = list(sel.channel_ids)
+        mine = channel == ids[0] if len(ids) == 1 else np.isin(channel, ids)
+        if not mine.any():
+            continue
+        try:
+            decoded = _decode(unit, mine, sel)
+        except cdr.CdrError as err:
+            raise InputError(
+                where,
+                f"{TYPE_NAME[sel.kind]} messages on {sel.topic!r} laid out as the schema says",
+                f"{err}, in the {unit.what}",
+                "The file is damaged or mislabelled; export the topic to CSV instead.",
+            ) from err
+        pieces.update(_pieces(decoded, sel.kind, dropped))
+    return pieces, dropped
+
+
+def _decoded_units(
+    log: Log, selections: Sequence[_Selection]
+) -> Generator[tuple[dict[str, _Piece], Counter[str]], None, None]:
+    """Per unit, in file order: the pieces of every selection and what was dropped."""
+    wanted = frozenset(i for s in selections for i in s.channel_ids)
+    with closing(chunk_units(log, wanted)) as units:
+        for unit in units:
+            decoded = _decode_unit(unit, selections, log.where)
+            del unit  # not held while the next chunk is read
+            yield decoded
+
+
+def _concat(pieces: list[_Piece]) -> _Piece:
+    """Join pieces and sort by time (stable, so file order breaks ties)."""
+    joined = _join_unsorted(pieces)
+    if _sorted(joined.t_s):
+        return joined
+    order = np.argsort(joined.t_s, kind="stable")
+    return _Piece(joined.t_s[order], {k: v[order] for k, v in joined.columns.items()})
+
+
+# --------------------------------------------------------------------------- public API
+
+
+def _no_samples(log: Log, topic: str, dropped: Counter[str]) -> InputError:
+    found = f"no messages on {topic!r}"
+    if dropped["imu_nonfinite"]:
+        found = f"{dropped['imu_nonfinite']} messages on {topic!r}, all with NaN or infinite values"
+    return InputError(log.where, "IMU samples", found, "Check the recording, or pass another topic=.")
+
+
+def _read(path: str | os.PathLike[str], fn_topics: dict[str, str | None]) -> Samples:
+    log = open_log(path)
+    try:
+        return _read_open(log, fn_topics)
+    except Corrupt as err:
+        raise damaged(log.where, str(err)) from err
+    finally:
+        log.file.close()
+
+
+def _read_open(log: Log, topics: dict[str, str | None]) -> Samples:
+    imu = _select(log, "imu", topics["imu"])
+    assert imu is not None  # the IMU topic is never optional
+    aux = [_select(log, kind, topic) for kind, topic in topics.items() if kind != "imu" and topic != ""]
+    selections = [imu, *(s for s in aux if s is not None)]
+    collected: dict[str, list[_Piece]] = {}
+    dropped: Counter[str] = Counter()
+    held, limit = 0, max_rows()
+    with closing(_decoded_units(log, selections)) as units:
+        for pieces, drops in units:
+            dropped.update(drops)
+            for key, piece in pieces.items():
+                collected.setdefault(key, []).append(piece)
+                held += piece.t_s.size
+            if held > limit:  # counted a chunk at a time, before the whole log is held
+                raise too_many_rows(log.where, "samples (all topics read)", held)
+    if not collected.get("imu") or not sum(p.t_s.size for p in collected["imu"]):
+        raise _no_samples(log, imu.topic, dropped)
+    samples = _concat(collected.pop("imu"))
+    channels = {}
+    for key, parts in collected.items():
+        joined = _concat(parts)
+        channels[key] = Channel(joined.t_s, joined.columns["value"])
+    return Samples(
+        t_s=samples.t_s,
+        acc_s=samples.columns["acc"],
+        gyro_s=_gyro(samples, dropped),
+        channels=channels,
+        source=log.where,
+        dropped={k: v for k, v in dropped.items() if v},
+    )
+
+
+def _gyro(piece: _Piece, dropped: Counter[str]) -> FloatArray | None:
+    """The gyro column, or None when messages mark it unknown (``angular_velocity_covariance[0]
+    = −1``, REP 145: an accelerometer without a gyro publishes zeros there). Where only some do,
+    none is used: zeros among real rates would read as standing still; the count is reported."""
+    unknown = int(np.count_nonzero(piece.columns["gyro_unknown"]))
+    if not unknown:
+        return piece.columns["gyro"]
+    dropped["imu_gyro_marked_unknown"] += unknown
+    return None
+
+
+def read_mcap(
+    path: str | os.PathLike[str],
+    *,
+    topic: str | None = None,
+    temperature_topic: str | None = None,
+    fix_topic: str | None = None,
+    odom_topic: str | None = None,
+) -> Samples:
+    """Read the IMU samples of an MCAP log, with temperature, GNSS fix and odometry channels.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The ``.mcap`` file (ROS 2 CDR or JSON messages; chunks uncompressed, zstd or lz4).
+    topic : str, optional
+        The ``sensor_msgs/msg/Imu`` topic. Default: the only one in the log (an error when there
+        are none or several).
+    temperature_topic, fix_topic, odom_topic : str, optional
+        ``sensor_msgs/msg/Temperature``, ``sensor_msgs/msg/NavSatFix`` and
+        ``nav_msgs/msg/Odometry`` topics. Default: the only one of that type, if any (an error
+        when several); ``""`` reads none.
+
+    Returns
+    -------
+    Samples
+        ``t_s`` (n,) in s, sorted (stamp rule in the module docstring); ``acc_s`` (n, 3)
+        ``linear_acceleration`` in m/s² and ``gyro_s`` (n, 3) ``angular_velocity`` in rad/s, sensor
+        frame = the IMU message's ``frame_id``. ``channels``: ``temperature_c`` (°C);
+        ``lat_deg``, ``lon_deg`` (degrees), ``alt_m`` (m, WGS 84 ellipsoid); ``speed_mps`` =
+        ``twist.twist.linear.x`` (m/s, negative when reversing); ``heading_deg`` = 90° − yaw of
+        ``pose.pose.orientation``, wrapped to [0, 360) — a compass heading only if the odometry
+        frame is ENU-aligned (REP 103), which wheel-odometry ``odom`` frames usually are not.
+        ``dropped`` counts discarded samples by reason.
+
+    Raises
+    ------
+    InputError
+        The file is missing, empty, truncated or damaged; the IMU topic is missing or ambiguous;
+        an encoding or compression is not supported; or no finite IMU sample remains.
+    """
+    return _read(path, {"imu": topic, "temperature": temperature_topic, "fix": fix_topic, "odom": odom_topic})
+
+
+def iter_mcap(
+    path: str | os.PathLike[str], *, topic: str | None = None, max_samples: int = 100_000
+) -> Iterator[Samples]:
+    """Stream the IMU samples of an MCAP log in batches of at most ``max_samples``, bounded memory.
+
+    The file is checked and the topic chosen (as in :func:`read_mcap`) before this returns; then
+    one MCAP chunk at a time is decoded. Each batch is sorted by time; batches follow the file's
+    chunk order, which is time order for recorders that write chunks as they go. Concatenated, the
+    batches equal :func:`read_mcap`'s IMU samples whenever chunks do not overlap in time.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The ``.mcap`` file.
+    topic : str, optional
+        The ``sensor_msgs/msg/Imu`` topic; default: the only one.
+    max_samples : int
+        Largest batch, in samples (≥ 1).
+
+    Yields
+    ------
+    Samples
+        ``t_s`` (m,), ``acc_s`` and ``gyro_s`` (m, 3), m ≤ ``max_samples``, as in :func:`read_mcap`
+        but without aux channels; ``dropped`` counts the samples dropped from the chunks that fed
+        this batch.
+
+    Raises
+    ------
+    InputError
+        As :func:`read_mcap`, the file-level problems immediately, damage found in a later chunk
+        when the iteration reaches it.
+    """
+    if max_samples < 1:
+        raise ValueError(f"max_samples must be at least 1, got {max_samples}")
+    log = open_log(path)
+    try:
+        selection = _select(log, "imu", topic)
+    finally:
+        log.file.close()
+    assert selection is not None  # the IMU topic is never optional
+    return _iter_batches(path, selection, max_samples)
+
+
+def _iter_batches(path: str | os.PathLike[str], selection: _Selection, max_samples: int) -> Iterator[Samples]:
+    log = open_log(path, discover=False)  # the channels were chosen already
+    try:
+        yield from _batches(log, selection, max_samples)
+    except Corrupt as err:
+        raise damaged(log.where, str(err)) from err
+    finally:
+        log.file.close()
+
+
+def _batches(log: Log, selection: _Selection, max_samples: int) -> Iterator[Samples]:
+    pending: list[_Piece] = []
+    count, total = 0, 0
+    dropped: Counter[str] = Counter()
+    with closing(_decoded_units(log, [selection])) as units:
+        for pieces, drops in units:
+            dropped.update(drops)
+            if "imu" in pieces and pieces["imu"].t_s.size:
+                pending.append(pieces["imu"])
+                count += pieces["imu"].t_s.size
+            while count >= max_samples:
+                joined = _join_unsorted(pending)
+                yield _batch(log, joined, 0, max_samples, dropped)
+                pending = [_slice(joined, max_samples, count)]
+                count, total, dropped = count - max_samples, total + max_samples, Counter()
+    if count:
+        yield _batch(log, _join_unsorted(pending), 0, count, dropped)
+    elif not total:
+        raise _no_samples(log, selection.topic, dropped)
+
+
+def _join_unsorted(pieces: list[_Piece]) -> _Piece:
+    if len(pieces) == 1:
+        return pieces[0]
+    return _Piece(
+        np.concatenate([p.t_s for p in pieces]),
+        {k: np.concatenate([p.columns[k] for p in pieces]) for k in pieces[0].columns},
+    )
+
+
+def _slice(piece: _Piece, start: int, stop: int) -> _Piece:
+    return _Piece(piece.t_s[start:stop], {k: v[start:stop] for k, v in piece.columns.items()})
+
+
+def _batch(log: Log, piece: _Piece, start: int, stop: int, dropped: Counter[str]) -> Samples:
+    """Rows ``start:stop`` of ``piece`` as Samples of their own (copied, sorted by time)."""
+    part = _concat([_slice(piece, start, stop)])
+    gyro = _gyro(part, dropped)
+    return Samples(
+        t_s=part.t_s.copy(),
+        acc_s=part.columns["acc"].copy(),
+        gyro_s=None if gyro is None else gyro.copy(),
+        source=log.where,
+        dropped={k: v for k, v in dropped.items() if v},
+    )

@@ -1,0 +1,113 @@
+"""Which reader reads a path: the built-in formats and those of installed plugins.
+
+Built-in readers (in this order; the first that claims a path reads it):
+
+- ``mcap``: ``.mcap``, ROS 2 Imu in CDR or JSON (:mod:`mountcal.io.mcap`);
+- ``can``: ``.blf .asc .log .trc .mf4 .mdf``, and ``.csv`` when a DBC is given (:mod:`mountcal.io.can`);
+- ``table``: ``.csv .parquet .pq`` sample tables (:mod:`mountcal.io.table`);
+- ``comma2k19``: a comma2k19 segment folder (:mod:`mountcal.io.comma2k19`).
+
+**Plugins.** A package adds a format by declaring, in its metadata, an entry point in the group
+``mountcal.readers`` naming a :class:`~mountcal.io.reader.LogReader` subclass (or instance)::
+
+    [project.entry-points."mountcal.readers"]
+    imutxt = "mountcal_imutxt:ImuTxtReader"
+
+Plugins are loaded on the first use of the registry (``mountcal --help`` loads none) and come after
+the built-in readers. A plugin that fails to load is reported once (a warning naming it) and left
+out; a file only it could have read is then refused with its name and the cause.
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+from functools import cache
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from mountcal.errors import InputError
+from mountcal.io.reader import LogReader
+from mountcal.plugins import entry_points_of
+
+if TYPE_CHECKING:
+    from mountcal.io.logs import LogOptions
+
+GROUP = "mountcal.readers"
+BUILTIN = (
+    "mountcal.io.mcap.reader:McapReader",
+    "mountcal.io.can.reader:CanReader",
+    "mountcal.io.table.reader:TableReader",
+    "mountcal.io.comma2k19:Comma2k19Reader",
+)
+_log = logging.getLogger("mountcal")
+
+
+def _load_builtin(spec: str) -> LogReader:
+    module, _, name = spec.partition(":")
+    cls: type[LogReader] = getattr(importlib.import_module(module), name)
+    return cls()
+
+
+def _as_reader(obj: object, where: str) -> LogReader:
+    reader = obj() if isinstance(obj, type) and issubclass(obj, LogReader) else obj
+    if not isinstance(reader, LogReader):
+        raise InputError(
+            where,
+            "a mountcal.io.reader.LogReader subclass or instance",
+            f"{type(obj).__name__} {obj!r}"[:200],
+            "Point the entry point at the reader class.",
+        )
+    return reader
+
+
+@cache
+def _registry() -> tuple[tuple[LogReader, ...], tuple[InputError, ...]]:
+    readers = [_load_builtin(spec) for spec in BUILTIN]
+    broken = []
+    for plugin in entry_points_of(GROUP):
+        where = f"plugin {plugin.name!r} ({plugin.value})"
+        try:
+            readers.append(_as_reader(plugin.load(), where))
+        except InputError as err:
+            _log.warning("a log-format plugin is left out: %s", err)
+            broken.append(err)
+    return tuple(readers), tuple(broken)
+
+
+def readers() -> tuple[LogReader, ...]:
+    """Every reader: the built-in ones, then those of plugins, in the order they are tried."""
+    return _registry()[0]
+
+
+def log_suffixes() -> frozenset[str]:
+    """The suffixes of every reader (with the dot, lower case)."""
+    return frozenset(s for r in readers() for s in r.suffixes)
+
+
+def is_log(path: Path, options: LogOptions) -> bool:
+    """Whether some reader takes ``path`` (fleet's test of which files of a folder are logs)."""
+    return any(r.claims(path, options) for r in readers())
+
+
+def reader_for(path: Path, options: LogOptions) -> LogReader:
+    """The first reader claiming ``path``.
+
+    Raises
+    ------
+    InputError
+        No reader claims it: the message lists the formats, and any plugin that failed to load.
+    """
+    for reader in readers():
+        if reader.claims(path, options):
+            return reader
+    formats = "; ".join(f"{r.description} ({' '.join(r.suffixes)})" for r in readers() if r.suffixes)
+    broken = _registry()[1]
+    todo = "Convert it, or name it by its format."
+    if broken:
+        todo += " These format plugins failed to load: " + "; ".join(str(b) for b in broken)
+    found = "a folder no reader takes" if path.is_dir() else f"a file ending in {path.suffix or '(nothing)'}"
+    raise InputError(str(path), f"a log mountcal reads: {formats}", found, todo)
+
+
+__all__ = ["BUILTIN", "GROUP", "is_log", "log_suffixes", "reader_for", "readers"]
