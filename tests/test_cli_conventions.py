@@ -69,8 +69,9 @@ def test_stops_to_stdout_read_back_by_calibrate_from_stdin(tmp_path: Path) -> No
     direct = tmp_path / "direct.json"
     assert main(["calibrate", str(PARKING), "--protocol", str(PROTOCOL), "--use", "stops", "-o", str(direct)]) == 0
     alone = Calibration.load(direct)
-    assert piped.roll_deg == pytest.approx(alone.roll_deg, abs=1e-9)
-    assert piped.yaw_deg == pytest.approx(alone.yaw_deg, abs=1e-9)
+    # the file form holds 15 significant digits: the fit may stop a hair apart (its convergence tolerance)
+    assert piped.roll_deg == pytest.approx(alone.roll_deg, abs=1e-6)
+    assert piped.yaw_deg == pytest.approx(alone.yaw_deg, abs=1e-6)
 
 
 def test_a_user_error_is_one_line_on_stderr_with_its_exit_code(capsys: pytest.CaptureFixture[str]) -> None:

@@ -436,7 +436,7 @@ def test_fleet_calibrates_a_real_drive_exactly_as_calibrate_does(real_data: Path
     output = tmp_path / "fleet.parquet"
     assert main(["fleet", str(manifest), "-o", str(output), "--workers", "1"]) == 0
     row = pd.read_parquet(output).iloc[0]
-    assert row["status"] == "ok" and row["calibrated_from"] == single.fit["calibrated_from"]
+    assert row["status"] == "ok" and row["calibrated_from"] == single.fit.calibrated_from
     assert single.yaw_deg is not None  # the drive determines yaw: the fleet must not lose it
     for angle in ("roll", "pitch", "yaw"):
         assert row[f"{angle}_deg"] == pytest.approx(getattr(single, f"{angle}_deg"), abs=1e-9)

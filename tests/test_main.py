@@ -74,7 +74,7 @@ def test_version_is_the_installed_distributions() -> None:
         assert mountcal.__version__ == "unknown"
 
 
-COMMANDS = ("calibrate", "stops", "inspect", "rotate", "report", "fleet", "simulate", "plan", "live", "export")
+COMMANDS = ("calibrate", "stops", "inspect", "rotate", "report", "fleet", "simulate", "plan", "live", "export", "triad")
 
 
 @pytest.mark.parametrize("command", [None, *COMMANDS])
@@ -131,4 +131,5 @@ def _required(command: str) -> list[str]:
         "plan": ["--target", "roll=0.1"],
         "live": ["--interface", "virtual", "--channel", "0", "--dbc", "b.dbc"],
         "export": ["r.json", "--to", "json"],
+        "triad": ["s.csv", "-o", "t.json"],
     }.get(command, [])

@@ -12,6 +12,7 @@ import pytest
 from mountcal import cli
 from mountcal.apply.rotate_log import to_frame
 from mountcal.calibrate import calibrate
+from mountcal.cli.options import detection
 from mountcal.errors import NotEnoughInformation
 from mountcal.io.timestamps import MERGED, increasing_times
 from mountcal.samples import Channel, Samples
@@ -202,7 +203,7 @@ def test_every_option_named_in_a_stop_detection_message_exists() -> None:
     messages.append(str(err.value))
     named = set().union(*map(_options_named, messages))
     assert {"--max-acc-std", "--max-gyro-std", "--max-gyro-rate", "--max-speed", "--min-stop-s"} <= named
-    parser = cli._parser()
+    parser = cli.build_parser()
     sub = next(a for a in parser._actions if a.dest == "command").choices
     assert isinstance(sub, dict)
     for command in ("calibrate", "stops", "fleet"):
@@ -213,10 +214,10 @@ def test_every_option_named_in_a_stop_detection_message_exists() -> None:
 def test_each_option_reaches_the_detector() -> None:
     given = "--max-acc-std 0.2 --max-gyro-std 0.03 --max-gyro-rate 0.04 --max-speed 0.5 --still-window-s 3 "
     given += "--min-stop-s 5 --trim-s 1 --max-heading-wander 7"
-    args = cli._parser().parse_args(["stops", "x.csv", "-o", "y.csv", *given.split()])
-    assert cli._detection(args) == StopDetection(3.0, 0.2, 0.03, 0.04, 0.5, 5.0, 1.0, 7.0)
+    args = cli.build_parser().parse_args(["stops", "x.csv", "-o", "y.csv", *given.split()])
+    assert detection(args) == StopDetection(3.0, 0.2, 0.03, 0.04, 0.5, 5.0, 1.0, 7.0)
     log = field_log(2.0, seed=13)
-    used = find_stops(samples_of(log), cli._detection(args)).thresholds
+    used = find_stops(samples_of(log), detection(args)).thresholds
     assert (used.acc_std_mps2, used.gyro_std_rad_s, used.gyro_rate_rad_s) == (0.2, 0.03, 0.04)
 
 
@@ -247,11 +248,11 @@ def test_the_desk_canedge_log_at_rest_gives_a_stop_with_default_thresholds(real_
 @pytest.mark.real_data
 def test_the_canedge_car_stop_table_is_honest_and_its_tilt_physical(real_data: Path) -> None:
     from mountcal.io.logs import LogOptions
-    from mountcal.pipeline import LogJob, calibrate_log
+    from mountcal.pipeline import LogJob, calibrate_job
 
     files = sorted((real_data / CANEDGE / "3BA199E2_car_DK_2021-07-26" / "00000165").glob("*.MF4"))
     job = LogJob(tuple(map(str, files)), LogOptions(dbc=str(real_data / CANEDGE / "dbc" / "gnss.dbc"), channel=2))
-    done = calibrate_log(job)
+    done = calibrate_job(job)
     frame = done.stops.table.to_frame()
     assert len(frame) >= 5  # the drive parks six times for ≥ 8 s at zero speed; one is too short once trimmed
     s = frame[["sx", "sy", "sz"]].to_numpy()
