@@ -432,5 +432,5 @@ def test_an_effect_that_cannot_be_loaded_is_refused_by_name(tmp_path: Path) -> N
         text=True,
     )
     assert done.returncode != 0
-    assert "broken = mc_missing:Broken" in done.stderr and "mc-broken" in done.stderr
+    assert "plugin 'broken' (mc_missing:Broken)" in done.stderr and "mc-broken" in done.stderr
     assert "Traceback" not in done.stderr
