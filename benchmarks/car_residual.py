@@ -376,6 +376,22 @@ def grades(tables: dict[str, StopTable], atts: dict[str, dict[str, np.ndarray]],
     return out
 
 
+def residual_split(step: effects.Step) -> str:
+    """Where the final χ² sits: along gravity (|a|, mm/s² precision) or across it (the road tilts)."""
+    f = step.fit
+    rm = f.state.rot_vs.as_matrix()
+    res_v = f.residual_s @ rm.T
+    cov_v = np.einsum("ij,njk,lk->nil", rm, step.table.cov_s, rm)
+    vertical = float(np.sum(res_v[:, 2] ** 2 / cov_v[:, 2, 2]))
+    rms_h = float(np.sqrt(np.mean(res_v[:, :2] ** 2)))
+    return (
+        f"- **Where the final χ² = {f.chi2:.1f} sits**: {vertical:.1f} of it along gravity, in residuals of "
+        f"{', '.join(f'{v * 1e3:+.1f}' for v in res_v[:, 2])} mm/s² (σ {np.sqrt(cov_v[:, 2, 2]).mean() * 1e3:.1f}): "
+        f"|a| differences between stops that a constant bias cannot take; the rest across gravity, "
+        f"RMS {rms_h * 1e3:.0f} mm/s² per axis, the size of the road tilts (g·{np.degrees(rms_h / G_N):.2f}°)."
+    )
+
+
 def positions(t: StopTable) -> str:
     north = np.radians(t.lat_deg) * 6.371e6  # type: ignore[arg-type]
     east = np.radians(t.lon_deg) * 6.371e6 * np.cos(np.radians(np.mean(t.lat_deg)))  # type: ignore[arg-type]
@@ -577,6 +593,7 @@ def main() -> None:
         f"more than the fitted tilt σ says. With the tilt σ widened by the Birge ratio {birge:.2f} "
         f"({np.degrees(_surface_sigma(loop)) * birge:.2f}°), {p_wide:.0%} of runs (median {median_wide:.3g} mg)."
     )
+    print(residual_split(fin))
     print(load_transfer(float(fin.fit.state.slope_rad[0]))[0])
     print(f"\nVehicle x axis from driving (drive 165, independent of the stops): {np.round(xv, 4).tolist()}.\n")
     print("\n".join(grades(tables, atts, xv)))
