@@ -430,8 +430,8 @@ def bias_separability(loop: effects.Loop, g: float, runs: int, rng: np.random.Ge
         f"{runs} runs per row.",
         "",
         "| common slope α | |a| offset, its drift over the stops | loop | bias admitted "
-        "| median |b_h| fitted (m/s², truth 0) | confident | tilt error / σ about vehicle x, y: RMS "
-        "| within 2σ (all; confident) |",
+        "| median |b_h| fitted (m/s², truth 0) | confident by the tilt about vehicle x, y "
+        "| tilt error / σ about vehicle x, y: RMS | within 2σ (all; confident) |",
         "|---|---|---|---|---|---|---|---|",
     ]
     alpha_fit = np.degrees(float(fin.fit.state.slope_rad[0]))
