@@ -440,20 +440,25 @@ def bias_separability(loop: effects.Loop, g: float, runs: int, rng: np.random.Ge
             out.append(
                 _simulate_row(name, run, raw, rot, beta, g, (alpha_deg, offset, drift), sigma_tilt, chol, runs, rng)
             )
-    lr = reml(loop, g)
-    rv, sig, conf = _tilt_and_sigma(lr)
-    i_b = lr.final.fit.names.index("bias_x")
-    b, bs = lr.final.fit.state.bias_s, np.sqrt(np.diag(lr.final.fit.cov)[i_b : i_b + 3])
-    shown = ", ".join(f"{v:+.3f} ± {e:.3f}" for v, e in zip(b, bs, strict=True))
-    roll, pitch, _ = np.degrees(angles_from_rot_vs(rv))
-    out += [
-        "",
-        f"The real drive 165, its final model with the road tilt σ by REML: {lr.final.reason}; "
-        f"χ² {lr.final.fit.chi2:.1f} / {lr.final.fit.dof}; bias ({shown}) m/s²; "
-        f"roll {roll:.1f}°, pitch {pitch:.2f}°, tilt σ about vehicle x, y {np.degrees(sig[0]):.2f}°, "
-        f"{np.degrees(sig[1]):.2f}°; confident {conf}; unexplained: "
-        + ("; ".join(f"{u.what} ({u.size})" for u in lr.unexplained) or "none"),
-    ]
+    for name, lr in (
+        ("its final model with the road tilt σ by REML", reml(loop, g)),
+        ("the loop with the road tilt decided before any outlier", surface_before_outlier(raw, g)),
+    ):
+        rv, sig, _confident = _tilt_and_sigma(lr)
+        f = lr.final.fit
+        roll, pitch, _ = np.degrees(angles_from_rot_vs(rv))
+        shown = "not admitted"
+        if "bias" in f.terms:
+            i_b = f.names.index("bias_x")
+            sb = np.sqrt(np.diag(f.cov)[i_b : i_b + 3])
+            shown = "(" + ", ".join(f"{v:+.3f} ± {e:.3f}" for v, e in zip(f.state.bias_s, sb, strict=True)) + ") m/s²"
+        out += [
+            "",
+            f"The real drive 165, {name}: steps {', '.join(s.added for s in lr.steps)} ({lr.final.reason[:60]}…); "
+            f"χ² {f.chi2:.1f} / {f.dof}; bias {shown}; roll {roll:.1f}°, pitch {pitch:.2f}°, tilt σ about vehicle "
+            f"x, y {np.degrees(sig[0]):.2f}°, {np.degrees(sig[1]):.2f}°; unexplained: "
+            + ("; ".join(f"{u.what} ({u.size})" for u in lr.unexplained) or "none"),
+        ]
     return out
 
 
