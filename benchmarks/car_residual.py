@@ -24,6 +24,7 @@ from mountcal import effects
 from mountcal.calibrate import Options, calibrate
 from mountcal.conventions import G_N, angles_from_rot_vs, normal_gravity, skew
 from mountcal.diagnose import _regression, whitened
+from mountcal.errors import FitFailed
 from mountcal.estimate import full
 from mountcal.estimate.driving import estimate_driving
 from mountcal.io.can_frames import read_frames
@@ -566,21 +567,26 @@ def surface_covariance_check(loop: effects.Loop, g: float, runs: int, rng: np.ra
             ("τ × f_v (first order)", effects.BASE, False),
             ("τ × f_v and (g·σ²)² along gravity; g fitted", (*effects.BASE, "gravity"), True),
         ):
-            z = []
+            z, failed = [], 0
             for sim in sims:
-                f = full.fit(sim, effects.BASE, g)
-                for _ in range(2):  # the covariance depends on the fit: refit once with the updated one
-                    table = (
-                        effects.with_surface(sim, f.state.rot_vs, sigma, g)
-                        if widen is None
-                        else tilted_surface(sim, f, sigma, widen)
-                    )
-                    f = full.fit(table, terms, g, f.state)
+                try:
+                    f = full.fit(sim, effects.BASE, g)
+                    for _ in range(2):  # the covariance depends on the fit: refit once with the updated one
+                        table = (
+                            effects.with_surface(sim, f.state.rot_vs, sigma, g)
+                            if widen is None
+                            else tilted_surface(sim, f, sigma, widen)
+                        )
+                        f = full.fit(table, terms, g, f.state)
+                except FitFailed:
+                    failed += 1
+                    continue
                 z.append(_tilt_error(f.state.rot_vs, rot) / np.sqrt(np.diag(f.cov)[:2]))
             zz = np.array(z)
             out.append(
                 f"| {sigma_deg:g}° | {name} | {', '.join(terms)} | {np.sqrt(np.mean(zz[:, 0] ** 2)):.1f}, "
-                f"{np.sqrt(np.mean(zz[:, 1] ** 2)):.1f} | {np.mean(np.all(np.abs(zz) <= 2, axis=1)):.0%} |"
+                f"{np.sqrt(np.mean(zz[:, 1] ** 2)):.1f} | {np.mean(np.all(np.abs(zz) <= 2, axis=1)):.0%} "
+                f"({len(zz)} fits{f', {failed} did not converge' if failed else ''}) |"
             )
     return out
 
