@@ -519,10 +519,6 @@ def surface_before_outlier(table: StopTable, g: float) -> effects.Loop:
         effects._outlier = original
 
 
-def _loop_reml(table: StopTable, g: float) -> effects.Loop:
-    return reml(_loop_now(table, g), g)
-
-
 def tilted_surface(table: StopTable, fit: full.Fit, sigma: float, second_order: bool) -> StopTable:
     """The stops' covariance widened by a road tilt τ per stop as it acts: δf = τ × f_v (τ about the vehicle
     x, y axes), which moves the component along gravity by g·sin α·τ as well as the horizontal ones by g·τ;
