@@ -43,7 +43,7 @@ def test_the_hand_held_session_gives_every_term_and_a_calibrated_sensor_reads_g(
     sigma = np.sqrt(np.diag(triad.cov))
     assert np.all(sigma[:3] < 0.01) and np.all(sigma[3:] < 1e-3)
     # the stops read as the calibrated sensor reads them: |a| = g far better than raw
-    from mountcal.cli.triad import session_stops
+    from mountcal.triad import session_stops
 
     acc, _ = session_stops([str(session)], "mps2")
     raw = np.abs(np.linalg.norm(acc, axis=1) - G_N)
