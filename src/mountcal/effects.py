@@ -38,6 +38,9 @@ SAME_PLACE_M = 30.0  # stops farther apart than this may stand on different surf
 # The heading harmonics a covariate term must explain more than (docs/effects.md, "Unexplained structure"): the
 # patterns of the effects tied to the vehicle's heading (a lean, a cross slope, compass errors) are 1β and 2β.
 ALIAS_HARMONICS = (1, 2)
+# The level of that check: it confirms one candidate the loop has already chosen (no search over many, so no
+# Bonferroni). Passing it wrongly is a confident wrong answer, failing it wrongly only a flag: 1 %.
+ALIAS_ALPHA = 0.01
 PLACE_COLUMNS = ("site", "lat_deg", "lon_deg", "alt_m")  # where a stop is: the geometry, not a logged covariate
 PROGRESS_STOPS = 2000  # from this many stops a model choice takes seconds: its rounds are logged at INFO
 
@@ -198,7 +201,7 @@ def _next_step(
         if odd:
             _decline(declined, name, odd, len(cur.excluded))
             continue
-        alias = _heading_alias(cur, f, name, alpha)
+        alias = _heading_alias(cur, f, name)
         if alias:
             _decline(declined, name, alias, len(cur.excluded))
             continue
@@ -407,7 +410,7 @@ def _inseparable(cur: Step, terms: tuple[str, ...], g: float) -> str | None:
     return None
 
 
-def _heading_alias(cur: Step, f: full.Fit, name: str, alpha: float) -> str | None:
+def _heading_alias(cur: Step, f: full.Fit, name: str) -> str | None:
     """Why a term driven by a logged covariate (temperature, …) is no explanation: what it explains is a heading
     pattern; or None.
 
@@ -415,7 +418,7 @@ def _heading_alias(cur: Step, f: full.Fit, name: str, alpha: float) -> str | Non
     (:data:`ALIAS_HARMONICS`, per axis): when the stops visited the headings in an order that the covariate
     follows (the sensor warming up around the circle and cooling on the way back), the term would take any
     heading-dependent effect as its own and leave nothing for the residual tests. It must then explain
-    something at ``alpha`` that no heading pattern does. Terms of the geometry (scale, slopes) predict their
+    something at :data:`ALIAS_ALPHA` that no heading pattern does. Terms of the geometry (scale, slopes) predict their
     heading pattern from the rotation; the Fisher rank tests those.
     """
     effect = registry.get(name)
@@ -431,11 +434,11 @@ def _heading_alias(cur: Step, f: full.Fit, name: str, alpha: float) -> str | Non
         return None
     r = full.StaticModel(cur.table, cur.terms, f.state.g_mps2).residual(cur.fit.state)
     finding = projection_test(r, jac[:, own], np.hstack([jac[:, rest], harmonics]), name, cur.fit)
-    if finding.p_value is None or finding.p_value < alpha:
+    if finding.p_value is None or finding.p_value < ALIAS_ALPHA:
         return None
     return (
         f"what it would explain is a heading pattern: beyond the 1β and 2β harmonics of heading it explains "
-        f"Δχ² = {finding.statistic:.3g} on {finding.dof} (p = {finding.p_value:.3g} ≥ {alpha:g}); its "
+        f"Δχ² = {finding.statistic:.3g} on {finding.dof} (p = {finding.p_value:.3g} ≥ {ALIAS_ALPHA:g}); its "
         f"{', '.join(effect.needs)} follows the "
         "order the headings were visited in — visit them in another order (or the circle twice) to separate it"
     )
