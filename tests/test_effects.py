@@ -124,6 +124,28 @@ def test_an_effect_outside_the_library_is_flagged_and_not_confident(kind: str) -
     assert flagged >= RUNS - 1
 
 
+def _lean_around_a_warm_up(rng: np.random.Generator, lean: float) -> StopTable:
+    """The paper's 12 stops visited in order of heading while the sensor warms up and cools down again (so the
+    temperature rises and falls around the circle, nearly as cos β), the body leaning ``lean`` × the lateral slope
+    (no term of the model)."""
+    temperature = np.interp(np.arange(12), [0, 6, 11], [20.0, 35.0, 22.0])
+    table, truth = simulate_preset("zhang2011", seed=rng, temperature_c=temperature)
+    f_v = truth.rot_vs.apply(table.acc_s)
+    roll = lean * np.arcsin(np.clip(f_v[:, 1] / truth.g_mps2, -1.0, 1.0))
+    leaned = Rotation.from_rotvec(np.column_stack([roll, np.zeros((12, 2))])).inv().apply(f_v)
+    return replace(table, acc_s=truth.rot_vs.inv().apply(leaned))
+
+
+def test_a_heading_pattern_is_not_taken_for_a_temperature_drift_that_follows_the_headings() -> None:
+    rng = np.random.default_rng(15)
+    refused = 0
+    for _ in range(RUNS):
+        cal = calibrate(_lean_around_a_warm_up(rng, 0.05))
+        why = [d.why for d in cal.model_selection.declined if d.effect == "temperature"]
+        refused += "temperature" not in cal.model and any("heading pattern" in w for w in why) and not cal.confident
+    assert refused >= RUNS - 1
+
+
 def test_the_result_carries_the_before_after_table() -> None:
     table, _ = simulate_preset("zhang2011", seed=4, bias_mps2=np.array([0.1, -0.15, 0.12]))
     doc = calibrate(table).to_dict()

@@ -119,6 +119,20 @@ def unexplained(findings: list[Finding], alpha: float = FAMILY_ALPHA) -> list[Fi
     return out
 
 
+def heading_harmonics(whiten: FloatArray, beta: FloatArray, ks: tuple[int, ...]) -> FloatArray | None:
+    """Whitened directions of the heading harmonics ``ks`` per axis, those below Nyquist (None if none are)."""
+    distinct = np.unique(np.round(np.mod(beta, 2 * np.pi), 6)).size
+    x = [np.column_stack([np.cos(k * beta), np.sin(k * beta)]) for k in ks if 2 * k < distinct]
+    return _per_axis(whiten, np.hstack(x)) if x else None
+
+
+def projection_test(r: FloatArray, d: FloatArray, basis: FloatArray, test: str, fit: full.Fit) -> Finding:
+    """Does adding the (whitened) directions ``d`` to those of ``basis`` explain significantly more of ``r``?
+    (Its ``size`` is in whitened units.)"""
+    n = len(r) // 3
+    return _projection(r, d, _span(basis), test, test, fit, np.broadcast_to(np.eye(3), (n, 3, 3)))
+
+
 def _per_axis(whiten: FloatArray, x: FloatArray) -> FloatArray:
     """Whitened directions of an effect ``x[:, c]`` along each sensor axis, shape (3n, 3·k)."""
     n, k = x.shape

@@ -21,7 +21,7 @@ import numpy as np
 from scipy import optimize
 from scipy.spatial.transform import Rotation
 
-from mountcal.diagnose import analyse, leave_one_out, unexplained
+from mountcal.diagnose import analyse, heading_harmonics, leave_one_out, projection_test, unexplained
 from mountcal.errors import FitFailed, NotEnoughInformation
 from mountcal.estimate import effects as registry
 from mountcal.estimate import full
@@ -35,6 +35,13 @@ MAX_TILT_SIGMA_DEG = 5.0  # an effect that would leave the tilt this uncertain i
 MAX_ROUNDS = 6
 MAX_SURFACE_TILT_DEG = 3.0  # roads and car parks: cross slopes and grades of a few degrees at most
 SAME_PLACE_M = 30.0  # stops farther apart than this may stand on different surfaces
+# The heading harmonics a covariate term must explain more than (docs/effects.md, "Unexplained structure"): the
+# patterns of the effects tied to the vehicle's heading (a lean, a cross slope, compass errors) are 1β and 2β.
+ALIAS_HARMONICS = (1, 2)
+# The level of that check: it confirms one candidate the loop has already chosen (no search over many, so no
+# Bonferroni). Passing it wrongly is a confident wrong answer, failing it wrongly only a flag: 1 %.
+ALIAS_ALPHA = 0.01
+PLACE_COLUMNS = ("site", "lat_deg", "lon_deg", "alt_m")  # where a stop is: the geometry, not a logged covariate
 PROGRESS_STOPS = 2000  # from this many stops a model choice takes seconds: its rounds are logged at INFO
 
 
@@ -193,6 +200,10 @@ def _next_step(
         odd = next((w for e in registry.chain(terms) if (w := e.implausible(f.state.values[e.name], g))), None)
         if odd:
             _decline(declined, name, odd, len(cur.excluded))
+            continue
+        alias = _heading_alias(cur, f, name)
+        if alias:
+            _decline(declined, name, alias, len(cur.excluded))
             continue
         logp, test = nested_test(cur.fit.chi2, f.chi2, len(f.names) - len(cur.fit.names), f.noise_known, f.dof)
         options.append(
@@ -397,6 +408,40 @@ def _inseparable(cur: Step, terms: tuple[str, ...], g: float) -> str | None:
     if tilt > MAX_TILT_SIGMA_DEG:
         return f"not separable from the tilt: with it the tilt 1σ would be {tilt:.3g}°"
     return None
+
+
+def _heading_alias(cur: Step, f: full.Fit, name: str) -> str | None:
+    """Why a term driven by a logged covariate (temperature, …) is no explanation: what it explains is a heading
+    pattern; or None.
+
+    Its columns are tested beyond the current model, the terms it brings and the low heading harmonics
+    (:data:`ALIAS_HARMONICS`, per axis): when the stops visited the headings in an order that the covariate
+    follows (the sensor warming up around the circle and cooling on the way back), the term would take any
+    heading-dependent effect as its own and leave nothing for the residual tests. It must then explain
+    something at :data:`ALIAS_ALPHA` that no heading pattern does. Terms of the geometry (scale, slopes) predict their
+    heading pattern from the rotation; the Fisher rank tests those.
+    """
+    effect = registry.get(name)
+    beta = cur.table.beta_rad if cur.table.beta_rad is not None else cur.fit.state.beta_rad
+    if not any(c not in PLACE_COLUMNS for c in effect.needs) or beta is None or beta.size != len(cur.table):
+        return None
+    model = full.StaticModel(cur.table, f.terms, f.state.g_mps2)
+    jac = model.jacobian(f.state)
+    own = list(f.owned[name])
+    rest = [i for i in range(jac.shape[1]) if i not in own]
+    harmonics = heading_harmonics(model.whiten, beta, ALIAS_HARMONICS)
+    if harmonics is None:
+        return None
+    r = full.StaticModel(cur.table, cur.terms, f.state.g_mps2).residual(cur.fit.state)
+    finding = projection_test(r, jac[:, own], np.hstack([jac[:, rest], harmonics]), name, cur.fit)
+    if finding.p_value is None or finding.p_value < ALIAS_ALPHA:
+        return None
+    return (
+        f"what it would explain is a heading pattern: beyond the 1β and 2β harmonics of heading it explains "
+        f"Δχ² = {finding.statistic:.3g} on {finding.dof} (p = {finding.p_value:.3g} ≥ {ALIAS_ALPHA:g}); its "
+        f"{', '.join(effect.needs)} follows the "
+        "order the headings were visited in — visit them in another order (or the circle twice) to separate it"
+    )
 
 
 def _refuse_inseparable(base: Step, fixed: tuple[str, ...], g: float) -> None:
