@@ -18,7 +18,7 @@ from mountcal.conventions import G_N, normal_gravity
 from mountcal.estimate import sphere
 from mountcal.io.can.frames import read_frames
 from mountcal.io.logs import LogOptions, read_log
-from mountcal.pipeline import LogJob, calibrate_log
+from mountcal.pipeline import LogJob, calibrate_job
 from mountcal.samples import Samples
 from mountcal.stops import StopDetection, detect_stops
 
@@ -30,8 +30,8 @@ def canedge_car(real: Path) -> str:
     out = ["## CANedge car (3BA199E2), drives 00000164 and 00000165", ""]
     for drives in (("00000165",), ("00000164", "00000165")):
         files = sorted(str(p) for d in drives for p in (base / "3BA199E2_car_DK_2021-07-26" / d).glob("*.MF4"))
-        job = LogJob(paths=tuple(files), log=LogOptions(dbc=str(base / "dbc" / "gnss.dbc"), channel=2))
-        done = calibrate_log(job)
+        job = LogJob(paths=tuple(files), log=LogOptions(dbc=str(base / "dbc" / "gnss.dbc"), channel=2), use="stops")
+        done = calibrate_job(job)
         cal = done.calibration
         out += [
             f"### drive(s) {' + '.join(drives)}: {len(files)} files, {len(done.samples)} IMU samples, "

@@ -26,7 +26,7 @@ from mcap_ros2.decoder import DecoderFactory
 from mountcal.calibrate import calibrate
 from mountcal.conventions import normal_gravity
 from mountcal.io.logs import LogOptions
-from mountcal.pipeline import LogJob, calibrate_log
+from mountcal.pipeline import LogJob, calibrate_job
 from mountcal.result import Calibration
 from mountcal.samples import Channel, Samples
 from mountcal.simulate import logs as export
@@ -62,7 +62,7 @@ def generate(workdir: Path) -> dict[str, Path]:
 
 def mountcal_path(log: Path, protocol: Path, fmt: str) -> Calibration:
     opts = LogOptions(dbc=str(DBC), mapping=str(MAPPING)) if fmt == "blf" else LogOptions()
-    return calibrate_log(LogJob(paths=(str(log),), log=opts, protocol=str(protocol))).calibration
+    return calibrate_job(LogJob(paths=(str(log),), log=opts, protocol=str(protocol), use="stops")).calibration
 
 
 def conventional_mcap(log: Path, protocol: Path) -> Calibration:
