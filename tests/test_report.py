@@ -64,6 +64,16 @@ def test_report_states_every_angle_with_its_sigma(
     assert "all uncertainties 1σ" in paper_html
 
 
+def test_report_gives_both_parts_of_each_sigma(paper_scenario: tuple[StopTable, Calibration], paper_html: str) -> None:
+    _, cal = paper_scenario
+    part = cal.systematic
+    assert part is not None and part.default_spec  # no sensor limits given: the default class, said
+    assert "total √(statistical² + systematic²)" in paper_html and "default class was assumed" in paper_html
+    for k in ("roll_deg", "pitch_deg"):
+        assert f"{part.statistical[k]:.3g}° / {part.systematic[k]:.3g}°" in paper_html
+    assert ("dominated by sensor errors" in paper_html) == part.dominant
+
+
 def test_report_is_self_contained(paper_html: str) -> None:
     assert "<script" not in paper_html and "<link" not in paper_html
     assert not re.search(r'(src|href)="(?!data:|#)', paper_html), "every reference must be inline"

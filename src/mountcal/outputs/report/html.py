@@ -188,7 +188,27 @@ def _angles_section(cal: Calibration) -> str:
         if any(s is not None for s in cal.rotation_sigma_deg)
         else ""
     )
-    return f"<h2>Mounting angles</h2>\n{table}\n{extra}"
+    return f"<h2>Mounting angles</h2>\n{table}\n{extra}{_parts(cal)}"
+
+
+def _parts(cal: Calibration) -> str:
+    """The two parts of every σ: the stops' noise and the sensor's limits the stops cannot see."""
+    part = cal.systematic
+    if part is None:
+        return ""
+    from mountcal.systematic import summary_line
+
+    dominated = (
+        " <b>The error is dominated by sensor errors these stops cannot see</b>: a triad calibration or stops on "
+        "slopes of two inclinations would remove that part."
+        if part.dominant
+        else ""
+    )
+    default = " No sensor limits were given: a default class was assumed." if part.default_spec else ""
+    return (
+        f'<p class="small">Each σ above is the total √(statistical² + systematic²) — {escape(summary_line(part))}.'
+        f"{default}{dominated}</p>"
+    )
 
 
 def _undetermined_section(cal: Calibration) -> str:
