@@ -23,16 +23,17 @@ from scipy.spatial.transform import Rotation
 from mountcal import effects
 from mountcal.calibrate import Options, calibrate
 from mountcal.conventions import G_N, angles_from_rot_vs, normal_gravity, skew
-from mountcal.diagnose import _regression, whitened
+from mountcal.diagnose import _per_axis, _projection, _span, analyse
 from mountcal.errors import FitFailed
 from mountcal.estimate import full
 from mountcal.estimate.driving import estimate_driving
-from mountcal.io.can_frames import read_frames
-from mountcal.io.dbc import decode, load_dbc, select_frames
+from mountcal.io.can.dbc import decode, load_dbc, select_frames
+from mountcal.io.can.frames import read_frames
 from mountcal.io.logs import LogOptions, read_log
-from mountcal.io.samples import Samples
 from mountcal.pipeline import LogJob, stops_of_log
 from mountcal.pvalues import chi2_sf
+from mountcal.result import Finding
+from mountcal.samples import Samples
 from mountcal.stoptable import StopTable, stop_table_from_frame
 
 REAL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real"
@@ -43,8 +44,8 @@ GEOID_DK_M = 40.0  # geoid above the ellipsoid in Denmark (EGM2008: 36–42 m); 
 PITCH_GRADIENT_DEG_PER_G, ROLL_GRADIENT_DEG_PER_G = 1.5, 7.0
 
 
-def session(real: Path, drive: str) -> tuple[Samples, pd.DataFrame, dict[str, np.ndarray]]:
-    """Samples, stop frame and the logger's GNSS attitude messages (pitch, heading and their accuracies)."""
+def session(real: Path, drive: str) -> tuple[Samples, StopTable, dict[str, np.ndarray]]:
+    """Samples, stop table and the logger's GNSS attitude messages (pitch, heading and their accuracies)."""
     dbc = real / "canedge" / "dbc" / "gnss.dbc"
     files = sorted(str(p) for p in (real / CAR / drive).glob("*.MF4"))
     samples, found = stops_of_log(LogJob(paths=tuple(files), log=LogOptions(dbc=str(dbc), channel=2)))
@@ -55,21 +56,42 @@ def session(real: Path, drive: str) -> tuple[Samples, pd.DataFrame, dict[str, np
         for k, v in {**decode(fr, msg), "t_s": fr.t_s}.items():
             att.setdefault(k, []).append(v)
     out = {k: np.concatenate(v) for k, v in att.items()}
-    out["stop_duration_s"] = found.frame["duration_s"].to_numpy(float)
-    return samples, found.frame, out
+    out["stop_duration_s"] = np.asarray(found.table.duration_s, dtype=float)
+    return samples, found.table, out
+
+
+def pattern_2b(table: StopTable, fit: full.Fit) -> Finding:
+    """diagnose.analyse's 2β harmonic test (the same projection), also where analyse skips it: with ≤ 4 distinct
+    headings it takes 2β as aliasing a lower harmonic, which at uneven headings it does not quite."""
+    own = next((f for f in analyse(table, fit) if f.test == "harmonic_2beta"), None)
+    if own is not None:
+        return own
+    model = full.StaticModel(table, fit.terms, fit.state.g_mps2)
+    beta = table.beta_rad
+    assert beta is not None and table.cov_s is not None
+    x2 = np.column_stack([np.cos(2 * beta), np.sin(2 * beta)])
+    basis = _span(model.jacobian(fit.state))
+    unw = np.linalg.cholesky(table.cov_s)
+    return _projection(model.residual(fit.state), _per_axis(model.whiten, x2), basis, "harmonic_2beta", "", fit, unw)
+
+
+def _p(finding: Finding) -> str:
+    return f"p = {finding.p_value:.2g}" if finding.p_value is not None else (finding.reason or "not tested")
+
+
+def mg(finding: Finding) -> float:
+    """A projection test's size (\"… mg RMS\") as a number."""
+    return float(finding.size.split()[0])
 
 
 def fit_row(name: str, fit: full.Fit, table: StopTable) -> str:
-    w = whitened(table, fit)
-    beta = table.beta_rad
-    assert beta is not None
-    h2 = _regression(w, np.column_stack([np.cos(2 * beta), np.sin(2 * beta)]), "h2", "", fit, table)
+    h2 = pattern_2b(table, fit)
     roll, pitch, _ = np.degrees(angles_from_rot_vs(fit.state.rot_vs))
     sx, sy = np.degrees(np.sqrt(np.diag(fit.cov)[:2]))
     norm = np.linalg.norm(table.acc_s, axis=1) - np.linalg.norm(table.acc_s - fit.residual_s, axis=1)
     rms = float(np.sqrt(np.mean(fit.residual_s**2)))
     return (
-        f"| {name} | {fit.chi2:.1f} / {fit.dof} | {rms * 1e3:.0f} | {h2.size} (p = {h2.p_value:.2g}) | "
+        f"| {name} | {fit.chi2:.1f} / {fit.dof} | {rms * 1e3:.0f} | {h2.size} ({_p(h2)}) | "
         f"{np.mean(norm) * MG:+.2f} mg | {roll:.1f} | {pitch:.2f} | {sx:.2f}, {sy:.2f} |"
     )
 
@@ -90,7 +112,14 @@ def before_after(table: StopTable, g: float) -> tuple[list[str], effects.Loop]:
         "",
         f"`mountcal calibrate` on the same stops: roll {cal.roll_deg:.1f} ± {cal.roll_sigma_deg:.1f}°, pitch "
         f"{cal.pitch_deg:.2f} ± {cal.pitch_sigma_deg:.2f}°, yaw not determined (relative headings), confident: "
-        f"{cal.confident}; effects {cal.effects}.",
+        f"{cal.confident}; effects {', '.join(e.name for e in cal.effects) or 'none'}. "
+        + (
+            f"Of the σ, statistical roll {cal.systematic.statistical['roll_deg']:.2f}°, pitch "
+            f"{cal.systematic.statistical['pitch_deg']:.2f}°; systematic ({cal.systematic.source}) roll "
+            f"{cal.systematic.systematic['roll_deg']:.2f}°, pitch {cal.systematic.systematic['pitch_deg']:.2f}°."
+            if cal.systematic is not None
+            else ""
+        ),
         "",
     ]
     return out, loop
@@ -258,6 +287,7 @@ def candidate_columns(fit: full.Fit, table: StopTable, g: float) -> list[str]:
         [np.kron(x2[:, j], np.eye(3)[k]) for j in range(2) for k in range(3)]
     )
     q, _ = np.linalg.qr(jac)
+    unw = np.linalg.cholesky(table.cov_s)  # type: ignore[arg-type]
     perp = r - q @ (q.T @ r)
     coef, *_ = np.linalg.lstsq(x2, r.reshape(n, 3), rcond=None)
     p2 = (x2 @ coef).ravel()
@@ -276,8 +306,9 @@ def candidate_columns(fit: full.Fit, table: StopTable, g: float) -> list[str]:
         dchi = float(np.sum((u.T @ perp) ** 2))
         share = float(np.sum((u.T @ p2) ** 2) / (p2 @ p2)) if p2 @ p2 > 0 else 0.0
         left = perp - u @ (u.T @ perp)
-        w_after = left.reshape(n, 3) / fit.noise_scale
-        h2 = _regression(w_after, x2, "h2", "", replace(fit, dof=max(fit.dof - rank, 1)), table)
+        h2 = _projection(
+            left, _per_axis(wh, x2), _span(np.hstack([q, u])), "h2", "", replace(fit, dof=max(fit.dof - rank, 1)), unw
+        )
         dof = max(fit.dof - rank, 0)
         out.append(
             f"| {name} | {c.shape[1]} ({rank}) | {dchi:.1f} | {chi2_sf(dchi, rank) if rank else float('nan'):.2g} | "
@@ -299,10 +330,7 @@ def surface_monte_carlo(
     model = full.StaticModel(table, terms, g)
     pred = model.predict(fit.state)
     rot_t = fit.state.rot_vs.inv().as_matrix()
-    beta = table.beta_rad
-    assert beta is not None
-    x2 = np.column_stack([np.cos(2 * beta), np.sin(2 * beta)])
-    observed = _regression(whitened(table, fit), x2, "h2", "", fit, table)
+    observed = mg(pattern_2b(table, fit))
     sizes = []
     chol = np.linalg.cholesky(raw.cov_s)  # type: ignore[arg-type]
     for _ in range(runs):
@@ -314,14 +342,9 @@ def surface_monte_carlo(
             f = full.fit(sim, terms, g, fit.state)
         except Exception:
             continue
-        h = _regression(whitened(sim, f), x2, "h2", "", f, sim)
-        sizes.append(float(h.size.split()[0]))
+        sizes.append(mg(pattern_2b(sim, f)))
     sizes_a = np.array(sizes)
-    return (
-        float(observed.size.split()[0]),
-        float(np.mean(sizes_a >= float(observed.size.split()[0]))),
-        float(np.median(sizes_a)),
-    )
+    return observed, float(np.mean(sizes_a >= observed)), float(np.median(sizes_a))
 
 
 def _surface_sigma(loop: effects.Loop) -> float:
@@ -657,7 +680,9 @@ def main() -> None:
     for drive in ("00000164", "00000165"):
         samples[drive], frames[drive], atts[drive] = session(args.real, drive)
     # drive 164 has 2 stops, too few for a table of its own: its rows of the two drives' table
-    both = stop_table_from_frame(pd.concat(list(frames.values()), ignore_index=True), headings="relative")
+    both = stop_table_from_frame(
+        pd.concat([t.to_frame() for t in frames.values()], ignore_index=True), "mps2", "relative"
+    )
     n4 = len(frames["00000164"])
     tables = {
         "00000164": both.subset(np.arange(n4)),
