@@ -249,7 +249,7 @@ def candidate_columns(fit: full.Fit, table: StopTable, g: float) -> list[str]:
     big = full.StaticModel(table, (*terms, "scale"), g)
     r = model.residual(fit.state)
     jac = model.jacobian(fit.state)
-    jbig = big.jacobian(fit.state)
+    jbig = big.jacobian(fit.state)[:, list(big.owned["scale"])]  # scale_xx, yy, zz, then cross-axis xy, xz, yz
     n = len(table)
     beta = table.beta_rad
     assert beta is not None
@@ -265,8 +265,8 @@ def candidate_columns(fit: full.Fit, table: StopTable, g: float) -> list[str]:
 
     head = g * np.sin(alpha) * np.column_stack([-np.sin(beta), -np.cos(beta), np.zeros(n)])  # ∂f_v/∂β
     cols = {
-        "scale and cross-axis (all six)": jbig[:, -6:],
-        "scale: common (trace)": jbig[:, -6:-3].sum(axis=1, keepdims=True),
+        "scale and cross-axis (all six)": jbig,
+        "scale: common (trace)": jbig[:, :3].sum(axis=1, keepdims=True),
         "heading: a scale error of the relative headings": vehicle(head * (beta - beta.mean())[:, None])[:, None],
         "heading: one error per stop": np.column_stack(
             [vehicle(head * (np.arange(n) == i)[:, None]) for i in range(n)]
