@@ -11,28 +11,26 @@ gravity. docs/real-data.md interprets this output.
 from __future__ import annotations
 
 import argparse
-from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from scipy import optimize
-from scipy.spatial.transform import Rotation
+from car_bias import bias_separability, surface_covariance_check, surface_sigma
 
 from mountcal import effects
 from mountcal.calibrate import Options, calibrate
-from mountcal.conventions import G_N, angles_from_rot_vs, normal_gravity, skew
-from mountcal.diagnose import _regression, whitened
-from mountcal.errors import FitFailed
+from mountcal.conventions import G_N, angles_from_rot_vs, normal_gravity
+from mountcal.diagnose import _per_axis, _projection, _span, analyse
 from mountcal.estimate import full
 from mountcal.estimate.driving import estimate_driving
-from mountcal.io.can_frames import read_frames
-from mountcal.io.dbc import decode, load_dbc, select_frames
+from mountcal.io.can.dbc import decode, load_dbc, select_frames
+from mountcal.io.can.frames import read_frames
 from mountcal.io.logs import LogOptions, read_log
-from mountcal.io.samples import Samples
 from mountcal.pipeline import LogJob, stops_of_log
 from mountcal.pvalues import chi2_sf
+from mountcal.result import Finding
+from mountcal.samples import Samples
 from mountcal.stoptable import StopTable, stop_table_from_frame
 
 REAL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real"
@@ -43,8 +41,8 @@ GEOID_DK_M = 40.0  # geoid above the ellipsoid in Denmark (EGM2008: 36–42 m); 
 PITCH_GRADIENT_DEG_PER_G, ROLL_GRADIENT_DEG_PER_G = 1.5, 7.0
 
 
-def session(real: Path, drive: str) -> tuple[Samples, pd.DataFrame, dict[str, np.ndarray]]:
-    """Samples, stop frame and the logger's GNSS attitude messages (pitch, heading and their accuracies)."""
+def session(real: Path, drive: str) -> tuple[Samples, StopTable, dict[str, np.ndarray]]:
+    """Samples, stop table and the logger's GNSS attitude messages (pitch, heading and their accuracies)."""
     dbc = real / "canedge" / "dbc" / "gnss.dbc"
     files = sorted(str(p) for p in (real / CAR / drive).glob("*.MF4"))
     samples, found = stops_of_log(LogJob(paths=tuple(files), log=LogOptions(dbc=str(dbc), channel=2)))
@@ -55,21 +53,42 @@ def session(real: Path, drive: str) -> tuple[Samples, pd.DataFrame, dict[str, np
         for k, v in {**decode(fr, msg), "t_s": fr.t_s}.items():
             att.setdefault(k, []).append(v)
     out = {k: np.concatenate(v) for k, v in att.items()}
-    out["stop_duration_s"] = found.frame["duration_s"].to_numpy(float)
-    return samples, found.frame, out
+    out["stop_duration_s"] = np.asarray(found.table.duration_s, dtype=float)
+    return samples, found.table, out
+
+
+def pattern_2b(table: StopTable, fit: full.Fit) -> Finding:
+    """diagnose.analyse's 2β harmonic test (the same projection), also where analyse skips it: with ≤ 4 distinct
+    headings it takes 2β as aliasing a lower harmonic, which at uneven headings it does not quite."""
+    own = next((f for f in analyse(table, fit) if f.test == "harmonic_2beta"), None)
+    if own is not None:
+        return own
+    model = full.StaticModel(table, fit.terms, fit.state.g_mps2)
+    beta = table.beta_rad
+    assert beta is not None and table.cov_s is not None
+    x2 = np.column_stack([np.cos(2 * beta), np.sin(2 * beta)])
+    basis = _span(model.jacobian(fit.state))
+    unw = np.linalg.cholesky(table.cov_s)
+    return _projection(model.residual(fit.state), _per_axis(model.whiten, x2), basis, "harmonic_2beta", "", fit, unw)
+
+
+def _p(finding: Finding) -> str:
+    return f"p = {finding.p_value:.2g}" if finding.p_value is not None else (finding.reason or "not tested")
+
+
+def mg(finding: Finding) -> float:
+    """A projection test's size (\"… mg RMS\") as a number."""
+    return float(finding.size.split()[0])
 
 
 def fit_row(name: str, fit: full.Fit, table: StopTable) -> str:
-    w = whitened(table, fit)
-    beta = table.beta_rad
-    assert beta is not None
-    h2 = _regression(w, np.column_stack([np.cos(2 * beta), np.sin(2 * beta)]), "h2", "", fit, table)
+    h2 = pattern_2b(table, fit)
     roll, pitch, _ = np.degrees(angles_from_rot_vs(fit.state.rot_vs))
     sx, sy = np.degrees(np.sqrt(np.diag(fit.cov)[:2]))
     norm = np.linalg.norm(table.acc_s, axis=1) - np.linalg.norm(table.acc_s - fit.residual_s, axis=1)
     rms = float(np.sqrt(np.mean(fit.residual_s**2)))
     return (
-        f"| {name} | {fit.chi2:.1f} / {fit.dof} | {rms * 1e3:.0f} | {h2.size} (p = {h2.p_value:.2g}) | "
+        f"| {name} | {fit.chi2:.1f} / {fit.dof} | {rms * 1e3:.0f} | {h2.size} ({_p(h2)}) | "
         f"{np.mean(norm) * MG:+.2f} mg | {roll:.1f} | {pitch:.2f} | {sx:.2f}, {sy:.2f} |"
     )
 
@@ -90,7 +109,14 @@ def before_after(table: StopTable, g: float) -> tuple[list[str], effects.Loop]:
         "",
         f"`mountcal calibrate` on the same stops: roll {cal.roll_deg:.1f} ± {cal.roll_sigma_deg:.1f}°, pitch "
         f"{cal.pitch_deg:.2f} ± {cal.pitch_sigma_deg:.2f}°, yaw not determined (relative headings), confident: "
-        f"{cal.confident}; effects {cal.effects}.",
+        f"{cal.confident}; effects {', '.join(e.name for e in cal.effects) or 'none'}. "
+        + (
+            f"Of the σ, statistical roll {cal.systematic.statistical['roll_deg']:.2f}°, pitch "
+            f"{cal.systematic.statistical['pitch_deg']:.2f}°; systematic ({cal.systematic.source}) roll "
+            f"{cal.systematic.systematic['roll_deg']:.2f}°, pitch {cal.systematic.systematic['pitch_deg']:.2f}°."
+            if cal.systematic is not None
+            else ""
+        ),
         "",
     ]
     return out, loop
@@ -223,7 +249,7 @@ def candidate_columns(fit: full.Fit, table: StopTable, g: float) -> list[str]:
     big = full.StaticModel(table, (*terms, "scale"), g)
     r = model.residual(fit.state)
     jac = model.jacobian(fit.state)
-    jbig = big.jacobian(fit.state)
+    jbig = big.jacobian(fit.state)[:, list(big.owned["scale"])]  # scale_xx, yy, zz, then cross-axis xy, xz, yz
     n = len(table)
     beta = table.beta_rad
     assert beta is not None
@@ -239,8 +265,8 @@ def candidate_columns(fit: full.Fit, table: StopTable, g: float) -> list[str]:
 
     head = g * np.sin(alpha) * np.column_stack([-np.sin(beta), -np.cos(beta), np.zeros(n)])  # ∂f_v/∂β
     cols = {
-        "scale and cross-axis (all six)": jbig[:, -6:],
-        "scale: common (trace)": jbig[:, -6:-3].sum(axis=1, keepdims=True),
+        "scale and cross-axis (all six)": jbig,
+        "scale: common (trace)": jbig[:, :3].sum(axis=1, keepdims=True),
         "heading: a scale error of the relative headings": vehicle(head * (beta - beta.mean())[:, None])[:, None],
         "heading: one error per stop": np.column_stack(
             [vehicle(head * (np.arange(n) == i)[:, None]) for i in range(n)]
@@ -258,6 +284,7 @@ def candidate_columns(fit: full.Fit, table: StopTable, g: float) -> list[str]:
         [np.kron(x2[:, j], np.eye(3)[k]) for j in range(2) for k in range(3)]
     )
     q, _ = np.linalg.qr(jac)
+    unw = np.linalg.cholesky(table.cov_s)  # type: ignore[arg-type]
     perp = r - q @ (q.T @ r)
     coef, *_ = np.linalg.lstsq(x2, r.reshape(n, 3), rcond=None)
     p2 = (x2 @ coef).ravel()
@@ -276,8 +303,9 @@ def candidate_columns(fit: full.Fit, table: StopTable, g: float) -> list[str]:
         dchi = float(np.sum((u.T @ perp) ** 2))
         share = float(np.sum((u.T @ p2) ** 2) / (p2 @ p2)) if p2 @ p2 > 0 else 0.0
         left = perp - u @ (u.T @ perp)
-        w_after = left.reshape(n, 3) / fit.noise_scale
-        h2 = _regression(w_after, x2, "h2", "", replace(fit, dof=max(fit.dof - rank, 1)), table)
+        h2 = _projection(
+            left, _per_axis(wh, x2), _span(np.hstack([q, u])), "h2", "", replace(fit, dof=max(fit.dof - rank, 1)), unw
+        )
         dof = max(fit.dof - rank, 0)
         out.append(
             f"| {name} | {c.shape[1]} ({rank}) | {dchi:.1f} | {chi2_sf(dchi, rank) if rank else float('nan'):.2g} | "
@@ -294,15 +322,12 @@ def surface_monte_carlo(
     fin = loop.final
     fit, table = fin.fit, fin.table
     terms = tuple(t for t in fit.terms if t != "surface")
-    sigma_tilt = _surface_sigma(loop) * widen
+    sigma_tilt = surface_sigma(loop) * widen
     raw = loop.steps[0].table.subset(np.setdiff1d(np.arange(len(loop.steps[0].table)), fin.excluded))
     model = full.StaticModel(table, terms, g)
     pred = model.predict(fit.state)
     rot_t = fit.state.rot_vs.inv().as_matrix()
-    beta = table.beta_rad
-    assert beta is not None
-    x2 = np.column_stack([np.cos(2 * beta), np.sin(2 * beta)])
-    observed = _regression(whitened(table, fit), x2, "h2", "", fit, table)
+    observed = mg(pattern_2b(table, fit))
     sizes = []
     chol = np.linalg.cholesky(raw.cov_s)  # type: ignore[arg-type]
     for _ in range(runs):
@@ -314,22 +339,9 @@ def surface_monte_carlo(
             f = full.fit(sim, terms, g, fit.state)
         except Exception:
             continue
-        h = _regression(whitened(sim, f), x2, "h2", "", f, sim)
-        sizes.append(float(h.size.split()[0]))
+        sizes.append(mg(pattern_2b(sim, f)))
     sizes_a = np.array(sizes)
-    return (
-        float(observed.size.split()[0]),
-        float(np.mean(sizes_a >= float(observed.size.split()[0]))),
-        float(np.median(sizes_a)),
-    )
-
-
-def _surface_sigma(loop: effects.Loop) -> float:
-    """The fitted road tilt σ (rad): the final table's covariance less the stops' own, trace (gσ)²·2."""
-    fin = loop.final
-    own = loop.steps[0].table.subset(np.setdiff1d(np.arange(len(loop.steps[0].table)), fin.excluded)).cov_s
-    extra = np.trace(fin.table.cov_s - own, axis1=1, axis2=2)  # type: ignore[operator]
-    return float(np.sqrt(max(float(np.mean(extra)), 0.0) / 2) / fin.fit.state.g_mps2)
+    return observed, float(np.mean(sizes_a >= observed)), float(np.median(sizes_a))
 
 
 def grades(tables: dict[str, StopTable], atts: dict[str, dict[str, np.ndarray]], xv: np.ndarray) -> list[str]:
@@ -406,241 +418,6 @@ def positions(t: StopTable) -> str:
     )
 
 
-def _tilt_and_sigma(lp: effects.Loop) -> tuple[np.ndarray, np.ndarray, bool]:
-    """Rotation vector of the fit, the tilt σ about vehicle x, y as calibrate reports it (Birge-widened when
-    structure is left), and whether calibrate would call it confident (nothing unexplained, tilt σ < 2°)."""
-    f = lp.final.fit
-    birge = max(1.0, float(np.sqrt(f.chi2 / f.dof))) if lp.unexplained and f.dof > 0 else 1.0
-    sig = np.sqrt(np.diag(f.cov)[:2]) * birge
-    return f.state.rot_vs, sig, not lp.unexplained and bool(np.degrees(sig.max()) < 2.0)
-
-
-def bias_separability(loop: effects.Loop, g: float, runs: int, rng: np.random.Generator) -> list[str]:
-    """Is admitting a 3-D bias right here? Simulate the car's 5 stops (its headings, places and noise) with no
-    horizontal bias, each stop on its own surface, an |a| offset that may drift (as a temperature would), run
-    the model loop, and compare the tilt with the truth."""
-    fin = loop.final
-    raw = loop.steps[0].table
-    rot = fin.fit.state.rot_vs
-    beta = raw.beta_rad
-    assert beta is not None
-    sigma_tilt = _surface_sigma(loop)
-    chol = np.linalg.cholesky(raw.cov_s)  # type: ignore[arg-type]
-    out = [
-        f"Per-stop road tilt {np.degrees(sigma_tilt):.2f}° (1σ), the fitted mounting, the stops' own noise; "
-        f"{runs} runs per row.",
-        "",
-        "| common slope α | |a| offset, its drift over the stops | loop | bias admitted "
-        "| median |b_h| fitted (m/s², truth 0) | confident by the tilt about vehicle x, y "
-        "| tilt error / σ about vehicle x, y: RMS | within 2σ (all; confident) |",
-        "|---|---|---|---|---|---|---|---|",
-    ]
-    alpha_fit = np.degrees(float(fin.fit.state.slope_rad[0]))
-    for alpha_deg, offset, drift in ((0.0, 0.0, 0.0), (alpha_fit, 0.09, 0.0), (alpha_fit, 0.09, 0.05)):
-        for name, run in (("now", _loop_now), ("road tilt before outliers", surface_before_outlier)):
-            out.append(
-                _simulate_row(name, run, raw, rot, beta, g, (alpha_deg, offset, drift), sigma_tilt, chol, runs, rng)
-            )
-    for name, lr in (
-        ("its final model with the road tilt σ by REML", reml(loop, g)),
-        ("the loop with the road tilt decided before any outlier", surface_before_outlier(raw, g)),
-    ):
-        rv, sig, _confident = _tilt_and_sigma(lr)
-        f = lr.final.fit
-        roll, pitch, _ = np.degrees(angles_from_rot_vs(rv))
-        shown = "not admitted"
-        if "bias" in f.terms:
-            i_b = f.names.index("bias_x")
-            sb = np.sqrt(np.diag(f.cov)[i_b : i_b + 3])
-            shown = "(" + ", ".join(f"{v:+.3f} ± {e:.3f}" for v, e in zip(f.state.bias_s, sb, strict=True)) + ") m/s²"
-        out += [
-            "",
-            f"The real drive 165, {name}: steps {', '.join(s.added for s in lr.steps)} ({lr.final.reason[:60]}…); "
-            f"χ² {f.chi2:.1f} / {f.dof}; bias {shown}; roll {roll:.1f}°, pitch {pitch:.2f}°, tilt σ about vehicle "
-            f"x, y {np.degrees(sig[0]):.2f}°, {np.degrees(sig[1]):.2f}°; unexplained: "
-            + ("; ".join(f"{u.what} ({u.size})" for u in lr.unexplained) or "none"),
-        ]
-    return out
-
-
-def _tilt_error(fitted: Rotation, true: Rotation) -> np.ndarray:
-    """Tilt error (rad) about the fitted vehicle x, y axes, whatever the yaw: where the fit puts the true up axis."""
-    e = fitted.apply(true.inv().apply([0.0, 0.0, 1.0]))  # the true vehicle z in the fitted vehicle frame
-    return np.array([-e[1], e[0]])  # δ = log(R_fit R_trueᵀ) moves the true e_z to (δ_y, −δ_x, 0) in the fit
-
-
-def reml(lp: effects.Loop, g: float) -> effects.Loop:
-    """The final model with its road tilt σ by restricted maximum likelihood (REML) instead of ML.
-
-    ML estimates a variance from the residuals as if the fitted parameters were known; with 5 stops and
-    7 parameters most of the scatter is fitted away, so σ comes out small. REML adds log det(Jᵀ Σ⁻¹ J),
-    the information of the fitted terms (Patterson & Thompson 1971), which undoes that bias.
-    """
-    fin = lp.final
-    if "surface" not in fin.terms:
-        return lp
-    own = lp.steps[0].table.subset(np.setdiff1d(np.arange(len(lp.steps[0].table)), fin.excluded))
-    rot = fin.fit.state.rot_vs
-
-    def cost(log_s: float) -> tuple[float, StopTable, full.Fit]:
-        table = effects.with_surface(own, rot, float(np.exp(log_s)), g)
-        f = full.fit(table, fin.terms, g, fin.fit.state)
-        logdet = float(np.sum(np.linalg.slogdet(table.cov_s)[1]))  # type: ignore[arg-type]
-        return f.chi2 + logdet + float(np.linalg.slogdet(f.fisher)[1]), table, f
-
-    res = optimize.minimize_scalar(
-        lambda x: cost(x)[0],
-        bounds=(np.log(1e-4), np.log(np.radians(10.0))),
-        method="bounded",
-        options={"xatol": 0.01},
-    )
-    _, table, f = cost(float(res.x))
-    step = effects.Step(
-        "surface (REML)", f"road tilt {np.degrees(np.exp(res.x)):.3g}° by REML", fin.terms, fin.excluded, table, f
-    )
-    return effects._finish([*lp.steps, step], [])
-
-
-def surface_before_outlier(table: StopTable, g: float) -> effects.Loop:
-    """The proposed order: while the road tilt per stop is on offer and not yet decided, no stop is excluded as
-    an outlier (the stop with the largest road tilt is always 'an outlier' against the stops' mm/s² noise).
-    Emulated by gating effects._outlier for this one call."""
-    original = effects._outlier
-
-    def gated(cur: effects.Step, full_table: StopTable, g_: float, k: int) -> tuple[float, effects.Step] | None:
-        if "surface" in effects.candidates(cur.table, cur.terms, True):
-            return None
-        return original(cur, full_table, g_, k)
-
-    effects._outlier = gated
-    try:
-        return _loop_now(table, g)
-    finally:
-        effects._outlier = original
-
-
-def tilted_surface(table: StopTable, fit: full.Fit, sigma: float, second_order: bool) -> StopTable:
-    """The stops' covariance widened by a road tilt τ per stop as it acts: δf = τ × f_v (τ about the vehicle
-    x, y axes), which moves the component along gravity by g·sin α·τ as well as the horizontal ones by g·τ;
-    with ``second_order`` also the spread g·σ² of the g·|τ|²/2 it takes off along gravity."""
-    g = fit.state.g_mps2
-    alpha = fit.state.slope_rad[full.site_index(table)[0]]
-    beta = table.beta_rad
-    assert beta is not None
-    f_v = g * np.column_stack([np.sin(alpha) * np.cos(beta), -np.sin(alpha) * np.sin(beta), np.cos(alpha)])
-    sk = skew(f_v)
-    cov_v = sigma**2 * sk @ np.diag([1.0, 1.0, 0.0]) @ np.swapaxes(sk, 1, 2)
-    if second_order:
-        cov_v[:, 2, 2] += (g * sigma**2) ** 2
-    rm = fit.state.rot_vs.as_matrix()
-    return replace(table, cov_s=table.cov_s + rm.T @ cov_v @ rm)  # type: ignore[operator]
-
-
-def surface_covariance_check(loop: effects.Loop, g: float, runs: int, rng: np.random.Generator) -> list[str]:
-    """Is the road-tilt covariance right? The car's 5 stops on a 2.2° slope, each tilted by τ (σ known and
-    given to the fit, no bias, no loop): how often is the fitted tilt within 2σ of the truth?"""
-    raw = loop.steps[0].table
-    rot = loop.final.fit.state.rot_vs
-    beta = raw.beta_rad
-    assert beta is not None
-    chol = np.linalg.cholesky(raw.cov_s)  # type: ignore[arg-type]
-    a = float(loop.final.fit.state.slope_rad[0])
-    f_v = g * np.column_stack([np.sin(a) * np.cos(beta), -np.sin(a) * np.sin(beta), np.full(len(raw), np.cos(a))])
-    out = [
-        "| road tilt σ | covariance given to the fit | terms | tilt error / σ about vehicle x, y: RMS | within 2σ |",
-        "|---|---|---|---|---|",
-    ]
-    for sigma_deg in (0.3, 1.19):
-        sigma = np.radians(sigma_deg)
-        sims = []
-        for _ in range(runs):
-            tau = rng.normal(0, sigma, (len(raw), 2))
-            f_i = Rotation.from_rotvec(np.column_stack([tau, np.zeros(len(raw))])).apply(f_v)
-            acc = rot.inv().apply(f_i) + np.einsum("nij,nj->ni", chol, rng.normal(size=(len(raw), 3)))
-            sims.append(replace(raw, acc_s=acc))
-        for name, terms, widen in (
-            ("now: horizontal only, (g·σ)² diag(1, 1, 0)", effects.BASE, None),
-            ("τ × f_v (first order)", effects.BASE, False),
-            ("τ × f_v and (g·σ²)² along gravity; g fitted", (*effects.BASE, "gravity"), True),
-        ):
-            z, failed = [], 0
-            for sim in sims:
-                try:
-                    f = full.fit(sim, effects.BASE, g)
-                    for _ in range(2):  # the covariance depends on the fit: refit once with the updated one
-                        table = (
-                            effects.with_surface(sim, f.state.rot_vs, sigma, g)
-                            if widen is None
-                            else tilted_surface(sim, f, sigma, widen)
-                        )
-                        f = full.fit(table, terms, g, f.state)
-                except FitFailed:
-                    failed += 1
-                    continue
-                z.append(_tilt_error(f.state.rot_vs, rot) / np.sqrt(np.diag(f.cov)[:2]))
-            zz = np.array(z)
-            out.append(
-                f"| {sigma_deg:g}° | {name} | {', '.join(terms)} | {np.sqrt(np.mean(zz[:, 0] ** 2)):.1f}, "
-                f"{np.sqrt(np.mean(zz[:, 1] ** 2)):.1f} | {np.mean(np.all(np.abs(zz) <= 2, axis=1)):.0%} "
-                f"({len(zz)} fits{f', {failed} did not converge' if failed else ''}) |"
-            )
-    return out
-
-
-def _loop_now(table: StopTable, g: float) -> effects.Loop:
-    return effects.close_the_loop(table, g, gravity_known=True, alpha=0.001)
-
-
-def _simulate_row(
-    name: str,
-    run: Callable[[StopTable, float], effects.Loop],
-    raw: StopTable,
-    rot: Rotation,
-    beta: np.ndarray,
-    g: float,
-    truth: tuple[float, float, float],
-    sigma_tilt: float,
-    chol: np.ndarray,
-    runs: int,
-    rng: np.random.Generator,
-) -> str:
-    alpha_deg, offset, drift = truth  # common slope (°), offset of |a| (m/s²), its drift over the stops (m/s²)
-    vertical = rot.inv().apply([0.0, 0.0, 1.0])
-    t = raw.t_s - raw.t_s.mean()  # type: ignore[operator]
-    level = offset + drift * t / np.ptp(t)
-    admitted, bh, z, conf = 0, [], [], []
-    for _ in range(runs):
-        tilt = rng.normal(0, sigma_tilt, (len(raw), 2))
-        a = np.radians(alpha_deg)
-        up = np.column_stack(
-            [np.sin(a) * np.cos(beta) + tilt[:, 1], -np.sin(a) * np.sin(beta) - tilt[:, 0], np.ones(len(raw))]
-        )
-        up /= np.linalg.norm(up, axis=1)[:, None]
-        acc = rot.inv().apply(g * up) - level[:, None] * vertical
-        acc += np.einsum("nij,nj->ni", chol, rng.normal(size=(len(raw), 3)))
-        try:
-            lp = run(replace(raw, acc_s=acc), g)
-        except Exception:
-            continue
-        f = lp.final.fit
-        if "bias" in f.terms:
-            admitted += 1
-            b_v = rot.apply(f.state.bias_s)
-            bh.append(float(np.hypot(b_v[0], b_v[1])))
-        rv, sig, c = _tilt_and_sigma(lp)
-        z.append(_tilt_error(rv, rot) / sig)
-        conf.append(c)
-    zz, cc = np.array(z), np.array(conf)
-    inside = np.all(np.abs(zz) <= 2, axis=1)
-    return (
-        f"| {alpha_deg:.1f}° | {-offset * MG:+.1f} mg, drift {drift * MG:.1f} mg | {name} | "
-        f"{admitted / max(len(zz), 1):.0%} | "
-        f"{np.median(bh) if bh else float('nan'):.3f} | {np.mean(cc):.0%} | "
-        f"{np.sqrt(np.mean(zz[:, 0] ** 2)):.1f}, {np.sqrt(np.mean(zz[:, 1] ** 2)):.1f} | "
-        f"{np.mean(inside):.0%}; {np.mean(inside[cc]) if cc.any() else float('nan'):.0%} |"
-    )
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--real", type=Path, default=REAL)
@@ -657,7 +434,9 @@ def main() -> None:
     for drive in ("00000164", "00000165"):
         samples[drive], frames[drive], atts[drive] = session(args.real, drive)
     # drive 164 has 2 stops, too few for a table of its own: its rows of the two drives' table
-    both = stop_table_from_frame(pd.concat(list(frames.values()), ignore_index=True), headings="relative")
+    both = stop_table_from_frame(
+        pd.concat([t.to_frame() for t in frames.values()], ignore_index=True), "mps2", "relative"
+    )
     n4 = len(frames["00000164"])
     tables = {
         "00000164": both.subset(np.arange(n4)),
@@ -677,12 +456,12 @@ def main() -> None:
     print("\n## The 2β pattern\n")
     print(positions(t5))
     print(
-        f"- **Random per-stop road tilt** (the `surface` effect, {np.degrees(_surface_sigma(loop)):.2f}° 1σ): "
+        f"- **Random per-stop road tilt** (the `surface` effect, {np.degrees(surface_sigma(loop)):.2f}° 1σ): "
         f"simulated at these {len(fin.table)} headings with the final model's fit and the stops' own noise "
         f"({args.runs} runs), a 2β pattern at least as large as the observed {obs:.3g} mg comes out in "
         f"**{p_mc:.0%}** of runs (median {median:.3g} mg). The final χ²/dof is {birge**2:.1f}: the stops scatter "
         f"more than the fitted tilt σ says. With the tilt σ widened by the Birge ratio {birge:.2f} "
-        f"({np.degrees(_surface_sigma(loop)) * birge:.2f}°), {p_wide:.0%} of runs (median {median_wide:.3g} mg)."
+        f"({np.degrees(surface_sigma(loop)) * birge:.2f}°), {p_wide:.0%} of runs (median {median_wide:.3g} mg)."
     )
     print(residual_split(fin))
     print(load_transfer(float(fin.fit.state.slope_rad[0]))[0])
