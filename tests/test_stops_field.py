@@ -12,18 +12,20 @@ import pytest
 from mountcal import cli
 from mountcal.apply.rotate_log import to_frame
 from mountcal.calibrate import calibrate
+from mountcal.cli.options import detection
 from mountcal.errors import NotEnoughInformation
 from mountcal.io.timestamps import MERGED, increasing_times
+from mountcal.option_names import as_flags
 from mountcal.samples import Channel, Samples
 from mountcal.simulate.stops import ParkingLog, simulate_parking_log
 from mountcal.stops import (
-    RELAX,
     StopDetection,
     Thresholds,
     _cov_of_mean,
     beta_from_heading,
     detect_stops,
     find_stops,
+    relax,
     still_mask,
     stop_table,
     tabulate,
@@ -195,14 +197,15 @@ def _options_named(text: str) -> set[str]:
 
 def test_every_option_named_in_a_stop_detection_message_exists() -> None:
     log = field_log(2.0, seed=12)
-    messages = [RELAX, *find_stops(samples_of(log)).lines()]
     moving = Samples(log.t_s[log.speed_mps > 1.0], log.acc_s[log.speed_mps > 1.0])
-    with pytest.raises(NotEnoughInformation) as err:
-        tabulate(moving)
+    with as_flags():  # as the CLI prints them
+        messages = [relax(), *find_stops(samples_of(log)).lines()]
+        with pytest.raises(NotEnoughInformation) as err:
+            tabulate(moving)
     messages.append(str(err.value))
     named = set().union(*map(_options_named, messages))
     assert {"--max-acc-std", "--max-gyro-std", "--max-gyro-rate", "--max-speed", "--min-stop-s"} <= named
-    parser = cli._parser()
+    parser = cli.build_parser()
     sub = next(a for a in parser._actions if a.dest == "command").choices
     assert isinstance(sub, dict)
     for command in ("calibrate", "stops", "fleet"):
@@ -213,16 +216,19 @@ def test_every_option_named_in_a_stop_detection_message_exists() -> None:
 def test_each_option_reaches_the_detector() -> None:
     given = "--max-acc-std 0.2 --max-gyro-std 0.03 --max-gyro-rate 0.04 --max-speed 0.5 --still-window-s 3 "
     given += "--min-stop-s 5 --trim-s 1 --max-heading-wander 7"
-    args = cli._parser().parse_args(["stops", "x.csv", "-o", "y.csv", *given.split()])
-    assert cli._detection(args) == StopDetection(3.0, 0.2, 0.03, 0.04, 0.5, 5.0, 1.0, 7.0)
+    args = cli.build_parser().parse_args(["stops", "x.csv", "-o", "y.csv", *given.split()])
+    assert detection(args) == StopDetection(3.0, 0.2, 0.03, 0.04, 0.5, 5.0, 1.0, 7.0)
     log = field_log(2.0, seed=13)
-    used = find_stops(samples_of(log), cli._detection(args)).thresholds
+    used = find_stops(samples_of(log), detection(args)).thresholds
     assert (used.acc_std_mps2, used.gyro_std_rad_s, used.gyro_rate_rad_s) == (0.2, 0.03, 0.04)
 
 
 def test_thresholds_report_names_their_options() -> None:
     t = Thresholds(0.1, np.zeros(3), np.zeros(3), 0.01, 0.02, np.zeros(3), np.zeros(3), np.zeros(3), 0.3)
-    assert {"--max-acc-std", "--max-gyro-std", "--max-gyro-rate", "--max-speed"} <= _options_named(" ".join(t.lines()))
+    assert "--" not in " ".join(t.lines()) and "StopDetection.max_acc_std_mps2=" in t.lines()[0]  # in Python
+    with as_flags():  # as the CLI logs them
+        lines = t.lines()
+    assert {"--max-acc-std", "--max-gyro-std", "--max-gyro-rate", "--max-speed"} <= _options_named(" ".join(lines))
 
 
 CANEDGE = Path("canedge")
