@@ -15,6 +15,7 @@ from mountcal.calibrate import Options, parse_model
 from mountcal.errors import InputError
 from mountcal.io.logs import LogOptions
 from mountcal.option_names import OPTIONS, as_flags, option
+from mountcal.outputs.exporters import export
 from mountcal.outputs.report.html import render
 from mountcal.pipeline import calibrate_log
 from mountcal.simulate.stops import simulate_preset
@@ -38,7 +39,10 @@ def test_every_flag_in_the_table_is_a_flag_of_the_parsers() -> None:
 def test_every_python_spelling_in_the_table_is_a_parameter() -> None:
     classes = {c.__name__: {f.name for f in dataclasses.fields(c)} for c in (StopDetection, Options, LogOptions)}
     parameters = set().union(
-        *(inspect.signature(f).parameters for f in (calibrate_log, read_stop_table, rotate_log, output_format, render))
+        *(
+            inspect.signature(f).parameters
+            for f in (calibrate_log, read_stop_table, rotate_log, output_format, render, export)
+        )
     )
     for key, (python, _) in OPTIONS.items():
         owner, _, name = python.rpartition(".")

@@ -15,6 +15,7 @@ from contextvars import ContextVar
 
 # key -> (Python spelling, CLI flag). A nested parameter is spelled with its options class.
 OPTIONS: dict[str, tuple[str, str]] = {
+    "accept_unconfident": ("accept_unconfident", "--accept-unconfident"),
     "dbc": ("LogOptions.dbc", "--dbc"),
     "figures": ("image_format", "--figures"),
     "format": ("fmt", "--format"),
@@ -38,6 +39,7 @@ OPTIONS: dict[str, tuple[str, str]] = {
     "trim": ("StopDetection.trim_s", "--trim-s"),
     "unit": ("unit", "--unit"),
     "uphill_azimuth": ("uphill_azimuth_deg", "--uphill-azimuth-deg"),
+    "yaw_undetermined": ("yaw", "--yaw-undetermined"),
 }
 
 _FLAGS: ContextVar[bool] = ContextVar("mountcal_option_flags", default=False)
