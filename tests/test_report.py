@@ -89,7 +89,7 @@ def test_report_from_the_json_alone_draws_the_residuals_and_says_what_is_missing
     _, cal = paper_scenario
     doc = json.loads(json.dumps(cal.to_dict()))
     html = render(doc)
-    assert "--stops STOPS" in html  # says why the 3-D figure is absent
+    assert "pass the stop table (<code>table=</code>)" in html  # says why the 3-D figure is absent, in Python terms
     assert _figure_count(html) >= 2  # residual per stop, uncertainty against the bound
     with_table = render(paper_scenario[1], paper_scenario[0])
     assert _figure_count(with_table) > _figure_count(html)

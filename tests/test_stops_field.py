@@ -15,16 +15,17 @@ from mountcal.calibrate import calibrate
 from mountcal.cli.options import detection
 from mountcal.errors import NotEnoughInformation
 from mountcal.io.timestamps import MERGED, increasing_times
+from mountcal.option_names import as_flags
 from mountcal.samples import Channel, Samples
 from mountcal.simulate.stops import ParkingLog, simulate_parking_log
 from mountcal.stops import (
-    RELAX,
     StopDetection,
     Thresholds,
     _cov_of_mean,
     beta_from_heading,
     detect_stops,
     find_stops,
+    relax,
     still_mask,
     stop_table,
     tabulate,
@@ -196,10 +197,11 @@ def _options_named(text: str) -> set[str]:
 
 def test_every_option_named_in_a_stop_detection_message_exists() -> None:
     log = field_log(2.0, seed=12)
-    messages = [RELAX, *find_stops(samples_of(log)).lines()]
     moving = Samples(log.t_s[log.speed_mps > 1.0], log.acc_s[log.speed_mps > 1.0])
-    with pytest.raises(NotEnoughInformation) as err:
-        tabulate(moving)
+    with as_flags():  # as the CLI prints them
+        messages = [relax(), *find_stops(samples_of(log)).lines()]
+        with pytest.raises(NotEnoughInformation) as err:
+            tabulate(moving)
     messages.append(str(err.value))
     named = set().union(*map(_options_named, messages))
     assert {"--max-acc-std", "--max-gyro-std", "--max-gyro-rate", "--max-speed", "--min-stop-s"} <= named
@@ -223,7 +225,10 @@ def test_each_option_reaches_the_detector() -> None:
 
 def test_thresholds_report_names_their_options() -> None:
     t = Thresholds(0.1, np.zeros(3), np.zeros(3), 0.01, 0.02, np.zeros(3), np.zeros(3), np.zeros(3), 0.3)
-    assert {"--max-acc-std", "--max-gyro-std", "--max-gyro-rate", "--max-speed"} <= _options_named(" ".join(t.lines()))
+    assert "--" not in " ".join(t.lines()) and "StopDetection.max_acc_std_mps2=" in t.lines()[0]  # in Python
+    with as_flags():  # as the CLI logs them
+        lines = t.lines()
+    assert {"--max-acc-std", "--max-gyro-std", "--max-gyro-rate", "--max-speed"} <= _options_named(" ".join(lines))
 
 
 CANEDGE = Path("canedge")

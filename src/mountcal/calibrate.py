@@ -33,6 +33,7 @@ from mountcal.estimate.bound import crb_deg, euler_gradients
 from mountcal.estimate.effects.temperature import MIN_TEMPERATURE_SPAN_C
 from mountcal.estimate.geometry import span_ratio
 from mountcal.estimate.observability import separability
+from mountcal.option_names import option
 from mountcal.pvalues import chi2_logsf, chi2_sf
 from mountcal.result import (
     Angles,
@@ -86,7 +87,7 @@ def calibrate(table: StopTable, options: Options | None = None) -> Calibration:
     if opts.method == "paper":
         return _paper(table, g, g_source, opts)
     if opts.method != "full":
-        raise InputError("--method", "paper or full", repr(opts.method), "Choose one of them.")
+        raise InputError(option("method"), "paper or full", repr(opts.method), "Choose one of them.")
     return _full(table, g, g_source, opts)
 
 
@@ -99,10 +100,10 @@ def parse_model(spec: str) -> tuple[str, ...] | None:
     unknown = [t for t in terms if t not in known]
     if terms[:2] != model_terms.BASE or unknown or len(set(terms)) != len(terms):
         raise InputError(
-            "--model",
+            option("model"),
             f"{model_terms.help_text()} (installed: {', '.join(model_terms.optional())})",
             repr(spec) + (f" (unknown: {', '.join(unknown)})" if unknown else ""),
-            "For example --model rotation,slope,bias.",
+            f"For example {option('model', 'rotation,slope,bias')}.",
         )
     return terms
 
@@ -114,10 +115,10 @@ def check_model(table: StopTable, terms: tuple[str, ...]) -> None:
         missing = [c for c in known[name].needs if getattr(table, _FIELD.get(c, c), None) is None]
         if missing:
             raise InputError(
-                f"{table.source} with --model {','.join(terms)}",
+                f"{table.source} with {option('model', ','.join(terms))}",
                 f"the column {', '.join(missing)} for the term {name}",
                 "no such column",
-                f"Add the column, or leave {name} out of --model (or use --model auto).",
+                f"Add the column, or leave {name} out of {option('model')} (or use {option('model', 'auto')}).",
             )
     if "temperature" in terms and table.temperature_c is not None:
         span = float(np.ptp(table.temperature_c))
@@ -125,12 +126,12 @@ def check_model(table: StopTable, terms: tuple[str, ...]) -> None:
             raise NotEnoughInformation(
                 f"{table.source}: the term temperature needs stops at different temperatures (a span of at least "
                 f"{MIN_TEMPERATURE_SPAN_C:g} °C), found a span of {span:.3g} °C: a drift per °C cannot be measured. "
-                "Leave temperature out of --model."
+                f"Leave temperature out of {option('model')}."
             )
     if "site_slope" in terms and table.site is not None and np.unique(table.site).size < 2:
         raise NotEnoughInformation(
             f"{table.source}: the term site_slope needs stops at two or more sites, found one. "
-            "Leave site_slope out of --model."
+            f"Leave site_slope out of {option('model')}."
         )
 
 
@@ -160,7 +161,7 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
         raise NotEnoughInformation(
             f"{table.source}: roll and pitch are not determined by these stops with the model "
             f"{', '.join(f.terms)} (the Fisher information is singular). On level ground a bias cannot be "
-            "told from a tilt: park on a slope, or fit without a bias (--model rotation,slope)."
+            f"told from a tilt: park on a slope, or fit without a bias ({option('model', 'rotation,slope')})."
         )
     notes: list[str] = []
     declined = tuple(Declined(str(d["effect"]), str(d["why"])) for d in loop.declined)
@@ -422,10 +423,10 @@ def _observability(table: StopTable, f: full.Fit, g: float) -> Observability:
 def _paper(table: StopTable, g: float, g_source: str, opts: Options) -> Calibration:
     if opts.model not in ("auto", "rotation,slope"):
         raise InputError(
-            "--model",
-            "auto or rotation,slope with --method paper",
+            option("model"),
+            f"auto or rotation,slope with {option('method', 'paper')}",
             repr(opts.model),
-            "The paper's method fits no bias; use --method full for other models.",
+            f"The paper's method fits no bias; use {option('method', 'full')} for other models.",
         )
     est, cov, noise_scale, residual = paper.paper_method(table, g)
     roll, pitch, yaw = (float(np.degrees(a)) for a in angles_from_rot_vs(est.rot_vs))
@@ -441,7 +442,7 @@ def _paper(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrat
     notes += [d + "; the result is not confident" for d in doubts]
     notes.append(
         "the paper's method reports the statistical σ only: the sensor's systematic part (scale, cross-axis, bias the "
-        "stops cannot see) is propagated by --method full"
+        f"stops cannot see) is propagated by {option('method', 'full')}"
     )
     if est.slope_rad is None:
         notes.append(

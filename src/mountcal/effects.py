@@ -25,6 +25,7 @@ from mountcal.diagnose import analyse, heading_harmonics, leave_one_out, project
 from mountcal.errors import FitFailed, NotEnoughInformation
 from mountcal.estimate import effects as registry
 from mountcal.estimate import full
+from mountcal.option_names import option
 from mountcal.pvalues import chi2_logsf, nested_test
 from mountcal.result import EffectValue, Finding
 from mountcal.stoptable import StopTable
@@ -133,7 +134,7 @@ def close_the_loop(
         if fixed != BASE:
             _refuse_inseparable(steps[-1], fixed, g_mps2)
             f = full.fit(table, fixed, g_mps2, base.state)
-            steps.append(Step("fixed", "terms fixed by --model", fixed, (), table, f))
+            steps.append(Step("fixed", "terms fixed by the model asked for", fixed, (), table, f))
         return _finish(steps, declined)
     level = logging.INFO if len(table) >= PROGRESS_STOPS else logging.DEBUG
     for round_ in range(1, MAX_ROUNDS + 1):
@@ -450,8 +451,9 @@ def _refuse_inseparable(base: Step, fixed: tuple[str, ...], g: float) -> None:
         problem = _inseparable(base, fixed[: i + 1], g)
         if problem:
             raise NotEnoughInformation(
-                f"{base.table.source}: the term {fixed[i]} of --model {','.join(fixed)} cannot be fitted: it is "
-                f"{problem}. Leave it out of --model (or use --model auto, which adds only what the stops separate)."
+                f"{base.table.source}: the term {fixed[i]} of {option('model', ','.join(fixed))} cannot be fitted: "
+                f"it is {problem}. Leave it out of {option('model')} (or use {option('model', 'auto')}, which adds "
+                "only what the stops separate)."
             )
 
 

@@ -22,6 +22,7 @@ import pandas as pd
 from mountcal.conventions import FloatArray
 from mountcal.errors import NotEnoughInformation
 from mountcal.io.timestamps import increasing_times, time_ordered
+from mountcal.option_names import option
 from mountcal.samples import Channel, Samples
 from mountcal.stoptable import Headings, StopTable, checked
 
@@ -73,20 +74,20 @@ class Thresholds:
             return "(" + ", ".join(f"{v * scale:.3g}" for v in x) + ")"
 
         out = [
-            f"stillness: accelerometer moving std < {self.acc_std_mps2:.3g} m/s² (--max-acc-std; rest noise "
+            f"stillness: accelerometer moving std < {self.acc_std_mps2:.3g} m/s² ({option('max_acc_std')}; rest noise "
             f"{vec(self.acc_rest_noise_mps2)}, quantisation {vec(self.acc_lsb_mps2)} m/s²)"
         ]
         if self.gyro_std_rad_s is not None and self.gyro_rate_rad_s is not None and self.gyro_bias_rad_s is not None:
             assert self.gyro_rest_noise_rad_s is not None and self.gyro_lsb_rad_s is not None
             deg = float(np.degrees(1.0))
             out.append(
-                f"stillness: gyro moving std < {self.gyro_std_rad_s:.3g} rad/s (--max-gyro-std) and rate within "
-                f"{self.gyro_rate_rad_s:.3g} rad/s of the gyro bias {vec(self.gyro_bias_rad_s, deg)} °/s "
-                f"(--max-gyro-rate; rest noise {vec(self.gyro_rest_noise_rad_s, deg)} °/s, "
+                f"stillness: gyro moving std < {self.gyro_std_rad_s:.3g} rad/s ({option('max_gyro_std')}) and rate "
+                f"within {self.gyro_rate_rad_s:.3g} rad/s of the gyro bias {vec(self.gyro_bias_rad_s, deg)} °/s "
+                f"({option('max_gyro_rate')}; rest noise {vec(self.gyro_rest_noise_rad_s, deg)} °/s, "
                 f"quantisation {vec(self.gyro_lsb_rad_s, deg)} °/s)"
             )
         if self.speed_mps is not None:
-            out.append(f"stillness: speed ≤ {self.speed_mps:g} m/s (--max-speed)")
+            out.append(f"stillness: speed ≤ {self.speed_mps:g} m/s ({option('max_speed')})")
         return out
 
 
@@ -253,7 +254,7 @@ def find_stops(
     if unjudged:
         counts[
             f"samples whose {cfg.window_s:g} s window holds fewer than {MIN_WINDOW_SAMPLES} samples or a gap "
-            f"(spans over {MAX_WINDOW_SPAN * cfg.window_s:g} s): not judged still (--still-window-s)"
+            f"(spans over {MAX_WINDOW_SPAN * cfg.window_s:g} s): not judged still ({option('still_window')})"
         ] = unjudged
     runs = _runs(still)
     t = samples.t_s
@@ -291,7 +292,8 @@ def find_stops(
             pieces_dropped += len(pieces) - len(found)
     if split:
         counts[
-            f"still periods whose heading wandered > {cfg.max_heading_wander_deg:g}° (split; --max-heading-wander)"
+            f"still periods whose heading wandered > {cfg.max_heading_wander_deg:g}° "
+            f"(split; {option('max_heading_wander')})"
         ] = split
         counts["pieces of those not kept as a stop (too short, or not the longest in a protocol row)"] = pieces_dropped
     if too_few:
@@ -518,7 +520,7 @@ def tabulate(
         if not stops:
             raise NotEnoughInformation(
                 f"{where}: no parked period found inside any protocol interval. Check that "
-                f"the sheet's times are on the log's clock, or {RELAX}. Used: {'; '.join(search.lines())}."
+                f"the sheet's times are on the log's clock, or {relax()}. Used: {'; '.join(search.lines())}."
             )
         beta = protocol["beta_deg"].to_numpy()[kept]
         return StopTableFromLog(
@@ -530,7 +532,7 @@ def tabulate(
     if not stops:
         raise NotEnoughInformation(
             f"{where}: no parked period found (no still run ≥ {(cfg or StopDetection()).min_duration_s:g} s). "
-            f"Check that the log holds parked periods, or {RELAX}. Used: {'; '.join(notes)}."
+            f"Check that the log holds parked periods, or {relax()}. Used: {'; '.join(notes)}."
         )
     heading = np.array([s.channels.get("heading_deg", np.nan) for s in stops])
     if np.all(np.isfinite(heading)):
@@ -548,8 +550,11 @@ def tabulate(
     return StopTableFromLog(stop_table(stops, None, "none", where), "none", notes=notes)
 
 
-# Advice naming the options that change stop detection (tests check that every one exists).
-RELAX = (
-    "relax the stillness thresholds: --max-acc-std (m/s²), --max-gyro-std and --max-gyro-rate (rad/s), "
-    "--max-speed (m/s), --min-stop-s, --trim-s, --still-window-s, --max-heading-wander (deg)"
-)
+def relax() -> str:
+    """Advice naming the options that change stop detection."""
+    o = option
+    return (
+        f"relax the stillness thresholds: {o('max_acc_std')} (m/s²), {o('max_gyro_std')} and {o('max_gyro_rate')} "
+        f"(rad/s), {o('max_speed')} (m/s), {o('min_stop')}, {o('trim')}, {o('still_window')}, "
+        f"{o('max_heading_wander')} (deg)"
+    )

@@ -27,6 +27,7 @@ import pandas as pd
 from mountcal.conventions import G_N, FloatArray
 from mountcal.errors import InputError, NotEnoughInformation
 from mountcal.io.inputs import check_parquet_rows
+from mountcal.option_names import option
 from mountcal.paths import read_input_bytes
 from mountcal.result import StopsFingerprint
 
@@ -413,18 +414,18 @@ def _check_gravity(acc: FloatArray, unit: Unit, source: str) -> None:
     scale = 1.0 if unit == "mps2" else G_N
     found = ", ".join(f"row {i + 1}: |a| = {mag[i] / scale:.4g} {shown}" for i in bad[:5])
     hint = (
-        "Check the unit: add --unit g if the table is in g."
+        f"Check the unit: add {option('unit', 'g')} if the table is in g."
         if unit == "mps2"
-        else ("Check the unit: drop --unit g if the table is in m/s².")
+        else (f"Check the unit: drop {option('unit', 'g')} if the table is in m/s².")
     )
     if np.median(mag) / scale < 2.0 and unit == "mps2":
-        hint = "The magnitudes look like g: add --unit g."
+        hint = f"The magnitudes look like g: add {option('unit', 'g')}."
     elif np.median(mag) / scale > 5.0 and unit == "g":
-        hint = "The magnitudes look like m/s²: drop --unit g."
+        hint = f"The magnitudes look like m/s²: drop {option('unit', 'g')}."
     with np.errstate(over="ignore"):
         other = mag[bad] * (G_N if unit == "mps2" else 1.0 / G_N)  # the bad rows read in the other unit
     hopeless = bad[~(np.isfinite(other) & (other >= lo * G_N) & (other <= hi * G_N))]
-    if hopeless.size == bad.size:  # the unit explains none of them: advising --unit would be wrong
+    if hopeless.size == bad.size:  # the unit explains none of them: advising a unit would be wrong
         hint = "Those rows are no static reading in either unit (huge, overflowing or near-zero): fix or remove them."
     elif hopeless.size:
         hint += f" Rows {_rows(hopeless)} are no static reading in either unit: fix or remove them."

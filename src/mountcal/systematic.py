@@ -26,6 +26,7 @@ from mountcal.conventions import FloatArray
 from mountcal.estimate import full
 from mountcal.estimate.bound import euler_gradients
 from mountcal.estimate.effects.scale import SCALE_NAMES
+from mountcal.option_names import option
 from mountcal.result import Systematic
 from mountcal.sensor_spec import SensorSpec
 from mountcal.stoptable import StopTable
@@ -166,14 +167,16 @@ def combine(
     if part.default_spec:
         notes.append(
             "no sensor spec given: the systematic σ assumes the default class (an uncalibrated consumer MEMS "
-            "accelerometer: ±3 % scale, ±2 % cross-axis, ±80 mg bias); give --sensor-spec or --triad for your sensor"
+            "accelerometer: ±3 % scale, ±2 % cross-axis, ±80 mg bias); give "
+            f"{option('sensor_spec')} or {option('triad')} for your sensor"
         )
     if part.dominant:
         worst = max(("roll_deg", "pitch_deg", "yaw_deg"), key=lambda k: sys_sigma[k] or 0.0)
         notes.append(
             f"the error is dominated by sensor errors these stops cannot see ({', '.join(_short(used))}): "
             f"{worst.split('_')[0]} σ {stat[worst]:.3g}° statistical, {sys_sigma[worst]:.3g}° systematic; a triad "
-            "calibration (`mountcal triad`, then --triad) or stops on two slopes of different inclination would "
+            f"calibration (`mountcal triad`, then {option('triad')}) or stops on two slopes of different "
+            "inclination would "
             "remove it"
         )
     rot = cal.rotation_sigma_deg

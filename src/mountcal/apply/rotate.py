@@ -21,13 +21,19 @@ import pandas as pd
 from mountcal.conventions import G_N, FloatArray
 from mountcal.errors import InputError
 from mountcal.estimate.effects import apply_corrections
+from mountcal.option_names import option
 from mountcal.result import Calibration
 
 ACC_COLUMNS = ("ax", "ay", "az")
-YAW_SOURCES = (
-    "calibrate with --protocol SHEET (headings from the slope's uphill direction), with --uphill-azimuth-deg "
-    "and a heading signal in the log, or from a log with driving and a vehicle speed channel"
-)
+
+
+def yaw_sources() -> str:
+    """Where a determined yaw comes from, naming the options that give it."""
+    return (
+        f"calibrate with {option('protocol')} (a protocol sheet: headings from the slope's uphill direction), "
+        f"with {option('uphill_azimuth')} and a heading signal in the log, or from a log with driving and a "
+        "vehicle speed channel"
+    )
 
 
 def check_applicable(
@@ -47,8 +53,8 @@ def check_applicable(
             where,
             "a calibration with a determined yaw, to rotate into the vehicle frame",
             f"yaw not determined ({cal.yaw_reason or 'no reason recorded'})",
-            f"Determine yaw: {YAW_SOURCES}. Or, to level only (z up, the heading left the sensor's own), "
-            "pass --level-only (level_only=True in Python).",
+            f"Determine yaw: {yaw_sources()}. Or, to level only (z up, the heading left the sensor's own), "
+            f"pass {option('level_only', True)}.",
         )
     found: list[str] = []
     if not cal.confident:
@@ -56,9 +62,10 @@ def check_applicable(
         if require_confident:
             raise InputError(
                 where,
-                "a confident calibration (--require-confident)",
+                f"a confident calibration ({option('require_confident', True)})",
                 f"a result that is not confident ({why})",
-                "Check the result's notes and unexplained structure, re-calibrate, or drop --require-confident.",
+                "Check the result's notes and unexplained structure, re-calibrate, or drop "
+                f"{option('require_confident', True)}.",
             )
         found.append(
             f"the calibration is not confident ({why}); its σ are qualified and the rotation may be wrong "

@@ -62,6 +62,7 @@ from mountcal.io.mcap.write import McapImuSamples
 from mountcal.io.registry import reader_for
 from mountcal.io.ros2.imu import ImuMessages
 from mountcal.io.table.write import CsvSamples, ParquetSamples
+from mountcal.option_names import option
 from mountcal.result import VEHICLE_FRAME, Calibration
 from mountcal.samples import Samples
 from mountcal.threads import helpers_allowed
@@ -124,7 +125,7 @@ def output_format(path: str | os.PathLike[str], fmt: str | None = None) -> str:
     """``parquet``, ``csv`` or ``mcap``: the one asked for, else from the suffix, else Parquet."""
     if fmt is not None:
         if fmt not in ("parquet", "csv", "mcap"):
-            raise InputError("--format", "parquet, csv or mcap", repr(fmt), "Choose one of them.")
+            raise InputError(option("format"), "parquet, csv or mcap", repr(fmt), "Choose one of them.")
         return fmt
     return FORMATS.get(Path(path).suffix.lower(), "parquet")
 

@@ -19,6 +19,7 @@ from collections.abc import Sequence
 
 from mountcal.cli.options import EXIT_CODES, configure_logging
 from mountcal.errors import MountcalError
+from mountcal.option_names import as_flags
 from mountcal.paths import SystemFailure
 from mountcal.terminal import safe
 
@@ -33,7 +34,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     configure_logging(args.verbose - args.quiet)
     try:
-        return int(args.run(args))
+        with as_flags():  # library messages name the flags, not the Python parameters
+            return int(args.run(args))
     except MountcalError as err:
         log.error("error: %s", safe(err, keep=chr(10)))
         return err.exit_code

@@ -25,9 +25,6 @@ FORMAT_NAMES = (
     "yaml",
 )
 
-# the library's words for a choice → this command's option (library messages name no option)
-OPTIONS = {"yaw='zero'": "--yaw-undetermined zero", "accept_unconfident=True": "--accept-unconfident"}
-
 log = logging.getLogger("mountcal")
 
 
@@ -63,7 +60,7 @@ def add_parser(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from mountcal.atomic import atomic_path
-    from mountcal.errors import InputError, NotEnoughInformation
+    from mountcal.errors import InputError
     from mountcal.outputs.exporters import Frames, export
     from mountcal.outputs.exporters.autoware import DEFAULT_FRAMES as AUTOWARE_FRAMES
     from mountcal.paths import check_outputs
@@ -81,13 +78,7 @@ def run(args: argparse.Namespace) -> int:
             child=args.child or base.child,
             translation_m=tuple(args.translation) if args.translation else base.translation_m,
         )
-    try:
-        out = export(cal, args.to, yaw=args.yaw_undetermined, accept_unconfident=args.accept_unconfident, frames=frames)
-    except NotEnoughInformation as err:
-        text = str(err)
-        for words, option in OPTIONS.items():
-            text = text.replace(words, option)
-        raise NotEnoughInformation(text) from err
+    out = export(cal, args.to, yaw=args.yaw_undetermined, accept_unconfident=args.accept_unconfident, frames=frames)
     if to_stdout:
         if isinstance(out, bytes):
             if sys.stdout.isatty():

@@ -58,6 +58,7 @@ from mountcal.estimate.driving_intervals import (
     time_offset,
     unit_vector,
 )
+from mountcal.option_names import option
 from mountcal.result import Calibration
 from mountcal.samples import Samples
 
@@ -291,7 +292,7 @@ def _fit(iv: Intervals, opts: DrivingOptions, where: str) -> _Fit:
         raise NotEnoughInformation(
             f"{where}: only {iv.a_ref.size} usable straight intervals at ≥ {opts.min_speed_mps:g} m/s "
             f"(need {MIN_INTERVALS}); yaw from driving needs more straight driving with speed changes "
-            "(accelerating and braking), or stops on a slope with headings (--protocol)"
+            f"(accelerating and braking), or stops on a slope with headings ({option('protocol')})"
         )
     u, a, lat = iv.centred()
     saa = float(a @ a)

@@ -18,6 +18,7 @@ from scipy.spatial.transform import Rotation
 from mountcal.conventions import FloatArray, angles_from_rot_vs, specific_force_v
 from mountcal.errors import NotEnoughInformation
 from mountcal.estimate.geometry import level_rotation, phase_yaw, plane_normal, with_yaw
+from mountcal.option_names import option
 from mountcal.stoptable import StopTable
 
 OPPOSITE_TOL_DEG = 1.0  # two headings are "opposite" within this
@@ -76,14 +77,15 @@ def paper_method(table: StopTable, g_mps2: float) -> tuple[PaperEstimate, FloatA
     if table.beta_rad is None or table.headings == "none":
         raise NotEnoughInformation(
             f"{table.source}: the paper's method needs the heading β of every stop, found none. "
-            "Add a beta_deg column, or use --method full, which estimates roll, pitch and slope without headings."
+            f"Add a beta_deg column, or use {option('method', 'full')}, which estimates roll, pitch and slope "
+            "without headings."
         )
     beta = table.beta_rad
     pairs = opposite_pairs(beta)
     if not pairs:
         raise NotEnoughInformation(
             f"{table.source}: the paper's slope step needs pairs of opposite headings (β and β+180°), "
-            "found none. Use --method full, which needs no pairs."
+            f"found none. Use {option('method', 'full')}, which needs no pairs."
         )
     est = paper_angles(table.acc_s, beta, pairs, g_mps2)
 

@@ -58,6 +58,7 @@ from mountcal.io.can.write import (
     write_frames,
 )
 from mountcal.io.ros2.definitions import ros2_definition
+from mountcal.option_names import option
 from mountcal.paths import SystemFailure
 from mountcal.samples import FloatArray, Samples
 
@@ -567,7 +568,7 @@ def check_log_path(path: str | os.PathLike[str], dbc_path: str | os.PathLike[str
             str(path),
             "a DBC to encode the CAN frames",
             "none",
-            "Pass the DBC (e.g. --dbc data/imu_mm5_10.dbc, the Bosch MM5.10 layout).",
+            f"Pass the DBC (e.g. {option('dbc', 'data/imu_mm5_10.dbc')}, the Bosch MM5.10 layout).",
         )
     load_dbc(Path(dbc_path))
     return fmt

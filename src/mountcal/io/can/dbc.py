@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 
 from mountcal.errors import InputError
 from mountcal.io.can.frames import DATA_WIDTH, CanFrames
+from mountcal.option_names import option
 from mountcal.paths import input_file
 
 FloatArray = NDArray[np.float64]
@@ -90,7 +91,7 @@ def load_dbcs(paths: str | Path | Sequence[str | Path]) -> Any:
         return load_dbc(paths)
     paths = list(paths)
     if not paths:
-        raise InputError("--dbc", "at least one DBC file", "none", "Pass --dbc FILE.")
+        raise InputError(option("dbc"), "at least one DBC file", "none", f"Pass the DBC file as {option('dbc')}.")
     if len(paths) == 1:
         return load_dbc(paths[0])
     import cantools

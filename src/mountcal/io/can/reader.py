@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 
 from mountcal.errors import InputError
 from mountcal.io.reader import LogReader
+from mountcal.option_names import option
 
 if TYPE_CHECKING:
     from mountcal.io.logs import LogOptions
@@ -47,8 +48,9 @@ def _dbc(path: Path, options: LogOptions) -> str | tuple[str, ...]:
         raise InputError(
             str(path),
             "a DBC to decode this CAN log",
-            "no --dbc",
-            "Pass --dbc FILE (and --mapping FILE when the signals are not named plainly).",
+            f"no {option('dbc')}",
+            f"Pass the DBC file as {option('dbc')} (and the signal mapping as {option('mapping')} when the signals "
+            "are not named plainly).",
         )
     return options.dbc
 

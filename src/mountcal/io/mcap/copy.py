@@ -34,6 +34,7 @@ from mountcal.io.mcap.records import MAGIC, MESSAGE_HEAD, RECORD_HEAD, Corrupt, 
 from mountcal.io.mcap.write import IMU_SCHEMA_NAME, McapOut
 from mountcal.io.ros2 import cdr
 from mountcal.io.ros2.imu import decode_imu_messages, encode_imu_messages
+from mountcal.option_names import option
 
 
 def chunk_counts(raw: bytes, index: ChunkIndex) -> dict[int, int] | None:
@@ -166,14 +167,14 @@ def open_mcap_summary(file: BinaryIO, where: str) -> tuple[Header, Any]:
             where,
             "an MCAP file with a summary and chunk indexes (to copy it through)",
             "none",
-            "Index it first (`mcap recover` of the mcap CLI), or write Parquet/CSV (--format parquet).",
+            f"Index it first (`mcap recover` of the mcap CLI), or write Parquet/CSV ({option('format', 'parquet')}).",
         )
     if _loose_messages(file):
         raise InputError(
             where,
             "an MCAP file whose messages are all in chunks (to copy it through)",
             "messages outside chunks",
-            "Re-chunk it (`mcap convert`), or write Parquet/CSV (--format parquet).",
+            f"Re-chunk it (`mcap convert`), or write Parquet/CSV ({option('format', 'parquet')}).",
         )
     return header, summary
 
@@ -316,12 +317,15 @@ def _imu_channels(summary: Any, topic: str | None, where: str) -> tuple[frozense
                 where,
                 "exactly one sensor_msgs/msg/Imu topic",
                 f"{len(candidates)}: {', '.join(candidates)}" if candidates else f"none; the topics are {listing}",
-                "Name the topic to rotate with --topic.",
+                f"Name the topic to rotate with {option('topic')}.",
             )
         topic = candidates[0]
     if topic not in by_topic or not all(is_imu(c) for c in by_topic[topic]):
         raise InputError(
-            where, f"a sensor_msgs/msg/Imu topic named {topic!r}", f"topics {listing}", "Pass one of them as --topic."
+            where,
+            f"a sensor_msgs/msg/Imu topic named {topic!r}",
+            f"topics {listing}",
+            f"Pass one of them as {option('topic')}.",
         )
     chans = by_topic[topic]
     if any(c.message_encoding != "cdr" for c in chans):
@@ -329,6 +333,6 @@ def _imu_channels(summary: Any, topic: str | None, where: str) -> tuple[frozense
             where,
             f"topic {topic!r} encoded as CDR (ROS 2), to copy it in its own layout",
             f"message encoding {chans[0].message_encoding!r}",
-            "Write Parquet or CSV instead (--format parquet), which reads JSON messages too.",
+            f"Write Parquet or CSV instead ({option('format', 'parquet')}), which reads JSON messages too.",
         )
     return frozenset(c.id for c in chans), topic, int(chans[0].schema_id)

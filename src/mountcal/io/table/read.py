@@ -17,6 +17,7 @@ import pyarrow.parquet as pq
 
 from mountcal.errors import InputError
 from mountcal.io.inputs import check_parquet_rows, check_regular_file
+from mountcal.option_names import option
 from mountcal.samples import Channel, FloatArray, Samples
 
 TABLE_CHANNELS = ("speed_mps", "heading_deg", "temperature_c", "lat_deg", "lon_deg", "alt_m")
@@ -45,7 +46,7 @@ def read_table(path: Path) -> Samples:
             str(path),
             "columns t_s, ax, ay, az",
             f"no {', '.join(missing)}",
-            "Rename the columns; a CAN log in CSV needs --dbc.",
+            f"Rename the columns; a CAN log in CSV needs a DBC ({option('dbc')}).",
         )
     values = df[["t_s", "ax", "ay", "az"]].apply(pd.to_numeric, errors="coerce").to_numpy(dtype=float)
     ok = np.all(np.isfinite(values), axis=1)
@@ -115,7 +116,7 @@ def iter_table(path: Path, max_samples: int) -> Iterator[Samples]:
             where,
             "columns t_s, ax, ay, az",
             f"no {', '.join(missing)}",
-            "Rename the columns; a CAN log in CSV needs --dbc.",
+            f"Rename the columns; a CAN log in CSV needs a DBC ({option('dbc')}).",
         )
     gyro = all(c in names for c in ("gx", "gy", "gz"))
     try:

@@ -17,6 +17,7 @@ from scipy.spatial.transform import Rotation
 
 from mountcal.conventions import FloatArray, rot_vs_from_angles
 from mountcal.errors import NotEnoughInformation
+from mountcal.option_names import option
 from mountcal.result import Calibration
 
 YawPolicy = Literal["refuse", "zero"]
@@ -53,7 +54,7 @@ def mounting(cal: Calibration, yaw: YawPolicy = "refuse", accept_unconfident: bo
             raise NotEnoughInformation(
                 "the calibration is not confident: its residual shows structure the model does not explain "
                 "(see `unexplained` in the result). Re-run the calibration, or export it anyway "
-                "(accept_unconfident=True)."
+                f"({option('accept_unconfident', True)})."
             )
         notes.append("the calibration is NOT confident (unexplained residual structure); exported on request")
     sx, sy = _radians(cal.rotation_sigma_deg[0]), _radians(cal.rotation_sigma_deg[1])
@@ -62,7 +63,7 @@ def mounting(cal: Calibration, yaw: YawPolicy = "refuse", accept_unconfident: bo
             raise NotEnoughInformation(
                 f"yaw is not determined by this calibration ({cal.yaw_reason or 'no reason given'}); every "
                 "exported format needs all three angles. Calibrate with headings from the uphill direction "
-                "or driving data, or write yaw = 0 (yaw='zero'; the tilt stays exact)."
+                f"or driving data, or write yaw = 0 ({option('yaw_undetermined', 'zero')}; the tilt stays exact)."
             )
         rot = rot_vs_from_angles(np.radians(cal.roll_deg), np.radians(cal.pitch_deg), 0.0)
         return Mounting(rot, (sx, sy, None), True, tuple(notes))

@@ -22,6 +22,7 @@ from matplotlib.figure import Figure
 
 from mountcal.conventions import CONVENTIONS, G_N
 from mountcal.errors import InputError
+from mountcal.option_names import option
 from mountcal.outputs.report import figures
 from mountcal.outputs.report.document import ANGLES, angle_estimates, format_pm, step_label
 from mountcal.outputs.report.embed import ImageFormat, figure_html
@@ -88,7 +89,7 @@ def render(
             "Pass the stop table the calibration was computed from (`mountcal stops … -o stops.csv`).",
         )
     if image_format not in ("svg", "png"):
-        raise InputError("--figures", "svg or png", repr(image_format), "Choose one of them.")
+        raise InputError(option("figures"), "svg or png", repr(image_format), "Choose one of them.")
     heading = title or f"Mounting calibration — {short_source(cal.provenance.input or 'calibration')}"
     parts = [
         _header(heading, cal),
@@ -357,7 +358,7 @@ def _figures_section(cal: Calibration, table: StopTable | None, image_format: Im
     else:
         out.append(
             '<p class="info">The 3-D figure of the stops on the fitted plane and circle needs the stop means: '
-            "pass the stop table (<code>--stops STOPS</code>). The residual figures below come from the result "
+            f"pass the stop table (<code>{option('stops')}</code>). The residual figures below come from the result "
             "alone.</p>"
         )
     shown.append(
