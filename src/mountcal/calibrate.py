@@ -50,7 +50,7 @@ from mountcal.result import (
 from mountcal.sensor_spec import DEFAULT as DEFAULT_SPEC
 from mountcal.sensor_spec import SensorSpec
 from mountcal.stoptable import StopTable, check_count, fingerprint
-from mountcal.systematic import assess, from_spec
+from mountcal.systematic import SensorErrors, assess, from_spec
 from mountcal.triad import Triad
 from mountcal.version import software_version
 
@@ -265,8 +265,7 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
 
 def _with_systematic(cal: Calibration, table: StopTable, f: full.Fit, opts: Options) -> Calibration:
     """The σ made total (statistical and systematic, :mod:`mountcal.systematic`); confident only if the total allows."""
-    errors = opts.triad.errors(opts.spec) if opts.triad is not None else from_spec(opts.spec)
-    out = assess(cal, table, f, errors)
+    out = assess(cal, table, f, sensor_errors(opts))
     # the tilt's own σ (about the vehicle's x and y axes): roll's σ grows as 1/cos(pitch) near ±90° without the
     # tilt being any less known
     tilt = max(s for s in out.rotation_sigma_deg[:2] if s is not None)
@@ -274,6 +273,11 @@ def _with_systematic(cal: Calibration, table: StopTable, f: full.Fit, opts: Opti
     if doubts and max(cal.roll_sigma_deg, cal.pitch_sigma_deg) <= MAX_CONFIDENT_TILT_SIGMA_DEG:
         out = replace(out, confident=False, notes=(*out.notes, *(d + "; the result is not confident" for d in doubts)))
     return out
+
+
+def sensor_errors(opts: Options) -> SensorErrors:
+    """The sensor errors left for the systematic part: the triad's covariance when one is applied, else the spec."""
+    return opts.triad.errors(opts.spec) if opts.triad is not None else from_spec(opts.spec)
 
 
 def _doubts(branch: str | None, tilt_sigma_deg: float, noise_dof: int | None) -> list[str]:

@@ -7,6 +7,11 @@ Noise assumption: the accelerometer noise is white, so a stop mean averages it d
 of each parked period (it trims settling at both ends). Correlated vibration averages down more
 slowly; ``noise_from_log`` therefore takes the *white-equivalent* noise ``√(n · var(mean))`` of real
 stops, whose variance of the mean comes from batch means and includes that correlation.
+
+Every σ a calibration reports is total: the statistical part (the bound) and the systematic part, the
+sensor's limits propagated through the fit's gain (:mod:`mountcal.systematic`) — so the plan predicts
+both at each design and searches on their root sum of squares. Scale and cross-axis errors are not seen
+by stops on one slope: their part is a floor no number of stops or dwell lowers.
 """
 
 from __future__ import annotations
@@ -23,13 +28,16 @@ from mountcal.conventions import G_N, FloatArray
 from mountcal.errors import InputError, NotEnoughInformation
 from mountcal.estimate.bound import crb_deg, true_state
 from mountcal.io.logs import LogOptions, read_log
+from mountcal.sensor_spec import DEFAULT as DEFAULT_SPEC
 from mountcal.simulate.stops import simulate_stops
 from mountcal.stops import StopDetection, detect_stops
 from mountcal.stoptable import StopTable
+from mountcal.systematic import SensorErrors, angle_sigmas, from_spec, propagate
 
 ANGLES = ("roll", "pitch", "yaw")
 DWELLS_S = (15.0, 20.0, 30.0, 45.0, 60.0, 90.0, 120.0, 180.0, 300.0)  # candidate dwell times when not given
 SLOPES_DEG = tuple(float(s) for s in np.arange(1.0, 15.01, 0.5))  # candidate slopes when not given
+FLOOR_NOISE_MPS2 = 1e-7  # stop noise standing for "noise-free" in the systematic floor (10 ng)
 MIN_STOPS = 4  # three headings determine the circle only just; one more gives the fit a residual
 
 
@@ -58,6 +66,7 @@ class Request:
     stop_s: float | None = None  # None: choose the dwell
     drive_s: float = 60.0  # time to reposition between stops (counts in the session time)
     detection: StopDetection = field(default_factory=StopDetection)
+    sensor: SensorErrors = field(default_factory=lambda: from_spec(DEFAULT_SPEC))  # limits for the systematic part
 
 
 @dataclass(frozen=True)
@@ -69,7 +78,9 @@ class Plan:
     slope_deg: float
     beta_deg: tuple[float, ...]  # in driving order
     stop_s: float
-    sigma_deg: dict[str, float | None]  # predicted 1σ of roll, pitch, yaw (and slope)
+    sigma_deg: dict[str, float | None]  # predicted total 1σ of roll, pitch, yaw (and slope), as calibrate reports
+    statistical_deg: dict[str, float | None]  # its statistical part (the bound)
+    systematic_deg: dict[str, float | None]  # its systematic part (the sensor's limits)
     reason: str = ""
 
     @property
@@ -96,17 +107,25 @@ class Plan:
         pred = ", ".join(
             f"{a} {_fmt(self.sigma_deg.get(a))} (target {req.target_deg[a]:g}°)" for a in ANGLES if a in req.target_deg
         )
+        parts = ", ".join(
+            f"{a} {_fmt(self.statistical_deg.get(a))} / {_fmt(self.systematic_deg.get(a))}"
+            for a in ANGLES
+            if a in req.target_deg
+        )
+        sensor = f"  σ statistical / systematic: {parts} (sensor: {req.sensor.source})"
         if not self.reachable:
             return [
                 f"not reachable, because {self.reason}",
                 f"  best within the limits: {self.n_stops} stops of {self.stop_s:g} s on a {self.slope_deg:g}° slope: "
                 + pred,
+                sensor,
                 f"  model {model}; {noise}",
             ]
         return [
             f"plan: {self.n_stops} stops of {self.stop_s:g} s each on a {self.slope_deg:g}° slope, headings "
             f"{', '.join(f'{b:g}°' for b in self.beta_deg)} (β from uphill, in driving order)",
-            f"  predicted 1σ: {pred}",
+            f"  predicted 1σ (total): {pred}",
+            sensor,
             f"  session ≈ {self.session_s / 60:.0f} min with {req.drive_s:g} s between stops; model {model}",
             f"  {noise}",
         ]
@@ -174,9 +193,13 @@ def bound_of_headings(
     beta_deg: tuple[float, ...] | FloatArray, slope_deg: float, terms: tuple[str, ...], stop_sigma_mps2: float
 ) -> dict[str, float | None]:
     """The bound for given headings and stop-mean noise, at a nominal (aligned) mounting."""
+    return table_bound(_design_table(beta_deg, slope_deg, stop_sigma_mps2), slope_deg, terms)
+
+
+def _design_table(beta_deg: tuple[float, ...] | FloatArray, slope_deg: float, stop_sigma_mps2: float) -> StopTable:
+    """Noise-free stops at an aligned mounting, each mean with covariance ``stop_sigma² I``."""
     table, _ = simulate_stops(0.0, 0.0, 0.0, slope_deg=slope_deg, beta_deg=np.asarray(beta_deg), noise_g=0.0)
-    table = replace(table, cov_s=np.broadcast_to(np.eye(3) * stop_sigma_mps2**2, (len(table), 3, 3)).copy())
-    return table_bound(table, slope_deg, terms)
+    return replace(table, cov_s=np.broadcast_to(np.eye(3) * stop_sigma_mps2**2, (len(table), 3, 3)).copy())
 
 
 def table_bound(table: StopTable, slope_deg: float, terms: tuple[str, ...]) -> dict[str, float | None]:
@@ -187,6 +210,41 @@ def table_bound(table: StopTable, slope_deg: float, terms: tuple[str, ...]) -> d
     if crb is None:
         return {"roll": None, "pitch": None, "yaw": None, "slope": None}
     return {k: crb[f"{k}_deg"] for k in ("roll", "pitch", "yaw", "slope")}
+
+
+def systematic_of_headings(
+    beta_deg: tuple[float, ...] | FloatArray,
+    slope_deg: float,
+    terms: tuple[str, ...],
+    stop_sigma_mps2: float,
+    sensor: SensorErrors,
+) -> dict[str, float]:
+    """The systematic 1σ (degrees) calibrate would report for this design: ``sensor``'s limits through the gain."""
+    return _systematic(_design_table(beta_deg, slope_deg, 1.0), slope_deg, terms, stop_sigma_mps2, sensor)
+
+
+def _systematic(
+    unit: StopTable, slope_deg: float, terms: tuple[str, ...], stop_sigma_mps2: float, sensor: SensorErrors
+) -> dict[str, float]:
+    """As calibrate's (mountcal.systematic.assess) at the design's true state; ``unit``: stops with unit covariance.
+
+    The gain does not depend on the stop noise; what the residual sees of an error does, as 1/σ,
+    which is the noise scale ``propagate`` divides by.
+    """
+    from scipy.spatial.transform import Rotation
+
+    from mountcal.estimate import full
+
+    state = true_state(Rotation.identity(), slope_deg, G_N)
+    names = tuple(full.StaticModel(unit, terms, G_N).names)
+    cov, _, _ = propagate(unit, state, names, terms, G_N, sensor, stop_sigma_mps2)
+    sig = angle_sigmas(cov, names, state.rot_vs, yaw=True, slope=True)
+    return {k: float(sig[f"{k}_deg"] or 0.0) for k in ("roll", "pitch", "yaw", "slope")}
+
+
+def _total(stat: dict[str, float | None], sys: dict[str, float]) -> dict[str, float | None]:
+    """Root sum of squares, as calibrate combines them (an undetermined angle stays undetermined)."""
+    return {k: (None if v is None else float(np.hypot(v, sys[k]))) for k, v in stat.items()}
 
 
 def make_plan(req: Request) -> Plan:
@@ -225,21 +283,31 @@ def make_plan(req: Request) -> Plan:
 
 
 def _best_at_slope(req: Request, slope: float, dwells: tuple[float, ...]) -> Plan:
-    """The shortest reachable protocol on one slope, else the most precise one within the limits."""
+    """The shortest protocol on one slope whose total σ reaches the target, else the most precise one."""
     trim = 2 * req.detection.trim_s
     candidates = []
     for n in range(MIN_STOPS, req.max_stops + 1):
         unit = unit_bound(n, slope, req.terms)
+        table = _design_table(headings(n), slope, 1.0)
         for dwell in dwells:
             s = req.noise.stop_sigma_mps2(dwell - trim)
-            sigma = {k: (None if v is None else v * s) for k, v in unit.items()}
-            candidates.append((session_time(n, dwell, req.drive_s), n, dwell, sigma))
-    reachable = [c for c in candidates if max(_shortfall(c[3], req.target_deg).values()) <= 1.0]
+            stat = {k: (None if v is None else v * s) for k, v in unit.items()}
+            sys = _systematic(table, slope, req.terms, s, req.sensor)
+            candidates.append((session_time(n, dwell, req.drive_s), n, dwell, stat, sys))
+    reachable = [c for c in candidates if max(_shortfall(_total(c[3], c[4]), req.target_deg).values()) <= 1.0]
     if reachable:
-        _, n, dwell, sigma = min(reachable, key=lambda c: (c[0], c[1]))
-        return Plan(req, True, slope, headings(n), dwell, sigma)
-    _, n, dwell, sigma = min(candidates, key=lambda c: (max(_shortfall(c[3], req.target_deg).values()), c[0]))
-    return Plan(req, False, slope, headings(n), dwell, sigma)
+        _, n, dwell, stat, sys = min(reachable, key=lambda c: (c[0], c[1]))
+        return Plan(req, True, slope, headings(n), dwell, _total(stat, sys), stat, dict(sys))
+    _, n, dwell, stat, sys = min(
+        candidates, key=lambda c: (max(_shortfall(_total(c[3], c[4]), req.target_deg).values()), c[0])
+    )
+    return Plan(req, False, slope, headings(n), dwell, _total(stat, sys), stat, dict(sys))
+
+
+def systematic_floor(req: Request, slope: float) -> dict[str, float]:
+    """The systematic σ on one slope with noise-free stops: what no number of stops or dwell lowers."""
+    n = req.max_stops
+    return _systematic(_design_table(headings(n), slope, 1.0), slope, req.terms, FLOOR_NOISE_MPS2, req.sensor)
 
 
 def _shortfall(sigma: dict[str, float | None], target: dict[str, float]) -> dict[str, float]:
@@ -249,8 +317,24 @@ def _shortfall(sigma: dict[str, float | None], target: dict[str, float]) -> dict
 
 def _why_not(req: Request, plan: Plan, dwells: tuple[float, ...]) -> str:
     over = [a for a, r in _shortfall(plan.sigma_deg, req.target_deg).items() if r > 1.0]
+    slopes = (req.slope_deg,) if req.slope_deg is not None else SLOPES_DEG
+    floors = [systematic_floor(req, slope) for slope in slopes]
+    floor = {a: min(f[a] for f in floors) for a in over}
+    below = [a for a in over if floor[a] >= req.target_deg[a]]
     parts = []
-    for a in over:
+    if below:
+        where = (
+            f"a {req.slope_deg:g}° slope" if req.slope_deg is not None else f"any one slope up to {SLOPES_DEG[-1]:g}°"
+        )
+        parts.append(
+            "the sensor's systematic part ("
+            + ", ".join(f"{a} ≥ {floor[a]:.3g}°, target {req.target_deg[a]:g}°" for a in below)
+            + f"; {req.sensor.source}) cannot be reached by any number of stops or dwell on {where}: scale and "
+            "cross-axis errors are not seen by stops on one slope. A triad calibration (`mountcal triad`, then "
+            "--triad), the sensor's own spec (--sensor-spec, if tighter), or stops on two slopes of different "
+            "inclination would remove it"
+        )
+    for a in (a for a in over if a not in below):
         got = plan.sigma_deg.get(a)
         text = (
             f"{a} is not determined"
@@ -269,11 +353,12 @@ def _why_not(req: Request, plan: Plan, dwells: tuple[float, ...]) -> str:
             text += f" on any slope up to {SLOPES_DEG[-1]:g}°"
         parts.append(text)
     why = "; ".join(parts)
-    if "yaw" in over:
+    rest = [a for a in over if a not in below]
+    if "yaw" in rest:
         why += " (yaw precision grows as 1/sin(slope): on level ground yaw is unobservable)"
-    if "bias" in req.terms and any(a in over for a in ("roll", "pitch")):
+    if "bias" in req.terms and any(a in rest for a in ("roll", "pitch")):
         why += " (with an unknown bias, roll and pitch come from the circle's radius g·sin(slope) only)"
-    return why + ". Allow more or longer stops, a steeper slope, or a quieter sensor."
+    return why + (". Allow more or longer stops, a steeper slope, or a quieter sensor." if rest else ".")
 
 
 def _slope_needed(req: Request, angle: str, dwells: tuple[float, ...]) -> float | None:

@@ -140,14 +140,19 @@ _DETECTION = {
 }
 
 
+def add_sensor_options(g: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
+    """The sensor's limits and triad calibration: the systematic part of every σ."""
+    g.add_argument("--sensor-spec", default=None, help="the sensor's datasheet limits (TOML/JSON; default class)")
+    g.add_argument("--triad", default=None, help="triad calibration from `mountcal triad`, applied to the stops")
+
+
 def add_fit_options(g: argparse.ArgumentParser | argparse._ArgumentGroup, *, headings_help: str) -> None:
     """Method, model, headings and the yaw threshold of the fit."""
     g.add_argument("--method", choices=("full", "paper"), default="full")
     g.add_argument("--model", default="auto", help=MODEL_HELP)
     g.add_argument("--headings", choices=HEADINGS, default="uphill", help=headings_help)
     g.add_argument("--max-yaw-sigma", type=float, default=5.0, help="report yaw only below this 1σ (deg)")
-    g.add_argument("--sensor-spec", default=None, help="the sensor's datasheet limits (TOML/JSON; default class)")
-    g.add_argument("--triad", default=None, help="triad calibration from `mountcal triad`, applied to the stops")
+    add_sensor_options(g)
     g.add_argument(
         "--use",
         choices=("auto", "stops", "driving"),

@@ -1,4 +1,8 @@
-"""``mountcal plan --target …``: the smallest session reaching the target; exit 0, or 3 when not reachable."""
+"""``mountcal plan --target …``: the smallest session reaching the target; exit 0, or 3 when not reachable.
+
+The target is on the total σ calibrate will report: the sensor's limits (--sensor-spec, --triad, or the
+default class) set a systematic part no number of stops on one slope lowers.
+"""
 
 from __future__ import annotations
 
@@ -7,7 +11,7 @@ import logging
 import math
 from typing import Any
 
-from mountcal.cli.options import add_command, add_log_options, log_options, working
+from mountcal.cli.options import add_command, add_log_options, add_sensor_options, log_options, working
 from mountcal.terminal import safe
 
 log = logging.getLogger("mountcal")
@@ -25,11 +29,14 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--stop-s", type=float, default=None, help="dwell of each stop (s; default: chosen)")
     p.add_argument("--drive-s", type=float, default=60.0, help="time between stops, for the session length (s)")
     p.add_argument("-o", "--output", default=None, help="protocol sheet CSV to write")
+    add_sensor_options(p)
     add_log_options(p, repeat_dbc=False, stops=False)
     p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    from mountcal.calibrate import Options, sensor_errors
+    from mountcal.cli.triad import sensor_options
     from mountcal.conventions import G_N
     from mountcal.errors import InputError, NotEnoughInformation
     from mountcal.plan import Noise, Request, make_plan, noise_from_log, parse_target, plan_terms
@@ -61,6 +68,7 @@ def run(args: argparse.Namespace) -> int:
         args.max_stops,
         args.stop_s,
         args.drive_s,
+        sensor=sensor_errors(sensor_options(Options(), args.sensor_spec, args.triad)),
     )
     with working(args, "planning"):
         plan = make_plan(req)
