@@ -28,6 +28,7 @@ from mountcal.conventions import G_N, FloatArray
 from mountcal.errors import InputError, NotEnoughInformation
 from mountcal.estimate.bound import crb_deg, true_state
 from mountcal.io.logs import LogOptions, read_log
+from mountcal.option_names import option
 from mountcal.sensor_spec import DEFAULT as DEFAULT_SPEC
 from mountcal.simulate.stops import simulate_stops
 from mountcal.stops import StopDetection, detect_stops
@@ -331,8 +332,8 @@ def _why_not(req: Request, plan: Plan, dwells: tuple[float, ...]) -> str:
             + ", ".join(f"{a} ≥ {floor[a]:.3g}°, target {req.target_deg[a]:g}°" for a in below)
             + f"; {req.sensor.source}) cannot be reached by any number of stops or dwell on {where}: scale and "
             "cross-axis errors are not seen by stops on one slope. A triad calibration (`mountcal triad`, then "
-            "--triad), the sensor's own spec (--sensor-spec, if tighter), or stops on two slopes of different "
-            "inclination would remove it"
+            f"{option('triad')}), the sensor's own spec ({option('sensor_spec')}, if tighter), or stops on two slopes "
+            "of different inclination would remove it"
         )
     for a in (a for a in over if a not in below):
         got = plan.sigma_deg.get(a)

@@ -223,7 +223,7 @@ def with_imucal_values(triad: Any, path: str) -> Any:
             f"values within {AGREE_SIGMA:g}σ of this session's fit",
             f"a difference of {np.max(z):.1f}σ",
             "Pass the session the imucal calibration was made from (its covariance comes from that session), with "
-            "the gravity imucal used (--gravity 9.81 is its default).",
+            "the gravity imucal used (9.81 m/s² is its default).",
         )
     return Triad(values[:3], values[3:], triad.cov, f"imucal {path} (covariance from {triad.source})", triad.fitted)
 
