@@ -181,22 +181,27 @@ def check_outputs(
                 _kind(st.st_mode),
                 "Name a file; mountcal never replaces a directory, device or FIFO.",
             )
-        for what, path in read:
+        clashes = [
+            (
+                path,
+                "an output path other than the files this command reads",
+                f"the {what} file {path}",
+                f"Choose another {name} path; mountcal never overwrites its input.",
+            )
+            for what, path in read
+        ]
+        clashes += [
+            (
+                path,
+                "a path of its own for each output",
+                f"the path also given to {other}",
+                f"Give {name} and {other} different paths.",
+            )
+            for other, path in written
+        ]
+        for path, expected, found, todo in clashes:
             if _same(out, path):
-                raise InputError(
-                    f"{name} {out}",
-                    "an output path other than the files this command reads",
-                    f"the {what} file {path}",
-                    f"Choose another {name} path; mountcal never overwrites its input.",
-                )
-        for other, path in written:
-            if _same(out, path):
-                raise InputError(
-                    f"{name} {out}",
-                    "a path of its own for each output",
-                    f"the path also given to {other}",
-                    f"Give {name} and {other} different paths.",
-                )
+                raise InputError(f"{name} {out}", expected, found, todo)
         written.append((name, out))
 
 
