@@ -589,34 +589,11 @@ def write_log(
     return write_can_log(path, log, dbc_path=dbc_path, with_fix=with_fix, start_time_s=start_time_s)
 
 
-def session_truth(
-    log: ParkingLog, *, start_time_s: float, with_fix: tuple[float, float, float] | None
-) -> dict[str, Any]:
-    """What a simulated parking session really was, as a JSON-ready dict (units in the keys)."""
-    truth = log.truth
-    roll, pitch, yaw = truth.angles_deg
-    return {
-        "roll_deg": roll,
-        "pitch_deg": pitch,
-        "yaw_deg": yaw,
-        "slope_deg": truth.slope_deg,
-        "beta_deg": truth.beta_deg.tolist(),
-        "uphill_azimuth_deg": log.uphill_azimuth_deg,
-        "g_mps2": truth.g_mps2,
-        "bias_mps2": truth.bias_mps2.tolist(),
-        "start_time_s": start_time_s,
-        "fix": None if with_fix is None else dict(zip(("lat_deg", "lon_deg", "alt_m"), with_fix, strict=True)),
-        "samples": int(log.t_s.size),
-        "duration_s": float(log.t_s[-1] - log.t_s[0]),
-    }
-
-
 __all__ = [
     "MM5_10_SIGNALS",
     "START_TIME_S",
     "WrittenLog",
     "check_log_path",
-    "session_truth",
     "write_can_log",
     "write_log",
     "write_mcap",

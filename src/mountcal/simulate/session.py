@@ -19,7 +19,7 @@ import numpy as np
 from mountcal.atomic import atomic_path
 from mountcal.conventions import G_N, normal_gravity
 from mountcal.errors import InputError
-from mountcal.simulate.stops import PRESETS, simulate_parking_log, simulate_stops
+from mountcal.simulate.stops import PRESETS, ParkingLog, simulate_parking_log, simulate_stops
 from mountcal.stoptable import Headings, write_stop_table
 
 PathLike = str | os.PathLike[str]
@@ -148,7 +148,7 @@ def write_log_session(
         export.write_protocol(protocol, log, start_time_s=done.start_time_s)
         lines.append(f"wrote {protocol} (protocol sheet on the log's clock, start {done.start_time_s:.6f} s)")
     if truth is not None:
-        _write_json(truth, export.session_truth(log, start_time_s=start, with_fix=fix) | {"seed": seed})
+        _write_json(truth, session_truth(log, start_time_s=start, with_fix=fix) | {"seed": seed})
         lines.append(f"wrote {truth}")
     return lines
 
@@ -156,3 +156,25 @@ def write_log_session(
 def _write_json(path: PathLike, doc: Mapping[str, Any]) -> None:
     with atomic_path(Path(path)) as tmp:
         tmp.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+
+
+def session_truth(
+    log: ParkingLog, *, start_time_s: float, with_fix: tuple[float, float, float] | None
+) -> dict[str, Any]:
+    """What a simulated parking session really was, as a JSON-ready dict (units in the keys)."""
+    truth = log.truth
+    roll, pitch, yaw = truth.angles_deg
+    return {
+        "roll_deg": roll,
+        "pitch_deg": pitch,
+        "yaw_deg": yaw,
+        "slope_deg": truth.slope_deg,
+        "beta_deg": truth.beta_deg.tolist(),
+        "uphill_azimuth_deg": log.uphill_azimuth_deg,
+        "g_mps2": truth.g_mps2,
+        "bias_mps2": truth.bias_mps2.tolist(),
+        "start_time_s": start_time_s,
+        "fix": None if with_fix is None else dict(zip(("lat_deg", "lon_deg", "alt_m"), with_fix, strict=True)),
+        "samples": int(log.t_s.size),
+        "duration_s": float(log.t_s[-1] - log.t_s[0]),
+    }
