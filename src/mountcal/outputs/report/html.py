@@ -20,10 +20,10 @@ from typing import Any
 
 from matplotlib.figure import Figure
 
+import mountcal.outputs.report.figures as figures
 from mountcal.conventions import CONVENTIONS, G_N
 from mountcal.errors import InputError
 from mountcal.option_names import option
-from mountcal.outputs.report import figures
 from mountcal.outputs.report.document import ANGLES, angle_estimates, format_pm, step_label
 from mountcal.outputs.report.embed import ImageFormat, figure_html
 from mountcal.outputs.report.loop import steps_section
