@@ -13,8 +13,9 @@ Built-in readers (in this order; the first that claims a path reads it):
     [project.entry-points."mountcal.readers"]
     imutxt = "mountcal_imutxt:ImuTxtReader"
 
-Plugins are loaded on the first use of the registry (``mountcal --help`` loads none) and come after
-the built-in readers. A plugin that fails to load is reported once (a warning naming it) and left
+Plugins are loaded when a path is claimed by no built-in reader, or the whole list is asked for
+(``mountcal --help`` and reading a built-in format load none), and come after the built-in readers.
+A plugin that fails to load is reported once (a warning naming it) and left
 out; a file only it could have read is then refused with its name and the cause.
 """
 
@@ -62,8 +63,13 @@ def _as_reader(obj: object, where: str) -> LogReader:
 
 
 @cache
+def _builtin() -> tuple[LogReader, ...]:
+    return tuple(_load_builtin(spec) for spec in BUILTIN)
+
+
+@cache
 def _registry() -> tuple[tuple[LogReader, ...], tuple[InputError, ...]]:
-    readers = [_load_builtin(spec) for spec in BUILTIN]
+    readers = list(_builtin())
     broken = []
     for plugin in entry_points_of(GROUP):
         where = f"plugin {plugin.name!r} ({plugin.value})"
@@ -87,7 +93,7 @@ def log_suffixes() -> frozenset[str]:
 
 def is_log(path: Path, options: LogOptions) -> bool:
     """Whether some reader takes ``path`` (fleet's test of which files of a folder are logs)."""
-    return any(r.claims(path, options) for r in readers())
+    return any(r.claims(path, options) for r in _builtin()) or any(r.claims(path, options) for r in readers())
 
 
 def reader_for(path: Path, options: LogOptions) -> LogReader:
@@ -98,9 +104,10 @@ def reader_for(path: Path, options: LogOptions) -> LogReader:
     InputError
         No reader claims it: the message lists the formats, and any plugin that failed to load.
     """
-    for reader in readers():
-        if reader.claims(path, options):
-            return reader
+    for group in (_builtin, readers):  # the entry points are scanned only when no built-in claims the path
+        for reader in group():
+            if reader.claims(path, options):
+                return reader
     formats = "; ".join(f"{r.description} ({' '.join(r.suffixes)})" for r in readers() if r.suffixes)
     broken = _registry()[1]
     todo = "Convert it, or name it by its format."

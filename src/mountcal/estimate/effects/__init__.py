@@ -38,13 +38,16 @@ def names() -> tuple[str, ...]:
 
 
 @cache
+def _builtin() -> dict[str, Effect]:
+    return {name: importlib.import_module(f"{__name__}.{name}").EFFECT for name in BUILTIN}
+
+
+@cache
 def registered() -> dict[str, Effect]:
     """Every effect by name: the built-in ones, then those of the ``mountcal.effects`` entry points."""
     from mountcal.plugins import entry_points_of
 
-    out: dict[str, Effect] = {}
-    for name in BUILTIN:
-        out[name] = importlib.import_module(f"{__name__}.{name}").EFFECT
+    out = dict(_builtin())
     for plugin in entry_points_of(GROUP):
         if plugin.name not in out:  # a built-in name cannot be replaced from outside
             out[plugin.name] = _effect(plugin)
@@ -71,7 +74,8 @@ def _effect(plugin: Plugin) -> Effect:
 
 
 def get(name: str) -> Effect:
-    return registered()[name]
+    builtin = _builtin()
+    return builtin[name] if name in builtin else registered()[name]
 
 
 def chain(terms: tuple[str, ...]) -> list[Effect]:
@@ -110,7 +114,10 @@ def apply_corrections(acc_s: FloatArray, calibration: Calibration, *, inverse: b
     bias = get("bias")
     if calibration.bias_mps2 is not None and bias.report_key not in reported:
         reported[bias.report_key] = bias.report(calibration.bias_mps2, np.zeros(3), ("x", "y", "z"))
-    for effect in sorted(registered().values(), key=lambda e: e.order, reverse=not inverse):
+    effects = _builtin()
+    if not reported.keys() <= {e.report_key for e in effects.values()}:
+        effects = registered()  # an effect of another package: scanning the entry points is only paid then
+    for effect in sorted(effects.values(), key=lambda e: e.order, reverse=not inverse):
         if effect.report_key in reported:
             undo = effect.restore if inverse else effect.correct
             try:
