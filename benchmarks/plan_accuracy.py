@@ -27,7 +27,7 @@ from mountcal.sensor_spec import SensorSpec
 from mountcal.systematic import from_spec
 
 # the Monte Carlo draws no sensor errors: plan for a sensor without limits, so the prediction is the statistical part
-NO_LIMITS = from_spec(SensorSpec(0.0, 0.0, 0.0, 0.0, "none (benchmark of the statistical part)"))
+NO_LIMITS = from_spec(SensorSpec(0.0, 0.0, 0.0, 0.0, "none (benchmark of the statistical part)", heading_deg=0.0))
 
 TOLERANCE = 0.15
 

@@ -20,7 +20,7 @@ from mountcal.systematic import SensorErrors, from_spec
 
 TARGET = {"roll": 0.1, "pitch": 0.1, "yaw": 0.5}
 # a calibrated sensor: limits far below what the stops resolve, so the plan is the bound alone
-TIGHT_SPEC = "scale = 1e-5\ncross_axis = 1e-5\nbias_mg = 0.01\nbias_tempco_mg_per_c = 0.0\n"
+TIGHT_SPEC = "scale = 1e-5\ncross_axis = 1e-5\nbias_mg = 0.01\nbias_tempco_mg_per_c = 0.0\nheading_deg = 0.0\n"
 
 
 def tight(tmp_path: Path) -> SensorErrors:
@@ -65,13 +65,27 @@ def test_the_plan_is_the_smallest_that_reaches_the_target(tmp_path: Path) -> Non
 def test_yaw_on_a_half_degree_slope_is_refused_with_the_reason(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    sheet = tmp_path / "plan.csv"
+    sheet, spec = tmp_path / "plan.csv", tmp_path / "tight.toml"
+    spec.write_text(TIGHT_SPEC, encoding="utf-8")  # the statistical part alone falls short, not the spec
     argv = ["plan", "--target", "yaw=0.2", "--noise", "10", "--slope-deg", "0.5", "--max-stops", "8", "--stop-s", "30"]
-    code = main([*argv, "-o", str(sheet)])
+    code = main([*argv, "--sensor-spec", str(spec), "-o", str(sheet)])
     out = capsys.readouterr().out
     assert code == 3
     assert "not reachable, because yaw reaches at best" in out and "needs a slope of ≥" in out
     assert not sheet.exists()
+
+
+def test_a_yaw_target_below_the_headings_limit_is_refused_naming_them(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    spec = tmp_path / "headings.toml"
+    spec.write_text(TIGHT_SPEC.replace("heading_deg = 0.0", "heading_deg = 2.0"), encoding="utf-8")
+    argv = ["plan", "--target", "yaw=0.5", "--noise", "1", "--slope-deg", "10", "--sensor-spec", str(spec)]
+    code = main([*argv, "-o", str(tmp_path / "plan.csv")])
+    out = capsys.readouterr().out
+    assert code == 3 and "headings' ±2.0° against the fall line" in out
+    spec.write_text(TIGHT_SPEC.replace("heading_deg = 0.0", "heading_deg = 0.2"), encoding="utf-8")
+    assert main([*argv, "-o", str(tmp_path / "plan.csv")]) == 0  # 0.2/√3 ≈ 0.12° leaves room
 
 
 def test_calibrate_reads_the_sheet_and_finds_every_planned_stop(tmp_path: Path) -> None:

@@ -19,7 +19,10 @@ from mountcal.sensor_spec import DEFAULT, SensorSpec, read_spec
 from mountcal.simulate.stops import simulate_stops
 from mountcal.stoptable import StopTable, write_stop_table
 
-BIAS_ONLY = SensorSpec(scale=0.0, cross_axis=0.0, bias_mps2=0.5, bias_tempco_mps2_per_c=0.0, source="test: bias only")
+BIAS_ONLY = SensorSpec(
+    scale=0.0, cross_axis=0.0, bias_mps2=0.5, bias_tempco_mps2_per_c=0.0, heading_deg=0.0, source="test: bias only"
+)
+SENSOR_ONLY = replace(DEFAULT, heading_deg=0.0, source="test: the default sensor, exact headings")
 
 
 @pytest.fixture(scope="module")
@@ -43,7 +46,7 @@ def test_the_sigma_fields_hold_the_root_sum_of_squares_of_both_parts(table: Stop
 
 
 def test_duplicating_stops_shrinks_only_the_statistical_part(table: StopTable) -> None:
-    opts = Options(model="rotation,slope,bias")
+    opts = Options(model="rotation,slope,bias", spec=SENSOR_ONLY)
     a, b = calibrate(table, opts), calibrate(table.subset(np.repeat(np.arange(len(table)), 2)), opts)
     for key in ("roll_deg", "pitch_deg", "yaw_deg"):
         (sa, ya), (sb, yb) = _parts(a, key), _parts(b, key)
@@ -58,6 +61,31 @@ def test_an_error_the_model_fits_contributes_nothing(table: StopTable) -> None:
         assert _parts(fitted, key)[1] == pytest.approx(0.0, abs=1e-9)
     assert _parts(unfitted, "roll_deg")[1] > 1e-3  # the same bias, not fitted, moves the tilt
     assert fitted.systematic is not None and "bias_x" not in fitted.systematic.propagated
+
+
+def test_a_common_heading_error_moves_yaw_one_for_one_and_the_total_sigma_covers_its_limit(table: StopTable) -> None:
+    """Yaw is read against the headings: turning every heading by δ turns yaw by δ and leaves no residual, so
+    only the headings' stated limit can bound it (the default ±1°, or heading_deg in the spec)."""
+    assert table.beta_rad is not None
+    delta = 0.7
+    turned = replace(table, beta_rad=table.beta_rad + np.radians(delta))
+    a, b = calibrate(table), calibrate(turned)
+    assert a.yaw_deg is not None and b.yaw_deg is not None and a.yaw_sigma_deg is not None
+    assert abs(abs(b.yaw_deg - a.yaw_deg) - delta) < 1e-3 * delta
+    assert (a.roll_deg, a.pitch_deg, a.fit.chi2) == pytest.approx((b.roll_deg, b.pitch_deg, b.fit.chi2), rel=1e-6)
+    stat, sys = _parts(a, "yaw_deg")
+    assert sys >= 1.0 / np.sqrt(3) and a.yaw_sigma_deg > delta / 2  # the common part alone: u = 1°/√3
+    assert a.systematic is not None and "heading" in a.systematic.propagated
+    assert any("headings are known against the fall line (±1.0°)" in n for n in a.notes)
+    exact = calibrate(table, Options(spec=SENSOR_ONLY))
+    assert _parts(exact, "yaw_deg")[1] < 0.5 * sys and _parts(exact, "yaw_deg")[0] == pytest.approx(stat, rel=1e-9)
+    assert exact.systematic is not None and "heading" not in exact.systematic.propagated
+
+
+def test_headings_that_do_not_set_yaw_add_nothing(table: StopTable) -> None:
+    for headings in ("relative", "none"):  # yaw is not determined from them: nothing for their error to move
+        cal = calibrate(replace(table, headings=headings))
+        assert cal.yaw_deg is None and cal.systematic is not None and "heading" not in cal.systematic.propagated
 
 
 @pytest.mark.parametrize("pair", [(0, 2), (1, 2), (0, 1)])
@@ -77,7 +105,7 @@ def test_the_systematic_part_is_the_shift_a_real_fit_makes_for_a_cross_axis_erro
     # limit stands, where it sees it (xy) the limit narrows and what it sees counts in full
     noisy, _ = simulate_stops(3.0, -2.0, 20.0, slope_deg=6.0, noise_g=1e-3, seed=2, scale_matrix=e)
     f = full.fit(noisy, ("rotation", "slope", "bias"), G_N)
-    cov, used, _ = systematic.propagate(noisy, f.state, f.names, f.terms, f.state.g_mps2, errors)
+    cov, used, _, _ = systematic.propagate(noisy, f.state, f.names, f.terms, f.state.g_mps2, errors)
     assert used == (names[pair],)
     predicted = systematic.angle_sigmas(cov, f.names, f.state.rot_vs, yaw=True, slope=True)
     for key in ("roll_deg", "pitch_deg", "yaw_deg"):
@@ -133,3 +161,13 @@ def test_cli_summary_shows_both_parts_and_refuses_a_bad_spec(
     assert main(["calibrate", str(stops), "--sensor-spec", str(bad)]) != 0
     err = capsys.readouterr().err
     assert "bad.toml" in err and "Traceback" not in err
+    bad.write_text("heading_deg = 180\n", encoding="utf-8")  # a heading, not a limit
+    assert main(["calibrate", str(stops), "--sensor-spec", str(bad)]) != 0
+    err = capsys.readouterr().err
+    assert "heading_deg" in err and "at most 90" in err and "Traceback" not in err
+    good = tmp_path / "survey.toml"
+    good.write_text("heading_deg = 0.1\n", encoding="utf-8")  # surveyed marks: yaw's systematic part shrinks
+    assert main(["calibrate", str(stops), "--sensor-spec", str(good), "-o", str(tmp_path / "r.json")]) == 0
+    surveyed = Calibration.load(tmp_path / "r.json")
+    assert surveyed.systematic is not None and surveyed.systematic.limits["heading_deg"] == 0.1
+    assert _parts(surveyed, "yaw_deg")[1] < _parts(calibrate(table), "yaw_deg")[1] / 2

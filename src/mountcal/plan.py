@@ -238,7 +238,7 @@ def _systematic(
 
     state = true_state(Rotation.identity(), slope_deg, G_N)
     names = tuple(full.StaticModel(unit, terms, G_N).names)
-    cov, _, _ = propagate(unit, state, names, terms, G_N, sensor, stop_sigma_mps2)
+    cov, _, _, _ = propagate(unit, state, names, terms, G_N, sensor, stop_sigma_mps2)
     sig = angle_sigmas(cov, names, state.rot_vs, yaw=True, slope=True)
     return {k: float(sig[f"{k}_deg"] or 0.0) for k in ("roll", "pitch", "yaw", "slope")}
 
@@ -334,6 +334,12 @@ def _why_not(req: Request, plan: Plan, dwells: tuple[float, ...]) -> str:
             "cross-axis errors are not seen by stops on one slope. A triad calibration (`mountcal triad`, then "
             f"{option('triad')}), the sensor's own spec ({option('sensor_spec')}, if tighter), or stops on two slopes "
             "of different inclination would remove it"
+            + (
+                f"; yaw's floor is also the headings' ±{req.sensor.limits.get('heading_deg', '?')}° against the fall "
+                f"line (heading_deg in {option('sensor_spec')}, if better known; or yaw from a drive with speed)"
+                if "yaw" in below and req.sensor.heading_u_rad > 0
+                else ""
+            )
         )
     for a in (a for a in over if a not in below):
         got = plan.sigma_deg.get(a)

@@ -11,12 +11,21 @@ tolerance ±80 mg" (Z; ±50 mg X, Y), zero-g change over 0–70 °C ±60 mg (Z; 
 0.86 mg/°C. Other consumer parts state limits of the same order (a few % in scale and
 cross-axis, tens of mg in offset).
 
+The headings are the protocol's, not the sensor's, but they limit yaw the same way: yaw comes from
+the stops' pattern against their headings relative to the uphill direction, so a common error of
+those headings moves yaw one for one, and no residual can show it. The default, ±1°, is a vehicle
+parked by eye at marks laid out against the fall line; surveyed marks or a dual-antenna GNSS
+heading are better (0.1–0.3°), headings from a single antenna's course over ground or a compass
+worse. The limit is that of the headings' common error (their reference against the fall line);
+each stop's own error scatters the stops, which the residual shows and the statistical part counts.
+
 A spec file (TOML or JSON) gives any of these keys; the others keep the default::
 
     scale = 0.03                 # ± fraction of the reading
     cross_axis = 0.02            # ± fraction of the other axis' reading
     bias_mps2 = 0.785            # ± m/s² (or bias_mg = 80)
     bias_tempco_mps2_per_c = 0.0084   # ± m/s² per °C (or bias_tempco_mg_per_c = 0.86)
+    heading_deg = 1.0            # ± degrees: the headings' common error against the fall line
 """
 
 from __future__ import annotations
@@ -41,6 +50,7 @@ class SensorSpec:
     bias_mps2: float = 80 * MG
     bias_tempco_mps2_per_c: float = 60 * MG / 70
     source: str = "default class: uncalibrated consumer MEMS (MPU-6050 datasheet limits)"
+    heading_deg: float = 1.0  # the protocol's: the headings' common error against the fall line
 
     @property
     def is_default(self) -> bool:
@@ -58,6 +68,7 @@ _KEYS = {
     "bias_mg": ("bias_mps2", MG),
     "bias_tempco_mps2_per_c": ("bias_tempco_mps2_per_c", 1.0),
     "bias_tempco_mg_per_c": ("bias_tempco_mps2_per_c", MG),
+    "heading_deg": ("heading_deg", 1.0),
 }
 
 
@@ -83,4 +94,6 @@ def read_spec(path: str | Path) -> SensorSpec:
         values[field] = float(value) * unit
     if values.get("scale", 0) >= 0.5 or values.get("cross_axis", 0) >= 0.5:
         raise InputError(str(path), "scale and cross_axis as fractions (0.03 for 3 %)", repr(doc), todo)
+    if values.get("heading_deg", 0) > 90:
+        raise InputError(str(path), "heading_deg: a limit in degrees, at most 90", repr(doc["heading_deg"]), todo)
     return replace(DEFAULT, **values, source=f"sensor spec {path}")

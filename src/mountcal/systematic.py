@@ -21,6 +21,7 @@ from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from scipy.linalg import block_diag
 
 from mountcal.conventions import FloatArray
 from mountcal.estimate import full
@@ -37,6 +38,7 @@ if TYPE_CHECKING:
 KEYS = ("roll_deg", "pitch_deg", "yaw_deg", "slope_deg", "rotation_x_deg", "rotation_y_deg", "rotation_z_deg")
 BIAS_NAMES = ("bias_x", "bias_y", "bias_z")
 TEMP_NAMES = ("temp_x", "temp_y", "temp_z")
+HEADING = "heading"  # the name the headings' error is reported under in ``propagated``
 _TERM_OF = {"bias": "bias", "temp": "temperature", "scale": "scale", "cross": "scale"}
 
 
@@ -48,13 +50,30 @@ class SensorErrors:
     cov: FloatArray
     source: str
     limits: dict[str, Any]
+    heading_u_rad: float = 0.0  # each stop's heading, and their common reference, against the fall line (1σ)
 
 
 def from_spec(spec: SensorSpec) -> SensorErrors:
     """A datasheet's ± limits as independent rectangular distributions (u = a/√3)."""
     limits = [spec.bias_mps2] * 3 + [spec.bias_tempco_mps2_per_c] * 3 + [spec.scale] * 3 + [spec.cross_axis] * 3
     names = BIAS_NAMES + TEMP_NAMES + SCALE_NAMES
-    return SensorErrors(names, np.diag(np.square(limits) / 3.0), spec.source, spec.to_dict())
+    return SensorErrors(
+        names, np.diag(np.square(limits) / 3.0), spec.source, spec.to_dict(), heading_u(spec.heading_deg)
+    )
+
+
+def heading_u(limit_deg: float) -> float:
+    """The standard uncertainty, radians, of headings known to ± ``limit_deg`` (rectangular)."""
+    return float(np.radians(limit_deg) / np.sqrt(3.0))
+
+
+def _headings_seen(table: StopTable, model: full.StaticModel, errors: SensorErrors) -> bool:
+    """Whether the given headings set yaw (relative to the uphill direction), so their common error moves it.
+
+    Each stop's own heading error scatters that stop off the model: the residual shows it, and the
+    statistical part (its Birge ratio) and the residual tests count it. A common error shows nowhere.
+    """
+    return errors.heading_u_rad > 0 and model.fit_yaw and not model.fit_beta and table.headings == "uphill"
 
 
 def propagate(
@@ -65,9 +84,9 @@ def propagate(
     g_mps2: float,
     errors: SensorErrors,
     noise_scale: float = 1.0,
-) -> tuple[FloatArray, tuple[str, ...], float]:
-    """``K A Σ_δ Aᵀ Kᵀ`` over the fitted parameters ``fitted``, the error names that entered, and the part of χ²
-    the errors' mean explains.
+) -> tuple[FloatArray, tuple[str, ...], float, FloatArray]:
+    """``K A Σ_δ Aᵀ Kᵀ`` over the fitted parameters ``fitted``, the error names that entered, the part of χ²
+    the errors' mean explains, and the part of the covariance that is the headings' common error.
 
     An error the stops can see but the final model does not fit (a bias on a slope the selection
     loop found insignificant) is bounded by the data as well as by its limit: Σ_δ is updated with
@@ -81,20 +100,29 @@ def propagate(
         if _TERM_OF[name.split("_")[0]] not in terms
         and not (name.startswith("temp_") and table.temperature_c is None)  # no temperatures: no drift to map
     ]
-    if not keep:
-        return np.zeros((len(fitted), len(fitted))), (), 0.0
     used = tuple(errors.names[i] for i in keep)
     extra = tuple(dict.fromkeys(_TERM_OF[n.split("_")[0]] for n in used))
     model = full.StaticModel(table, tuple(dict.fromkeys((*terms, *extra))), g_mps2)
-    jac = model.jacobian(state)  # whitened: W is inside both J and A
+    headings = _headings_seen(table, model, errors)
+    none = np.zeros((len(fitted), len(fitted)))
+    if not keep and not headings:
+        return none, (), 0.0, none
+    jac, heading_column = model.with_heading_offset(state)  # whitened: W is inside both J and A
     residual = -model.residual(state)  # the sign that makes r ≈ −A δ + noise, as the Jacobian is −∂prediction
     j = jac[:, [model.names.index(n) for n in fitted]]
     a = jac[:, [model.names.index(n) for n in used]]
+    prior = errors.cov[np.ix_(keep, keep)]
+    if headings:  # their common error: a rotation about the vertical, yaw one for one, no residual at all
+        a = np.column_stack([a, heading_column])
+        prior = block_diag(prior, [[errors.heading_u_rad**2]])
+        used = (*used, HEADING)
     gain_a = full.inverse_information(j.T @ j) @ (j.T @ a)  # K A
     seen = (a - j @ gain_a) / noise_scale  # what of each error the residual shows (whitened, unit noise)
-    post, mean = _updated(errors.cov[np.ix_(keep, keep)], seen, residual / noise_scale)
+    post, mean = _updated(prior, seen, residual / noise_scale)
     explained = float(np.sum((seen @ mean) ** 2)) if np.isfinite(noise_scale) else 0.0
-    return gain_a @ (post + np.outer(mean, mean)) @ gain_a.T, used, explained
+    # the residual sees nothing of a common heading error (its column is the yaw's): its part stands alone
+    heading_cov = errors.heading_u_rad**2 * np.outer(gain_a[:, -1], gain_a[:, -1]) if headings else none
+    return gain_a @ (post + np.outer(mean, mean)) @ gain_a.T, used, explained, heading_cov
 
 
 def _updated(prior: FloatArray, seen: FloatArray, residual: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -132,9 +160,14 @@ def angle_sigmas(
 
 
 def combine(
-    cal: Calibration, sys_sigma: dict[str, float | None], errors: SensorErrors, used: tuple[str, ...]
+    cal: Calibration,
+    sys_sigma: dict[str, float | None],
+    errors: SensorErrors,
+    used: tuple[str, ...],
+    sensor_only: dict[str, float | None] | None = None,
 ) -> Calibration:
-    """``cal`` with total σ in its fields, both parts in ``systematic``, and a note when systematic dominates."""
+    """``cal`` with total σ in its fields, both parts in ``systematic``, and a note when systematic dominates
+    (naming the headings when it is mostly theirs: ``sensor_only`` is the part without them)."""
     stat: dict[str, float | None] = {
         "roll_deg": cal.roll_sigma_deg,
         "pitch_deg": cal.pitch_sigma_deg,
@@ -167,18 +200,35 @@ def combine(
     if part.default_spec:
         notes.append(
             "no sensor spec given: the systematic σ assumes the default class (an uncalibrated consumer MEMS "
-            "accelerometer: ±3 % scale, ±2 % cross-axis, ±80 mg bias); give "
+            "accelerometer: ±3 % scale, ±2 % cross-axis, ±80 mg bias; headings within ±1° of the fall line in common); "
+            "give "
             f"{option('sensor_spec')} or {option('triad')} for your sensor"
         )
     if part.dominant:
-        worst = max(("roll_deg", "pitch_deg", "yaw_deg"), key=lambda k: sys_sigma[k] or 0.0)
-        notes.append(
-            f"the error is dominated by sensor errors these stops cannot see ({', '.join(_short(used))}): "
-            f"{worst.split('_')[0]} σ {stat[worst]:.3g}° statistical, {sys_sigma[worst]:.3g}° systematic; a triad "
-            f"calibration (`mountcal triad`, then {option('triad')}) or stops on two slopes of different "
-            "inclination would "
-            "remove it"
-        )
+        over = [k for k in ("roll_deg", "pitch_deg", "yaw_deg") if (sys_sigma[k] or 0.0) > (stat[k] or np.inf)]
+        without = sensor_only or {}  # the systematic σ without the headings' part
+        by_headings = [
+            k for k in over if sensor_only is not None and (without.get(k) or 0.0) < (sys_sigma[k] or 0) / 2**0.5
+        ]
+
+        def both(k: str) -> str:
+            return f"{k.split('_')[0]} σ {stat[k]:.3g}° statistical, {sys_sigma[k]:.3g}° systematic"
+
+        if by_sensor := [k for k in over if k not in by_headings]:
+            worst = max(by_sensor, key=lambda k: sys_sigma[k] or 0.0)
+            notes.append(
+                f"the error is dominated by sensor errors these stops cannot see "
+                f"({', '.join(_short(tuple(n for n in used if n != HEADING)))}): {both(worst)}; a triad calibration "
+                f"(`mountcal triad`, then {option('triad')}) or stops on two slopes of different inclination would "
+                "remove it"
+            )
+        for k in by_headings:
+            notes.append(
+                f"{both(k)}: it is limited by how well the headings are known against the fall line "
+                f"(±{errors.limits.get('heading_deg', '?')}°), which no residual can show. Give heading_deg in "
+                f"{option('sensor_spec')} if they are better known (surveyed marks, a dual-antenna GNSS heading), "
+                "or log a drive with vehicle speed (yaw from driving needs no heading)"
+            )
     rot = cal.rotation_sigma_deg
     return replace(
         cal,
@@ -197,13 +247,18 @@ def combine(
 def assess(cal: Calibration, table: StopTable, fit: full.Fit, errors: SensorErrors) -> Calibration:
     """Propagate ``errors`` through the final fit and fold them into ``cal``'s σ."""
     state = fit.state
-    cov, used, explained = propagate(table, state, fit.names, fit.terms, state.g_mps2, errors, fit.noise_scale)
+    cov, used, explained, heading_cov = propagate(
+        table, state, fit.names, fit.terms, state.g_mps2, errors, fit.noise_scale
+    )
     birge = cal.fit.birge_ratio
     if birge > 1.0 and fit.noise_known and fit.dof > 0:  # the structure the sensor errors explain is in sys already
         rest = float(np.sqrt(max(1.0, (fit.chi2 - explained) / fit.dof)))
         cal = _rescaled(cal, rest / birge, rest)
-    sig = angle_sigmas(cov, fit.names, state.rot_vs, cal.yaw_deg is not None, cal.slope_deg is not None)
-    return combine(cal, sig, errors, used)
+    yaw, slope = cal.yaw_deg is not None, cal.slope_deg is not None
+    sig = angle_sigmas(cov, fit.names, state.rot_vs, yaw, slope)
+    # which part dominates decides what the note tells the user to do
+    sensor_only = angle_sigmas(cov - heading_cov, fit.names, state.rot_vs, yaw, slope) if HEADING in used else None
+    return combine(cal, sig, errors, used, sensor_only)
 
 
 def _rescaled(cal: Calibration, factor: float, birge: float) -> Calibration:
@@ -224,7 +279,13 @@ def _rescaled(cal: Calibration, factor: float, birge: float) -> Calibration:
 
 
 def _short(names: tuple[str, ...]) -> list[str]:
-    label = {"bias": "bias", "temp": "bias drift per °C", "scale": "scale", "cross": "cross-axis"}
+    label = {
+        "bias": "bias",
+        "temp": "bias drift per °C",
+        "scale": "scale",
+        "cross": "cross-axis",
+        HEADING: "the headings' reference",
+    }
     return list(dict.fromkeys(label[n.split("_")[0]] for n in names))
 
 

@@ -24,7 +24,7 @@ from mountcal.estimate.effects.scale import SCALE_NAMES
 from mountcal.result_file import read_json
 from mountcal.sensor_spec import SensorSpec
 from mountcal.stoptable import StopTable, Unit, read_stop_table
-from mountcal.systematic import BIAS_NAMES, TEMP_NAMES, SensorErrors, from_spec
+from mountcal.systematic import BIAS_NAMES, TEMP_NAMES, SensorErrors, from_spec, heading_u
 
 FORMAT = "mountcal.triad"
 FORMAT_VERSION = 1
@@ -71,7 +71,10 @@ class Triad:
             "from_spec": {n: float(np.sqrt(cov[i, i])) for i, n in enumerate(NAMES) if n not in self.fitted},
             "bias_tempco_mps2_per_c": spec.bias_tempco_mps2_per_c,
         }
-        return SensorErrors(NAMES + TEMP_NAMES, cov, f"triad calibration {self.source}", limits)
+        limits["heading_deg"] = spec.heading_deg
+        return SensorErrors(
+            NAMES + TEMP_NAMES, cov, f"triad calibration {self.source}", limits, heading_u(spec.heading_deg)
+        )
 
     def to_dict(self) -> dict[str, Any]:
         return {

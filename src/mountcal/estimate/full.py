@@ -172,6 +172,22 @@ class StaticModel:
     def jacobian(self, state: State) -> FloatArray:
         """Jacobian of the whitened residual, shape (3n, p), at δ = 0: the base force's columns carried
         through each effect (chain rule), then each effect's own."""
+        jac, local = self._jacobians(state)
+        if not self.fit_beta:
+            return jac
+        n = len(self.table)
+        jb = np.zeros((3 * n, n))
+        jb[np.arange(3 * n), np.repeat(np.arange(n), 3)] = local
+        return np.hstack([jac, jb])
+
+    def with_heading_offset(self, state: State) -> tuple[FloatArray, FloatArray]:
+        """:meth:`jacobian`, and the whitened residual's Jacobian against one error common to every stop's
+        heading, shape (3n,), in one pass."""
+        jac, local = self._jacobians(state)
+        return (self.jacobian(state) if self.fit_beta else jac), local
+
+    def _jacobians(self, state: State) -> tuple[FloatArray, FloatArray]:
+        """The Jacobian without heading columns, and each stop's residual against its own heading, (3n,)."""
         n = len(self.table)
         alpha, f_v, p = self._base(state)
         beta, g = self.beta(state), state.g0_mps2
@@ -183,23 +199,16 @@ class StaticModel:
         da = np.zeros((n, 3, len(self.sites)))
         da[np.arange(n), :, self.site_index] = df_da @ rt.T
         blocks = [np.concatenate([rot, da], axis=2)]
-        if self.fit_beta:
-            df_db = g * np.sin(alpha)[:, None] * np.column_stack([-np.sin(beta), -np.cos(beta), np.zeros(n)])
-            db = (df_db @ rt.T)[:, :, None]
+        df_db = g * np.sin(alpha)[:, None] * np.column_stack([-np.sin(beta), -np.cos(beta), np.zeros(n)])
+        db = df_db @ rt.T
         for effect, values in zip(self.chain, self._values(state), strict=True):
             p, d_values, d_p = effect.apply(self.table, values, p, g)
             if d_p is not None:
                 blocks = [d_p @ b for b in blocks]
-                if self.fit_beta:
-                    db = d_p @ db
+                db = (d_p @ db[:, :, None])[:, :, 0]
             blocks.append(d_values)
         jac = -np.einsum("nij,njk->nik", self.whiten, np.concatenate(blocks, axis=2)).reshape(3 * n, -1)
-        if self.fit_beta:
-            local = -np.einsum("nij,nj->ni", self.whiten, db[:, :, 0])
-            jb = np.zeros((3 * n, n))
-            jb[np.arange(3 * n), np.repeat(np.arange(n), 3)] = local.ravel()
-            jac = np.hstack([jac, jb])
-        return jac
+        return jac, -np.einsum("nij,nj->ni", self.whiten, db).ravel()
 
     def retract(self, state: State, step: np.ndarray) -> State:
         k = 3 if self.fit_yaw else 2
