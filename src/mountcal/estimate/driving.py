@@ -54,6 +54,7 @@ from mountcal.estimate.driving_intervals import (
     SegmentLines,
     layout_intervals,
     speed_channel,
+    speed_intervals,
     tilt_rotation,
     time_offset,
     unit_vector,
@@ -211,6 +212,13 @@ def estimate_driving(
     if moving.sum() < 10:
         raise NotEnoughInformation(
             f"{where}: no driving at ≥ {opts.min_speed_mps:g} m/s in the speed channel; yaw from driving needs a drive"
+        )
+    at_speed = int(speed_intervals(speed, opts)[2].sum())
+    if at_speed < MIN_INTERVALS:  # decided by the speed alone: the IMU's integrals would be built for nothing
+        raise NotEnoughInformation(
+            f"{where}: only {at_speed} intervals at ≥ {opts.min_speed_mps:g} m/s, straight or not (need "
+            f"{MIN_INTERVALS}); yaw from driving needs more straight driving with speed changes (accelerating and "
+            f"braking), or stops on a slope with headings ({option('protocol')})"
         )
     if tilt_from is not None:
         up_given = np.asarray(tilt_from.rot_vs.inv().apply([0.0, 0.0, 1.0]), dtype=float)

@@ -151,6 +151,19 @@ class Layout:
         )
 
 
+def speed_intervals(speed: Channel, opts: DrivingOptions) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Start and end indices (into the speed samples) of intervals of about ``interval_s``, and which of them
+    start and end at speed without a gap: the most that can be used, decided by the speed alone."""
+    t_v, v = speed.t_s, speed.value
+    step = float(np.median(np.diff(t_v))) if t_v.size > 1 else np.inf
+    stride = max(1, round(opts.interval_s / step)) if np.isfinite(step) and step > 0 else 1
+    start = np.arange(0, t_v.size - stride, stride)
+    end = start + stride
+    width = t_v[end] - t_v[start]
+    ok = (v[start] >= opts.min_speed_mps) & (v[end] >= opts.min_speed_mps) & (width <= 1.5 * stride * step)
+    return start, end, ok
+
+
 def layout_intervals(
     imu: Imu,
     speed: Channel,
@@ -161,12 +174,7 @@ def layout_intervals(
 ) -> Layout:
     """Intervals of about ``interval_s`` between speed samples, and the IMU integrals to judge them."""
     t_v, v = speed.t_s, speed.value
-    step = float(np.median(np.diff(t_v)))
-    stride = max(1, round(opts.interval_s / step))
-    start = np.arange(0, t_v.size - stride, stride)
-    end = start + stride
-    width = t_v[end] - t_v[start]
-    base_ok = (v[start] >= opts.min_speed_mps) & (v[end] >= opts.min_speed_mps) & (width <= 1.5 * stride * step)
+    start, end, base_ok = speed_intervals(speed, opts)
     levelled = rot_tilt.apply(imu.acc_s)
     gate_cols = [np.linalg.norm(levelled[:, :2], axis=1)]
     if imu.gyro_s is not None:
