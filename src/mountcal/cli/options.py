@@ -142,7 +142,12 @@ _DETECTION = {
 
 def add_sensor_options(g: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
     """The sensor's limits and triad calibration: the systematic part of every σ."""
-    g.add_argument("--sensor-spec", default=None, help="the sensor's datasheet limits (TOML/JSON; default class)")
+    g.add_argument(
+        "--sensor-spec",
+        default=None,
+        help="limits for the systematic σ (TOML/JSON): scale, cross_axis, bias_mg, bias_tempco_mg_per_c, "
+        "heading_deg (the headings' common error against the fall line); without it, the default class",
+    )
     g.add_argument("--triad", default=None, help="triad calibration from `mountcal triad`, applied to the stops")
 
 
