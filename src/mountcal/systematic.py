@@ -50,7 +50,7 @@ class SensorErrors:
     cov: FloatArray
     source: str
     limits: dict[str, Any]
-    heading_u_rad: float = 0.0  # each stop's heading, and their common reference, against the fall line (1σ)
+    heading_u_rad: float = 0.0  # the headings' common error against the fall line (1σ)
 
 
 def from_spec(spec: SensorSpec) -> SensorErrors:
@@ -206,10 +206,8 @@ def combine(
         )
     if part.dominant:
         over = [k for k in ("roll_deg", "pitch_deg", "yaw_deg") if (sys_sigma[k] or 0.0) > (stat[k] or np.inf)]
-        without = sensor_only or {}  # the systematic σ without the headings' part
-        by_headings = [
-            k for k in over if sensor_only is not None and (without.get(k) or 0.0) < (sys_sigma[k] or 0) / 2**0.5
-        ]
+        without = sys_sigma if sensor_only is None else sensor_only  # the systematic σ without the headings' part
+        by_headings = [k for k in over if (without.get(k) or 0.0) < (sys_sigma[k] or 0.0) / 2**0.5]
 
         def both(k: str) -> str:
             return f"{k.split('_')[0]} σ {stat[k]:.3g}° statistical, {sys_sigma[k]:.3g}° systematic"
@@ -279,13 +277,7 @@ def _rescaled(cal: Calibration, factor: float, birge: float) -> Calibration:
 
 
 def _short(names: tuple[str, ...]) -> list[str]:
-    label = {
-        "bias": "bias",
-        "temp": "bias drift per °C",
-        "scale": "scale",
-        "cross": "cross-axis",
-        HEADING: "the headings' reference",
-    }
+    label = {"bias": "bias", "temp": "bias drift per °C", "scale": "scale", "cross": "cross-axis"}
     return list(dict.fromkeys(label[n.split("_")[0]] for n in names))
 
 

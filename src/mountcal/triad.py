@@ -70,8 +70,8 @@ class Triad:
             "triad_sigma": {n: float(s) for n, s in zip(NAMES, sigma, strict=True) if n in self.fitted},
             "from_spec": {n: float(np.sqrt(cov[i, i])) for i, n in enumerate(NAMES) if n not in self.fitted},
             "bias_tempco_mps2_per_c": spec.bias_tempco_mps2_per_c,
+            "heading_deg": spec.heading_deg,
         }
-        limits["heading_deg"] = spec.heading_deg
         return SensorErrors(
             NAMES + TEMP_NAMES, cov, f"triad calibration {self.source}", limits, heading_u(spec.heading_deg)
         )

@@ -172,19 +172,18 @@ class StaticModel:
     def jacobian(self, state: State) -> FloatArray:
         """Jacobian of the whitened residual, shape (3n, p), at δ = 0: the base force's columns carried
         through each effect (chain rule), then each effect's own."""
-        jac, local = self._jacobians(state)
-        if not self.fit_beta:
-            return jac
-        n = len(self.table)
-        jb = np.zeros((3 * n, n))
-        jb[np.arange(3 * n), np.repeat(np.arange(n), 3)] = local
-        return np.hstack([jac, jb])
+        return self.with_heading_offset(state)[0]
 
     def with_heading_offset(self, state: State) -> tuple[FloatArray, FloatArray]:
         """:meth:`jacobian`, and the whitened residual's Jacobian against one error common to every stop's
         heading, shape (3n,), in one pass."""
         jac, local = self._jacobians(state)
-        return (self.jacobian(state) if self.fit_beta else jac), local
+        if self.fit_beta:  # each fitted heading moves its own stop only
+            n = len(self.table)
+            jb = np.zeros((3 * n, n))
+            jb[np.arange(3 * n), np.repeat(np.arange(n), 3)] = local
+            jac = np.hstack([jac, jb])
+        return jac, local
 
     def _jacobians(self, state: State) -> tuple[FloatArray, FloatArray]:
         """The Jacobian without heading columns, and each stop's residual against its own heading, (3n,)."""

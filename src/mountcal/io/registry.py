@@ -91,9 +91,20 @@ def log_suffixes() -> frozenset[str]:
     return frozenset(s for r in readers() for s in r.suffixes)
 
 
+def _claimant(path: Path, options: LogOptions) -> LogReader | None:
+    """The first reader claiming ``path``: the entry points are scanned only when no built-in reader claims it."""
+    for reader in _builtin():
+        if reader.claims(path, options):
+            return reader
+    for reader in readers()[len(BUILTIN) :]:  # the plugins' readers, after the built-in ones
+        if reader.claims(path, options):
+            return reader
+    return None
+
+
 def is_log(path: Path, options: LogOptions) -> bool:
     """Whether some reader takes ``path`` (fleet's test of which files of a folder are logs)."""
-    return any(r.claims(path, options) for r in _builtin()) or any(r.claims(path, options) for r in readers())
+    return _claimant(path, options) is not None
 
 
 def reader_for(path: Path, options: LogOptions) -> LogReader:
@@ -104,10 +115,9 @@ def reader_for(path: Path, options: LogOptions) -> LogReader:
     InputError
         No reader claims it: the message lists the formats, and any plugin that failed to load.
     """
-    for group in (_builtin, readers):  # the entry points are scanned only when no built-in claims the path
-        for reader in group():
-            if reader.claims(path, options):
-                return reader
+    reader = _claimant(path, options)
+    if reader is not None:
+        return reader
     formats = "; ".join(f"{r.description} ({' '.join(r.suffixes)})" for r in readers() if r.suffixes)
     broken = _registry()[1]
     todo = "Convert it, or name it by its format."
