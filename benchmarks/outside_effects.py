@@ -1,11 +1,12 @@
 """Effects the library does not model: when one moves an estimate beyond 2σ, is the result flagged?
 
-Nine physically motivated effect types, and two invented after those were measured, none of them
-a term of the model (docs/effects.md, "Unexplained structure"), each at three strengths, added to
-the same noisy session as a clean run. Two session layouts alternate so that no single geometry is
-tuned to: the paper's 12 stops 30° apart on a 5° slope with 1 mg noise, and 24 stops at random
-headings on a 3° slope with 0.5 mg noise. The mounting is random in every run; the stop table logs
-time and temperature (a warm-up and cool-down, 20 → 35 → 22 °C) but no position.
+Nine physically motivated effect types, two invented after those were measured and one after the
+step tests (a slope that changes mid-session), none of them a term of the model (docs/effects.md,
+"Unexplained structure"), each at three strengths, added to the same noisy session as a clean run.
+Two session layouts alternate so that no single geometry is tuned to: the paper's 12 stops 30° apart
+on a 5° slope with 1 mg noise, and 24 stops at random headings on a 3° slope with 0.5 mg noise. The
+mounting is random in every run; the stop table logs time and temperature (a warm-up and cool-down,
+20 → 35 → 22 °C) but no position.
 
 For each type and strength: the fraction of runs in which the effect moves roll, pitch, yaw or
 slope beyond 2σ of the σ the result reports — the total (statistical ⊕ systematic; the sessions
@@ -132,6 +133,16 @@ def bias_step(s: Session, b: float, rng: np.random.Generator) -> StopTable:
     return _add(s, np.outer(np.arange(n) >= at, b * MG * direction / np.linalg.norm(direction)))
 
 
+def second_bay(s: Session, d: float, rng: np.random.Generator) -> StopTable:
+    """The car moves to another bay mid-session (a random stop in the middle half): the slope changes by ±d degrees."""
+    n = len(s.table)
+    later = np.arange(n) >= rng.integers(n // 4, 3 * n // 4)
+    slope = np.radians(s.truth.slope_deg + d * rng.choice([-1.0, 1.0]) * later)
+    beta = np.asarray(s.table.beta_rad, float)
+    f_v = s.truth.g_mps2 * np.column_stack([np.sin(slope) * np.cos(beta), -np.sin(slope) * np.sin(beta), np.cos(slope)])
+    return _add(s, s.truth.rot_vs.inv().apply(f_v) - s.u_s)
+
+
 EFFECTS: list[tuple[str, str, Effect, tuple[float, ...]]] = [
     ("quadratic nonlinearity", "mg/g²", nonlinearity, (5.0, 20.0, 60.0)),
     ("g-sensitive misalignment", "mrad/g", g_misalignment, (10.0, 30.0, 100.0)),
@@ -145,8 +156,14 @@ EFFECTS: list[tuple[str, str, Effect, tuple[float, ...]]] = [
     # two more, invented after the nine were measured (none a term of the model), so the figure is not fitted to them
     ("heading drift of an integrating gyro", "° at the end", heading_drift, (1.0, 3.0, 8.0)),
     ("bias step at a restart mid-session", "mg", bias_step, (0.5, 1.5, 5.0)),
+    # invented after the step tests were built (a change of the road, not of the sensor)
+    ("second bay mid-session: the slope changes", "°", second_bay, (0.2, 0.5, 1.5)),
 ]
 NINE = 9
+# On one slope its change of the stops lies 99.7–99.9 % inside the base model's span (docs/effects.md): no residual
+# test can see it; the pooled figure is also given without it.
+INSIDE_THE_SPAN = ("g-sensitive misalignment",)
+LEAVES = "all types but the one inside the model's span"
 
 
 def session(run: int, rng: np.random.Generator) -> Session:
@@ -245,7 +262,9 @@ def main() -> None:
     lines += ["", "| effect | flagged when moved beyond 2σ, total σ | the same, statistical σ |", "|---|---|---|"]
     for i, (name, *_rest) in enumerate(EFFECTS):
         lines.append(f"| {name} | {share(flag[i], moved[0, i])} | {share(flag[i], moved[1, i])} |")
-    for label, sel in (("the nine original types", slice(0, NINE)), ("all types", slice(None))):
+    leaves = [i for i, (name, *_r) in enumerate(EFFECTS) if name not in INSIDE_THE_SPAN]
+    groups = (("the nine original types", slice(0, NINE)), ("all types", slice(None)), (LEAVES, leaves))
+    for label, sel in groups:
         pooled = [share(flag[sel], moved[v, sel]) for v in range(len(VIEWS))]
         lines.append(f"| **{label}** | **{pooled[0]}** | **{pooled[1]}** |")
     lines += [

@@ -6,9 +6,10 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from mountcal.calibrate import calibrate
-from mountcal.conventions import G_N
+from mountcal.conventions import G_N, FloatArray
 from mountcal.diagnose import FAMILY_ALPHA, analyse, unexplained
 from mountcal.effects import BASE
 from mountcal.estimate import full
@@ -46,7 +47,7 @@ def test_every_test_fires_at_its_nominal_rate_under_the_model(noise_known: bool)
         for test, p in p_values(table).items():
             low[test] = low.get(test, 0) + (p < 0.05)
     expected = {"harmonic_2beta", "harmonic_3beta", "drift", "temperature", "norm", "variance_heading", "single_stop"}
-    expected |= {"stop_norm", "stop_heading", "hysteresis"}
+    expected |= {"stop_norm", "stop_heading", "hysteresis", "bias_step", "attitude_step"}
     assert expected | ({"chi2"} if noise_known else set()) <= set(low)
     for test, k in low.items():
         assert 0.015 <= k / runs <= 0.095, (test, k / runs)
@@ -164,3 +165,87 @@ def test_the_per_stop_tests_equal_the_dense_projection(terms: tuple[str, ...]) -
     found = next(f for f in analyse(table, fit) if f.test == "stop_norm")
     assert found.dof == q.shape[1]
     assert found.statistic == pytest.approx(float(np.sum((q.T @ r) ** 2)), rel=1e-5)  # r ⟂ J to the fit's tolerance
+
+
+def _finding(table: StopTable, test: str, terms: tuple[str, ...] = BASE) -> Finding:
+    return next(f for f in analyse(table, full.fit(table, terms, G_N)) if f.test == test)
+
+
+def _stepped(
+    table: StopTable, at: int, bias_mps2: FloatArray | None = None, turn_deg: FloatArray | None = None
+) -> StopTable:
+    """The stops from row ``at`` on (the table in time order) with an extra bias, or turned by a small rotation."""
+    acc = table.acc_s.copy()
+    if bias_mps2 is not None:
+        acc[at:] += bias_mps2
+    if turn_deg is not None:
+        acc[at:] = Rotation.from_rotvec(np.radians(turn_deg)).apply(acc[at:])
+    return replace(table, acc_s=acc)
+
+
+def test_a_bias_step_and_a_slipped_mount_are_seen_and_placed() -> None:
+    # 24 stops driven once round in heading order: most of a mid-session step is a constant and a 1β
+    # pattern the bias and tilt absorb; the step tests look for its edge, and name the stop it starts at.
+    rng = np.random.default_rng(16)
+    table = clean(rng, 24, noise_g=0.0005)
+    table = replace(table, t_s=np.arange(24) * 60.0)
+    step = _finding(_stepped(table, 14, bias_mps2=np.array([2.0, -2.0, 1.0]) * MG), "bias_step")
+    assert step.p_value is not None and step.p_value < 1e-4
+    assert step.size.endswith("from stop 15 on")
+    slip = _finding(_stepped(table, 9, turn_deg=np.array([0.3, -0.2, 0.0])), "attitude_step")
+    assert slip.p_value is not None and slip.p_value < 1e-4
+    assert slip.size.endswith("from stop 10 on")
+    clean_p = [_finding(table, t).p_value for t in ("bias_step", "attitude_step")]
+    assert all(p is not None and p > 1e-3 for p in clean_p)
+
+
+def test_the_step_tests_follow_time_not_rows() -> None:
+    # The same stops listed in another row order with their times: the same split, the same statistic.
+    rng = np.random.default_rng(17)
+    table = replace(clean(rng, 18), t_s=np.arange(18) * 60.0)
+    stepped = _stepped(table, 7, bias_mps2=np.array([0.0, 3.0, 0.0]) * MG)
+    shuffled = stepped.subset(rng.permutation(18))
+    a, b = _finding(stepped, "bias_step"), _finding(shuffled, "bias_step")
+    assert a.statistic == pytest.approx(b.statistic, rel=1e-6)
+    assert a.p_value == pytest.approx(b.p_value, rel=1e-6)
+    row = int(a.size.split("from stop ")[1].split()[0]) - 1
+    moved = int(b.size.split("from stop ")[1].split()[0]) - 1
+    assert shuffled.t_s[moved] == stepped.t_s[row] == 7 * 60.0  # type: ignore[index]
+
+
+@pytest.mark.parametrize("terms", [BASE, (*BASE, "bias")])
+def test_the_step_statistic_equals_the_dense_projection_at_its_split(terms: tuple[str, ...]) -> None:
+    # The suffix sums against the plain form: project the split's 3 columns off the Jacobian.
+    from mountcal.change_point import _attitude_directions
+    from mountcal.diagnose import _outside, _span
+
+    rng = np.random.default_rng(18)
+    table = _stepped(clean(rng, 15), 6, bias_mps2=np.array([1.0, 1.0, -2.0]) * MG)
+    fit = full.fit(table, terms, G_N)
+    model = full.StaticModel(table, terms, G_N)
+    r, basis = model.residual(fit.state), _span(model.jacobian(fit.state))
+    u = model.predict(fit.state) / fit.state.g_mps2
+    for test, e in (("bias_step", model.whiten), ("attitude_step", _attitude_directions(model.whiten, u))):
+        found = next(f for f in analyse(table, fit) if f.test == test)
+        at = int(found.size.split("from stop ")[1].split()[0]) - 1
+        dense = np.zeros((3 * len(table), 3))
+        dense[3 * at :] = e[at:].reshape(-1, 3)
+        q = _outside(dense, basis)
+        assert found.dof == q.shape[1]
+        assert found.statistic == pytest.approx(float(np.sum((q.T @ r) ** 2)), rel=1e-5)
+        # its size: what that step explains, back in mg per stop through the stop noise
+        structure = np.einsum("nij,nj->ni", np.linalg.cholesky(table.cov_s), (q @ (q.T @ r)).reshape(-1, 3))
+        rms_mg = np.sqrt(np.mean(np.sum(structure**2, axis=1))) / MG
+        assert float(found.size.split()[0]) == pytest.approx(rms_mg, rel=5e-3)
+
+
+def test_findings_name_the_users_rows_when_the_model_choice_leaves_a_stop_out() -> None:
+    rng = np.random.default_rng(19)
+    table = replace(clean(rng, 12), t_s=np.arange(12) * 60.0)
+    acc = table.acc_s.copy()
+    acc[3] += [0.0, 0.0, 60 * MG]  # row 4: not still at all, left out by the model choice
+    acc[8] += [0.0, 6 * MG, 0.0]  # row 9: the worst of those left
+    cal = calibrate(replace(table, acc_s=acc))
+    assert cal.fit.excluded_stops == (4,)
+    named = {f.test: f.size for f in cal.diagnostics}
+    assert named["single_stop"].startswith("stop 9:")

@@ -3,7 +3,8 @@
 Every test compares the whitened residuals with a structure they would show if an effect were
 missing — harmonics against heading, the gravity direction, slow drift across the session,
 temperature and hysteresis, offsets per site, the norm against g, single stops off in |a| or in
-heading, scatter against heading, the one stop the others do not predict — and returns its size
+heading, a step in the bias or the mounting at one stop (:mod:`mountcal.change_point`), scatter
+against heading, the one stop the others do not predict — and returns its size
 and its p-value; :func:`unexplained` holds the family's false-alarm rate (Holm). docs/effects.md
 ("Unexplained structure") gives each test's null and what it points at.
 """
@@ -12,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from mountcal.change_point import change_points
 from mountcal.conventions import G_N, FloatArray
 from mountcal.errors import FitFailed, NotEnoughInformation
 from mountcal.estimate import full
@@ -26,8 +28,11 @@ VARIANCE_DRAWS = 400  # simulated residual sets for the null of the variance tes
 VARIANCE_SIMULATED_STOPS = 60  # above this many stops leverage is small: the asymptotic null (no simulation)
 
 
-def analyse(table: StopTable, fit: full.Fit) -> list[Finding]:
+def analyse(table: StopTable, fit: full.Fit, rows: np.ndarray | None = None) -> list[Finding]:
     """Every residual test the table's columns allow (docs/effects.md, "Unexplained structure").
+
+    ``rows`` are the stops' rows in the user's table (0-based; default 0…n−1), for the findings that name a
+    stop: the model choice may have left some out.
 
     Each projection test asks whether adding a set of directions to the linearised model explains
     significantly more of the whitened residual: the directions are first made orthogonal to the
@@ -100,11 +105,13 @@ def analyse(table: StopTable, fit: full.Fit) -> list[Finding]:
         per_stop.append(("stop_heading", what, np.einsum("nij,nj->ni", model.whiten, tangent).reshape(-1, 1)))
     for name, what, v in per_stop:
         findings.append(_per_stop(r, v.reshape(n, 3), basis, name, what, fit, unwhiten))
+    rows = np.arange(n) if rows is None else np.asarray(rows)
+    findings += change_points(r, model.whiten, unwhiten, u, basis, order, fit.noise_known, fit.dof, rows)
     if beta is not None and beta.size == n:
         findings.append(
             _variance(r, basis, np.column_stack([np.cos(beta), np.sin(beta), np.cos(2 * beta), np.sin(2 * beta)]))
         )
-    findings.append(_single_stop(r, basis, fit))
+    findings.append(_single_stop(r, basis, fit, rows))
     return findings
 
 
@@ -273,7 +280,7 @@ def _variance(r: FloatArray, basis: FloatArray, x: FloatArray) -> Finding:
     )
 
 
-def _single_stop(r: FloatArray, basis: FloatArray, fit: full.Fit) -> Finding:
+def _single_stop(r: FloatArray, basis: FloatArray, fit: full.Fit, rows: np.ndarray) -> Finding:
     """The stop the others predict worst, Bonferroni over the stops.
 
     Deleting stop i from the linearised fit leaves ``r_iᵀ (I − H_ii)⁻¹ r_i``, exactly χ²(rank) with
@@ -317,7 +324,7 @@ def _single_stop(r: FloatArray, basis: FloatArray, fit: full.Fit) -> Finding:
     return Finding(
         "single_stop",
         what,
-        f"stop {stop + 1}: held-out χ² {d2[stop]:.1f} on {k[stop]}",
+        f"stop {int(rows[stop]) + 1}: held-out χ² {d2[stop]:.1f} on {k[stop]}",
         float(d2[stop]),
         int(k[stop]),
         float(np.exp(logp)),

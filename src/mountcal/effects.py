@@ -164,7 +164,8 @@ def close_the_loop(
 
 def _finish(steps: list[Step], declined: list[dict[str, Any]]) -> Loop:
     last = steps[-1]
-    findings = analyse(last.table, last.fit)
+    rows = np.delete(np.arange(len(steps[0].table)), list(last.excluded))  # findings name the user's rows
+    findings = analyse(last.table, last.fit, rows)
     return Loop(steps, declined, findings, unexplained(findings))
 
 
