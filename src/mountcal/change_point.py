@@ -17,6 +17,7 @@ where the splits' exceedances become nearly disjoint events.
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 from itertools import pairwise
 
 import numpy as np
@@ -94,6 +95,39 @@ def _suffix(x: FloatArray, splits: np.ndarray) -> FloatArray:
     return np.flip(np.cumsum(np.flip(seg, axis=0), axis=0), axis=0)
 
 
+@dataclass(frozen=True)
+class _Projected:
+    """The step directions of every split, made orthogonal to the model's span (normalised per column)."""
+
+    vec: FloatArray  # eigenvectors of each split's Gram matrix outside the span, (m, 3, 3)
+    lam: FloatArray  # its eigenvalues, 1 where dropped, (m, 3)
+    keep: np.ndarray  # the eigen-directions outside the span, (m, 3)
+    norms: FloatArray  # column norms of each split's directions, (m, 3)
+    inside: FloatArray  # Qᵀ D_k, (m, p, 3)
+    c_obs: FloatArray  # D_kᵀ r outside the span, (m, 3)
+
+    def explained(self, c: FloatArray) -> FloatArray:
+        """Δχ² of each split for D_kᵀ r given as ``c`` (m, 3, S)."""
+        proj = np.einsum("mab,mas->mbs", self.vec, c / self.norms[:, :, None])
+        return np.asarray(np.sum(np.where(self.keep[:, :, None], proj**2 / self.lam[:, :, None], 0.0), axis=1))
+
+
+def _project(r: FloatArray, e: FloatArray, basis: FloatArray, order: np.ndarray, splits: np.ndarray) -> _Projected:
+    n = len(order)
+    q = basis.reshape(n, 3, -1)[order]
+    gram = _suffix(np.einsum("nia,nib->nab", e, e), splits)
+    bounds = np.append(splits, n)
+    seg = np.stack([np.einsum("nip,nia->pa", q[a:b], e[a:b]) for a, b in pairwise(bounds)])
+    inside = np.flip(np.cumsum(np.flip(seg, axis=0), axis=0), axis=0)
+    norms = np.sqrt(np.einsum("maa->ma", gram))
+    scale = norms[:, :, None] * norms[:, None, :]
+    lam, vec = np.linalg.eigh((gram - np.einsum("mpa,mpb->mab", inside, inside)) / scale)
+    keep = lam > 1e-8
+    rs = r.reshape(n, 3)[order]
+    c_obs = _suffix(np.einsum("nia,ni->na", e, rs), splits) - np.einsum("mpa,p->ma", inside, basis.T @ r)
+    return _Projected(vec, np.where(keep, lam, 1.0), keep, norms, inside, c_obs)
+
+
 def _scan(
     test: str,
     what: str,
@@ -109,26 +143,13 @@ def _scan(
     rows: np.ndarray,
 ) -> Finding:
     n = len(order)
-    q = basis.reshape(n, 3, -1)[order]
-    rs = r.reshape(n, 3)[order]
-    gram = _suffix(np.einsum("nia,nib->nab", e, e), splits)
-    bounds = np.append(splits, n)
-    seg = np.stack([np.einsum("nip,nia->pa", q[a:b], e[a:b]) for a, b in pairwise(bounds)])
-    inside = np.flip(np.cumsum(np.flip(seg, axis=0), axis=0), axis=0)  # Qᵀ D_k, shape (m, p, 3)
-    norms = np.sqrt(np.einsum("maa->ma", gram))
-    scale = norms[:, :, None] * norms[:, None, :]
-    lam, vec = np.linalg.eigh((gram - np.einsum("mpa,mpb->mab", inside, inside)) / scale)
-    keep = lam > 1e-8
-    k = keep.sum(axis=1)
+    proj = _project(r, e, basis, order, splits)
+    k = proj.keep.sum(axis=1)
     ok = (k > 0) & (noise_known | (dof - k >= 1))
     if not np.any(ok):
         why = "no test: the fitted model already absorbs a step, or no degrees of freedom are left"
         return Finding(test, what, why, None, 3, None, None, why)
-    lam_safe = np.where(keep, lam, 1.0)
-
-    def explained(c: FloatArray) -> FloatArray:  # c shape (m, 3, S): Dᵀr outside the span, per split
-        proj = np.einsum("mab,mas->mbs", vec, c / norms[:, :, None])
-        return np.asarray(np.sum(np.where(keep[:, :, None], proj**2 / lam_safe[:, :, None], 0.0), axis=1))
+    explained = proj.explained
 
     def rank(stat: FloatArray, total: FloatArray) -> FloatArray:  # per split (m, S): larger is less likely
         if noise_known:
@@ -144,8 +165,7 @@ def _scan(
             out = f_logsf(rank(stat, total) * rest_dof / kk, kk, rest_dof)
         return np.asarray(np.where(ok[:, None], out, 0.0))
 
-    c_obs = _suffix(np.einsum("nia,ni->na", e, rs), splits) - np.einsum("mpa,p->ma", inside, basis.T @ r)
-    stat = explained(c_obs[:, :, None])
+    stat = explained(proj.c_obs[:, :, None])
     lp = logp(stat, np.array([[float(r @ r)]]))[:, 0]
     best = int(np.argmin(lp))
     tested = int(np.sum(ok))
@@ -159,9 +179,9 @@ def _scan(
         log_p = min(log_p, _simulated(null, order, e, splits, explained, score, ok_col, sign, observed))
     # Size as the other tests give it: the explained structure (the step's part outside the model's span, which
     # is all the residual can show) as an RMS per stop in m/s², back through the stop noise.
-    coef = vec[best] @ np.where(keep[best], (vec[best].T @ (c_obs[best] / norms[best])) / lam_safe[best], 0.0)
-    coef = coef / norms[best]
-    structure = -(basis @ (inside[best] @ coef)).reshape(n, 3)
+    vec, norms = proj.vec[best], proj.norms[best]
+    coef = vec @ np.where(proj.keep[best], (vec.T @ (proj.c_obs[best] / norms)) / proj.lam[best], 0.0) / norms
+    structure = -(basis @ (proj.inside[best] @ coef)).reshape(n, 3)
     structure[order[splits[best] :]] += np.einsum("nia,a->ni", e[splits[best] :], coef)
     fitted = np.einsum("nij,nj->ni", unwhiten, structure)
     size = f"{np.sqrt(np.mean(np.sum(fitted**2, axis=1))) * 1e3 / G_N:.3g} mg RMS"

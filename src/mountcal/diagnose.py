@@ -65,7 +65,7 @@ def analyse(table: StopTable, fit: full.Fit, rows: np.ndarray | None = None) -> 
             d = _per_axis(model.whiten, x)
             if _outside(d, known).shape[1] > 0:
                 tests.append((name, what, d))
-    order = np.argsort(table.t_s, kind="stable") if table.t_s is not None else np.arange(n)
+    order = time_order(table)
     if n > 2 * DRIFT_MODES:
         rank = np.empty(n)
         rank[order] = np.arange(n)
@@ -124,6 +124,11 @@ def unexplained(findings: list[Finding], alpha: float = FAMILY_ALPHA) -> list[Fi
             break
         out.append(f)
     return out
+
+
+def time_order(table: StopTable) -> np.ndarray:
+    """The stops in the order they were taken: by ``t_s`` where logged, else as listed."""
+    return np.argsort(table.t_s, kind="stable") if table.t_s is not None else np.arange(len(table))
 
 
 def heading_harmonics(whiten: FloatArray, beta: FloatArray, ks: tuple[int, ...]) -> FloatArray | None:
