@@ -206,14 +206,22 @@ def flagged(cal: Calibration) -> bool:
 VIEWS = ("total", "statistical")
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def main(
+    effects: list[tuple[str, str, Effect, tuple[float, ...]]] = EFFECTS,
+    pooled: tuple[tuple[str, slice | list[int]], ...] | None = None,
+    doc: str | None = __doc__,
+) -> None:
+    """Run ``effects`` (default: the benchmark's twelve) and print the tables; ``pooled`` the rows summed at the end."""
+    if pooled is None:
+        leaves = [i for i, (name, *_r) in enumerate(effects) if name not in INSIDE_THE_SPAN]
+        pooled = (("the nine original types", slice(0, NINE)), ("all types", slice(None)), (LEAVES, leaves))
+    ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--runs", type=int, default=100)
     ap.add_argument("--seed", type=int, default=15)
     ap.add_argument("--markdown", default=None)
     args = ap.parse_args()
     t0 = time.perf_counter()
-    shape = (len(VIEWS), len(EFFECTS), 3, args.runs)
+    shape = (len(VIEWS), len(effects), 3, args.runs)
     moved, off = np.zeros(shape, bool), np.zeros(shape, bool)
     flag = np.zeros(shape[1:], bool)
     clean_flag, clean_off = np.zeros(args.runs, bool), np.zeros((len(VIEWS), args.runs), bool)
@@ -227,7 +235,7 @@ def main() -> None:
         clean_flag[r] = flagged(clean)
         for v in range(len(VIEWS)):
             clean_off[v, r] = beyond(ref, truth, ref_sig[v])
-        for i, (_, _, effect, strengths) in enumerate(EFFECTS):
+        for i, (_, _, effect, strengths) in enumerate(effects):
             for j, strength in enumerate(strengths):
                 cal = calibrate(effect(s, strength, np.random.default_rng([args.seed, r, i, j])))
                 est, *sig = estimates(cal)
@@ -247,7 +255,7 @@ def main() -> None:
         "off the truth: total [statistical] | flagged when off: total [statistical] | flagged, all runs |",
         "|---|---|---|---|---|---|---|",
     ]
-    for i, (name, unit, _, strengths) in enumerate(EFFECTS):
+    for i, (name, unit, _, strengths) in enumerate(effects):
         for j, strength in enumerate(strengths):
             m, o, f = moved[:, i, j], off[:, i, j], flag[i, j]
             lines.append(
@@ -260,11 +268,9 @@ def main() -> None:
         f"{share(clean_flag, clean_off[0])} [{share(clean_flag, clean_off[1])}] | **{clean_flag.mean():.1%}** |"
     )
     lines += ["", "| effect | flagged when moved beyond 2σ, total σ | the same, statistical σ |", "|---|---|---|"]
-    for i, (name, *_rest) in enumerate(EFFECTS):
+    for i, (name, *_rest) in enumerate(effects):
         lines.append(f"| {name} | {share(flag[i], moved[0, i])} | {share(flag[i], moved[1, i])} |")
-    leaves = [i for i, (name, *_r) in enumerate(EFFECTS) if name not in INSIDE_THE_SPAN]
-    groups = (("the nine original types", slice(0, NINE)), ("all types", slice(None)), (LEAVES, leaves))
-    for label, sel in groups:
+    for label, sel in pooled:
         pooled = [share(flag[sel], moved[v, sel]) for v in range(len(VIEWS))]
         lines.append(f"| **{label}** | **{pooled[0]}** | **{pooled[1]}** |")
     lines += [
