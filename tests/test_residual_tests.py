@@ -249,3 +249,25 @@ def test_findings_name_the_users_rows_when_the_model_choice_leaves_a_stop_out() 
     assert cal.fit.excluded_stops == (4,)
     named = {f.test: f.size for f in cal.diagnostics}
     assert named["single_stop"].startswith("stop 9:")
+
+
+def test_a_temperature_term_that_a_bias_step_explains_as_well_is_not_confident() -> None:
+    # A bias step mid-session, temperature rising and falling once around the circle: where the loop takes
+    # the temperature term for the step, the stops cannot tell the two apart and the result must say so.
+    rng = np.random.default_rng(20)
+    taken, only_the_doubt = 0, 0
+    for _ in range(40):
+        table = replace(clean(rng, 12), t_s=np.arange(12) * 60.0)
+        direction = rng.normal(size=3)
+        at = int(rng.integers(3, 9))
+        acc = table.acc_s.copy()
+        acc[at:] += 5 * MG * direction / np.linalg.norm(direction)
+        cal = calibrate(replace(table, acc_s=acc))
+        if "temperature" not in cal.model:
+            continue
+        taken += 1
+        assert not cal.confident
+        doubt = [n for n in cal.notes if n.startswith("a bias step from stop")]
+        assert doubt and doubt[0].startswith(f"a bias step from stop {at + 1} on")
+        only_the_doubt += not cal.unexplained
+    assert taken >= 2 and only_the_doubt >= 1  # the case exists, and only this check catches it there

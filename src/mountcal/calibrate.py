@@ -180,7 +180,7 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
             + f"); the σ are widened ×{birge:.2f} (Birge ratio) and the result is not confident"
         )
     tilt_sigma = max(angles.roll_sigma_deg, angles.pitch_sigma_deg) * birge
-    doubts = _doubts(f.branch, tilt_sigma, None if f.noise_known else f.dof)
+    doubts = [*loop.doubts, *_doubts(f.branch, tilt_sigma, None if f.noise_known else f.dof)]
     notes += [d + "; the result is not confident" for d in doubts]
     pitch = angles.pitch_deg
     if abs(pitch) > GIMBAL_LOCK_PITCH_DEG:

@@ -128,6 +128,19 @@ def _project(r: FloatArray, e: FloatArray, basis: FloatArray, order: np.ndarray,
     return _Projected(vec, np.where(keep, lam, 1.0), keep, norms, inside, c_obs)
 
 
+def largest_bias_step(r: FloatArray, whiten: FloatArray, basis: FloatArray, order: np.ndarray) -> tuple[float, int]:
+    """The most the residual ``r`` a bias step at one stop (in time order) explains beyond ``basis`` — its Δχ²
+    and the row of the first stop after it; (0, −1) when the stops allow no split. No p-value: it is the
+    alternative a term that follows time must beat, not a test."""
+    splits = _splits(len(order))
+    if splits.size == 0:
+        return 0.0, -1
+    proj = _project(r, whiten[order], basis, order, splits)
+    stat = proj.explained(proj.c_obs[:, :, None])[:, 0]
+    best = int(np.argmax(stat))
+    return float(stat[best]), int(order[splits[best]])
+
+
 def _scan(
     test: str,
     what: str,

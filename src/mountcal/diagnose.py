@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mountcal.change_point import change_points
+from mountcal.change_point import change_points, largest_bias_step
 from mountcal.conventions import G_N, FloatArray
 from mountcal.errors import FitFailed, NotEnoughInformation
 from mountcal.estimate import full
@@ -129,6 +129,12 @@ def unexplained(findings: list[Finding], alpha: float = FAMILY_ALPHA) -> list[Fi
 def time_order(table: StopTable) -> np.ndarray:
     """The stops in the order they were taken: by ``t_s`` where logged, else as listed."""
     return np.argsort(table.t_s, kind="stable") if table.t_s is not None else np.arange(len(table))
+
+
+def step_alternative(table: StopTable, r: FloatArray, whiten: FloatArray, jac: FloatArray) -> tuple[float, int]:
+    """Δχ² of the bias step (at one stop, in time order) that explains most of the residual ``r`` beyond the
+    span of ``jac``, and the row of the first stop after it (−1 when the stops allow no split)."""
+    return largest_bias_step(r, whiten, _span(jac), time_order(table))
 
 
 def heading_harmonics(whiten: FloatArray, beta: FloatArray, ks: tuple[int, ...]) -> FloatArray | None:

@@ -21,7 +21,7 @@ import numpy as np
 from scipy import optimize
 from scipy.spatial.transform import Rotation
 
-from mountcal.diagnose import analyse, heading_harmonics, leave_one_out, projection_test, unexplained
+from mountcal.diagnose import analyse, heading_harmonics, leave_one_out, projection_test, step_alternative, unexplained
 from mountcal.errors import FitFailed, NotEnoughInformation
 from mountcal.estimate import effects as registry
 from mountcal.estimate import full
@@ -67,6 +67,7 @@ class Loop:
     declined: list[dict[str, Any]]
     findings: list[Finding]
     unexplained: list[Finding] = field(default_factory=list)
+    doubts: list[str] = field(default_factory=list)  # why the chosen model may be the wrong explanation
 
     @property
     def final(self) -> Step:
@@ -166,7 +167,34 @@ def _finish(steps: list[Step], declined: list[dict[str, Any]]) -> Loop:
     last = steps[-1]
     rows = np.delete(np.arange(len(steps[0].table)), list(last.excluded))  # findings name the user's rows
     findings = analyse(last.table, last.fit, rows)
-    return Loop(steps, declined, findings, unexplained(findings))
+    doubts = [d for i in range(1, len(steps)) if (d := _step_or_covariate(steps[i - 1], steps[i], len(steps[0].table)))]
+    return Loop(steps, declined, findings, unexplained(findings), doubts)
+
+
+def _step_or_covariate(before: Step, step: Step, n_rows: int) -> str | None:
+    """Why a term driven by a logged covariate that changes with time (temperature) may be the wrong
+    explanation: a bias step at one stop (a restart, a knock) explains the stops it was chosen on as well.
+
+    Both follow time, the stops cannot tell them apart, and they move the angles differently; the loop
+    keeps the covariate (its effect is the one the model has), the result is not confident. None when the
+    term is no covariate or explains more than any step.
+    """
+    effect = registry.get(step.added) if step.added in registry.registered() else None
+    if effect is None or not any(c not in PLACE_COLUMNS for c in effect.needs) or step.excluded != before.excluded:
+        return None
+    model = full.StaticModel(before.table, before.terms, before.fit.state.g_mps2)
+    r = model.residual(before.fit.state)
+    explained, at = step_alternative(before.table, r, model.whiten, model.jacobian(before.fit.state))
+    gain = before.fit.chi2 - step.fit.chi2
+    if at < 0 or explained < gain:
+        return None
+    row = int(np.delete(np.arange(n_rows), list(before.excluded))[at])  # the user's row
+    return (
+        f"a bias step from stop {row + 1} on (a restart, a knock) explains the stops as well as the "
+        f"{step.added} term does (Δχ² {explained:.1f} against {gain:.1f}): both follow time, these stops cannot "
+        f"tell them apart and they move the angles differently — the result keeps {step.added}; note restarts, "
+        f"or let the {', '.join(effect.needs)} rise and fall more than once over the session, to separate them"
+    )
 
 
 def _next_step(
