@@ -57,6 +57,16 @@ def _add(s: Session, delta_s: FloatArray) -> StopTable:
     return replace(s.table, acc_s=s.table.acc_s + delta_s)
 
 
+def _from_vehicle(s: Session, f_v: FloatArray) -> StopTable:
+    """The stops reading the specific force ``f_v`` (vehicle frame, per stop) instead of the clean one."""
+    return _add(s, s.truth.rot_vs.inv().apply(f_v) - s.u_s)
+
+
+def _later(n: int, rng: np.random.Generator) -> np.ndarray:
+    """True from a random stop in the middle half of the session on."""
+    return np.arange(n) >= rng.integers(n // 4, 3 * n // 4)
+
+
 def _sign3(rng: np.random.Generator) -> FloatArray:
     return rng.choice([-1.0, 1.0], 3)
 
@@ -76,7 +86,7 @@ def suspension(s: Session, k: float, rng: np.random.Generator) -> StopTable:
     """The body leans downhill on a cross slope, relative to the road: extra roll = k·(lateral slope); pitch stiff."""
     lean = k * np.arcsin(np.clip(s.f_v[:, 1] / s.truth.g_mps2, -1.0, 1.0))
     leaned = Rotation.from_rotvec(np.column_stack([lean, np.zeros((len(lean), 2))])).inv().apply(s.f_v)
-    return _add(s, s.truth.rot_vs.inv().apply(leaned) - s.u_s)
+    return _from_vehicle(s, leaned)
 
 
 def bias_walk(s: Session, q: float, rng: np.random.Generator) -> StopTable:
@@ -101,7 +111,7 @@ def crowned_road(s: Session, c: float, rng: np.random.Generator) -> StopTable:
     """Parked left or right of a crowned road: an extra cross slope of ±c degrees, random side per stop."""
     side = rng.choice([-1.0, 1.0], len(s.table))
     crown = Rotation.from_rotvec(np.column_stack([np.radians(c) * side, np.zeros((len(side), 2))]))
-    return _add(s, s.truth.rot_vs.inv().apply(crown.apply(s.f_v)) - s.u_s)
+    return _from_vehicle(s, crown.apply(s.f_v))
 
 
 def rectification(s: Session, m: float, rng: np.random.Generator) -> StopTable:
@@ -127,20 +137,18 @@ def heading_drift(s: Session, d: float, rng: np.random.Generator) -> StopTable:
 
 def bias_step(s: Session, b: float, rng: np.random.Generator) -> StopTable:
     """The sensor restarts once mid-session (a random stop in the middle half) with a new bias: a step of b mg."""
-    n = len(s.table)
-    at = rng.integers(n // 4, 3 * n // 4)
+    later = _later(len(s.table), rng)
     direction = rng.normal(size=3)
-    return _add(s, np.outer(np.arange(n) >= at, b * MG * direction / np.linalg.norm(direction)))
+    return _add(s, np.outer(later, b * MG * direction / np.linalg.norm(direction)))
 
 
 def second_bay(s: Session, d: float, rng: np.random.Generator) -> StopTable:
     """The car moves to another bay mid-session (a random stop in the middle half): the slope changes by ±d degrees."""
-    n = len(s.table)
-    later = np.arange(n) >= rng.integers(n // 4, 3 * n // 4)
+    later = _later(len(s.table), rng)
     slope = np.radians(s.truth.slope_deg + d * rng.choice([-1.0, 1.0]) * later)
     beta = np.asarray(s.table.beta_rad, float)
     f_v = s.truth.g_mps2 * np.column_stack([np.sin(slope) * np.cos(beta), -np.sin(slope) * np.sin(beta), np.cos(slope)])
-    return _add(s, s.truth.rot_vs.inv().apply(f_v) - s.u_s)
+    return _from_vehicle(s, f_v)
 
 
 EFFECTS: list[tuple[str, str, Effect, tuple[float, ...]]] = [

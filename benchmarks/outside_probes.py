@@ -16,7 +16,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
-from outside_effects import Effect, Session, _add, _sign3, main
+from outside_effects import Effect, Session, _add, _from_vehicle, _later, _sign3, main
 from scipy.spatial.transform import Rotation
 
 from mountcal.stoptable import StopTable
@@ -24,13 +24,7 @@ from mountcal.stoptable import StopTable
 
 def _body_turned(s: Session, rotvec: np.ndarray) -> StopTable:
     """The stops with the body turned by ``rotvec`` (n, 3) relative to the road, in the vehicle frame."""
-    turned = Rotation.from_rotvec(rotvec).apply(s.f_v)
-    return _add(s, s.truth.rot_vs.inv().apply(turned) - s.u_s)
-
-
-def _later(n: int, rng: np.random.Generator) -> np.ndarray:
-    """True from a random stop in the middle half of the session on."""
-    return np.arange(n) >= rng.integers(n // 4, 3 * n // 4)
+    return _from_vehicle(s, Rotation.from_rotvec(rotvec).apply(s.f_v))
 
 
 def scale_tc(s: Session, k: float, rng: np.random.Generator) -> StopTable:
