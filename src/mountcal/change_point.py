@@ -91,7 +91,11 @@ def _splits(n: int) -> np.ndarray:
 
 def _suffix(x: FloatArray, splits: np.ndarray) -> FloatArray:
     """Σ over the stops from each split on, of ``x`` given per stop in time order."""
-    seg = np.add.reduceat(x[splits[0] :], splits - splits[0], axis=0)
+    return _from_each_on(np.add.reduceat(x[splits[0] :], splits - splits[0], axis=0))
+
+
+def _from_each_on(seg: FloatArray) -> FloatArray:
+    """Sums of the segments between consecutive splits → sums from each split to the end."""
     return np.flip(np.cumsum(np.flip(seg, axis=0), axis=0), axis=0)
 
 
@@ -117,8 +121,7 @@ def _project(r: FloatArray, e: FloatArray, basis: FloatArray, order: np.ndarray,
     q = basis.reshape(n, 3, -1)[order]
     gram = _suffix(np.einsum("nia,nib->nab", e, e), splits)
     bounds = np.append(splits, n)
-    seg = np.stack([np.einsum("nip,nia->pa", q[a:b], e[a:b]) for a, b in pairwise(bounds)])
-    inside = np.flip(np.cumsum(np.flip(seg, axis=0), axis=0), axis=0)
+    inside = _from_each_on(np.stack([np.einsum("nip,nia->pa", q[a:b], e[a:b]) for a, b in pairwise(bounds)]))
     norms = np.sqrt(np.einsum("maa->ma", gram))
     scale = norms[:, :, None] * norms[:, None, :]
     lam, vec = np.linalg.eigh((gram - np.einsum("mpa,mpb->mab", inside, inside)) / scale)
@@ -163,6 +166,7 @@ def _scan(
         why = "no test: the fitted model already absorbs a step, or no degrees of freedom are left"
         return Finding(test, what, why, None, 3, None, None, why)
     explained = proj.explained
+    total = np.array([[float(r @ r)]])
 
     def rank(stat: FloatArray, total: FloatArray) -> FloatArray:  # per split (m, S): larger is less likely
         if noise_known:
@@ -179,7 +183,7 @@ def _scan(
         return np.asarray(np.where(ok[:, None], out, 0.0))
 
     stat = explained(proj.c_obs[:, :, None])
-    lp = logp(stat, np.array([[float(r @ r)]]))[:, 0]
+    lp = logp(stat, total)[:, 0]
     best = int(np.argmin(lp))
     tested = int(np.sum(ok))
     log_p = min(float(lp[best]) + float(np.log(tested)), 0.0)  # Bonferroni
@@ -188,7 +192,7 @@ def _scan(
         score = rank if np.unique(k[ok]).size == 1 else logp
         sign = 1.0 if score is rank else -1.0
         ok_col = ok[:, None]
-        observed = sign * float(np.max(np.where(ok_col, sign * score(stat, np.array([[float(r @ r)]])), -np.inf)))
+        observed = sign * float(np.max(np.where(ok_col, sign * score(stat, total), -np.inf)))
         log_p = min(log_p, _simulated(null, order, e, splits, explained, score, ok_col, sign, observed))
     # Size as the other tests give it: the explained structure (the step's part outside the model's span, which
     # is all the residual can show) as an RMS per stop in m/s², back through the stop noise.

@@ -164,11 +164,15 @@ def close_the_loop(
 
 
 def _finish(steps: list[Step], declined: list[dict[str, Any]]) -> Loop:
-    last = steps[-1]
-    rows = np.delete(np.arange(len(steps[0].table)), list(last.excluded))  # findings name the user's rows
-    findings = analyse(last.table, last.fit, rows)
-    doubts = [d for i in range(1, len(steps)) if (d := _step_or_covariate(steps[i - 1], steps[i], len(steps[0].table)))]
+    last, n_rows = steps[-1], len(steps[0].table)
+    findings = analyse(last.table, last.fit, _rows(last, n_rows))
+    doubts = [d for i in range(1, len(steps)) if (d := _step_or_covariate(steps[i - 1], steps[i], n_rows))]
     return Loop(steps, declined, findings, unexplained(findings), doubts)
+
+
+def _rows(step: Step, n_rows: int) -> np.ndarray:
+    """The rows of the user's table (0-based) that ``step``'s stops are: findings name those."""
+    return np.delete(np.arange(n_rows), list(step.excluded))
 
 
 def _step_or_covariate(before: Step, step: Step, n_rows: int) -> str | None:
@@ -179,7 +183,7 @@ def _step_or_covariate(before: Step, step: Step, n_rows: int) -> str | None:
     keeps the covariate (its effect is the one the model has), the result is not confident. None when the
     term is no covariate or explains more than any step.
     """
-    effect = registry.get(step.added) if step.added in registry.registered() else None
+    effect = registry.registered().get(step.added)  # None for the loop's own steps (outlier, surface)
     if effect is None or not any(c not in PLACE_COLUMNS for c in effect.needs) or step.excluded != before.excluded:
         return None
     model = full.StaticModel(before.table, before.terms, before.fit.state.g_mps2)
@@ -188,12 +192,12 @@ def _step_or_covariate(before: Step, step: Step, n_rows: int) -> str | None:
     gain = before.fit.chi2 - step.fit.chi2
     if at < 0 or explained < gain:
         return None
-    row = int(np.delete(np.arange(n_rows), list(before.excluded))[at])  # the user's row
     return (
-        f"a bias step from stop {row + 1} on (a restart, a knock) explains the stops as well as the "
-        f"{step.added} term does (Δχ² {explained:.1f} against {gain:.1f}): both follow time, these stops cannot "
-        f"tell them apart and they move the angles differently — the result keeps {step.added}; note restarts, "
-        f"or let the {', '.join(effect.needs)} rise and fall more than once over the session, to separate them"
+        f"a bias step from stop {int(_rows(before, n_rows)[at]) + 1} on (a restart, a knock) explains the stops "
+        f"as well as the {step.added} term does (Δχ² {explained:.1f} against {gain:.1f}): both follow time, "
+        "these stops cannot tell them apart and they move the angles differently — the result keeps "
+        f"{step.added}; note restarts, or let the {', '.join(effect.needs)} rise and fall more than once over "
+        "the session, to separate them"
     )
 
 

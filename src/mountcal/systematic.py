@@ -201,8 +201,7 @@ def combine(
         notes.append(
             "no sensor spec given: the systematic σ assumes the default class (an uncalibrated consumer MEMS "
             "accelerometer: ±3 % scale, ±2 % cross-axis, ±80 mg bias; headings within ±1° of the fall line in common); "
-            "give "
-            f"{option('sensor_spec')} or {option('triad')} for your sensor"
+            f"give {option('sensor_spec')} or {option('triad')} for your sensor"
         )
     if part.dominant:
         over = [k for k in ("roll_deg", "pitch_deg", "yaw_deg") if (sys_sigma[k] or 0.0) > (stat[k] or np.inf)]
