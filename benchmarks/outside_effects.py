@@ -17,6 +17,9 @@ false or ``unexplained`` non-empty). The clean runs give the false-alarm rate.
 
     OMP_NUM_THREADS=1 python benchmarks/outside_effects.py --runs 200 --seed 15 \
         --markdown docs/outside-effects-results.md
+
+With ``--slope-reference-sigma 0.02`` every calibration is also given the session's slope measured
+apart (the true slope plus its own error; docs/effects.md, "A slope reference").
 """
 
 from __future__ import annotations
@@ -30,10 +33,11 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from mountcal.calibrate import calibrate
+from mountcal.calibrate import Options, calibrate
 from mountcal.conventions import G_N, FloatArray, specific_force_v
 from mountcal.result import Calibration
 from mountcal.simulate.stops import Truth, simulate_stops
+from mountcal.slope_reference import SlopeReference
 from mountcal.stoptable import StopTable
 
 MG = 1e-3 * G_N
@@ -227,6 +231,12 @@ def main(
     ap.add_argument("--runs", type=int, default=100)
     ap.add_argument("--seed", type=int, default=15)
     ap.add_argument("--markdown", default=None)
+    ap.add_argument(
+        "--slope-reference-sigma",
+        type=float,
+        default=None,
+        help="give every calibration the session's slope measured apart, to this 1σ in degrees (a slope reference)",
+    )
     args = ap.parse_args()
     t0 = time.perf_counter()
     shape = (len(VIEWS), len(effects), 3, args.runs)
@@ -238,26 +248,37 @@ def main(
         rng = np.random.default_rng([args.seed, r])
         s = session(r, rng)
         truth = np.array([*s.truth.angles_deg, s.truth.slope_deg])
-        clean = calibrate(s.table)
+        options = Options()
+        if args.slope_reference_sigma is not None:  # its own generator: the sessions and effects stay the same
+            measured = s.truth.slope_deg + np.random.default_rng([args.seed, r, 99]).normal(
+                0.0, args.slope_reference_sigma
+            )
+            options = Options(slope_reference=SlopeReference(max(measured, 0.0), args.slope_reference_sigma))
+        clean = calibrate(s.table, options)
         ref, *ref_sig = estimates(clean)
         clean_flag[r] = flagged(clean)
         for v in range(len(VIEWS)):
             clean_off[v, r] = beyond(ref, truth, ref_sig[v])
         for i, (_, _, effect, strengths) in enumerate(effects):
             for j, strength in enumerate(strengths):
-                cal = calibrate(effect(s, strength, np.random.default_rng([args.seed, r, i, j])))
+                cal = calibrate(effect(s, strength, np.random.default_rng([args.seed, r, i, j])), options)
                 est, *sig = estimates(cal)
                 flag[i, j, r] = flagged(cal)
                 for v in range(len(VIEWS)):
                     moved[v, i, j, r], off[v, i, j, r] = beyond(est, ref, sig[v]), beyond(est, truth, sig[v])
                 for u in cal.unexplained:
                     fired[u.test] = fired.get(u.test, 0) + 1
-    share = lambda hit, among: f"{hit[among].mean():.0%} of {among.sum()}" if among.any() else "—"  # noqa: E731
+    reference = (
+        ""
+        if args.slope_reference_sigma is None
+        else f" Every calibration is given the slope measured apart, ±{args.slope_reference_sigma:g}° (1σ)."
+    )
     lines = [
-        f'{args.runs} runs per row (the two layouts alternate), seed {args.seed}. "Moved": an estimate (roll, pitch, '
-        'yaw or slope) beyond 2σ of the clean run of the same noise; "off": beyond 2σ of the truth. σ as the result '
-        "reports it (the total: statistical ⊕ systematic of the default sensor class), and in brackets the "
-        "statistical part alone (`cal.systematic.statistical`). The flag is the same in both views.",
+        f"{args.runs} runs per row (the two layouts alternate), seed {args.seed}.{reference} "
+        '"Moved": an estimate (roll, pitch, yaw or slope) beyond 2σ of the clean run of the same noise; '
+        '"off": beyond 2σ of the truth. σ as the result reports it (the total: statistical ⊕ systematic of the '
+        "default sensor class), and in brackets the statistical part alone (`cal.systematic.statistical`). "
+        "The flag is the same in both views.",
         "",
         "| effect | strength | moved: total σ [statistical] | flagged when moved: total [statistical] | "
         "off the truth: total [statistical] | flagged when off: total [statistical] | flagged, all runs |",
@@ -289,10 +310,20 @@ def main(
         + ", ".join(f"`{k}` {v}" for k, v in sorted(fired.items(), key=lambda kv: -kv[1]))
         + ".",
     ]
+    write(lines, t0, args.markdown)
+
+
+def share(hit: np.ndarray, among: np.ndarray) -> str:
+    """The share of ``hit`` among the runs ``among``, with their count ("—" when there are none)."""
+    return f"{hit[among].mean():.0%} of {among.sum()}" if among.any() else "—"
+
+
+def write(lines: list[str], t0: float, markdown: str | None) -> None:
+    """Print the tables with the time they took since ``t0``, and write them to ``markdown`` if given."""
     text = "\n".join(lines) + f"\n\n_{time.perf_counter() - t0:.0f} s._\n"
     print(text)
-    if args.markdown:
-        Path(args.markdown).write_text(text, encoding="utf-8")
+    if markdown:
+        Path(markdown).write_text(text, encoding="utf-8")
 
 
 if __name__ == "__main__":

@@ -222,6 +222,18 @@ def test_calibrate_a_drive_log_uses_what_it_supports_and_says_so(
     assert cal.fit.driving is not None and cal.fit.driving["segments"] > 10 and cal.slope_deg is None
 
 
+def test_a_slope_reference_with_a_result_from_driving_says_it_was_not_checked(
+    tmp_path: Path,
+    drive,  # type: ignore[no-untyped-def]
+) -> None:
+    log = tmp_path / "drive.parquet"
+    to_frame(drive.to_samples()).to_parquet(log, index=False)
+    out = tmp_path / "result.json"
+    assert main(["calibrate", str(log), "--use", "driving", "--slope-reference", "3", "0.05", "-o", str(out)]) == 0
+    cal = Calibration.load(out)
+    assert cal.slope_deg is None and any("--slope-reference was not checked" in n for n in cal.notes)
+
+
 def test_a_log_with_neither_stops_nor_speed_says_both_reasons(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -18,6 +18,7 @@ from typing import Literal
 
 import numpy as np
 
+from mountcal import slope_reference
 from mountcal import terms as model_terms
 from mountcal.conventions import (
     G_N,
@@ -26,6 +27,7 @@ from mountcal.conventions import (
     angles_from_rot_vs,
     normal_gravity,
 )
+from mountcal.diagnose import unexplained
 from mountcal.effects import Loop, Step, close_the_loop, effect_values
 from mountcal.errors import InputError, NotEnoughInformation
 from mountcal.estimate import full, paper
@@ -75,6 +77,9 @@ class Options:
     selection_alpha: float = 0.001
     spec: SensorSpec = DEFAULT_SPEC  # the sensor's limits, for the systematic part of σ
     triad: Triad | None = None  # a triad calibration: applied to the stops, its covariance replaces the spec's
+    slope_reference: slope_reference.SlopeReference | None = (
+        None  # the slope measured independently, checked against the stops'
+    )
 
 
 def calibrate(table: StopTable, options: Options | None = None) -> Calibration:
@@ -83,6 +88,8 @@ def calibrate(table: StopTable, options: Options | None = None) -> Calibration:
     if opts.triad is not None:
         table = opts.triad.correct(table)
     _check_geometry(table)
+    if opts.slope_reference is not None:
+        _check_slope_reference(table, opts)
     g, g_source = local_gravity(table.lat_deg, table.alt_m, opts.gravity_mps2)
     if opts.method == "paper":
         return _paper(table, g, g_source, opts)
@@ -170,14 +177,28 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
             "a constant accelerometer bias cannot be told from a tilt with these stops: if the sensor has a "
             "bias b, roll and pitch are off by up to b/g (20 mg → 1.1°) beyond their σ (docs/conventions.md §4)"
         )
+    findings = list(loop.findings)
+    if opts.slope_reference is not None:
+        assert angles.slope_deg is not None and angles.slope_sigma_deg is not None  # one site: one slope
+        noise_dof = None if f.noise_known else f.dof
+        findings.append(
+            slope_reference.check(angles.slope_deg, angles.slope_sigma_deg, opts.slope_reference, noise_dof)
+        )
+    flagged = unexplained(findings)
     birge = 1.0
-    if loop.unexplained:
+    if flagged:
         if f.noise_known and f.dof > 0:
             birge = max(1.0, float(np.sqrt(f.chi2 / f.dof)))
         notes.append(
             "the best model leaves structure unexplained ("
-            + "; ".join(f"{u.what}: {u.size}" for u in loop.unexplained)
+            + "; ".join(f"{u.what}: {u.size}" for u in flagged)
             + f"); the σ are widened ×{birge:.2f} (Birge ratio) and the result is not confident"
+        )
+    if any(u.test == slope_reference.TEST for u in flagged):
+        notes.append(
+            "the stops read a different slope than the reference: a common scale error of the sensor's horizontal "
+            "axes, axes that tilt with the lateral load (a compliant mount or cradle), or a wrong reference; the stops "
+            "alone cannot tell these from the slope. A triad calibration (`mountcal triad`) separates the first"
         )
     tilt_sigma = max(angles.roll_sigma_deg, angles.pitch_sigma_deg) * birge
     doubts = [*loop.doubts, *_doubts(f.branch, tilt_sigma, None if f.noise_known else f.dof)]
@@ -255,10 +276,10 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
         provenance=_provenance(table, "full", tuple(model)),
         notes=tuple(notes),
         model_steps=_steps(loop, opts),
-        unexplained=tuple(loop.unexplained),
-        diagnostics=tuple(loop.findings),
+        unexplained=tuple(flagged),
+        diagnostics=tuple(findings),
         effects=effect_values(f),
-        confident=not loop.unexplained and not doubts,
+        confident=not flagged and not doubts,
     )
     return _with_systematic(cal, final.table, f, opts)
 
@@ -273,6 +294,25 @@ def _with_systematic(cal: Calibration, table: StopTable, f: full.Fit, opts: Opti
     if doubts and max(cal.roll_sigma_deg, cal.pitch_sigma_deg) <= MAX_CONFIDENT_TILT_SIGMA_DEG:
         out = replace(out, confident=False, notes=(*out.notes, *(d + "; the result is not confident" for d in doubts)))
     return out
+
+
+def _check_slope_reference(table: StopTable, opts: Options) -> None:
+    """Refuse a slope reference the fit cannot check: one slope is given, the stops must be on one slope."""
+    if opts.method == "paper":
+        raise InputError(
+            option("slope_reference"),
+            f"{option('method', 'full')}",
+            f"{option('method', 'paper')}",
+            f"The reference is checked by the full estimator's residual tests; use {option('method', 'full')}.",
+        )
+    sites = [] if table.site is None else np.unique(table.site.astype(str)).tolist()
+    if len(sites) > 1:
+        raise InputError(
+            f"{table.source} with {option('slope_reference')}",
+            "stops on one slope",
+            f"{len(sites)} sites ({', '.join(sites[:5])}{', …' if len(sites) > 5 else ''})",
+            "Calibrate each site's stops with its own reference, or leave the reference out.",
+        )
 
 
 def sensor_errors(opts: Options) -> SensorErrors:

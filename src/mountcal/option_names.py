@@ -32,6 +32,7 @@ OPTIONS: dict[str, tuple[str, str]] = {
     "protocol": ("protocol", "--protocol"),
     "require_confident": ("require_confident", "--require-confident"),
     "sensor_spec": ("Options.spec", "--sensor-spec"),
+    "slope_reference": ("Options.slope_reference", "--slope-reference"),
     "still_window": ("StopDetection.window_s", "--still-window-s"),
     "stops": ("table", "--stops"),
     "topic": ("LogOptions.topic", "--topic"),

@@ -23,6 +23,7 @@ from mountcal.estimate.driving import DrivingFit, DrivingOptions, estimate_drivi
 from mountcal.estimate.driving_combine import combine, driving_calibration, not_combined
 from mountcal.io.logs import LogOptions, read_log
 from mountcal.io.timestamps import increasing_times
+from mountcal.option_names import option
 from mountcal.paths import special_kind
 from mountcal.result import Calibration, Provenance
 from mountcal.samples import Samples
@@ -286,7 +287,11 @@ def _driving_alone(fit: DrivingFit, samples: Samples, job: LogJob) -> Calibratio
     g, g_source = local_gravity(
         None if lat is None else lat.value, None if alt is None else alt.value, job.options.gravity_mps2
     )
-    return driving_calibration(fit, gravity_mps2=g, gravity_source=g_source, provenance=_provenance(job.paths))
+    cal = driving_calibration(fit, gravity_mps2=g, gravity_source=g_source, provenance=_provenance(job.paths))
+    if job.options.slope_reference is None:
+        return cal
+    unused = f"{option('slope_reference')} was not checked: this result is from driving, which measures no slope"
+    return replace(cal, notes=(*cal.notes, unused))
 
 
 def _up_is_up(cal: Calibration, table: StopTable | None) -> bool:

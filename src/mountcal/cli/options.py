@@ -159,6 +159,15 @@ def add_fit_options(g: argparse.ArgumentParser | argparse._ArgumentGroup, *, hea
     g.add_argument("--max-yaw-sigma", type=float, default=5.0, help="report yaw only below this 1σ (deg)")
     add_sensor_options(g)
     g.add_argument(
+        "--slope-reference",
+        nargs=2,
+        type=float,
+        default=None,
+        metavar=("DEG", "SIGMA_DEG"),
+        help="the ground's slope measured independently (surveyed, an inclinometer) and its 1σ: checked against the "
+        "stops' slope, it shows a horizontal scale error or a compliant mount the stops alone cannot",
+    )
+    g.add_argument(
         "--use",
         choices=("auto", "stops", "driving"),
         default="auto",
@@ -185,12 +194,15 @@ def detection(args: argparse.Namespace) -> StopDetection:
 def fit_options(args: argparse.Namespace) -> Options:
     from mountcal.calibrate import Options
     from mountcal.cli.triad import sensor_options
+    from mountcal.slope_reference import SlopeReference
 
+    reference = getattr(args, "slope_reference", None)
     options = Options(
         method=args.method,
         model=args.model,
         gravity_mps2=getattr(args, "gravity", None),
         max_yaw_sigma_deg=args.max_yaw_sigma,
+        slope_reference=None if reference is None else SlopeReference(*reference),
     )
     return sensor_options(options, getattr(args, "sensor_spec", None), getattr(args, "triad", None))
 

@@ -1,0 +1,71 @@
+"""A slope measured independently of the sensor (a surveyed bay, an inclinometer on the floor), checked
+against the slope the stops give.
+
+On one slope a common scale of the sensor's two horizontal axes, or axes that tilt with the lateral
+load (a compliant bracket, a phone cradle), changes only the size of the circle the stops trace: the
+stops read as a steeper or flatter slope, and nothing in their residual shows it (docs/effects.md,
+"What no residual can show"). A reference slope sees it: the fitted slope against the reference is
+one more residual test, ``z = (α̂ − α_ref) / √(σ²_stat + σ²_ref)``, N(0, 1) to first order when
+neither effect is there (Student's t with Welch–Satterthwaite degrees of freedom when the stop noise
+was estimated).
+It joins the family of residual tests (:func:`mountcal.diagnose.unexplained`); the slope it is checked
+against is the stops', so the σ is the statistical one: an error of the sensor's scale within its
+limits shows too, which is the point of a reference.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from mountcal.errors import InputError
+from mountcal.option_names import option
+from mountcal.pvalues import chi2_logsf, f_logsf
+from mountcal.result import Finding
+
+TEST = "slope_reference"
+WHAT = "fitted slope against the given reference (a common horizontal scale, axes tilting with the lateral load)"
+
+
+@dataclass(frozen=True)
+class SlopeReference:
+    """The slope of the ground where the stops were taken, degrees, and its standard uncertainty (1σ)."""
+
+    slope_deg: float
+    sigma_deg: float
+
+    def __post_init__(self) -> None:
+        ok = (
+            math.isfinite(self.slope_deg)
+            and math.isfinite(self.sigma_deg)
+            and 0.0 <= self.slope_deg < 90.0
+            and self.sigma_deg > 0.0
+        )
+        if not ok:
+            raise InputError(
+                option("slope_reference"),
+                "the slope in degrees (0 ≤ slope < 90) and its 1σ in degrees (> 0)",
+                f"{self.slope_deg!r} and {self.sigma_deg!r}",
+                "Give the surveyed or measured slope of the ground and its standard uncertainty, both in degrees.",
+            )
+
+
+def check(slope_deg: float, sigma_deg: float, ref: SlopeReference, noise_dof: int | None) -> Finding:
+    """The finding of the fitted slope (``slope_deg`` ± its statistical ``sigma_deg``) against ``ref``.
+
+    ``noise_dof``: the degrees of freedom the stop noise was estimated from (None: the table gave it).
+    """
+    var_stat, var_ref = sigma_deg**2, ref.sigma_deg**2
+    z2 = (slope_deg - ref.slope_deg) ** 2 / (var_stat + var_ref)
+    if noise_dof is None:
+        logp = float(chi2_logsf(z2, 1))
+    else:  # Welch–Satterthwaite: only the stops' part of the variance was estimated
+        dof = (var_stat + var_ref) ** 2 / (var_stat**2 / max(noise_dof, 1))
+        logp = float(f_logsf(z2, 1, dof))
+    diff = slope_deg - ref.slope_deg
+    relative = f" ({100 * diff / ref.slope_deg:+.2g} % of it)" if ref.slope_deg > 0 else ""
+    size = (
+        f"{slope_deg:.3f} ± {sigma_deg:.3f}° from the stops, {ref.slope_deg:.3f} ± {ref.sigma_deg:.3f}° given: "
+        f"{diff:+.3f}°{relative}"
+    )
+    return Finding(TEST, WHAT, size, z2, 1, math.exp(logp), logp / math.log(10))
