@@ -198,7 +198,12 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
         notes.append(
             "the stops read a different slope than the reference: a common scale error of the sensor's horizontal "
             "axes, axes that tilt with the lateral load (a compliant mount or cradle), or a wrong reference; the stops "
-            "alone cannot tell these from the slope. A triad calibration (`mountcal triad`) separates the first"
+            "alone cannot tell these from the slope"
+            + (
+                ""
+                if opts.triad is not None
+                else f". A triad calibration (`mountcal triad`, then {option('triad')}) removes the first"
+            )
         )
     tilt_sigma = max(angles.roll_sigma_deg, angles.pitch_sigma_deg) * birge
     doubts = [*loop.doubts, *_doubts(f.branch, tilt_sigma, None if f.noise_known else f.dof)]
