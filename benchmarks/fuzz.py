@@ -2,7 +2,7 @@
 
 Each case is an input a user can write: a stop table with any subset of the optional columns, in
 m/s² or g, 3–200 stops, headings none / relative / uphill, any mounting in SO(3), stop noise
-0.1–20 mg, slope 0.5–30° — or a parking log the simulator writes with random parameters. Every
+0.1–20 mg, slope 0.5–30°, now and then a slope reference (right, off, or no slope at all) — or a parking log the simulator writes with random parameters. Every
 case runs the real CLI in-process and is classified:
 
 - ``ok``: exit 0 and a result that is valid JSON with finite numbers, loads back, and is right
@@ -66,6 +66,7 @@ class StopCase:
     model: str = "auto"  # the --model flag
     method: str = "full"  # the --method flag
     parquet: bool = False  # the table as Parquet (columns shuffled, an unknown column added), else CSV
+    slope_reference: tuple[float, float] | None = None  # --slope-reference DEG SIGMA_DEG (right, off, or no slope)
 
 
 MODELS = (
@@ -119,7 +120,16 @@ def random_stop_case(rng: np.random.Generator) -> StopCase:
         model=str(rng.choice(MODELS)) if rng.random() < 0.3 else "auto",
         method="paper" if rng.random() < 0.15 else "full",
         parquet=bool(rng.random() < 0.2),
+        slope_reference=_slope_reference(rng) if rng.random() < 0.2 else None,
     )
+
+
+def _slope_reference(rng: np.random.Generator) -> tuple[float, float]:
+    """A reference as a user may give it: an offset from the true slope (applied in write_stop_case), and its σ —
+    now and then one that is no slope or no σ."""
+    if rng.random() < 0.15:
+        return float(rng.choice([-1.0, 90.0, 1e9, np.nan])), float(rng.choice([0.0, -0.1, 0.05, np.inf]))
+    return float(rng.choice([0.0, 0.0, 0.3, -2.0])), float(rng.choice([0.01, 0.05, 0.5]))
 
 
 def write_stop_case(case: StopCase, folder: Path) -> tuple[Path, list[str], Rotation]:
@@ -160,6 +170,10 @@ def write_stop_case(case: StopCase, folder: Path) -> tuple[Path, list[str], Rota
         path = folder / f"stops_{case.seed}.csv"
         df.to_csv(path, index=False, float_format="%.15g")
     args = [str(path), "--unit", case.unit, "--headings", case.headings, "--model", case.model, "--method", case.method]
+    if case.slope_reference is not None:
+        offset, sigma = case.slope_reference
+        measured = case.slope_deg + offset if abs(offset) < 10 else offset  # beyond ±10: the value itself
+        args += ["--slope-reference", f"{measured:.6g}", f"{sigma:g}"]
     return path, args, rot
 
 

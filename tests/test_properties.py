@@ -49,6 +49,13 @@ stop_cases = st.builds(
     model=st.one_of(st.just("auto"), st.sampled_from(fuzz.MODELS)),
     method=st.sampled_from(["full", "full", "paper"]),
     parquet=st.booleans(),
+    slope_reference=st.one_of(
+        st.none(),
+        st.tuples(  # an offset from the true slope (beyond ±10: the value itself), and its σ
+            st.one_of(st.floats(-3.0, 3.0), st.sampled_from([90.0, 1e9, float("nan")])),
+            st.sampled_from([0.01, 0.05, 0.5, 0.0, -0.1, float("inf")]),
+        ),
+    ),
 )
 
 
