@@ -2,8 +2,9 @@
 
 Each case is an input a user can write: a stop table with any subset of the optional columns, in
 m/s² or g, 3–200 stops, headings none / relative / uphill, any mounting in SO(3), stop noise
-0.1–20 mg, slope 0.5–30°, now and then a slope reference (right, off, or no slope at all) — or a parking log the simulator writes with random parameters. Every
-case runs the real CLI in-process and is classified:
+0.1–20 mg, slope 0.5–30°, now and then a slope reference (right, off, or no slope at all) — or a
+parking log the simulator writes with random parameters. Every case runs the real CLI in-process
+and is classified:
 
 - ``ok``: exit 0 and a result that is valid JSON with finite numbers, loads back, and is right
   (when marked confident: tilt within 10°, yaw within 5σ);
