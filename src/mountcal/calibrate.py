@@ -196,13 +196,16 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
         )
     if any(u.test == slope_reference.TEST for u in flagged):
         notes.append(
-            "the stops read a different slope than the reference: a common scale error of the sensor's horizontal "
-            "axes, axes that tilt with the lateral load (a compliant mount or cradle), or a wrong reference; the stops "
-            "alone cannot tell these from the slope"
+            "the stops read the body at another slope than the reference. If the reference is the ground's, the body "
+            "leaning downhill on its suspension (a car's roll gradient of 3–7°/g: 5–12 % of the slope) is the likely "
+            "cause: measure the body's inclination instead (a level on the body facing uphill and downhill, half the "
+            "difference). Otherwise: a common scale error of the sensor's horizontal axes, axes that tilt with the "
+            "lateral load (a compliant mount or cradle), or a wrong reference; the stops alone cannot tell these from "
+            "the slope"
             + (
                 ""
                 if opts.triad is not None
-                else f". A triad calibration (`mountcal triad`, then {option('triad')}) removes the first"
+                else f". A triad calibration (`mountcal triad`, then {option('triad')}) removes the scale error"
             )
         )
     tilt_sigma = max(angles.roll_sigma_deg, angles.pitch_sigma_deg) * birge

@@ -1,10 +1,14 @@
-"""A slope measured independently of the sensor (a surveyed bay, an inclinometer on the floor), checked
-against the slope the stops give.
+"""A slope measured apart from the sensor, checked against the slope the stops give.
 
 On one slope a common scale of the sensor's two horizontal axes, or axes that tilt with the lateral
 load (a compliant bracket, a phone cradle), changes only the size of the circle the stops trace: the
 stops read as a steeper or flatter slope, and nothing in their residual shows it (docs/effects.md,
-"What no residual can show"). A reference slope sees it: the fitted slope against the reference is
+"What no residual can show"). So does the body leaning downhill on its suspension, by the same
+fraction in roll and pitch: the stops measure the slope the *body* stands at. The reference is best
+that too (a level on the body facing uphill and downhill, half the difference); the ground's slope
+(a surveyed bay) differs from it by the suspension's lean: a car's roll gradient of 3–7°/g leans it
+by 5–12 % of the slope across it, its pitch gradient by less along it.
+A reference sees what the stops cannot: the fitted slope against the reference is
 one more residual test, ``z = (α̂ − α_ref) / √(σ²_stat + σ²_ref)``, N(0, 1) to first order when
 neither effect is there (Student's t with Welch–Satterthwaite degrees of freedom when the stop noise
 was estimated).
@@ -24,7 +28,10 @@ from mountcal.pvalues import chi2_logsf, f_logsf
 from mountcal.result import Finding
 
 TEST = "slope_reference"
-WHAT = "fitted slope against the given reference (a common horizontal scale, axes tilting with the lateral load)"
+WHAT = (
+    "fitted slope against the given reference (the body's lean on its suspension, a common horizontal scale, axes "
+    "tilting with the lateral load)"
+)
 
 
 @dataclass(frozen=True)

@@ -164,8 +164,10 @@ def add_fit_options(g: argparse.ArgumentParser | argparse._ArgumentGroup, *, hea
         type=float,
         default=None,
         metavar=("DEG", "SIGMA_DEG"),
-        help="the ground's slope measured independently (surveyed, an inclinometer) and its 1σ: checked against the "
-        "stops' slope, it shows a horizontal scale error or a compliant mount the stops alone cannot",
+        help="the slope the body stands at, measured apart from the sensor (a level on the body facing uphill and "
+        "downhill, half the difference; or the ground's, surveyed, which differs by the suspension's lean), and its "
+        "1σ: checked against the stops' slope, it shows a horizontal scale error or a compliant mount the stops "
+        "alone cannot",
     )
     g.add_argument(
         "--use",
