@@ -14,7 +14,7 @@ from mountcal.cli import main
 from mountcal.conventions import specific_force_v
 from mountcal.errors import InputError
 from mountcal.simulate.stops import simulate_stops
-from mountcal.slope_reference import TEST, SlopeReference
+from mountcal.slope_reference import TEST, SlopeReference, check
 from mountcal.stoptable import StopTable
 
 
@@ -106,3 +106,8 @@ def test_the_command_line_checks_the_reference_and_refuses_a_bad_one(
     assert main(["calibrate", str(stops), "--slope-reference", "5", "0", "-o", str(bad)]) == 2
     err = capsys.readouterr().err
     assert "--slope-reference" in err and "Traceback" not in err and not bad.exists()
+
+
+def test_a_model_without_one_slope_gives_no_test_and_says_why() -> None:
+    found = check(None, None, SlopeReference(5.0, 0.02), None)
+    assert found.p_value is None and found.reason is not None and "no test" in found.reason

@@ -77,9 +77,7 @@ class Options:
     selection_alpha: float = 0.001
     spec: SensorSpec = DEFAULT_SPEC  # the sensor's limits, for the systematic part of σ
     triad: Triad | None = None  # a triad calibration: applied to the stops, its covariance replaces the spec's
-    slope_reference: slope_reference.SlopeReference | None = (
-        None  # the slope measured independently, checked against the stops'
-    )
+    slope_reference: slope_reference.SlopeReference | None = None  # checked against the stops' slope
 
 
 def calibrate(table: StopTable, options: Options | None = None) -> Calibration:
@@ -179,7 +177,6 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
         )
     findings = list(loop.findings)
     if opts.slope_reference is not None:
-        assert angles.slope_deg is not None and angles.slope_sigma_deg is not None  # one site: one slope
         noise_dof = None if f.noise_known else f.dof
         findings.append(
             slope_reference.check(angles.slope_deg, angles.slope_sigma_deg, opts.slope_reference, noise_dof)

@@ -36,7 +36,7 @@ WHAT = (
 
 @dataclass(frozen=True)
 class SlopeReference:
-    """The slope of the ground where the stops were taken, degrees, and its standard uncertainty (1σ)."""
+    """The slope the body stands at (or the ground's), measured apart from the sensor, degrees, and its 1σ."""
 
     slope_deg: float
     sigma_deg: float
@@ -57,11 +57,14 @@ class SlopeReference:
             )
 
 
-def check(slope_deg: float, sigma_deg: float, ref: SlopeReference, noise_dof: int | None) -> Finding:
+def check(slope_deg: float | None, sigma_deg: float | None, ref: SlopeReference, noise_dof: int | None) -> Finding:
     """The finding of the fitted slope (``slope_deg`` ± its statistical ``sigma_deg``) against ``ref``.
 
     ``noise_dof``: the degrees of freedom the stop noise was estimated from (None: the table gave it).
     """
+    if slope_deg is None or sigma_deg is None:
+        why = "no test: the stops do not determine one slope with this model"
+        return Finding(TEST, WHAT, why, None, 1, None, None, why)
     var_stat, var_ref = sigma_deg**2, ref.sigma_deg**2
     z2 = (slope_deg - ref.slope_deg) ** 2 / (var_stat + var_ref)
     if noise_dof is None:
