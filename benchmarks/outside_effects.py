@@ -71,6 +71,11 @@ def _later(n: int, rng: np.random.Generator) -> np.ndarray:
     return np.arange(n) >= rng.integers(n // 4, 3 * n // 4)
 
 
+def measured_slope(s: Session, sigma_deg: float, rng: np.random.Generator) -> SlopeReference:
+    """The session's slope measured apart from the sensor: the true one plus an error of ``sigma_deg`` (1σ)."""
+    return SlopeReference(max(s.truth.slope_deg + rng.normal(0.0, sigma_deg), 0.0), sigma_deg)
+
+
 def _sign3(rng: np.random.Generator) -> FloatArray:
     return rng.choice([-1.0, 1.0], 3)
 
@@ -250,10 +255,8 @@ def main(
         truth = np.array([*s.truth.angles_deg, s.truth.slope_deg])
         options = Options()
         if args.slope_reference_sigma is not None:  # its own generator: the sessions and effects stay the same
-            measured = s.truth.slope_deg + np.random.default_rng([args.seed, r, 99]).normal(
-                0.0, args.slope_reference_sigma
-            )
-            options = Options(slope_reference=SlopeReference(max(measured, 0.0), args.slope_reference_sigma))
+            own = np.random.default_rng([args.seed, r, 99])
+            options = Options(slope_reference=measured_slope(s, args.slope_reference_sigma, own))
         clean = calibrate(s.table, options)
         ref, *ref_sig = estimates(clean)
         clean_flag[r] = flagged(clean)

@@ -18,10 +18,21 @@ from __future__ import annotations
 
 import argparse
 import time
-from dataclasses import replace
 
 import numpy as np
-from outside_effects import Effect, Session, beyond, estimates, flagged, g_misalignment, session, share, write
+from outside_effects import (
+    Effect,
+    Session,
+    _add,
+    beyond,
+    estimates,
+    flagged,
+    g_misalignment,
+    measured_slope,
+    session,
+    share,
+    write,
+)
 
 from mountcal.calibrate import Options, calibrate
 from mountcal.slope_reference import SlopeReference
@@ -33,7 +44,7 @@ REFERENCE_SIGMAS = (0.02, 0.05)
 def horizontal_scale(s: Session, percent: float, rng: np.random.Generator) -> StopTable:
     """The sensor's x and y axes read ``percent`` % too much (or too little: a random sign), z is right."""
     k = 1e-2 * percent * rng.choice([-1.0, 1.0])
-    return replace(s.table, acc_s=s.table.acc_s + s.u_s * np.array([k, k, 0.0]))
+    return _add(s, s.u_s * np.array([k, k, 0.0]))
 
 
 EFFECTS: list[tuple[str, str, Effect, tuple[float, ...]]] = [
@@ -57,8 +68,7 @@ def main() -> None:
         rng = np.random.default_rng([args.seed, r])
         s = session(r, rng)
         refs: list[SlopeReference | None] = [None]
-        for sigma in REFERENCE_SIGMAS:
-            refs.append(SlopeReference(max(s.truth.slope_deg + rng.normal(0.0, sigma), 0.0), sigma))
+        refs += [measured_slope(s, sigma, rng) for sigma in REFERENCE_SIGMAS]
         clean = [calibrate(s.table, Options(slope_reference=ref)) for ref in refs]
         ref_est, *_ = estimates(clean[0])
         clean_flag[:, r] = [flagged(c) for c in clean]

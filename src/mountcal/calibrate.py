@@ -306,8 +306,8 @@ def _check_slope_reference(table: StopTable, opts: Options) -> None:
     if opts.method == "paper":
         raise InputError(
             option("slope_reference"),
-            f"{option('method', 'full')}",
-            f"{option('method', 'paper')}",
+            option("method", "full"),
+            option("method", "paper"),
             f"The reference is checked by the full estimator's residual tests; use {option('method', 'full')}.",
         )
     sites = [] if table.site is None else np.unique(table.site.astype(str)).tolist()

@@ -66,12 +66,16 @@ class Loop:
     steps: list[Step]
     declined: list[dict[str, Any]]
     findings: list[Finding]
-    unexplained: list[Finding] = field(default_factory=list)
     doubts: list[str] = field(default_factory=list)  # why the chosen model may be the wrong explanation
 
     @property
     def final(self) -> Step:
         return self.steps[-1]
+
+    @property
+    def unexplained(self) -> list[Finding]:
+        """The findings the family's test rejects (Holm at :data:`mountcal.diagnose.FAMILY_ALPHA`)."""
+        return unexplained(self.findings)
 
 
 def candidates(table: StopTable, terms: tuple[str, ...], gravity_known: bool) -> list[str]:
@@ -167,7 +171,7 @@ def _finish(steps: list[Step], declined: list[dict[str, Any]]) -> Loop:
     last, n_rows = steps[-1], len(steps[0].table)
     findings = analyse(last.table, last.fit, _rows(last, n_rows))
     doubts = [d for i in range(1, len(steps)) if (d := _step_or_covariate(steps[i - 1], steps[i], n_rows))]
-    return Loop(steps, declined, findings, unexplained(findings), doubts)
+    return Loop(steps, declined, findings, doubts)
 
 
 def _rows(step: Step, n_rows: int) -> np.ndarray:

@@ -198,7 +198,7 @@ def fit_options(args: argparse.Namespace) -> Options:
     from mountcal.cli.triad import sensor_options
     from mountcal.slope_reference import SlopeReference
 
-    reference = getattr(args, "slope_reference", None)
+    reference = args.slope_reference
     options = Options(
         method=args.method,
         model=args.model,
