@@ -8,6 +8,7 @@ sensor reads them, through the exported parameters and compare with ``rot_vs`` (
 
 from __future__ import annotations
 
+import io
 import json
 import re
 import xml.etree.ElementTree as ET
@@ -22,8 +23,8 @@ from scipy.spatial.transform import Rotation
 
 from mountcal.calibrate import calibrate
 from mountcal.cli import main
-from mountcal.errors import NotEnoughInformation
-from mountcal.outputs.exporters import FORMATS, Frames, export
+from mountcal.errors import InputError, NotEnoughInformation
+from mountcal.outputs.exporters import FORMATS, Frames, export, read_parent_pose
 from mountcal.result import Calibration
 from mountcal.simulate.stops import simulate_stops
 
@@ -87,14 +88,13 @@ def simulated(request: pytest.FixtureRequest) -> Calibration:
 
 # ---------------------------------------------------------------- u-blox ----------------------------------
 
-UBLOX_ISO_FROM_INSTALLATION = np.diag([1.0, -1.0, -1.0])  # installation frame: x forward, y right, z down
-
 
 def ublox_to_vehicle(yaw: float, pitch: float, roll: float, a_imu: np.ndarray) -> np.ndarray:
-    """u-blox: the angles rotate the installation frame into the IMU frame, yaw (z), then pitch (new y), then
-    roll (new x): the IMU axes in installation coordinates are the columns of Rz·Ry·Rx."""
-    a_inst = (rz(yaw) @ ry(pitch) @ rx(roll)) @ a_imu.T
-    return (UBLOX_ISO_FROM_INSTALLATION @ a_inst).T
+    """u-blox (ZED-F9R Integration manual UBX-20039643 R10, §3.2.4.4.2): the angles rotate the installation
+    frame (§3.2.4.1.2: x front, y left, z up) into the IMU frame, yaw (z), then pitch (new y), then roll
+    (new x): the IMU axes in installation coordinates are the columns of Rz·Ry·Rx. The installation frame is
+    ISO 8855 itself."""
+    return ((rz(yaw) @ ry(pitch) @ rx(roll)) @ a_imu.T).T
 
 
 def ublox_values(text: str) -> dict[str, tuple[float, float | None]]:
@@ -105,39 +105,49 @@ def ublox_values(text: str) -> dict[str, tuple[float, float | None]]:
     return out
 
 
+UBLOX_NAMES = ("AUTO_MNTALG_ENA", "IMU_MNTALG_YAW", "IMU_MNTALG_PITCH", "IMU_MNTALG_ROLL", "IMU_MNTALG_TOLERANCE")
+
+
 def decode_ubx(data: bytes) -> dict[str, int]:
-    msg = UBXReader.parse(data, msgmode=SET)  # checks the checksum
-    assert msg.identity == "CFG-VALSET"
-    names = ("AUTO_MNTALG_ENA", "IMU_MNTALG_YAW", "IMU_MNTALG_PITCH", "IMU_MNTALG_ROLL")
-    return {n: getattr(msg, f"CFG_SFIMU_{n}") for n in names}
+    """Every CFG-SFIMU key of every UBX-CFG-VALSET in ``data``, read by pyubx2 (which checks each checksum)."""
+    out: dict[str, int] = {}
+    messages = 0
+    for _, msg in UBXReader(io.BytesIO(data), msgmode=SET, quitonerror=2):
+        assert msg.identity == "CFG-VALSET"
+        messages += 1
+        out |= {n: getattr(msg, f"CFG_SFIMU_{n}") for n in UBLOX_NAMES if hasattr(msg, f"CFG_SFIMU_{n}")}
+    assert messages == 2  # the angles, then the tolerance (a key older firmware rejects) on its own
+    return out
 
 
-UBLOX_MANUAL = {  # ZED-F9K integration manual UBX-20046189, single-angle examples of CFG-SFIMU-IMU_MNTALG
-    # yaw 344.0°: IMU frame = installation frame turned 344° about its z (down) axis: x 16° left of forward
+UBLOX_MANUAL = {  # the manual's single-angle examples (§3.2.4.4.2, and ZED-F9K UBX-20046189): each a rotation
+    # about one installation axis (x front, y left, z up), right-handed; the text gives the axes, its Figure 5
+    # (not available as text) the physical pictures
+    # yaw 344.0° about z (up): the IMU's x turned 16° clockwise seen from above, to the right of forward
     "yaw": (
         (344.0, 0.0, 0.0),
         from_axes(
-            (np.cos(np.radians(16)), np.sin(np.radians(16)), 0),
-            (np.sin(np.radians(16)), -np.cos(np.radians(16)), 0),
-            (0, 0, -1),
+            (np.cos(np.radians(16)), -np.sin(np.radians(16)), 0),
+            (np.sin(np.radians(16)), np.cos(np.radians(16)), 0),
+            (0, 0, 1),
         ),
     ),
-    # pitch 26.5° about the installation y (right) axis: x tilted 26.5° up, z down tilted forward
+    # pitch 26.5° about y (left): the IMU's x tilted 26.5° down, its z tilted forward
     "pitch": (
         (0.0, 26.5, 0.0),
         from_axes(
-            (np.cos(np.radians(26.5)), 0, np.sin(np.radians(26.5))),
-            (0, -1, 0),
-            (np.sin(np.radians(26.5)), 0, -np.cos(np.radians(26.5))),
+            (np.cos(np.radians(26.5)), 0, -np.sin(np.radians(26.5))),
+            (0, 1, 0),
+            (np.sin(np.radians(26.5)), 0, np.cos(np.radians(26.5))),
         ),
     ),
-    # roll −23.5° about the installation x (forward) axis: y (right) tilted 23.5° up
+    # roll −23.5° about x (front): the IMU's y (left) tilted 23.5° down
     "roll": (
         (0.0, 0.0, -23.5),
         from_axes(
             (1, 0, 0),
-            (0, -np.cos(np.radians(23.5)), np.sin(np.radians(23.5))),
-            (0, -np.sin(np.radians(23.5)), -np.cos(np.radians(23.5))),
+            (0, np.cos(np.radians(23.5)), -np.sin(np.radians(23.5))),
+            (0, np.sin(np.radians(23.5)), np.cos(np.radians(23.5))),
         ),
     ),
 }
@@ -153,12 +163,21 @@ def test_ublox_manual_single_angle_examples(base: Calibration, case: str) -> Non
     assert values["CFG-SFIMU-IMU_MNTALG_ROLL"][0] == roll
     assert values["CFG-SFIMU-AUTO_MNTALG_ENA"][0] == 0
     raw = decode_ubx(bytes(export(cal, "ublox-ubx")))
-    assert raw == {
+    assert {k: raw[k] for k in UBLOX_NAMES[:4]} == {
         "AUTO_MNTALG_ENA": 0,
         "IMU_MNTALG_YAW": round(yaw * 100),
         "IMU_MNTALG_PITCH": round(pitch * 100),
         "IMU_MNTALG_ROLL": round(roll * 100),
     }
+
+
+def test_ublox_flat_level_aligned_module_exports_zeros(base: Calibration) -> None:
+    """A module lying flat (reads +g on its z, out of its top), its x forward: yaw, pitch and roll all 0."""
+    cal = with_rotation(base, from_axes((1, 0, 0), (0, 1, 0), (0, 0, 1)))
+    values = ublox_values(str(export(cal, "ublox")))
+    assert [values[f"CFG-SFIMU-IMU_MNTALG_{k}"][0] for k in ("YAW", "PITCH", "ROLL")] == [0.0, 0.0, 0.0]
+    raw = decode_ubx(bytes(export(cal, "ublox-ubx")))
+    assert (raw["IMU_MNTALG_YAW"], raw["IMU_MNTALG_PITCH"], raw["IMU_MNTALG_ROLL"]) == (0, 0, 0)
 
 
 def test_ublox_round_trip_exact_angles(simulated: Calibration) -> None:
@@ -175,6 +194,7 @@ def test_ublox_bytes_decode_to_the_text_and_stay_within_the_resolution(simulated
     raw = decode_ubx(bytes(export(simulated, "ublox-ubx")))
     for key in ("YAW", "PITCH", "ROLL"):
         assert raw[f"IMU_MNTALG_{key}"] == round(values[f"CFG-SFIMU-IMU_MNTALG_{key}"][0] * 100)
+    assert raw["IMU_MNTALG_TOLERANCE"] == values["CFG-SFIMU-IMU_MNTALG_TOLERANCE"][0]
     a_s = sensor_readings(simulated.rot_vs.as_matrix())
     sent = ublox_to_vehicle(
         raw["IMU_MNTALG_YAW"] / 100, raw["IMU_MNTALG_PITCH"] / 100, raw["IMU_MNTALG_ROLL"] / 100, a_s
@@ -192,7 +212,7 @@ def test_ublox_bytes_round_trip_on_the_grid(base: Calibration, seed: int) -> Non
         rng.integers(-8900, 8900) / 100,
         rng.integers(-18000, 18000) / 100,
     )
-    matrix = UBLOX_ISO_FROM_INSTALLATION @ rz(yaw) @ ry(pitch) @ rx(roll)
+    matrix = rz(yaw) @ ry(pitch) @ rx(roll)
     raw = decode_ubx(bytes(export(with_rotation(base, matrix), "ublox-ubx")))
     assert raw["IMU_MNTALG_YAW"] == round(yaw * 100) % 36000  # wrapped into 0…360° as U4
     a_s = sensor_readings(matrix)
@@ -203,23 +223,46 @@ def test_ublox_bytes_round_trip_on_the_grid(base: Calibration, seed: int) -> Non
 
 
 def test_ublox_ucenter_file_lines_decode_to_the_same_values(simulated: Calibration) -> None:
-    """u-center's generation-9 configuration file: ``CFG-VALGET - 06 8B …`` lines, one per layer."""
+    """u-center's generation-9 configuration file: ``CFG-VALGET - 06 8B …`` lines, one per message and layer."""
     raw = decode_ubx(bytes(export(simulated, "ublox-ubx")))
     lines = str(export(simulated, "ublox-ucenter")).splitlines()
-    assert len(lines) == 3
-    for layer, line in enumerate(lines):
+    assert len(lines) == 6
+    got: dict[str, int] = {}
+    for i, line in enumerate(lines):
         name, dash, hexdata = line.split(" ", 2)
         assert (name, dash) == ("CFG-VALGET", "-")
         data = bytes.fromhex(hexdata)
         msg = UBXReader.parse(b"\xb5\x62" + data + calc_checksum(data), msgmode=GET)
-        assert msg.identity == "CFG-VALGET" and msg.layer == layer
-        assert {k: getattr(msg, f"CFG_SFIMU_{k}") for k in raw} == raw
+        assert msg.identity == "CFG-VALGET" and msg.layer == i % 3
+        got |= {k: getattr(msg, f"CFG_SFIMU_{k}") for k in UBLOX_NAMES if hasattr(msg, f"CFG_SFIMU_{k}")}
+    assert got == raw
 
 
 def test_ublox_yaw_just_below_360_wraps_to_0(base: Calibration) -> None:
-    matrix = UBLOX_ISO_FROM_INSTALLATION @ rz(-0.004)
-    raw = decode_ubx(bytes(export(with_rotation(base, matrix), "ublox-ubx")))
+    raw = decode_ubx(bytes(export(with_rotation(base, rz(-0.004)), "ublox-ubx")))
     assert raw["IMU_MNTALG_YAW"] == 0  # 359.996° rounds to 360.00°, which u-blox's 0…360 range holds as 0
+
+
+@pytest.mark.parametrize(
+    ("sigma_deg", "tolerance", "automatic"),
+    [(0.3, 0, 0), (0.66, 0, 0), (0.7, 1, 0), (2.0, 1, 0), (3.3, 1, 0), (3.4, 1, 1), (20.0, 1, 1)],
+)
+def test_ublox_tolerance_follows_the_sigma(base: Calibration, sigma_deg: float, tolerance: int, automatic: int) -> None:
+    """§3.2.4.4.2: LOW = "up to 2 degrees wrong", HIGH = within 5°, "in any case no more than 10 degrees",
+    beyond that the automatic alignment; the error bound is 3σ about the worst-known vehicle axis."""
+    cal = replace(with_rotation(base, rz(30) @ rx(4)), rotation_sigma_deg=(0.1, sigma_deg, 0.2))
+    raw = decode_ubx(bytes(export(cal, "ublox-ubx")))
+    assert (raw["IMU_MNTALG_TOLERANCE"], raw["AUTO_MNTALG_ENA"]) == (tolerance, automatic)
+    text = str(export(cal, "ublox"))
+    assert f"{3 * sigma_deg:.1f}°" in text or f"{3 * sigma_deg:.2f}°" in text  # the bound is stated
+
+
+def test_ublox_undetermined_yaw_hands_over_to_the_automatic_alignment(base: Calibration) -> None:
+    """A yaw written as 0 on request is not configured as known: the receiver's own alignment is switched on."""
+    cal = replace(base, yaw_deg=None, yaw_sigma_deg=None, yaw_reason="level ground")
+    raw = decode_ubx(bytes(export(cal, "ublox-ubx", yaw="zero")))
+    assert (raw["AUTO_MNTALG_ENA"], raw["IMU_MNTALG_YAW"], raw["IMU_MNTALG_TOLERANCE"]) == (1, 0, 1)
+    assert "YAW NOT DETERMINED" in str(export(cal, "ublox", yaw="zero"))
 
 
 # ---------------------------------------------------------------- NovAtel ---------------------------------
@@ -340,28 +383,109 @@ def test_ros_round_trips(simulated: Calibration) -> None:
 
 # ---------------------------------------------------------------- Autoware --------------------------------
 
+# Autoware's sample_sensor_kit_description/config/sensors_calibration.yaml: the kit's base in base_link
+# (yaw −0.0364 rad = −2.1°), and the IMU's entry of its sensor_kit_calibration.yaml
+SAMPLE_SENSORS_CALIBRATION = """\
+base_link:
+  sensor_kit_base_link:
+    x: 0.9
+    y: 0.0
+    z: 2.0
+    roll: -0.001
+    pitch: 0.015
+    yaw: -0.0364
+"""
+SAMPLE_IMU_ENTRY = {"x": 0.0, "y": 0.0, "z": 0.0, "roll": 3.14159265359, "pitch": 0.0, "yaw": 3.14159265359}
 
-def test_autoware_documented_entry(base: Calibration) -> None:
-    """Autoware's documentation shows a sensor-kit entry ``roll: -0.01, pitch: 0.71, yaw: -1.580`` (a camera)
-    and ``tamagawa/imu_link`` at z 0.8: each comes back as written."""
-    for child, xyz, rpy in (
-        ("camera0/camera_link", (0.0, -0.56362, -0.30555), (-0.01, 0.71, -1.580)),
-        ("tamagawa/imu_link", (0.0, 0.0, 0.8), (0.0, 0.0, 0.0)),
-    ):
-        cal = with_rotation(base, urdf_rpy_matrix(*rpy))
-        frames = Frames(parent="sensor_kit_base_link", child=child, translation_m=xyz)
-        doc = yaml.safe_load(str(export(cal, "autoware", frames=frames)))
-        entry = doc["sensor_kit_base_link"][child]
-        assert [entry[k] for k in ("x", "y", "z")] == list(xyz)
-        np.testing.assert_allclose([entry[k] for k in ("roll", "pitch", "yaw")], rpy, atol=1e-11)
+
+@pytest.fixture
+def kit_pose(tmp_path: Path) -> Path:
+    path = tmp_path / "sensors_calibration.yaml"
+    path.write_text(SAMPLE_SENSORS_CALIBRATION, encoding="utf-8")
+    return path
 
 
-def test_autoware_round_trip(simulated: Calibration) -> None:
-    doc = yaml.safe_load(str(export(simulated, "autoware")))
+def kit_rotation(path: Path) -> np.ndarray:
+    pose = yaml.safe_load(path.read_text(encoding="utf-8"))["base_link"]["sensor_kit_base_link"]
+    return urdf_rpy_matrix(pose["roll"], pose["pitch"], pose["yaw"])
+
+
+def test_autoware_sample_kit_imu_entry_comes_back_through_the_kit_pose(base: Calibration, kit_pose: Path) -> None:
+    """The sample kit's IMU (rpy π, 0, π in sensor_kit_base_link, itself turned 2.1° in base_link): a calibration
+    of that IMU in base_link exports the entry Autoware's file holds."""
+    e = SAMPLE_IMU_ENTRY
+    in_base = kit_rotation(kit_pose) @ urdf_rpy_matrix(e["roll"], e["pitch"], e["yaw"])
+    frames = Frames(child="tamagawa/imu_link", parent_pose=read_parent_pose(kit_pose, "sensor_kit_base_link"))
+    frames = replace(frames, parent="sensor_kit_base_link")
+    doc = yaml.safe_load(str(export(with_rotation(base, in_base), "autoware", frames=frames)))
+    entry = doc["sensor_kit_base_link"]["tamagawa/imu_link"]
+    np.testing.assert_allclose(
+        urdf_rpy_matrix(entry["roll"], entry["pitch"], entry["yaw"]),
+        urdf_rpy_matrix(e["roll"], e["pitch"], e["yaw"]),
+        rtol=0,
+        atol=1e-11,
+    )
+    # the entry a kit taken as parallel to base_link would get is off by the kit's own turn (2.1° yaw, 0.9° pitch)
+    as_if_parallel = replace(frames, parent="base_link", parent_pose=None)
+    wrong = yaml.safe_load(str(export(with_rotation(base, in_base), "autoware", frames=as_if_parallel)))
+    r_wrong = urdf_rpy_matrix(*(wrong["base_link"]["tamagawa/imu_link"][k] for k in ("roll", "pitch", "yaw")))
+    angle = Rotation.from_matrix(r_wrong.T @ urdf_rpy_matrix(e["roll"], e["pitch"], e["yaw"])).magnitude()
+    assert np.degrees(angle) == pytest.approx(np.degrees(Rotation.from_matrix(kit_rotation(kit_pose)).magnitude()))
+    assert np.degrees(angle) > 2.0
+
+
+def test_autoware_round_trip(simulated: Calibration, kit_pose: Path) -> None:
+    frames = Frames(parent="sensor_kit_base_link", parent_pose=read_parent_pose(kit_pose, "sensor_kit_base_link"))
+    doc = yaml.safe_load(str(export(simulated, "autoware", frames=frames)))
     entry = doc["sensor_kit_base_link"]["imu_link"]
     a_s = sensor_readings(simulated.rot_vs.as_matrix())
-    back = (urdf_rpy_matrix(entry["roll"], entry["pitch"], entry["yaw"]) @ a_s.T).T
-    np.testing.assert_allclose(back, simulated.rot_vs.apply(a_s), rtol=0, atol=TOL)
+    in_base = kit_rotation(kit_pose) @ urdf_rpy_matrix(entry["roll"], entry["pitch"], entry["yaw"])
+    np.testing.assert_allclose((in_base @ a_s.T).T, simulated.rot_vs.apply(a_s), rtol=0, atol=TOL)
+
+
+def test_autoware_needs_the_parent_pose_unless_the_parent_is_base_link(base: Calibration) -> None:
+    with pytest.raises(InputError, match="parent_pose"):
+        export(base, "autoware")
+    doc = yaml.safe_load(str(export(base, "autoware", frames=Frames(parent="base_link"))))
+    assert set(doc) == {"base_link"}
+
+
+def test_parent_pose_file_errors_name_the_file_and_what_it_should_hold(tmp_path: Path, kit_pose: Path) -> None:
+    kit = tmp_path / "sensor_kit_calibration.yaml"
+    kit.write_text("sensor_kit_base_link:\n  imu_link: {x: 0, y: 0, z: 0, roll: 0, pitch: 0, yaw: 0}\n", "utf-8")
+    with pytest.raises(InputError, match=r"sensor_kit_calibration.yaml.*sensors_calibration.yaml"):
+        read_parent_pose(kit, "sensor_kit_base_link")
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(SAMPLE_SENSORS_CALIBRATION.replace("yaw: -0.0364", "yaw: -2.1deg"), "utf-8")
+    with pytest.raises(InputError, match=r"bad.yaml: base_link/sensor_kit_base_link/yaw.*'-2.1deg'"):
+        read_parent_pose(bad, "sensor_kit_base_link")
+    with pytest.raises(InputError, match=r"missing\.yaml"):
+        read_parent_pose(tmp_path / "missing.yaml", "sensor_kit_base_link")
+    with pytest.raises(InputError, match="other_link"):
+        read_parent_pose(kit_pose, "other_link")
+
+
+def test_frames_are_refused_where_a_format_has_none(base: Calibration, kit_pose: Path) -> None:
+    """A parent, child, translation or pose given to a format without frames is refused, not ignored."""
+    for fmt in ("ublox", "ublox-ubx", "novatel", "json"):
+        with pytest.raises(InputError, match="Leave them out"):
+            export(base, fmt, frames=Frames(parent="chassis"))
+    pose = read_parent_pose(kit_pose, "sensor_kit_base_link")
+    with pytest.raises(InputError, match="no pose of its own"):
+        export(base, "urdf", frames=Frames(parent="base_link", parent_pose=pose))
+
+
+def test_ros_formats_compose_the_parent_pose_too(base: Calibration, kit_pose: Path) -> None:
+    frames = Frames(parent="sensor_kit_base_link", parent_pose=read_parent_pose(kit_pose, "sensor_kit_base_link"))
+    a_s = sensor_readings(base.rot_vs.as_matrix())
+    _, _, rpy = urdf_origin(str(export(base, "urdf", frames=frames)))
+    in_base = kit_rotation(kit_pose) @ urdf_rpy_matrix(*rpy)
+    np.testing.assert_allclose((in_base @ a_s.T).T, base.rot_vs.apply(a_s), rtol=0, atol=TOL)
+    args = static_tf_args(str(export(base, "ros2-static-tf", frames=frames)))
+    q = np.array([float(args[k]) for k in ("--qx", "--qy", "--qz", "--qw")])
+    np.testing.assert_allclose(
+        [kit_rotation(kit_pose) @ quat_rotate(q, v) for v in a_s], base.rot_vs.apply(a_s), rtol=0, atol=TOL
+    )
 
 
 # ---------------------------------------------------------------- JSON / YAML -----------------------------
@@ -492,8 +616,8 @@ def test_cli_refuses_undetermined_yaw_without_output(
     result = tmp_path / "r.json"
     replace(base, yaw_deg=None, yaw_sigma_deg=None, yaw_reason="level ground").save(result)
     out = tmp_path / "out.txt"
-    assert main(["export", str(result), "--to", "autoware", "-o", str(out)]) == 3
+    assert main(["export", str(result), "--to", "urdf", "-o", str(out)]) == 3
     assert "--yaw-undetermined zero" in capsys.readouterr().err
     assert not out.exists()
-    assert main(["export", str(result), "--to", "autoware", "-o", str(out), "--yaw-undetermined", "zero"]) == 0
+    assert main(["export", str(result), "--to", "urdf", "-o", str(out), "--yaw-undetermined", "zero"]) == 0
     assert "YAW NOT DETERMINED" in out.read_text(encoding="utf-8")

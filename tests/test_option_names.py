@@ -15,7 +15,7 @@ from mountcal.calibrate import Options, parse_model
 from mountcal.errors import InputError
 from mountcal.io.logs import LogOptions
 from mountcal.option_names import OPTIONS, as_flags, option
-from mountcal.outputs.exporters import export
+from mountcal.outputs.exporters import Frames, export
 from mountcal.outputs.report.html import render
 from mountcal.pipeline import calibrate_log
 from mountcal.simulate.stops import simulate_preset
@@ -37,7 +37,8 @@ def test_every_flag_in_the_table_is_a_flag_of_the_parsers() -> None:
 
 
 def test_every_python_spelling_in_the_table_is_a_parameter() -> None:
-    classes = {c.__name__: {f.name for f in dataclasses.fields(c)} for c in (StopDetection, Options, LogOptions)}
+    owners = (StopDetection, Options, LogOptions, Frames)
+    classes = {c.__name__: {f.name for f in dataclasses.fields(c)} for c in owners}
     parameters = set().union(
         *(
             inspect.signature(f).parameters

@@ -29,6 +29,8 @@ OPTIONS: dict[str, tuple[str, str]] = {
     "method": ("Options.method", "--method"),
     "min_stop": ("StopDetection.min_duration_s", "--min-stop-s"),
     "model": ("Options.model", "--model"),
+    "parent": ("Frames.parent", "--parent"),
+    "parent_pose": ("Frames.parent_pose", "--parent-pose"),
     "protocol": ("protocol", "--protocol"),
     "require_confident": ("require_confident", "--require-confident"),
     "sensor_spec": ("Options.spec", "--sensor-spec"),

@@ -45,7 +45,18 @@ def add_parser(sub: Any) -> None:
         help="when the result's yaw is not determined: refuse (default) or write yaw = 0, marked in the output",
     )
     p.add_argument("--accept-unconfident", action="store_true", help="export a result marked not confident")
-    p.add_argument("--parent", default=None, help="parent frame (ROS: base_link; Autoware: sensor_kit_base_link)")
+    p.add_argument(
+        "--parent",
+        default=None,
+        help="parent frame (ROS: base_link, which must be a REP 103 body frame; Autoware: sensor_kit_base_link)",
+    )
+    p.add_argument(
+        "--parent-pose",
+        default=None,
+        metavar="YAML",
+        help="Autoware's sensors_calibration.yaml: the parent's pose in base_link, composed with the mounting "
+        "(needed for a parent other than base_link in Autoware)",
+    )
     p.add_argument("--child", default=None, help="the IMU's frame (default imu_link)")
     p.add_argument(
         "--translation",
@@ -61,22 +72,24 @@ def add_parser(sub: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     from mountcal.atomic import atomic_path
     from mountcal.errors import InputError
-    from mountcal.outputs.exporters import Frames, export
-    from mountcal.outputs.exporters.autoware import DEFAULT_FRAMES as AUTOWARE_FRAMES
+    from mountcal.outputs.exporters import DEFAULT_FRAMES, Frames, export, read_parent_pose
     from mountcal.paths import check_outputs
     from mountcal.result import Calibration
 
     result = Path(args.input)
     to_stdout = args.output in (None, STDOUT)
-    check_outputs({"-o": None if to_stdout else args.output}, {"RESULT.json": result})
+    inputs = {"RESULT.json": result, "--parent-pose": args.parent_pose}
+    check_outputs({"-o": None if to_stdout else args.output}, inputs)
     cal = Calibration.load(result)
     frames = None
-    if args.parent or args.child or args.translation:
-        base = AUTOWARE_FRAMES if args.to == "autoware" else Frames()
+    if args.parent or args.child or args.translation or args.parent_pose:
+        base = DEFAULT_FRAMES.get(args.to, Frames())
+        parent = args.parent or base.parent
         frames = Frames(
-            parent=args.parent or base.parent,
+            parent=parent,
             child=args.child or base.child,
             translation_m=tuple(args.translation) if args.translation else base.translation_m,
+            parent_pose=read_parent_pose(args.parent_pose, parent) if args.parent_pose else None,
         )
     out = export(cal, args.to, yaw=args.yaw_undetermined, accept_unconfident=args.accept_unconfident, frames=frames)
     if to_stdout:

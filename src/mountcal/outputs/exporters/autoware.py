@@ -1,31 +1,50 @@
-"""Autoware: the IMU's entry of ``sensor_kit_calibration.yaml``.
+"""Autoware: the IMU's entry of ``sensor_kit_calibration.yaml`` (or of ``sensors_calibration.yaml``).
 
-Autoware's sensor kit description loads this file with ``xacro.load_yaml`` and writes each entry
-as a URDF joint ``<origin xyz="x y z" rpy="roll pitch yaw"/>`` from the parent (the YAML's
-top-level key, ``sensor_kit_base_link``) to the sensor frame (Autoware documentation, "Creating
-vehicle and sensor description"; ``sample_sensor_kit_description``): metres and radians,
-fixed-axis roll, pitch, yaw, as in :mod:`mountcal.outputs.exporters.ros`. mountcal's rotation is from the
-IMU to ``base_link``: it is the entry under ``sensor_kit_base_link`` only when that frame's axes
-are parallel to ``base_link`` (zero roll, pitch, yaw in ``sensors_calibration.yaml``); otherwise
-export with ``--parent base_link`` into ``sensors_calibration.yaml``.
+Autoware's sensor description (Autoware documentation, "Creating a sensor model for Autoware";
+``sample_sensor_kit_description``) keeps two files, each ``parent: {child: {x, y, z, roll, pitch,
+yaw}}`` in metres and radians, which its xacros turn into URDF joints ``<origin xyz="x y z"
+rpy="roll pitch yaw"/>`` (fixed-axis roll, pitch, yaw: :mod:`mountcal.outputs.exporters.ros`):
+
+- ``sensors_calibration.yaml``: ``base_link`` → ``sensor_kit_base_link`` (and sensors mounted on the
+  body directly);
+- ``sensor_kit_calibration.yaml``: ``sensor_kit_base_link`` → each sensor of the kit.
+
+mountcal's rotation is the IMU's orientation in ``base_link`` (the REP 103 body frame). The kit's
+base is itself turned (the sample kit's by roll −0.001, pitch 0.015, yaw −0.0364 rad: 2.1° of yaw),
+so the entry under ``sensor_kit_base_link`` is composed with that pose, read from
+``sensors_calibration.yaml`` (:func:`read_parent_pose`): ``R_kit←imu = R_base←kitᵀ · R_base←imu``.
+Without that pose only ``base_link`` itself can be the parent.
 """
 
 from __future__ import annotations
 
-from mountcal.conventions import angles_from_rot_vs
+import math
+from pathlib import Path
+from typing import Any
+
+from mountcal.conventions import angles_from_rot_vs, rot_vs_from_angles
+from mountcal.errors import InputError
+from mountcal.option_names import option
 from mountcal.outputs.exporters.common import Mounting, number
-from mountcal.outputs.exporters.ros import Frames, sigma_lines
+from mountcal.outputs.exporters.ros import BODY_FRAME, Frames, ParentPose, frame_lines
 
 DEFAULT_FRAMES = Frames(parent="sensor_kit_base_link", child="imu_link")
+POSE_KEYS = ("x", "y", "z", "roll", "pitch", "yaw")
 
 
 def autoware_yaml(mount: Mounting, frames: Frames = DEFAULT_FRAMES) -> str:
     """The YAML entry (parent → child: x, y, z in m; roll, pitch, yaw in rad)."""
-    roll, pitch, yaw = angles_from_rot_vs(mount.rot_vs)
+    if frames.parent != BODY_FRAME and frames.parent_pose is None:
+        raise InputError(
+            f"the Autoware parent frame {frames.parent}",
+            f"its pose in {BODY_FRAME} (mountcal's rotation is the IMU's orientation in {BODY_FRAME})",
+            "none given",
+            f"Give the sensors_calibration.yaml that places {frames.parent} ({option('parent_pose')}), or write "
+            f"the entry under {BODY_FRAME} ({option('parent', BODY_FRAME)}).",
+        )
+    roll, pitch, yaw = angles_from_rot_vs(frames.in_parent(mount.rot_vs))
     x, y, z = frames.translation_m
-    lines = sigma_lines(mount, "#")
-    if frames.parent != "base_link":
-        lines.append(f"# valid when {frames.parent} is parallel to base_link (its roll, pitch, yaw all 0)")
+    lines = frame_lines(mount, frames, "#")
     lines += [f"{frames.parent}:", f"  {frames.child}:"]
     for key, value, digits in (
         ("x", x, 9),
@@ -37,3 +56,50 @@ def autoware_yaml(mount: Mounting, frames: Frames = DEFAULT_FRAMES) -> str:
     ):
         lines.append(f"    {key}: {number(value, digits)}")
     return "\n".join(lines) + "\n"
+
+
+def read_parent_pose(path: str | Path, parent: str) -> ParentPose:
+    """The pose of ``parent`` in ``base_link`` from an Autoware ``sensors_calibration.yaml``.
+
+    The file holds ``base_link: {parent: {x, y, z, roll, pitch, yaw}}``; roll, pitch and yaw are the
+    URDF joint's fixed-axis angles in radians.
+    """
+    import yaml  # PyYAML: imported here, so that the rest of mountcal does not load it
+
+    where = str(path)
+    try:
+        doc: Any = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise InputError(where, "a readable YAML file", f"{type(exc).__name__}: {exc}", "Check the path.") from exc
+    except yaml.YAMLError as exc:
+        raise InputError(where, "YAML", f"a syntax error ({exc})", "Give Autoware's sensors_calibration.yaml.") from exc
+    top = doc if isinstance(doc, dict) else {}
+    entry = top.get(BODY_FRAME, {}).get(parent) if isinstance(top.get(BODY_FRAME), dict) else None
+    if not isinstance(entry, dict):
+        keys = sorted(map(str, top))
+        found = f"top-level keys {', '.join(keys[:6])}{', …' if len(keys) > 6 else ''}" if top else "no mapping"
+        hint = (
+            " That looks like sensor_kit_calibration.yaml, which places the sensors in the kit; the kit's own "
+            "pose is in sensors_calibration.yaml."
+            if parent in top
+            else ""
+        )
+        raise InputError(
+            where,
+            f"{BODY_FRAME}: {{{parent}: {{x, y, z, roll, pitch, yaw}}}} (Autoware's sensors_calibration.yaml)",
+            found,
+            f"Give the file that places {parent} in {BODY_FRAME}.{hint}",
+        )
+    values = {}
+    for key in POSE_KEYS:
+        value = entry.get(key)
+        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+            raise InputError(
+                f"{where}: {BODY_FRAME}/{parent}/{key}",
+                "a number (metres, or radians for roll, pitch, yaw)",
+                repr(value),
+                "Fix the entry.",
+            )
+        values[key] = float(value)
+    rotation = rot_vs_from_angles(values["roll"], values["pitch"], values["yaw"])  # URDF rpy = Rz·Ry·Rx
+    return ParentPose(rotation, f"{Path(path).name}: {BODY_FRAME}/{parent}")

@@ -84,8 +84,10 @@ def novatel_rotation(mount: Mounting) -> NovatelRotation:
 def novatel_text(r: NovatelRotation) -> str:
     """The abbreviated ASCII command, with comment lines stating the frames and σ."""
     lines = [f"# {h}" for h in r.mount.header]
-    lines.append("# NovAtel SPAN: rotation from the IMU body frame to the vehicle frame (x right, y forward, z up),")
-    lines.append("# applied Z, X, Y; degrees; standard deviations 1σ. Send only the SETINSROTATION line.")
+    lines.append("# NovAtel SPAN (OEM7): rotation from the IMU body frame (the axes marked on the IMU) to the vehicle")
+    lines.append("# frame (x right, y forward, z up), about Z, then the new X, then the new Y, right-handed; degrees;")
+    lines.append("# standard deviations 1σ. Calibrate on the body axes: RAWIMU/RAWIMUS/RAWIMUSX log -y (\"-(Y Accel")
+    lines.append("# Output)\"), so negate that field first. Send only the SETINSROTATION line.")
     lines += [f"# {n}" for n in r.notes]
     angles = " ".join(number(v) for v in r.xyz_deg)
     sds = " ".join(number(v, 4) for v in r.sd_deg)

@@ -1,13 +1,15 @@
 """ROS 2: ``static_transform_publisher``, a URDF ``<joint>``, a tf2 quaternion.
 
-REP 103 makes ``base_link`` x forward, y left, z up: mountcal's vehicle frame. A tf transform
-from ``frame_id`` (parent) to ``child_frame_id`` is the child's pose in the parent, mapping child
-coordinates to parent coordinates (tf2 ``static_transform_publisher`` documentation; URDF joint
-``<origin>``: "the transform from the parent link to the child link"). With the IMU's frame as
-the child, its rotation is ``rot_vs`` itself. URDF ``rpy`` are fixed-axis roll about x, then
-pitch about y, then yaw about z, radians (URDF XML specification, joint/origin), i.e.
-``Rz(yaw)·Ry(pitch)·Rx(roll)``: mountcal's convention. Translation is not estimated by mountcal:
-it is written as given (default 0).
+REP 103 makes a body frame such as ``base_link`` x forward, y left, z up: mountcal's vehicle frame.
+A tf transform from ``frame_id`` (parent) to ``child_frame_id`` is the child's pose in the parent,
+mapping child coordinates to parent coordinates (tf2 ``static_transform_publisher`` documentation;
+URDF joint ``<origin>``: "the transform from the parent link to the child link"). With the IMU's
+frame as the child and a REP 103 body frame aligned with the vehicle as the parent, its rotation is
+``rot_vs`` itself. A parent that is turned against the vehicle (a sensor kit's base) needs its pose
+in the body frame (:class:`ParentPose`); the rotation written is then ``parentᵀ · rot_vs``. URDF
+``rpy`` are fixed-axis roll about x, then pitch about y, then yaw about z, radians (URDF XML
+specification, joint/origin), i.e. ``Rz(yaw)·Ry(pitch)·Rx(roll)``: mountcal's convention.
+Translation is not estimated by mountcal: it is written as given (default 0).
 """
 
 from __future__ import annotations
@@ -15,41 +17,78 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from mountcal.conventions import angles_from_rot_vs
 from mountcal.outputs.exporters.common import Mounting, number, propagate_sigma
 
+BODY_FRAME = "base_link"  # REP 105's name for the REP 103 body frame, and Autoware's
+
+
+@dataclass(frozen=True)
+class ParentPose:
+    """A parent frame's orientation in the body frame (``base_link``), as a URDF joint origin gives it.
+
+    Only its rotation matters: the IMU's position is given in the parent frame itself.
+    """
+
+    rotation: Rotation  # maps parent coordinates to base_link coordinates
+    source: str  # where it was read, for the output's comments
+
 
 @dataclass(frozen=True)
 class Frames:
-    """Frame names and the IMU's position in the parent frame (m), for ROS and Autoware."""
+    """Frame names, the IMU's position in the parent frame (m), and the parent's pose when it is not the body frame."""
 
-    parent: str = "base_link"
+    parent: str = BODY_FRAME
     child: str = "imu_link"
     translation_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    parent_pose: ParentPose | None = None  # None: the parent is a REP 103 body frame aligned with the vehicle
+
+    def in_parent(self, rot_vs: Rotation) -> Rotation:
+        """The IMU's orientation in the parent frame (maps IMU coordinates to parent coordinates)."""
+        return rot_vs if self.parent_pose is None else self.parent_pose.rotation.inv() * rot_vs
 
 
-def quaternion_xyzw(mount: Mounting) -> np.ndarray:
+def quaternion_xyzw(mount: Mounting, frames: Frames = Frames()) -> np.ndarray:
     """The tf2 quaternion (x, y, z, w) of the child (IMU) frame in the parent, w ≥ 0."""
-    q = mount.rot_vs.as_quat()
+    q = frames.in_parent(mount.rot_vs).as_quat()
     return -q if q[3] < 0 else q
 
 
-def sigma_lines(mount: Mounting, prefix: str) -> list[str]:
-    sig = propagate_sigma(lambda r: np.array(angles_from_rot_vs(r)), mount, np.array([2 * np.pi] * 3))
+def frame_lines(mount: Mounting, frames: Frames, prefix: str) -> list[str]:
+    """The comment lines every ROS format starts with: what the transform means, its parent, and its σ."""
+    lines = [f"{prefix} {h}" for h in mount.header]
+    lines.append(
+        f"{prefix} transform {frames.parent} -> {frames.child}: the IMU's pose in {frames.parent}, mapping IMU "
+        f"coordinates to {frames.parent} coordinates (p_parent = q p_imu q*)"
+    )
+    pose = frames.parent_pose
+    if pose is None:
+        lines.append(
+            f"{prefix} {frames.parent} must be a REP 103 body frame aligned with the vehicle: x forward, y left, z up"
+        )
+    else:
+        rpy = " ".join(number(v, 9) for v in angles_from_rot_vs(pose.rotation))
+        lines.append(
+            f"{prefix} {frames.parent} is turned in {BODY_FRAME} by rpy {rpy} rad (from {pose.source}), "
+            f"composed here; its own uncertainty is not in the σ below"
+        )
+    sig = propagate_sigma(
+        lambda r: np.array(angles_from_rot_vs(frames.in_parent(r))), mount, np.array([2 * np.pi] * 3)
+    )
     text = ", ".join(
         f"{name} {'not determined' if s is None else f'{s:.3g}'}"
         for name, s in zip(("roll", "pitch", "yaw"), sig, strict=True)
     )
-    lines = [f"{prefix} {h}" for h in mount.header]
     return [*lines, f"{prefix} 1σ of the fixed-axis roll, pitch, yaw (rad): {text}"]
 
 
 def static_transform_command(mount: Mounting, frames: Frames = Frames()) -> str:
     """``ros2 run tf2_ros static_transform_publisher`` with the Humble+ named arguments."""
     x, y, z = (number(v) for v in frames.translation_m)
-    qx, qy, qz, qw = (number(float(v), 12) for v in quaternion_xyzw(mount))
-    lines = sigma_lines(mount, "#")
+    qx, qy, qz, qw = (number(float(v), 12) for v in quaternion_xyzw(mount, frames))
+    lines = frame_lines(mount, frames, "#")
     lines.append(
         f"ros2 run tf2_ros static_transform_publisher --x {x} --y {y} --z {z} "
         f"--qx {qx} --qy {qy} --qz {qz} --qw {qw} --frame-id {frames.parent} --child-frame-id {frames.child}"
@@ -59,10 +98,11 @@ def static_transform_command(mount: Mounting, frames: Frames = Frames()) -> str:
 
 def urdf_joint(mount: Mounting, frames: Frames = Frames(), name: str | None = None) -> str:
     """A fixed URDF joint placing the IMU's link in the parent link."""
-    roll, pitch, yaw = angles_from_rot_vs(mount.rot_vs)
+    roll, pitch, yaw = angles_from_rot_vs(frames.in_parent(mount.rot_vs))
     xyz = " ".join(number(v) for v in frames.translation_m)
     rpy = " ".join(number(v, 12) for v in (roll, pitch, yaw))
-    comments = [f"<!-- {line[2:]} -->" for line in sigma_lines(mount, "#")]
+    # XML comments may not hold "--"
+    comments = [f"<!-- {line[2:].replace('--', '- -')} -->" for line in frame_lines(mount, frames, "#")]
     joint = name or f"{frames.child}_joint"
     return (
         "\n".join(
@@ -81,11 +121,10 @@ def urdf_joint(mount: Mounting, frames: Frames = Frames(), name: str | None = No
 
 def tf2_quaternion(mount: Mounting, frames: Frames = Frames()) -> str:
     """The quaternion of ``parent → child`` for C++ and Python tf2 code."""
-    qx, qy, qz, qw = (number(float(v), 12) for v in quaternion_xyzw(mount))
-    lines = sigma_lines(mount, "//")
+    qx, qy, qz, qw = (number(float(v), 12) for v in quaternion_xyzw(mount, frames))
+    lines = frame_lines(mount, frames, "//")
     lines += [
-        f"// tf2 rotation {frames.parent} -> {frames.child} (x, y, z, w): child coordinates to parent coordinates",
-        f"tf2::Quaternion q({qx}, {qy}, {qz}, {qw});",
+        f"tf2::Quaternion q({qx}, {qy}, {qz}, {qw});  // x, y, z, w",
         f"// Python: geometry_msgs.msg.Quaternion(x={qx}, y={qy}, z={qz}, w={qw})",
     ]
     return "\n".join(lines) + "\n"
