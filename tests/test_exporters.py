@@ -621,3 +621,24 @@ def test_cli_refuses_undetermined_yaw_without_output(
     assert not out.exists()
     assert main(["export", str(result), "--to", "urdf", "-o", str(out), "--yaw-undetermined", "zero"]) == 0
     assert "YAW NOT DETERMINED" in out.read_text(encoding="utf-8")
+
+
+def test_cli_parent_pose_and_its_refusals(
+    base: Calibration, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    result = tmp_path / "r.json"
+    base.save(result)
+    out = tmp_path / "entry.yaml"
+    assert main(["export", str(result), "--to", "autoware", "-o", str(out)]) == 2
+    assert "--parent-pose" in capsys.readouterr().err and not out.exists()
+    pose = tmp_path / "sensors_calibration.yaml"
+    pose.write_text(SAMPLE_SENSORS_CALIBRATION, encoding="utf-8")
+    assert main(["export", str(result), "--to", "autoware", "--parent-pose", str(pose), "-o", str(out)]) == 0
+    assert "sensor_kit_base_link" in yaml.safe_load(out.read_text(encoding="utf-8"))
+    assert main(["export", str(result), "--to", "ublox", "--parent-pose", str(pose)]) == 2
+    assert "Leave them out" in capsys.readouterr().err
+    missing = str(tmp_path / "no.yaml")
+    assert main(["export", str(result), "--to", "urdf", "--parent", "kit", "--parent-pose", missing]) == 2
+    assert "no.yaml" in capsys.readouterr().err
+    assert main(["export", str(result), "--to", "urdf", "--parent-pose", str(pose)]) == 2  # base_link has no pose
+    assert "--parent sensor_kit_base_link" in capsys.readouterr().err

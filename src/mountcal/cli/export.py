@@ -85,11 +85,12 @@ def run(args: argparse.Namespace) -> int:
     if args.parent or args.child or args.translation or args.parent_pose:
         base = DEFAULT_FRAMES.get(args.to, Frames())
         parent = args.parent or base.parent
+        read = args.parent_pose and args.to in DEFAULT_FRAMES  # export() refuses frames for the other formats
         frames = Frames(
             parent=parent,
             child=args.child or base.child,
             translation_m=tuple(args.translation) if args.translation else base.translation_m,
-            parent_pose=read_parent_pose(args.parent_pose, parent) if args.parent_pose else None,
+            parent_pose=read_parent_pose(args.parent_pose, parent) if read else None,
         )
     out = export(cal, args.to, yaw=args.yaw_undetermined, accept_unconfident=args.accept_unconfident, frames=frames)
     if to_stdout:

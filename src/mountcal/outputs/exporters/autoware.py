@@ -67,6 +67,13 @@ def read_parent_pose(path: str | Path, parent: str) -> ParentPose:
     import yaml  # PyYAML: imported here, so that the rest of mountcal does not load it
 
     where = str(path)
+    if parent == BODY_FRAME:
+        raise InputError(
+            f"{where} for the parent frame {BODY_FRAME}",
+            f"a parent other than {BODY_FRAME} (poses are given in {BODY_FRAME}; it has none of its own)",
+            f"the parent {BODY_FRAME}",
+            f"Name the parent the pose belongs to ({option('parent', 'sensor_kit_base_link')}), or leave the pose out.",
+        )
     try:
         doc: Any = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
     except OSError as exc:
