@@ -642,3 +642,28 @@ def test_cli_parent_pose_and_its_refusals(
     assert "no.yaml" in capsys.readouterr().err
     assert main(["export", str(result), "--to", "urdf", "--parent-pose", str(pose)]) == 2  # base_link has no pose
     assert "--parent sensor_kit_base_link" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("fmt", "name", "ok"),
+    [
+        ("ublox", "mount.ubx", False),  # text where the receiver expects UBX bytes
+        ("ublox-ubx", "mount.txt", False),
+        ("ublox-ubx", "mount.ubx", True),
+        ("json", "rotation.yaml", False),
+        ("yaml", "rotation.yaml", True),
+        ("urdf", "imu.yaml", False),
+        ("novatel", "rbv.txt", True),
+        ("novatel", "rbv", True),  # no suffix: nothing claimed
+    ],
+)
+def test_cli_output_suffix_means_its_format(
+    base: Calibration, tmp_path: Path, capsys: pytest.CaptureFixture[str], fmt: str, name: str, ok: bool
+) -> None:
+    result = tmp_path / "r.json"
+    base.save(result)
+    out = tmp_path / name
+    code = main(["export", str(result), "--to", fmt, "-o", str(out)])
+    assert (code == 0) == ok and out.exists() == ok
+    if not ok:
+        assert "--to" in capsys.readouterr().err

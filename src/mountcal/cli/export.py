@@ -72,7 +72,7 @@ def add_parser(sub: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     from mountcal.atomic import atomic_path
     from mountcal.errors import InputError
-    from mountcal.outputs.exporters import DEFAULT_FRAMES, Frames, export, read_parent_pose
+    from mountcal.outputs.exporters import DEFAULT_FRAMES, Frames, check_suffix, export, read_parent_pose
     from mountcal.paths import check_outputs
     from mountcal.result import Calibration
 
@@ -80,6 +80,8 @@ def run(args: argparse.Namespace) -> int:
     to_stdout = args.output in (None, STDOUT)
     inputs = {"RESULT.json": result, "--parent-pose": args.parent_pose}
     check_outputs({"-o": None if to_stdout else args.output}, inputs)
+    if not to_stdout:
+        check_suffix(args.to, args.output)
     cal = Calibration.load(result)
     frames = None
     if args.parent or args.child or args.translation or args.parent_pose:
