@@ -38,7 +38,7 @@ from mountcal.io.can.bus import BusFrames, recorder
 from mountcal.io.can.read import samples_from_frames
 from mountcal.result import Calibration
 from mountcal.samples import Samples
-from mountcal.stops import StopDetection, detect_stops, tabulate
+from mountcal.stops import StillPeriod, StopDetection, detect_stops, tabulate
 from mountcal.stoptable import StopTable, write_stop_table
 
 CANDIDATES_DEG = tuple(float(b) for b in range(0, 360, 5))
@@ -75,6 +75,7 @@ class Session:
     suggestion_deg: float | None = None
     dropped: dict[str, int] = field(default_factory=dict)
     ignored_frames: int = 0  # error and remote frames (recorded, carry no signal)
+    still_not_kept: tuple[StillPeriod, ...] = ()  # still periods stop detection did not keep (for the report)
 
 
 def next_heading(
@@ -256,7 +257,7 @@ class Live:
             self._waiting(str(err))
             self._suggest(None, None)
             return False
-        self.last.table, self.last.calibration = table, cal
+        self.last.table, self.last.calibration, self.last.still_not_kept = table, cal, found.dropped
         event: dict[str, Any] = {"event": "fit", "stops": len(table), "model": list(cal.model)}
         for a in ("roll", "pitch", "yaw"):
             event[f"{a}_deg"] = getattr(cal, f"{a}_deg")

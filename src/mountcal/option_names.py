@@ -37,6 +37,7 @@ OPTIONS: dict[str, tuple[str, str]] = {
     "slope_reference": ("Options.slope_reference", "--slope-reference"),
     "still_window": ("StopDetection.window_s", "--still-window-s"),
     "stops": ("table", "--stops"),
+    "timeline": ("timeline", "--report"),
     "topic": ("LogOptions.topic", "--topic"),
     "triad": ("Options.triad", "--triad"),
     "trim": ("StopDetection.trim_s", "--trim-s"),

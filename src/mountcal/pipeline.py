@@ -60,7 +60,8 @@ class LogResult:
     """A log's calibration, what it was made from, and what was left out and why.
 
     ``used`` is ``"stops"``, ``"driving"`` or ``"stops + driving"``; ``skipped`` maps a source that
-    was not used to the reason.
+    was not used to the reason. ``stops`` is what stop detection found, also when no fit used it
+    (``table``, the table the result was fitted to, is then None).
     """
 
     calibration: Calibration
@@ -163,7 +164,7 @@ def calibrate_job(job: LogJob) -> LogResult:
         return LogResult(static, samples, "stops", static, None, found, table, skipped)
     assert fit is not None
     cal = _driving_alone(fit, samples, job)
-    return LogResult(cal, increasing_times(samples), "driving", None, fit, None, None, skipped)  # counts merged stamps
+    return LogResult(cal, increasing_times(samples), "driving", None, fit, found, None, skipped)  # counts merged stamps
 
 
 def stops_of_log(job: LogJob) -> tuple[Samples, StopTableFromLog]:

@@ -110,12 +110,22 @@ class Stop:
 
 
 @dataclass(frozen=True)
+class StillPeriod:
+    """A still period that detection did not keep as a stop, and why (times on the log's clock, s)."""
+
+    t_start_s: float
+    t_end_s: float
+    why: str
+
+
+@dataclass(frozen=True)
 class StopSearch:
     """The stops of a log, the thresholds that found them, and what was changed or left out."""
 
     stops: list[Stop]
     thresholds: Thresholds
     counts: dict[str, int] = field(default_factory=dict)
+    dropped: tuple[StillPeriod, ...] = ()
 
     def lines(self) -> list[str]:
         return self.thresholds.lines() + [f"{k}: {v}" for k, v in self.counts.items()]
@@ -269,6 +279,7 @@ def find_stops(
     heading = samples.channels.get("heading_deg")
     lsb = thresholds.acc_lsb_mps2
     stops = []
+    dropped: list[StillPeriod] = []
     split = pieces_dropped = too_few = 0
     for i0, i1 in runs:
         pieces = [(float(t[i0]), float(t[i1 - 1]))]
@@ -278,14 +289,20 @@ def find_stops(
         for p_lo, p_hi in pieces:
             lo, hi = p_lo + cfg.trim_s, p_hi - cfg.trim_s
             if hi - lo < cfg.min_duration_s:
+                why = f"{max(hi - lo, 0.0):.3g} s once trimmed, under {option('min_stop')} {cfg.min_duration_s:g} s"
+                dropped.append(StillPeriod(p_lo, p_hi, why))
                 continue
             sel = slice(int(np.searchsorted(logged.t_s, lo)), int(np.searchsorted(logged.t_s, hi, side="right")))
             if sel.stop - sel.start < MIN_WINDOW_SAMPLES:  # sparse samples: the trimmed span holds too few
                 too_few += 1
+                dropped.append(StillPeriod(p_lo, p_hi, f"fewer than {MIN_WINDOW_SAMPLES} samples once trimmed"))
                 continue
             found.append(_stop_stats(logged, sel, lsb))
         if windows is not None and len(found) > 1:  # one stop per protocol row: its longest steady piece
-            found = [max(found, key=lambda s: s.duration_s)]
+            longest = max(found, key=lambda s: s.duration_s)
+            why = "not the longest steady piece in its protocol row"
+            dropped += [StillPeriod(s.t_start_s, s.t_end_s, why) for s in found if s is not longest]
+            found = [longest]
         stops += found
         if len(pieces) > 1:
             split += 1
@@ -298,7 +315,7 @@ def find_stops(
         counts["pieces of those not kept as a stop (too short, or not the longest in a protocol row)"] = pieces_dropped
     if too_few:
         counts[f"still periods with fewer than {MIN_WINDOW_SAMPLES} samples once trimmed (not kept)"] = too_few
-    return StopSearch(stops, thresholds, counts)
+    return StopSearch(stops, thresholds, counts, tuple(dropped))
 
 
 def _steady_heading(
@@ -471,6 +488,7 @@ class StopTableFromLog:
     heading_source: str
     unmatched_protocol_rows: int = 0
     notes: tuple[str, ...] = ()  # the thresholds used and what detection changed or dropped
+    dropped: tuple[StillPeriod, ...] = ()  # still periods not kept as a stop
 
 
 def read_protocol(path: str) -> pd.DataFrame:
@@ -524,7 +542,11 @@ def tabulate(
             )
         beta = protocol["beta_deg"].to_numpy()[kept]
         return StopTableFromLog(
-            stop_table(stops, beta, "uphill", where), "protocol sheet", len(windows) - len(kept), tuple(search.lines())
+            stop_table(stops, beta, "uphill", where),
+            "protocol sheet",
+            len(windows) - len(kept),
+            tuple(search.lines()),
+            search.dropped,
         )
     search = find_stops(samples, cfg)
     stops = search.stops
@@ -541,13 +563,15 @@ def tabulate(
                 stop_table(stops, beta_from_heading(heading, uphill_azimuth_deg), "uphill", where),
                 f"heading channel with uphill azimuth {uphill_azimuth_deg:g}°",
                 notes=notes,
+                dropped=search.dropped,
             )
         return StopTableFromLog(
             stop_table(stops, beta_from_heading(heading, 0.0), "relative", where),
             "heading channel without the uphill azimuth (relative)",
             notes=notes,
+            dropped=search.dropped,
         )
-    return StopTableFromLog(stop_table(stops, None, "none", where), "none", notes=notes)
+    return StopTableFromLog(stop_table(stops, None, "none", where), "none", notes=notes, dropped=search.dropped)
 
 
 def relax() -> str:

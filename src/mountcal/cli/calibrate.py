@@ -22,6 +22,7 @@ from mountcal.cli.options import (
 from mountcal.terminal import safe
 
 if TYPE_CHECKING:
+    from mountcal.pipeline import LogResult
     from mountcal.stoptable import StopTable
 
 log = logging.getLogger("mountcal")
@@ -68,6 +69,7 @@ def run(args: argparse.Namespace) -> int:
     if args.report is not None:
         require("matplotlib", "report", "calibrate --report")  # before any work: nothing is written without it
     table: StopTable | None
+    done: LogResult | None = None  # the log's result, when the input is a log
     if args.input == [STDOUT] or (len(args.input) == 1 and is_stop_table(args.input[0], bool(args.dbc))):
         table = read_stop_table(args.input[0], unit=args.unit, headings=args.headings)
         with working(args, "fitting"):
@@ -87,10 +89,10 @@ def run(args: argparse.Namespace) -> int:
         cal.save(args.output)
         log.info("wrote %s", safe(args.output))
     if args.report is not None:
-        from mountcal.outputs.report import render  # matplotlib is needed for reports only
+        from mountcal.outputs.report import render, timeline_of  # matplotlib is needed for reports only
 
         with working(args, "writing the report"):
-            html = render(cal.to_dict(), table)
+            html = render(cal.to_dict(), table, timeline=None if done is None else timeline_of(done))
         with atomic_path(args.report) as tmp:
             tmp.write_text(html, encoding="utf-8")
         log.info("wrote %s", safe(args.report))

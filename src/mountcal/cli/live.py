@@ -106,8 +106,13 @@ def run(args: argparse.Namespace) -> int:
         print(summary(session.calibration))
     if args.report and session.table is not None:
         from mountcal.outputs.report import render
+        from mountcal.outputs.report.timeline import timeline
 
+        cal, samples = session.calibration, session.samples
+        drawn = None
+        if samples is not None:  # the session over time, its stops numbered as in its stop table
+            drawn = timeline(samples, session.table, left_out=cal.fit.excluded_stops, dropped=session.still_not_kept)
         with atomic_path(args.report) as tmp:
-            tmp.write_text(render(session.calibration.to_dict(), session.table), encoding="utf-8")
+            tmp.write_text(render(cal.to_dict(), session.table, timeline=drawn), encoding="utf-8")
         log.info("wrote %s", safe(args.report))
     return 130 if session.reason == "interrupted" else 0

@@ -38,7 +38,7 @@ ends; no per-sample Python.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -103,7 +103,8 @@ class DrivingFit:
     over d(speed)/dt (1 for a true speed; the speed regressed on the IMU, so the noise of a
     differentiated speed does not pull it towards 0); ``correlation`` is theirs. ``n_intervals``
     intervals of about ``interval_s`` in ``n_segments`` straight segments, ``usable_s`` seconds of
-    the ``moving_s`` driven at speed, passed the gates.
+    the ``moving_s`` driven at speed, passed the gates; ``segments_s`` holds each segment's start
+    and end on the IMU clock (what the report marks).
     """
 
     rot_vs: Rotation
@@ -134,6 +135,7 @@ class DrivingFit:
     straightness_source: str
     options: DrivingOptions
     notes: tuple[str, ...] = field(default=())
+    segments_s: FloatArray = field(default_factory=lambda: np.empty((0, 2)))
 
     def to_dict(self) -> dict[str, Any]:
         """Plain types, for the result JSON (``fit["driving"]``)."""
@@ -239,16 +241,18 @@ def estimate_driving(
     last = tilt_from is not None and bool(straight)
     layout = layout_intervals(imu, speed, rot_tilt, heading, opts, None)
     offset, offset_sigma, searched = time_offset(layout, opts, notes if last else [])
-    fit = _fit(layout.at(offset), opts, where)
+    used = layout.at(offset)
+    fit = _fit(used, opts, where)
     if not last:
         rot_tilt = rot_tilt if tilt_from is not None else tilt_rotation(fit.up_s(rot_tilt))
         layout = layout_intervals(imu, speed, rot_tilt, heading, opts, None if straight else fit.yaw_rad)
         offset, offset_sigma, searched = time_offset(layout, opts, notes)
-        fit = _fit(layout.at(offset), opts, where)
+        used = layout.at(offset)
+        fit = _fit(used, opts, where)
     if not straight:
         straight = f"lateral acceleration (|a_y| ≤ {opts.max_lateral_mps2:g} m/s² after a first pass)"
     up_driving = fit.up_s(rot_tilt)
-    return _result(
+    result = _result(
         fit,
         rot_tilt,
         up_driving,
@@ -263,6 +267,7 @@ def estimate_driving(
         opts,
         notes,
     )
+    return replace(result, segments_s=used.segment_spans())
 
 
 @dataclass(frozen=True)

@@ -255,6 +255,18 @@ class Intervals:
     segment: IntArray
     t_mid_s: FloatArray
 
+    def segment_spans(self) -> FloatArray:
+        """Start and end of each segment on the IMU clock, shape (segments, 2), s: its intervals are consecutive."""
+        if self.segment.size == 0:
+            return np.empty((0, 2))
+        half = 0.5 * self.width_s
+        n = int(self.segment.max()) + 1
+        start = np.full(n, np.inf)
+        end = np.full(n, -np.inf)
+        np.minimum.at(start, self.segment, self.t_mid_s - half)
+        np.maximum.at(end, self.segment, self.t_mid_s + half)
+        return np.column_stack([start, end])
+
     def centred(self) -> tuple[FloatArray, FloatArray, FloatArray]:
         """``u``, ``a_ref`` and ``a_lat`` less a straight line in time fitted per segment."""
         fit = SegmentLines(self.segment, self.t_mid_s)

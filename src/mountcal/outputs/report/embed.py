@@ -14,6 +14,8 @@ from matplotlib.figure import Figure
 ImageFormat = Literal["svg", "png"]
 
 _ID = re.compile(r'\bid="([^"]+)"')
+_PATH_DATA = re.compile(r'\sd="[^"]*"')
+_DIGITS = re.compile(r"(\.\d\d)\d+")  # coordinates in pixels: a hundredth is finer than any screen
 
 
 def figure_html(fig: Figure, caption: str, image_format: ImageFormat, number: int) -> str:
@@ -50,7 +52,7 @@ def embed_svg(svg: str, prefix: str, label: str) -> str:
     start = svg.find("<svg")
     if start < 0:
         raise ValueError("not an SVG document")
-    body = svg[start:]
+    body = _PATH_DATA.sub(lambda m: _DIGITS.sub(r"\1", m.group(0)), svg[start:])
     ids = set(_ID.findall(body))
     body = _ID.sub(lambda m: f'id="{prefix}{m.group(1)}"', body)
     body = re.sub(

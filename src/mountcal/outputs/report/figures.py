@@ -15,10 +15,12 @@ from typing import Any, Literal, cast
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
+from matplotlib.patches import Patch
 from mpl_toolkits.mplot3d import Axes3D
 
 from mountcal.conventions import G_N, FloatArray, specific_force_v
 from mountcal.outputs.report.document import ANGLES, Estimate, angle_estimates
+from mountcal.outputs.report.timeline import Timeline
 from mountcal.result import Calibration, ModelStep
 from mountcal.stoptable import StopTable
 
@@ -26,6 +28,85 @@ AXIS_COLOURS = ("tab:red", "tab:green", "tab:blue")  # x, y, z, the usual conven
 MM = 1e3  # m/s² → mm/s²
 Frame = Literal["sensor", "vehicle"]
 _NICE = (1, 2, 5)
+
+
+# --- the log over time ----------------------------------------------------------------------------
+
+STOP_STYLES: dict[str, dict[str, Any]] = {  # by StopSpan.status
+    "used": {"facecolor": "tab:green", "alpha": 0.22, "label": "stop used by the fit"},
+    "left out": {"facecolor": "tab:orange", "edgecolor": "tab:red", "alpha": 0.4, "hatch": "xx",
+                 "label": "stop left out by the model choice"},
+    "not used": {"facecolor": "0.6", "edgecolor": "0.3", "alpha": 0.35, "hatch": "..",
+                 "label": "stop found, not used by the result"},
+    "dropped": {"facecolor": "none", "edgecolor": "0.45", "hatch": "////", "label": "still, not kept as a stop"},
+}  # fmt: skip
+DRIVING_COLOUR = "tab:purple"
+
+
+def log_over_time(timeline: Timeline) -> Figure:
+    """The log over time: accelerometer axes (and speed on its own axis) with the stops and drive marked.
+
+    Each signal is drawn as its min/max envelope per pixel column (:mod:`.timeline`), so spikes
+    stay. Stops are shaded by what became of them and numbered as in the stop table; still periods
+    detection did not keep are hatched, unnumbered; a band at the bottom marks the intervals the
+    driving fit used. Every span carries an id (``stop-N``, ``still-K``, ``driving-K``).
+    """
+    tl = timeline
+    fig = Figure(figsize=(9.0, 4.2), layout="constrained")
+    ax = fig.add_subplot()
+    t0 = tl.t_start_s
+    minutes = tl.t_end_s - t0 > 1200.0
+    scale = 60.0 if minutes else 1.0
+
+    def x(t: Any) -> Any:
+        return (np.asarray(t, dtype=float) - t0) / scale
+
+    acc = tl.acc_mps2
+    for k, axis in enumerate("xyz"):
+        ax.fill_between(
+            x(acc.t_s), acc.low[:, k], acc.high[:, k], color=AXIS_COLOURS[k], lw=0.6, label=f"sensor {axis}"
+        )
+    ax.set_ylabel("specific force (m/s², sensor axes)")
+    axes = [ax]
+    if tl.speed_mps is not None:
+        right = ax.twinx()
+        v = tl.speed_mps
+        right.fill_between(x(v.t_s), v.low[:, 0], v.high[:, 0], color="0.15", lw=0.8, label="speed")
+        right.set_ylabel("speed (m/s)")
+        right.set_ylim(bottom=min(0.0, float(np.nanmin(v.low))) if np.isfinite(v.low).any() else 0.0)
+        axes.append(right)
+    last_label = -np.inf
+    for k, stop in enumerate(tl.stops, start=1):
+        style = {key: val for key, val in STOP_STYLES[stop.status].items() if key != "label"}
+        span = ax.axvspan(x(stop.t_start_s), x(stop.t_end_s), zorder=0, lw=0, **style)
+        span.set_gid(f"stop-{stop.number}" if stop.number is not None else f"still-{k}")
+        middle = float(x(0.5 * (stop.t_start_s + stop.t_end_s)))
+        if stop.number is not None and middle - last_label >= 0.018 * float(x(tl.t_end_s)):  # no overlaps
+            ax.text(middle, 1.0, str(stop.number), transform=ax.get_xaxis_transform(), ha="center", va="bottom",
+                    fontsize=7)  # fmt: skip
+            last_label = middle
+    for k, (a, b) in enumerate(tl.driving_s, start=1):
+        band = ax.axvspan(x(a), x(b), ymin=0.0, ymax=0.035, color=DRIVING_COLOUR, lw=0, zorder=3)
+        band.set_gid(f"driving-{k}")
+    handles, labels = [], []
+    for drawn in axes:
+        h, lab = drawn.get_legend_handles_labels()
+        handles += h
+        labels += lab
+    for status in dict.fromkeys(s.status for s in tl.stops):  # the kinds present, in order of appearance
+        style = dict(STOP_STYLES[status])
+        labels.append(style.pop("label"))
+        handles.append(Patch(**style))
+    if tl.driving_s:
+        handles.append(Patch(color=DRIVING_COLOUR))
+        labels.append(f"intervals the driving fit used (calibrated from: {tl.driving_use})")
+    fig.legend(handles, labels, loc="outside lower center", ncols=min(len(labels), 4), fontsize=8)
+    ax.set_xlim(0.0, max(float(x(tl.t_end_s)), 1e-9))
+    ax.set_xlabel(f"time since the log's start ({'min' if minutes else 's'})")
+    ax.grid(alpha=0.3)
+    numbered = " (numbers as in the stop table)" if any(s.number is not None for s in tl.stops) else ""
+    ax.set_title(f"The log over time{numbered}", fontsize=11, loc="left", pad=12)
+    return fig
 
 
 # --- stops on the plane and circle ----------------------------------------------------------------

@@ -27,6 +27,7 @@ from mountcal.option_names import option
 from mountcal.outputs.report.document import ANGLES, angle_estimates, format_pm, step_label
 from mountcal.outputs.report.embed import ImageFormat, figure_html
 from mountcal.outputs.report.loop import steps_section
+from mountcal.outputs.report.timeline import Timeline
 from mountcal.result import FORMAT, FORMAT_VERSION, STRUCTURE_P, Calibration, FitQuality, ModelStep
 from mountcal.stoptable import StopTable
 from mountcal.typed_json import to_plain
@@ -54,6 +55,7 @@ def render(
     *,
     title: str | None = None,
     image_format: ImageFormat = "svg",
+    timeline: Timeline | None = None,
 ) -> str:
     """The HTML report of a calibration, as one self-contained document.
 
@@ -69,6 +71,10 @@ def render(
     title : str, optional
     image_format : {"svg", "png"}
         Inline SVG (default) or base64-encoded PNG.
+    timeline : Timeline, optional
+        The log over time (:func:`mountcal.outputs.report.timeline_of` of ``calibrate_log``'s
+        result): drawn first among the figures, with the stops and driving intervals marked.
+        Without it the report says in one line that it was made without the log's samples.
 
     Returns
     -------
@@ -99,7 +105,7 @@ def render(
         _fit_section(cal),
         _gravity_section(cal),
         steps_section(cal),
-        _figures_section(cal, table, image_format),
+        _figures_section(cal, table, image_format, timeline),
         _model_section(cal),
         _observability_section(cal),
         _provenance_section(cal),
@@ -343,9 +349,15 @@ def _observability_section(cal: Calibration) -> str:
     return "<h2>Observability</h2>\n" + "\n".join(lines)
 
 
-def _figures_section(cal: Calibration, table: StopTable | None, image_format: ImageFormat) -> str:
+def _figures_section(
+    cal: Calibration, table: StopTable | None, image_format: ImageFormat, timeline: Timeline | None
+) -> str:
     out = ["<h2>Figures</h2>"]
     shown: list[tuple[Figure, str]] = []
+    if timeline is not None:
+        shown.append((figures.log_over_time(timeline), _timeline_caption(timeline)))
+    else:
+        out.append(_no_timeline())
     if table is not None:
         shown.append(
             (
@@ -392,6 +404,37 @@ def _figures_section(cal: Calibration, table: StopTable | None, image_format: Im
         )
     out += [figure_html(fig, caption, image_format, k) for k, (fig, caption) in enumerate(shown, start=1)]
     return "\n".join(out)
+
+
+def _timeline_caption(tl: Timeline) -> str:
+    drawn = (
+        f"min and max per pixel column of its {tl.samples} samples"
+        if tl.acc_mps2.decimated
+        else f"all {tl.samples} samples"
+    )
+    parts = [f"The log over time: the accelerometer's sensor axes ({drawn})"]
+    if tl.speed_mps is not None:
+        offset = tl.speed_offset_s
+        moved = f"; the driving fit puts its clock at {offset:+.3g} s" if offset else ""
+        parts.append(f"the speed on the right-hand axis, as logged{moved}")
+    if tl.stops:
+        parts.append(
+            "shaded: the stops, numbered as in the stop table, by what the fit did with them; hatched without a "
+            "number: still periods detection did not keep as a stop (too short once trimmed, too few samples, or "
+            "not the longest piece in a protocol row)"
+        )
+    if tl.driving_s:
+        parts.append(f"bottom band: the intervals the driving fit used (calibrated from: {tl.driving_use})")
+    return "; ".join(parts) + "."
+
+
+def _no_timeline() -> str:
+    how = option("timeline")
+    how = f"mountcal calibrate LOG … {how}" if how.startswith("--") else f"{how}timeline_of(calibrate_log(LOG))"
+    return (
+        '<p class="info">The log over time (stops and driving intervals marked) is not drawn: this report was made '
+        f"without the log's samples. Make it from the log (<code>{escape(how)}</code>).</p>"
+    )
 
 
 def _notes_section(cal: Calibration, table: StopTable | None) -> str:
