@@ -378,3 +378,25 @@ def test_report_renders_in_headless_chromium(
     grey = image[..., :3].mean(axis=2)
     assert np.unique(np.round(grey * 255)).size > 50, "a screenshot of a real page has many grey levels"
     assert (grey < 0.5).mean() > 0.005, "text and lines are drawn"
+
+
+def test_a_report_of_a_log_renders_in_headless_chromium_with_its_stops_over_time(tmp_path: Path) -> None:
+    from mountcal.io.logs import LogOptions
+    from mountcal.outputs.report import timeline_of
+    from mountcal.pipeline import calibrate_log
+
+    data = Path(__file__).resolve().parents[1] / "data"
+    done = calibrate_log(
+        data / "parking.blf", log=LogOptions(dbc=str(data / "imu_mm5_10.dbc")), protocol=data / "parking_protocol.csv"
+    )
+    assert done.table is not None
+    page = tmp_path / "log.html"
+    html = render(done.calibration, done.table, timeline=timeline_of(done))
+    page.write_text(html, encoding="utf-8")
+    dom = _browse(page, tmp_path / "profile-log", "--dump-dom")
+    assert dom.returncode == 0, dom.stderr[-2000:]
+    assert dom.stdout.count("<svg") == _figure_count(html) >= 5
+    stops = sorted(int(n) for n in re.findall(r'\bid="fig1-stop-(\d+)"', dom.stdout))  # the first figure
+    assert stops == list(range(1, len(done.table) + 1))
+    console = [line for line in dom.stderr.splitlines() if "CONSOLE" in line or "Uncaught" in line]
+    assert console == []
