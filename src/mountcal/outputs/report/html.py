@@ -415,7 +415,7 @@ def _timeline_caption(tl: Timeline) -> str:
     parts = [f"The log over time: the accelerometer's sensor axes ({drawn})"]
     if tl.speed_mps is not None:
         offset = tl.speed_offset_s
-        moved = f"; the driving fit puts its clock at {offset:+.3g} s" if offset else ""
+        moved = f" (the driving fit adds {offset:+.3g} s to its times to put them on the IMU's clock)" if offset else ""
         parts.append(f"the speed on the right-hand axis, as logged{moved}")
     if tl.stops:
         parts.append(
