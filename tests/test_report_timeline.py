@@ -26,6 +26,7 @@ from mountcal.pipeline import LogResult, calibrate_log
 from mountcal.samples import Channel, Samples
 from mountcal.simulate.drive import simulate_drive
 from mountcal.stops import StopDetection, find_stops
+from mountcal.stoptable import StopTable
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 DBC = str(DATA / "imu_mm5_10.dbc")
@@ -253,3 +254,14 @@ def test_a_timeline_is_a_frozen_value() -> None:
     assert isinstance(tl, Timeline) and tl.stops == () and tl.driving_s == () and tl.speed_mps is None
     with pytest.raises(AttributeError):
         tl.source = "y"  # type: ignore[misc]
+
+
+def test_numbers_too_close_to_read_are_left_out_and_counted() -> None:
+    t = np.arange(0.0, 3600.0, 0.1)
+    samples = Samples(t, np.zeros((t.size, 3)), None, {}, source="dense")
+    starts = np.array([100.0, 110.0, 120.0, 2000.0])  # three within 1 % of an hour of each other
+    table = StopTable(acc_s=np.zeros((4, 3)), t_s=starts, duration_s=np.full(4, 8.0))
+    fig = figures.log_over_time(timeline(samples, table))
+    assert len(_spans(fig, "stop")) == 4
+    assert sorted(t.get_text() for t in fig.axes[0].texts) == ["1", "4"]
+    assert "2 too close to the one before left unnumbered" in fig.axes[0].get_title(loc="left")

@@ -75,16 +75,20 @@ def log_over_time(timeline: Timeline) -> Figure:
         right.set_ylabel("speed (m/s)")
         right.set_ylim(bottom=min(0.0, float(np.nanmin(v.low))) if np.isfinite(v.low).any() else 0.0)
         axes.append(right)
-    last_label = -np.inf
+    last_label, unlabelled = -np.inf, 0
     for k, stop in enumerate(tl.stops, start=1):
         style = {key: val for key, val in STOP_STYLES[stop.status].items() if key != "label"}
         span = ax.axvspan(x(stop.t_start_s), x(stop.t_end_s), zorder=0, lw=0, **style)
         span.set_gid(f"stop-{stop.number}" if stop.number is not None else f"still-{k}")
         middle = float(x(0.5 * (stop.t_start_s + stop.t_end_s)))
-        if stop.number is not None and middle - last_label >= 0.018 * float(x(tl.t_end_s)):  # no overlaps
+        if stop.number is None:
+            continue
+        if middle - last_label >= 0.018 * float(x(tl.t_end_s)):  # numbers that would overlap are left out
             ax.text(middle, 1.0, str(stop.number), transform=ax.get_xaxis_transform(), ha="center", va="bottom",
                     fontsize=7)  # fmt: skip
             last_label = middle
+        else:
+            unlabelled += 1
     for k, (a, b) in enumerate(tl.driving_s, start=1):
         band = ax.axvspan(x(a), x(b), ymin=0.0, ymax=0.035, color=DRIVING_COLOUR, lw=0, zorder=3)
         band.set_gid(f"driving-{k}")
@@ -105,6 +109,8 @@ def log_over_time(timeline: Timeline) -> Figure:
     ax.set_xlabel(f"time since the log's start ({'min' if minutes else 's'})")
     ax.grid(alpha=0.3)
     numbered = " (numbers as in the stop table)" if any(s.number is not None for s in tl.stops) else ""
+    if unlabelled:
+        numbered = f" (numbers as in the stop table; {unlabelled} too close to the one before left unnumbered)"
     ax.set_title(f"The log over time{numbered}", fontsize=11, loc="left", pad=12)
     return fig
 
