@@ -174,7 +174,7 @@ def align(at: Offset, size: int) -> Offset:
     return (at + (size - 1)) // size * size
 
 
-def _cdr_rows(buf: U8Array, start: I64Array, size: I64Array) -> Rows:
+def cdr_rows(buf: U8Array, start: I64Array, size: I64Array) -> Rows:
     """Rows positioned after the encapsulation header, refusing anything but little-endian CDR."""
     short = np.flatnonzero(size < HEADER_BYTES)
     if short.size:
@@ -214,7 +214,7 @@ IMU_BYTES = 296  # the quaternion and everything after it
 def imu_rows(buf: U8Array, start: I64Array, size: I64Array) -> tuple[Rows, I64Array, I64Array, Offset]:
     """Imu messages as rows checked to hold every field: rows, ``header.stamp`` (sec, nanosec) and the
     offset of the quaternion (the first field after the header, 8-aligned)."""
-    rows = _cdr_rows(buf, start, size)
+    rows = cdr_rows(buf, start, size)
     sec, nanosec, end = _header(rows)
     orientation = align(end, 8)  # quaternion (32 B), then a 3x3 covariance (72 B)
     rows.need(orientation + IMU_BYTES, "the Imu fields after header")
@@ -243,7 +243,7 @@ def decode_imu(buf: U8Array, start: I64Array, size: I64Array) -> Decoded:
 
 def decode_temperature(buf: U8Array, start: I64Array, size: I64Array) -> Decoded:
     """``sensor_msgs/msg/Temperature``: column ``temperature`` (n,) in °C."""
-    rows = _cdr_rows(buf, start, size)
+    rows = cdr_rows(buf, start, size)
     sec, nanosec, end = _header(rows)
     temperature = rows.take(align(end, 8), "<f8", 1, "temperature")[:, 0]
     return Decoded(sec, nanosec, {"temperature": temperature})
@@ -255,7 +255,7 @@ def decode_navsatfix(buf: U8Array, start: I64Array, size: I64Array) -> Decoded:
     Columns ``status`` (n,) (``status.status``: −1 no fix, ≥ 0 a fix), ``lat`` and ``lon`` (n,) in
     degrees and ``alt`` (n,) in metres above the WGS 84 ellipsoid.
     """
-    rows = _cdr_rows(buf, start, size)
+    rows = cdr_rows(buf, start, size)
     sec, nanosec, end = _header(rows)
     status = rows.take(end, "i1", 1, "status.status")[:, 0].astype(np.float64)
     latitude = align(align(end + 1, 2) + 2, 8)  # after int8 status and uint16 service
@@ -269,7 +269,7 @@ def decode_odometry(buf: U8Array, start: I64Array, size: I64Array) -> Decoded:
     Columns ``vx`` (n,) = ``twist.twist.linear.x`` in m/s (child frame, signed: negative when
     reversing) and ``quat`` (n, 4) = ``pose.pose.orientation`` as (x, y, z, w), in the header's frame.
     """
-    rows = _cdr_rows(buf, start, size)
+    rows = cdr_rows(buf, start, size)
     sec, nanosec, end = _header(rows)
     position = align(rows.string_end(end, "child_frame_id"), 8)
     # pose: position (24 B) + orientation (32 B) + 6x6 covariance (288 B), then twist.linear
