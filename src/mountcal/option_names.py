@@ -17,6 +17,7 @@ from contextvars import ContextVar
 OPTIONS: dict[str, tuple[str, str]] = {
     "accept_unconfident": ("accept_unconfident", "--accept-unconfident"),
     "dbc": ("LogOptions.dbc", "--dbc"),
+    "field": ("LogOptions.field", "--field"),
     "figures": ("image_format", "--figures"),
     "format": ("fmt", "--format"),
     "level_only": ("level_only", "--level-only"),

@@ -249,6 +249,7 @@ def describe(result: LogResult | tuple[Samples, StopTableFromLog], n_files: int)
     found = result[1] if isinstance(result, tuple) else result.stops
     dropped = ", ".join(f"{k}: {v}" for k, v in samples.dropped.items())
     lines = [f"read {len(samples)} samples from {n_files} file(s)" + (f"; dropped {dropped}" if dropped else "")]
+    lines += samples.notes
     if found is not None:
         unmatched = found.unmatched_protocol_rows
         lines.append(

@@ -44,6 +44,8 @@ class Samples:
         How the device's axes were mapped to the right-handed sensor frame (``"x,y,z"`` when as-is).
     dropped : dict of str to int
         Frames or messages the reader discarded, counted by reason.
+    notes : tuple of str
+        What the reader inferred or chose and says (a detected export, the topic a speed came from).
     """
 
     t_s: FloatArray
@@ -53,6 +55,7 @@ class Samples:
     source: str = ""
     axis_map: str = "x,y,z"
     dropped: dict[str, int] = field(default_factory=dict)
+    notes: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         n = self.t_s.shape[0]
@@ -112,6 +115,7 @@ def slices(samples: Samples, max_samples: int) -> Iterator[Samples]:
             gyro_s=None if samples.gyro_s is None else samples.gyro_s[start:stop],
             channels=channels,
             dropped=samples.dropped if k == 0 else {},
+            notes=samples.notes if k == 0 else (),
         )
 
 

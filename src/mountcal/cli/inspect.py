@@ -20,7 +20,7 @@ def add_parser(sub: Any) -> None:
         many=False,
     )
     p.add_argument("--dbc", action="append", default=None, help="DBC naming the CAN messages (repeat for several)")
-    p.set_defaults(run=run, mapping=None, channel=None, topic=None)
+    p.set_defaults(run=run, mapping=None, channel=None, topic=None, field=None)
 
 
 def run(args: argparse.Namespace) -> int:

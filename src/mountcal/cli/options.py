@@ -111,7 +111,12 @@ def add_log_options(
         g.add_argument("--dbc", default=None, help="DBC to decode CAN logs")
     g.add_argument("--mapping", default=None, help="TOML naming the accelerometer signals (CAN)")
     g.add_argument("--channel", type=int, default=None, help="CAN channel of the IMU")
-    g.add_argument("--topic", default=None, help="IMU topic (MCAP)")
+    g.add_argument("--topic", default=None, help="IMU topic (MCAP, ROS bags)")
+    g.add_argument(
+        "--field",
+        default=None,
+        help="the Imu or Vector3 inside the topic's message, e.g. imu or imu.linear_acceleration (MCAP, ROS bags)",
+    )
     if not stops:
         return
     if protocol:
@@ -183,7 +188,7 @@ def log_options(args: argparse.Namespace) -> LogOptions:
     dbc = args.dbc
     if isinstance(dbc, list):  # --dbc given once (a path) or repeated (their messages together)
         dbc = None if not dbc else dbc[0] if len(dbc) == 1 else tuple(dbc)
-    return LogOptions(dbc=dbc, mapping=args.mapping, channel=args.channel, topic=args.topic)
+    return LogOptions(dbc=dbc, mapping=args.mapping, channel=args.channel, topic=args.topic, field=args.field)
 
 
 def detection(args: argparse.Namespace) -> StopDetection:

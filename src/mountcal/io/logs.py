@@ -31,12 +31,13 @@ CHUNK_SAMPLES = 100_000  # samples per chunk of iter_log: its memory bound
 
 @dataclass(frozen=True)
 class LogOptions:
-    """How to read a log: the DBC and mapping for CAN, the topic for MCAP."""
+    """How to read a log: the DBC and mapping for CAN, the topic (and field) for MCAP and ROS bags."""
 
     dbc: str | tuple[str, ...] | None = None  # several DBCs: their messages together (no clash allowed)
     mapping: str | None = None
     channel: int | None = None
     topic: str | None = None
+    field: str | None = None  # the Imu or Vector3 inside the topic's message ("imu", "imu.linear_acceleration")
 
 
 def read_log(paths: str | Path | Sequence[str | Path], options: LogOptions | None = None) -> Samples:
@@ -130,6 +131,7 @@ def join(parts: Sequence[Samples]) -> Samples:
         source=" + ".join(p.source for p in parts),
         axis_map=parts[0].axis_map,
         dropped=dict(dropped),
+        notes=tuple(dict.fromkeys(n for p in parts for n in p.notes)),
     )
 
 

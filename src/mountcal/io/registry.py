@@ -3,6 +3,7 @@
 Built-in readers (in this order; the first that claims a path reads it):
 
 - ``mcap``: ``.mcap``, ROS 2 Imu in CDR or JSON (:mod:`mountcal.io.mcap`);
+- ``bag``: ``.bag`` (ROS 1), a ROS 2 bag folder (``metadata.yaml``) or ``.db3`` (:mod:`mountcal.io.bag`);
 - ``can``: ``.blf .asc .log .trc .mf4 .mdf``, and ``.csv`` when a DBC is given (:mod:`mountcal.io.can`);
 - ``table``: ``.csv .parquet .pq`` sample tables (:mod:`mountcal.io.table`);
 - ``comma2k19``: a comma2k19 segment folder (:mod:`mountcal.io.comma2k19`).
@@ -37,6 +38,7 @@ if TYPE_CHECKING:
 GROUP = "mountcal.readers"
 BUILTIN = (
     "mountcal.io.mcap.reader:McapReader",
+    "mountcal.io.bag.reader:BagReader",
     "mountcal.io.can.reader:CanReader",
     "mountcal.io.table.reader:TableReader",
     "mountcal.io.comma2k19:Comma2k19Reader",

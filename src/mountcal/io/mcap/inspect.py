@@ -112,3 +112,20 @@ def _spans_from_scan(log: Log) -> _Spans:
             for channel_id in np.unique(channel).tolist():
                 _merge(spans, channel_id, log_ns[channel == channel_id])
     return spans
+
+
+def topic_spans(path: str | os.PathLike[str]) -> dict[str, tuple[int, int, int]]:
+    """Per topic of an MCAP log: message count, first and last log time (ns), as :func:`inspect_mcap` finds them."""
+    log = open_log(path)
+    try:
+        spans = _spans_from_indexes(log) or _spans_from_scan(log)
+    except Corrupt as err:
+        raise damaged(log.where, str(err)) from err
+    finally:
+        log.file.close()
+    out = {}
+    for topic, channels in log.topics().items():
+        seen = [spans[ch.id] for ch in channels if ch.id in spans]
+        if seen:
+            out[topic] = (sum(s[0] for s in seen), min(s[1] for s in seen), max(s[2] for s in seen))
+    return out
