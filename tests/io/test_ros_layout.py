@@ -83,10 +83,11 @@ def _rows(payloads: list[bytes], cdr: bool) -> Rows:
 
 def _batch(ros1: bool, notes: list[str], n_samples: list[int], n_path: int, names: list[str]) -> tuple[list[Any], Rows]:
     store = _store(ros1)
-    msgs = [_message(store, i, note, k, n_path, names, ros1) for i, (note, k) in enumerate(zip(notes, n_samples, strict=True))]
-    payloads = [
-        bytes(store.serialize_ros1(m, WRAPPED) if ros1 else store.serialize_cdr(m, WRAPPED)) for m in msgs
+    msgs = [
+        _message(store, i, note, k, n_path, names, ros1)
+        for i, (note, k) in enumerate(zip(notes, n_samples, strict=True))
     ]
+    payloads = [bytes(store.serialize_ros1(m, WRAPPED) if ros1 else store.serialize_cdr(m, WRAPPED)) for m in msgs]
     return msgs, _rows(payloads, not ros1)
 
 
@@ -115,7 +116,9 @@ def test_a_wrapped_imu_reads_back_exactly(
     want_gyro = [[m.imu.angular_velocity.x, m.imu.angular_velocity.y, m.imu.angular_velocity.z] for m in msgs]
     np.testing.assert_array_equal(got.columns["acc"], want_acc)
     np.testing.assert_array_equal(got.columns["gyro"], want_gyro)
-    np.testing.assert_array_equal(got.columns["gyro_unknown"], [m.imu.angular_velocity_covariance[0] == -1 for m in msgs])
+    np.testing.assert_array_equal(
+        got.columns["gyro_unknown"], [m.imu.angular_velocity_covariance[0] == -1 for m in msgs]
+    )
     np.testing.assert_array_equal(got.sec, [m.imu.header.stamp.sec for m in msgs])
     np.testing.assert_array_equal(got.nanosec, [m.imu.header.stamp.nanosec for m in msgs])
     vector = target(types, WRAPPED, "extra")

@@ -160,7 +160,9 @@ def read_ros1(path: str | Path, *, topic: str | None = None, field: str | None =
     """The samples of a ROS 1 bag (see the module doc)."""
     bag = ros1.open_bag(path)
     try:
-        return samples_of(bag.where, ros1_topics(bag), lambda sels: _ros1_batches(bag, sels), cdr=False, topic=topic, field=field)
+        return samples_of(
+            bag.where, ros1_topics(bag), lambda sels: _ros1_batches(bag, sels), cdr=False, topic=topic, field=field
+        )
     except ros1.Corrupt as err:
         raise ros1.damaged(bag.where, str(err)) from err
     finally:
@@ -222,7 +224,9 @@ def sqlite_batches(
                     yield Batch(sel, batch_rows, record, f"rows {n}–{n + size.size - 1} of {file.name}")
                     n += size.size
         except sqlite3.DatabaseError as err:
-            raise InputError(str(file), "a readable ROS 2 SQLite bag file", f"{type(err).__name__}: {err}", "Check the file.") from err
+            raise InputError(
+                str(file), "a readable ROS 2 SQLite bag file", f"{type(err).__name__}: {err}", "Check the file."
+            ) from err
         finally:
             db.close()
 
@@ -262,7 +266,9 @@ def read_mcap_topics(path: str | Path, *, topic: str | None, field: str | None) 
 
     log = open_log(path)
     try:
-        return samples_of(log.where, mcap_topics(log), lambda sels: mcap_batches(log, sels), cdr=True, topic=topic, field=field)
+        return samples_of(
+            log.where, mcap_topics(log), lambda sels: mcap_batches(log, sels), cdr=True, topic=topic, field=field
+        )
     except Corrupt as err:
         raise damaged(log.where, str(err)) from err
     finally:
@@ -292,7 +298,12 @@ def mcap_batches(
                 try:
                     rows = cdr_rows(unit.data, at + RECORD_HEAD.size + MESSAGE_HEAD, size)
                 except CdrError as err:
-                    raise InputError(log.where, f"CDR messages on {sel.topic.name!r}", f"{err}, in the {unit.what}", "Check the file.") from err
+                    raise InputError(
+                        log.where,
+                        f"CDR messages on {sel.topic.name!r}",
+                        f"{err}, in the {unit.what}",
+                        "Check the file.",
+                    ) from err
                 yield Batch(sel, rows, record, unit.what)
             del unit
 

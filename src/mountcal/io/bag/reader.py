@@ -23,7 +23,9 @@ class BagReader(LogReader):
             return True
         from mountcal.io.bag.ros2 import bag_folder
 
-        return bag_folder(path) is not None
+        if bag_folder(path) is not None:
+            return True
+        return path.is_dir() and any(path.glob("*.db3"))  # a bag folder that lost its metadata: refused, with the fix
 
     def read(self, path: Path, options: LogOptions) -> Samples:
         if path.suffix.lower() == ".bag":

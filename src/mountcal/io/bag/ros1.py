@@ -244,7 +244,9 @@ def _connection(fields: dict[str, bytes], data: bytes, pos: int) -> Connection:
         return (raw or b"").decode("utf-8", "replace")
 
     topic = text(fields.get("topic") or inner.get("topic"))
-    return Connection(conn, topic, normalize(text(inner["type"])), text(inner.get("message_definition")), text(inner.get("md5sum")))
+    return Connection(
+        conn, topic, normalize(text(inner["type"])), text(inner.get("message_definition")), text(inner.get("md5sum"))
+    )
 
 
 def _chunk_info(fields: dict[str, bytes], data: bytes, pos: int) -> ChunkInfo:
@@ -288,7 +290,9 @@ def _decompress(raw: bytes, compression: str, size: int, what: str) -> U8Array:
     return out
 
 
-def _index(reader: _Reader, pos: int, entries: int, wanted: frozenset[int] | None, what: str) -> tuple[dict[int, NDArray[np.void]], int]:
+def _index(
+    reader: _Reader, pos: int, entries: int, wanted: frozenset[int] | None, what: str
+) -> tuple[dict[int, NDArray[np.void]], int]:
     """The ``entries`` index records from ``pos``: per connection, its (sec, nsec, offset) rows."""
     out: dict[int, NDArray[np.void]] = {}
     for _ in range(entries):
@@ -360,6 +364,8 @@ def _messages(data: U8Array, index: NDArray[np.void], conn: int, what: str) -> t
         raise Corrupt(f"an index entry pointing past the end of {what}")
     rows = Rows(data, at)
     header_len = rows.read(0, "<u4")[:, 0].astype(np.int64)
+    if int((at + header_len).max()) + 8 > n:
+        raise Corrupt(f"a record header running past the end of {what}")
     template = _template(data, int(at[0]), int(header_len[0]), what)
     same = header_len == header_len[0]
     if same.all() and template is not None:
@@ -415,7 +421,7 @@ def _template(data: U8Array, at: int, header_len: int, what: str) -> _Template |
 
 def _slow_record(data: U8Array, at: int, conn: int, what: str) -> tuple[int, int]:
     """(data-length offset, header length) of the message record at ``at``; connection records before it skipped."""
-    raw = memoryview(data)
+    raw = memoryview(data.data)
     for _ in range(64):
         if at + 4 > data.size:
             break

@@ -61,7 +61,9 @@ def open_bag(path: Path) -> Iterator[Opened]:
         reader = Reader(target)
         reader.open()
     except FileNotFoundError as err:
-        raise InputError(where, "a ROS 2 bag folder with its metadata.yaml and storage files", str(err), _REINDEX) from err
+        raise InputError(
+            where, "a ROS 2 bag folder with its metadata.yaml and storage files", str(err), _REINDEX
+        ) from err
     except (ReaderError, KeyError, ValueError, TypeError) as err:
         raise InputError(where, "a ROS 2 bag that rosbags can read", f"{type(err).__name__}: {err}", _REINDEX) from err
     try:
@@ -87,7 +89,12 @@ def _opened(reader: Any, where: str, lone: bool) -> Opened:
     files = tuple(Path(s.path) for s in storages)
     kinds = {STORAGES.get(f.suffix.lower(), f.suffix) for f in files}
     if len(kinds) != 1 or next(iter(kinds)) not in STORAGES.values():
-        raise InputError(where, "a ROS 2 bag stored in SQLite (.db3) or MCAP", f"storage files {[f.name for f in files]}", "Convert it with `ros2 bag convert`.")
+        raise InputError(
+            where,
+            "a ROS 2 bag stored in SQLite (.db3) or MCAP",
+            f"storage files {[f.name for f in files]}",
+            "Convert it with `ros2 bag convert`.",
+        )
     topics: dict[str, Topic] = {}
     counts: dict[str, int] = {}
     for conn in reader.connections:

@@ -18,8 +18,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from mountcal.errors import InputError
-from mountcal.io.ros.kinds import FIELD_TYPES, TYPES, Target, target
-from mountcal.io.ros.types import DefinitionError, Types, carriers
+from mountcal.io.ros.kinds import TYPES, Target, target
+from mountcal.io.ros.types import IMU, VECTOR3, VECTOR3_STAMPED, DefinitionError, Types, carriers
 from mountcal.option_names import option
 
 AUX = ("temperature", "fix", "odom", "velocity")
@@ -64,17 +64,32 @@ def listing(topics: dict[str, Topic]) -> str:
 
 
 def _carried(topics: dict[str, Topic]) -> list[tuple[Topic, str]]:
-    """Topics carrying an Imu or a Vector3 in a field: (topic, dotted field path)."""
+    """Fields carrying an Imu, or a Vector3 named as an acceleration: (topic, dotted field path)."""
     out = []
     for t in topics.values():
-        if t.types is None or t.type_name in TYPES:
-            continue
-        out += [(t, ".".join(p)) for p in carriers(t.types, t.type_name, FIELD_TYPES)]
+        if t.types is not None and t.type_name not in TYPES:
+            out += [(t, ".".join(p)) for p in _candidates(t.types, t.type_name)]
     return out
+
+
+def _candidates(types: Types, type_name: str) -> list[tuple[str, ...]]:
+    imus = carriers(types, type_name, (IMU,))
+    vectors = [
+        p
+        for p in carriers(types, type_name, (VECTOR3, VECTOR3_STAMPED))
+        if "acc" in ".".join(p).lower() and not any(p[: len(i)] == i for i in imus)  # not inside an Imu listed
+    ]
+    return imus + vectors
 
 
 def _read_with(carried: list[tuple[Topic, str]]) -> str:
     return "; ".join(f"{option('topic', t.name)} {option('field', f)}" for t, f in carried[:4])
+
+
+def carried_hint(topics: dict[str, Topic]) -> str:
+    """ " Read the Imu … a message carries: --topic … --field …" when some topic carries one, else ""."""
+    carried = _carried(topics)
+    return f" Read the Imu or Vector3 a message carries: {_read_with(carried)}." if carried else ""
 
 
 def choose_imu(topics: dict[str, Topic], where: str, name: str | None, field: str | None) -> Selection:
@@ -82,7 +97,10 @@ def choose_imu(topics: dict[str, Topic], where: str, name: str | None, field: st
     if name is not None:
         if name not in topics:
             raise InputError(
-                where, f"a topic named {name!r}", f"topics {listing(topics)}", f"Pass one of them with {option('topic')}."
+                where,
+                f"a topic named {name!r}",
+                f"topics {listing(topics)}",
+                f"Pass one of them with {option('topic')}.",
             )
         return _imu_of(topics[name], where, field, topics)
     if field is not None:
@@ -91,7 +109,9 @@ def choose_imu(topics: dict[str, Topic], where: str, name: str | None, field: st
             raise InputError(
                 where,
                 f"exactly one topic whose field {field!r} is an Imu or a Vector3",
-                f"{len(fitting)}: " + ", ".join(repr(t.name) for t in fitting) if fitting else f"none; {listing(topics)}",
+                f"{len(fitting)}: " + ", ".join(repr(t.name) for t in fitting)
+                if fitting
+                else f"none; {listing(topics)}",
                 f"Name the topic with {option('topic')}.",
             )
         return _imu_of(fitting[0], where, field, topics)
@@ -120,28 +140,32 @@ def _imu_of(topic: Topic, where: str, field: str | None, topics: dict[str, Topic
         raise InputError(where, f"a readable definition of {topic.type_name}", str(err), "Read another topic.") from err
     if t is not None and t.kind in ("imu", "acc"):
         return Selection(topic, t)
-    carried = [(topic, ".".join(p)) for p in carriers(types, topic.type_name, FIELD_TYPES)]
+    carried = [(topic, ".".join(p)) for p in _candidates(types, topic.type_name)]
     if field is None:
         expected = f"topic {topic.name!r} of type sensor_msgs/msg/Imu"
         found = f"type {topic.type_name}"
     else:
-        expected = f"a field {field!r} of topic {topic.name!r} holding a sensor_msgs/msg/Imu or geometry_msgs/msg/Vector3"
+        expected = (
+            f"a field {field!r} of topic {topic.name!r} holding a sensor_msgs/msg/Imu or geometry_msgs/msg/Vector3"
+        )
         found = f"no such Imu or Vector3 field in {topic.type_name}"
     if carried:
         todo = f"Read what it carries: {_read_with(carried)}."
     else:
         imus = [t.name for t in topics.values() if t.type_name == "sensor_msgs/msg/Imu"]
-        todo = f"Pass an Imu topic with {option('topic')}" + (f": {', '.join(map(repr, imus))}." if imus else "; the recording has none.")
+        todo = f"Pass an Imu topic with {option('topic')}" + (
+            f": {', '.join(map(repr, imus))}." if imus else "; the recording has none."
+        )
     raise InputError(where, expected, found, todo)
 
 
 def choose_aux(topics: dict[str, Topic], where: str, notes: list[str]) -> list[Selection]:
     """The temperature, fix, odometry and velocity selections (each optional; see the module doc)."""
     by_kind: dict[str, list[Topic]] = {k: [] for k in AUX}
-    for t in topics.values():
-        kind = TYPES.get(t.type_name)
+    for topic in topics.values():
+        kind = TYPES.get(topic.type_name)
         if kind in by_kind:
-            by_kind[kind].append(t)
+            by_kind[kind].append(topic)
     velocity = [t for t in by_kind["velocity"] if "cmd" not in t.name.lower()]
     by_kind["velocity"] = velocity if by_kind["fix"] and not by_kind["odom"] else []
     out = []
@@ -153,15 +177,15 @@ def choose_aux(topics: dict[str, Topic], where: str, notes: list[str]) -> list[S
             continue
         topic = found[0]
         try:
-            t = target(topic.definitions(where), topic.type_name)
+            chosen = target(topic.definitions(where), topic.type_name)
         except (InputError, DefinitionError) as err:
             notes.append(f"{kind} topic {topic.name} not read: {err}")
             continue
-        if t is not None:
-            out.append(Selection(topic, t))
+        if chosen is not None:
+            out.append(Selection(topic, chosen))
             if kind == "velocity":
                 notes.append(f"speed from the GNSS velocity {topic.name} (horizontal magnitude, never negative)")
     return out
 
 
-__all__ = ["AUX", "Selection", "Topic", "choose_aux", "choose_imu", "listing"]
+__all__ = ["AUX", "Selection", "Topic", "carried_hint", "choose_aux", "choose_imu", "listing"]

@@ -104,7 +104,8 @@ def _select(log: Log, kind: str, topic: str | None) -> _Selection | None:
                 f"topic {topic!r} of type {TYPE_NAME[kind]}",
                 f"type {log.type_name(chosen[0])}",
                 f"Pass a {TYPE_NAME[kind]} topic as {argument}= (CLI: {flag})"
-                + (f": {names}." if candidates else "; the log has none."),
+                + (f": {names}." if candidates else "; the log has none.")
+                + _field_hint(log, kind),
             )
     else:
         if len(candidates) != 1:
@@ -114,11 +115,22 @@ def _select(log: Log, kind: str, topic: str | None) -> _Selection | None:
                 log.where,
                 f"exactly one {TYPE_NAME[kind]} topic",
                 f"{len(candidates)}: {names}" if candidates else f"none; the topics are {log.listing()}",
-                f"Name the topic to read with {argument}= (CLI: {flag}).",
+                f"Name the topic to read with {argument}= (CLI: {flag})."
+                + ("" if candidates else _field_hint(log, kind)),
             )
         topic = candidates[0]
         chosen = topics[topic]
     return _Selection(kind, topic, frozenset(ch.id for ch in chosen), _check_encoding(log, kind, topic, chosen))
+
+
+def _field_hint(log: Log, kind: str) -> str:
+    """How to read an Imu or Vector3 that a topic's message carries (``--topic … --field …``), or ""."""
+    if kind != "imu":
+        return ""
+    from mountcal.io.bag.read import mcap_topics
+    from mountcal.io.bag.topics import carried_hint
+
+    return carried_hint(mcap_topics(log))
 
 
 def _check_encoding(log: Log, kind: str, topic: str, channels: Sequence[McapChannel]) -> str:

@@ -19,11 +19,17 @@ class McapReader(LogReader):
     description = "MCAP with ROS 2 sensor_msgs/Imu"
 
     def read(self, path: Path, options: LogOptions) -> Samples:
+        if options.field is not None:  # an Imu or Vector3 inside another message: read by its definition
+            from mountcal.io.bag.read import read_mcap_topics
+
+            return read_mcap_topics(path, topic=options.topic, field=options.field)
         from mountcal.io.mcap.read import read_mcap
 
         return read_mcap(path, topic=options.topic)
 
     def iter_chunks(self, path: Path, options: LogOptions, max_samples: int) -> Iterator[Samples]:
+        if options.field is not None:
+            return super().iter_chunks(path, options, max_samples)
         from mountcal.io.mcap.read import iter_mcap
 
         return iter_mcap(path, topic=options.topic, max_samples=max_samples)

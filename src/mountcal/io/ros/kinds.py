@@ -37,7 +37,10 @@ TYPES = {
     "geometry_msgs/msg/TwistWithCovarianceStamped": "velocity",
 }
 FIELD_TYPES = (IMU, VECTOR3, VECTOR3_STAMPED)  # what --field may point at
-_VELOCITY = {"geometry_msgs/msg/TwistStamped": ("twist",), "geometry_msgs/msg/TwistWithCovarianceStamped": ("twist", "twist")}
+_VELOCITY = {
+    "geometry_msgs/msg/TwistStamped": ("twist",),
+    "geometry_msgs/msg/TwistWithCovarianceStamped": ("twist", "twist"),
+}
 
 
 @dataclass(frozen=True)

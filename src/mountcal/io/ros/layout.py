@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from mountcal.io.ros.types import ARRAY, BASE, NAME, SEQUENCE, Types
+from mountcal.io.ros.types import ARRAY, BASE, NAME, Types
 from mountcal.io.ros2.cdr import CdrError, Offset, Rows, align, as_offset
 
 Path = tuple[str, ...]
@@ -144,7 +144,9 @@ class _Walk:
         return as_offset(at + 4 + length)
 
 
-def locate(rows: Rows, types: Types, type_name: str, wanted: Iterable[Path], *, cdr: bool) -> dict[Path, tuple[Offset, str]]:
+def locate(
+    rows: Rows, types: Types, type_name: str, wanted: Iterable[Path], *, cdr: bool
+) -> dict[Path, tuple[Offset, str]]:
     """Offset and primitive type of each wanted numeric field (a path through nested messages; a fixed
     array of numbers stands for its first element).
 
