@@ -189,7 +189,7 @@ def _ros1_batches(bag: ros1.Bag, selections: Sequence[Selection]) -> Generator[B
 def sqlite_batches(
     files: Sequence[Path], selections: Sequence[Selection], decompress: Callable[[bytes], bytes] | None
 ) -> Generator[Batch, None, None]:
-    """Blocks of at most ``SQLITE_BATCH`` messages per selection, file by file, in insertion order.
+    """Blocks of at most ``SQLITE_BATCH`` rows (one pass over each file, in insertion order), split by topic.
 
     The database is opened read-only and immutable: nothing is written beside it.
     """
@@ -197,38 +197,55 @@ def sqlite_batches(
         db = sqlite3.connect(f"{file.resolve().as_uri()}?mode=ro&immutable=1", uri=True)
         try:
             ids = dict(db.execute("SELECT name, id FROM topics"))
-            for sel in selections:
-                if sel.topic.name not in ids:
-                    continue
-                cursor = db.execute(
-                    "SELECT timestamp, data FROM messages WHERE topic_id = ? ORDER BY id", (ids[sel.topic.name],)
-                )
-                n = 0
-                while rows := cursor.fetchmany(SQLITE_BATCH):
-                    record = np.fromiter((r[0] for r in rows), dtype=np.int64, count=len(rows))
-                    data = [r[1] for r in rows] if decompress is None else [decompress(r[1]) for r in rows]
-                    size = np.fromiter(map(len, data), dtype=np.int64, count=len(data))
-                    start = np.zeros(size.size, dtype=np.int64)
-                    np.cumsum(size[:-1], out=start[1:])
-                    buf = np.frombuffer(b"".join(data), dtype=np.uint8)
-                    del rows, data
-                    try:
-                        batch_rows = cdr_rows(buf, start, size)
-                    except CdrError as err:
-                        raise InputError(
-                            str(file),
-                            f"CDR messages on {sel.topic.name!r}",
-                            str(err),
-                            "The file is damaged or not a ROS 2 bag.",
-                        ) from err
-                    yield Batch(sel, batch_rows, record, f"rows {n}–{n + size.size - 1} of {file.name}")
-                    n += size.size
+            mine = {ids[s.topic.name]: s for s in selections if s.topic.name in ids}
+            if not mine:
+                continue
+            marks = ",".join("?" * len(mine))
+            cursor = db.execute(  # rowid order: the order of insertion, with no sort
+                f"SELECT topic_id, timestamp, data FROM messages WHERE topic_id IN ({marks})", tuple(mine)
+            )
+            n = 0
+            while rows := cursor.fetchmany(SQLITE_BATCH):
+                topics, stamps, blobs = zip(*rows, strict=True)  # columns, transposed in C
+                topic = np.array(topics, dtype=np.int64)
+                record = np.array(stamps, dtype=np.int64)
+                data = np.empty(len(blobs), dtype=object)
+                data[:] = blobs
+                what = f"rows {n}–{n + len(rows) - 1} of {file.name}"
+                n += len(rows)
+                del rows, blobs
+                for topic_id, sel in mine.items():
+                    take = topic == topic_id
+                    if take.any():
+                        yield _sqlite_batch(sel, data[take].tolist(), record[take], decompress, file, what)
         except sqlite3.DatabaseError as err:
             raise InputError(
                 str(file), "a readable ROS 2 SQLite bag file", f"{type(err).__name__}: {err}", "Check the file."
             ) from err
         finally:
             db.close()
+
+
+def _sqlite_batch(
+    sel: Selection,
+    data: list[bytes],
+    record: I64Array,
+    decompress: Callable[[bytes], bytes] | None,
+    file: Path,
+    what: str,
+) -> Batch:
+    if decompress is not None:
+        data = [decompress(d) for d in data]
+    size = np.fromiter(map(len, data), dtype=np.int64, count=len(data))
+    start = np.zeros(size.size, dtype=np.int64)
+    np.cumsum(size[:-1], out=start[1:])
+    buf = np.frombuffer(b"".join(data), dtype=np.uint8)
+    try:
+        return Batch(sel, cdr_rows(buf, start, size), record, what)
+    except CdrError as err:
+        raise InputError(
+            str(file), f"CDR messages on {sel.topic.name!r}", str(err), "The file is damaged or not a ROS 2 bag."
+        ) from err
 
 
 # --------------------------------------------------------------------------- MCAP (ROS 2 storage, or --field)

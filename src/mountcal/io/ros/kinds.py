@@ -126,8 +126,10 @@ def decode(rows: Rows, types: Types, t: Target, *, cdr: bool) -> Decoded:
     found = layout.locate(rows, types, t.type_name, wanted, cdr=cdr)
     out = {}
     for name, paths in columns.items():
-        values = [layout.read(rows, found, p).astype(np.float64) for p in paths]
-        out[name] = values[0] if len(values) == 1 else np.column_stack(values)
+        if len(paths) == 1:
+            out[name] = layout.read(rows, found, paths[0]).astype(np.float64)
+        else:
+            out[name] = layout.read_columns(rows, found, paths).astype(np.float64)
     if "gyro_cov" in out:
         out["gyro_unknown"] = (out.pop("gyro_cov") == -1.0).astype(np.float64)
     n = rows.start.size

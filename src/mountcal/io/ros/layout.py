@@ -170,4 +170,18 @@ def read(rows: Rows, found: dict[Path, tuple[Offset, str]], path: Path) -> NDArr
     return rows.take(at, PRIMITIVES[primitive], 1, ".".join(path))[:, 0]
 
 
-__all__ = ["PRIMITIVES", "locate", "read"]
+def read_columns(rows: Rows, found: dict[Path, tuple[Offset, str]], paths: list[Path]) -> NDArray[Any]:
+    """Several located fields as columns, shape (n, len(paths)); fields of one type that lie back to
+    back (a Vector3's x, y, z) are read in one pass."""
+    at0, primitive = found[paths[0]]
+    size = _size(primitive)
+    back_to_back = all(
+        found[p][1] == primitive and np.all(np.asarray(found[p][0]) - np.asarray(at0) == i * size)
+        for i, p in enumerate(paths)
+    )
+    if back_to_back:
+        return rows.take(at0, PRIMITIVES[primitive], len(paths), ".".join(paths[0][:-1]))
+    return np.column_stack([read(rows, found, p) for p in paths])
+
+
+__all__ = ["PRIMITIVES", "locate", "read", "read_columns"]

@@ -91,8 +91,11 @@ _FIND_STEP = -1  # Rows(step=...) default: work the spacing out
 
 
 def gather(buf: U8Array, at: I64Array, nbytes: int) -> U8Array:
-    """Bytes ``buf[at[i] : at[i] + nbytes]`` for every i, shape (n, nbytes); ranges must lie in ``buf``."""
-    return buf[at[:, None] + np.arange(nbytes, dtype=np.int64)]
+    """Bytes ``buf[at[i] : at[i] + nbytes]`` for every i, shape (n, nbytes); ranges must lie in ``buf``.
+
+    Rows of a sliding-window view are copied whole (several times faster than gathering byte by byte).
+    """
+    return np.lib.stride_tricks.sliding_window_view(buf, nbytes)[at]
 
 
 def _even_step(start: I64Array) -> int | None:
