@@ -16,6 +16,7 @@ from contextvars import ContextVar
 # key -> (Python spelling, CLI flag). A nested parameter is spelled with its options class.
 OPTIONS: dict[str, tuple[str, str]] = {
     "accept_unconfident": ("accept_unconfident", "--accept-unconfident"),
+    "columns": ("LogOptions.columns", "--columns"),
     "dbc": ("LogOptions.dbc", "--dbc"),
     "field": ("LogOptions.field", "--field"),
     "figures": ("image_format", "--figures"),

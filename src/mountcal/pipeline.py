@@ -129,7 +129,7 @@ def calibrate_log(
 
 def calibrate_job(job: LogJob) -> LogResult:
     """:func:`calibrate_log` of a prepared job (the fleet's and the command line's form)."""
-    samples = read_log(list(job.paths), job.log)
+    samples = with_gravity(read_log(list(job.paths), job.log))
     source = _source(job.paths)
     skipped: dict[str, str] = {}
     static = found = table = None
@@ -169,8 +169,28 @@ def calibrate_job(job: LogJob) -> LogResult:
 
 def stops_of_log(job: LogJob) -> tuple[Samples, StopTableFromLog]:
     """Read the log and tabulate its stops with their headings (``mountcal stops``)."""
-    samples = read_log(list(job.paths), job.log)
+    samples = with_gravity(read_log(list(job.paths), job.log))
     return samples, _tabulate(samples, job)
+
+
+def with_gravity(samples: Samples) -> Samples:
+    """``samples``, refused when their acceleration is known to lack gravity (a "linear acceleration"):
+    the mounting is measured against gravity, which such samples have had removed.
+
+    Raises
+    ------
+    InputError
+        ``samples.gravity_free`` says why they lack it.
+    """
+    if samples.gravity_free:
+        raise InputError(
+            samples.source,
+            "the specific force (an accelerometer's reading, gravity included) for calibration",
+            f"an acceleration without gravity: {samples.gravity_free}",
+            "Export the raw accelerometer (with g); a gravity-free acceleration can be neither levelled nor "
+            "calibrated against gravity.",
+        )
+    return samples
 
 
 def stops_with_drive(
@@ -200,11 +220,12 @@ def stops_with_drive(
     )
 
 
-def is_stop_table(path: str | Path, has_dbc: bool = False) -> bool:
-    """Whether a CSV/Parquet file is a stop table (``beta_deg``, ``n`` or ``sx``, or no ``t_s``).
+def is_stop_table(path: str | Path, has_dbc: bool = False, columns: bool = False) -> bool:
+    """Whether a CSV/Parquet file is a stop table (``beta_deg``, ``n`` or ``sx``, or no ``t_s`` and no known
+    sample export).
 
-    A CSV read with a DBC is a CAN log. A FIFO or a device counts as a stop table, so that the
-    stop-table reader refuses it without opening it.
+    A CSV read with a DBC is a CAN log; a table read with a column map (``columns``) is a sample table. A
+    FIFO or a device counts as a stop table, so that the stop-table reader refuses it without opening it.
 
     Raises
     ------
@@ -213,7 +234,7 @@ def is_stop_table(path: str | Path, has_dbc: bool = False) -> bool:
     """
     path = Path(path)
     suffix = path.suffix.lower()
-    if suffix not in STOP_TABLE_SUFFIXES or (has_dbc and suffix == ".csv"):
+    if suffix not in STOP_TABLE_SUFFIXES or (has_dbc and suffix == ".csv") or columns:
         return False
     if special_kind(path) is not None:
         return True
@@ -223,11 +244,12 @@ def is_stop_table(path: str | Path, has_dbc: bool = False) -> bool:
         elif suffix == ".csv":
             import pandas as pd
 
-            return _stop_columns(pd.read_csv(path, nrows=0, comment="#", skipinitialspace=True).columns)
+            names = pd.read_csv(path, nrows=0, comment="#", skipinitialspace=True).columns
         else:
             import pyarrow.parquet as pq
 
-            return _stop_columns(pq.read_schema(path).names)
+            names = pq.read_schema(path).names
+        return _stop_columns(names, path)
     except FileNotFoundError:
         found = "no such file"
     except OSError as err:
@@ -279,9 +301,17 @@ def _tabulate(samples: Samples, job: LogJob) -> StopTableFromLog:
     return tabulate(samples, job.detection, protocol, job.uphill_azimuth_deg)
 
 
-def _stop_columns(columns: Any) -> bool:
+def _stop_columns(columns: Any, path: Path) -> bool:
+    from mountcal.io.table.layout import detect
+    from mountcal.io.table.mapped import header
+
     names = {str(c).strip() for c in columns}
-    return bool(names & STOP_TABLE_MARKERS) or "t_s" not in names
+    if names & STOP_TABLE_MARKERS:
+        return True
+    if "t_s" in names:
+        return False
+    exported = detect(header(path)[0], path) if path.suffix.lower() == ".csv" else detect(sorted(names), path)
+    return exported is None  # a known export (a phone's, imucal's) holds samples
 
 
 def _driving_alone(fit: DrivingFit, samples: Samples, job: LogJob) -> Calibration:

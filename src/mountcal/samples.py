@@ -46,6 +46,9 @@ class Samples:
         Frames or messages the reader discarded, counted by reason.
     notes : tuple of str
         What the reader inferred or chose and says (a detected export, the topic a speed came from).
+    gravity_free : str
+        Why ``acc_s`` is known to lack gravity (a "linear acceleration" export), else "": such samples
+        rotate, but do not calibrate (the mounting is measured against gravity).
     """
 
     t_s: FloatArray
@@ -56,6 +59,7 @@ class Samples:
     axis_map: str = "x,y,z"
     dropped: dict[str, int] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
+    gravity_free: str = ""
 
     def __post_init__(self) -> None:
         n = self.t_s.shape[0]

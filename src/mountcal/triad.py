@@ -186,9 +186,11 @@ def session_stops(
         table = read_stop_table(paths[0], unit=unit, headings="none")
         return table.acc_s, table.cov_s
     from mountcal.io.logs import LogOptions, read_log
+    from mountcal.pipeline import with_gravity
     from mountcal.stops import StopDetection, detect_stops
 
-    stops = detect_stops(read_log(paths, LogOptions()), StopDetection(min_duration_s=min_stop_s, trim_s=trim_s))
+    samples = with_gravity(read_log(paths, LogOptions()))
+    stops = detect_stops(samples, StopDetection(min_duration_s=min_stop_s, trim_s=trim_s))
     if not stops:
         raise InputError(" + ".join(paths), "a session with still periods", "no stop", _TODO_POSITIONS)
     return np.array([s.acc_mean_s for s in stops]), np.array([s.acc_cov_mean_s for s in stops])

@@ -70,7 +70,8 @@ def run(args: argparse.Namespace) -> int:
         require("matplotlib", "report", "calibrate --report")  # before any work: nothing is written without it
     table: StopTable | None
     done: LogResult | None = None  # the log's result, when the input is a log
-    if args.input == [STDOUT] or (len(args.input) == 1 and is_stop_table(args.input[0], bool(args.dbc))):
+    mapped = args.columns is not None or (args.mapping is not None and not args.dbc)  # a table's column map
+    if args.input == [STDOUT] or (len(args.input) == 1 and is_stop_table(args.input[0], bool(args.dbc), mapped)):
         table = read_stop_table(args.input[0], unit=args.unit, headings=args.headings)
         with working(args, "fitting"):
             cal = calibrate(table, fit_options(args))

@@ -20,6 +20,7 @@ def add_parser(sub: Any) -> None:
         many=False,
     )
     p.add_argument("--dbc", action="append", default=None, help="DBC naming the CAN messages (repeat for several)")
+    p.add_argument("--columns", default=None, help="a table's columns as ROLE=COLUMN[:UNIT] pairs (see calibrate)")
     p.set_defaults(run=run, mapping=None, channel=None, topic=None, field=None)
 
 

@@ -109,7 +109,15 @@ def add_log_options(
         g.add_argument("--dbc", action="append", default=None, help="DBC to decode a CAN log (repeat for several)")
     else:
         g.add_argument("--dbc", default=None, help="DBC to decode CAN logs")
-    g.add_argument("--mapping", default=None, help="TOML naming the accelerometer signals (CAN)")
+    g.add_argument(
+        "--mapping", default=None, help="TOML naming the accelerometer signals (CAN) or a table's [columns]"
+    )
+    g.add_argument(
+        "--columns",
+        default=None,
+        help="a table's columns as ROLE=COLUMN[:UNIT] pairs, e.g. time=ts:ms,ax=acc_x:g,ay=acc_y:g,az=acc_z:g "
+        "(roles time ax ay az gx gy gz speed heading temperature latitude longitude altitude)",
+    )
     g.add_argument("--channel", type=int, default=None, help="CAN channel of the IMU")
     g.add_argument("--topic", default=None, help="IMU topic (MCAP, ROS bags)")
     g.add_argument(
@@ -188,7 +196,19 @@ def log_options(args: argparse.Namespace) -> LogOptions:
     dbc = args.dbc
     if isinstance(dbc, list):  # --dbc given once (a path) or repeated (their messages together)
         dbc = None if not dbc else dbc[0] if len(dbc) == 1 else tuple(dbc)
-    return LogOptions(dbc=dbc, mapping=args.mapping, channel=args.channel, topic=args.topic, field=args.field)
+    from mountcal.io.table.layout import parse_columns
+
+    columns = getattr(args, "columns", None)
+    unit = getattr(args, "unit", None)
+    return LogOptions(
+        dbc=dbc,
+        mapping=args.mapping,
+        channel=args.channel,
+        topic=args.topic,
+        field=args.field,
+        columns=None if columns is None else parse_columns(columns),
+        unit=None if unit in (None, "mps2") else unit,
+    )
 
 
 def detection(args: argparse.Namespace) -> StopDetection:

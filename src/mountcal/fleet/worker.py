@@ -44,7 +44,7 @@ def run_job(job: FleetJob) -> dict[str, Any]:
 
 def _calibrate(job: FleetJob) -> dict[str, Any]:
     lj = job.job
-    if len(lj.paths) == 1 and is_stop_table(Path(lj.paths[0]), lj.log.dbc is not None):
+    if len(lj.paths) == 1 and is_stop_table(Path(lj.paths[0]), lj.log.dbc is not None, lj.log.columns is not None):
         table = read_stop_table(lj.paths[0], headings=job.headings)
         cal = calibrate(table, lj.options)
         record = calibration_record(cal)

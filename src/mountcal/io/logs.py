@@ -24,6 +24,7 @@ from mountcal.errors import InputError
 from mountcal.io.registry import reader_for
 
 if TYPE_CHECKING:  # numpy and the readers load when a log is read: `mountcal --help` needs neither
+    from mountcal.io.reader import LogReader
     from mountcal.samples import LogSummary, Samples
 
 CHUNK_SAMPLES = 100_000  # samples per chunk of iter_log: its memory bound
@@ -31,13 +32,36 @@ CHUNK_SAMPLES = 100_000  # samples per chunk of iter_log: its memory bound
 
 @dataclass(frozen=True)
 class LogOptions:
-    """How to read a log: the DBC and mapping for CAN, the topic (and field) for MCAP and ROS bags."""
+    """How to read a log: the DBC and mapping for CAN, the topic (and field) for MCAP and ROS bags, the
+    column map and acceleration unit for tables (:mod:`mountcal.io.table.layout`)."""
 
     dbc: str | tuple[str, ...] | None = None  # several DBCs: their messages together (no clash allowed)
     mapping: str | None = None
     channel: int | None = None
     topic: str | None = None
     field: str | None = None  # the Imu or Vector3 inside the topic's message ("imu", "imu.linear_acceleration")
+    columns: tuple[tuple[str, str], ...] | None = None  # a table's column map: (role, "COLUMN[:UNIT]") pairs
+    unit: str | None = None  # a table's acceleration unit where neither the table nor the map gives it ("g")
+
+
+# options only some formats read: given for another, they would be silently ignored
+_READ_BY = {"field": ("mcap", "bag"), "columns": ("table",), "unit": ("table",)}
+
+
+def _reader(path: Path, opts: LogOptions) -> LogReader:
+    """The reader of ``path``, refusing an option that its format does not read."""
+    from mountcal.option_names import option
+
+    reader = reader_for(path, opts)
+    for name, formats in _READ_BY.items():
+        if getattr(opts, name) is not None and reader.name not in formats:
+            raise InputError(
+                str(path),
+                f"a {' or '.join(formats)} log for {option(name)}",
+                f"a {reader.name} log, which {option(name)} does not apply to",
+                f"Drop {option(name)}.",
+            )
+    return reader
 
 
 def read_log(paths: str | Path | Sequence[str | Path], options: LogOptions | None = None) -> Samples:
@@ -46,7 +70,7 @@ def read_log(paths: str | Path | Sequence[str | Path], options: LogOptions | Non
     files = [Path(p) for p in ([paths] if isinstance(paths, str | Path) else paths)]
     if not files:
         raise InputError("LOG", "at least one log file", "none", "Name the log file(s).")
-    parts = [reader_for(f, opts).read(f, opts) for f in files]
+    parts = [_reader(f, opts).read(f, opts) for f in files]
     return parts[0] if len(parts) == 1 else join(parts)
 
 
@@ -55,7 +79,7 @@ def inspect_log(path: str | Path, options: LogOptions | None = None) -> LogSumma
     ids per channel with counts, rates and DLCs)."""
     opts = options or LogOptions()
     path = Path(path)
-    return reader_for(path, opts).inspect(path, opts)
+    return _reader(path, opts).inspect(path, opts)
 
 
 def iter_log(
@@ -78,7 +102,7 @@ def iter_log(
     previous: tuple[str, float] | None = None  # the file before and its last time
     for f in files:
         first = True
-        for chunk in reader_for(f, opts).iter_chunks(f, opts, max_samples):
+        for chunk in _reader(f, opts).iter_chunks(f, opts, max_samples):
             if len(chunk):
                 if first and previous is not None and float(chunk.t_s[0]) < previous[1]:
                     raise overlap_error(previous[0], previous[1], str(f), float(chunk.t_s[0]))
@@ -132,6 +156,7 @@ def join(parts: Sequence[Samples]) -> Samples:
         axis_map=parts[0].axis_map,
         dropped=dict(dropped),
         notes=tuple(dict.fromkeys(n for p in parts for n in p.notes)),
+        gravity_free=next((p.gravity_free for p in parts if p.gravity_free), ""),
     )
 
 

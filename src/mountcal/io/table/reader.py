@@ -1,4 +1,5 @@
-"""Sample tables in the registry (:mod:`mountcal.io.registry`): CSV and Parquet with ``t_s, ax, ay, az``."""
+"""Sample tables in the registry (:mod:`mountcal.io.registry`): CSV and Parquet with mountcal's own columns
+(``t_s, ax, ay, az``), a column map, or a known export (:mod:`mountcal.io.table.layout`)."""
 
 from __future__ import annotations
 
@@ -10,23 +11,38 @@ from mountcal.io.reader import LogReader
 
 if TYPE_CHECKING:
     from mountcal.io.logs import LogOptions
+    from mountcal.io.table.layout import Layout
     from mountcal.samples import LogSummary, Samples
 
 
 class TableReader(LogReader):
     name = "table"
     suffixes = (".csv", ".parquet", ".pq")
-    description = "CSV or Parquet sample table (t_s, ax, ay, az)"
+    description = "CSV or Parquet sample table (t_s, ax, ay, az; a column map; phone and imucal exports)"
 
     def read(self, path: Path, options: LogOptions) -> Samples:
-        from mountcal.io.table.read import read_table
+        from mountcal.io.table.mapped import check_magnitude, read_mapped
 
-        return read_table(path)
+        layout, read_as = table_layout(path, options)
+        if layout.native:
+            from mountcal.io.table.read import read_table
+
+            samples = read_table(path)
+        else:
+            samples = read_mapped(path, layout, read_as)
+        return check_magnitude(samples, layout, str(path))
 
     def iter_chunks(self, path: Path, options: LogOptions, max_samples: int) -> Iterator[Samples]:
-        from mountcal.io.table.read import iter_table
+        from mountcal.io.table.mapped import iter_mapped
 
-        return iter_table(path, max_samples)
+        layout, read_as = table_layout(path, options)
+        if layout.native:
+            from mountcal.io.table.read import iter_table
+
+            chunks = iter_table(path, max_samples)
+        else:
+            chunks = iter_mapped(path, layout, read_as, max_samples)
+        return _checked(chunks, layout, str(path))
 
     def inspect(self, path: Path, options: LogOptions) -> LogSummary:
         from mountcal.samples import summary
@@ -34,4 +50,53 @@ class TableReader(LogReader):
         return summary(self.read(path, options), path.suffix.lstrip(".").lower(), "table")
 
 
-__all__ = ["TableReader"]
+def _checked(chunks: Iterator[Samples], layout: Layout, where: str) -> Iterator[Samples]:
+    """The chunks, the first (the first with samples) checked as :func:`check_magnitude` checks a whole table;
+    its verdict (gravity-free) carried to the rest."""
+    from dataclasses import replace
+
+    from mountcal.io.table.mapped import check_magnitude
+
+    verdict: str | None = None
+    for chunk in chunks:
+        if verdict is None and len(chunk):
+            chunk = check_magnitude(chunk, layout, where)
+            verdict = chunk.gravity_free
+        elif verdict:
+            chunk = replace(chunk, gravity_free=verdict)
+        yield chunk
+
+
+def table_layout(path: Path, options: LogOptions) -> tuple[Layout, dict[str, str]]:
+    """The layout of a sample table (see :mod:`mountcal.io.table.layout`) and how to read its CSV.
+
+    Raises
+    ------
+    InputError
+        A table whose columns are neither mountcal's, mapped, nor a known export; a map given twice.
+    """
+    from dataclasses import replace
+
+    from mountcal.errors import InputError
+    from mountcal.io.table.layout import mapping_columns, refuse_unknown, resolve
+    from mountcal.io.table.mapped import header
+    from mountcal.option_names import option
+
+    names, read_as = header(path)
+    columns = options.columns
+    if options.mapping is not None:
+        if columns is not None:
+            raise InputError(
+                str(path),
+                "one column map",
+                f"{option('columns')} and {option('mapping')} {options.mapping}",
+                "Give the map once.",
+            )
+        columns = mapping_columns(options.mapping)
+    layout = resolve(names, path, columns=columns, acc_unit=options.unit)
+    if layout is None:
+        raise refuse_unknown(names, path)
+    return (replace(layout, read_as=read_as) if read_as else layout), read_as
+
+
+__all__ = ["TableReader", "table_layout"]

@@ -1,0 +1,227 @@
+"""Tables read through a :class:`~mountcal.io.table.layout.Layout`: mapped columns, units converted, exports
+recognised. Read whole (:func:`read_mapped`) or in batches of bounded memory (:func:`iter_mapped`).
+
+CSV files are read with their own delimiter (``,``, ``;`` or tab, from the header line) and a decimal
+comma where a ``;``-separated file writes one. Rows with a missing or non-numeric value in a sample
+column are dropped and counted; so are unreadable times.
+"""
+
+from __future__ import annotations
+
+import csv
+import re
+from collections.abc import Iterator
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from mountcal.errors import InputError
+from mountcal.io.inputs import check_parquet_rows, check_regular_file, max_rows, too_many_rows
+from mountcal.io.table.layout import ACC, CHANNELS, G_N, GYRO, TIME_UNITS, Layout
+from mountcal.option_names import option
+from mountcal.samples import Channel, FloatArray, Samples
+
+PARQUET = (".parquet", ".pq")
+_COMMA_DECIMAL = re.compile(r"[-+]?\d+,\d+(?:[eE][-+]?\d+)?")
+_DOT_DECIMAL = re.compile(r"[-+]?\d*\.\d+(?:[eE][-+]?\d+)?")
+GRAVITY_FREE_MPS2 = 0.5  # a median |a| below this has no gravity in it (g read as m/s² gives ≈ 1)
+GRAVITY_BAND_G = (0.5, 1.5)  # the median |a| of samples with gravity: at rest 1 g, driving close to it
+_DROPPED = "rows with missing or non-numeric values"
+
+
+def header(path: Path) -> tuple[list[str], dict[str, str]]:
+    """The column names of a CSV or Parquet table, and how to read a CSV (``sep``, ``decimal``)."""
+    check_regular_file(path, "sample table")
+    where = str(path)
+    if path.suffix.lower() in PARQUET:
+        import pyarrow.parquet as pq
+
+        try:
+            return [str(n) for n in pq.read_schema(path).names], {}
+        except Exception as err:  # pyarrow raises many types for malformed files
+            raise InputError(
+                where, "a Parquet table", f"a file that does not parse ({err})", "Check the file."
+            ) from err
+    with path.open("r", encoding="utf-8-sig", errors="replace", newline="") as f:
+        lines = [f.readline() for _ in range(2)]
+    first = lines[0].rstrip("\r\n")
+    sep = max((",", ";", "\t"), key=first.count)
+    names = next(csv.reader([first], delimiter=sep)) if first else []
+    read_as = {} if sep == "," else {"sep": sep}
+    fields = [f.strip() for f in lines[1].split(sep)]
+    if sep != "," and sum(bool(_COMMA_DECIMAL.fullmatch(f)) for f in fields) > sum(
+        bool(_DOT_DECIMAL.fullmatch(f)) for f in fields
+    ):
+        read_as["decimal"] = ","
+    return [n.strip() for n in names], read_as
+
+
+def _frames(path: Path, layout: Layout, read_as: dict[str, str], rows: int | None) -> Iterator[pd.DataFrame]:
+    """The table's used columns, whole (``rows`` None) or in pieces of ``rows``."""
+    used = list(dict.fromkeys(c.name for c in layout.columns.values()))
+    where = str(path)
+    try:
+        if path.suffix.lower() in PARQUET:
+            import pyarrow.parquet as pq
+
+            check_parquet_rows(path)
+            file = pq.ParquetFile(path)
+            for batch in file.iter_batches(batch_size=rows or 1 << 20, columns=used):
+                yield batch.to_pandas()
+            return
+        reader = pd.read_csv(
+            path,
+            usecols=lambda c: str(c).strip() in used,
+            dtype={layout.time.name: str} if layout.time.unit == "iso" else None,
+            chunksize=rows,
+            skipinitialspace=True,
+            encoding="utf-8-sig",
+            **read_as,
+        )
+        if rows is None:
+            yield reader.rename(columns=str.strip)
+        else:
+            for chunk in reader:
+                yield chunk.rename(columns=str.strip)
+    except (ValueError, pd.errors.ParserError, UnicodeDecodeError, OSError) as err:
+        raise InputError(
+            where, "a CSV or Parquet sample table", f"a file that does not parse ({err})", "Check the file."
+        ) from err
+
+
+def _numbers(values: Any) -> FloatArray:
+    return np.asarray(pd.to_numeric(values, errors="coerce"), dtype=np.float64)
+
+
+def _time(values: pd.Series, layout: Layout) -> FloatArray:
+    """Seconds (Unix epoch or the table's own zero); NaN where unreadable."""
+    column = layout.time
+    if column.unit == "iso":
+        stamps = pd.to_datetime(values, utc=True, errors="coerce", format="ISO8601")
+        ns = stamps.to_numpy(dtype="datetime64[ns]").astype(np.int64)
+        out = (ns // 1_000_000_000).astype(np.float64) + (ns % 1_000_000_000) * 1e-9
+        out[np.isnat(stamps.to_numpy(dtype="datetime64[ns]"))] = np.nan
+        return out
+    if pd.api.types.is_integer_dtype(values.dtype) and column.scale in TIME_UNITS.values() and column.scale < 1:
+        per_second = round(1.0 / column.scale)  # whole ns/us/ms since an epoch: exact seconds, then the fraction
+        ints = values.to_numpy(dtype=np.int64)
+        return (ints // per_second).astype(np.float64) + (ints % per_second) / per_second
+    return _numbers(values) * column.scale + column.offset
+
+
+def _samples(df: pd.DataFrame, layout: Layout, where: str) -> Samples:
+    cols = layout.columns
+    t = _time(df[cols["time"].name], layout)
+    acc = np.column_stack([_numbers(df[cols[r].name]) * cols[r].scale + cols[r].offset for r in ACC])
+    gyro = None
+    if all(r in cols for r in GYRO):
+        gyro = np.column_stack([_numbers(df[cols[r].name]) * cols[r].scale + cols[r].offset for r in GYRO])
+    ok = np.isfinite(t) & np.isfinite(acc).all(axis=1)
+    if gyro is not None:
+        ok &= np.isfinite(gyro).all(axis=1)
+    channels = {}
+    for role, key in CHANNELS.items():
+        if role in cols:
+            v = _numbers(df[cols[role].name]) * cols[role].scale + cols[role].offset
+            good = np.isfinite(v) & np.isfinite(t)
+            channels[key] = Channel(t[good], v[good])
+    order = np.argsort(t[ok], kind="stable")
+    return Samples(
+        t[ok][order],
+        acc[ok][order],
+        None if gyro is None else gyro[ok][order],
+        {k: _sorted(ch) for k, ch in channels.items()},
+        source=where,
+        dropped={_DROPPED: int((~ok).sum())} if not ok.all() else {},
+        notes=layout.notes,
+        gravity_free=layout.gravity_free,
+    )
+
+
+def _sorted(ch: Channel) -> Channel:
+    order = np.argsort(ch.t_s, kind="stable")
+    return Channel(ch.t_s[order], ch.value[order])
+
+
+def read_mapped(path: Path, layout: Layout, read_as: dict[str, str]) -> Samples:
+    """The whole table's samples (sorted by time)."""
+    where = str(path)
+    frames = list(_frames(path, layout, read_as, None))
+    df = frames[0] if len(frames) == 1 else pd.concat(frames, ignore_index=True)
+    if len(df) > max_rows():
+        raise too_many_rows(where, "table rows", len(df))
+    samples = _samples(df, layout, where)
+    if not len(samples):
+        raise InputError(
+            where,
+            "numbers in the columns read as time, ax, ay, az "
+            f"({', '.join(layout.columns[r].name for r in ('time', *ACC))})",
+            "no row with numbers in all of them",
+            "Check the column map and units.",
+        )
+    return samples
+
+
+def iter_mapped(path: Path, layout: Layout, read_as: dict[str, str], max_samples: int) -> Iterator[Samples]:
+    """The table's samples in batches of at most ``max_samples`` rows (each sorted by time)."""
+    where = str(path)
+    for df in _frames(path, layout, read_as, max_samples):
+        yield _samples(df, layout, where)
+
+
+def check_magnitude(samples: Samples, layout: Layout, where: str) -> Samples:
+    """``samples`` after a look at their acceleration's median magnitude, which gravity sets near 1 g.
+
+    Below 0.5 m/s², the acceleration has no gravity in it: the samples are marked gravity-free (they
+    read, but do not calibrate). Outside 0.5–1.5 g otherwise, the unit is wrong: refused, with the unit
+    the magnitude fits (g, mg, or counts of 1/N g).
+    """
+    if not len(samples) or layout.gravity_free:
+        return samples
+    m = float(np.median(np.linalg.norm(samples.acc_s, axis=1)))  # m/s², as read
+    if m < GRAVITY_FREE_MPS2:
+        reason = f"the acceleration's median magnitude is {m:.3g} m/s²: no gravity in it, as in a 'linear acceleration'"
+        return replace(samples, gravity_free=reason)
+    lo, hi = GRAVITY_BAND_G
+    if lo * G_N <= m <= hi * G_N:
+        return samples
+    read_as = layout.columns["ax"].unit or "m/s2"
+    per_g = m / G_N if read_as.split("/")[0] == "g" else m  # the value 1 g takes in the column, roughly
+    if 0.8 <= per_g <= 1.25:
+        fits = "g"
+    elif 800 <= per_g <= 1250:
+        fits = "mg"
+    elif per_g > 16:
+        fits = f"g/{2 ** round(np.log2(per_g))}"  # raw counts: N per g, N a power of two for most sensors
+    else:
+        fits = ""
+    todo = (
+        f"If the columns are in {fits}, say so: {option('columns', _column_map(layout, fits))}."
+        if fits
+        else f"Give the columns' unit in {option('columns')} (g, mg, m/s2, or g/N for counts of 1/N g)."
+    )
+    return _refuse(where, read_as, m, todo)
+
+
+def _column_map(layout: Layout, acc_unit: str) -> str:
+    """The column map reading this layout with the acceleration in ``acc_unit`` (every column it reads)."""
+    items = []
+    for role, c in layout.columns.items():
+        unit = acc_unit if role in ACC else c.unit
+        items.append(f"{role}={c.name}" + (f":{unit}" if unit else ""))
+    return ",".join(items)
+
+
+def _refuse(where: str, read_as: str, m: float, todo: str) -> Samples:
+    raise InputError(
+        where,
+        f"accelerations of magnitude near 1 g ({GRAVITY_BAND_G[0]:g}–{GRAVITY_BAND_G[1]:g} g) read in {read_as}",
+        f"a median magnitude of {m:.4g} m/s² ({m / G_N:.4g} g)",
+        todo,
+    )
+
+
+__all__ = ["check_magnitude", "header", "iter_mapped", "read_mapped"]
