@@ -92,6 +92,7 @@ class LogSummary:
     format: str  # "mcap", "blf", "asc", "log", "trc", "csv", "mf4", "parquet"
     duration_s: float
     streams: tuple[Stream, ...]
+    notes: tuple[str, ...] = ()  # what the reader inferred (a recognised export and its units)
 
 
 def slices(samples: Samples, max_samples: int) -> Iterator[Samples]:
@@ -129,4 +130,4 @@ def summary(samples: Samples, fmt: str, kind: str) -> LogSummary:
     dur = float(samples.t_s[-1] - samples.t_s[0]) if n > 1 else 0.0
     rate = (n - 1) / dur if dur > 0 else 0.0
     fields = ("ax", "ay", "az", *(("gx", "gy", "gz") if samples.gyro_s is not None else ()), *samples.channels)
-    return LogSummary(samples.source, fmt, dur, (Stream("samples", kind, n, rate, fields),))
+    return LogSummary(samples.source, fmt, dur, (Stream("samples", kind, n, rate, fields),), samples.notes)

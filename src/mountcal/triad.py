@@ -12,7 +12,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -25,6 +25,9 @@ from mountcal.result_file import read_json
 from mountcal.sensor_spec import SensorSpec
 from mountcal.stoptable import StopTable, Unit, read_stop_table
 from mountcal.systematic import BIAS_NAMES, TEMP_NAMES, SensorErrors, from_spec, heading_u
+
+if TYPE_CHECKING:
+    from mountcal.io.logs import LogOptions
 
 FORMAT = "mountcal.triad"
 FORMAT_VERSION = 1
@@ -177,19 +180,26 @@ _TODO_POSITIONS = (
 
 
 def session_stops(
-    paths: list[str], unit: Unit, min_stop_s: float = 3.0, trim_s: float = 0.5
+    paths: list[str],
+    unit: Unit,
+    min_stop_s: float = 3.0,
+    trim_s: float = 0.5,
+    log: LogOptions | None = None,
 ) -> tuple[FloatArray, FloatArray | None]:
-    """Stop means (n, 3) in m/s² and their covariances, from a stop table or from logs."""
-    from mountcal.pipeline import is_stop_table
-
-    if len(paths) == 1 and is_stop_table(paths[0]):
-        table = read_stop_table(paths[0], unit=unit, headings="none")
-        return table.acc_s, table.cov_s
+    """Stop means (n, 3) in m/s² and their covariances, from a stop table or from logs (read as ``log``
+    says; ``unit`` is a stop table's, and a sample table's where ``log`` gives none)."""
     from mountcal.io.logs import LogOptions, read_log
-    from mountcal.pipeline import with_gravity
+    from mountcal.pipeline import is_stop_table, with_gravity
     from mountcal.stops import StopDetection, detect_stops
 
-    samples = with_gravity(read_log(paths, LogOptions()))
+    log = log or LogOptions()
+    mapped = log.columns is not None or log.mapping is not None
+    if len(paths) == 1 and is_stop_table(paths[0], columns=mapped):
+        table = read_stop_table(paths[0], unit=unit, headings="none")
+        return table.acc_s, table.cov_s
+    if log.unit is None and unit != "mps2":
+        log = replace(log, unit=unit)
+    samples = with_gravity(read_log(paths, log))
     stops = detect_stops(samples, StopDetection(min_duration_s=min_stop_s, trim_s=trim_s))
     if not stops:
         raise InputError(" + ".join(paths), "a session with still periods", "no stop", _TODO_POSITIONS)

@@ -223,15 +223,20 @@ def vn_logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
             for m in msgs:
                 writer.write(conn, _ns(m), store2.serialize_cdr(m, VN))
         logs[name] = d / name
-    mcap = d / "vn.mcap"
-    definition = store2.generate_msgdef(VN, ros_version=2)[0]
-    with open(mcap, "wb") as f, Ros2McapWriter(f) as writer:
-        schema = writer.register_msgdef(VN, definition)
-        for m in msgs:
-            writer.write_message("/vn/common", schema, _as_dict(m), log_time=_ns(m) + 1000)
-    logs["mcap"] = mcap
+    logs["mcap"] = write_vn_mcap(d / "vn.mcap")
     logs["msgs"] = msgs
     return logs
+
+
+def write_vn_mcap(path: Path) -> Path:
+    """The VectorNav-style messages on /vn/common as a ROS 2 MCAP, written by mcap-ros2."""
+    store = _store(False)
+    definition = store.generate_msgdef(VN, ros_version=2)[0]
+    with open(path, "wb") as f, Ros2McapWriter(f) as writer:
+        schema = writer.register_msgdef(VN, definition)
+        for m in _vn_messages(store, False):
+            writer.write_message("/vn/common", schema, _as_dict(m), log_time=_ns(m) + 1000)
+    return path
 
 
 def _as_dict(msg: Any) -> Any:

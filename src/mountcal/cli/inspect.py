@@ -37,4 +37,6 @@ def run(args: argparse.Namespace) -> int:
         fields = f"  [{', '.join(map(safe, st.fields))}]" if st.fields else ""
         fields += f"  DLC {','.join(map(str, st.dlcs))}" if st.dlcs else ""
         print(f"  {safe(st.name):<32} {safe(st.kind):<28} {st.count:>9} msgs {st.rate_hz:>9.2f} Hz{fields}")
+    for note in info.notes:
+        print(f"  note: {safe(note)}")
     return 0

@@ -38,6 +38,10 @@ def add_parser(subparsers: Any) -> None:
     p.add_argument("--imucal", default=None, help="imucal's Ferraris calibration JSON made from this session")
     p.add_argument("--min-stop-s", type=float, default=3.0, help="shortest still period in a log (s; hand-held: short)")
     p.add_argument("--trim-s", type=float, default=0.5, help="cut from each end of a still period in a log (s)")
+    p.add_argument(
+        "--columns", default=None, help="a sample table's columns as ROLE=COLUMN[:UNIT] pairs (see calibrate --help)"
+    )
+    p.add_argument("--mapping", default=None, help="a TOML with a sample table's [columns]")
     p.set_defaults(run=run)
 
 
@@ -47,8 +51,15 @@ def run(args: argparse.Namespace) -> int:
     from mountcal.paths import check_outputs
     from mountcal.triad import describe, fit_all, from_sphere, session_stops, with_imucal_values
 
-    check_outputs({"-o": args.output}, {f"input {i + 1}": p for i, p in enumerate(args.input)})
-    acc, cov = session_stops(args.input, args.unit, args.min_stop_s, args.trim_s)
+    inputs = {f"input {i + 1}": p for i, p in enumerate(args.input)}
+    check_outputs({"-o": args.output}, {**inputs, "--mapping": args.mapping})
+    from mountcal.io.logs import LogOptions
+    from mountcal.io.table.layout import parse_columns
+
+    columns = None if args.columns is None else parse_columns(args.columns)
+    acc, cov = session_stops(
+        args.input, args.unit, args.min_stop_s, args.trim_s, LogOptions(mapping=args.mapping, columns=columns)
+    )
     g = G_N if args.gravity is None else float(args.gravity)
     source = " + ".join(str(Path(p)) for p in args.input)
     for _, why in sphere.loop(acc, g, cov):
