@@ -11,9 +11,9 @@ import numpy as np
 import pandas as pd
 import pytest
 from rosbags.convert.converter import convert
+from tests.io.test_bags import write_vn_mcap
 
 from mountcal.cli import main
-from tests.io.test_bags import write_vn_mcap
 
 REPO = Path(__file__).resolve().parents[2]
 DOC = REPO / "docs" / "inputs.md"
