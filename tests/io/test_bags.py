@@ -414,3 +414,92 @@ def test_a_folder_of_db3_files_without_metadata_names_the_tool_that_restores_it(
     shutil.copy(next(folder.glob("*.db3")), folder / "second.db3")
     assert main(["calibrate", str(folder)]) == 2
     assert "ros2 bag reindex" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------- speed from GNSS velocity and NMEA
+
+RMC = "$GPRMC,123519,A,4807.038,N,01131.000,E,022.4,084.4,230394,003.1,W*6A"  # NMEA 0183's textbook examples
+VTG = "$GPVTG,054.7,T,034.4,M,005.5,N,010.2,K*48"
+
+
+def _gnss_bag(path: Path, velocity: bool, nmea: bool) -> None:
+    """A still IMU at 100 Hz with a GNSS fix; a GNSS velocity (east 3, north 4 m/s) and a commanded one
+    (10 m/s, not a measurement); NMEA sentences: RMC, VTG, a corrupted RMC and a GGA (no speed)."""
+    store = get_typestore(Stores.ROS1_NOETIC)
+    store.register(get_types_from_msg("std_msgs/Header header\nstring sentence\n", "nmea_msgs/msg/Sentence"))
+    t = store.types
+    vec = t["geometry_msgs/msg/Vector3"]
+
+    def header(i: int) -> Any:
+        return t["std_msgs/msg/Header"](
+            seq=i, stamp=t["builtin_interfaces/msg/Time"](sec=10 + i // 100, nanosec=(i % 100) * 10**7), frame_id="gps"
+        )
+
+    with Writer1(path) as writer:
+        imu = writer.add_connection("/imu", "sensor_msgs/msg/Imu", typestore=store)
+        fix = writer.add_connection("/fix", "sensor_msgs/msg/NavSatFix", typestore=store)
+        vel = writer.add_connection("/vel", "geometry_msgs/msg/TwistStamped", typestore=store)
+        cmd = writer.add_connection("/cmd_vel_stamped", "geometry_msgs/msg/TwistStamped", typestore=store)
+        sentence = writer.add_connection("/nmea_sentence", "nmea_msgs/msg/Sentence", typestore=store)
+        for i in range(2000):
+            ns = (10 + i // 100) * 10**9 + (i % 100) * 10**7
+            m = t["sensor_msgs/msg/Imu"](
+                header=header(i),
+                orientation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+                orientation_covariance=np.zeros(9),
+                angular_velocity=vec(x=0.0, y=0.0, z=0.0),
+                angular_velocity_covariance=np.zeros(9),
+                linear_acceleration=vec(x=0.0, y=0.0, z=9.8),
+                linear_acceleration_covariance=np.zeros(9),
+            )
+            writer.write(imu, ns, store.serialize_ros1(m, "sensor_msgs/msg/Imu"))
+            if i % 20:
+                continue
+            status = t["sensor_msgs/msg/NavSatStatus"](status=0, service=1)
+            f = t["sensor_msgs/msg/NavSatFix"](
+                header=header(i),
+                status=status,
+                latitude=48.1,
+                longitude=11.5,
+                altitude=500.0,
+                position_covariance=np.zeros(9),
+                position_covariance_type=0,
+            )
+            writer.write(fix, ns, store.serialize_ros1(f, "sensor_msgs/msg/NavSatFix"))
+            for conn, v in ((vel, (3.0, 4.0)), (cmd, (10.0, 0.0))):
+                if velocity:
+                    twist = t["geometry_msgs/msg/Twist"](
+                        linear=vec(x=v[0], y=v[1], z=0.5), angular=vec(x=0.0, y=0.0, z=0.0)
+                    )
+                    msg = t["geometry_msgs/msg/TwistStamped"](header=header(i), twist=twist)
+                    writer.write(conn, ns, store.serialize_ros1(msg, "geometry_msgs/msg/TwistStamped"))
+            if nmea:
+                text = [
+                    RMC,
+                    VTG,
+                    RMC.replace("022.4", "023.4"),
+                    "$GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,*47",
+                ][(i // 20) % 4]
+                msg = t["nmea_msgs/msg/Sentence"](header=header(i), sentence=text)
+                writer.write(sentence, ns, store.serialize_ros1(msg, "nmea_msgs/msg/Sentence"))
+
+
+def test_speed_from_a_gnss_velocity_not_from_a_command(tmp_path: Path) -> None:
+    path = tmp_path / "gnss.bag"
+    _gnss_bag(path, velocity=True, nmea=True)
+    got = read_log(path)
+    speed = got.channels["speed_mps"]
+    assert speed.t_s.size == 100 and np.all(speed.value == 5.0)  # |(3, 4)|: horizontal, not the command's 10
+    assert "heading_deg" not in got.channels  # a Twist's frame is not known to be east-north-up
+    assert any("GNSS velocity /vel" in n for n in got.notes) and any("/nmea_sentence" in n for n in got.notes)
+
+
+def test_speed_and_course_from_nmea_sentences(tmp_path: Path) -> None:
+    path = tmp_path / "nmea.bag"
+    _gnss_bag(path, velocity=False, nmea=True)
+    got = read_log(path)
+    speed, heading = got.channels["speed_mps"], got.channels["heading_deg"]
+    assert speed.t_s.size == 50  # RMC and VTG of each four sentences
+    np.testing.assert_allclose(np.unique(speed.value), [5.5 * 1852 / 3600, 22.4 * 1852 / 3600])
+    np.testing.assert_allclose(np.unique(heading.value), [54.7, 84.4])
+    assert got.dropped["nmea_bad_checksum"] == 25 and got.dropped["nmea_sentences_without_speed"] == 25

@@ -34,6 +34,7 @@ from mountcal.samples import Channel, FloatArray, Samples
 
 I64Array = NDArray[np.int64]
 SQLITE_BATCH = 65_536  # rows fetched at once from a .db3
+MIN_COURSE_SPEED_MPS = 1.0  # a GNSS course over ground is a heading only while moving
 
 
 @dataclass(frozen=True)
@@ -126,7 +127,24 @@ def _decode(batch: Batch, where: str, cdr: bool, dropped: Counter[str]) -> dict[
         ok = np.isfinite(speed)
         dropped["speed_mps_nonfinite"] += int((~ok).sum())
         return {"speed_mps": _keep(t, {"value": speed}, ok)}
+    if sel.kind == "nmea":
+        return _nmea(t, columns, dropped)
     return _pieces(Decoded(decoded.sec, decoded.nanosec, columns), sel.kind, dropped)
+
+
+def _nmea(t: FloatArray, columns: dict[str, FloatArray], dropped: Counter[str]) -> dict[str, _Piece]:
+    """Speed from RMC/VTG sentences; their course as a heading while moving (at rest it is noise)."""
+    bad = columns["bad_checksum"] > 0
+    speed, course = columns["sog"], columns["cog"]
+    has_speed = np.isfinite(speed)
+    moving = has_speed & np.isfinite(course) & (speed >= MIN_COURSE_SPEED_MPS)
+    dropped["nmea_bad_checksum"] += int(bad.sum())
+    dropped["nmea_sentences_without_speed"] += int((~bad & ~has_speed).sum())
+    dropped[f"heading_deg_below_{MIN_COURSE_SPEED_MPS:g}_mps"] += int((has_speed & np.isfinite(course) & ~moving).sum())
+    return {
+        "speed_mps": _keep(t, {"value": speed}, has_speed),
+        "heading_deg": _keep(t, {"value": np.mod(course, 360.0)}, moving),
+    }
 
 
 def _times(decoded: Decoded, record_ns: I64Array) -> FloatArray:
@@ -152,7 +170,9 @@ def ros1_topics(bag: ros1.Bag) -> dict[str, Topic]:
             types, problem = from_definition(first.definition, first.type_name), ""
         except DefinitionError as err:
             types, problem = None, str(err)
-        out[name] = Topic(name, first.type_name, tuple(c.id for c in conns), types, problem)
+        ids = tuple(c.id for c in conns)
+        count = sum(info.counts.get(i, 0) for info in bag.chunks for i in ids)
+        out[name] = Topic(name, first.type_name, ids, types, problem, count)
     return out
 
 
@@ -272,7 +292,9 @@ def mcap_topics(log: object) -> dict[str, Topic]:
                 problem = str(err)
         if any(c.message_encoding != "cdr" for c in channels):
             types, problem = None, f"messages encoded as {channels[0].message_encoding!r}, not CDR"
-        out[name] = Topic(name, type_name, tuple(c.id for c in channels), types, problem)
+        counts = log.statistics.channel_counts if log.statistics is not None else None
+        count = None if counts is None else sum(counts.get(c.id, 0) for c in channels)
+        out[name] = Topic(name, type_name, tuple(c.id for c in channels), types, problem, count)
     return out
 
 

@@ -99,10 +99,10 @@ def _opened(reader: Any, where: str, lone: bool) -> Opened:
     counts: dict[str, int] = {}
     for conn in reader.connections:
         counts[conn.topic] = counts.get(conn.topic, 0) + int(conn.msgcount)
-        if conn.topic in topics:
-            continue
-        types, problem = _definitions(conn)
-        topics[conn.topic] = Topic(conn.topic, conn.msgtype, (conn.id,), types, problem)
+    for conn in reader.connections:
+        if conn.topic not in topics:
+            types, problem = _definitions(conn)
+            topics[conn.topic] = Topic(conn.topic, conn.msgtype, (conn.id,), types, problem, counts[conn.topic])
     return Opened(
         where,
         next(iter(kinds)),

@@ -9,8 +9,10 @@ The rules, the same for every ROS container (ROS 1 bag, ROS 2 bag folder, MCAP r
   message carrying one is refused with the ``--topic … --field …`` that reads it.
 - **Temperature, fix, odometry**: the only topic of that type; several of a type are left unread
   and the notes say so (no option chooses among them).
-- **GNSS velocity** (``TwistStamped``, ``TwistWithCovarianceStamped``): read for speed only when the
-  recording has a GNSS fix, no odometry, and one such topic whose name is not a command (``cmd``).
+- **Speed** from one source, in order: odometry; a GNSS velocity (``TwistStamped``,
+  ``TwistWithCovarianceStamped``; only with a GNSS fix in the recording, and not a command topic,
+  ``cmd``); NMEA sentences (``nmea_msgs/msg/Sentence``, RMC and VTG, with their course as heading).
+  The others are left unread and the notes say so.
 """
 
 from __future__ import annotations
@@ -22,7 +24,8 @@ from mountcal.io.ros.kinds import TYPES, Target, target
 from mountcal.io.ros.types import IMU, VECTOR3, VECTOR3_STAMPED, DefinitionError, Types, carriers
 from mountcal.option_names import option
 
-AUX = ("temperature", "fix", "odom", "velocity")
+AUX = ("temperature", "fix", "odom", "velocity", "nmea")
+SPEED = ("odom", "velocity", "nmea")  # speed sources, in order of preference: one is read
 
 
 @dataclass(frozen=True)
@@ -34,6 +37,7 @@ class Topic:
     ids: tuple[int, ...]
     types: Types | None
     problem: str = ""  # why there are no definitions
+    count: int | None = None  # messages recorded (None: not known without reading them)
 
     def definitions(self, where: str) -> Types:
         if self.types is None:
@@ -164,10 +168,14 @@ def choose_aux(topics: dict[str, Topic], where: str, notes: list[str]) -> list[S
     by_kind: dict[str, list[Topic]] = {k: [] for k in AUX}
     for topic in topics.values():
         kind = TYPES.get(topic.type_name)
-        if kind in by_kind:
+        if kind in by_kind and topic.count != 0:  # a topic that recorded nothing is no source
             by_kind[kind].append(topic)
-    velocity = [t for t in by_kind["velocity"] if "cmd" not in t.name.lower()]
-    by_kind["velocity"] = velocity if by_kind["fix"] and not by_kind["odom"] else []
+    by_kind["velocity"] = [t for t in by_kind["velocity"] if "cmd" not in t.name.lower()] if by_kind["fix"] else []
+    speed = next((k for k in SPEED if by_kind[k]), None)
+    for kind in SPEED:
+        if kind != speed and by_kind[kind]:
+            notes.append(f"speed not taken from {', '.join(t.name for t in by_kind[kind])}: {speed} is read")
+            by_kind[kind] = []
     out = []
     for kind, found in by_kind.items():
         if len(found) > 1:
@@ -185,6 +193,8 @@ def choose_aux(topics: dict[str, Topic], where: str, notes: list[str]) -> list[S
             out.append(Selection(topic, chosen))
             if kind == "velocity":
                 notes.append(f"speed from the GNSS velocity {topic.name} (horizontal magnitude, never negative)")
+            if kind == "nmea":
+                notes.append(f"speed and course from the NMEA sentences of {topic.name} (RMC, VTG)")
     return out
 
 

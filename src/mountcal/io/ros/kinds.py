@@ -10,7 +10,9 @@ Kinds (``Target.kind``) and their message types:
 - ``temperature``, ``fix``, ``odom``: ``sensor_msgs/msg/Temperature``, ``sensor_msgs/msg/NavSatFix``,
   ``nav_msgs/msg/Odometry``;
 - ``velocity``: ``geometry_msgs/msg/TwistStamped`` or ``TwistWithCovarianceStamped`` (a GNSS
-  receiver's velocity): the linear velocity's three components.
+  receiver's velocity): the linear velocity's three components;
+- ``nmea``: ``nmea_msgs/msg/Sentence``: speed and course over ground of its RMC and VTG sentences
+  (:mod:`mountcal.io.ros.nmea`; text, parsed message by message: GNSS rates are low).
 
 A sample's stamp is the ``header.stamp`` nearest the target along its path (the Imu's own header,
 else the enclosing message's); without one, the record's time (see :attr:`Target.stamp`).
@@ -22,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mountcal.io.ros import layout
+from mountcal.io.ros import layout, nmea
 from mountcal.io.ros.types import IMU, NAME, VECTOR3, VECTOR3_STAMPED, Types, has_stamp, type_at
 from mountcal.io.ros2.cdr import CdrError, Decoded, Rows
 
@@ -35,6 +37,7 @@ TYPES = {
     "nav_msgs/msg/Odometry": "odom",
     "geometry_msgs/msg/TwistStamped": "velocity",
     "geometry_msgs/msg/TwistWithCovarianceStamped": "velocity",
+    "nmea_msgs/msg/Sentence": "nmea",
 }
 FIELD_TYPES = (IMU, VECTOR3, VECTOR3_STAMPED)  # what --field may point at
 _VELOCITY = {
@@ -108,6 +111,8 @@ def _columns(t: Target) -> dict[str, list[Path]]:
             "vx": [("twist", "twist", "linear", "x")],
             "quat": [("pose", "pose", "orientation", c) for c in (*XYZ, "w")],
         }
+    if t.kind == "nmea":
+        return {}
     return {"v": [(*p, "linear", c) for c in XYZ]}
 
 
@@ -122,9 +127,13 @@ def decode(rows: Rows, types: Types, t: Target, *, cdr: bool) -> Decoded:
     """
     columns = _columns(t)
     stamp = [] if t.stamp is None else [(*t.stamp, "sec"), (*t.stamp, "nanosec")]
-    wanted = [p for paths in columns.values() for p in paths] + stamp
+    text = [("sentence",)] if t.kind == "nmea" else []
+    wanted = [p for paths in columns.values() for p in paths] + stamp + text
     found = layout.locate(rows, types, t.type_name, wanted, cdr=cdr)
     out = {}
+    if text:
+        speed, course, bad = nmea.parse(layout.read_strings(rows, found, text[0]))
+        out = {"sog": speed, "cog": course, "bad_checksum": bad}
     for name, paths in columns.items():
         if len(paths) == 1:
             out[name] = layout.read(rows, found, paths[0]).astype(np.float64)

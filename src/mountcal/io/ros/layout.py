@@ -81,11 +81,15 @@ class _Walk:
         for name, desc in self.types[type_name][1]:
             path = (*prefix, name)
             if path in self.wanted:
-                primitive = _number(desc)
-                if primitive is None:
-                    raise CdrError(f"field {'.'.join(path)} is not a number")
-                at = self.align(at, _size(primitive))
-                self.found[path] = (at, primitive)
+                if desc == (BASE, ("string", 0)):
+                    at = self.align(at, 4)
+                    self.found[path] = (at, "string")
+                else:
+                    primitive = _number(desc)
+                    if primitive is None:
+                        raise CdrError(f"field {'.'.join(path)} is neither a number nor a string")
+                    at = self.align(at, _size(primitive))
+                    self.found[path] = (at, primitive)
                 if len(self.found) == len(self.wanted):
                     return None
             if path in self.prefixes and desc[0] == NAME:
@@ -147,8 +151,8 @@ class _Walk:
 def locate(
     rows: Rows, types: Types, type_name: str, wanted: Iterable[Path], *, cdr: bool
 ) -> dict[Path, tuple[Offset, str]]:
-    """Offset and primitive type of each wanted numeric field (a path through nested messages; a fixed
-    array of numbers stands for its first element).
+    """Offset and primitive type of each wanted numeric or string field (a path through nested messages; a
+    fixed array of numbers stands for its first element; a string's offset is that of its length).
 
     Raises
     ------
@@ -184,4 +188,19 @@ def read_columns(rows: Rows, found: dict[Path, tuple[Offset, str]], paths: list[
     return np.column_stack([read(rows, found, p) for p in paths])
 
 
-__all__ = ["PRIMITIVES", "locate", "read", "read_columns"]
+def read_strings(rows: Rows, found: dict[Path, tuple[Offset, str]], path: Path) -> list[bytes]:
+    """The values of one located string field, one ``bytes`` per message (its NUL, in CDR, removed).
+
+    Text is taken message by message: for the low-rate topics that carry it (NMEA sentences).
+    """
+    at, kind = found[path]
+    if kind != "string":
+        raise CdrError(f"field {'.'.join(path)} is not a string")
+    length = rows.take(at, "<u4", 1, ".".join(path))[:, 0].astype(np.int64)
+    start = rows.start + at + 4
+    rows.need(np.asarray(at) + 4 + length, ".".join(path))
+    buf = rows.buf
+    return [bytes(buf[s : s + n]).rstrip(b"\0") for s, n in zip(start.tolist(), length.tolist(), strict=True)]
+
+
+__all__ = ["PRIMITIVES", "locate", "read", "read_columns", "read_strings"]
