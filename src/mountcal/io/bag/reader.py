@@ -1,5 +1,5 @@
-"""ROS bags in the registry (:mod:`mountcal.io.registry`): a ROS 1 ``.bag``, a ROS 2 bag folder (or its
-``metadata.yaml``), a lone ROS 2 ``.db3``."""
+"""ROS bags in the registry (:mod:`mountcal.io.registry`): a ROS 1 ``.bag``, a ROS 2 bag folder, a lone
+ROS 2 ``.db3``."""
 
 from __future__ import annotations
 
@@ -23,9 +23,7 @@ class BagReader(LogReader):
             return True
         from mountcal.io.bag.ros2 import bag_folder
 
-        if bag_folder(path) is not None:
-            return True
-        return path.is_dir() and any(path.glob("*.db3"))  # a bag folder that lost its metadata: refused, with the fix
+        return bag_folder(path) is not None
 
     def read(self, path: Path, options: LogOptions) -> Samples:
         if path.suffix.lower() == ".bag":

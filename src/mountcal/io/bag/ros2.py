@@ -35,12 +35,12 @@ class Opened:
 
 
 def bag_folder(path: Path) -> Path | None:
-    """The bag folder ``path`` names: itself when it holds ``metadata.yaml``, or the folder of that file."""
-    if path.is_dir() and (path / "metadata.yaml").is_file():
-        return path
-    if path.name == "metadata.yaml" and path.is_file():
-        return path.parent
-    return None
+    """``path`` when it is a bag folder (it holds ``metadata.yaml``), else None.
+
+    Its ``metadata.yaml`` alone is not claimed: a folder walk (``mountcal fleet``) would read the bag
+    once for that file and once more for its storage files.
+    """
+    return path if path.is_dir() and (path / "metadata.yaml").is_file() else None
 
 
 @contextmanager
