@@ -241,15 +241,16 @@ def is_stop_table(path: str | Path, has_dbc: bool = False, columns: bool = False
     try:
         if path.stat().st_size == 0:
             found = "an empty file (0 bytes)"
-        elif suffix == ".csv":
-            import pandas as pd
-
-            names = pd.read_csv(path, nrows=0, comment="#", skipinitialspace=True).columns
         else:
-            import pyarrow.parquet as pq
+            if suffix == ".csv":
+                import pandas as pd
 
-            names = pq.read_schema(path).names
-        return _stop_columns(names, path)
+                names = pd.read_csv(path, nrows=0, comment="#", skipinitialspace=True).columns
+            else:
+                import pyarrow.parquet as pq
+
+                names = pq.read_schema(path).names
+            return _stop_columns(names, path)
     except FileNotFoundError:
         found = "no such file"
     except OSError as err:

@@ -501,3 +501,19 @@ def test_speed_and_course_from_nmea_sentences(tmp_path: Path) -> None:
     np.testing.assert_allclose(np.unique(speed.value), [5.5 * 1852 / 3600, 22.4 * 1852 / 3600])
     np.testing.assert_allclose(np.unique(heading.value), [54.7, 84.4])
     assert got.dropped["nmea_bad_checksum"] == 25 and got.dropped["nmea_sentences_without_speed"] == 25
+
+
+@pytest.mark.parametrize(("storage", "mode"), [("sqlite3", "message"), ("sqlite3", "file"), ("mcap", "file")])
+def test_a_compressed_ros2_bag_reads_as_the_demo(tmp_path: Path, storage: str, mode: str) -> None:
+    folder = tmp_path / "bag"
+    convert([PARKING], folder, storage, 9, "zstd", mode, None, None, [], [], [], [])
+    got = read_log(folder)
+    assert_same_samples(read_log(PARKING), got)
+    assert any("one by one" in n for n in got.notes) == (mode == "message")
+
+
+def test_a_ros2_mcap_bag_compressed_message_by_message_is_refused_with_the_converter(tmp_path: Path) -> None:
+    folder = tmp_path / "bag"
+    convert([PARKING], folder, "mcap", 9, "zstd", "message", None, None, [], [], [], [])
+    with pytest.raises(InputError, match="ros2 bag convert"):
+        read_log(folder)

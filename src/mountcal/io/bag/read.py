@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 from mountcal.errors import InputError
 from mountcal.io.bag import ros1
 from mountcal.io.bag.topics import Selection, Topic, choose_aux, choose_imu
-from mountcal.io.inputs import max_rows, too_many_rows
+from mountcal.io.inputs import block_too_large, max_block_bytes, max_rows, too_many_rows
 from mountcal.io.mcap.read import _concat, _gyro, _keep, _Piece, _pieces  # the MCAP reader's sample rules
 from mountcal.io.ros import kinds
 from mountcal.io.ros.types import DefinitionError, Types, from_definition, standard
@@ -257,6 +257,8 @@ def _sqlite_batch(
     if decompress is not None:
         data = [decompress(d) for d in data]
     size = np.fromiter(map(len, data), dtype=np.int64, count=len(data))
+    if int(size.sum()) > max_block_bytes():  # one batch of rows is this reader's block
+        raise block_too_large(str(file), f"a batch of {size.size} messages ({what})", f"{int(size.sum())} bytes")
     start = np.zeros(size.size, dtype=np.int64)
     np.cumsum(size[:-1], out=start[1:])
     buf = np.frombuffer(b"".join(data), dtype=np.uint8)

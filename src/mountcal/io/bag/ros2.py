@@ -130,9 +130,12 @@ def _definitions(conn: Any) -> tuple[Types | None, str]:
 
 
 def _unzstd(data: bytes) -> bytes:
+    """One message of a bag compressed message by message, inflated to at most the block limit."""
     import zstandard
 
-    return zstandard.ZstdDecompressor().decompress(data)
+    from mountcal.io.inputs import max_block_bytes
+
+    return zstandard.ZstdDecompressor().decompress(data, max_output_size=max_block_bytes())
 
 
 def read_ros2(path: Path, *, topic: str | None = None, field: str | None = None) -> Samples:
