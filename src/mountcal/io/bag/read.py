@@ -27,6 +27,7 @@ from mountcal.io.bag import ros1
 from mountcal.io.bag.topics import Selection, Topic, choose_aux, choose_imu
 from mountcal.io.inputs import block_too_large, max_block_bytes, max_rows, too_many_rows
 from mountcal.io.mcap.read import _concat, _gyro, _keep, _Piece, _pieces  # the MCAP reader's sample rules
+from mountcal.io.mcap.records import Log
 from mountcal.io.ros import kinds
 from mountcal.io.ros.types import DefinitionError, Types, from_definition, standard
 from mountcal.io.ros2.cdr import CdrError, Decoded, Rows, cdr_rows
@@ -273,11 +274,8 @@ def _sqlite_batch(
 # --------------------------------------------------------------------------- MCAP (ROS 2 storage, or --field)
 
 
-def mcap_topics(log: object) -> dict[str, Topic]:
+def mcap_topics(log: Log) -> dict[str, Topic]:
     """An MCAP log's topics with the definitions of their schemas (``ros2msg`` or ``ros2idl``)."""
-    from mountcal.io.mcap.records import Log
-
-    assert isinstance(log, Log)
     out = {}
     for name, channels in log.topics().items():
         schema = log.schemas.get(channels[0].schema_id)
@@ -317,14 +315,13 @@ def read_mcap_topics(path: str | Path, *, topic: str | None, field: str | None) 
 
 
 def mcap_batches(
-    log: object, selections: Sequence[Selection], ids: dict[str, tuple[int, ...]] | None = None
+    log: Log, selections: Sequence[Selection], ids: dict[str, tuple[int, ...]] | None = None
 ) -> Generator[Batch, None, None]:
     """Blocks (MCAP chunks) of the selections' messages; ``ids`` gives each topic's channel ids in this
     file when they are not those of the selection (the files of a ROS 2 bag number channels apart)."""
     from mountcal.io.mcap.chunks import chunk_units
-    from mountcal.io.mcap.records import MESSAGE_HEAD, RECORD_HEAD, Log, record_field
+    from mountcal.io.mcap.records import MESSAGE_HEAD, RECORD_HEAD, record_field
 
-    assert isinstance(log, Log)
     channel_ids = {s.topic.name: s.topic.ids if ids is None else ids.get(s.topic.name, ()) for s in selections}
     wanted = frozenset(i for v in channel_ids.values() for i in v)
     with closing(chunk_units(log, wanted)) as units:
