@@ -63,6 +63,11 @@ def option(key: str, value: str | bool | None = None) -> str:
     return f"{python}=" if value is None else f"{python}={value!r}"
 
 
+def flags_on() -> bool:
+    """Whether :func:`option` spells flags here (the fleet passes it on to its worker processes)."""
+    return _FLAGS.get()
+
+
 @contextmanager
 def as_flags() -> Iterator[None]:
     """Within this block, :func:`option` spells options as the CLI's flags."""
@@ -73,4 +78,4 @@ def as_flags() -> Iterator[None]:
         _FLAGS.reset(token)
 
 
-__all__ = ["OPTIONS", "as_flags", "option"]
+__all__ = ["OPTIONS", "as_flags", "flags_on", "option"]

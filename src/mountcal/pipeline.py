@@ -127,9 +127,10 @@ def calibrate_log(
     return calibrate_job(job)
 
 
-def calibrate_job(job: LogJob) -> LogResult:
-    """:func:`calibrate_log` of a prepared job (the fleet's and the command line's form)."""
-    samples = with_gravity(read_log(list(job.paths), job.log))
+def calibrate_job(job: LogJob, samples: Samples | None = None) -> LogResult:
+    """:func:`calibrate_log` of a prepared job (the fleet's and the command line's form); ``samples``
+    are the job's files already read (the fleet reads a log's splits itself to count their gaps)."""
+    samples = with_gravity(read_log(list(job.paths), job.log) if samples is None else samples)
     source = _source(job.paths)
     skipped: dict[str, str] = {}
     static = found = table = None

@@ -8,10 +8,16 @@
   a second, and its workers die with the parent. At most two jobs per worker are in flight, so
   when a worker process dies (out of memory, a crash in a native library) the suspects are known:
   they are retried one at a time, and a log that kills its worker twice is recorded as failed.
+  Workers ignore Ctrl-C (the command handles it and stops them) and die with the command however
+  it ends, SIGKILL included: each watches the command's process (a pidfd, else a poll) and kills
+  itself when it is gone, so no worker outlives its run holding the terminal or a pipe.
 - :class:`DaskEngine` (``--scheduler tcp://HOST:PORT``): the same jobs on an existing Dask
   distributed cluster via ``distributed.Client(address)``. Workers need only the installed
-  mountcal and the log files at the same paths (a shared file system). A task whose worker dies
-  repeatedly comes back as ``KilledWorker`` and is recorded as failed.
+  mountcal and the log files at the same paths (a shared file system) or in object storage. Jobs
+  go to the workers as paths, never bytes, in batches sized so that a batch holds about
+  :data:`BATCH_TARGET_S` of work (estimated from the logs done so far; smaller at the end, so that
+  the workers finish together): a task costs the scheduler a few milliseconds, a log ~0.1 s. A
+  batch whose worker dies repeatedly comes back as ``KilledWorker`` and its logs are recorded as failed.
 
 This module imports nothing heavy, so that the command line can start the worker server
 (:func:`start_worker_server`) before it imports mountcal's numerical code itself: the two imports
@@ -27,7 +33,10 @@ import multiprocessing
 import multiprocessing.forkserver
 import os
 import secrets
+import select
+import signal
 import threading
+import time
 from collections import deque
 from collections.abc import Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, CancelledError, Future, ProcessPoolExecutor, wait
@@ -40,6 +49,8 @@ if TYPE_CHECKING:
     from mountcal.fleet.inputs import FleetJob
 
 WORKER_MODULE = "mountcal.fleet.worker"  # what the worker server imports before forking workers
+SERVER_MODULE = "mountcal.fleet.server"  # imported first by the worker server: it ignores Ctrl-C
+PASSED_VARIABLES = ("AWS_",)  # the workers see these as the command has them now (object storage)
 THREAD_VARIABLES = (
     "OMP_NUM_THREADS",
     "OPENBLAS_NUM_THREADS",
@@ -49,6 +60,9 @@ THREAD_VARIABLES = (
 )
 QUEUED_PER_WORKER = 2  # jobs in flight per worker: one running, one waiting (no idle gap between logs)
 MAX_WORKER_DEATHS = 2  # a log in flight when its worker died this often is recorded as failed
+BATCH_TARGET_S = 0.5  # Dask: work per task (a task costs the scheduler and the network milliseconds)
+MAX_BATCH = 64
+WATCH_PERIOD_S = 1.0  # where there is no pidfd, a worker checks this often whether the command lives
 
 
 class Engine(Protocol):
@@ -96,7 +110,18 @@ class LocalEngine:
         return self
 
     def __exit__(self, *exc: object) -> None:
+        if isinstance(exc[1], KeyboardInterrupt | SystemExit):
+            self.kill()
         self.close()
+
+    def kill(self) -> None:
+        """Stop the workers now, logs in flight and all (an interrupted run: they are redone next time)."""
+        if self._starting is not None:
+            self._starting.join()
+        processes = getattr(self._pool, "_processes", None) or {}
+        for process in list(processes.values()):
+            with contextlib.suppress(Exception):
+                process.kill()
 
     def start(self) -> None:
         """Start the workers in a background thread (the forkserver imports mountcal meanwhile)."""
@@ -193,7 +218,45 @@ class LocalEngine:
                 self._pool = self._new_pool()
 
     def _new_pool(self) -> ProcessPoolExecutor:
-        return ProcessPoolExecutor(max_workers=self.workers, mp_context=worker_context())
+        passed = {k: v for k, v in os.environ.items() if k.startswith(PASSED_VARIABLES) or k in THREAD_VARIABLES}
+        return ProcessPoolExecutor(
+            max_workers=self.workers,
+            mp_context=worker_context(),
+            initializer=worker_started,
+            initargs=(os.getpid(), passed),
+        )
+
+
+def worker_started(parent: int, environment: dict[str, str]) -> None:
+    """A worker's first act: ignore Ctrl-C, take the command's environment as it is now (the worker
+    server may be older than a change to it), and watch the command to die with it."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    for key in [k for k in os.environ if k.startswith(PASSED_VARIABLES)]:
+        os.environ.pop(key)
+    os.environ.update(environment)
+    threading.Thread(target=_die_with, args=(parent,), name="mountcal-parent-watch", daemon=True).start()
+
+
+def _die_with(parent: int) -> None:
+    """Return never: kill this process as soon as ``parent`` has ended (SIGKILL to it included)."""
+    try:
+        fd = os.pidfd_open(parent)
+    except ProcessLookupError:
+        fd = -1  # already gone
+    except (AttributeError, OSError):  # no pidfd (not Linux ≥ 5.3): poll
+        fd = None
+    if fd is None:
+        while True:
+            time.sleep(WATCH_PERIOD_S)
+            try:
+                os.kill(parent, 0)
+            except ProcessLookupError:
+                break
+            except PermissionError:  # alive, another user's: cannot be ours
+                pass
+    elif fd >= 0:
+        select.select([fd], [], [])
+    os.kill(os.getpid(), signal.SIGKILL)
 
 
 def worker_context() -> multiprocessing.context.BaseContext:
@@ -201,7 +264,7 @@ def worker_context() -> multiprocessing.context.BaseContext:
     the first), else ``spawn``; never a plain ``fork`` of a process that may hold threads."""
     if "forkserver" in multiprocessing.get_all_start_methods():
         context = multiprocessing.get_context("forkserver")
-        context.set_forkserver_preload([WORKER_MODULE])
+        context.set_forkserver_preload([SERVER_MODULE, WORKER_MODULE])
         return context
     return multiprocessing.get_context("spawn")
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections import Counter
 from collections.abc import Iterator, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -21,6 +22,7 @@ from mountcal.errors import InputError, MountcalError
 from mountcal.fleet.engines import make_engine
 from mountcal.fleet.inputs import FleetJob
 from mountcal.fleet.progress import Progress
+from mountcal.fleet.storage import is_url
 from mountcal.fleet.store import (
     LOG_COLUMNS,
     VEHICLE_COLUMNS,
@@ -99,6 +101,9 @@ class FleetResult:
     elapsed_s: float
     discarded: dict[str, int] = field(default_factory=dict)
     not_confident: tuple[str, ...] = ()  # logs whose calibration is not confident (flag not_confident)
+    layout: dict[str, int] = field(default_factory=dict)  # logs by layout: folders, canedge, manifest
+    sessions: int = 0  # CANedge sessions
+    splits: int = 0  # files read, a session's splits each
 
 
 def outputs_of(output: str | Path) -> tuple[Path, Path, Path]:
@@ -107,7 +112,12 @@ def outputs_of(output: str | Path) -> tuple[Path, Path, Path]:
     return output, output.with_name(f"{output.stem}_vehicles{output.suffix}"), output.with_name(output.name + ".parts")
 
 
-def run_fleet(jobs: Sequence[FleetJob], output: str | Path, options: FleetOptions | None = None) -> FleetResult:
+def run_fleet(
+    jobs: Sequence[FleetJob],
+    output: str | Path,
+    options: FleetOptions | None = None,
+    set_aside: Mapping[str, int] | None = None,
+) -> FleetResult:
     """Calibrate every job (skipping those an earlier run finished) and write the two tables.
 
     Parameters
@@ -117,6 +127,9 @@ def run_fleet(jobs: Sequence[FleetJob], output: str | Path, options: FleetOption
     output : str or Path
         The per-log Parquet table; ``<stem>_vehicles.parquet`` and ``<output>.parts/`` go beside it.
     options : FleetOptions, optional
+    set_aside : mapping of str to int, optional
+        Files the inputs' layout set aside, by reason (``collect_jobs(discarded=…)``): reported
+        with the run's own.
 
     Raises
     ------
@@ -125,10 +138,12 @@ def run_fleet(jobs: Sequence[FleetJob], output: str | Path, options: FleetOption
         another run is writing the same output (it holds the lock).
     """
     with output_lock(outputs_of(output)[0]):  # two runs on one output would redo each other's work
-        return _run_locked(jobs, output, options)
+        return _run_locked(jobs, output, options, dict(set_aside or {}))
 
 
-def _run_locked(jobs: Sequence[FleetJob], output: str | Path, options: FleetOptions | None) -> FleetResult:
+def _run_locked(
+    jobs: Sequence[FleetJob], output: str | Path, options: FleetOptions | None, set_aside: dict[str, int]
+) -> FleetResult:
     options = options or FleetOptions()
     started = time.monotonic()
     output, vehicles_path, parts = outputs_of(output)
@@ -203,11 +218,15 @@ def _run_locked(jobs: Sequence[FleetJob], output: str | Path, options: FleetOpti
         engine=engine.name,
         elapsed_s=time.monotonic() - started,
         discarded={
+            **set_aside,
             "inputs naming a log already listed": duplicates,
             "temporary files of a killed run": stale,
             "unreadable part files (their logs were recalculated)": unreadable,
         },
         not_confident=doubtful,
+        layout=dict(Counter(job.layout for job in jobs)),
+        sessions=sum(job.session is not None for job in jobs),
+        splits=sum(len(job.job.paths) for job in jobs),
     )
 
 
@@ -220,12 +239,24 @@ def _check_output(output: Path, jobs: Sequence[FleetJob]) -> None:
     check_outputs(
         {"fleet table": table, "vehicles table": vehicles},
         {
-            "log": [p for job in jobs for p in job.job.paths],
-            "DBC, mapping or protocol sheet": [p for job in jobs for p in _settings_files(job)],
+            "log": [p for job in jobs for p in job.job.paths if _local(p)],
+            "DBC, mapping or protocol sheet": [p for job in jobs for p in _settings_files(job) if _local(p)],
         },
     )
     for path in (table, vehicles):
         check_overwritable(path)
+
+
+def _local(path: str) -> bool:
+    """A local file that could be the output: not an object in storage, nor a symlink loop (which
+    resolves to nothing, and fails its own row)."""
+    if is_url(path):
+        return False
+    try:
+        Path(path).resolve()
+    except (OSError, RuntimeError):
+        return False
+    return True
 
 
 def _settings_files(job: FleetJob) -> list[str]:

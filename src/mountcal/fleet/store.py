@@ -49,7 +49,7 @@ def file_digest(path: str | Path, where: str | None = None) -> str:
         raise InputError(
             where or str(path),
             "a regular file",
-            f"{kind} ({path})",
+            kind if where else f"{kind} ({path})",
             "Point the manifest or option at the file itself; the other logs are calibrated regardless.",
         )
     try:
@@ -58,7 +58,7 @@ def file_digest(path: str | Path, where: str | None = None) -> str:
         raise InputError(
             where or str(path),
             "a readable file",
-            f"{err.strerror or err or type(err).__name__} ({path})",
+            f"{err.strerror or err or type(err).__name__}" + ("" if where else f" ({path})"),
             "Check the path; the other logs are calibrated regardless.",
         ) from err
     return f"blake3:{digest.hexdigest()}"
@@ -69,9 +69,11 @@ def job_hash(job: FleetJob) -> str:
 
     Paths and the vehicle id are not part of it (a renamed or moved log is the same log); the file
     suffixes (they choose the reader), the contents of the DBC, mapping and protocol sheet are, as
-    is the mountcal version.
+    is the mountcal version. An object in storage counts by its listed stamp (ETag, size, time), not
+    its bytes: a resumed run reads no object twice.
     """
     lj = job.job
+    stamps = job.stamps or (None,) * len(lj.paths)
     log = asdict(lj.log)
     for key in ("dbc", "mapping"):
         if log[key] is not None:
@@ -80,7 +82,10 @@ def job_hash(job: FleetJob) -> str:
         "key": PART_FORMAT,
         "version": PART_VERSION,
         "mountcal": software_version(),
-        "files": [(Path(p).suffix.lower(), file_digest(p, where=job.log)) for p in lj.paths],  # suffix: the reader
+        "files": [  # the suffix chooses the reader
+            (Path(p).suffix.lower(), stamp or file_digest(p, where=shown))
+            for p, shown, stamp in zip(lj.paths, job.shown or lj.paths, stamps, strict=True)
+        ],
         "log": log,
         "protocol": None if lj.protocol is None else file_digest(lj.protocol, where=f"{job.log}: protocol sheet"),
         "detection": asdict(lj.detection),
@@ -196,7 +201,12 @@ _L = pa.list_(pa.string())
 
 LOG_COLUMNS: tuple[tuple[str, pa.DataType, str], ...] = (
     ("vehicle_id", _S, "vehicle (manifest, or the log's parent folder name)"),
-    ("log", _S, "the log file(s) as found; split files joined with ' + '"),
+    ("log", _S, "the log as found: a file, split files joined with ' + ', or a CANedge session folder"),
+    ("session", _S, "the CANedge session (folder name); null in the other layouts"),
+    ("n_splits", _I, "files joined into this log (a CANedge session's splits)"),
+    ("split_gaps", _I, "gaps between consecutive splits: more than 1 s without a sample"),
+    ("split_gap_s", _F, "the gaps' total duration (s)"),
+    ("split_overlaps", _I, "splits starting before the previous one ends (the log then fails: not one recording)"),
     ("status", _S, "ok or failed"),
     ("start_time", _T, "start of the log (manifest, or the log's clock when it is Unix time)"),
     ("start_time_source", _S, "manifest, log clock, or null"),

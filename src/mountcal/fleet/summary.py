@@ -16,7 +16,8 @@ def summary_lines(result: FleetResult) -> list[str]:
     lines = [
         f"mountcal fleet — {len(logs)} logs of {logs['vehicle_id'].nunique()} vehicles on {result.engine}: "
         f"{len(logs) - len(failed)} ok, {len(failed)} failed; {result.computed} calibrated now, "
-        f"{result.reused} from earlier runs ({result.elapsed_s:.1f} s)"
+        f"{result.reused} from earlier runs ({result.elapsed_s:.1f} s)",
+        "  layout: " + layout_line(result),
     ]
     for row in failed.head(MAX_LISTED).itertuples():
         named = Path(str(row.log).split(" + ")[0]).name in str(row.error)  # the message names the file
@@ -39,6 +40,21 @@ def summary_lines(result: FleetResult) -> list[str]:
         lines.append("  set aside: " + "; ".join(set_aside))
     lines.append(f"wrote {result.output} and {result.vehicles_path} (finished logs are kept in {result.parts})")
     return lines
+
+
+def layout_line(result: FleetResult) -> str:
+    """Which layout the inputs were read in, and the vehicles, sessions and splits it found."""
+    logs = result.logs
+    names = ", ".join(f"{name} ({n} logs)" for name, n in sorted(result.layout.items())) or "none"
+    line = f"{names}; {logs['vehicle_id'].nunique()} vehicles"
+    if result.sessions:
+        gaps = int(logs["split_gaps"].fillna(0).sum())
+        overlaps = int(logs["split_overlaps"].fillna(0).sum())
+        line += (
+            f", {result.sessions} sessions, {result.splits} splits "
+            f"({gaps} gaps of {float(logs['split_gap_s'].fillna(0).sum()):.1f} s in all, {overlaps} overlaps between splits)"
+        )
+    return line
 
 
 def _p(p: float) -> str:
