@@ -281,12 +281,16 @@ def start_worker_server() -> None:
         multiprocessing.forkserver.ensure_running()
 
 
+NETWORK_SCHEMES = ("tcp", "tls", "ws", "wss")
+
+
 class DaskEngine:
     """An existing Dask distributed cluster (see the module docstring)."""
 
     def __init__(self, address: str, timeout_s: float = 20.0) -> None:
         self.address, self.timeout_s = address, timeout_s
         self.name = f"Dask scheduler {address}"
+        self.live_workers = 0  # the cluster's workers when last looked (the progress bar shows them)
         self._client: Any = None
         self._distributed: Any = None
 
@@ -321,19 +325,21 @@ class DaskEngine:
             ) from err
 
     def _check_address(self) -> None:
-        """Refuse a malformed address before a Client exists: a Client that failed to parse one
-        still runs its finaliser, which waits 40 s and prints a traceback."""
+        """Refuse an address that cannot name a scheduler of another process before a Client exists
+        (a Client that failed on one still runs its finaliser, which waits 40 s and prints a
+        traceback): a network scheme with a host and port."""
         from distributed.comm.addressing import parse_address, parse_host_port
 
         try:
             scheme, location = parse_address(self.address)
-            if scheme in ("tcp", "tls", "ws", "wss"):
-                parse_host_port(location)
+            if scheme not in NETWORK_SCHEMES:
+                raise ValueError(f"the scheme {scheme}:// reaches no scheduler outside this process")
+            parse_host_port(location)
         except ValueError as err:
             raise InputError(
-                f"the Dask scheduler {self.address}",
-                "a Dask scheduler address, tcp://HOST:PORT",
-                f"not an address ({err})",
+                f"--scheduler {self.address}",
+                "a Dask scheduler address, tcp://HOST:PORT (or tls://, ws://, wss://)",
+                f"not such an address ({err})",
                 "Write it as tcp://HOST:PORT, e.g. tcp://10.0.0.5:8786 (the port `dask scheduler` prints).",
             ) from err
 
@@ -343,23 +349,56 @@ class DaskEngine:
                 self._client.close()
             self._client = None
 
+    def workers(self) -> int:
+        """The cluster's workers now (at least 1: a cluster still starting is given time)."""
+        try:
+            return max(1, len(self._client.scheduler_info(n_workers=-1).get("workers", {})))
+        except Exception:  # a scheduler too old for n_workers, or busy: the batching only needs a guess
+            return max(1, len(self._client.scheduler_info().get("workers", {})))
+
     def results(self, jobs: Iterable[tuple[str, FleetJob]]) -> Iterator[tuple[str, dict[str, Any]]]:
-        from mountcal.fleet.worker import run_job
+        from mountcal.fleet.worker import run_batch
 
         self.start()
         client = self._client
         token = secrets.token_hex(4)
-        futures: dict[Any, str] = {}
+        source = iter(jobs)
+        waiting: deque[tuple[str, FleetJob]] = deque()  # hashed, not yet submitted
+        batches: dict[Any, list[str]] = {}
+        sizing = _BatchSizing()
         finished = self._distributed.as_completed([], loop=client.loop)
+        exhausted = False
+        workers, looked = self.workers(), time.monotonic()
+        self.live_workers = workers
         try:
-            for key, job in jobs:  # submit as the logs are hashed; collect what is already done meanwhile
-                future = client.submit(run_job, job, key=f"mountcal-fleet-{token}-{key[:16]}", pure=False)
-                futures[future] = key
-                finished.add(future)
-                while finished.has_ready():
-                    yield from self._collect(finished.next_batch(block=False), futures)
-            while not finished.is_empty():
-                yield from self._collect(finished.next_batch(block=True), futures)
+            while True:
+                # keep two batches per worker queued; look ahead so that the last batches can be shrunk
+                ahead = 2 * workers * sizing.size(MAX_BATCH * workers, False, workers) + 1
+                while not exhausted and len(waiting) < ahead:
+                    pair = next(source, None)
+                    if pair is None:
+                        exhausted = True
+                    else:
+                        waiting.append(pair)
+                while waiting and len(batches) < 2 * workers:
+                    size = sizing.size(len(waiting), exhausted, workers)
+                    batch = [waiting.popleft() for _ in range(min(size, len(waiting)))]
+                    keys = [key for key, _ in batch]
+                    future = client.submit(
+                        run_batch, [job for _, job in batch], key=f"mountcal-fleet-{token}-{keys[0][:16]}", pure=False
+                    )
+                    batches[future] = keys
+                    finished.add(future)
+                if not batches:
+                    break
+                for future in finished.next_batch(block=True):
+                    keys = batches.pop(future)
+                    for key, record in zip(keys, self._records(future, len(keys)), strict=True):
+                        sizing.done(record)
+                        yield key, record
+                if time.monotonic() - looked > WATCH_PERIOD_S:  # the cluster may grow or shrink
+                    workers, looked = self.workers(), time.monotonic()
+                    self.live_workers = workers
         except CancelledError as err:
             raise MountcalError(
                 f"{self.address}: lost the Dask scheduler ({err}); the logs finished so far are "
@@ -367,20 +406,43 @@ class DaskEngine:
             ) from err
         finally:
             with contextlib.suppress(Exception):
-                client.cancel([f for f in futures if not f.done()])
+                client.cancel([f for f in batches if not f.done()])
 
     @staticmethod
-    def _collect(batch: Iterable[Any], futures: dict[Any, str]) -> Iterator[tuple[str, dict[str, Any]]]:
-        for future in batch:
-            key = futures.pop(future)
-            try:
-                record = future.result()
-            except (CancelledError, MountcalError):
-                raise
-            except Exception as err:  # KilledWorker and the like: this log, not the batch
-                record = engine_failure(err, "the Dask cluster could not run this log")
-            future.release()
-            yield key, record
+    def _records(future: Any, n: int) -> list[dict[str, Any]]:
+        try:
+            records = future.result()
+        except (CancelledError, MountcalError):
+            raise
+        except Exception as err:  # KilledWorker and the like: these logs, not the run
+            records = [engine_failure(err, "the Dask cluster could not run this log")] * n
+        future.release()
+        return list(records)
+
+
+class _BatchSizing:
+    """How many logs a Dask task takes: about BATCH_TARGET_S of work at the rate seen so far (one log
+    until a log has been timed), and at the end no more than an even share of what is left, so that
+    the workers finish together."""
+
+    def __init__(self) -> None:
+        self.seconds = 0.0
+        self.logs = 0
+
+    def done(self, record: dict[str, Any]) -> None:
+        elapsed = record.get("elapsed_s")
+        if isinstance(elapsed, float | int):
+            self.seconds += float(elapsed)
+            self.logs += 1
+
+    def size(self, waiting: int, exhausted: bool, workers: int) -> int:
+        if not self.logs:
+            return 1
+        per_log = max(self.seconds / self.logs, 1e-3)
+        size = int(min(MAX_BATCH, max(1, BATCH_TARGET_S / per_log)))
+        if exhausted:  # the tail: at most a share of what is left for each of two batches per worker
+            size = min(size, max(1, waiting // (2 * workers)))
+        return size
 
 
 def make_engine(workers: int | None = None, scheduler: str | None = None) -> Engine:

@@ -38,7 +38,7 @@ from mountcal.calibrate import Options
 from mountcal.errors import InputError
 from mountcal.io.logs import LogOptions
 from mountcal.io.mcap.write import written_by_mountcal
-from mountcal.fleet.layout import Found, Grouped, Layout, group, infer_layout
+from mountcal.fleet.layout import Found, Grouped, Layout, group, infer_layout, unreadable_split
 from mountcal.fleet.storage import is_url, list_objects
 from mountcal.io.registry import is_log, log_suffixes
 from mountcal.option_names import flags_on
@@ -206,7 +206,7 @@ def _jobs_of_input(item: str, ctx: _Context) -> Iterator[FleetJob]:
         )
     if is_url(item):
         objects = list_objects(item, ctx.storage)
-        found = [Found(o.url, o.url, o.stamp) for o in objects if is_log(Path(o.url.split("://", 1)[1]), ctx.defaults.log)]
+        found = [Found(o.url, o.url, o.stamp) for o in objects if _is_candidate(Path(o.url.split("://", 1)[1]), ctx)]
         if not found:
             raise InputError(item, "log objects (" + ", ".join(sorted(log_suffixes())) + ")", "none", "Check the URL.")
         yield from _grouped_jobs(found, item, ctx, origin=f"storage {item}")
@@ -261,6 +261,11 @@ def _jobs_of_input(item: str, ctx: _Context) -> Iterator[FleetJob]:
         )
 
 
+def _is_candidate(path: Path, ctx: _Context) -> bool:
+    """A file some reader takes, or a CANedge split the layout counts as unreadable."""
+    return (is_log(path, ctx.defaults.log) or unreadable_split(path.name)) and not _is_protocol(path)
+
+
 def _grouped_jobs(files: Sequence[Found], item: str, ctx: _Context, origin: str) -> Iterator[FleetJob]:
     """The jobs of a folder's, glob's or URL's files in the chosen (or inferred) layout."""
     layout = infer_layout(files, item) if ctx.layout == "auto" else ctx.layout
@@ -305,7 +310,7 @@ def _walk_logs(folder: Path, skip: set[Path], options: LogOptions) -> Iterator[P
             file = here / name
             if (
                 not name.startswith(".")
-                and is_log(file, options)
+                and (is_log(file, options) or unreadable_split(name))
                 and not _is_protocol(file)
                 and _resolved(file) not in skip
             ):

@@ -70,6 +70,13 @@ class Grouped:
         self.set_aside[reason] = self.set_aside.get(reason, 0) + n
 
 
+def unreadable_split(name: str) -> bool:
+    """Whether a file name is a CANedge split mountcal cannot read (compressed or encrypted): the
+    layout counts it instead of leaving it unseen."""
+    match = SPLIT.match(name)
+    return match is not None and match["ext"].lower() in UNREADABLE_SPLITS
+
+
 def canedge_split(found: Found) -> re.Match[str] | None:
     """The split-name match of a file in the CANedge layout (session folder of 8 hex digits, a device above)."""
     parts = found.parts
@@ -130,4 +137,14 @@ def group(files: Sequence[Found], layout: Literal["canedge", "folders"]) -> Grou
     return out
 
 
-__all__ = ["LAYOUTS", "Found", "Grouped", "Layout", "Session", "canedge_split", "group", "infer_layout"]
+__all__ = [
+    "LAYOUTS",
+    "Found",
+    "Grouped",
+    "Layout",
+    "Session",
+    "canedge_split",
+    "group",
+    "infer_layout",
+    "unreadable_split",
+]

@@ -25,6 +25,7 @@ from mountcal.fleet.progress import Progress
 from mountcal.fleet.storage import is_url
 from mountcal.fleet.store import (
     LOG_COLUMNS,
+    MOUNTING_COLUMNS,
     VEHICLE_COLUMNS,
     PartStore,
     check_overwritable,
@@ -32,7 +33,7 @@ from mountcal.fleet.store import (
     schema,
     write_table,
 )
-from mountcal.fleet.vehicles import ALPHA, analyse_fleet
+from mountcal.fleet.vehicles import ALPHA, analyse_fleet, vehicle_table
 from mountcal.paths import check_outputs, output_lock
 from mountcal.version import software_version
 
@@ -78,7 +79,9 @@ class FleetResult:
     Attributes
     ----------
     logs, vehicles : DataFrame
-        The tables written to ``output`` and ``vehicles_path``.
+        The tables written to ``output`` (one row per log) and ``vehicles_path`` (one row per vehicle).
+    mountings : DataFrame
+        One row per vehicle and mounting period (the ``mountings`` of the vehicles table, flat).
     computed : int
         Logs calibrated by this run.
     reused : int
@@ -92,6 +95,7 @@ class FleetResult:
 
     logs: pd.DataFrame
     vehicles: pd.DataFrame
+    mountings: pd.DataFrame
     output: Path
     vehicles_path: Path
     parts: Path
@@ -189,13 +193,15 @@ def _run_locked(
                 if not record.pop("_transient", False):
                     store.save(key, record)
                 results[key] = record
+                progress.workers(getattr(engine, "live_workers", 0))
                 progress.update(record.get("status") == "ok")
         finally:
             progress.finish()
     computed = len(pending)
     logs = _log_table(jobs, keys, setup_failures, results)
-    logs, vehicles = analyse_fleet(logs, options.alpha, options.floor_deg)
-    vehicles = _complete(vehicles, VEHICLE_COLUMNS)
+    logs, mountings = analyse_fleet(logs, options.alpha, options.floor_deg)
+    mountings = _complete(mountings, MOUNTING_COLUMNS)
+    vehicles = _complete(vehicle_table(mountings, logs), VEHICLE_COLUMNS)
     doubtful = tuple(str(log) for log, flag in zip(logs["log"], logs["flags"], strict=True) if "not_confident" in flag)
     if doubtful and options.require_confident:
         raise InputError(
@@ -210,6 +216,7 @@ def _run_locked(
     return FleetResult(
         logs=logs,
         vehicles=vehicles,
+        mountings=mountings,
         output=output,
         vehicles_path=vehicles_path,
         parts=parts,

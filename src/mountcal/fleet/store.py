@@ -262,7 +262,7 @@ LOG_COLUMNS: tuple[tuple[str, pa.DataType, str], ...] = (
     ("elapsed_s", _F, "wall time of the calibration on its worker (s)"),
 )
 
-VEHICLE_COLUMNS: tuple[tuple[str, pa.DataType, str], ...] = (
+MOUNTING_COLUMNS: tuple[tuple[str, pa.DataType, str], ...] = (  # FleetResult.mountings: per mounting period
     ("vehicle_id", _S, "vehicle"),
     ("segment", _I, "mounting period, 0 = the first; a new one starts at each remount"),
     ("n_segments", _I, "mounting periods of the vehicle"),
@@ -307,6 +307,78 @@ VEHICLE_COLUMNS: tuple[tuple[str, pa.DataType, str], ...] = (
     ("remount_statistic", _F, "χ² of the change against the two-segment consensus"),
     ("remount_dof", _I, "its degrees of freedom"),
     ("remount_p_value", _F, "Bonferroni-corrected p-value of the change point (flagged below 0.001)"),
+)
+
+
+_MOUNTING = pa.struct(
+    [
+        ("segment", _I),
+        ("first_log", _S),
+        ("last_log", _S),
+        ("first_start_time", _T),
+        ("last_start_time", _T),
+        ("n_logs", _I),
+        ("n_used", _I),
+        ("roll_deg", _F),
+        ("roll_sigma_deg", _F),
+        ("pitch_deg", _F),
+        ("pitch_sigma_deg", _F),
+        ("yaw_deg", _F),
+        ("yaw_sigma_deg", _F),
+        ("sigma_scale", _F),
+    ]
+)
+_REMOUNT = pa.struct(
+    [
+        ("time", _T),
+        ("log", _S),
+        ("change_deg", _F),
+        ("change_sigma_deg", _F),
+        ("change_x_deg", _F),
+        ("change_y_deg", _F),
+        ("change_z_deg", _F),
+        ("p_value", _F),
+    ]
+)
+
+VEHICLE_COLUMNS: tuple[tuple[str, pa.DataType, str], ...] = (  # fleet_vehicles.parquet: one row per vehicle
+    ("vehicle_id", _S, "vehicle"),
+    ("status", _S, "ok, or no calibration (no log of the vehicle succeeded)"),
+    ("reason", _S, "why there is no calibration"),
+    ("order", _S, "how the logs were put in time order: start_time or log name"),
+    ("n_logs", _I, "successful logs of the vehicle"),
+    ("n_failed", _I, "failed logs of the vehicle"),
+    ("n_mountings", _I, "mounting periods (1 + remounts)"),
+    ("first_start_time", _T, "start of the vehicle's first successful log"),
+    ("last_start_time", _T, "start of its last"),
+    ("roll_deg", _F, "current mounting: consensus roll (deg)"),
+    ("roll_sigma_deg", _F, "its 1σ (deg)"),
+    ("pitch_deg", _F, "current mounting: consensus pitch (deg)"),
+    ("pitch_sigma_deg", _F, "its 1σ (deg)"),
+    ("yaw_deg", _F, "current mounting: consensus yaw (deg); null when no log of the period determined it"),
+    ("yaw_sigma_deg", _F, "its 1σ (deg)"),
+    ("yaw_reason", _S, "why yaw is not determined"),
+    ("rot_sigma_x_deg", _F, "1σ of the current mounting about vehicle x (deg)"),
+    ("rot_sigma_y_deg", _F, ""),
+    ("rot_sigma_z_deg", _F, ""),
+    ("quat_x", _F, "current mounting, rot_vs as a quaternion (x, y, z, w)"),
+    ("quat_y", _F, ""),
+    ("quat_z", _F, ""),
+    ("quat_w", _F, ""),
+    ("n_used", _I, "logs in the current mounting's consensus"),
+    ("n_disagreeing", _I, "logs of the current mounting that disagree with its consensus"),
+    ("disagreeing_logs", _L, "those logs"),
+    ("chi2", _F, "χ² of the used logs about the current consensus"),
+    ("dof", _I, "its degrees of freedom"),
+    ("p_value", _F, "P(χ² ≥ chi2)"),
+    ("sigma_scale", _F, "factor applied to the current σ: √(χ²/dof) when the logs scatter beyond their σ, else 1"),
+    ("since_log", _S, "first log of the current mounting"),
+    ("since_time", _T, "its start"),
+    ("latest_confident", _B, "whether the current mounting is confident (see confidence_note)"),
+    ("confidence_note", _S, "why it is not: its logs are not confident, or they scatter beyond their σ"),
+    ("n_remounts", _I, "remounts found"),
+    ("remounts", pa.list_(_REMOUNT), "each remount: time and log where the new mounting starts, change ± σ, p"),
+    ("mountings", pa.list_(_MOUNTING), "the mounting over time: each period's extent and angles ± σ"),
 )
 
 

@@ -11,7 +11,7 @@ MAX_LISTED = 20
 
 def summary_lines(result: FleetResult) -> list[str]:
     """What was done, what failed and why, and which vehicles were remounted."""
-    logs, vehicles = result.logs, result.vehicles
+    logs, vehicles = result.logs, result.mountings
     failed = logs[logs["status"] != "ok"]
     lines = [
         f"mountcal fleet — {len(logs)} logs of {logs['vehicle_id'].nunique()} vehicles on {result.engine}: "
@@ -35,6 +35,9 @@ def summary_lines(result: FleetResult) -> list[str]:
     nothing = vehicles[vehicles["status"] != "ok"]
     for row in nothing.itertuples():
         lines.append(f"  no calibration for {row.vehicle_id}: {row.reason}")
+    ok = result.vehicles[result.vehicles["status"] == "ok"]
+    for row in ok[~ok["latest_confident"].astype(bool)].head(MAX_LISTED).itertuples():
+        lines.append(f"  not confident: the current mounting of {row.vehicle_id}: {row.confidence_note}")
     set_aside = [f"{n} {reason}" for reason, n in result.discarded.items() if n]
     if set_aside:
         lines.append("  set aside: " + "; ".join(set_aside))
