@@ -278,7 +278,24 @@ def start_worker_server() -> None:
     """
     os.environ.update({k: "1" for k in THREAD_VARIABLES})
     if worker_context().get_start_method() == "forkserver":
-        multiprocessing.forkserver.ensure_running()
+        # started with Ctrl-C ignored, which Python then keeps: a Ctrl-C while the server (or a
+        # worker forked from it) starts is the command's to handle, not a traceback of theirs
+        with _sigint_ignored():
+            multiprocessing.forkserver.ensure_running()
+
+
+@contextlib.contextmanager
+def _sigint_ignored() -> Iterator[None]:
+    """SIGINT ignored in this process for the block (where signals can be set: the main thread)."""
+    try:
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except ValueError:  # not the main thread: the server's first import ignores it instead
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 NETWORK_SCHEMES = ("tcp", "tls", "ws", "wss")
