@@ -154,6 +154,16 @@ def test_the_remount_is_found_at_the_right_session_and_the_steady_device_has_non
     assert f"remount {MOVED} at" in local_run["stdout"]
 
 
+def test_the_overview_page_shows_each_vehicle_its_angles_over_time_and_its_remount(local_run: dict) -> None:
+    page = local_run["output"].with_name("fleet_overview.html").read_text(encoding="utf-8")
+    assert page.count("<svg") == 2  # a plot per vehicle
+    rows = {row.split("</td>")[0]: row for row in page.split("<tr><td>")[1:]}
+    assert set(rows) == {STEADY, MOVED}
+    assert "2024-05-03 11:00 (2.0" in rows[MOVED] and "confident" in rows[MOVED]  # the remount: time and size
+    assert "none" in rows[STEADY]
+    assert page.index(MOVED) < page.index(STEADY)  # remounted vehicles come first
+
+
 def test_a_session_calibrates_exactly_as_calibrate_does_on_its_joined_splits(
     canedge: Path, local_run: dict, tmp_path: Path
 ) -> None:

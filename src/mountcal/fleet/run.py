@@ -21,6 +21,7 @@ import pandas as pd
 from mountcal.errors import InputError, MountcalError
 from mountcal.fleet.engines import make_engine
 from mountcal.fleet.inputs import FleetJob
+from mountcal.fleet.overview import check_overview_overwritable, overview_path, write_overview
 from mountcal.fleet.progress import Progress
 from mountcal.fleet.storage import is_url
 from mountcal.fleet.store import (
@@ -213,6 +214,7 @@ def _run_locked(
     said = {"mountcal.confident": json.dumps(not doubtful), "mountcal.not_confident_logs": json.dumps(doubtful)}
     write_table(vehicles, schema(VEHICLE_COLUMNS, "vehicles"), vehicles_path, said)
     write_table(logs, schema(LOG_COLUMNS, "logs"), output, said)
+    write_overview(overview_path(output), vehicles, logs, f"mountcal fleet: {output.name}")
     return FleetResult(
         logs=logs,
         vehicles=vehicles,
@@ -244,7 +246,7 @@ def _check_output(output: Path, jobs: Sequence[FleetJob]) -> None:
         )
     table, vehicles, _ = outputs_of(output)
     check_outputs(
-        {"fleet table": table, "vehicles table": vehicles},
+        {"fleet table": table, "vehicles table": vehicles, "overview page": overview_path(output)},
         {
             "log": [p for job in jobs for p in job.job.paths if _local(p)],
             "DBC, mapping or protocol sheet": [p for job in jobs for p in _settings_files(job) if _local(p)],
@@ -252,6 +254,7 @@ def _check_output(output: Path, jobs: Sequence[FleetJob]) -> None:
     )
     for path in (table, vehicles):
         check_overwritable(path)
+    check_overview_overwritable(overview_path(output))
 
 
 def _local(path: str) -> bool:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from mountcal.fleet.overview import overview_path
 from mountcal.fleet.run import FleetResult
 
 MAX_LISTED = 20
@@ -41,7 +42,10 @@ def summary_lines(result: FleetResult) -> list[str]:
     set_aside = [f"{n} {reason}" for reason, n in result.discarded.items() if n]
     if set_aside:
         lines.append("  set aside: " + "; ".join(set_aside))
-    lines.append(f"wrote {result.output} and {result.vehicles_path} (finished logs are kept in {result.parts})")
+    lines.append(
+        f"wrote {result.output}, {result.vehicles_path} and {overview_path(result.output)} "
+        f"(finished logs are kept in {result.parts})"
+    )
     return lines
 
 
