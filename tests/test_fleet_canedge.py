@@ -343,3 +343,45 @@ def _state(pid: int) -> str:
         return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
     except OSError:
         return "Z"
+
+
+# --- a real CANedge recording ---------------------------------------------------------------------
+
+
+@pytest.mark.real_data
+def test_a_real_canedge_drive_split_at_10_minutes_calibrates_as_the_unsplit_file(real_data: Path, tmp_path: Path) -> None:
+    """The CANedge car's second drive (5 logger splits, 46 min), joined into one MF4 by asammdf's
+    ``concatenate``, then split again at 10 minutes with asammdf's ``cut``/``save`` into a session
+    folder: the fleet's session gives the unsplit file's calibration, every frame kept."""
+    from asammdf import MDF
+
+    canedge = real_data / "canedge"
+    drive = sorted((canedge / "3BA199E2_car_DK_2021-07-26" / "00000165").glob("*.MF4"))[:5]  # one power cycle
+    joined = MDF.concatenate(drive)
+    whole = Path(joined.save(tmp_path / "whole.mf4", overwrite=True))
+    joined.close()
+    session = tmp_path / "LOG" / "3BA199E2" / "00000165"
+    splits = cut_session(whole, session, lead_s=0.0)
+    assert len(splits) == 5
+
+    def frames(path: Path) -> int:
+        mdf = MDF(path)
+        try:
+            return sum(int(g.channel_group.cycles_nr) for g in mdf.groups)
+        finally:
+            mdf.close()
+
+    assert sum(map(frames, splits)) == frames(whole)
+    dbc = str(canedge / "dbc" / "gnss.dbc")
+    result = tmp_path / "whole.json"
+    assert main(["calibrate", str(whole), "--dbc", dbc, "--channel", "2", "-o", str(result), "-q"]) == 0
+    single = Calibration.load(result)
+    output = tmp_path / "fleet.parquet"
+    code, stdout = run_cli(str(tmp_path / "LOG"), "-o", str(output), "--dbc", dbc, "--channel", "2", "--workers", "1")
+    assert code == 0 and "layout: canedge (1 logs); 1 vehicles, 1 sessions, 5 splits (0 gaps" in stdout
+    row = pd.read_parquet(output).iloc[0]
+    assert row["status"] == "ok" and row["vehicle_id"] == "3BA199E2" and row["n_splits"] == 5
+    assert single.yaw_deg is not None and row["calibrated_from"] == single.fit.calibrated_from
+    for angle in ("roll", "pitch", "yaw"):
+        assert row[f"{angle}_deg"] == pytest.approx(getattr(single, f"{angle}_deg"), abs=1e-9)
+        assert row[f"{angle}_sigma_deg"] == pytest.approx(getattr(single, f"{angle}_sigma_deg"), abs=1e-9)
