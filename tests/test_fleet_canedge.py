@@ -190,7 +190,7 @@ def test_splits_uploaded_twice_or_compressed_are_counted_and_a_mixed_folder_asks
     shutil.copy(first, session / (first.name[:8] + "-FFFFFFFF.MF4"))  # the same split counter, uploaded again
     (session / "00000003.MFC").write_bytes(b"compressed")
     output = tmp_path / "fleet.parquet"
-    code, stdout = run_cli(str(fleet), "-o", str(output), "--dbc", str(DBC), "--workers", "1")
+    code, _ = run_cli(str(fleet), "-o", str(output), "--dbc", str(DBC), "--workers", "1")
     assert code == 0
     assert "set aside 1 CANedge splits uploaded twice" in caplog.text
     assert "set aside 1 compressed or encrypted CANedge splits" in caplog.text
@@ -302,7 +302,7 @@ def test_a_run_against_the_bucket_killed_mid_run_resumes_losing_and_repeating_no
     assert workers and _gone(workers, within_s=10.0), "workers outlived the killed command"
     before = {p.name: (p.stat().st_ino, p.stat().st_mtime_ns) for p in parts.glob("*.json")}
     stored, unreadable = PartStore(parts).load()
-    assert 2 <= len(before) < 6 and unreadable == 0
+    assert 2 <= len(before) < 6 and unreadable == 0 and len(stored) == len(before)
 
     code, stdout = run_cli("s3://fleet/LOG", "-o", str(output), "--dbc", str(DBC), *AZIMUTH, "-q", "--workers", "2")
     assert code == 0
@@ -349,7 +349,9 @@ def _state(pid: int) -> str:
 
 
 @pytest.mark.real_data
-def test_a_real_canedge_drive_split_at_10_minutes_calibrates_as_the_unsplit_file(real_data: Path, tmp_path: Path) -> None:
+def test_a_real_canedge_drive_split_at_10_minutes_calibrates_as_the_unsplit_file(
+    real_data: Path, tmp_path: Path
+) -> None:
     """The CANedge car's second drive (5 logger splits, 46 min), joined into one MF4 by asammdf's
     ``concatenate``, then split again at 10 minutes with asammdf's ``cut``/``save`` into a session
     folder: the fleet's session gives the unsplit file's calibration, every frame kept."""

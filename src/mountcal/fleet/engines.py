@@ -27,6 +27,7 @@ then run at the same time, on two cores.
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import importlib
 import itertools
 import multiprocessing
@@ -231,6 +232,10 @@ def worker_started(parent: int, environment: dict[str, str]) -> None:
     """A worker's first act: ignore Ctrl-C, take the command's environment as it is now (the worker
     server may be older than a change to it), and watch the command to die with it."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    with contextlib.suppress(OSError, AttributeError):  # glibc: recycle a log's arrays (see worker.heap_for_logs)
+        libc = ctypes.CDLL(None)
+        libc.mallopt(-3, 32 << 20)  # M_MMAP_THRESHOLD
+        libc.mallopt(-1, 64 << 20)  # M_TRIM_THRESHOLD
     for key in [k for k in os.environ if k.startswith(PASSED_VARIABLES)]:
         os.environ.pop(key)
     os.environ.update(environment)

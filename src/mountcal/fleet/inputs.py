@@ -30,16 +30,16 @@ from collections.abc import Collection, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from glob import glob
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import pandas as pd
 
 from mountcal.calibrate import Options
 from mountcal.errors import InputError
-from mountcal.io.logs import LogOptions
-from mountcal.io.mcap.write import written_by_mountcal
 from mountcal.fleet.layout import Found, Grouped, Layout, group, infer_layout, unreadable_split
 from mountcal.fleet.storage import is_url, list_objects
+from mountcal.io.logs import LogOptions
+from mountcal.io.mcap.write import written_by_mountcal
 from mountcal.io.registry import is_log, log_suffixes
 from mountcal.option_names import flags_on
 from mountcal.paths import input_file, special_kind
@@ -241,16 +241,16 @@ def _jobs_of_input(item: str, ctx: _Context) -> Iterator[FleetJob]:
             yield _file_job(Found(item, str(_resolved(path))), ctx, origin=item)
     elif _GLOB_CHARS.search(item):
         matches = [Path(m) for m in sorted(glob(item, recursive=True), key=natural_key)]
-        files = [m for m in matches if m.is_file() and _resolved(m) not in ctx.skip and not _is_protocol(m)]
-        if not files:
+        matched = [m for m in matches if m.is_file() and _resolved(m) not in ctx.skip and not _is_protocol(m)]
+        if not matched:
             raise InputError(item, "a glob matching log files", "no match", "Check the pattern (quote it).")
-        found = []
-        for file in files:
+        taken = []
+        for file in matched:
             if written_by_mountcal(file):
                 ctx.ours.append(file)
                 continue
-            found.append(Found(str(file), str(_resolved(file))))
-        yield from _grouped_jobs(found, item, ctx, origin=f"glob {item}")
+            taken.append(Found(str(file), str(_resolved(file))))
+        yield from _grouped_jobs(taken, item, ctx, origin=f"glob {item}")
     else:
         kind = special_kind(path)
         raise InputError(
@@ -268,8 +268,9 @@ def _is_candidate(path: Path, ctx: _Context) -> bool:
 
 def _grouped_jobs(files: Sequence[Found], item: str, ctx: _Context, origin: str) -> Iterator[FleetJob]:
     """The jobs of a folder's, glob's or URL's files in the chosen (or inferred) layout."""
-    layout = infer_layout(files, item) if ctx.layout == "auto" else ctx.layout
-    assert layout != "manifest" and layout != "auto"
+    layout: Literal["canedge", "folders"] = (
+        "canedge" if ctx.layout == "canedge" else "folders" if ctx.layout == "folders" else infer_layout(files, item)
+    )
     grouped: Grouped = group(files, layout)
     for reason, n in grouped.set_aside.items():
         ctx.discarded[reason] = ctx.discarded.get(reason, 0) + n

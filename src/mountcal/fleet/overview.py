@@ -91,7 +91,8 @@ def _angle(value: Any, sigma: Any) -> str:
 
 
 def _table(vehicles: pd.DataFrame) -> str:
-    head = "<tr><th>vehicle</th><th>roll</th><th>pitch</th><th>yaw</th><th>since</th><th>remounts</th><th>current mounting</th></tr>"
+    names = ("vehicle", "roll", "pitch", "yaw", "since", "remounts", "current mounting")
+    head = "<tr>" + "".join(f"<th>{n}</th>" for n in names) + "</tr>"
     rows = []
     for v in vehicles.itertuples():
         if v.status != "ok":

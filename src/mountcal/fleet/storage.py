@@ -115,7 +115,8 @@ def storage_error(url: str, err: BaseException, doing: str) -> InputError:
         found = f"{type(err).__name__}: {err}"
         todo = (
             "Check the endpoint and credentials: the AWS variables (AWS_ENDPOINT_URL for MinIO or another "
-            f"S3-compatible server, AWS_ACCESS_KEY_ID, AWS_SECRET_ACCESS_KEY, AWS_PROFILE) or {STORAGE_OPTION} KEY=VALUE."
+            "S3-compatible server, AWS_ACCESS_KEY_ID, AWS_SECRET_ACCESS_KEY, AWS_PROFILE) "
+            f"or {STORAGE_OPTION} KEY=VALUE."
         )
     return InputError(url, f"a readable object store ({doing})", found, todo)
 

@@ -57,9 +57,10 @@ def layout_line(result: FleetResult) -> str:
     if result.sessions:
         gaps = int(logs["split_gaps"].fillna(0).sum())
         overlaps = int(logs["split_overlaps"].fillna(0).sum())
+        gap_s = float(logs["split_gap_s"].fillna(0).sum())
         line += (
             f", {result.sessions} sessions, {result.splits} splits "
-            f"({gaps} gaps of {float(logs['split_gap_s'].fillna(0).sum()):.1f} s in all, {overlaps} overlaps between splits)"
+            f"({gaps} gaps of {gap_s:.1f} s in all, {overlaps} overlaps between splits)"
         )
     return line
 

@@ -619,7 +619,9 @@ def vehicle_table(mountings: pd.DataFrame, logs: pd.DataFrame) -> pd.DataFrame:
                 "confidence_note": note if ok else latest.get("reason"),
                 "n_remounts": int(periods["remount"].fillna(False).astype(bool).sum()),
                 "remounts": [_remount(p) for _, p in periods.iterrows() if bool(p.get("remount"))],
-                "mountings": [{k: _plain(p.get(k)) for k in MOUNTING_KEYS} for _, p in periods.iterrows()] if ok else [],
+                "mountings": [{k: _plain(p.get(k)) for k in MOUNTING_KEYS} for _, p in periods.iterrows()]
+                if ok
+                else [],
             }
         )
     return pd.DataFrame(rows)
@@ -634,7 +636,9 @@ def _confidence(latest: pd.Series, period_logs: pd.DataFrame) -> tuple[bool, str
         reasons.append(f"its {doubtful} log(s) are not confident (flag not_confident)")
     scale = latest.get("sigma_scale")
     if scale is not None and np.isfinite(scale) and scale > 1.0:
-        reasons.append(f"its logs scatter beyond their σ (σ scaled by {scale:.2g}: an effect the model lacks, or a loose mount)")
+        reasons.append(
+            f"its logs scatter beyond their σ (σ scaled by {scale:.2g}: an effect the model lacks, or a loose mount)"
+        )
     return not reasons, "; ".join(reasons) or None
 
 

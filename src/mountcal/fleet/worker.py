@@ -15,10 +15,13 @@ than :data:`GAP_S` without a sample) and their overlaps are counted in the recor
 from __future__ import annotations
 
 import contextlib
+import ctypes
+import os
 import time
 from collections.abc import Iterator, Sequence
 from dataclasses import replace
 from datetime import UTC, datetime
+from itertools import pairwise
 from pathlib import Path
 from typing import Any
 
@@ -67,8 +70,47 @@ def run_job(job: FleetJob) -> dict[str, Any]:
 
 
 def run_batch(jobs: Sequence[FleetJob]) -> list[dict[str, Any]]:
-    """:func:`run_job` of several logs, in order (one task of a Dask cluster)."""
-    return [run_job(job) for job in jobs]
+    """:func:`run_job` of several logs, in order (one task of a Dask cluster), with a heap made for
+    them (:func:`heap_for_logs`)."""
+    with heap_for_logs():
+        return [run_job(job) for job in jobs]
+
+
+M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3  # glibc's mallopt parameters
+HEAP_MMAP_THRESHOLD = 32 << 20  # arrays below this are recycled within the heap (glibc's largest)
+DEFAULT_MMAP_THRESHOLD = 128 << 10  # glibc's default, restored after a batch
+
+
+@contextlib.contextmanager
+def heap_for_logs() -> Iterator[None]:
+    """Let glibc recycle a log's arrays instead of mapping fresh pages for each (restored after).
+
+    A Dask nanny starts its workers with ``MALLOC_TRIM_THRESHOLD_`` set (to hand memory back to the
+    system), which also turns off glibc's adaptive mmap threshold: every array above 128 KiB is then
+    mmap-ed and unmapped, and its pages faulted in again, for every log — measured 25–35 % more CPU
+    per log than in a worker without it. Elsewhere (not glibc) this does nothing.
+    """
+    try:
+        mallopt = ctypes.CDLL(None).mallopt
+    except (OSError, AttributeError):
+        yield
+        return
+    mallopt(M_MMAP_THRESHOLD, HEAP_MMAP_THRESHOLD)
+    mallopt(M_TRIM_THRESHOLD, 2 * HEAP_MMAP_THRESHOLD)
+    try:
+        yield
+    finally:
+        mallopt(M_MMAP_THRESHOLD, _env_bytes("MALLOC_MMAP_THRESHOLD_", DEFAULT_MMAP_THRESHOLD))
+        mallopt(M_TRIM_THRESHOLD, _env_bytes("MALLOC_TRIM_THRESHOLD_", DEFAULT_MMAP_THRESHOLD))
+        with contextlib.suppress(AttributeError):
+            ctypes.CDLL(None).malloc_trim(0)  # hand the batch's memory back, as the worker's setting wants
+
+
+def _env_bytes(name: str, default: int) -> int:
+    try:
+        return int(os.environ.get(name, default))
+    except ValueError:
+        return default
 
 
 @contextlib.contextmanager
@@ -115,7 +157,7 @@ def _read_splits(job: FleetJob, record: dict[str, Any]) -> Samples:
     if len(parts) == 1:
         return parts[0]
     spans = sorted((float(s.t_s[0]), float(s.t_s[-1])) for s in parts if len(s))
-    steps = np.array([after[0] - before[1] for before, after in zip(spans, spans[1:], strict=False)])
+    steps = np.array([after[0] - before[1] for before, after in pairwise(spans)])
     record.update(
         split_gaps=int((steps > GAP_S).sum()),
         split_gap_s=float(steps[steps > GAP_S].sum()) if steps.size else 0.0,
