@@ -137,3 +137,24 @@ def test_ctrl_c_at_any_moment_ends_cleanly_and_the_run_resumes(tmp_path: Path, d
     assert proc.returncode in (0, 130, -signal.SIGINT)
     assert main(["fleet", str(tmp_path / "logs"), "-o", str(output), "-q"]) == 0
     assert len(pd.read_parquet(output)) == 30
+
+
+def test_errors_name_the_files_as_given_and_the_options_as_flags(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A log that cannot give yaw from driving: its row says why in the user's terms."""
+    import numpy as np
+
+    folder = tmp_path / "fleet" / "van"
+    folder.mkdir(parents=True)
+    t = np.arange(0.0, 120.0, 0.01)
+    rng = np.random.default_rng(1)
+    moving = pd.DataFrame({"t_s": t, "ax": rng.normal(0, 1, t.size), "ay": rng.normal(0, 1, t.size)})
+    moving = moving.assign(az=9.8 + rng.normal(0, 1, t.size), speed_mps=np.where(t < 2.0, 5.0, 0.0))  # 2 s of driving
+    moving.to_csv(folder / "drive.csv", index=False)
+    monkeypatch.chdir(tmp_path)
+    assert main(["fleet", "fleet", "-o", "out.parquet", "--use", "driving", "--workers", "1", "-q"]) == 0
+    error = pd.read_parquet(tmp_path / "out.parquet")["error"].iloc[0]
+    assert "fleet/van/drive.csv" in error and str(tmp_path) not in error, error
+    assert "--protocol" in error and "protocol=" not in error, error
+    assert "fleet/van/drive.csv" in capsys.readouterr().out

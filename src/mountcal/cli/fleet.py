@@ -153,6 +153,12 @@ def run(args: argparse.Namespace) -> int:
                 "logs": len(result.logs),
                 "status": {str(k): int(v) for k, v in status.items()},
                 "vehicles": len(result.vehicles),
+                "layout": result.layout,
+                "sessions": result.sessions,
+                "splits": result.splits,
+                "vehicles_not_confident": [
+                    str(row.vehicle_id) for row in result.vehicles.itertuples() if not row.latest_confident
+                ],
                 "computed": result.computed,
                 "reused": result.reused,
                 "engine": result.engine,
