@@ -16,6 +16,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
@@ -311,6 +312,8 @@ def test_a_run_against_the_bucket_killed_mid_run_resumes_losing_and_repeating_no
     assert all(after[name] == stamp for name, stamp in before.items())  # nothing finished was redone
     table = pd.read_parquet(output)
     assert len(table) == 6 and table["log"].is_unique and (table["status"] == "ok").all()
+    scratch = Path(tempfile.gettempdir())
+    assert not [f for pid in workers for f in scratch.glob(f"mountcal-fetch-{pid}-*")]  # the killed ones' copies
 
 
 def _children(pid: int) -> list[int]:

@@ -23,12 +23,13 @@ import shutil
 import tempfile
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
-from pathlib import PurePosixPath
+from pathlib import Path, PurePosixPath
 from typing import Any
 
 from mountcal.errors import InputError
 
 BLOCK_BYTES = 8 << 20  # one ranged read of a fetch: the memory a worker's fetch holds
+SCRATCH_PREFIX = "mountcal-fetch-"  # + the worker's pid: a killed worker's folder is removed by the next fetch
 _URL = re.compile(r"^[A-Za-z][A-Za-z0-9+.-]*://")
 STORAGE_OPTION = "--storage-option"
 
@@ -178,7 +179,8 @@ def local_copies(urls: Sequence[str], options: Mapping[str, Any], stamps: Sequen
     InputError
         An object is missing, unreadable, or changed since it was listed (its stamp differs).
     """
-    scratch = tempfile.mkdtemp(prefix="mountcal-fetch-")
+    _remove_orphans()
+    scratch = tempfile.mkdtemp(prefix=f"{SCRATCH_PREFIX}{os.getpid()}-")
     try:
         paths = []
         for i, (url, stamp) in enumerate(zip(urls, stamps, strict=True)):
@@ -204,6 +206,24 @@ def local_copies(urls: Sequence[str], options: Mapping[str, Any], stamps: Sequen
         yield paths
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
+
+
+def _remove_orphans() -> None:
+    """Delete the scratch folders of workers that were killed while fetching (their pid is gone)."""
+    for folder in Path(tempfile.gettempdir()).glob(f"{SCRATCH_PREFIX}*-*"):
+        pid = folder.name[len(SCRATCH_PREFIX) :].split("-", 1)[0]
+        if pid.isdigit() and not _alive(int(pid)):
+            shutil.rmtree(folder, ignore_errors=True)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process: alive, and not ours to clean
+        return True
+    return True
 
 
 __all__ = [
