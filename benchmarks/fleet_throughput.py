@@ -254,8 +254,12 @@ def cost_model(logs: Path, output: Path, times: dict[str, list[float]], overhead
     s = (t_all - t_half) / (n_all - n_half)
     a = t_all - s * n_all
     sizes = np.array([sum(Path(p).stat().st_size for p in str(log).split(" + ")) for log in table["log"]], dtype=float)
-    design = np.column_stack([np.ones_like(sizes), sizes])
-    (c_log, c_byte), *_ = np.linalg.lstsq(design, table["elapsed_s"].to_numpy(float), rcond=None)
+    from scipy.optimize import nnls
+
+    scale = sizes.mean()  # fit in units of the mean log, then back to per byte (a well-conditioned problem)
+    design = np.column_stack([np.ones_like(sizes), sizes / scale])
+    (c_log, c_mean), _ = nnls(design, table["elapsed_s"].to_numpy(float))  # neither cost can be negative
+    c_byte = c_mean / scale
     work = float(np.sum(c_log + c_byte * sizes))
     per_log = work / n_all
     batch = max(1.0, BATCH_TARGET_S / per_log)

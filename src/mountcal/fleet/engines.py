@@ -386,7 +386,9 @@ class DaskEngine:
         token = secrets.token_hex(4)
         source = iter(jobs)
         waiting: deque[tuple[str, FleetJob]] = deque()  # hashed, not yet submitted
-        batches: dict[Any, list[str]] = {}
+        alone: deque[tuple[str, FleetJob]] = deque()  # the logs of a failed batch, to be run one per task
+        serial = itertools.count()  # task keys are unique, also for a log submitted again alone
+        batches: dict[Any, list[tuple[str, FleetJob]]] = {}
         sizing = _BatchSizing()
         finished = self._distributed.as_completed([], loop=client.loop)
         exhausted = False
@@ -402,20 +404,26 @@ class DaskEngine:
                         exhausted = True
                     else:
                         waiting.append(pair)
-                while waiting and len(batches) < 2 * workers:
-                    size = sizing.size(len(waiting), exhausted, workers)
-                    batch = [waiting.popleft() for _ in range(min(size, len(waiting)))]
-                    keys = [key for key, _ in batch]
-                    future = client.submit(
-                        run_batch, [job for _, job in batch], key=f"mountcal-fleet-{token}-{keys[0][:16]}", pure=False
-                    )
-                    batches[future] = keys
+                while (alone or waiting) and len(batches) < 2 * workers:
+                    if alone:
+                        batch = [alone.popleft()]
+                    else:
+                        size = sizing.size(len(waiting), exhausted, workers)
+                        batch = [waiting.popleft() for _ in range(min(size, len(waiting)))]
+                    name = f"mountcal-fleet-{token}-{next(serial)}-{batch[0][0][:16]}"
+                    future = client.submit(run_batch, [job for _, job in batch], key=name, pure=False)
+                    batches[future] = batch
                     finished.add(future)
                 if not batches:
                     break
                 for future in finished.next_batch(block=True):
-                    keys = batches.pop(future)
-                    for key, record in zip(keys, self._records(future, len(keys)), strict=True):
+                    batch = batches.pop(future)
+                    records = self._records(future, len(batch))
+                    if records is None and len(batch) > 1:  # a batch whose worker died: find which log, alone
+                        future.release()
+                        alone.extend(batch)
+                        continue
+                    for (key, _), record in zip(batch, records or self._failures(future, len(batch)), strict=True):
                         sizing.done(record)
                         yield key, record
                 if time.monotonic() - looked > WATCH_PERIOD_S:  # the cluster may grow or shrink
@@ -431,15 +439,22 @@ class DaskEngine:
                 client.cancel([f for f in batches if not f.done()])
 
     @staticmethod
-    def _records(future: Any, n: int) -> list[dict[str, Any]]:
+    def _records(future: Any, n: int) -> list[dict[str, Any]] | None:
+        """The batch's records; None when the cluster could not run it (KilledWorker and the like)."""
         try:
             records = future.result()
         except (CancelledError, MountcalError):
             raise
-        except Exception as err:  # KilledWorker and the like: these logs, not the run
-            records = [engine_failure(err, "the Dask cluster could not run this log")] * n
+        except Exception:  # these logs, not the run
+            return None
         future.release()
         return list(records)
+
+    @staticmethod
+    def _failures(future: Any, n: int) -> list[dict[str, Any]]:
+        error = future.exception()
+        future.release()
+        return [engine_failure(error, "the Dask cluster could not run this log")] * n
 
 
 class _BatchSizing:
