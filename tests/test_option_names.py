@@ -37,7 +37,9 @@ def test_every_flag_in_the_table_is_a_flag_of_the_parsers() -> None:
 
 
 def test_every_python_spelling_in_the_table_is_a_parameter() -> None:
-    owners = (StopDetection, Options, LogOptions, Frames)
+    from mountcal.fleet import FleetOptions
+
+    owners = (StopDetection, Options, LogOptions, Frames, FleetOptions)
     classes = {c.__name__: {f.name for f in dataclasses.fields(c)} for c in owners}
     parameters = set().union(
         *(

@@ -46,6 +46,8 @@ OPTIONS: dict[str, tuple[str, str]] = {
     "unit": ("unit", "--unit"),
     "uphill_azimuth": ("uphill_azimuth_deg", "--uphill-azimuth-deg"),
     "yaw_undetermined": ("yaw", "--yaw-undetermined"),
+    "workers": ("FleetOptions.workers", "--workers"),
+    "scheduler": ("FleetOptions.scheduler", "--scheduler"),
 }
 
 _FLAGS: ContextVar[bool] = ContextVar("mountcal_option_flags", default=False)

@@ -45,6 +45,7 @@ from concurrent.futures.process import BrokenProcessPool
 from typing import TYPE_CHECKING, Any, Protocol
 
 from mountcal.errors import InputError, MountcalError
+from mountcal.option_names import option
 
 if TYPE_CHECKING:
     from mountcal.fleet.inputs import FleetJob
@@ -98,7 +99,9 @@ class LocalEngine:
 
     def __init__(self, workers: int | None = None) -> None:
         if workers is not None and workers < 1:
-            raise InputError("workers", "a number of worker processes ≥ 1", str(workers), "Ask for 1 or more.")
+            raise InputError(
+                option("workers", str(workers)), "a number of worker processes ≥ 1", str(workers), "Ask for 1 or more."
+            )
         available = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
         self.workers = workers or available or 1
         self.name = f"local, {self.workers} worker process{'es' if self.workers > 1 else ''}"
@@ -330,7 +333,7 @@ class DaskEngine:
             self._distributed = importlib.import_module("distributed")  # optional: mountcal[fleet]
         except ImportError as err:
             raise InputError(
-                f"the Dask scheduler {self.address}",
+                option("scheduler", self.address),
                 "the Dask distributed package",
                 "it is not installed",
                 "Install it: pip install 'mountcal[fleet]'; or run on the local cores (no scheduler).",
@@ -340,7 +343,7 @@ class DaskEngine:
             self._client = self._distributed.Client(self.address, timeout=self.timeout_s, set_as_default=False)
         except (OSError, TimeoutError, ValueError) as err:
             raise InputError(
-                f"the Dask scheduler {self.address}",
+                option("scheduler", self.address),
                 "a reachable Dask scheduler (tcp://HOST:PORT)",
                 f"no connection ({type(err).__name__}: {err})",
                 "Start one (`dask scheduler`, then `dask worker ADDRESS` on each machine) or check the address.",
@@ -359,7 +362,7 @@ class DaskEngine:
             parse_host_port(location)
         except ValueError as err:
             raise InputError(
-                f"--scheduler {self.address}",
+                option("scheduler", self.address),
                 "a Dask scheduler address, tcp://HOST:PORT (or tls://, ws://, wss://)",
                 f"not such an address ({err})",
                 "Write it as tcp://HOST:PORT, e.g. tcp://10.0.0.5:8786 (the port `dask scheduler` prints).",
