@@ -158,3 +158,20 @@ def test_errors_name_the_files_as_given_and_the_options_as_flags(
     assert "fleet/van/drive.csv" in error and str(tmp_path) not in error, error
     assert "--protocol" in error and "protocol=" not in error, error
     assert "fleet/van/drive.csv" in capsys.readouterr().out
+
+
+def test_with_a_dbc_a_stop_table_in_the_folder_is_still_a_stop_table(tmp_path: Path) -> None:
+    """--dbc makes a CSV possibly a CAN log; a CSV with a stop table's columns stays a stop table."""
+    import shutil
+
+    van = tmp_path / "fleet" / "van"
+    van.mkdir(parents=True)
+    shutil.copy(REPO / "data" / "zhang2011_stops.csv", van / "stops.csv")
+    shutil.copy(REPO / "data" / "parking.blf", van / "parking.blf")
+    output = tmp_path / "out.parquet"
+    args = ["fleet", str(tmp_path / "fleet"), "-o", str(output), "--dbc", str(REPO / "data" / "imu_mm5_10.dbc")]
+    assert main([*args, "--uphill-azimuth-deg", "30", "--workers", "1", "-q"]) == 0
+    logs = pd.read_parquet(output).set_index(pd.read_parquet(output)["log"].map(lambda p: Path(p).name))
+    assert logs.loc["stops.csv", "status"] == "ok", logs.loc["stops.csv", "error"]
+    assert logs.loc["stops.csv", "input_kind"] == "stop table" and logs.loc["stops.csv", "n_stops"] == 12
+    assert logs.loc["parking.blf", "status"] == "ok" and logs.loc["parking.blf", "input_kind"] == "log"
