@@ -231,9 +231,9 @@ def task_overhead() -> dict[str, float]:
     return out
 
 
-def resumed_run(inputs: list[Path], output: Path) -> float:
+def resumed_run(inputs: list[Path], output: Path, engine: tuple[str, ...] = ("--workers", "1")) -> float:
     """Wall time of a `mountcal fleet` run that finds every log already stored: the serial part."""
-    command = [sys.executable, "-m", "mountcal", "fleet", *map(str, inputs), "-o", str(output), "-q", "--workers", "1"]
+    command = [sys.executable, "-m", "mountcal", "fleet", *map(str, inputs), "-o", str(output), "-q", *engine]
     command += ["--uphill-azimuth-deg", str(UPHILL_AZIMUTH_DEG)]
     started = time.perf_counter()
     subprocess.run(command, check=True, stdout=subprocess.DEVNULL)
@@ -253,6 +253,8 @@ def cost_model(logs: Path, output: Path, times: dict[str, list[float]], overhead
     t_half = statistics.median(resumed_run(half, output) for _ in range(3))  # the same parts: nothing computed
     s = (t_all - t_half) / (n_all - n_half)
     a = t_all - s * n_all
+    with dask_cluster([], 1) as address:  # the Dask command's own fixed cost: importing distributed, connecting
+        a_dask = statistics.median(resumed_run([logs], output, ("--scheduler", address)) for _ in range(3)) - s * n_all
     sizes = np.array([sum(Path(p).stat().st_size for p in str(log).split(" + ")) for log in table["log"]], dtype=float)
     from scipy.optimize import nnls
 
@@ -265,7 +267,7 @@ def cost_model(logs: Path, output: Path, times: dict[str, list[float]], overhead
     batch = max(1.0, BATCH_TARGET_S / per_log)
     print("cost model: T(W) = a + s·N + (Σ (c_log + c_byte·bytes) + n_tasks·c_task) / W")
     resumed = f"resumed: {t_all:.2f} s for {n_all}, {t_half:.2f} s for {n_half}"
-    print(f"  a = {a:.2f} s; s = {1e3 * s:.2f} ms per log ({resumed})")
+    print(f"  a = {a:.2f} s local, {a_dask:.2f} s Dask; s = {1e3 * s:.2f} ms per log ({resumed})")
     print(
         f"  c_log = {1e3 * c_log:.1f} ms, c_byte = {1e9 * c_byte:.0f} ms/GB "
         f"(mean log {sizes.mean() / 1e6:.2f} MB: {1e3 * per_log:.0f} ms of work)"
@@ -274,15 +276,16 @@ def cost_model(logs: Path, output: Path, times: dict[str, list[float]], overhead
     print(f"  c_task = {local:.2f} ms local, {dask:.2f} ms Dask ({batch:.0f} logs a task)")
     print(f"  {'configuration':<30} {'predicted':>10} {'measured':>9} {'error':>7}")
     for name, values in times.items():
-        tasks, c_task = (n_all / batch, overhead["dask"]) if name.startswith("Dask") else (n_all, overhead["local"])
-        predicted = a + s * n_all + (work + tasks * c_task) / workers_of(name)
+        dask = name.startswith("Dask")
+        tasks, c_task = (n_all / batch, overhead["dask"]) if dask else (n_all, overhead["local"])
+        predicted = (a_dask if dask else a) + s * n_all + (work + tasks * c_task) / workers_of(name)
         measured = statistics.median(values)
         print(f"  {name:<30} {predicted:>9.1f}s {measured:>8.1f}s {100 * (predicted / measured - 1):>+6.0f}%")
     n, w = 10_000 * 100, 32
     tasks = n / batch
     parallel = (n * per_log + tasks * overhead["dask"]) / w
     scheduler = tasks * overhead["dask"]  # the scheduler and the command see every task one at a time
-    serial = a + s * n
+    serial = a_dask + s * n
     print(
         f"  10 000 vehicles × 100 sessions of these logs on {w} Dask workers: "
         f"{(serial + max(parallel, scheduler)) / 3600:.2f} h "
