@@ -115,8 +115,10 @@ def test_the_workers_end_with_the_command_and_release_its_output_pipe(tmp_path: 
     assert len(pd.read_parquet(output)) == 40
 
 
-@pytest.mark.parametrize("delay_s", [0.05, 0.2, 0.4, 0.8, 1.5, 3.0])
+@pytest.mark.parametrize("delay_s", [0.0, 0.2, 0.5, 1.0, 2.0, 4.0])
 def test_ctrl_c_at_any_moment_ends_cleanly_and_the_run_resumes(tmp_path: Path, delay_s: float) -> None:
+    """Ctrl-C at moments from the command's first act (starting its worker server: before that,
+    Python itself is starting, and an interrupt is the interpreter's own) to the last log."""
     _stop_tables(tmp_path / "logs" / "van", 30)
     output = tmp_path / "fleet.parquet"
     proc = subprocess.Popen(
@@ -126,6 +128,9 @@ def test_ctrl_c_at_any_moment_ends_cleanly_and_the_run_resumes(tmp_path: Path, d
         stderr=subprocess.PIPE,
         start_new_session=True,
     )
+    deadline = time.monotonic() + 60
+    while not _children(proc.pid) and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.002)  # mountcal's code runs: the worker server is being started
     time.sleep(delay_s)
     os.killpg(proc.pid, signal.SIGINT)  # Ctrl-C reaches the whole foreground process group
     try:
@@ -133,8 +138,7 @@ def test_ctrl_c_at_any_moment_ends_cleanly_and_the_run_resumes(tmp_path: Path, d
     finally:
         proc.kill()
     assert b"Traceback" not in stderr and b"KeyboardInterrupt" not in stderr, stderr.decode()
-    # 130: interrupted; 0: it finished first; −SIGINT: it came before Python itself had started
-    assert proc.returncode in (0, 130, -signal.SIGINT)
+    assert proc.returncode in (0, 130)  # 130: interrupted; 0: it finished first
     assert main(["fleet", str(tmp_path / "logs"), "-o", str(output), "-q"]) == 0
     assert len(pd.read_parquet(output)) == 30
 
