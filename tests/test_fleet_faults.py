@@ -138,7 +138,9 @@ def test_ctrl_c_at_any_moment_ends_cleanly_and_the_run_resumes(tmp_path: Path, d
     finally:
         proc.kill()
     assert b"Traceback" not in stderr and b"KeyboardInterrupt" not in stderr, stderr.decode()
-    assert proc.returncode in (0, 130)  # 130: interrupted; 0: it finished first
+    # 130: interrupted; 0: it finished first; −SIGINT: it had finished and was exiting (Python's own
+    # handler is gone by then), with its tables written
+    assert proc.returncode in (0, 130) or (proc.returncode == -signal.SIGINT and output.exists()), proc.returncode
     assert main(["fleet", str(tmp_path / "logs"), "-o", str(output), "-q"]) == 0
     assert len(pd.read_parquet(output)) == 30
 
