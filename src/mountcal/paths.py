@@ -62,11 +62,9 @@ STDIN = "-"
 
 def small_input_limit() -> int:
     """The size limit of a small input, in bytes (``MOUNTCAL_MAX_INPUT_MB`` raises it)."""
-    value = os.environ.get(LIMIT_VARIABLE)
-    try:
-        return int(float(value) * 2**20) if value else SMALL_INPUT_LIMIT_BYTES
-    except ValueError:
-        return SMALL_INPUT_LIMIT_BYTES
+    from mountcal.budget import setting
+
+    return setting("input")
 
 
 def _kind(mode: int) -> str:

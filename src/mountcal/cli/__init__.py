@@ -17,6 +17,7 @@ import logging
 import sys
 from collections.abc import Sequence
 
+from mountcal import budget
 from mountcal.cli.options import EXIT_CODES, configure_logging
 from mountcal.errors import MountcalError
 from mountcal.option_names import as_flags
@@ -34,7 +35,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     configure_logging(args.verbose - args.quiet)
     try:
-        with as_flags():  # library messages name the flags, not the Python parameters
+        # library messages name the flags, not the Python parameters; one budget for the whole command
+        with as_flags(), budget.scope():
             return int(args.run(args))
     except MountcalError as err:
         log.error("error: %s", safe(err, keep=chr(10)))

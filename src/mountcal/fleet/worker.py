@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from mountcal import budget
 from mountcal.calibrate import calibrate
 from mountcal.conventions import GIMBAL_LOCK_PITCH_DEG
 from mountcal.errors import MountcalError
@@ -57,7 +58,8 @@ def run_job(job: FleetJob) -> dict[str, Any]:
     }
     local: Sequence[str] = job.job.paths
     try:
-        with as_flags() if job.flags else contextlib.nullcontext(), _fetched(job) as local:
+        # each log its own totals of the budget
+        with as_flags() if job.flags else contextlib.nullcontext(), budget.scope(), _fetched(job) as local:
             record.update(_calibrate(replace(job, job=replace(job.job, paths=tuple(local))), record))
         record["status"] = "ok"
     except MountcalError as err:

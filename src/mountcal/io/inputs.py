@@ -4,17 +4,11 @@ Every reader calls :func:`check_regular_file` before opening its input: a FIFO w
 read forever, ``/dev/zero`` or ``/dev/urandom`` never end, and a directory is not a log. Each one is
 refused with an :class:`~mountcal.errors.InputError` instead.
 
-Readers also bound their memory by what they will actually hold, whatever a file declares:
-
-- ``MOUNTCAL_MAX_BLOCK_MB`` (default 256): the largest block a reader inflates or loads at once
-  (an MCAP chunk, a BLF log container, a Parquet row group), checked on the declared size and
-  again while inflating (the inflate stops at the declared size), so a decompression bomb is
-  refused after at most this much memory.
-- ``MOUNTCAL_MAX_ROWS`` (default 100 million): the most samples, frames or table rows a reader
-  materialises from one input, counted before they are held.
-
-A limit hit is an :class:`~mountcal.errors.InputError` naming the file, the limit and the variable
-that raises it. See ``docs/reliability.md`` for the memory bound these give.
+Readers also bound their memory and time by what they will actually inflate, walk and hold,
+whatever a file declares: each charges :mod:`mountcal.budget` per block or batch (the largest
+block, the decompression ratio, rows, records, columns), and a limit hit is an
+:class:`~mountcal.errors.InputError` naming the file, the limit and the variable that raises it.
+See ``docs/reliability.md`` for the memory bound these give.
 """
 
 from __future__ import annotations
@@ -25,13 +19,10 @@ from collections.abc import Iterable, Sized
 from pathlib import Path
 from typing import TypeVar
 
+from mountcal import budget
 from mountcal.errors import InputError
 from mountcal.paths import input_file
 
-MAX_BLOCK_ENV = "MOUNTCAL_MAX_BLOCK_MB"
-MAX_ROWS_ENV = "MOUNTCAL_MAX_ROWS"
-_DEFAULT_BLOCK_MB = 256
-_DEFAULT_ROWS = 100_000_000
 _Sized = TypeVar("_Sized", bound=Sized)
 
 
@@ -50,27 +41,14 @@ def check_regular_file(path: str | os.PathLike[str], role: str) -> Path:
     return input_file(path, f"a {role}", limit=sys.maxsize)
 
 
-def _env_int(name: str, default: int) -> int:
-    raw = os.environ.get(name, "").strip()
-    if not raw:
-        return default
-    try:
-        value = int(raw)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise InputError(name, "a positive whole number", repr(raw), f"Set {name} to a number ≥ 1 or unset it.")
-    return value
-
-
 def max_block_bytes() -> int:
     """The largest block (MCAP chunk, BLF container, ...) a reader inflates, in bytes."""
-    return _env_int(MAX_BLOCK_ENV, _DEFAULT_BLOCK_MB) << 20
+    return budget.setting("block")
 
 
 def max_rows() -> int:
-    """The most samples, frames or rows a reader materialises from one input."""
-    return _env_int(MAX_ROWS_ENV, _DEFAULT_ROWS)
+    """The most samples, frames or rows a reader materialises (a total of the run: :mod:`mountcal.budget`)."""
+    return budget.setting("rows")
 
 
 def block_too_large(where: str, what: str, found: str) -> InputError:
@@ -78,36 +56,46 @@ def block_too_large(where: str, what: str, found: str) -> InputError:
 
     ``what`` names the block (``"an MCAP chunk at byte 8"``), ``found`` what it holds.
     """
-    limit_mb = max_block_bytes() >> 20
-    return InputError(
+    return budget.over(
+        "block",
         where,
-        f"{what} of at most {limit_mb} MiB once inflated (the {MAX_BLOCK_ENV} limit)",
+        f"{what} of at most {max_block_bytes() >> 20} MiB once inflated",
         found,
-        f"A block this large is damage or a decompression bomb; if the file is genuine, raise the "
-        f"limit, e.g. {MAX_BLOCK_ENV}={4 * limit_mb}.",
+        "A block this large is damage or a decompression bomb.",
     )
 
 
 def too_many_rows(where: str, what: str, count: int) -> InputError:
     """The error for an input holding more than :func:`max_rows` samples, frames or rows."""
-    limit = max_rows()
-    return InputError(
-        where,
-        f"at most {limit} {what} (the {MAX_ROWS_ENV} limit)",
-        f"{count} or more",
-        f"Split the input, or raise the limit, e.g. {MAX_ROWS_ENV}={2 * limit}, with the memory to hold them.",
-    )
+    return budget.over("rows", where, f"at most {max_rows()} {what}", f"{count} or more", "Split the input.")
 
 
 def hold(parts: Iterable[_Sized], where: str, what: str) -> list[_Sized]:
-    """``list(parts)``, counting their rows as they arrive and refusing past :func:`max_rows`."""
-    out, count, limit = [], 0, max_rows()
+    """``list(parts)``, charging their rows to the run's budget as they arrive."""
+    out = []
     for part in parts:
-        count += len(part)
-        if count > limit:
-            raise too_many_rows(where, what, count)
+        budget.charge("rows", len(part), where, what)
         out.append(part)
     return out
+
+
+def csv_columns(head: bytes | Path, where: str) -> None:
+    """Charge the columns of a CSV table (its first line; ``head``: the bytes, or the file) to the
+    budget, reading no more of the line than the limit allows: a header of a million columns is
+    refused before a parser allocates one object per column."""
+    limit = budget.setting("columns")
+    if isinstance(head, Path):
+        with head.open("rb") as f:
+            line = b""
+            while b"\n" not in line and line.count(b",") <= limit:
+                piece = f.read(1 << 16)
+                if not piece:
+                    break
+                line += piece
+    else:
+        line = head[: head.find(b"\n")] if b"\n" in head[: 1 << 24] else head[: 1 << 24]
+    line = line.split(b"\n", 1)[0]
+    budget.charge("columns", line.count(b",") + 1, where, "table columns")
 
 
 def check_parquet_rows(path: Path) -> None:
@@ -116,8 +104,9 @@ def check_parquet_rows(path: Path) -> None:
     import pyarrow.parquet as pq
 
     try:
-        rows = pq.ParquetFile(path).metadata.num_rows
+        meta = pq.ParquetFile(path).metadata
     except Exception:  # an unreadable footer: the reader's own parse reports it
         return
-    if rows > max_rows():
-        raise too_many_rows(str(path), "table rows", rows)
+    budget.charge("columns", meta.num_columns, str(path), "table columns")
+    if meta.num_rows > max_rows():
+        raise too_many_rows(str(path), "table rows", meta.num_rows)

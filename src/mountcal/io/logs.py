@@ -20,6 +20,7 @@ from itertools import pairwise
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from mountcal.budget import scoped, scoped_iter
 from mountcal.errors import InputError
 from mountcal.io.registry import reader_for
 
@@ -64,6 +65,7 @@ def _reader(path: Path, opts: LogOptions) -> LogReader:
     return reader
 
 
+@scoped
 def read_log(paths: str | Path | Sequence[str | Path], options: LogOptions | None = None) -> Samples:
     """Samples of one log (one file, or several splits joined in time order)."""
     opts = options or LogOptions()
@@ -74,6 +76,7 @@ def read_log(paths: str | Path | Sequence[str | Path], options: LogOptions | Non
     return parts[0] if len(parts) == 1 else join(parts)
 
 
+@scoped
 def inspect_log(path: str | Path, options: LogOptions | None = None) -> LogSummary:
     """What a log holds: topics or messages, signals, rates, duration (a CAN log without a DBC too:
     ids per channel with counts, rates and DLCs)."""
@@ -82,6 +85,7 @@ def inspect_log(path: str | Path, options: LogOptions | None = None) -> LogSumma
     return _reader(path, opts).inspect(path, opts)
 
 
+@scoped_iter
 def iter_log(
     paths: str | os.PathLike[str] | Sequence[str | os.PathLike[str]],
     options: LogOptions | None = None,

@@ -16,6 +16,7 @@ import numpy as np
 from isal import isal_zlib  # zlib-compatible inflate, 1.7× faster than zlib's on BLF containers
 from numpy.typing import NDArray
 
+from mountcal import budget
 from mountcal.errors import InputError
 from mountcal.io.can.frames import CLASSIC_WIDTH, DATA_WIDTH, CanFrames, Filter, FloatArray, IntArray, pad_payload
 from mountcal.io.inputs import block_too_large, max_block_bytes
@@ -31,6 +32,10 @@ _LOBJ = 0x4A424F4C  # b"LOBJ" read as a little-endian uint32
 _LOG_CONTAINER, _CAN_MESSAGE, _CAN_MESSAGE2, _CAN_FD_MESSAGE, _CAN_FD_MESSAGE_64 = 10, 1, 86, 100, 101
 _BLF_BATCH_BYTES = 4 << 20  # inflated bytes scanned at a time
 _BLF_READ_BYTES = 4 << 20  # compressed bytes read at a time
+_BLF_JOB_BYTES = 256 << 10  # containers handed to a thread together (inflated + compressed bytes)
+_BLF_JOB_CONTAINERS = 1024  # ... or this many of them
+_BLF_JOBS_IN_FLIGHT = 8
+_BLF_RECORDS_CHARGED = 1 << 16  # objects walked between charges to the budget
 DLC2LEN = np.array([0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64], np.uint8)
 
 
@@ -75,11 +80,13 @@ def _blf_compressed_containers(f: BinaryIO, path: Path) -> Iterator[tuple[int, i
     """
     offset = f.tell()
     block, pos = b"", 0
+    walked = 0  # objects stepped through, charged to the budget in batches
     while True:
         if len(block) - pos < _BLF_OBJ_BASE.size:
             block, pos = block[pos:] + f.read(_BLF_READ_BYTES), 0
         raw = block[pos : pos + _BLF_OBJ_BASE.size]
         if not raw.strip(b"\0"):  # end of file (or trailing padding)
+            budget.charge("records", walked, str(path), "BLF objects")
             return
         if len(raw) < _BLF_OBJ_BASE.size:
             raise _blf_error(path, f"an object header at byte {offset}", f"{len(raw)} bytes before the end")
@@ -101,9 +108,15 @@ def _blf_compressed_containers(f: BinaryIO, path: Path) -> Iterator[tuple[int, i
             if usize > max_block_bytes():
                 found = f"one stating {usize} bytes"
                 raise block_too_large(str(path), f"a BLF log container (at byte {offset})", found)
+            if usize:  # all containers together within the decompression ratio
+                budget.inflate(size, usize, str(path), f"the BLF log containers up to byte {offset}")
             yield method, usize, block[pos + _BLF_OBJ_BASE.size + _BLF_CONTAINER.size : pos + size]
         pos += stride
         offset += stride
+        walked += 1
+        if walked == _BLF_RECORDS_CHARGED:
+            budget.charge("records", walked, str(path), "BLF objects")
+            walked = 0
 
 
 def _inflate(method: int, usize: int, payload: bytes, path: Path) -> bytes:
@@ -128,29 +141,50 @@ def _inflate(method: int, usize: int, payload: bytes, path: Path) -> bytes:
     raise _blf_error(path, "a zlib-compressed log container", found)
 
 
+def _inflate_all(containers: list[tuple[int, int, bytes]], path: Path) -> list[bytes]:
+    return [_inflate(method, usize, payload, path) for method, usize, payload in containers]
+
+
+def _jobs(containers: Iterator[tuple[int, int, bytes]]) -> Iterator[tuple[list[tuple[int, int, bytes]], int]]:
+    """Containers grouped into jobs of about ``_BLF_JOB_BYTES`` (inflated and compressed), each with
+    its size: a thread hand-over per job, not per container (a file of tiny or empty containers
+    would otherwise cost a future each, and a queue of them)."""
+    job: list[tuple[int, int, bytes]] = []
+    size = 0
+    for container in containers:
+        job.append(container)
+        size += container[1] + len(container[2])
+        if size >= _BLF_JOB_BYTES or len(job) >= _BLF_JOB_CONTAINERS:
+            yield job, size
+            job, size = [], 0
+    if job:
+        yield job, size
+
+
 def _blf_inflated(f: BinaryIO, path: Path) -> Iterator[bytes]:
     """Container payloads, inflated in two threads (ISA-L releases the GIL), or here where
     :func:`~mountcal.threads.helpers_allowed` says no.
 
-    Up to a scan batch and a half of inflated bytes is kept in flight, so the threads inflate the
-    next batch while the caller scans this one (a shallow queue left them idle during the scan).
+    Up to a scan batch and a half of inflated bytes (and at most a few jobs) is kept in flight, so
+    the threads inflate the next batch while the caller scans this one (a shallow queue left them
+    idle during the scan).
     """
     containers = _blf_compressed_containers(f, path)
     if not helpers_allowed():
         yield from (_inflate(method, usize, payload, path) for method, usize, payload in containers)
         return
-    pending: deque[tuple[Future[bytes], int]] = deque()
+    pending: deque[tuple[Future[list[bytes]], int]] = deque()
     in_flight = 0
     with ThreadPoolExecutor(max_workers=2) as pool:
-        for method, usize, payload in containers:
-            pending.append((pool.submit(_inflate, method, usize, payload, path), usize))
-            in_flight += usize
-            while in_flight > _BLF_BATCH_BYTES * 3 // 2:
+        for job, job_size in _jobs(containers):
+            pending.append((pool.submit(_inflate_all, job, path), job_size))
+            in_flight += job_size
+            while in_flight > _BLF_BATCH_BYTES * 3 // 2 or len(pending) > _BLF_JOBS_IN_FLIGHT:
                 future, size = pending.popleft()
                 in_flight -= size
-                yield future.result()
+                yield from future.result()
         while pending:
-            yield pending.popleft()[0].result()
+            yield from pending.popleft()[0].result()
 
 
 def iter_blf(path: Path, keep: Filter) -> Iterator[CanFrames]:
@@ -162,6 +196,8 @@ def iter_blf(path: Path, keep: Filter) -> Iterator[CanFrames]:
     with path.open("rb") as f:
         start = _read_blf_header(f, path)
         for block in _blf_inflated(f, path):
+            if not block:
+                continue
             if filled + len(block) > len(buf):  # a container larger than the usual: a larger buffer
                 buf = buf[:filled] + bytearray(max(len(buf), filled + len(block)))
             buf[filled : filled + len(block)] = block

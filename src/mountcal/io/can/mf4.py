@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from mountcal import budget
 from mountcal.errors import InputError
 from mountcal.io.can.blf import DLC2LEN, le_field
 from mountcal.io.can.frames import DATA_WIDTH, CanFrames, Filter, FloatArray, pad_payload
@@ -268,6 +269,8 @@ def _check_mf4_blocks(path: Path, group: Any) -> None:
         if block.original_size > max_block_bytes():
             what = f"an MF4 data block (at byte {block.address})"
             raise block_too_large(str(path), what, f"one stating {block.original_size} bytes")
+        if block.compressed_size and block.compressed_size != block.original_size:  # a DZ block
+            budget.inflate(int(block.compressed_size), int(block.original_size), str(path), "the MF4 data blocks")
         total += int(block.original_size)
     cg = group.channel_group
     record = int(cg.samples_byte_nr) + int(cg.invalidation_bytes_nr)
@@ -295,6 +298,8 @@ def _check_mf4_vlsd(path: Path, mdf: Any, index: int) -> None:
             if block.original_size > max_block_bytes():
                 what = f"an MF4 signal data block (at byte {block.address})"
                 raise block_too_large(str(path), what, f"one stating {block.original_size} bytes")
+            if block.compressed_size and block.compressed_size != block.original_size:
+                budget.inflate(int(block.compressed_size), int(block.original_size), str(path), "the MF4 data blocks")
         try:
             with _asammdf_quiet():
                 data, offsets = _mf4_vlsd_arrays(mdf._mdf, group, ch_nr)  # the MDF4 object under MDF

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from mountcal import budget
 from mountcal.errors import InputError
 from mountcal.io.can.dbc import frame_id_text, id_match
 from mountcal.io.can.frames import iter_frames
@@ -118,6 +119,7 @@ def id_stats(path: Path) -> dict[tuple[int, int, bool], _IdStat]:
     """Per (channel, id, extended): frame count, first and last time, DLCs, in one streamed pass."""
     stats: dict[tuple[int, int, bool], _IdStat] = {}
     for frames in iter_frames(path, max_frames=1 << 18):
+        known = len(stats)
         key = (frames.channel * (1 << 33)) + frames.arbitration_id.astype(np.int64) * 2 + frames.is_extended
         uniq, first, counts = np.unique(key, return_index=True, return_counts=True)
         last = len(key) - 1 - np.unique(key[::-1], return_index=True)[1]
@@ -132,4 +134,5 @@ def id_stats(path: Path) -> dict[tuple[int, int, bool], _IdStat]:
             entry.count += int(c)
             entry.last = float(frames.t_s[la])
             entry.dlcs |= dlcs[u]
+        budget.charge("streams", len(stats) - known, str(path), "distinct CAN ids (per channel)")
     return stats

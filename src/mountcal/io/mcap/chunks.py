@@ -22,6 +22,7 @@ import numpy as np
 import zstandard
 from numpy.typing import NDArray
 
+from mountcal import budget
 from mountcal.errors import InputError
 from mountcal.io.inputs import block_too_large, check_regular_file, max_block_bytes
 from mountcal.io.mcap.records import (
@@ -185,10 +186,15 @@ def messages_by_walk(data: U8Array, what: str) -> Unit:
     return Unit(data, np.array(at, dtype=np.int64), np.array(lengths, dtype=np.int64), others, what)
 
 
-def _unit(data: U8Array, index: I64Array | None, what: str) -> Unit:
-    """Locate the message records of ``data``: by its index, by stride, or by walking them."""
+def _unit(data: U8Array, index: I64Array | None, what: str, where: str) -> Unit:
+    """Locate the message records of ``data``: by its index, by stride, or by walking them (the
+    records walked charged to the budget of the file ``where``)."""
     unit = _messages_from_index(data, np.sort(index), what) if index is not None else None
-    return unit or _messages_by_stride(data, what) or messages_by_walk(data, what)
+    unit = unit or _messages_by_stride(data, what)
+    if unit is None:
+        unit = messages_by_walk(data, what)
+        budget.charge("records", unit.messages.size + len(unit.others), where, "MCAP records stepped through")
+    return unit
 
 
 @dataclass(frozen=True)
@@ -273,6 +279,7 @@ def _chunk_job(
         raise block_too_large(log.where, f"an MCAP chunk (at byte {at})", f"a chunk stating {size} bytes")
     if compression not in ("zstd", "lz4", ""):
         raise Corrupt(f"a chunk at byte {at} compressed with {compression!r} (readable: zstd, lz4, none)")
+    budget.inflate(data_len, size, log.where, f"the MCAP chunks up to byte {at}")
     # The output buffer is allocated here, on the reading thread, and freed here after decoding:
     # buffers allocated on the worker and freed on this thread cost fresh pages (and time) per chunk.
     out = np.empty(size, dtype=np.uint8) if compression == "zstd" else None
@@ -333,7 +340,7 @@ def chunk_units(log: Log, wanted: frozenset[int] | None) -> Generator[Unit, None
     with closing(_prefetch(_jobs(log, wanted))) as prefetched:  # stop the worker on any exit
         for job, data in prefetched:
             what = f"{'chunk' if job.chunk else 'records'} at byte {job.at}"
-            unit = _unit(data, job.index if job.chunk else None, what)
+            unit = _unit(data, job.index if job.chunk else None, what, log.where)
             del job, data  # hold one chunk, not two, while the next one is read
             yield unit
             del unit

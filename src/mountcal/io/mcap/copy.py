@@ -27,6 +27,7 @@ from mcap.records import (
 )
 from numpy.typing import NDArray
 
+from mountcal import budget
 from mountcal.errors import InputError
 from mountcal.io.inputs import block_too_large, max_block_bytes
 from mountcal.io.mcap.chunks import messages_by_walk, unlz4, unzstd
@@ -61,6 +62,7 @@ def decompress_chunk(raw: bytes, where: str) -> U8Array:
         data = raw[at + name_len + 8 : at + name_len + 8 + data_len]
         if size > max_block_bytes():
             raise block_too_large(where, "an MCAP chunk", f"{size} bytes stated")
+        budget.inflate(len(data), size, where, "the MCAP chunks copied")
         if compression == "zstd":
             out = unzstd(data, np.empty(size, dtype=np.uint8))
         elif compression == "lz4":
@@ -90,6 +92,7 @@ def walk_messages(records: U8Array, where: str) -> tuple[NDArray[np.int64], NDAr
         at = messages_by_walk(records, "chunk").messages
     except Corrupt as err:
         raise damaged(where, str(err)) from err
+    budget.charge("records", at.size, where, "MCAP records stepped through")
     return at, record_field(records, at, RECORD_HEAD.size, "<u2").astype(np.int64)
 
 

@@ -9,6 +9,7 @@ from contextlib import closing
 import numpy as np
 from numpy.typing import NDArray
 
+from mountcal import budget
 from mountcal.io.mcap.chunks import chunk_units, open_log, read_message_index
 from mountcal.io.mcap.read import schema_fields
 from mountcal.io.mcap.records import (
@@ -26,6 +27,7 @@ from mountcal.io.mcap.records import (
 from mountcal.samples import LogSummary, Stream
 
 
+@budget.scoped
 def inspect_mcap(path: str | os.PathLike[str]) -> LogSummary:
     """What an MCAP log holds: topics, types, message counts, rates and duration.
 

@@ -39,8 +39,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from mountcal import budget
 from mountcal.errors import InputError
-from mountcal.io.inputs import max_rows, too_many_rows
 from mountcal.io.mcap.chunks import Unit, chunk_units, open_log
 from mountcal.io.mcap.records import (
     ARGUMENT,
@@ -404,15 +404,13 @@ def _read_open(log: Log, topics: dict[str, str | None]) -> Samples:
     selections = [imu, *(s for s in aux if s is not None)]
     collected: dict[str, list[_Piece]] = {}
     dropped: Counter[str] = Counter()
-    held, limit = 0, max_rows()
     with closing(_decoded_units(log, selections)) as units:
         for pieces, drops in units:
             dropped.update(drops)
             for key, piece in pieces.items():
                 collected.setdefault(key, []).append(piece)
-                held += piece.t_s.size
-            if held > limit:  # counted a chunk at a time, before the whole log is held
-                raise too_many_rows(log.where, "samples (all topics read)", held)
+            # counted a chunk at a time, before the whole log is held
+            budget.charge("rows", sum(p.t_s.size for p in pieces.values()), log.where, "samples (all topics read)")
     if not collected.get("imu") or not sum(p.t_s.size for p in collected["imu"]):
         raise _no_samples(log, imu.topic, dropped)
     samples = _concat(collected.pop("imu"))
@@ -441,6 +439,7 @@ def _gyro(piece: _Piece, dropped: Counter[str]) -> FloatArray | None:
     return None
 
 
+@budget.scoped
 def read_mcap(
     path: str | os.PathLike[str],
     *,
@@ -527,6 +526,7 @@ def iter_mcap(
     return _iter_batches(path, selection, max_samples)
 
 
+@budget.scoped_iter
 def _iter_batches(path: str | os.PathLike[str], selection: _Selection, max_samples: int) -> Iterator[Samples]:
     log = open_log(path, discover=False)  # the channels were chosen already
     try:
