@@ -168,7 +168,7 @@ def test_an_impossible_latitude_is_refused(tmp_path: Path) -> None:
     df["lat_deg"] = 95.0
     path = tmp_path / "lat.csv"
     df.to_csv(path, index=False)
-    with pytest.raises(InputError, match="lat_deg within ±90°"):
+    with pytest.raises(InputError, match=r"lat_deg: a latitude, a finite number in \[-90, 90\] °"):
         read_stop_table(path)
 
 

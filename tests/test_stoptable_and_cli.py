@@ -108,7 +108,7 @@ BAD_TABLES = {
     "one heading only": (lambda df: df.assign(beta_deg=30.0), "different headings"),
     "g given as m/s²": (lambda df: df.assign(ax=df.ax / 9.8, ay=df.ay / 9.8, az=df.az / 9.8), "add --unit g"),
     "not gravity": (lambda df: df.assign(az=df.az * 3), "magnitude near gravity"),
-    "negative spread": (lambda df: df.assign(sx=-1.0), "sx, sy, sz > 0"),
+    "negative spread": (lambda df: df.assign(sx=-1.0), "sx, sy, sz: the spread of a stop's samples"),
 }
 
 

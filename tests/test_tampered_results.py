@@ -21,7 +21,8 @@ import pytest
 from mountcal.cli import main
 from mountcal.errors import InputError
 from mountcal.result import FORMAT_VERSION, Calibration, schema_defs
-from mountcal.result_file import MAX_DEPTH, check_document, read_json, schema
+from mountcal.budget import setting
+from mountcal.result_file import check_document, read_json, schema
 from mountcal.terminal import safe
 
 Doc = dict[str, Any]
@@ -293,7 +294,7 @@ def test_a_200000_deep_array_is_refused_without_recursion(
 ) -> None:
     deep = _write(made["dir"] / "deep.json", "[" * 200_000 + "]" * 200_000)
     code, _, err = run(["report", str(deep), "-o", str(made["dir"] / "deep.html")], capsys)
-    assert code == 2 and f"nested at most {MAX_DEPTH} levels" in err and "200000 levels" in err
+    assert code == 2 and f"nested at most {setting('depth')} levels" in err and "200000 levels" in err
     brackets_in_strings = _write(made["dir"] / "strings.json", json.dumps({"a": "[" * 1000, "format": "x"}))
     with pytest.raises(InputError, match="format"):  # depth 1: parsed, then refused as no calibration
         Calibration.load(brackets_in_strings)

@@ -69,9 +69,13 @@ LIMITS: tuple[Limit, ...] = (
         1 << 20,
     ),
     Limit("rows", "MOUNTCAL_MAX_ROWS", 100_000_000, "", "samples, frames and table rows held", "process"),
-    Limit("records", "MOUNTCAL_MAX_RECORDS", 200_000_000, "", "records, containers and lines stepped through", "process"),
+    Limit(
+        "records", "MOUNTCAL_MAX_RECORDS", 200_000_000, "", "records, containers and lines stepped through", "process"
+    ),
     Limit("columns", "MOUNTCAL_MAX_COLUMNS", 10_000, "", "table columns read", "process"),
-    Limit("streams", "MOUNTCAL_MAX_STREAMS", 65_536, "", "distinct CAN ids (per channel) a log is listed by", "process"),
+    Limit(
+        "streams", "MOUNTCAL_MAX_STREAMS", 65_536, "", "distinct CAN ids (per channel) a log is listed by", "process"
+    ),
     Limit("stops", "MOUNTCAL_MAX_STOPS", 100_000, "", "stops read from stop tables", "process"),
     Limit("input", "MOUNTCAL_MAX_INPUT_MB", 256, "MiB", "a small input file", "file", 1 << 20),
     Limit("document", "MOUNTCAL_MAX_DOCUMENT_MB", 32, "MiB", "JSON and TOML parsed", "process", 1 << 16),
@@ -122,7 +126,8 @@ def over(key: str, where: str, what: str, found: str, todo: str = "") -> InputEr
         f"{what} (the {limit.variable} limit{', counted over the whole run' if limit.per == 'process' else ''})",
         found,
         (todo + " " if todo else "")
-        + f"If the input is genuine, raise the limit, e.g. {limit.variable}={raised}, with the memory and time it needs.",
+        + f"If the input is genuine, raise the limit, e.g. {limit.variable}={raised}, with the memory and time "
+        "it needs.",
     )
 
 
@@ -286,7 +291,9 @@ def document(raw: bytes, where: str, what: str, *, toml: bool = False) -> Any:
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as err:
-        raise InputError(where, f"{what} in UTF-8", f"byte 0x{raw[err.start]:02x} at {err.start}", "Save it as UTF-8.") from err
+        raise InputError(
+            where, f"{what} in UTF-8", f"byte 0x{raw[err.start]:02x} at {err.start}", "Save it as UTF-8."
+        ) from err
     try:
         if toml:
             import tomllib
@@ -299,7 +306,9 @@ def document(raw: bytes, where: str, what: str, *, toml: bool = False) -> Any:
         raise InputError(where, what, "nesting too deep to parse", "Pass a file written by its tool.") from err
     except ValueError as err:  # JSONDecodeError and TOMLDecodeError are ValueErrors
         kind = "TOML" if toml else "JSON"
-        raise InputError(where, f"{what} (valid {kind})", f"invalid {kind} ({err})", "Fix or re-export the file.") from err
+        raise InputError(
+            where, f"valid {kind} ({what})", f"invalid {kind} ({err})", "Fix or re-export the file."
+        ) from err
 
 
 def _no_constant(name: str) -> float:

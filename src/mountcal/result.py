@@ -16,7 +16,7 @@ from scipy.spatial.transform import Rotation
 
 from mountcal.atomic import atomic_path
 from mountcal.conventions import CONVENTIONS, FloatArray, levelled
-from mountcal.errors import InputError
+from mountcal.errors import InputError, NotEnoughInformation
 from mountcal.result_file import check_document, read_json
 from mountcal.typed_json import from_plain, schema_of, to_plain
 
@@ -335,9 +335,23 @@ class Calibration:
             "systematic": to_plain(self.systematic),
         }
 
+    def document(self) -> dict[str, Any]:
+        """:meth:`to_dict`, checked as the loader checks a file (:meth:`from_dict`): what mountcal
+        writes, it reads back. A result with a value outside its range (docs/reliability.md) —
+        an angle whose 1σ exceeds ten turns — is no usable calibration: not enough information."""
+        doc = self.to_dict()
+        try:
+            Calibration.from_dict(doc, where="the result")
+        except InputError as err:
+            raise NotEnoughInformation(
+                f"the result holds values no calibration can ({err.found}): the data do not determine the mounting. "
+                "Park at more headings, on a steeper slope, or for longer."
+            ) from err
+        return doc
+
     def save(self, path: str | Path) -> None:
-        """Write the JSON file atomically."""
-        text = json.dumps(self.to_dict(), indent=2, allow_nan=False)
+        """Write the JSON file atomically (:meth:`document`: only what reads back)."""
+        text = json.dumps(self.document(), indent=2, allow_nan=False)
         with atomic_path(path) as tmp:
             tmp.write_text(text + "\n", encoding="utf-8")
 

@@ -4,8 +4,9 @@ A result is applied to every log of a vehicle, so a tampered or corrupted one mu
 before use, never half-applied: a NaN bias would turn every row into NaN, a quaternion that
 contradicts its angles would rotate by something nobody reported.
 
-- :func:`read_json` parses with a size limit (:mod:`mountcal.paths`), a nesting-depth limit
-  (a deep array would exhaust the parser's recursion), and no ``NaN``/``Infinity`` literals.
+- :func:`read_json` parses within the run's budget (:mod:`mountcal.budget`: size, a nesting-depth
+  limit found by a linear scan — a deep array would exhaust the parser's recursion), and no
+  ``NaN``/``Infinity`` literals.
 - :func:`check_document` checks the untyped fields a :class:`~mountcal.result.Calibration` uses
   (the typed parts are checked by :func:`mountcal.typed_json.from_plain`): types, finiteness,
   ranges, shapes, and that the rotation agrees with its angles within
@@ -21,7 +22,6 @@ from __future__ import annotations
 
 import json
 import math
-import re
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -29,17 +29,16 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from mountcal import budget
 from mountcal.conventions import G_N, rot_vs_from_angles
 from mountcal.errors import InputError
 from mountcal.paths import PathLike, read_input_bytes
+from mountcal.ranges import QUANTITIES
 
-MAX_DEPTH = 64  # a result nests 5 levels deep; 64 leaves room and stays far from the recursion limit
 ROTATION_TOLERANCE_DEG = 1e-6  # the stored angles and quaternion are both written at full precision
 MAX_BIAS_MPS2 = G_N  # readings within 0.7–1.3 g cannot produce a bias beyond 1 g
 GRAVITY_RANGE_MPS2 = (0.7 * G_N, 1.3 * G_N)  # the stop tables' gravity band
 SCHEMA = "schema/calibration.schema.json"
-
-_STRINGS = re.compile(rb'"(?:[^"\\]|\\.)*"', re.DOTALL)
 
 
 def schema() -> dict[str, Any]:
@@ -57,37 +56,9 @@ def write_schema(typed: dict[str, Any]) -> None:
 
 
 def read_json(path: PathLike, what: str = "a calibration JSON file") -> Any:
-    """Parse a JSON file of bounded size and nesting depth, refusing NaN and Infinity literals."""
-    where = str(path)
-    raw = read_input_bytes(path, what)
-    depth = _max_depth(raw)
-    if depth > MAX_DEPTH:
-        raise InputError(
-            where,
-            f"{what} nested at most {MAX_DEPTH} levels deep",
-            f"{depth} levels",
-            "Pass a file written by `mountcal calibrate`.",
-        )
-
-    def refuse(name: str) -> float:
-        raise ValueError(f"the non-standard literal {name}")
-
-    try:
-        return json.loads(raw.decode("utf-8"), parse_constant=refuse)
-    except (UnicodeDecodeError, ValueError) as err:  # JSONDecodeError is a ValueError
-        raise InputError(where, what, f"invalid JSON ({err})", "Pass a file written by `mountcal calibrate`.") from err
-
-
-def _max_depth(raw: bytes) -> int:
-    """The deepest nesting of arrays and objects, strings ignored (a linear scan, no recursion)."""
-    bare = np.frombuffer(_STRINGS.sub(b'""', raw), dtype=np.uint8)
-    deepest = level = 0
-    for start in range(0, bare.size, 1 << 22):  # 4 MiB at a time: bounded memory on a big file
-        chunk = bare[start : start + (1 << 22)]
-        step = (chunk == ord("[")).astype(np.int32) + (chunk == ord("{")) - (chunk == ord("]")) - (chunk == ord("}"))
-        depth = level + np.cumsum(step, dtype=np.int64)
-        deepest, level = max(deepest, int(depth.max(initial=level))), int(depth[-1]) if depth.size else level
-    return deepest
+    """Parse a JSON file of bounded size and nesting depth, refusing NaN and Infinity literals
+    (:func:`mountcal.budget.document`: the depth is found by a linear scan before parsing)."""
+    return budget.document(read_input_bytes(path, what), str(path), what)
 
 
 def check_document(doc: dict[str, Any], where: str) -> None:
@@ -125,17 +96,20 @@ def check_document(doc: dict[str, Any], where: str) -> None:
     pitch = number("mounting.pitch_deg", -90, 90)
     yaw = number("mounting.yaw_deg", -180, 180, null=True)
     number("slope_deg", -90, 90, null=True)
+    # a σ may be large (an angle barely determined), within the ranges of mountcal.ranges: finite, and
+    # far from where a square or a conversion overflows downstream (export, report)
+    sigma_deg, sigma_mps2 = QUANTITIES["result_sigma_deg"], QUANTITIES["result_sigma_mps2"]
     for name in ("roll_deg", "pitch_deg"):
-        number(f"uncertainty.{name}", 0)
-    number("uncertainty.yaw_deg", 0, null=yaw is None)
-    number("uncertainty.slope_deg", 0, null=True)
-    vector("uncertainty.rotation_about_vehicle_xyz_deg", 3, 0, math.inf, items_null=True)
+        number(f"uncertainty.{name}", sigma_deg.lo, sigma_deg.hi)
+    number("uncertainty.yaw_deg", sigma_deg.lo, sigma_deg.hi, null=yaw is None)
+    number("uncertainty.slope_deg", sigma_deg.lo, sigma_deg.hi, null=True)
+    vector("uncertainty.rotation_about_vehicle_xyz_deg", 3, sigma_deg.lo, sigma_deg.hi, items_null=True)
     vector("bias_mps2", 3, -MAX_BIAS_MPS2, MAX_BIAS_MPS2, null=True)
-    vector("uncertainty.bias_mps2", 3, 0, math.inf, null=_get(doc, "bias_mps2") is None)  # a σ may be large: finite
+    vector("uncertainty.bias_mps2", 3, sigma_mps2.lo, sigma_mps2.hi, null=_get(doc, "bias_mps2") is None)
     number("gravity.value_mps2", *GRAVITY_RANGE_MPS2)
     number("residual_rms_mps2", 0, 2 * G_N)
-    if isinstance(doc.get("observability"), dict):
-        number("observability.condition_number", 1 - 1e-9, math.inf, null=True)  # the report formats it
+    if isinstance(doc.get("observability"), dict):  # the report formats it
+        number("observability.condition_number", 1 - 1e-9, QUANTITIES["result_value"].hi, null=True)
     if not isinstance(_get(doc, "gravity.source"), str):
         problems.append(f"gravity.source = {_show(_get(doc, 'gravity.source'))} (expected a text)")
     determined = _get(doc, "yaw.determined")
@@ -235,4 +209,4 @@ def _show(value: Any) -> str:
     return text if len(text) <= 60 else text[:57] + "..."
 
 
-__all__ = ["MAX_DEPTH", "ROTATION_TOLERANCE_DEG", "check_document", "read_json", "schema", "write_schema"]
+__all__ = ["ROTATION_TOLERANCE_DEG", "check_document", "read_json", "schema", "write_schema"]

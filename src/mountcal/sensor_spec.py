@@ -30,13 +30,14 @@ A spec file (TOML or JSON) gives any of these keys; the others keep the default:
 
 from __future__ import annotations
 
-import json
-import tomllib
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from mountcal import budget
 from mountcal.errors import InputError
+from mountcal.paths import read_input_bytes
+from mountcal.ranges import QUANTITIES
 
 MG = 9.80665e-3  # m/s² per mg
 
@@ -76,11 +77,8 @@ def read_spec(path: str | Path) -> SensorSpec:
     """A spec from a TOML or JSON datasheet file; unknown keys or bad values are refused."""
     path = Path(path)
     todo = f"Give a TOML or JSON file with any of {', '.join(_KEYS)} (non-negative numbers)."
-    try:
-        text = path.read_text(encoding="utf-8")
-        doc = json.loads(text) if path.suffix.lower() == ".json" else tomllib.loads(text)
-    except (OSError, UnicodeDecodeError, ValueError) as err:
-        raise InputError(str(path), "a readable TOML or JSON sensor spec", str(err), todo) from err
+    raw = read_input_bytes(path, "a sensor spec")  # a regular file of bounded size: not /dev/zero
+    doc = budget.document(raw, str(path), "a TOML or JSON sensor spec", toml=path.suffix.lower() != ".json")
     if not isinstance(doc, dict):
         raise InputError(str(path), "a table of limits", type(doc).__name__, todo)
     unknown = sorted(set(doc) - set(_KEYS))
@@ -88,8 +86,8 @@ def read_spec(path: str | Path) -> SensorSpec:
         raise InputError(str(path), f"keys among {', '.join(_KEYS)}", f"unknown keys {', '.join(unknown)}", todo)
     values: dict[str, Any] = {}
     for key, value in doc.items():
-        if isinstance(value, bool) or not isinstance(value, int | float) or not 0 <= value < 1e3:
-            raise InputError(str(path), f"{key}: a non-negative number", repr(value), todo)
+        if isinstance(value, bool) or not isinstance(value, int | float) or not QUANTITIES["spec_limit"].holds(value):
+            raise InputError(str(path), f"{key}: {QUANTITIES['spec_limit'].expected()}", repr(value), todo)
         field, unit = _KEYS[key]
         values[field] = float(value) * unit
     if values.get("scale", 0) >= 0.5 or values.get("cross_axis", 0) >= 0.5:

@@ -24,11 +24,13 @@ from typing import Any, Literal
 import numpy as np
 import pandas as pd
 
+from mountcal import budget
 from mountcal.conventions import G_N, FloatArray
 from mountcal.errors import InputError, NotEnoughInformation
 from mountcal.io.inputs import check_parquet_rows
 from mountcal.option_names import option
 from mountcal.paths import read_input_bytes
+from mountcal.ranges import check_values
 from mountcal.result import StopsFingerprint
 
 # Column names of the stop table file.
@@ -51,6 +53,16 @@ REQUIRED = ACC
 OPTIONAL = (BETA, *STD, COUNT, *STD_MEAN, *CORR, TIME, DURATION, TEMPERATURE, SITE, LAT, LON, ALT, HEADING)
 COLUMNS = (BETA, *ACC, *OPTIONAL[1:])
 
+# the physical range of each optional column (mountcal.ranges; the noise columns are checked where read)
+_QUANTITY = {
+    TIME: "time_s",
+    DURATION: "file_duration_s",
+    TEMPERATURE: "temperature_c",
+    LAT: "lat_deg",
+    LON: "lon_deg",
+    ALT: "alt_m",
+    HEADING: "heading_deg",
+}
 Headings = Literal["uphill", "relative", "none"]
 Unit = Literal["mps2", "g"]
 MIN_STOPS = 3
@@ -197,14 +209,17 @@ def stop_table_from_frame(
             "Rename the columns or write the stop table with `mountcal stops`.",
         )
     check_count(len(df), source)
+    budget.charge("stops", len(df), source, "stops (stop table rows)")
+    budget.charge("columns", len(df.columns), source, "table columns")
     scale = G_N if unit == "g" else 1.0
     with np.errstate(over="ignore"):  # a huge value becomes inf here and is refused by the gravity check
         acc = _numeric(df, list(ACC), source) * scale
     _check_gravity(acc, unit, source)
+    check_values("acc_mps2", acc, source, ", ".join(ACC), scale=scale)
 
     beta = None
     if BETA in df.columns and headings != "none":
-        beta = np.radians(_numeric(df, [BETA], source)[:, 0])
+        beta = np.radians(_numeric(df, [BETA], source, "heading_deg")[:, 0])
     cov = sample_std = sample_count = None
     noise_columns = [c for c in (*STD, COUNT) if c in df.columns]
     if noise_columns and not all(c in df.columns for c in STD):
@@ -215,8 +230,8 @@ def stop_table_from_frame(
             f"Add the missing ones, or drop {', '.join(noise_columns)} to estimate the noise from the residuals.",
         )
     if all(c in df.columns for c in STD):
-        std = _numeric(df, list(STD), source) * scale
-        count = _numeric(df, [COUNT], source)[:, 0] if COUNT in df.columns else np.ones(len(df))
+        std = _numeric(df, list(STD), source, "sample_std_mps2", scale)
+        count = _numeric(df, [COUNT], source, "sample_count")[:, 0] if COUNT in df.columns else np.ones(len(df))
         cov = _diagonal(
             std**2 / count[:, None],
             np.any(std <= 0, axis=1) | (count < 1),
@@ -226,7 +241,7 @@ def stop_table_from_frame(
         )
         sample_std, sample_count = std, (count if COUNT in df.columns else None)
     if all(c in df.columns for c in STD_MEAN):  # the mean's own uncertainty (correlation, quantisation)
-        sigma = _numeric(df, list(STD_MEAN), source) * scale
+        sigma = _numeric(df, list(STD_MEAN), source, "mean_std_mps2", scale)
         cov = _diagonal(
             sigma**2,
             np.any(sigma <= 0, axis=1),
@@ -238,16 +253,10 @@ def stop_table_from_frame(
         cov = _with_correlations(cov, _numeric(df, [c for c in CORR if c in df.columns], source), df, source)
 
     def optional(name: str) -> FloatArray | None:
-        return _numeric(df, [name], source)[:, 0] if name in df.columns else None
+        quantity = _QUANTITY.get(name)
+        return _numeric(df, [name], source, quantity)[:, 0] if name in df.columns else None
 
-    lat = optional(LAT)
-    if lat is not None and np.any(np.abs(lat) > 90):
-        raise InputError(
-            source,
-            f"{LAT} within ±90°",
-            f"{lat[np.argmax(np.abs(lat))]:g} in rows {_rows(np.flatnonzero(np.abs(lat) > 90))}",
-            "Fix the latitudes (degrees north), or drop the column to assume standard gravity.",
-        )
+    lat = optional(LAT)  # in ±90° (mountcal.ranges): local gravity comes from it
     return StopTable(
         acc_s=acc,
         beta_rad=beta,
@@ -388,8 +397,13 @@ def write_stop_table(table: StopTable, path: str | Path) -> None:
             df.to_csv(tmp, index=False, float_format="%.15g")
 
 
-def _numeric(df: pd.DataFrame, cols: list[str], source: str) -> FloatArray:
-    values = df[cols].apply(pd.to_numeric, errors="coerce").to_numpy(dtype=float)
+def _numeric(
+    df: pd.DataFrame, cols: list[str], source: str, quantity: str | None = None, scale: float = 1.0
+) -> FloatArray:
+    """The columns as finite floats times ``scale`` (to SI), each within ``quantity``'s physical range
+    (:mod:`mountcal.ranges`); anything else is refused naming the rows."""
+    with np.errstate(over="ignore"):
+        values = df[cols].apply(pd.to_numeric, errors="coerce").to_numpy(dtype=float) * scale
     bad = ~np.isfinite(values)
     if bad.any():
         rows, cs = np.nonzero(bad)
@@ -401,6 +415,8 @@ def _numeric(df: pd.DataFrame, cols: list[str], source: str) -> FloatArray:
             f"missing or non-numeric values at {found}{more}",
             _NO_GUESS,
         )
+    if quantity is not None:
+        check_values(quantity, values, source, ", ".join(cols), scale=scale)
     return values
 
 

@@ -19,6 +19,7 @@ import numpy as np
 from mountcal.atomic import atomic_path
 from mountcal.conventions import FloatArray
 from mountcal.errors import InputError
+from mountcal.ranges import check_values
 from mountcal.estimate import sphere
 from mountcal.estimate.effects.scale import SCALE_NAMES
 from mountcal.result_file import read_json
@@ -124,16 +125,14 @@ def load(path: str | Path) -> Triad:
         values = np.asarray(doc["values"], dtype=float)
         cov = np.asarray(doc["covariance"], dtype=float)
         fitted = tuple(str(n) for n in doc.get("fitted", NAMES))
-        ok = set(fitted) <= set(NAMES)
-        ok = (
-            values.shape == (9,)
-            and cov.shape == (9, 9)
-            and bool(np.all(np.isfinite(values)) and np.all(np.isfinite(cov)))
-        )
-        ok = ok and bool(np.allclose(cov, cov.T)) and bool(np.all(np.linalg.eigvalsh(cov) > -1e-12 * cov.max()))
-        ok = ok and bool(np.all(np.abs(values[3:]) < 0.5))
+        ok = set(fitted) <= set(NAMES) and values.shape == (9,) and cov.shape == (9, 9)
     except (KeyError, TypeError, ValueError):
         ok = False
+    if ok:  # each number in its range (mountcal.ranges) before any arithmetic on them
+        check_values("triad_bias_mps2", values[:3], str(path), "values (the bias)")
+        check_values("triad_covariance", cov, str(path), "covariance")
+        ok = bool(np.allclose(cov, cov.T)) and bool(np.all(np.linalg.eigvalsh(cov) > -1e-12 * cov.max()))
+        ok = ok and bool(np.all(np.abs(values[3:]) < 0.5))
     if not ok:
         raise InputError(str(path), "9 finite values (|E| < 0.5) and a symmetric 9×9 covariance", "other values", todo)
     return Triad(values[:3], values[3:], cov, str(doc.get("source", path)), fitted)
@@ -226,6 +225,8 @@ def with_imucal_values(triad: Any, path: str) -> Any:
         ok = False
     if not ok:
         raise InputError(path, "an imucal Ferraris calibration JSON with K_a, R_a, b_a", "other content", todo)
+    check_values("imucal_matrix", np.concatenate([k_a, r_a]), path, "K_a, R_a (rows 1–3: K_a, 4–6: R_a)")
+    check_values("triad_bias_mps2", b_a, path, "b_a")
     _, p = polar(k_a @ r_a, side="left")
     e = p - np.eye(3)
     values = np.concatenate([b_a, np.diag(e), [e[0, 1], e[0, 2], e[1, 2]]])

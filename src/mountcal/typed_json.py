@@ -15,6 +15,9 @@ import math
 import types
 from typing import Any, Literal, Union, get_args, get_origin, get_type_hints
 
+from mountcal.ranges import QUANTITIES
+
+MAX_NUMBER = QUANTITIES["result_value"].hi  # a square (a variance, a χ²) of it stays finite
 _SCALARS: dict[type, str] = {bool: "boolean", int: "integer", float: "number", str: "string", type(None): "null"}
 
 
@@ -73,8 +76,8 @@ def from_plain(tp: Any, data: Any, path: str = "") -> Any:
             raise ValueError(f"{path or 'value'} = {_short(data)} (expected an object)")
         return {str(k): from_plain(args[1], v, f"{path}.{k}") for k, v in data.items()}
     if tp is float and isinstance(data, int | float) and not isinstance(data, bool):
-        if not math.isfinite(data):
-            raise ValueError(f"{path} = {data!r} (expected a finite number)")
+        if not (math.isfinite(data) and abs(data) <= MAX_NUMBER):
+            raise ValueError(f"{path} = {data!r} (expected a finite number within ±{MAX_NUMBER:g})")
         return float(data)
     if tp in _SCALARS and tp is not float and isinstance(data, tp) and (tp is bool or not isinstance(data, bool)):
         return data

@@ -19,6 +19,7 @@ from mountcal.cli.options import (
     require,
     working,
 )
+from mountcal.ranges import Number
 from mountcal.terminal import safe
 
 if TYPE_CHECKING:
@@ -46,7 +47,7 @@ def add_parser(sub: Any) -> None:
     g.add_argument("--unit", choices=("mps2", "g"), default="mps2", help="unit of a stop table's ax, ay, az")
     g.add_argument(
         "--gravity",
-        type=float,
+        type=Number("gravity_mps2"),
         default=None,
         help="local gravity in m/s² (default: from lat_deg/alt_m when the data have them, else 9.80665)",
     )
@@ -81,9 +82,10 @@ def run(args: argparse.Namespace) -> int:
         for line in describe(done, len(args.input)):
             log.info("%s", safe(line))
         cal, table = done.calibration, done.table  # no stop table: calibrated from driving alone
+    doc = cal.document()  # checked as a loader checks it, before anything is shown or written
     if to_stdout:
         log.info("%s", summary(cal))
-        print_json(cal.to_dict())
+        print_json(doc)
     else:
         print(summary(cal))
     if args.output not in (None, STDOUT):
@@ -93,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
         from mountcal.outputs.report import render, timeline_of  # matplotlib is needed for reports only
 
         with working(args, "writing the report"):
-            html = render(cal.to_dict(), table, timeline=None if done is None else timeline_of(done))
+            html = render(doc, table, timeline=None if done is None else timeline_of(done))
         with atomic_path(args.report) as tmp:
             tmp.write_text(html, encoding="utf-8")
         log.info("wrote %s", safe(args.report))

@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from mountcal.cli.options import STDOUT, add_command
+from mountcal.ranges import Number
 from mountcal.terminal import safe
 
 # the keys of mountcal.outputs.exporters.FORMATS (a test keeps them equal), here so that `--help` stays light
@@ -60,7 +61,7 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--child", default=None, help="the IMU's frame (default imu_link)")
     p.add_argument(
         "--translation",
-        type=float,
+        type=Number("offset_m"),
         nargs=3,
         metavar=("X", "Y", "Z"),
         default=None,

@@ -21,6 +21,7 @@ from mountcal.cli.options import (
     progress_wanted,
     require,
 )
+from mountcal.ranges import Number
 from mountcal.terminal import safe
 
 log = logging.getLogger("mountcal")
@@ -39,7 +40,9 @@ def add_parser(sub: Any) -> None:
         output="per-log Parquet table (vehicles go to <stem>_vehicles)",
         output_required=True,
     )
-    p.add_argument("--workers", type=int, default=None, help="local worker processes (default: all cores)")
+    p.add_argument(
+        "--workers", type=Number("workers"), default=None, help="local worker processes (default: all cores)"
+    )
     p.add_argument("--scheduler", default=None, help="run on this Dask scheduler, tcp://HOST:PORT")
     p.add_argument(
         "--layout",
@@ -59,7 +62,10 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument("--retry-failed", action="store_true", help="recalculate logs an earlier run recorded as failed")
     p.add_argument(
-        "--floor-deg", type=float, default=0.0, help="mounting scatter between logs added to each log's σ (deg)"
+        "--floor-deg",
+        type=Number("floor_deg"),
+        default=0.0,
+        help="mounting scatter between logs added to each log's σ (deg)",
     )
     p.add_argument(
         "--require-confident", action="store_true", help="refuse (write no table) if a log's result is not confident"

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from mountcal.cli.options import STDOUT, add_command
+from mountcal.ranges import Number
 from mountcal.terminal import safe
 
 log = logging.getLogger("mountcal")
@@ -21,14 +22,24 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--channel", required=True, help="bus channel, e.g. can0")
     p.add_argument("--dbc", required=True, help="DBC describing the bus")
     p.add_argument("--mapping", default=None, help="TOML naming the accelerometer signals")
-    p.add_argument("--can-channel", type=int, default=None, help="channel number of the IMU frames (recorded)")
+    p.add_argument(
+        "--can-channel", type=Number("can_channel"), default=None, help="channel number of the IMU frames (recorded)"
+    )
     p.add_argument("--target", default="roll=0.1,pitch=0.1,yaw=0.5", help="stop when every 1σ is below (deg)")
     p.add_argument("--model", default="auto", help="auto (default), rotation,slope or rotation,slope,bias")
     p.add_argument("--plan", default=None, help="protocol sheet from `mountcal plan`: stops take its β in order")
-    p.add_argument("--uphill-azimuth-deg", type=float, default=None, help="β from the bus's heading signal")
-    p.add_argument("--timeout", type=float, default=10.0, help="a bus silent this long ends the session (s)")
-    p.add_argument("--max-acc-std", type=float, default=None, help="stillness (m/s²; default: StopDetection's)")
-    p.add_argument("--min-stop-s", type=float, default=None, help="shortest stop (s; default: StopDetection's)")
+    p.add_argument(
+        "--uphill-azimuth-deg", type=Number("angle_deg"), default=None, help="β from the bus's heading signal"
+    )
+    p.add_argument(
+        "--timeout", type=Number("timeout_s"), default=10.0, help="a bus silent this long ends the session (s)"
+    )
+    p.add_argument(
+        "--max-acc-std", type=Number("acc_limit_mps2"), default=None, help="stillness (m/s²; default: StopDetection's)"
+    )
+    p.add_argument(
+        "--min-stop-s", type=Number("duration_s"), default=None, help="shortest stop (s; default: StopDetection's)"
+    )
     p.add_argument("--json-events", default=None, help="also write the events as JSON lines here ('-': stdout)")
     p.add_argument("-o", "--output", default="session", help="prefix: PREFIX.blf, PREFIX.json, PREFIX_stops.csv")
     p.add_argument("--report", default=None, help="also write the HTML report here")

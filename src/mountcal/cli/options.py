@@ -16,6 +16,7 @@ from contextlib import contextmanager
 from typing import TYPE_CHECKING, Any
 
 from mountcal.errors import InputError
+from mountcal.ranges import Number, numbers
 
 if TYPE_CHECKING:
     from tqdm import tqdm
@@ -118,7 +119,7 @@ def add_log_options(
         help="a table's columns as ROLE=COLUMN[:UNIT] pairs, e.g. time=ts:ms,ax=acc_x:g,ay=acc_y:g,az=acc_z:g "
         "(roles time ax ay az gx gy gz speed heading temperature latitude longitude altitude)",
     )
-    g.add_argument("--channel", type=int, default=None, help="CAN channel of the IMU")
+    g.add_argument("--channel", type=Number("can_channel"), default=None, help="CAN channel of the IMU")
     g.add_argument("--topic", default=None, help="IMU topic (MCAP, ROS bags)")
     g.add_argument(
         "--field",
@@ -131,25 +132,37 @@ def add_log_options(
         g.add_argument("--protocol", default=None, help="protocol sheet CSV: t_start_s, t_end_s, beta_deg")
     g.add_argument(
         "--uphill-azimuth-deg",
-        type=float,
+        type=Number("angle_deg"),
         default=None,
         help="compass azimuth of the slope's uphill direction, with a heading signal in the log",
     )
     d = p.add_argument_group("stop detection (default: mountcal.stops.StopDetection, some from the log)")
-    for flag, text in _DETECTION.values():
-        d.add_argument(flag, type=float, default=None, help=text)
+    for flag, text, quantity in _DETECTION.values():
+        d.add_argument(flag, type=Number(quantity), default=None, help=text)
 
 
-# StopDetection field → (flag, help); unset flags keep the library's defaults
+# StopDetection field → (flag, help, quantity of mountcal.ranges); unset flags keep the library's defaults
 _DETECTION = {
-    "max_acc_std_mps2": ("--max-acc-std", "stillness: moving std of each axis below this (m/s²)"),
-    "max_gyro_std_rad_s": ("--max-gyro-std", "stillness: moving std of each gyro axis below this (rad/s)"),
-    "max_gyro_rad_s": ("--max-gyro-rate", "stillness: angular rate within this of the gyro's bias (rad/s)"),
-    "max_speed_mps": ("--max-speed", "stillness: speed at most this (m/s)"),
-    "window_s": ("--still-window-s", "window of the moving statistics (s)"),
-    "min_duration_s": ("--min-stop-s", "shortest stop (s)"),
-    "trim_s": ("--trim-s", "settling cut from both ends of a stop (s)"),
-    "max_heading_wander_deg": ("--max-heading-wander", "a stop whose heading wanders more is split (deg)"),
+    "max_acc_std_mps2": ("--max-acc-std", "stillness: moving std of each axis below this (m/s²)", "acc_limit_mps2"),
+    "max_gyro_std_rad_s": (
+        "--max-gyro-std",
+        "stillness: moving std of each gyro axis below this (rad/s)",
+        "gyro_limit_rad_s",
+    ),
+    "max_gyro_rad_s": (
+        "--max-gyro-rate",
+        "stillness: angular rate within this of the gyro's bias (rad/s)",
+        "gyro_limit_rad_s",
+    ),
+    "max_speed_mps": ("--max-speed", "stillness: speed at most this (m/s)", "speed_limit_mps"),
+    "window_s": ("--still-window-s", "window of the moving statistics (s)", "duration_s"),
+    "min_duration_s": ("--min-stop-s", "shortest stop (s)", "duration_s"),
+    "trim_s": ("--trim-s", "settling cut from both ends of a stop (s)", "trim_s"),
+    "max_heading_wander_deg": (
+        "--max-heading-wander",
+        "a stop whose heading wanders more is split (deg)",
+        "tolerance_deg",
+    ),
 }
 
 
@@ -169,12 +182,12 @@ def add_fit_options(g: argparse.ArgumentParser | argparse._ArgumentGroup, *, hea
     g.add_argument("--method", choices=("full", "paper"), default="full")
     g.add_argument("--model", default="auto", help=MODEL_HELP)
     g.add_argument("--headings", choices=HEADINGS, default="uphill", help=headings_help)
-    g.add_argument("--max-yaw-sigma", type=float, default=5.0, help="report yaw only below this 1σ (deg)")
+    g.add_argument("--max-yaw-sigma", type=Number("sigma_deg"), default=5.0, help="report yaw only below this 1σ (deg)")
     add_sensor_options(g)
     g.add_argument(
         "--slope-reference",
         nargs=2,
-        type=float,
+        action=numbers("slope_deg", "sigma_deg"),
         default=None,
         metavar=("DEG", "SIGMA_DEG"),
         help="the slope the body stands at, measured apart from the sensor (a level on the body facing uphill and "
@@ -214,7 +227,7 @@ def log_options(args: argparse.Namespace) -> LogOptions:
 def detection(args: argparse.Namespace) -> StopDetection:
     from mountcal.stops import StopDetection
 
-    given = {field: getattr(args, flag[2:].replace("-", "_")) for field, (flag, _) in _DETECTION.items()}
+    given = {field: getattr(args, flag[2:].replace("-", "_")) for field, (flag, _, _) in _DETECTION.items()}
     return StopDetection(**{k: v for k, v in given.items() if v is not None})
 
 

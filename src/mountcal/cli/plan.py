@@ -12,6 +12,7 @@ import math
 from typing import Any
 
 from mountcal.cli.options import add_command, add_log_options, add_sensor_options, log_options, working
+from mountcal.ranges import Number
 from mountcal.terminal import safe
 
 log = logging.getLogger("mountcal")
@@ -20,14 +21,22 @@ log = logging.getLogger("mountcal")
 def add_parser(sub: Any) -> None:
     p = add_command(sub, "plan", "plan a session from the bound: stops, headings, dwell, slope")
     p.add_argument("--target", required=True, help="1σ targets in degrees, e.g. roll=0.1,pitch=0.1,yaw=0.5")
-    p.add_argument("--noise", type=float, default=None, help="accelerometer noise per sample, 1σ per axis (mg)")
-    p.add_argument("--rate-hz", type=float, default=100.0, help="sample rate with --noise (Hz; default 100)")
+    p.add_argument(
+        "--noise", type=Number("noise_mg"), default=None, help="accelerometer noise per sample, 1σ per axis (mg)"
+    )
+    p.add_argument(
+        "--rate-hz", type=Number("rate_hz"), default=100.0, help="sample rate with --noise (Hz; default 100)"
+    )
     p.add_argument("--from-log", nargs="+", default=None, metavar="LOG", help="measure noise and rate on a log")
-    p.add_argument("--slope-deg", type=float, default=None, help="the slope available (default: find one)")
+    p.add_argument(
+        "--slope-deg", type=Number("planned_slope_deg"), default=None, help="the slope available (default: find one)"
+    )
     p.add_argument("--model", default="rotation,slope,bias", help="rotation,slope,bias (default) or rotation,slope")
-    p.add_argument("--max-stops", type=int, default=24, help="most stops to plan (default 24)")
-    p.add_argument("--stop-s", type=float, default=None, help="dwell of each stop (s; default: chosen)")
-    p.add_argument("--drive-s", type=float, default=60.0, help="time between stops, for the session length (s)")
+    p.add_argument("--max-stops", type=Number("planned_stops"), default=24, help="most stops to plan (default 24)")
+    p.add_argument("--stop-s", type=Number("duration_s"), default=None, help="dwell of each stop (s; default: chosen)")
+    p.add_argument(
+        "--drive-s", type=Number("drive_s"), default=60.0, help="time between stops, for the session length (s)"
+    )
     p.add_argument("-o", "--output", default=None, help="protocol sheet CSV to write")
     add_sensor_options(p)
     add_log_options(p, repeat_dbc=False, stops=False)

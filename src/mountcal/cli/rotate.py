@@ -8,6 +8,7 @@ from dataclasses import asdict
 from typing import Any
 
 from mountcal.cli.options import add_command, add_log_options, log_inputs, log_options, print_json, working
+from mountcal.ranges import Number
 from mountcal.terminal import safe
 
 log = logging.getLogger("mountcal")
@@ -27,7 +28,12 @@ def add_parser(sub: Any) -> None:
     p.add_argument(
         "--format", choices=("parquet", "csv", "mcap"), default=None, help="default: from -o's suffix, else parquet"
     )
-    p.add_argument("--chunk", type=int, default=100_000, help="samples per chunk: bounds the memory (default 100000)")
+    p.add_argument(
+        "--chunk",
+        type=Number("chunk_samples"),
+        default=100_000,
+        help="samples per chunk: bounds the memory (default 100000)",
+    )
     p.add_argument(
         "--level-only",
         action="store_true",

@@ -8,6 +8,7 @@ from typing import Any
 
 from mountcal.cli.options import HEADINGS, add_command, bar
 from mountcal.errors import InputError
+from mountcal.ranges import Number, numbers
 from mountcal.terminal import safe
 
 log = logging.getLogger("mountcal")
@@ -16,15 +17,15 @@ log = logging.getLogger("mountcal")
 def add_parser(sub: Any) -> None:
     p = add_command(sub, "simulate", "write a simulated stop table, or (--log) a parking session as logs")
     p.add_argument("--preset", default="zhang2011", help="parameters to start from (default zhang2011, the paper's)")
-    p.add_argument("--roll", dest="roll_deg", type=float)
-    p.add_argument("--pitch", dest="pitch_deg", type=float)
-    p.add_argument("--yaw", dest="yaw_deg", type=float)
-    p.add_argument("--slope", dest="slope_deg", type=float)
-    p.add_argument("--noise-g", dest="noise_g", type=float, help="1σ noise of each stop mean, in g")
-    p.add_argument("--bias-mg", type=float, nargs=3, metavar=("BX", "BY", "BZ"), help="constant bias in mg")
+    p.add_argument("--roll", dest="roll_deg", type=Number("angle_deg"))
+    p.add_argument("--pitch", dest="pitch_deg", type=Number("angle_deg"))
+    p.add_argument("--yaw", dest="yaw_deg", type=Number("angle_deg"))
+    p.add_argument("--slope", dest="slope_deg", type=Number("slope_deg"))
+    p.add_argument("--noise-g", dest="noise_g", type=Number("noise_g"), help="1σ noise of each stop mean, in g")
+    p.add_argument("--bias-mg", type=Number("bias_mg"), nargs=3, metavar=("BX", "BY", "BZ"), help="constant bias in mg")
     p.add_argument("--headings", choices=HEADINGS, default="uphill")
-    p.add_argument("--heading-offset", type=float, default=0.0, help="common offset added to β (deg)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--heading-offset", type=Number("angle_deg"), default=0.0, help="common offset added to β (deg)")
+    p.add_argument("--seed", type=Number("seed"), default=0)
     p.add_argument("--truth", default=None, help="also write the truth as JSON")
     p.add_argument("-o", "--output", default=None, help="stop table to write (CSV or .parquet)")
     lg = p.add_argument_group("parking session as logs (--noise-g and --headings apply to stop tables only)")
@@ -34,15 +35,34 @@ def add_parser(sub: Any) -> None:
     lg.add_argument("--protocol", default=None, help="also write the protocol sheet (t_start_s, t_end_s, beta_deg)")
     lg.add_argument("--dbc", default=None, help="DBC to encode CAN logs (data/imu_mm5_10.dbc: Bosch MM5.10)")
     lg.add_argument(
-        "--fix", type=float, nargs=3, metavar=("LAT", "LON", "ALT"), help="site position logged (deg, deg, m)"
+        "--fix",
+        action=numbers("lat_deg", "lon_deg", "alt_m"),
+        nargs=3,
+        metavar=("LAT", "LON", "ALT"),
+        help="site position logged (deg, deg, m)",
     )
-    lg.add_argument("--start-time", type=float, default=None, help="Unix time of the start (s; default 1714557600)")
-    lg.add_argument("--stop-s", type=float, default=None, help="duration of each stop (s; default 40)")
-    lg.add_argument("--drive-s", type=float, default=None, help="duration of each drive between stops (s; default 20)")
-    lg.add_argument("--rate-hz", type=float, default=None, help="IMU sample rate (Hz; default 100)")
-    lg.add_argument("--gyro-bias-dps", type=float, nargs=3, metavar=("BX", "BY", "BZ"), help="gyro bias (°/s)")
-    lg.add_argument("--acc-lsb", type=float, default=0.0, help="accelerometer quantisation step (m/s²; default none)")
-    lg.add_argument("--gyro-lsb-dps", type=float, default=0.0, help="gyro quantisation step (°/s; default none)")
+    lg.add_argument(
+        "--start-time", type=Number("unix_time_s"), default=None, help="Unix time of the start (s; default 1714557600)"
+    )
+    lg.add_argument("--stop-s", type=Number("simulated_s"), default=None, help="duration of each stop (s; default 40)")
+    lg.add_argument(
+        "--drive-s",
+        type=Number("simulated_s"),
+        default=None,
+        help="duration of each drive between stops (s; default 20)",
+    )
+    lg.add_argument(
+        "--rate-hz", type=Number("simulated_rate_hz"), default=None, help="IMU sample rate (Hz; default 100)"
+    )
+    lg.add_argument(
+        "--gyro-bias-dps", type=Number("gyro_bias_dps"), nargs=3, metavar=("BX", "BY", "BZ"), help="gyro bias (°/s)"
+    )
+    lg.add_argument(
+        "--acc-lsb", type=Number("lsb_mps2"), default=0.0, help="accelerometer quantisation step (m/s²; default none)"
+    )
+    lg.add_argument(
+        "--gyro-lsb-dps", type=Number("gyro_lsb_dps"), default=0.0, help="gyro quantisation step (°/s; default none)"
+    )
     lg.add_argument("--paired-stamps", action="store_true", help="stamp the IMU samples in pairs, as some loggers do")
     p.set_defaults(run=run)
 

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from mountcal.cli.options import add_command, print_json
+from mountcal.ranges import Number
 from mountcal.terminal import safe
 
 if TYPE_CHECKING:
@@ -34,10 +35,19 @@ def add_parser(subparsers: Any) -> None:
         output_required=True,
     )
     p.add_argument("--unit", choices=("mps2", "g"), default="mps2", help="unit of ax, ay, az in a stop table")
-    p.add_argument("--gravity", type=float, default=None, help="local gravity in m/s² (default 9.80665)")
+    p.add_argument(
+        "--gravity", type=Number("gravity_mps2"), default=None, help="local gravity in m/s² (default 9.80665)"
+    )
     p.add_argument("--imucal", default=None, help="imucal's Ferraris calibration JSON made from this session")
-    p.add_argument("--min-stop-s", type=float, default=3.0, help="shortest still period in a log (s; hand-held: short)")
-    p.add_argument("--trim-s", type=float, default=0.5, help="cut from each end of a still period in a log (s)")
+    p.add_argument(
+        "--min-stop-s",
+        type=Number("duration_s"),
+        default=3.0,
+        help="shortest still period in a log (s; hand-held: short)",
+    )
+    p.add_argument(
+        "--trim-s", type=Number("trim_s"), default=0.5, help="cut from each end of a still period in a log (s)"
+    )
     p.add_argument(
         "--columns", default=None, help="a sample table's columns as ROLE=COLUMN[:UNIT] pairs (see calibrate --help)"
     )

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from mountcal import ranges
 from mountcal.atomic import atomic_path
 from mountcal.conventions import G_N, normal_gravity
 from mountcal.errors import InputError
@@ -113,6 +114,17 @@ def write_log_session(
             "Write the ASC log by itself, with its own protocol sheet.",
         )
     timing: dict[str, Any] = dict(session or {})
+    n_stops = len(params["beta_deg"])
+    rate, stop, drive = (
+        timing.get(k, default) for k, default in (("rate_hz", 100.0), ("stop_s", 40.0), ("drive_s", 20.0))
+    )
+    # the session's samples, checked before any is made: memory and time grow with them
+    ranges.check(
+        "simulated_samples",
+        round(rate * (n_stops * stop + (n_stops - 1) * drive)),
+        "the samples of --rate-hz × the session's duration (--stop-s, --drive-s)",
+        todo="Simulate a lower rate or shorter stops and drives.",
+    )
     log = simulate_parking_log(
         params["roll_deg"],
         params["pitch_deg"],
@@ -155,7 +167,7 @@ def write_log_session(
 
 def _write_json(path: PathLike, doc: Mapping[str, Any]) -> None:
     with atomic_path(Path(path)) as tmp:
-        tmp.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+        tmp.write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n", encoding="utf-8")
 
 
 def session_truth(

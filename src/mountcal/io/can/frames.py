@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from mountcal import budget, ranges
 from mountcal.errors import InputError
 from mountcal.io.inputs import check_regular_file, hold
 
@@ -320,6 +321,7 @@ def _iter_text(path: Path, fmt: str, keep: Filter, max_frames: int) -> Iterator[
     from can.util import channel2int
 
     rows: list[tuple[float, int, int, bool, int, bytes]] = []
+    done = 0  # data frames before this batch
     line_error = (ValueError, IndexError, KeyError, TypeError)
     try:
         reader = _text_reader(path, fmt)
@@ -333,7 +335,8 @@ def _iter_text(path: Path, fmt: str, keep: Filter, max_frames: int) -> Iterator[
                      len(msg.data), bytes(msg.data))
                 )  # fmt: skip
                 if len(rows) >= max_frames:
-                    yield _rows_table(rows, keep)
+                    yield _rows_table(rows, keep, path, done)
+                    done += len(rows)
                     rows = []
     except line_error as err:
         raise InputError(
@@ -342,13 +345,19 @@ def _iter_text(path: Path, fmt: str, keep: Filter, max_frames: int) -> Iterator[
             f"a malformed line ({type(err).__name__}: {err})",
             "Repair or re-export the log.",
         ) from err
-    yield _rows_table(rows, keep)
+    yield _rows_table(rows, keep, path, done)
 
 
-def _rows_table(rows: list[tuple[float, int, int, bool, int, bytes]], keep: Filter) -> CanFrames:
+def _rows_table(rows: list[tuple[float, int, int, bool, int, bytes]], keep: Filter, path: Path, done: int) -> CanFrames:
+    """A batch of parsed lines as a table, its time stamps and ids checked against their ranges
+    (a text log can say ``nan`` or ``-0x70``), and charged to the budget as records."""
     if not rows:
         return CanFrames.empty()
+    budget.charge("records", len(rows), str(path), "lines of a text CAN log")
     t_s, channel, ident, ext, length, payload = zip(*rows, strict=True)
+    what = "of the data frames (rows: data frames in file order)"
+    ranges.check_values("time_s", t_s, str(path), f"time stamps {what}", first=done)
+    ranges.check_values("can_id", ident, str(path), f"arbitration ids {what}", first=done)
     raw_id = np.asarray(ident, np.uint32)
     chan = np.asarray(channel, np.int64)
     mask = keep.mask(raw_id, chan)

@@ -6,7 +6,6 @@ The mapping format is described in :mod:`mountcal.io.can.read`.
 from __future__ import annotations
 
 import re
-import tomllib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -15,13 +14,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from mountcal import budget
 from mountcal.errors import InputError
 from mountcal.io.can.dbc import frame_id_text, id_match, load_dbcs
 from mountcal.io.can.frames import iter_frames, log_format
 from mountcal.io.can.mismatch import SHOWN, Want, log_mismatch
 from mountcal.io.can.signals import UNIT_HINT, UNIT_KIND, message_refs, si_scale
 from mountcal.io.inputs import check_regular_file
-from mountcal.paths import input_file
+from mountcal.paths import read_input_bytes
 
 ACCEL_ROLES = ("ax", "ay", "az")
 GYRO_ROLES = ("gx", "gy", "gz")
@@ -180,14 +180,10 @@ def _mapping_dict(mapping: str | Path | Mapping[str, Any] | None) -> dict[str, A
     where = "the mapping"
     if isinstance(mapping, str | Path):
         where = str(mapping)
-        input_file(mapping, "a mapping TOML file")  # not a FIFO or a device: reading ends
-        try:
-            with Path(mapping).open("rb") as f:
-                spec = tomllib.load(f)
-        except OSError as err:
-            raise InputError(where, "a mapping TOML file", f"an unreadable path ({err})", "Check the path.") from err
-        except tomllib.TOMLDecodeError as err:
-            raise InputError(where, "valid TOML", f"a syntax error ({err})", "Fix the mapping file.") from err
+        # a regular file of bounded size (not a FIFO or a device: reading ends), parsed within the budget
+        spec = budget.document(
+            read_input_bytes(mapping, "a mapping TOML file"), where, "a mapping TOML file", toml=True
+        )
     else:
         spec = dict(mapping)
     _check_keys(spec, _MAPPING_KEYS, where, "")

@@ -15,6 +15,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from mountcal.conventions import CONVENTIONS, FloatArray, angles_from_rot_vs
+from mountcal.errors import FitFailed
 from mountcal.outputs.exporters.common import Mounting, propagate_sigma
 
 AXIS_UNDEFINED_RAD = 1e-6  # below this angle the rotation axis (and its σ) is not meaningful
@@ -106,7 +107,9 @@ def _angle_sigma(mount: Mounting) -> float | None:
 
 
 def rotation_json(mount: Mounting) -> str:
-    return json.dumps(parameterisations(mount), indent=2, allow_nan=False) + "\n"
+    doc = parameterisations(mount)
+    _dumps(doc, "the rotation")  # a non-finite value is refused by name, never written
+    return json.dumps(doc, indent=2, allow_nan=False) + "\n"
 
 
 def rotation_yaml(mount: Mounting) -> str:
@@ -123,7 +126,16 @@ def _yaml(node: Any, indent: int) -> list[str]:
             lines += _yaml(value, indent + 2)
         elif isinstance(value, list) and value and isinstance(value[0], list):
             lines.append(f"{pad}{key}:")
-            lines += [f"{pad}  - {json.dumps(row)}" for row in value]
+            lines += [f"{pad}  - {_dumps(row, key)}" for row in value]
         else:
-            lines.append(f"{pad}{key}: {json.dumps(value)}")
+            lines.append(f"{pad}{key}: {_dumps(value, key)}")
     return lines
+
+
+def _dumps(value: Any, key: str) -> str:
+    """``value`` as JSON, refusing ``inf`` and ``NaN`` (which JSON has no literal for, and YAML would
+    read as ``Infinity`` text): the result's values are in range, so only a bug could bring one."""
+    try:
+        return json.dumps(value, allow_nan=False)
+    except ValueError as err:
+        raise FitFailed(f"{key}: a value that is not a finite number ({value!r}); nothing was written") from err
