@@ -29,6 +29,7 @@ from mountcal.errors import InputError, NotEnoughInformation
 from mountcal.estimate.bound import crb_deg, true_state
 from mountcal.io.logs import LogOptions, read_log
 from mountcal.option_names import option
+from mountcal.ranges import QUANTITIES, check
 from mountcal.sensor_spec import DEFAULT as DEFAULT_SPEC
 from mountcal.simulate.stops import simulate_stops
 from mountcal.stops import StopDetection, detect_stops
@@ -154,10 +155,11 @@ def parse_target(spec: str) -> dict[str, float]:
             number = float(value)
         except ValueError:
             number = float("nan")
-        if name.strip() not in ANGLES or not np.isfinite(number) or number <= 0 or name.strip() in out:
+        if name.strip() not in ANGLES or not QUANTITIES["sigma_deg"].holds(number) or name.strip() in out:
             raise InputError(
                 "the target",
-                "a comma list of roll=σ, pitch=σ, yaw=σ (1σ in degrees, positive, each at most once)",
+                f"a comma list of roll=σ, pitch=σ, yaw=σ (1σ in degrees, {QUANTITIES['sigma_deg'].interval()}, "
+                "each at most once)",
                 repr(spec),
                 "For example roll=0.1,pitch=0.1,yaw=0.5.",
             )
@@ -266,6 +268,8 @@ def make_plan(req: Request) -> Plan:
         )
     if req.max_stops < MIN_STOPS:
         raise InputError("the most stops", f"at least {MIN_STOPS}", str(req.max_stops), "Allow more stops.")
+    # the search tries every count up to it on every candidate slope: a stated maximum bounds its time
+    check("planned_stops", req.max_stops, "the most stops", todo="Plan with fewer stops (12–24 is usual).")
     if req.slope_deg is not None and not 0.0 <= req.slope_deg < 45.0:
         raise InputError("the slope", "a slope in [0°, 45°)", f"{req.slope_deg:g}°", "Give the slope in degrees.")
     dwells = (req.stop_s,) if req.stop_s is not None else tuple(d for d in DWELLS_S if d >= shortest)

@@ -194,12 +194,7 @@ def check_values(quantity: str, values: Any, where: str, name: str, *, scale: fl
 
     q = QUANTITIES[quantity]
     v = np.asarray(values, dtype=float)
-    with np.errstate(invalid="ignore"):
-        lo = v > q.lo if q.open_lo else v >= q.lo
-        hi = v < q.hi if q.open_hi else v <= q.hi
-        good = np.isfinite(v) & lo & hi
-        if q.whole:
-            good &= v == np.round(v)
+    good = in_range(quantity, v)
     if good.all():
         return
     bad = np.argwhere(~good) if v.ndim > 1 else np.flatnonzero(~good)[:, None]
@@ -211,6 +206,17 @@ def check_values(quantity: str, values: Any, where: str, name: str, *, scale: fl
         f"{shown}{more}",
         "Fix or remove those rows; mountcal refuses numbers no sensor or vehicle produces.",
     )
+
+
+def in_range(quantity: str, values: Any) -> Any:
+    """Which of ``values`` (an array) are finite and inside ``quantity``'s range (a boolean array)."""
+    import numpy as np
+
+    q = QUANTITIES[quantity]
+    v = np.asarray(values, dtype=float)
+    with np.errstate(invalid="ignore"):
+        good = np.isfinite(v) & (v > q.lo if q.open_lo else v >= q.lo) & (v < q.hi if q.open_hi else v <= q.hi)
+        return good & (v == np.round(v)) if q.whole else good
 
 
 class Number:

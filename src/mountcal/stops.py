@@ -494,9 +494,12 @@ class StopTableFromLog:
 def read_protocol(path: str) -> pd.DataFrame:
     """A protocol sheet: CSV ``t_start_s, t_end_s, beta_deg`` (times on the log's clock)."""
     from mountcal.errors import InputError
+    from mountcal.io.inputs import csv_columns
     from mountcal.paths import input_file
+    from mountcal.ranges import check_values
 
-    input_file(path, "a protocol sheet CSV")  # not a FIFO or a device: reading ends
+    checked = input_file(path, "a protocol sheet CSV")  # not a FIFO or a device: reading ends
+    csv_columns(checked, path)  # a header of a million columns is refused before pandas parses it
     try:
         df = pd.read_csv(path, comment="#", skipinitialspace=True)
     except (OSError, ValueError) as err:
@@ -515,6 +518,8 @@ def read_protocol(path: str) -> pd.DataFrame:
             f"missing columns {missing}" if missing else "empty or non-numeric cells",
             "Write one row per stop.",
         )
+    check_values("time_s", values[["t_start_s", "t_end_s"]].to_numpy(), path, "t_start_s, t_end_s")
+    check_values("heading_deg", values[["beta_deg"]].to_numpy(), path, "beta_deg")
     return values
 
 

@@ -27,7 +27,7 @@ import pandas as pd
 from mountcal import budget
 from mountcal.conventions import G_N, FloatArray
 from mountcal.errors import InputError, NotEnoughInformation
-from mountcal.io.inputs import check_parquet_rows
+from mountcal.io.inputs import check_parquet_rows, csv_columns
 from mountcal.option_names import option
 from mountcal.paths import read_input_bytes
 from mountcal.ranges import check_values
@@ -179,6 +179,8 @@ def read_stop_table(path: str | Path, unit: Unit = "mps2", headings: Headings = 
     raw = read_input_bytes(path, "a stop table file")  # a regular file, size bounded
     if path.suffix.lower() in (".parquet", ".pq"):
         check_parquet_rows(path)
+    else:  # a header of a million columns is refused before pandas parses it
+        csv_columns(raw, where)
     try:
         if path.suffix.lower() in (".parquet", ".pq"):
             df = pd.read_parquet(io.BytesIO(raw))
@@ -210,7 +212,6 @@ def stop_table_from_frame(
         )
     check_count(len(df), source)
     budget.charge("stops", len(df), source, "stops (stop table rows)")
-    budget.charge("columns", len(df.columns), source, "table columns")
     scale = G_N if unit == "g" else 1.0
     with np.errstate(over="ignore"):  # a huge value becomes inf here and is refused by the gravity check
         acc = _numeric(df, list(ACC), source) * scale

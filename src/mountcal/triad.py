@@ -19,9 +19,9 @@ import numpy as np
 from mountcal.atomic import atomic_path
 from mountcal.conventions import FloatArray
 from mountcal.errors import InputError
-from mountcal.ranges import check_values
 from mountcal.estimate import sphere
 from mountcal.estimate.effects.scale import SCALE_NAMES
+from mountcal.ranges import check_values
 from mountcal.result_file import read_json
 from mountcal.sensor_spec import SensorSpec
 from mountcal.stoptable import StopTable, Unit, read_stop_table

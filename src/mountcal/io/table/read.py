@@ -14,10 +14,13 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.csv as pa_csv
 import pyarrow.parquet as pq
+from numpy.typing import NDArray
 
+from mountcal import budget
 from mountcal.errors import InputError
-from mountcal.io.inputs import check_parquet_rows, check_regular_file
+from mountcal.io.inputs import check_parquet_rows, check_regular_file, csv_columns
 from mountcal.option_names import option
+from mountcal.ranges import in_range
 from mountcal.samples import Channel, FloatArray, Samples
 
 TABLE_CHANNELS = ("speed_mps", "heading_deg", "temperature_c", "lat_deg", "lon_deg", "alt_m")
@@ -29,6 +32,8 @@ def read_table(path: Path) -> Samples:
     parquet = path.suffix.lower() in (".parquet", ".pq")
     if parquet:
         check_parquet_rows(path)
+    else:  # a header of a million columns is refused before pandas parses it
+        csv_columns(path, str(path))
     try:
         df = pd.read_parquet(path) if parquet else pd.read_csv(path)
     except FileNotFoundError as err:
@@ -48,16 +53,20 @@ def read_table(path: Path) -> Samples:
             f"no {', '.join(missing)}",
             f"Rename the columns; a CAN log in CSV needs a DBC ({option('dbc')}).",
         )
+    budget.charge("rows", len(df), str(path), "table rows")
     values = df[["t_s", "ax", "ay", "az"]].apply(pd.to_numeric, errors="coerce").to_numpy(dtype=float)
-    ok = np.all(np.isfinite(values), axis=1)
     gyro = (
         df[["gx", "gy", "gz"]].apply(pd.to_numeric, errors="coerce").to_numpy(dtype=float)
         if {"gx", "gy", "gz"} <= set(df.columns)
         else None
     )
-    if gyro is not None:
-        ok &= np.all(np.isfinite(gyro), axis=1)
-    dropped = {"rows with missing or non-numeric values": int((~ok).sum())} if not ok.all() else {}
+    numeric = np.all(np.isfinite(values), axis=1) & (gyro is None or np.all(np.isfinite(gyro), axis=1))
+    ok = numeric & _in_range(values[:, 0], values[:, 1:], gyro)
+    dropped = {}
+    if not numeric.all():
+        dropped["rows with missing or non-numeric values"] = int((~numeric).sum())
+    if (numeric & ~ok).any():
+        dropped[_OUT_OF_RANGE] = int((numeric & ~ok).sum())
     if not ok.any():
         raise InputError(
             str(path),
@@ -83,6 +92,13 @@ def read_table(path: Path) -> Samples:
 
 
 _REQUIRED = ("t_s", "ax", "ay", "az")
+_OUT_OF_RANGE = "rows with a time, acceleration or rate outside its physical range (docs/reliability.md)"
+
+
+def _in_range(t: FloatArray, acc: FloatArray, gyro: FloatArray | None) -> NDArray[np.bool_]:
+    """Rows whose time, acceleration and rate are finite and inside their ranges (mountcal.ranges)."""
+    ok = in_range("time_s", t) & in_range("acc_mps2", acc).all(axis=1)
+    return ok if gyro is None else ok & in_range("gyro_rad_s", gyro).all(axis=1)
 
 
 def iter_table(path: Path, max_samples: int) -> Iterator[Samples]:
@@ -92,6 +108,7 @@ def iter_table(path: Path, max_samples: int) -> Iterator[Samples]:
         raise InputError(where, "a readable sample table", "no such file", "Check the path.")
     try:
         if path.suffix.lower() == ".csv":
+            csv_columns(path, where)  # a header of a million columns is refused before it is parsed
             names = pa_csv.open_csv(path).schema.names
             wanted = [c for c in (*_REQUIRED, "gx", "gy", "gz", *TABLE_CHANNELS) if c in names]
             reader: Any = pa_csv.open_csv(
@@ -104,6 +121,7 @@ def iter_table(path: Path, max_samples: int) -> Iterator[Samples]:
         else:
             parquet = pq.ParquetFile(path)
             names = parquet.schema_arrow.names
+            budget.charge("columns", len(names), where, "table columns")
             wanted = [c for c in (*_REQUIRED, "gx", "gy", "gz", *TABLE_CHANNELS) if c in names]
             reader = parquet.iter_batches(batch_size=max_samples, columns=wanted)
     except (pa.ArrowInvalid, OSError) as err:
@@ -136,16 +154,19 @@ def _table_samples(batch: pa.RecordBatch, gyro: bool, where: str) -> Samples:
     t = col("t_s")
     acc = np.column_stack([col(c) for c in ("ax", "ay", "az")])
     g = np.column_stack([col(c) for c in ("gx", "gy", "gz")]) if gyro else None
-    ok = np.isfinite(t) & np.isfinite(acc).all(axis=1)
-    if g is not None:
-        ok &= np.isfinite(g).all(axis=1)
+    ok = _in_range(t, acc, g)
     channels = {}
     for name in TABLE_CHANNELS:
         if name in batch.schema.names:
             v = col(name)
             good = np.isfinite(v) & np.isfinite(t)
             channels[name] = Channel(t[good], v[good])
-    dropped = {"non-finite sample rows": int((~ok).sum())} if not ok.all() else {}
+    finite = np.isfinite(t) & np.isfinite(acc).all(axis=1) & (g is None or np.isfinite(g).all(axis=1))
+    dropped = {}
+    if not finite.all():
+        dropped["non-finite sample rows"] = int((~finite).sum())
+    if (finite & ~ok).any():
+        dropped[_OUT_OF_RANGE] = int((finite & ~ok).sum())
     return Samples(t[ok], acc[ok], None if g is None else g[ok], channels, source=where, dropped=dropped)
 
 
