@@ -178,9 +178,10 @@ def read_stop_table(path: str | Path, unit: Unit = "mps2", headings: Headings = 
     where = str(path)
     raw = read_input_bytes(path, "a stop table file")  # a regular file, size bounded
     if path.suffix.lower() in (".parquet", ".pq"):
-        check_parquet_rows(path)
-    else:  # a header of a million columns is refused before pandas parses it
+        _check_stop_count(check_parquet_rows(path) or 0, where, "rows")
+    else:  # a million columns or stops are refused before pandas parses them
         csv_columns(raw, where)
+        _check_stop_count(raw.count(b"\n"), where, "lines")
     try:
         if path.suffix.lower() in (".parquet", ".pq"):
             df = pd.read_parquet(io.BytesIO(raw))
@@ -299,6 +300,16 @@ def checked(table: StopTable, min_stops: int = MIN_STOPS) -> StopTable:
                 "The stops' samples do not vary (a stuck or constant sensor): check the log.",
             )
     return table
+
+
+def _check_stop_count(n: int, source: str, what: str) -> None:
+    """Refuse a file of more than the run's budget of stops (``n`` lines: a bound on its rows) before
+    it is parsed: a stop costs a fit memory and time, and a protocol has tens of them."""
+    limit = budget.setting("stops")
+    if n > limit + 1:  # the header line
+        raise budget.over(
+            "stops", source, f"at most {limit} stops", f"{n} {what}", "A stop table holds one row per stop."
+        )
 
 
 def check_count(n: int, source: str, min_stops: int = MIN_STOPS) -> None:

@@ -98,15 +98,17 @@ def csv_columns(head: bytes | Path, where: str) -> None:
     budget.charge("columns", line.count(b",") + 1, where, "table columns")
 
 
-def check_parquet_rows(path: Path) -> None:
-    """Refuse a Parquet file declaring more than :func:`max_rows` rows, from its footer alone
-    (a few kilobytes of run-length-encoded zeros can declare billions of rows)."""
+def check_parquet_rows(path: Path) -> int | None:
+    """The rows a Parquet file declares (None: an unreadable footer), refusing more than
+    :func:`max_rows` from its footer alone (a few kilobytes of run-length-encoded zeros can declare
+    billions of rows); its columns are charged to the budget."""
     import pyarrow.parquet as pq
 
     try:
         meta = pq.ParquetFile(path).metadata
     except Exception:  # an unreadable footer: the reader's own parse reports it
-        return
+        return None
     budget.charge("columns", meta.num_columns, str(path), "table columns")
     if meta.num_rows > max_rows():
         raise too_many_rows(str(path), "table rows", meta.num_rows)
+    return int(meta.num_rows)
