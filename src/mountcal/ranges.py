@@ -59,9 +59,11 @@ class Quantity:
 
 
 def _num(x: float) -> str:
-    if x == int(x) and abs(x) < 1e6:
+    """``536870911``, ``1e10``, ``4.1e9``, ``1e-09``: whole numbers exactly unless %g says them exactly."""
+    short = f"{x:g}".replace("e+0", "e").replace("e+", "e")
+    if x == int(x) and (abs(x) < 1e7 or float(short) != x):
         return f"{int(x)}"
-    return f"{x:g}"
+    return short
 
 
 QUANTITIES: dict[str, Quantity] = {
@@ -306,5 +308,11 @@ def _commands(parser: argparse.ArgumentParser) -> list[tuple[str, argparse.Argum
             out += [(name, sub) for name, sub in action.choices.items()]
     return out
 
+
+if __name__ == "__main__":  # the table of docs/reliability.md (run as a script: this module is __main__)
+    from mountcal.cli import build_parser
+    from mountcal.ranges import markdown as table
+
+    print(table(build_parser()), end="")
 
 __all__ = ["COLUMNS", "QUANTITIES", "Number", "Quantity", "check", "check_values", "markdown", "numbers"]

@@ -79,8 +79,8 @@ def read_table(path: Path) -> Samples:
     for name in TABLE_CHANNELS:
         if name in df.columns:
             v = pd.to_numeric(df[name], errors="coerce").to_numpy(dtype=float)
-            good = np.isfinite(v) & np.isfinite(df["t_s"].to_numpy(dtype=float))
-            channels[name] = Channel(df["t_s"].to_numpy(dtype=float)[good], v[good])
+            t = df["t_s"].to_numpy(dtype=float)
+            channels[name] = _channel(name, t, v, dropped)
     return Samples(
         values[ok, 0][order],
         values[ok, 1:][order],
@@ -93,6 +93,15 @@ def read_table(path: Path) -> Samples:
 
 _REQUIRED = ("t_s", "ax", "ay", "az")
 _OUT_OF_RANGE = "rows with a time, acceleration or rate outside its physical range (docs/reliability.md)"
+
+
+def _channel(name: str, t: FloatArray, v: FloatArray, dropped: dict[str, int]) -> Channel:
+    """A channel's finite values inside its range (mountcal.ranges); those outside it are counted."""
+    finite = np.isfinite(v) & np.isfinite(t)
+    good = finite & in_range(name, v) & in_range("time_s", t)  # each channel is named as its quantity
+    if (finite & ~good).any():
+        dropped[f"{name} values outside the physical range (docs/reliability.md)"] = int((finite & ~good).sum())
+    return Channel(t[good], v[good])
 
 
 def _in_range(t: FloatArray, acc: FloatArray, gyro: FloatArray | None) -> NDArray[np.bool_]:
@@ -156,13 +165,11 @@ def _table_samples(batch: pa.RecordBatch, gyro: bool, where: str) -> Samples:
     g = np.column_stack([col(c) for c in ("gx", "gy", "gz")]) if gyro else None
     ok = _in_range(t, acc, g)
     channels = {}
+    finite = np.isfinite(t) & np.isfinite(acc).all(axis=1) & (g is None or np.isfinite(g).all(axis=1))
+    dropped: dict[str, int] = {}
     for name in TABLE_CHANNELS:
         if name in batch.schema.names:
-            v = col(name)
-            good = np.isfinite(v) & np.isfinite(t)
-            channels[name] = Channel(t[good], v[good])
-    finite = np.isfinite(t) & np.isfinite(acc).all(axis=1) & (g is None or np.isfinite(g).all(axis=1))
-    dropped = {}
+            channels[name] = _channel(name, t, col(name), dropped)
     if not finite.all():
         dropped["non-finite sample rows"] = int((~finite).sum())
     if (finite & ~ok).any():
