@@ -71,6 +71,11 @@ def refused(result: tuple[int, str, float, float], *words: str, peak_mb: float =
 # --------------------------------------------------------------------------- the mechanism
 
 
+def test_the_limits_in_the_docs_are_the_code_s() -> None:
+    docs = (REPO / "docs" / "reliability.md").read_text(encoding="utf-8")
+    assert budget.markdown() in docs, "regenerate: python -m mountcal.budget\n" + budget.markdown()
+
+
 def test_totals_are_per_scope_and_refusals_name_the_variable(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("MOUNTCAL_MAX_ROWS", "10")
     with budget.scope() as totals:

@@ -18,10 +18,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from mountcal.budget import setting
 from mountcal.cli import main
 from mountcal.errors import InputError
 from mountcal.result import FORMAT_VERSION, Calibration, schema_defs
-from mountcal.budget import setting
 from mountcal.result_file import check_document, read_json, schema
 from mountcal.terminal import safe
 

@@ -64,7 +64,7 @@ LIMITS: tuple[Limit, ...] = (
         "MOUNTCAL_MAX_INFLATE_RATIO",
         100,
         "×",
-        "decompressed bytes per compressed byte read (plus one block)",
+        "decompressed bytes per compressed byte read",
         "process",
         1 << 20,
     ),
@@ -73,9 +73,7 @@ LIMITS: tuple[Limit, ...] = (
         "records", "MOUNTCAL_MAX_RECORDS", 200_000_000, "", "records, containers and lines stepped through", "process"
     ),
     Limit("columns", "MOUNTCAL_MAX_COLUMNS", 10_000, "", "table columns read", "process"),
-    Limit(
-        "streams", "MOUNTCAL_MAX_STREAMS", 65_536, "", "distinct CAN ids (per channel) a log is listed by", "process"
-    ),
+    Limit("streams", "MOUNTCAL_MAX_STREAMS", 65_536, "", "distinct CAN ids (per channel) tallied", "process"),
     Limit("stops", "MOUNTCAL_MAX_STOPS", 100_000, "", "stops read from stop tables", "process"),
     Limit("input", "MOUNTCAL_MAX_INPUT_MB", 256, "MiB", "a small input file", "file", 1 << 20),
     Limit("document", "MOUNTCAL_MAX_DOCUMENT_MB", 32, "MiB", "JSON and TOML parsed", "process", 1 << 16),
@@ -322,6 +320,21 @@ def _finite_float(text: str) -> float:
     return value
 
 
+def markdown() -> str:
+    """The table of docs/reliability.md: each limit, its variable, default and what it counts."""
+    lines = ["| limit | variable | default | counts | over |", "|---|---|---|---|---|"]
+    for limit in LIMITS:
+        default = f"{limit.default} MiB" if limit.unit == "MiB" else f"{limit.default:,}".replace(",", " ")
+        if limit.unit == "×":
+            default = f"{limit.default}× (+ one block)"
+        per = "the whole run" if limit.per == "process" else f"one {limit.per}"
+        lines.append(f"| {limit.key} | `{limit.variable}` | {default} | {limit.counts} | {per} |")
+    return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":  # the table of docs/reliability.md
+    print(markdown(), end="")
+
 __all__ = [
     "LIMITS",
     "Limit",
@@ -330,6 +343,7 @@ __all__ = [
     "check_depth",
     "document",
     "inflate",
+    "markdown",
     "nesting_depth",
     "over",
     "scope",
