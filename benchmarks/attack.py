@@ -18,7 +18,7 @@ Counted per category, for each command:
 - **hang**: killed at the time bound;
 - **input changed**: an input's bytes (SHA-256), or its kind (a FIFO, a device), differ afterwards;
 - **unclear exit**: killed by a signal, an exit code outside 0, 2, 3, 4, 5, 130, or a non-zero exit
-  without an ``error:`` line;
+  without an ``error:`` line (or a report on stdout: ``plan``'s "not reachable");
 - **over bound**: peak RSS above ``A · (input bytes) + B`` (the bound of docs/reliability.md);
 - **other**: what the case checks beyond these (stdout that no longer parses, a NaN in a written
   file, an output written over an input, a temporary file left behind, ...).
@@ -183,6 +183,12 @@ def execute(case: Case, workdir: Path, src: Path, cap_bytes: int, timeout_s: flo
     )
 
 
+def _said(run: Run) -> bool:
+    """A non-zero exit came with a message: an ``error:`` line (or, for ``plan``'s "not reachable",
+    its report on stdout)."""
+    return bool(re.search(r"error:", run.stderr)) or bool(run.stdout.strip() and run.stderr.strip() == "")
+
+
 def judge(case: Case, run: Run, changed: list[str], size: int) -> dict[str, str]:
     """The findings of one run, by kind (empty: clean)."""
     found: dict[str, str] = {}
@@ -194,9 +200,7 @@ def judge(case: Case, run: Run, changed: list[str], size: int) -> dict[str, str]
         found["input changed"] = ", ".join(changed)
     if run.signal is not None:
         found["unclear exit"] = f"killed by signal {run.signal}"
-    elif run.code is not None and (
-        run.code not in CLEAR_EXITS or (run.code != 0 and not re.search(r"error:", run.stderr))
-    ):
+    elif run.code is not None and (run.code not in CLEAR_EXITS or (run.code != 0 and not _said(run))):
         found["unclear exit"] = f"exit {run.code}: {run.stderr.strip()[-200:]!r}"
     bound = BOUND_A * size / MIB + BOUND_B_MB
     if run.peak_mb > bound:
@@ -500,11 +504,11 @@ def build(root: Path, src: Path, quick: bool, only: set[str]) -> list[Case]:
         )
         case("readers", "report", ["report", result, "--stops", stops, "-o", out / "rep.html"], [result, stops])
         case("readers", "export yaml", ["export", result, "--to", "yaml", "-o", out / "m.yaml"], [result])
-        case("readers", "plan", ["plan", "--target", "roll=0.2,pitch=0.2,yaw=1", "--noise", "1"], [])
+        case("readers", "plan", ["plan", "--target", "roll=1,pitch=1,yaw=3", "--noise", "1"], [])
         case("readers", "plan --from-log", ["plan", "--target", "roll=0.2", "--from-log", mcap], [mcap])
         case("readers", "triad", ["triad", faces, "-o", out / "t.json"], [faces])
         case("readers", "simulate --log", ["simulate", "--log", out / "s.mcap", out / "s.blf", "--dbc", dbc], [dbc])
-        case("readers", "fleet", ["fleet", stops, mcap, "-o", out / "fleet.csv", "--workers", "1"], [stops, mcap])
+        case("readers", "fleet", ["fleet", stops, mcap, "-o", out / "fleet.parquet", "--workers", "1"], [stops, mcap])
 
     # ---- 2. memory
     if "memory" in only:
@@ -798,20 +802,20 @@ def build(root: Path, src: Path, quick: bool, only: set[str]) -> list[Case]:
         case(
             "faults",
             "fleet with a FIFO in its folder",
-            ["fleet", folder, "-o", out / "f.csv", "--workers", "1"],
+            ["fleet", folder, "-o", out / "f.parquet", "--workers", "1"],
             [folder],
             timeout_s=120,
         )
         case(
             "faults",
             "fleet with a symlink loop in its folder",
-            ["fleet", folder2, "-o", out / "g.csv", "--workers", "1"],
+            ["fleet", folder2, "-o", out / "g.parquet", "--workers", "1"],
             [folder2],
         )
         case(
             "faults",
             "fleet --scheduler inproc://x",
-            ["fleet", stops, "-o", out / "h.csv", "--scheduler", "inproc://x"],
+            ["fleet", stops, "-o", out / "h.parquet", "--scheduler", "inproc://x"],
             [stops],
             timeout_s=60,
         )
@@ -819,7 +823,7 @@ def build(root: Path, src: Path, quick: bool, only: set[str]) -> list[Case]:
         case(
             "faults",
             "SIGTERM to fleet",
-            ["fleet", stops, mcap, blf, "--dbc", dbc, "-o", out / "t.csv", "--workers", "2"],
+            ["fleet", stops, mcap, blf, "--dbc", dbc, "-o", out / "t.parquet", "--workers", "2"],
             [stops],
             terminate_after_s=8,
             timeout_s=60,

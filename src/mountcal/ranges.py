@@ -69,7 +69,9 @@ def _num(x: float) -> str:
 QUANTITIES: dict[str, Quantity] = {
     # times and durations
     "time_s": Quantity(-1e10, 1e10, "s", "a time stamp or time column (Unix or relative; 1e10 s is the year 2286)"),
-    "unix_time_s": Quantity(0, 4.1e9, "s", "a Unix time to write into a log (1970–2099)"),
+    "unix_time_s": Quantity(
+        86_400, 2e9, "s", "a Unix time to write into a log (1970-01-02 to 2033: ROS 2 stamps hold 32-bit seconds)"
+    ),
     "duration_s": Quantity(0, 86_400, "s", "a duration or window of stop detection, a dwell", open_lo=True),
     "trim_s": Quantity(0, 3_600, "s", "a settling time cut from a stop"),
     "drive_s": Quantity(0, 86_400, "s", "the time between stops of a plan"),
