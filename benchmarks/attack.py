@@ -198,7 +198,7 @@ def judge(case: Case, run: Run, changed: list[str], size: int) -> dict[str, str]
         found["hang"] = f"killed after {run.seconds:.0f} s"
     if changed:
         found["input changed"] = ", ".join(changed)
-    if run.signal is not None:
+    if run.signal is not None and not (case.terminate_after_s is not None and run.signal == signal.SIGTERM):
         found["unclear exit"] = f"killed by signal {run.signal}"
     elif run.code is not None and (run.code not in CLEAR_EXITS or (run.code != 0 and not _said(run))):
         found["unclear exit"] = f"exit {run.code}: {run.stderr.strip()[-200:]!r}"
@@ -854,7 +854,15 @@ def build(root: Path, src: Path, quick: bool, only: set[str]) -> list[Case]:
                 env=dict(env),
                 check=both(wrote(r), stdout_parses("json")),
             )
-            case("other", f"calibrate X.attack with a plugin {what}", ["calibrate", target], [target], env=dict(env))
+            r2 = r.with_name("r2.json")
+            case(
+                "other",
+                f"calibrate X.attack with a plugin {what}",
+                ["calibrate", target, "-o", r2, "--json"],
+                [target],
+                env=dict(env),
+                check=both(wrote(r2), stdout_parses("json")),
+            )
         for suffix, text in (
             (".json", '{"scale": ' + "[" * 100_000 + "]" * 100_000 + "}"),
             (".toml", "scale = " + "[" * 100_000 + "]" * 100_000),

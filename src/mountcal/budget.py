@@ -181,20 +181,20 @@ def scoped_iter(func: Callable[_P, Iterator[_T]]) -> Callable[_P, Iterator[_T]]:
     return run
 
 
-def charge(key: str, amount: int, where: str, what: str) -> None:
+def charge(key: str, amount: int, where: str, what: str, *, total: bool = True) -> None:
     """Add ``amount`` to the scope's total of ``key`` (``rows``, ``records``, ``columns``, ``stops``,
     ``document``) and refuse when the total passes the limit. ``what`` names what is counted
-    ("CAN frames"). Outside any scope, ``amount`` alone is checked."""
-    totals = _totals()
-    total = amount
+    ("CAN frames"). Outside any scope, or with ``total=False``, ``amount`` alone is checked."""
+    totals = _totals() if total else None
+    count = amount
     if totals is not None:
-        total = totals.counts.get(key, 0) + amount
-        totals.counts[key] = total
+        count = totals.counts.get(key, 0) + amount
+        totals.counts[key] = count
     limit = setting(key)
-    if total > limit:
+    if count > limit:
         unit = _BY_KEY[key]
-        shown = f"{total / MIB:.1f} MiB" if unit.unit == "MiB" else f"{total}"
-        raise over(key, where, f"at most {_shown(unit, limit)} {what}", f"{shown} so far")
+        shown = f"{count / MIB:.1f} MiB" if unit.unit == "MiB" else f"{count}"
+        raise over(key, where, f"at most {_shown(unit, limit)} {what}", f"{shown}{' so far' if totals else ''}")
 
 
 def check_block(size: int, where: str, what: str, found: str | None = None) -> None:

@@ -21,6 +21,7 @@ from mountcal.calibrate import Options, calibrate, local_gravity
 from mountcal.errors import InputError, NotEnoughInformation
 from mountcal.estimate.driving import DrivingFit, DrivingOptions, estimate_driving
 from mountcal.estimate.driving_combine import combine, driving_calibration, not_combined
+from mountcal.io.inputs import csv_columns
 from mountcal.io.logs import LogOptions, read_log
 from mountcal.io.timestamps import increasing_times
 from mountcal.option_names import option
@@ -239,6 +240,8 @@ def is_stop_table(path: str | Path, has_dbc: bool = False, columns: bool = False
         return False
     if special_kind(path) is not None:
         return True
+    if suffix == ".csv" and path.is_file():  # a header of a million columns is refused before pandas reads it
+        csv_columns(path, str(path), charge=False)
     try:
         if path.stat().st_size == 0:
             found = "an empty file (0 bytes)"

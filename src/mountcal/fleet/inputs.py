@@ -38,6 +38,7 @@ from mountcal.calibrate import Options
 from mountcal.errors import InputError
 from mountcal.fleet.layout import Found, Grouped, Layout, group, infer_layout, unreadable_split
 from mountcal.fleet.storage import is_url, list_objects
+from mountcal.io.inputs import csv_columns
 from mountcal.io.logs import LogOptions
 from mountcal.io.mcap.write import written_by_mountcal
 from mountcal.io.registry import is_log, log_suffixes
@@ -352,6 +353,8 @@ def _file_job(found: Found, ctx: _Context, origin: str) -> FleetJob:
 def _is_manifest(path: Path) -> bool:
     if path.suffix.lower() != ".csv":
         return False
+    if path.is_file():  # a header of a million columns is refused before pandas reads it
+        csv_columns(path, str(path), charge=False)
     try:
         columns = pd.read_csv(path, nrows=0, comment="#", skipinitialspace=True).columns
     except Exception:  # unreadable: not a manifest; the log reader will say what is wrong with it

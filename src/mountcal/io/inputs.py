@@ -79,10 +79,11 @@ def hold(parts: Iterable[_Sized], where: str, what: str) -> list[_Sized]:
     return out
 
 
-def csv_columns(head: bytes | Path, where: str) -> None:
+def csv_columns(head: bytes | Path, where: str, *, charge: bool = True) -> None:
     """Charge the columns of a CSV table (its first line; ``head``: the bytes, or the file) to the
     budget, reading no more of the line than the limit allows: a header of a million columns is
-    refused before a parser allocates one object per column."""
+    refused before a parser allocates one object per column. ``charge=False`` checks them alone
+    (a look at a header that the table's reader charges again)."""
     limit = budget.setting("columns")
     if isinstance(head, Path):
         with head.open("rb") as f:
@@ -95,7 +96,7 @@ def csv_columns(head: bytes | Path, where: str) -> None:
     else:
         line = head[: head.find(b"\n")] if b"\n" in head[: 1 << 24] else head[: 1 << 24]
     line = line.split(b"\n", 1)[0]
-    budget.charge("columns", line.count(b",") + 1, where, "table columns")
+    budget.charge("columns", line.count(b",") + 1, where, "table columns", total=charge)
 
 
 def check_parquet_rows(path: Path) -> int | None:
