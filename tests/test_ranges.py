@@ -306,10 +306,12 @@ def test_text_can_logs_with_impossible_stamps_or_ids_are_refused(
 def test_the_truth_of_a_simulation_is_finite_json_at_the_ends_of_the_ranges(tmp_path: Path) -> None:
     """simulate wrote NaN literals into a truth JSON."""
     truth = tmp_path / "t.json"
+    logs = [str(tmp_path / f"s.{fmt}") for fmt in ("mcap", "blf", "mf4")]
     args = ["--slope", "89.99", "--roll", "360", "--rate-hz", "1", "--stop-s", "1", "--drive-s", "1"]
-    args += ["--fix", "90", "360", "100000", "--start-time", "0", "--seed", str(2**32 - 1)]
-    assert main(["simulate", "--log", str(tmp_path / "s.mcap"), "--truth", str(truth), *args, "-q"]) == 0
-    doc = json.loads(truth.read_text(), parse_constant=_no_constant)
-    assert all(math.isfinite(v) for v in doc["beta_deg"])
+    args += ["--fix", "90", "360", "100000", "--seed", str(2**32 - 1), "--dbc", str(DBC)]
+    for start in ("86400", "2e9"):  # the ends of the start time: MF4 and ROS 2 stamps hold them
+        assert main(["simulate", "--log", *logs, "--truth", str(truth), *args, "--start-time", start, "-q"]) == 0
+        doc = json.loads(truth.read_text(), parse_constant=_no_constant)
+        assert all(math.isfinite(v) for v in doc["beta_deg"])
     assert main(["simulate", "--log", str(tmp_path / "big.mcap"), "--rate-hz", "10000", "--stop-s", "3600"]) == 2
     assert not (tmp_path / "big.mcap").exists()
