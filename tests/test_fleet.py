@@ -318,13 +318,15 @@ def test_bad_inputs_stop_with_a_clear_message_and_write_nothing(
         ([str(tmp_path / "v")], str(tmp_path / "o.csv"), "ending in .parquet"),
         ([str(bad_manifest)], str(tmp_path / "o.parquet"), "unknown column(s) uphil_azimuth_deg"),
         ([str(tmp_path / "v")], str(log), "never overwrites its input"),
-        ([str(tmp_path / "v"), "--workers", "0"], str(tmp_path / "o.parquet"), "worker processes ≥ 1"),
         ([str(tmp_path / "v"), str(log)], str(log), "never overwrites its input"),
     ]
     for inputs, output, phrase in cases:
         assert main(["fleet", *inputs, "-o", output, "-q"]) == 2, phrase
         err = capsys.readouterr().err
         assert phrase in err and "Traceback" not in err, err
+    with pytest.raises(SystemExit) as stop:  # the parser refuses it: the option's range (mountcal.ranges)
+        main(["fleet", str(tmp_path / "v"), "--workers", "0", "-o", str(tmp_path / "o.parquet"), "-q"])
+    assert stop.value.code == 2 and "worker processes: a whole number in [1, 1024]" in capsys.readouterr().err
     assert log.read_bytes() == before
     assert not (tmp_path / "o.parquet").exists() and not (tmp_path / "o.csv").exists()
 
