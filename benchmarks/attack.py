@@ -300,7 +300,7 @@ def _record(opcode: int, body: bytes) -> bytes:
     return struct.pack("<BQ", opcode, len(body)) + body
 
 
-def mcap_of_chunks(path: Path, records: bytes, chunks: int) -> Path:
+def mcap_of_chunks(path: Path, records: bytes, chunks: int, level: int = 19) -> Path:
     """Header, an Imu schema and channel from mcap's Writer, then ``chunks`` zstd chunks of ``records``."""
     import zstandard
     from mcap.writer import CompressionType, Writer
@@ -325,7 +325,7 @@ def mcap_of_chunks(path: Path, records: bytes, chunks: int) -> Path:
         if raw[pos] in (0x03, 0x04):
             out += raw[pos : pos + 9 + length]
         pos += 9 + length
-    data = zstandard.ZstdCompressor(level=19).compress(records)
+    data = zstandard.ZstdCompressor(level=level).compress(records)
     body = struct.pack("<QQQI", 0, 0, len(records), 0) + struct.pack("<I", 4) + b"zstd"
     chunk = _record(0x06, body + struct.pack("<Q", len(data)) + data)
     out += chunk * chunks + _record(0x0F, struct.pack("<I", 0)) + _record(0x02, struct.pack("<QQI", 0, 0, 0)) + raw[:8]
@@ -370,6 +370,24 @@ def imu_mcap(path: Path, chunk_bytes: int, chunks: int) -> Path:
     payload = encode_imu_messages(msgs, "imu")[0].tobytes()
     record = _record(0x05, struct.pack("<HIQQ", 1, 0, 10**18, 10**18) + payload)
     return mcap_of_chunks(path, record * (chunk_bytes // len(record)), chunks)
+
+
+def stamped_imu_mcap(path: Path, chunk_bytes: int, chunks: int) -> Path:
+    """IMU messages identical but for their stamps (5 ms apart), compressed at zstd's level 19: about
+    60-fold, within the ratio, so the whole log is read: the worst a compressed log can hold per byte."""
+    import numpy as np
+
+    from mountcal.io.ros2.imu import ImuMessages, encode_imu_messages
+
+    n = chunk_bytes // 347
+    t = 10**18 + np.arange(n, dtype=np.int64) * 5_000_000
+    rows = encode_imu_messages(ImuMessages.unknown_orientation(t, None, np.tile([0.0, 0.0, 9.81], (n, 1))), "imu")
+    head = np.zeros((n, 31), np.uint8)
+    head[:, 0] = 0x05
+    head[:, 1:9] = np.full(n, 22 + rows.shape[1], "<u8").view(np.uint8).reshape(n, 8)
+    head[:, 9] = 1  # channel id
+    head[:, 15:23] = head[:, 23:31] = t.astype("<u8").view(np.uint8).reshape(n, 8)
+    return mcap_of_chunks(path, np.concatenate([head, rows], axis=1).tobytes(), chunks, level=19)
 
 
 def message_records(size: int) -> bytes:
@@ -527,6 +545,28 @@ def build(root: Path, src: Path, quick: bool, only: set[str]) -> list[Case]:
             "rotate IMU MCAP of repeated messages",
             ["rotate", imu, "--calibration", result, "-o", fresh("memory rotate") / "v.parquet", "--level-only"],
             [imu, result],
+        )
+        stamped = stamped_imu_mcap(big / "stamped.mcap", 64 * MIB, 3 if quick else 16)
+        ratio = 64 * MIB * (3 if quick else 16) / stamped.stat().st_size
+        case(
+            "memory",
+            f"calibrate IMU MCAP of {_mb(stamped)} inflating {ratio:.0f}-fold (read whole)",
+            ["calibrate", stamped, "--use", "stops"],
+            [stamped],
+        )
+        case(
+            "memory",
+            f"rotate the same {_mb(stamped)}",
+            [
+                "rotate",
+                stamped,
+                "--calibration",
+                result,
+                "-o",
+                fresh("memory rotate stamped") / "v.parquet",
+                "--level-only",
+            ],
+            [stamped, result],
         )
         ids = blf_of_ids(big / "ids.blf", 100_000 if quick else 1_500_000)
         case("memory", f"inspect BLF of {_mb(ids)}, one id per frame", ["inspect", ids], [ids])
