@@ -275,16 +275,28 @@ def nesting_depth(raw: bytes, *, strings: bool = True) -> int:
     return deepest
 
 
-def document(raw: bytes, where: str, what: str, *, toml: bool = False) -> Any:
-    """Parse a JSON (or TOML) document within the budget: size charged, depth checked before the
-    parser recurses, no ``NaN``/``Infinity`` (JSON) or ``nan``/``inf`` (TOML) literals.
+def read_document(path: str | os.PathLike[str], what: str, *, toml: bool = False) -> Any:
+    """A JSON (or TOML) file parsed within the budget (:func:`document`): a regular file of at most
+    the input limit, whose size is charged before a byte of it is read."""
+    from mountcal.paths import input_file, read_input_bytes
+
+    size = input_file(path, what).stat().st_size  # a FIFO or a device is refused unopened
+    charge("document", size, str(path), f"bytes of JSON and TOML ({what})")
+    return document(read_input_bytes(path, what), str(path), what, toml=toml, charged=True)
+
+
+def document(raw: bytes, where: str, what: str, *, toml: bool = False, charged: bool = False) -> Any:
+    """Parse a JSON (or TOML) document within the budget: size charged (unless ``charged``), depth
+    checked before the parser recurses, no ``NaN``/``Infinity`` (JSON) or ``nan``/``inf`` (TOML)
+    literals.
 
     Raises
     ------
     InputError
         Naming ``where``, what it should be and the first problem found.
     """
-    charge("document", len(raw), where, f"bytes of JSON and TOML ({what})")
+    if not charged:
+        charge("document", len(raw), where, f"bytes of JSON and TOML ({what})")
     check_depth(nesting_depth(raw, strings=not toml), where, what)
     try:
         text = raw.decode("utf-8")
@@ -346,6 +358,7 @@ __all__ = [
     "markdown",
     "nesting_depth",
     "over",
+    "read_document",
     "scope",
     "scoped",
     "scoped_iter",

@@ -32,7 +32,7 @@ from scipy.spatial.transform import Rotation
 from mountcal import budget
 from mountcal.conventions import G_N, rot_vs_from_angles
 from mountcal.errors import InputError
-from mountcal.paths import PathLike, read_input_bytes
+from mountcal.paths import PathLike
 from mountcal.ranges import QUANTITIES
 
 ROTATION_TOLERANCE_DEG = 1e-6  # the stored angles and quaternion are both written at full precision
@@ -58,7 +58,7 @@ def write_schema(typed: dict[str, Any]) -> None:
 def read_json(path: PathLike, what: str = "a calibration JSON file") -> Any:
     """Parse a JSON file of bounded size and nesting depth, refusing NaN and Infinity literals
     (:func:`mountcal.budget.document`: the depth is found by a linear scan before parsing)."""
-    return budget.document(read_input_bytes(path, what), str(path), what)
+    return budget.read_document(path, what)
 
 
 def check_document(doc: dict[str, Any], where: str) -> None:

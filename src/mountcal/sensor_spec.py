@@ -36,7 +36,6 @@ from typing import Any
 
 from mountcal import budget
 from mountcal.errors import InputError
-from mountcal.paths import read_input_bytes
 from mountcal.ranges import QUANTITIES
 
 MG = 9.80665e-3  # m/s² per mg
@@ -77,8 +76,7 @@ def read_spec(path: str | Path) -> SensorSpec:
     """A spec from a TOML or JSON datasheet file; unknown keys or bad values are refused."""
     path = Path(path)
     todo = f"Give a TOML or JSON file with any of {', '.join(_KEYS)} (non-negative numbers)."
-    raw = read_input_bytes(path, "a sensor spec")  # a regular file of bounded size: not /dev/zero
-    doc = budget.document(raw, str(path), "a TOML or JSON sensor spec", toml=path.suffix.lower() != ".json")
+    doc = budget.read_document(path, "a sensor spec", toml=path.suffix.lower() != ".json")  # not /dev/zero
     if not isinstance(doc, dict):
         raise InputError(str(path), "a table of limits", type(doc).__name__, todo)
     unknown = sorted(set(doc) - set(_KEYS))

@@ -21,7 +21,6 @@ from mountcal.io.can.frames import iter_frames, log_format
 from mountcal.io.can.mismatch import SHOWN, Want, log_mismatch
 from mountcal.io.can.signals import UNIT_HINT, UNIT_KIND, message_refs, si_scale
 from mountcal.io.inputs import check_regular_file
-from mountcal.paths import read_input_bytes
 
 ACCEL_ROLES = ("ax", "ay", "az")
 GYRO_ROLES = ("gx", "gy", "gz")
@@ -181,9 +180,7 @@ def _mapping_dict(mapping: str | Path | Mapping[str, Any] | None) -> dict[str, A
     if isinstance(mapping, str | Path):
         where = str(mapping)
         # a regular file of bounded size (not a FIFO or a device: reading ends), parsed within the budget
-        spec = budget.document(
-            read_input_bytes(mapping, "a mapping TOML file"), where, "a mapping TOML file", toml=True
-        )
+        spec = budget.read_document(mapping, "a mapping TOML file", toml=True)
     else:
         spec = dict(mapping)
     _check_keys(spec, _MAPPING_KEYS, where, "")
