@@ -221,7 +221,8 @@ def test_a_sigma_at_the_end_of_its_range_exports_finite_numbers(
     edge.write_text(json.dumps(doc))
     for to in ("json", "yaml", "urdf", "ros2-static-tf", "ublox", "autoware"):
         out = tmp_path / f"m.{to}"
-        assert main(["export", str(edge), "--to", to, "-o", str(out), "--accept-unconfident"]) == 0, to
+        parent = ["--parent", "base_link"] if to == "autoware" else []
+        assert main(["export", str(edge), "--to", to, "-o", str(out), "--accept-unconfident", *parent]) == 0, to
         assert not re.search(r"\b(nan|inf|Infinity|NaN)\b", out.read_text()), to
     assert main(["report", str(edge), "-o", str(tmp_path / "r.html")]) == 0
 
