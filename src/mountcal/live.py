@@ -339,22 +339,26 @@ def json_sink(stream: IO[str]) -> Callable[[dict[str, Any]], None]:
     return write
 
 
+def session_files(prefix: Path) -> dict[str, Path]:
+    """The files a session writes beside ``prefix``: its recording, stop table, protocol sheet and result."""
+    names = {"recording": ".blf", "stops": "_stops.csv", "protocol": "_protocol.csv", "result": ".json"}
+    return {key: prefix.with_name(prefix.name + end) for key, end in names.items()}
+
+
 def write_outputs(session: Session, prefix: Path) -> list[Path]:
     """The session's stop table, protocol sheet (log clock) and result, as ``calibrate`` writes them."""
     written = []
+    files = session_files(prefix)
     if session.table is not None:
-        path = prefix.with_name(prefix.name + "_stops.csv")
-        write_stop_table(session.table, path)
-        written.append(path)
+        write_stop_table(session.table, files["stops"])
+        written.append(files["stops"])
     if session.protocol is not None and not session.protocol.empty:
-        path = prefix.with_name(prefix.name + "_protocol.csv")
-        with atomic_path(path) as tmp:
+        with atomic_path(files["protocol"]) as tmp:
             session.protocol.to_csv(tmp, index=False, float_format="%.17g")
-        written.append(path)
+        written.append(files["protocol"])
     if session.calibration is not None:
-        path = prefix.with_name(prefix.name + ".json")
-        session.calibration.save(path)
-        written.append(path)
+        session.calibration.save(files["result"])
+        written.append(files["result"])
     return written
 
 

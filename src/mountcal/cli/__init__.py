@@ -18,6 +18,7 @@ import sys
 from collections.abc import Sequence
 
 from mountcal.cli.options import EXIT_CODES, configure_logging
+from mountcal.cli.path_options import check_paths, command_parser
 from mountcal.errors import MountcalError
 from mountcal.option_names import as_flags
 from mountcal.paths import SystemFailure
@@ -35,6 +36,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     configure_logging(args.verbose - args.quiet)
     try:
         with as_flags():  # library messages name the flags, not the Python parameters
+            check_paths(command_parser(parser, args.command), args)  # every declared path, before any work
             return int(args.run(args))
     except MountcalError as err:
         log.error("error: %s", safe(err, keep=chr(10)))

@@ -13,12 +13,12 @@ from mountcal.cli.options import (
     add_fit_options,
     add_log_options,
     fit_options,
-    log_inputs,
     log_job,
     print_json,
     require,
     working,
 )
+from mountcal.cli.path_options import add_path
 from mountcal.terminal import safe
 
 if TYPE_CHECKING:
@@ -35,9 +35,14 @@ def add_parser(sub: Any) -> None:
         "estimate the mounting from a stop table or a log",
         json_help="write the result JSON on stdout (the summary goes to stderr)",
         inputs=("STOPS|LOG", "stop table (beta_deg, ax, ay, az, ...; '-': CSV on stdin) or log file(s)"),
+        reads={"what": "a stop table or log", "folders": True, "stdio": True},
         output="result JSON to write ('-': stdout)",
+        writes={"what": "the result", "stdio": True},
     )
-    p.add_argument("--report", default=None, help="also write a self-contained HTML report here")
+    add_path(
+        p, "--report", role="output", what="the HTML report", default=None,
+        help="also write a self-contained HTML report here",
+    )  # fmt: skip
     add_log_options(p)
     g = p.add_argument_group("fit")
     add_fit_options(
@@ -57,7 +62,6 @@ def run(args: argparse.Namespace) -> int:
     from mountcal.atomic import atomic_path
     from mountcal.calibrate import calibrate
     from mountcal.errors import InputError
-    from mountcal.paths import check_outputs
     from mountcal.pipeline import calibrate_job, describe, is_stop_table
     from mountcal.stoptable import read_stop_table
     from mountcal.summary import summary
@@ -65,7 +69,6 @@ def run(args: argparse.Namespace) -> int:
     to_stdout = args.json or args.output == STDOUT
     if args.input == [STDOUT] and sys.stdin.isatty():
         raise InputError("-", "a CSV stop table piped on stdin", "a terminal", "Pipe one in, or name the file.")
-    check_outputs({"-o": None if args.output == STDOUT else args.output, "--report": args.report}, log_inputs(args))
     if args.report is not None:
         require("matplotlib", "report", "calibrate --report")  # before any work: nothing is written without it
     table: StopTable | None

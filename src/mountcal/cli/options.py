@@ -15,6 +15,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import TYPE_CHECKING, Any
 
+from mountcal.cli.path_options import add_path
 from mountcal.errors import InputError
 
 if TYPE_CHECKING:
@@ -84,17 +85,37 @@ def add_command(
     *,
     json_help: str | None = None,
     inputs: tuple[str, str] | None = None,
+    reads: dict[str, Any] | None = None,
     many: bool = True,
     output: str | None = None,
     output_required: bool = False,
+    writes: dict[str, Any] | None = None,
 ) -> argparse.ArgumentParser:
     """A subcommand with the common options; its inputs (``args.input``: metavar, help), its ``-o`` and,
-    when it has a machine-readable result, ``--json``."""
+    when it has a machine-readable result, ``--json``. ``reads`` and ``writes`` declare the inputs and
+    ``-o`` (:func:`mountcal.cli.path_options.add_path`; default: logs, which may be folders, and a file)."""
     p: argparse.ArgumentParser = sub.add_parser(name, help=help_text, description=help_text, parents=[common_options()])
     if inputs is not None:
-        p.add_argument("input", nargs="+" if many else None, metavar=inputs[0], help=inputs[1])
+        add_path(
+            p,
+            "input",
+            role="input",
+            **(reads or {"what": "a log", "folders": True}),
+            nargs="+" if many else None,
+            metavar=inputs[0],
+            help=inputs[1],
+        )
     if output is not None:
-        p.add_argument("-o", "--output", required=output_required, default=None, help=output)
+        add_path(
+            p,
+            "-o",
+            "--output",
+            role="output",
+            **(writes or {"what": "the output"}),
+            required=output_required,
+            default=None,
+            help=output,
+        )
     if json_help is not None:
         p.add_argument("--json", action="store_true", help=json_help)
     return p
@@ -106,12 +127,16 @@ def add_log_options(
     """How to read a log (and, with ``stops``, how to find its stops and their headings)."""
     g = p.add_argument_group("logs")
     if repeat_dbc:
-        g.add_argument("--dbc", action="append", default=None, help="DBC to decode a CAN log (repeat for several)")
+        add_path(
+            g, "--dbc", role="input", what="a DBC", small=True, action="append", default=None,
+            help="DBC to decode a CAN log (repeat for several)",
+        )  # fmt: skip
     else:
-        g.add_argument("--dbc", default=None, help="DBC to decode CAN logs")
-    g.add_argument(
-        "--mapping", default=None, help="TOML naming the accelerometer signals (CAN) or a table's [columns]"
-    )
+        add_path(g, "--dbc", role="input", what="a DBC", small=True, default=None, help="DBC to decode CAN logs")
+    add_path(
+        g, "--mapping", role="input", what="a mapping", small=True, default=None,
+        help="TOML naming the accelerometer signals (CAN) or a table's [columns]",
+    )  # fmt: skip
     g.add_argument(
         "--columns",
         default=None,
@@ -128,7 +153,10 @@ def add_log_options(
     if not stops:
         return
     if protocol:
-        g.add_argument("--protocol", default=None, help="protocol sheet CSV: t_start_s, t_end_s, beta_deg")
+        add_path(
+            g, "--protocol", role="input", what="a protocol sheet", small=True, default=None,
+            help="protocol sheet CSV: t_start_s, t_end_s, beta_deg",
+        )  # fmt: skip
     g.add_argument(
         "--uphill-azimuth-deg",
         type=float,
@@ -155,13 +183,20 @@ _DETECTION = {
 
 def add_sensor_options(g: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
     """The sensor's limits and triad calibration: the systematic part of every σ."""
-    g.add_argument(
+    add_path(
+        g,
         "--sensor-spec",
+        role="input",
+        what="a sensor spec",
+        small=True,
         default=None,
         help="limits for the systematic σ (TOML/JSON): scale, cross_axis, bias_mg, bias_tempco_mg_per_c, "
         "heading_deg (the headings' common error against the fall line); without it, the default class",
     )
-    g.add_argument("--triad", default=None, help="triad calibration from `mountcal triad`, applied to the stops")
+    add_path(
+        g, "--triad", role="input", what="a triad calibration", small=True, default=None,
+        help="triad calibration from `mountcal triad`, applied to the stops",
+    )  # fmt: skip
 
 
 def add_fit_options(g: argparse.ArgumentParser | argparse._ArgumentGroup, *, headings_help: str) -> None:
@@ -246,11 +281,6 @@ def log_job(args: argparse.Namespace, options: Options | None = None) -> LogJob:
         options=options if options is not None else fit_options(args),
         use=getattr(args, "use", "auto"),
     )
-
-
-def log_inputs(args: argparse.Namespace) -> dict[str, Any]:
-    """Every file a log command reads, by option name (for :func:`mountcal.paths.check_outputs`)."""
-    return {"input": args.input, **{f"--{k}": getattr(args, k, None) for k in ("dbc", "mapping", "protocol")}}
 
 
 def require(module: str, extra: str, needed_by: str) -> None:

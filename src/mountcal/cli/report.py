@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from mountcal.cli.options import STDOUT, add_command, print_json, require, working
+from mountcal.cli.path_options import add_path
 from mountcal.terminal import safe
 
 log = logging.getLogger("mountcal")
@@ -20,15 +21,28 @@ def add_parser(sub: Any) -> None:
         "write a self-contained HTML report of a calibration result",
         json_help="the output and its figures as JSON on stdout",
         inputs=("RESULT.json", "result written by `mountcal calibrate -o`"),
+        reads={"what": "a result JSON", "small": True},
         many=False,
         output="HTML file to write (default: RESULT with .html; '-': stdout)",
+        writes={"what": "the HTML report", "stdio": True, "writes": _writes},
     )
-    p.add_argument(
-        "--stops", default=None, help="the stop table the result was fitted to (adds the 3-D figure, headings, σ)"
-    )
+    add_path(
+        p, "--stops", role="input", what="a stop table", small=True, default=None,
+        help="the stop table the result was fitted to (adds the 3-D figure, headings, σ)",
+    )  # fmt: skip
     p.add_argument("--unit", choices=("mps2", "g"), default="mps2", help="unit of ax, ay, az in --stops")
     p.add_argument("--figures", choices=("svg", "png"), default="svg", help="inline SVG (default) or base64 PNG")
     p.set_defaults(run=run)
+
+
+def _output(value: str | None, result: str) -> Path | None:
+    """The HTML file written: -o, or the result's name with .html; None for stdout."""
+    return None if value == STDOUT else Path(value) if value is not None else Path(result).with_suffix(".html")
+
+
+def _writes(value: str | None, args: argparse.Namespace) -> list[tuple[str, str]]:
+    output = _output(value, args.input)
+    return [] if output is None else [(str(output), "" if value is not None else "(default)")]
 
 
 def run(args: argparse.Namespace) -> int:
@@ -36,15 +50,12 @@ def run(args: argparse.Namespace) -> int:
     from mountcal.atomic import atomic_path
     from mountcal.errors import InputError
     from mountcal.outputs.report import render  # matplotlib is needed by this command only
-    from mountcal.paths import check_outputs
     from mountcal.result import Calibration
     from mountcal.result_file import read_json
     from mountcal.stoptable import read_stop_table, same_stops
 
     result = Path(args.input)
-    to_stdout = args.output == STDOUT
-    output = Path(args.output) if args.output is not None else result.with_suffix(".html")
-    check_outputs({"-o": None if to_stdout else output}, {"result": result, "--stops": args.stops})
+    output = _output(args.output, args.input)
     cal = Calibration.load(result)  # validates format and version
     doc = read_json(result)  # the whole document: entries Calibration may not keep
     table = None
@@ -62,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
     with working(args, "drawing the report"):
         html = render(doc, table, image_format=args.figures)
     shown = html.count("<figure>")
-    if to_stdout:
+    if output is None:
         print(html, end="")
         return 0
     with atomic_path(output) as tmp:
