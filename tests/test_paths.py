@@ -241,13 +241,17 @@ def test_no_output_replaces_a_special_file(
 ) -> None:
     argv = fill(short_dir, command, skip={output.dest})
     value = str(short_dir / "out")
-    target = Path(written_by(command, output, spec, value, argv)[-1])
-    gen = make(kind, target)
-    next(gen)
-    code, err = run(with_value(argv, output, value), capsys)
-    assert code == 2, err
-    assert KIND[kind] in err and str(target) in err and "Traceback" not in err
-    next(gen, None)
+    for target in map(Path, written_by(command, output, spec, value, argv)):  # live's -o PREFIX: each of its files
+        gen = make(kind, target)
+        next(gen)
+        code, err = run(with_value(argv, output, value), capsys)
+        assert code == 2, err
+        assert KIND[kind] in err and str(target) in err and "Traceback" not in err
+        next(gen, None)
+        if kind == "directory":
+            target.rmdir()
+        else:
+            target.unlink()
 
 
 @pytest.mark.parametrize("kind", ["fifo", "socket", "directory", "device", "symlink loop", "missing", "too large"])

@@ -34,7 +34,7 @@ from mountcal.calibrate import Options, calibrate
 from mountcal.conventions import specific_force_v
 from mountcal.errors import InputError, MountcalError, NotEnoughInformation
 from mountcal.estimate.bound import crb_deg, true_state
-from mountcal.io.can.bus import BusFrames, recorder
+from mountcal.io.can.bus import BusFrames, Recording
 from mountcal.io.can.read import samples_from_frames
 from mountcal.result import Calibration
 from mountcal.samples import Samples
@@ -150,7 +150,33 @@ class Live:
         self.told_unreachable = False
 
     def run(self, bus: Any) -> Session:
-        writer = recorder(self.recording)
+        """Listen until the target is met, the bus is silent or Ctrl-C (SIGTERM likewise); the recording is
+        closed however the session ends.
+
+        Raises
+        ------
+        SystemFailure
+            The recording could not be written (no space, ...): it is kept up to its last whole
+            container, and the message says so.
+        """
+        recording = Recording(self.recording)
+        try:
+            reason = self._listen(bus, recording)
+        finally:
+            recording.close()
+        try:
+            self._evaluate(final=True)
+        except KeyboardInterrupt:  # a second Ctrl-C: the recording is closed already
+            pass
+        self.last.reason = reason
+        self.last.frames = self.frames.count
+        self.last.ignored_frames = self.ignored
+        self.last.dropped = {**self.last.dropped, **recording.refused}
+        self.emit({"event": "ended", "reason": reason, "frames": self.last.frames, "recording": str(self.recording)})
+        return self.last
+
+    def _listen(self, bus: Any, recording: Recording) -> str:
+        """Receive, record and evaluate until the session ends; why it ended."""
         reason = "interrupted"
         last_eval = -np.inf
         last_rx = time.monotonic()
@@ -170,11 +196,12 @@ class Live:
                             break
                         continue
                     last_rx = time.monotonic()
-                    writer.on_message_received(msg)
+                    if not recording.add(msg):  # a stamp the recording cannot hold: counted there
+                        continue
                     if msg.is_error_frame or msg.is_remote_frame:
                         self.ignored += 1
                         continue
-                    self.frames.add(msg)
+                    self.frames.add(msg, recording.writer.start_timestamp)
                     if self.frames.last_t - last_eval >= self.opts.evaluate_every_s:
                         last_eval = self.frames.last_t
                         if self._evaluate(final=False):
@@ -183,17 +210,7 @@ class Live:
         except KeyboardInterrupt:
             reason = "interrupted"
             self.emit({"event": "interrupted"})
-        finally:
-            writer.stop()
-        try:
-            self._evaluate(final=True)
-        except KeyboardInterrupt:  # a second Ctrl-C: the recording is closed already
-            pass
-        self.last.reason = reason
-        self.last.frames = self.frames.count
-        self.last.ignored_frames = self.ignored
-        self.emit({"event": "ended", "reason": reason, "frames": self.last.frames, "recording": str(self.recording)})
-        return self.last
+        return reason
 
     # --- evaluation -------------------------------------------------------------------------
 
@@ -331,9 +348,14 @@ def line_of(event: dict[str, Any]) -> str:
     return json.dumps(event)
 
 
+def event_line(event: dict[str, Any]) -> str:
+    """An event as a JSON line, stamped with the wall-clock time."""
+    return json.dumps({"time_utc": datetime.now(UTC).isoformat(timespec="milliseconds"), **event}) + "\n"
+
+
 def json_sink(stream: IO[str]) -> Callable[[dict[str, Any]], None]:
     def write(event: dict[str, Any]) -> None:
-        stream.write(json.dumps({"time_utc": datetime.now(UTC).isoformat(timespec="milliseconds"), **event}) + "\n")
+        stream.write(event_line(event))
         stream.flush()
 
     return write

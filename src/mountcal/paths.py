@@ -36,18 +36,20 @@ class SystemFailure(MountcalError):
 
     exit_code = 5
 
-    def __init__(self, path: str, operation: str, err: OSError) -> None:
+    def __init__(self, path: str, operation: str, err: OSError, *, left: str = "no partial file was left") -> None:
+        """``left`` says what the failed write left behind (said where space ran out)."""
         self.path, self.operation, self.errno = path, operation, err.errno
         reason = err.strerror or str(err)
         code = errno.errorcode.get(err.errno or 0, "")
-        super().__init__(f"{path}: {operation} failed: {reason}{f' ({code})' if code else ''}. {_todo(err.errno)}")
+        todo = _todo(err.errno).replace("{left}", left)
+        super().__init__(f"{path}: {operation} failed: {reason}{f' ({code})' if code else ''}. {todo}")
 
 
 def _todo(code: int | None) -> str:
     todo = {
-        errno.ENOSPC: "Free space on that disk or write to another one; no partial file was left.",
-        errno.EDQUOT: "Free space within your quota or write elsewhere; no partial file was left.",
-        errno.EFBIG: "The file is larger than this system allows (see `ulimit -f`); write elsewhere.",
+        errno.ENOSPC: "Free space on that disk or write to another one; {left}.",
+        errno.EDQUOT: "Free space within your quota or write elsewhere; {left}.",
+        errno.EFBIG: "The file is larger than this system allows (see `ulimit -f`); write elsewhere; {left}.",
         errno.EACCES: "Choose a folder you may write to (or a file you may read), or fix its permissions.",
         errno.EPERM: "Choose a folder you may write to (or a file you may read), or fix its permissions.",
         errno.EROFS: "That file system is read-only: write elsewhere.",

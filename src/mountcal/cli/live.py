@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
 from mountcal.cli.options import STDOUT, add_command
 from mountcal.cli.path_options import add_path
@@ -54,16 +55,39 @@ def _writes(prefix: str, _: argparse.Namespace) -> list[tuple[str, str]]:
     return [(str(path), f"{prefix}, writing") for path in session_files(Path(prefix)).values()]
 
 
+def _file_sink(file: Any, line: Callable[[dict[str, Any]], str]) -> Callable[[dict[str, Any]], None]:
+    """Each event appended as one whole line (a GrowingFile: a full disk leaves whole lines only)."""
+
+    def write(event: dict[str, Any]) -> None:
+        file.write(line(event).encode("utf-8"))
+        file.commit()
+
+    return write
+
+
 def run(args: argparse.Namespace) -> int:
-    from mountcal.atomic import atomic_path
+    from mountcal.atomic import GrowingFile, atomic_path
     from mountcal.calibrate import Options
     from mountcal.errors import InputError
     from mountcal.io.can.bus import BUS_ERRORS, open_bus
-    from mountcal.live import Live, LiveOptions, fail_if_empty, json_sink, line_of, session_files, write_outputs
+    from mountcal.live import (
+        Live,
+        LiveOptions,
+        event_line,
+        fail_if_empty,
+        json_sink,
+        line_of,
+        session_files,
+        write_outputs,
+    )
     from mountcal.plan import parse_target
     from mountcal.stops import StopDetection, read_protocol
     from mountcal.summary import summary
 
+    if not (math.isfinite(args.timeout) and args.timeout > 0):
+        raise InputError(
+            "--timeout", "a positive number of seconds", f"{args.timeout:g}", "Pass the silence that ends the session."
+        )
     prefix = Path(args.output)
     recording = session_files(prefix)["recording"]
     plan_beta = tuple(float(b) for b in read_protocol(args.plan)["beta_deg"]) if args.plan else None
@@ -89,16 +113,16 @@ def run(args: argparse.Namespace) -> int:
             "Check the interface name, the channel and that the device is up.",
         ) from err
     sinks: list[Callable[[dict[str, Any]], None]] = [lambda e: print(line_of(e), flush=True)]
-    events_file: IO[str] | None = None
+    events_file: GrowingFile | None = None
     if args.json_events == STDOUT:
         sinks = [json_sink(sys.stdout)]
     elif args.json_events:
         try:
-            events_file = open(args.json_events, "w", encoding="utf-8")  # open for the session
-        except OSError as err:
+            events_file = GrowingFile(args.json_events, "the events")  # a line at a time, whole
+        except BaseException:
             bus.shutdown()
-            raise InputError(str(args.json_events), "a writable events file", str(err), "Check the path.") from err
-        sinks.append(json_sink(events_file))
+            raise
+        sinks.append(_file_sink(events_file, event_line))
 
     def emit(event: dict[str, Any]) -> None:
         for sink in sinks:
