@@ -28,7 +28,10 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
+import shutil
+import signal
 import tempfile
+import threading
 from collections.abc import Iterator
 from pathlib import Path
 from typing import BinaryIO
@@ -63,25 +66,38 @@ def atomic_output(target: str | os.PathLike[str]) -> Iterator[BinaryIO]:
 
 
 @contextlib.contextmanager
-def atomic_path(target: str | Path, *, durable: bool = True) -> Iterator[Path]:
+def atomic_path(target: str | os.PathLike[str], *, durable: bool = True, keep_name: bool = False) -> Iterator[Path]:
     """Yield a temporary path in the target's folder; on success sync it (unless ``durable`` is
-    False) and rename it onto the target."""
+    False) and rename it onto the target.
+
+    With ``keep_name`` the temporary path has the target's own file name, in a hidden
+    ``.NAME.*.part`` folder beside it (for writers that record the file's name in the file, or
+    write files of their own beside it); the folder is removed with all it holds.
+    """
     target = Path(target)
     with _refused_as_failure(target):
         target.parent.mkdir(parents=True, exist_ok=True)
-        fd, name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".part", dir=target.parent)
-        os.close(fd)
-    tmp = Path(name)
+        if keep_name:
+            folder = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".part", dir=target.parent))
+            tmp = folder / target.name
+        else:
+            fd, name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".part", dir=target.parent)
+            os.close(fd)
+            tmp = Path(name)
     try:
         with _refused_as_failure(target):
-            tmp.chmod(0o666 & ~_umask())  # mkstemp makes 0600; outputs get the usual permissions
+            if not keep_name:
+                tmp.chmod(0o666 & ~_umask())  # mkstemp makes 0600; outputs get the usual permissions
             yield tmp
             if durable:
                 with tmp.open("rb+") as f:
                     os.fsync(f.fileno())
             os.replace(tmp, target)
     finally:
-        tmp.unlink(missing_ok=True)
+        if keep_name:
+            shutil.rmtree(tmp.parent, ignore_errors=True)
+        else:
+            tmp.unlink(missing_ok=True)
 
 
 @contextlib.contextmanager
@@ -92,7 +108,8 @@ def _refused_as_failure(target: Path) -> Iterator[None]:
         yield
     except OSError as err:
         name = None if err.filename is None else Path(os.fsdecode(err.filename))
-        ours = name is None or name in (target, target.parent) or name.name.startswith(f".{target.name}.")
+        temporary = f".{target.name}."
+        ours = name is None or name in (target, target.parent) or any(p.startswith(temporary) for p in name.parts)
         if not ours and not str(name).startswith("/proc/self/fd/"):
             raise
         raise SystemFailure(str(target), "writing", err) from err
@@ -232,4 +249,39 @@ def _pwrite_all(fd: int, data: bytes, offset: int) -> None:
         view, offset = view[done:], offset + done
 
 
-__all__ = ["GrowingFile", "atomic_output", "atomic_path"]
+class Terminated(KeyboardInterrupt):
+    """SIGTERM or SIGHUP, raised in the main thread as Ctrl-C's KeyboardInterrupt is (and handled as one)."""
+
+    def __init__(self, signum: int) -> None:
+        self.signum = signum
+        super().__init__(signal.Signals(signum).name)
+
+
+CLEAN_UP_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
+
+
+@contextlib.contextmanager
+def removed_on_signals() -> Iterator[None]:
+    """Within the block, SIGTERM and SIGHUP raise :class:`Terminated` (as SIGINT raises
+    KeyboardInterrupt), so every write in progress unwinds: the temporary files of
+    :func:`atomic_path` are removed, an :func:`atomic_output` is never named, a lock is released.
+    A second signal ends the process at once. Outside the main thread: no change.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def terminate(signum: int, _: object) -> None:
+        for sig in CLEAN_UP_SIGNALS:
+            signal.signal(sig, signal.SIG_DFL)
+        raise Terminated(signum)
+
+    previous = {sig: signal.signal(sig, terminate) for sig in CLEAN_UP_SIGNALS}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+__all__ = ["GrowingFile", "Terminated", "atomic_output", "atomic_path", "removed_on_signals"]

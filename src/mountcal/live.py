@@ -400,7 +400,7 @@ def fail_if_empty(session: Session) -> None:
 
 @contextlib.contextmanager
 def _ctrl_c_sets(flag: threading.Event) -> Iterator[None]:
-    """Ctrl-C (SIGINT) sets ``flag`` instead of raising wherever the main thread happens to be.
+    """Ctrl-C (SIGINT), SIGTERM and SIGHUP set ``flag`` instead of raising wherever the main thread happens to be.
 
     The session loop checks the flag between two steps, so an interrupt never lands between a
     stop being counted and its event being sent (the events would then miss a stop the result has).
@@ -408,8 +408,10 @@ def _ctrl_c_sets(flag: threading.Event) -> Iterator[None]:
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = signal.signal(signal.SIGINT, lambda *_: flag.set())
+    asked = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)  # a session ended by the system keeps its data too
+    previous = {sig: signal.signal(sig, lambda *_: flag.set()) for sig in asked}
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)

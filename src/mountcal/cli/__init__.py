@@ -14,12 +14,14 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
 import sys
 from collections.abc import Sequence
 
+from mountcal.atomic import Terminated, removed_on_signals
 from mountcal.cli.options import EXIT_CODES, configure_logging
 from mountcal.cli.path_options import check_paths, command_parser
-from mountcal.errors import MountcalError
+from mountcal.errors import InputError, MountcalError
 from mountcal.option_names import as_flags
 from mountcal.paths import SystemFailure
 from mountcal.terminal import safe
@@ -31,11 +33,19 @@ log = logging.getLogger("mountcal")
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run one command; return its exit code (see :data:`mountcal.cli.options.EXIT_CODES`)."""
+    stdout_closed = _standard_streams()
     parser = build_parser()
     args = parser.parse_args(argv)
     configure_logging(args.verbose - args.quiet)
     try:
-        with as_flags():  # library messages name the flags, not the Python parameters
+        if stdout_closed:
+            raise InputError(
+                "stdout",
+                "an open standard output (mountcal writes results and summaries there)",
+                "it closed (`>&-`)",
+                "Redirect it to a file or to /dev/null instead. Nothing was written.",
+            )
+        with as_flags(), removed_on_signals():  # messages name flags; SIGTERM/SIGHUP unwind like Ctrl-C
             check_paths(command_parser(parser, args.command), args)  # every declared path, before any work
             return int(args.run(args))
     except MountcalError as err:
@@ -48,9 +58,32 @@ def main(argv: Sequence[str] | None = None) -> int:
         failure = SystemFailure(str(err.filename or f"mountcal {args.command}"), "reading or writing", err)
         log.error("error: %s", safe(failure))
         return failure.exit_code
+    except Terminated as err:
+        log.error("terminated by %s; no output was written", err)
+        return 128 + err.signum
     except KeyboardInterrupt:
         log.error("interrupted; no output was written")
         return 130
+
+
+def _standard_streams() -> bool:
+    """Give a closed stdin, stdout or stderr ``/dev/null`` (so that no file mountcal opens takes its
+    descriptor, and no child process writes into one); True when stdout was closed."""
+    closed = False
+    for fd, name in ((0, "stdin"), (1, "stdout"), (2, "stderr")):
+        try:
+            os.fstat(fd)
+            continue
+        except OSError:
+            pass
+        null = os.open(os.devnull, os.O_RDWR)
+        if null != fd:
+            os.dup2(null, fd)
+            os.close(null)
+        if getattr(sys, name) is None:  # closed when Python started
+            setattr(sys, name, open(fd, "w" if fd else "r", encoding="utf-8", closefd=False))
+        closed = closed or fd == 1
+    return closed
 
 
 def build_parser() -> argparse.ArgumentParser:
