@@ -33,6 +33,7 @@ EXIT_CODES = {
     4: "the fit failed",
     5: "the system refused a read or a write",
     130: "interrupted (nothing partial is written)",
+    143: "terminated by SIGTERM (129: SIGHUP; nothing partial is written)",
 }
 STDOUT = "-"
 MODEL_HELP = (
