@@ -332,6 +332,14 @@ def frames_read(recording: Path) -> int:
     return len(read_frames(recording).t_s)
 
 
+def on_the_bus_clock(recording: Path, sent: Path) -> bool:
+    """Whether the recording's first frame has the stamp of a frame sent (its header's start is the bus's)."""
+    from mountcal.io.can.frames import read_frames
+
+    first = read_frames(recording).t_s[0]
+    return bool(np.min(np.abs(read_frames(sent).t_s - first)) < 1e-4)
+
+
 def test_a_full_disk_keeps_a_readable_recording_and_says_so(sim_blf: Path) -> None:
     from tests.test_hostile_paths import small_tmpfs
 
@@ -346,6 +354,7 @@ def test_a_full_disk_keeps_a_readable_recording_and_says_so(sim_blf: Path) -> No
         assert "session.blf" in err and "kept" in err
         n = frames_read(recording)
         assert 0 < n < 54910  # a prefix of the session, as far as the disk held
+        assert on_the_bus_clock(recording, sim_blf)
         with can.BLFReader(str(recording)) as reader:
             assert sum(1 for _ in reader) == n
         assert [p.name for p in folder.iterdir()] == ["session.blf"]  # no partial result, table or sheet
@@ -363,3 +372,38 @@ def test_a_killed_session_leaves_a_readable_recording(sim_blf: Path, tmp_path: P
     proc.communicate(timeout=60)
     n = frames_read(prefix.with_suffix(".blf"))
     assert n > 1000  # every whole block written before the kill
+    assert on_the_bus_clock(prefix.with_suffix(".blf"), sim_blf)  # the header was kept current
+
+
+def test_the_recording_reads_whole_at_every_moment_it_can_be_cut(tmp_path: Path) -> None:
+    """Each state the file passes through on disk (after each container and header) is a BLF both readers
+    read to the same frames, every frame whole: what a kill at that moment leaves."""
+    from mountcal.io.can.bus import Recording
+    from mountcal.io.can.frames import read_frames
+
+    rng = np.random.default_rng(4)
+    path = tmp_path / "rec.blf"
+    recording = Recording(path)
+    states, t = [], 1714557600.0
+    for k in range(40_000):
+        t += float(rng.uniform(0, 2e-3))
+        size = int(rng.choice([0, 3, 8]))
+        recording.add(can.Message(timestamp=t, arbitration_id=int(rng.integers(0, 0x7FF)), data=bytes(size),
+                                  is_error_frame=k % 997 == 0))  # fmt: skip
+        if recording.file.size != (states[-1][0] if states else 0):
+            states.append((recording.file.size, path.read_bytes()))
+    recording.close()
+    states.append((path.stat().st_size, path.read_bytes()))
+    assert len(states) > 5
+    counts = []
+    for i, (_, data) in enumerate(states):
+        cut = tmp_path / f"cut{i}.blf"
+        cut.write_bytes(data)
+        with can.BLFReader(str(cut)) as reader:
+            theirs = [m for m in reader if not m.is_error_frame]
+        ours = read_frames(cut)
+        assert len(ours.t_s) == len(theirs)
+        if theirs:
+            assert abs(ours.t_s[0] - theirs[0].timestamp) < 1e-6 and abs(ours.t_s[0] - 1714557600.0) < 1
+        counts.append(len(theirs))
+    assert counts == sorted(counts) and counts[-1] == 40_000 - len(range(0, 40_000, 997))

@@ -155,33 +155,48 @@ def test_each_output_refuses_each_input_of_its_command(
         victim.unlink()
 
 
-REPRODUCTIONS = {  # issue 27, reproduction 1: each exited 0 with its input destroyed
-    "calibrate --triad": ["calibrate", "{stops}", "--triad", "{victim}", "-o", "{victim}"],
-    "calibrate --sensor-spec": ["calibrate", "{stops}", "--sensor-spec", "{victim}", "-o", "{victim}"],
-    "calibrate --report over --triad": ["calibrate", "{stops}", "--triad", "{victim}", "--report", "{victim}"],
-    "triad --imucal": ["triad", "{stops}", "--imucal", "{victim}", "-o", "{victim}"],
-    "plan --from-log": ["plan", "--target", "roll=1", "--from-log", "{victim}", "-o", "{victim}"],
-    "live --json-events over --dbc": ["live", "--interface", "virtual", "--channel", "r1", "--dbc", "{victim}",
-                                      "--json-events", "{victim}"],
-    "live --report over --dbc": ["live", "--interface", "virtual", "--channel", "r1", "--dbc", "{victim}",
-                                 "--report", "{victim}"],
-    "live -o over --plan": ["live", "--interface", "virtual", "--channel", "r1", "--dbc", "{dbc}",
-                            "--plan", "{dir}/s_protocol.csv", "-o", "{dir}/s"],
-}  # fmt: skip
+@pytest.fixture(scope="module")
+def real_inputs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """Valid inputs, so that on the code before the check each reproduction ran to the end and wrote."""
+    import shutil
+
+    import numpy as np
+
+    from mountcal.triad import Triad
+
+    d = tmp_path_factory.mktemp("real_inputs")
+    assert cli.main(["simulate", "-o", str(d / "s.csv"), "--seed", "3"]) == 0
+    assert cli.main(["simulate", "--log", str(d / "log.mcap"), "--rate-hz", "50"]) == 0
+    Triad(np.array([0.01, -0.02, 0.03]), np.zeros(6), np.eye(9) * 1e-8, "test").save(d / "t.json")
+    (d / "spec.toml").write_text("scale = 0.01\ncross_axis = 0.005\n")
+    shutil.copy(REPO / "data" / "imu_mm5_10.dbc", d / "b.dbc")
+    shutil.copy(REPO / "data" / "parking_protocol.csv", d / "s_protocol.csv")
+    return {p.name: p for p in d.iterdir()}
+
+
+LIVE = ["live", "--interface", "virtual", "--channel", "issue27", "--timeout", "0.2"]
+REPRODUCTIONS = {  # issue 27, reproduction 1: each exited 0 with the input destroyed (inputs valid here)
+    "calibrate --triad": ["calibrate", "s.csv", "--triad", "t.json", "-o", "t.json"],
+    "calibrate --sensor-spec": ["calibrate", "s.csv", "--sensor-spec", "spec.toml", "-o", "spec.toml"],
+    "calibrate --report over --triad": ["calibrate", "s.csv", "--triad", "t.json", "--report", "t.json"],
+    "triad --imucal": ["triad", "s.csv", "--imucal", "t.json", "-o", "t.json"],
+    "plan --from-log": ["plan", "--target", "roll=1", "--from-log", "log.mcap", "-o", "log.mcap"],
+    "live --json-events over --dbc": [*LIVE, "--dbc", "b.dbc", "--json-events", "b.dbc", "-o", "x"],
+    "live --report over --dbc": [*LIVE, "--dbc", "b.dbc", "--report", "b.dbc", "-o", "x"],
+    "live -o over --plan": [*LIVE, "--dbc", "b.dbc", "--plan", "s_protocol.csv", "-o", "s"],
+}
 
 
 @pytest.mark.parametrize("case", list(REPRODUCTIONS))
 def test_the_reproductions_of_issue_27_keep_their_input(
-    case: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    case: str, real_inputs: dict[str, Path], capsys: pytest.CaptureFixture[str]
 ) -> None:
-    stops, victim, dbc = tmp_path / "s.csv", tmp_path / "victim.json", tmp_path / "b.dbc"
-    for path in (stops, victim, dbc, tmp_path / "s_protocol.csv"):
-        path.write_text("t_start_s,t_end_s,beta_deg\n0,1,0\n")
-    argv = [a.format(stops=stops, victim=victim, dbc=dbc, dir=tmp_path) for a in REPRODUCTIONS[case]]
-    before = {p: snapshot(p) for p in tmp_path.iterdir()}
+    folder = next(iter(real_inputs.values())).parent
+    argv = [str(folder / a) if a in real_inputs or a in ("x", "s") else a for a in REPRODUCTIONS[case]]
+    before = {p: snapshot(p) for p in folder.iterdir()}
     code, err = run(argv, capsys)
     assert code == 2 and "never overwrites its input" in err, err
-    assert {p: snapshot(p) for p in tmp_path.iterdir()} == before
+    assert {p: snapshot(p) for p in folder.iterdir()} == before
 
 
 # ------------------------------------------------------------------ outputs: never a special file

@@ -23,6 +23,7 @@ LAST_STAMP_S = datetime(9999, 12, 31, 23, 59, 59, tzinfo=UTC).timestamp()
 LONGEST_S = (2**64 - 1) / 1e9
 BLF_FIRST_START_S = 631152000.0  # 1990: python-can's BLFWriter writes an earlier start as none (zeros)
 _BLF_OBJECT_HEADER = 16  # signature, sizes, type: zeros there end a BLF file for a reader
+_LARGEST_OBJECT = 1024  # bytes: BLFWriter's objects are at most ~120 (a CAN FD frame of 64 bytes)
 
 BUS_ERRORS = (can.CanError, OSError, ValueError, ImportError)
 
@@ -35,9 +36,10 @@ def open_bus(interface: str, channel: str) -> Any:
 class Recording:
     """A session's BLF recording (python-can's ``BLFWriter``), readable at every moment.
 
-    The writer's log containers reach the file whole, each followed by the file header rewritten to
-    cover it (:class:`~mountcal.atomic.GrowingFile`): a session killed at any point leaves a BLF of
-    every frame up to the last container written (≈ 2 700 classic frames each), and a full disk
+    The writer's log containers reach the file whole, each holding whole frames (flushed before
+    python-can would cut a frame between two containers) and followed by the file header rewritten
+    to cover it (:class:`~mountcal.atomic.GrowingFile`): a session killed at any point leaves a BLF
+    of every frame up to the last container written (≈ 2 700 classic frames each), and a full disk
     cuts the file back to that and raises :class:`~mountcal.paths.SystemFailure` saying so.
     :meth:`add` refuses (and counts) a frame the format cannot hold, rather than losing the session
     to the writer's exception.
@@ -68,6 +70,9 @@ class Recording:
         except (struct.error, ValueError, OverflowError, TypeError) as err:
             self.refused[f"frames the BLF writer refused ({type(err).__name__})"] += 1
             return False
+        buffered = self.writer.file_size() - self.file.tell()
+        if buffered >= self.writer.max_container_size - _LARGEST_OBJECT:
+            self.writer._flush()  # now, whole objects: python-can's own flush cuts one across two containers
         if self.file.pending:  # a container was written: header after it, both whole in the file
             self._rewrite_header()
             self.file.commit()
