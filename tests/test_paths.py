@@ -283,6 +283,8 @@ def test_every_input_is_a_regular_file_or_a_folder_where_one_is_taken(
     argv = fill(short_dir, command, skip={input_.dest})
     path = short_dir / "in"
     expected = {"missing": "no such file", "too large": "MOUNTCAL_MAX_INPUT_MB", **KIND}[kind]
+    if spec.globs and kind in ("missing", "symlink loop"):
+        expected = ""  # nothing at the path: a glob the command expands, and says what it found
     if kind == "too large":
         if not spec.small:
             pytest.skip("a log: read in chunks, no size limit")

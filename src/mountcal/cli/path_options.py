@@ -19,7 +19,6 @@ for a path option added with plain ``add_argument``.
 from __future__ import annotations
 
 import argparse
-import glob
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -145,8 +144,8 @@ def check_paths(parser: argparse.ArgumentParser, args: argparse.Namespace) -> No
         if spec.role == "output":
             written.append((name, path))
             continue
-        if spec.globs and not Path(path).exists() and glob.has_magic(path):
-            continue  # a pattern: the command expands it and checks what it finds
+        if spec.globs and not Path(path).exists():
+            continue  # a pattern, or nothing: the command expands it and says what it found
         what = spec.what if name == "input" else f"{spec.what} given to {name}"
         input_file(path, what, limit=None if spec.small else 2**63, folders=spec.folders)
         inputs.setdefault(name, []).append(path)

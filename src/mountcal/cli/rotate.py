@@ -26,7 +26,7 @@ def add_parser(sub: Any) -> None:
         writes={"what": "the rotated log"},
     )
     add_path(
-        p, "--calibration", role="input", what="a result JSON", small=True, required=True,
+        p, "--calibration", role="input", what="a calibration JSON", small=True, required=True,
         help="result JSON written by `mountcal calibrate`",
     )  # fmt: skip
     p.add_argument(
