@@ -27,7 +27,19 @@ REPO = Path(__file__).resolve().parents[1]
 
 # String-valued options that name no file (by dest). Any other option taking a string must be declared
 # with mountcal.cli.path_options.add_path: a new one fails the test below until it is (or is listed here).
-NOT_PATHS = {"topic", "model", "scheduler", "preset", "target", "interface", "channel", "parent", "child"}
+NOT_PATHS = {
+    "topic",
+    "field",
+    "columns",
+    "model",
+    "scheduler",
+    "preset",
+    "target",
+    "interface",
+    "channel",
+    "parent",
+    "child",
+}
 # values for required options that are not paths
 REQUIRED_VALUES = {"interface": "virtual", "channel": "test-paths", "target": "roll=1"}
 

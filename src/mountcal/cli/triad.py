@@ -57,10 +57,9 @@ def add_parser(subparsers: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     from mountcal.conventions import G_N
     from mountcal.estimate import sphere
-    from mountcal.triad import describe, fit_all, from_sphere, session_stops, with_imucal_values
-
     from mountcal.io.logs import LogOptions
     from mountcal.io.table.layout import parse_columns
+    from mountcal.triad import describe, fit_all, from_sphere, session_stops, with_imucal_values
 
     columns = None if args.columns is None else parse_columns(args.columns)
     acc, cov = session_stops(
