@@ -33,6 +33,7 @@ NOT_PATHS = {
     "columns",
     "model",
     "scheduler",
+    "storage_option",
     "preset",
     "target",
     "interface",
