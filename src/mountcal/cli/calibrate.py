@@ -46,14 +46,18 @@ def add_parser(sub: Any) -> None:
     add_log_options(p)
     g = p.add_argument_group("fit")
     add_fit_options(
-        g, headings_help="a stop table's beta_deg is from the uphill direction (default), relative, or none"
+        g,
+        headings_help="what a stop table's beta_deg is measured from: the uphill direction, relative (an unknown "
+        "common offset), or none (default: the table's heading_ref column, else uphill, said in the result)",
     )
-    g.add_argument("--unit", choices=("mps2", "g"), default="mps2", help="unit of a stop table's ax, ay, az")
+    g.add_argument(
+        "--unit", choices=("mps2", "g"), default=None, help="unit of a stop table's ax, ay, az (default m/s², checked)"
+    )
     g.add_argument(
         "--gravity",
-        type=float,
         default=None,
-        help="local gravity in m/s² (default: from lat_deg/alt_m when the data have them, else 9.80665)",
+        help="local gravity in m/s², or with its unit (1g; default: from lat_deg/alt_m when the data have them, "
+        "else 9.80665); a bare number outside 9.7–9.9 is refused",
     )
     p.set_defaults(run=run)
 
@@ -62,6 +66,8 @@ def run(args: argparse.Namespace) -> int:
     from mountcal.atomic import atomic_path
     from mountcal.calibrate import calibrate
     from mountcal.errors import InputError
+    from mountcal.input_conventions import parse_axes
+    from mountcal.option_names import option
     from mountcal.pipeline import calibrate_job, describe, is_stop_table
     from mountcal.stoptable import read_stop_table
     from mountcal.summary import summary
@@ -75,7 +81,14 @@ def run(args: argparse.Namespace) -> int:
     done: LogResult | None = None  # the log's result, when the input is a log
     mapped = args.columns is not None or (args.mapping is not None and not args.dbc)  # a table's column map
     if args.input == [STDOUT] or (len(args.input) == 1 and is_stop_table(args.input[0], bool(args.dbc), mapped)):
-        table = read_stop_table(args.input[0], unit=args.unit, headings=args.headings)
+        table = read_stop_table(
+            args.input[0],
+            unit=args.unit,
+            headings=args.headings,
+            heading_unit=args.heading_unit,
+            axes=None if args.axes is None else parse_axes(args.axes, option("axes")),
+            uphill_azimuth_deg=args.uphill_azimuth_deg,
+        )
         with working(args, "fitting"):
             cal = calibrate(table, fit_options(args))
     else:

@@ -151,6 +151,14 @@ def add_log_options(
         default=None,
         help="the Imu or Vector3 inside the topic's message, e.g. imu or imu.linear_acceleration (MCAP, ROS bags)",
     )
+    add_axes_option(g)
+    g.add_argument(
+        "--heading-unit",
+        choices=("deg", "rad"),
+        default=None,
+        help="unit of the headings (a heading channel, a protocol's or stop table's beta_deg); default degrees, "
+        "checked: headings that look like radians are refused",
+    )
     if not stops:
         return
     if protocol:
@@ -162,11 +170,23 @@ def add_log_options(
         "--uphill-azimuth-deg",
         type=float,
         default=None,
-        help="compass azimuth of the slope's uphill direction, with a heading signal in the log",
+        help="compass azimuth of the slope's uphill direction, with a heading signal in the log (or a stop table's "
+        "compass column heading_deg)",
     )
     d = p.add_argument_group("stop detection (default: mountcal.stops.StopDetection, some from the log)")
     for flag, text in _DETECTION.values():
         d.add_argument(flag, type=float, default=None, help=text)
+
+
+def add_axes_option(g: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
+    """``--axes``: the device's axes onto the right-handed sensor frame, for every input of samples."""
+    g.add_argument(
+        "--axes",
+        default=None,
+        metavar="MAP",
+        help='the device\'s axes as the sensor frame: a signed permutation, e.g. "x,-y,z" (sensor x, y, z in turn; a '
+        "reflection states a left-handed device), applied to accelerometer and gyro after a mapping's own axes",
+    )
 
 
 # StopDetection field → (flag, help); unset flags keep the library's defaults
@@ -204,7 +224,7 @@ def add_fit_options(g: argparse.ArgumentParser | argparse._ArgumentGroup, *, hea
     """Method, model, headings and the yaw threshold of the fit."""
     g.add_argument("--method", choices=("full", "paper"), default="full")
     g.add_argument("--model", default="auto", help=MODEL_HELP)
-    g.add_argument("--headings", choices=HEADINGS, default="uphill", help=headings_help)
+    g.add_argument("--headings", choices=HEADINGS, default=None, help=headings_help)
     g.add_argument("--max-yaw-sigma", type=float, default=5.0, help="report yaw only below this 1σ (deg)")
     add_sensor_options(g)
     g.add_argument(
@@ -244,6 +264,8 @@ def log_options(args: argparse.Namespace) -> LogOptions:
         field=args.field,
         columns=None if columns is None else parse_columns(columns),
         unit=None if unit in (None, "mps2") else unit,
+        axes=getattr(args, "axes", None),
+        heading_unit=getattr(args, "heading_unit", None),
     )
 
 
@@ -263,11 +285,21 @@ def fit_options(args: argparse.Namespace) -> Options:
     options = Options(
         method=args.method,
         model=args.model,
-        gravity_mps2=getattr(args, "gravity", None),
+        gravity_mps2=gravity(args),
         max_yaw_sigma_deg=args.max_yaw_sigma,
         slope_reference=None if reference is None else SlopeReference(*reference),
     )
     return sensor_options(options, getattr(args, "sensor_spec", None), getattr(args, "triad", None))
+
+
+def gravity(args: argparse.Namespace) -> float | None:
+    """``--gravity`` in m/s²: a bare number in m/s² (checked to be Earth's), or a value with its unit (``1g``)."""
+    text = getattr(args, "gravity", None)
+    if text is None:
+        return None
+    from mountcal.input_conventions import GRAVITY, parse_quantity
+
+    return parse_quantity(text, GRAVITY)[0]
 
 
 def log_job(args: argparse.Namespace, options: Options | None = None) -> LogJob:

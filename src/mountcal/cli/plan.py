@@ -21,7 +21,12 @@ log = logging.getLogger("mountcal")
 def add_parser(sub: Any) -> None:
     p = add_command(sub, "plan", "plan a session from the bound: stops, headings, dwell, slope")
     p.add_argument("--target", required=True, help="1σ targets in degrees, e.g. roll=0.1,pitch=0.1,yaw=0.5")
-    p.add_argument("--noise", type=float, default=None, help="accelerometer noise per sample, 1σ per axis (mg)")
+    p.add_argument(
+        "--noise",
+        default=None,
+        help="accelerometer noise per sample, 1σ per axis: mg, or with its unit (0.005g, 0.05m/s2); a bare number "
+        "outside 0.05–200 mg is refused",
+    )
     p.add_argument("--rate-hz", type=float, default=100.0, help="sample rate with --noise (Hz; default 100)")
     add_path(
         p, "--from-log", role="input", what="a log", folders=True, nargs="+", default=None, metavar="LOG",
@@ -55,14 +60,12 @@ def run(args: argparse.Namespace) -> int:
             "Give the sensor's per-sample noise in mg, or a log with parked periods to measure it on.",
         )
     if args.noise is not None:
-        if not (math.isfinite(args.noise) and args.noise > 0 and math.isfinite(args.rate_hz) and args.rate_hz > 0):
-            raise InputError(
-                "--noise/--rate-hz",
-                "positive numbers",
-                f"{args.noise:g} mg at {args.rate_hz:g} Hz",
-                "Give the sensor's values.",
-            )
-        noise = Noise(args.noise * 1e-3 * G_N, args.rate_hz, "given by --noise and --rate-hz")
+        from mountcal.input_conventions import NOISE, parse_quantity
+
+        noise_mg, stated = parse_quantity(args.noise, NOISE)
+        if not (math.isfinite(args.rate_hz) and args.rate_hz > 0):
+            raise InputError("--rate-hz", "a positive number", f"{args.rate_hz:g} Hz", "Give the sensor's sample rate.")
+        noise = Noise(noise_mg * 1e-3 * G_N, args.rate_hz, f"given by --noise and --rate-hz ({stated.by})")
     else:
         with working(args, "measuring the noise on the log"):
             noise = noise_from_log(list(args.from_log), log_options(args))

@@ -14,7 +14,7 @@ import logging
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from mountcal.cli.options import add_command, print_json
+from mountcal.cli.options import add_axes_option, add_command, gravity, print_json
 from mountcal.cli.path_options import add_path
 from mountcal.terminal import safe
 
@@ -37,7 +37,8 @@ def add_parser(subparsers: Any) -> None:
         writes={"what": "the triad calibration"},
     )
     p.add_argument("--unit", choices=("mps2", "g"), default="mps2", help="unit of ax, ay, az in a stop table")
-    p.add_argument("--gravity", type=float, default=None, help="local gravity in m/s² (default 9.80665)")
+    p.add_argument("--gravity", default=None, help="local gravity in m/s², or with its unit (1g; default 9.80665)")
+    add_axes_option(p)
     add_path(
         p, "--imucal", role="input", what="an imucal calibration", small=True, default=None,
         help="imucal's Ferraris calibration JSON made from this session",
@@ -63,9 +64,14 @@ def run(args: argparse.Namespace) -> int:
 
     columns = None if args.columns is None else parse_columns(args.columns)
     acc, cov = session_stops(
-        args.input, args.unit, args.min_stop_s, args.trim_s, LogOptions(mapping=args.mapping, columns=columns)
+        args.input,
+        args.unit,
+        args.min_stop_s,
+        args.trim_s,
+        LogOptions(mapping=args.mapping, columns=columns, axes=args.axes),
     )
-    g = G_N if args.gravity is None else float(args.gravity)
+    given = gravity(args)
+    g = G_N if given is None else given
     source = " + ".join(str(Path(p)) for p in args.input)
     for _, why in sphere.loop(acc, g, cov):
         log.info("  %s", why)
