@@ -40,7 +40,8 @@ SENSE_CLEAR = 0.9  # |mean e^{i(φ ∓ β)}| of the sense the stops follow
 SENSE_OTHER = 0.5  # ... and at most this for the other sense
 TURN_R = 0.5  # a correlation beyond ±0.5 between two yaw-rate cues decides their relative sign
 TURN_BIN_S = 1.0  # the cues are compared as 1 s means (vibration and the clocks' jitter averaged out)
-MIN_TURNING_S = 10.0  # seconds of turning (|ω| > 2°/s) a pair needs before its sign counts
+TURN_Z = 5.0  # ... and lies this many σ from no correlation (a refusal must not come from noise)
+BINS_PER_INDEPENDENT = 3.0  # 1 s means of a drive correlate over a few seconds
 MIN_SPEED_MPS = 3.0
 HALF_TURN_DEG = 150.0  # stops and drive further apart than this in yaw: half a turn, not noise
 AXES = "xyz"
@@ -137,7 +138,7 @@ def turn_handedness(samples: Samples, rot_vs: Rotation, yaw_known: bool) -> Chec
             if r is not None:
                 pairs[(a, b)] = r
     if not pairs:
-        return Check(name, None, f"too little turning (under {MIN_TURNING_S:g} s above 2°/s) to compare the cues")
+        return Check(name, None, "too little turning to compare the cues (no correlation beyond 5σ)")
     shown = "; ".join(f"{_CUE[a]} against {_CUE[b]}: r = {r:+.2f}" for (a, b), r in pairs.items())
     wrong = {p for p, r in pairs.items() if r < 0}
     if not wrong:
@@ -232,17 +233,20 @@ def _turn_cues(samples: Samples, rot_vs: Rotation, yaw_known: bool) -> dict[str,
 
 
 def _sign_test(a: FloatArray, b: FloatArray, reference: FloatArray) -> float | None:
-    """The correlation of two cues over the bins both have, when the reference shows enough turning."""
+    """The correlation of two cues over the 1 s bins both have, when it decides their relative sign: beyond
+    ±:data:`TURN_R` and :data:`TURN_Z` σ from none (Fisher's z, neighbouring bins counted as one in
+    :data:`BINS_PER_INDEPENDENT`). ``reference`` is the cue whose turning must be present in those bins."""
     ok = np.isfinite(a) & np.isfinite(b) & np.isfinite(reference)
-    turning = ok & (np.abs(reference) > np.radians(2.0))
-    if turning.sum() * TURN_BIN_S < MIN_TURNING_S or ok.sum() < 5:
+    n_eff = ok.sum() / BINS_PER_INDEPENDENT
+    if n_eff < 4:
         return None
     x, y = a[ok] - a[ok].mean(), b[ok] - b[ok].mean()
     den = float(np.sqrt((x @ x) * (y @ y)))
     if den == 0:
         return None
-    r = float(x @ y / den)
-    return r if abs(r) >= TURN_R else None
+    r = float(np.clip(x @ y / den, -0.999999, 0.999999))
+    decided = abs(r) >= TURN_R and abs(np.arctanh(r)) * np.sqrt(n_eff - 3) >= TURN_Z
+    return r if decided else None
 
 
 # --------------------------------------------------------------------------- two readings of a heading

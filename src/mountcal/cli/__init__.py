@@ -15,6 +15,7 @@ import argparse
 import importlib
 import logging
 import os
+import re
 import sys
 from collections.abc import Sequence
 
@@ -35,7 +36,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run one command; return its exit code (see :data:`mountcal.cli.options.EXIT_CODES`)."""
     stdout_closed = _standard_streams()
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(_signed_maps(sys.argv[1:] if argv is None else list(argv)))
     configure_logging(args.verbose - args.quiet)
     try:
         if stdout_closed:
@@ -84,6 +85,23 @@ def _standard_streams() -> bool:
             setattr(sys, name, open(fd, "w" if fd else "r", encoding="utf-8", closefd=False))
         closed = closed or fd == 1
     return closed
+
+
+_AXIS_MAP = re.compile(r"-[xyzXYZ]\s*,.*")
+
+
+def _signed_maps(argv: list[str]) -> list[str]:
+    """``--axes -y,x,z`` as ``--axes=-y,x,z``: argparse would take a value starting with "-" for an option."""
+    out: list[str] = []
+    i = 0
+    while i < len(argv):
+        if argv[i] == "--axes" and i + 1 < len(argv) and _AXIS_MAP.fullmatch(argv[i + 1]):
+            out.append(f"--axes={argv[i + 1]}")
+            i += 2
+        else:
+            out.append(argv[i])
+            i += 1
+    return out
 
 
 def build_parser() -> argparse.ArgumentParser:

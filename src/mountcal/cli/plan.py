@@ -62,10 +62,10 @@ def run(args: argparse.Namespace) -> int:
     if args.noise is not None:
         from mountcal.input_conventions import NOISE, parse_quantity
 
-        noise_mg, stated = parse_quantity(args.noise, NOISE)
+        noise_mg, _ = parse_quantity(args.noise, NOISE)
         if not (math.isfinite(args.rate_hz) and args.rate_hz > 0):
             raise InputError("--rate-hz", "a positive number", f"{args.rate_hz:g} Hz", "Give the sensor's sample rate.")
-        noise = Noise(noise_mg * 1e-3 * G_N, args.rate_hz, f"given by --noise and --rate-hz ({stated.by})")
+        noise = Noise(noise_mg * 1e-3 * G_N, args.rate_hz, f"given by --noise ({noise_mg:.6g} mg) and --rate-hz")
     else:
         with working(args, "measuring the noise on the log"):
             noise = noise_from_log(list(args.from_log), log_options(args))
