@@ -88,7 +88,7 @@ def parse_axes(text: str, where: str = "--axes") -> AxisMap:
     if len(tokens) != 3 or not all(parsed) or sorted(letters) != ["x", "y", "z"]:
         raise InputError(
             where,
-            'a signed permutation of x, y, z such as "x,-y,z" or "-y,x,z"',
+            'axes as a signed permutation of x, y, z such as "x,-y,z" or "-y,x,z"',
             repr(text),
             "List, for the sensor axes x, y, z in turn, the device axis (with its sign) that points along it.",
         )
@@ -139,14 +139,20 @@ _STRENGTH = {"none": 0, "relative": 1, "uphill": 2}
 
 
 def heading_reference(
-    marker: Iterable[object] | None, given: Headings | None, where: str
+    marker: Iterable[object] | None,
+    given: Headings | None,
+    where: str,
+    beta_deg: FloatArray | None = None,
+    compass_deg: FloatArray | None = None,
 ) -> tuple[Headings, Convention]:
     """What a stop table's ``beta_deg`` is measured from: its ``heading_ref`` column and/or the option.
 
     An option may say less than the column (``relative`` or ``none`` for a table marked ``uphill``:
     information is dropped, never invented); one that says more (``uphill`` for a ``relative`` table)
-    contradicts the table and is refused. A table without the column (written before it existed, or
-    by hand) is read as from uphill, and the result says that this was assumed.
+    contradicts the table and is refused. A table without the column is read from its content when
+    it shows how β were made — β = azimuth − ``heading_deg`` exactly in every row (what ``mountcal stops``
+    wrote before the column existed: azimuth 0 for relative headings) — else (by hand) as from uphill,
+    and the result says that this was assumed.
     """
     stated: Headings | None = None
     if marker is not None:
@@ -160,6 +166,10 @@ def heading_reference(
                 f"with an unknown common offset), or drop the column and say it with {option('headings')}.",
             )
         stated = values.pop()  # type: ignore[assignment]
+    if stated is None and given is None and beta_deg is not None and compass_deg is not None:
+        inferred = _from_compass(np.asarray(beta_deg, dtype=float), np.asarray(compass_deg, dtype=float))
+        if inferred is not None:
+            return inferred
     if stated is None and given is None:
         return "uphill", Convention(
             "heading_reference",
@@ -183,6 +193,29 @@ def heading_reference(
         f"{option('headings', given)}, which contradicts it",
         f"If beta_deg really is measured from the slope's uphill direction, set {HEADING_REF} to {given} in the "
         f"table; relative headings with the compass column heading_deg become uphill with {option('uphill_azimuth')}.",
+    )
+
+
+def _from_compass(beta: FloatArray, compass: FloatArray) -> tuple[Headings, Convention] | None:
+    """β made from the compass column by β = azimuth − heading (to rounding): relative for azimuth 0."""
+    total = np.exp(1j * np.radians(beta + compass))
+    azimuth = float(np.degrees(np.angle(total.mean())) % 360.0)
+    if not np.all(np.abs(np.angle(total * np.exp(-1j * np.radians(azimuth)))) < 1e-8):
+        return None
+    if min(azimuth, 360.0 - azimuth) < 1e-6:
+        return "relative", Convention(
+            "heading_reference",
+            "relative",
+            "inferred",
+            f"beta_deg = −heading_deg in every row (no {HEADING_REF} column): relative headings as `mountcal stops` "
+            "writes them without the slope's uphill azimuth",
+        )
+    return "uphill", Convention(
+        "heading_reference",
+        "uphill",
+        "inferred",
+        f"beta_deg = {azimuth:.6g} − heading_deg in every row (no {HEADING_REF} column): β from the compass heading "
+        f"with an uphill azimuth of {azimuth:.6g}°",
     )
 
 
@@ -398,6 +431,24 @@ def acceleration_unit(unit: str, stated: bool) -> Convention:
         "default",
         f"m/s² unless {option('unit', 'g')} (checked: the stops' |a| lies near 9.8 m/s², not near 1)",
     )
+
+
+def stop_table_reading(conventions: Sequence[Convention]) -> dict[str, object]:
+    """The arguments of :func:`mountcal.stoptable.read_stop_table` that read a stop table again as a result's
+    ``provenance.conventions`` say it was read (what was stated is stated again; defaults stay defaults)."""
+    by = {c.name: c for c in conventions}
+    out: dict[str, object] = {}
+    if (c := by.get("acceleration_unit")) is not None and c.how == "stated":
+        out["unit"] = c.value
+    if (c := by.get("uphill_azimuth")) is not None:
+        out["uphill_azimuth_deg"] = float(c.value)
+    elif (c := by.get("heading_reference")) is not None and c.how != "default":
+        out["headings"] = c.value
+    if (c := by.get("heading_unit")) is not None and c.by.startswith(option("heading_unit")):
+        out["heading_unit"] = c.value
+    if (c := by.get("axes")) is not None and c.how == "stated":
+        out["axes"] = parse_axes(c.value.split(" ")[0])
+    return out
 
 
 def merged(*groups: Sequence[Convention]) -> tuple[Convention, ...]:

@@ -34,8 +34,11 @@ from mountcal.calibrate import Options, calibrate
 from mountcal.conventions import specific_force_v
 from mountcal.errors import InputError, MountcalError, NotEnoughInformation
 from mountcal.estimate.bound import crb_deg, true_state
+from mountcal.input_conventions import parse_axes
 from mountcal.io.can.bus import BusFrames, Recording
 from mountcal.io.can.read import samples_from_frames
+from mountcal.io.logs import LogOptions, stated
+from mountcal.option_names import option
 from mountcal.result import Calibration
 from mountcal.samples import Samples
 from mountcal.stops import StillPeriod, StopDetection, detect_stops, tabulate
@@ -58,6 +61,7 @@ class LiveOptions:
     uphill_azimuth_deg: float | None = None
     plan_beta_deg: tuple[float, ...] | None = None  # headings in driving order (a plan's sheet)
     silence_s: float = 10.0  # a bus silent this long ends the session
+    axes: str | None = None  # the device's axes onto the sensor frame (--axes), after the mapping's
     evaluate_every_s: float = 2.0  # bus time between evaluations
 
 
@@ -139,6 +143,7 @@ class Live:
     """One session: feed it a bus; it calls ``emit`` with each event (a dict)."""
 
     def __init__(self, opts: LiveOptions, recording: Path, emit: Callable[[dict[str, Any]], None]) -> None:
+        self.axes = None if opts.axes is None else parse_axes(opts.axes, option("axes"))  # refused before the bus
         self.opts, self.recording, self.emit = opts, recording, emit
         self.frames = BusFrames()
         self.ignored = 0
@@ -228,6 +233,7 @@ class Live:
                 self.last.calibration = None
             self._waiting(str(err))
             return False
+        samples = stated(samples, LogOptions(axes=self.opts.axes), self.axes, check=False)
         self.last.samples, self.last.dropped = samples, dict(samples.dropped)
         cfg = self.opts.detection
         if len(samples) < 3 or samples.t_s[-1] - samples.t_s[0] < cfg.min_duration_s + 2 * cfg.trim_s:

@@ -258,7 +258,8 @@ def stop_table_from_frame(
         beta, reference = np.radians(beta_deg), "uphill"
         conventions += from_compass
     elif BETA in df.columns and headings != "none":
-        reference, stated = heading_reference(marker, headings, source)
+        compass = _numeric(df, [HEADING], source)[:, 0] if HEADING in df.columns else None
+        reference, stated = heading_reference(marker, headings, source, _numeric(df, [BETA], source)[:, 0], compass)
         if reference != "none":
             beta_deg, unit_known = headings_in_degrees(_numeric(df, [BETA], source)[:, 0], heading_unit, source)
             beta = np.radians(beta_deg)

@@ -10,7 +10,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from mountcal.cli.options import STDOUT, add_command
+from mountcal.cli.options import STDOUT, add_axes_option, add_command
 from mountcal.cli.path_options import add_path
 from mountcal.terminal import safe
 
@@ -26,6 +26,7 @@ def add_parser(sub: Any) -> None:
         p, "--mapping", role="input", what="a mapping", small=True, default=None,
         help="TOML naming the accelerometer signals",
     )  # fmt: skip
+    add_axes_option(p)
     p.add_argument("--can-channel", type=int, default=None, help="channel number of the IMU frames (recorded)")
     p.add_argument("--target", default="roll=0.1,pitch=0.1,yaw=0.5", help="stop when every 1σ is below (deg)")
     p.add_argument("--model", default="auto", help="auto (default), rotation,slope or rotation,slope,bias")
@@ -102,6 +103,7 @@ def run(args: argparse.Namespace) -> int:
         uphill_azimuth_deg=args.uphill_azimuth_deg,
         plan_beta_deg=plan_beta,
         silence_s=args.timeout,
+        axes=args.axes,
     )
     try:
         bus = open_bus(args.interface, args.channel)

@@ -30,7 +30,12 @@ def add_parser(sub: Any) -> None:
         p, "--stops", role="input", what="a stop table", small=True, default=None,
         help="the stop table the result was fitted to (adds the 3-D figure, headings, σ)",
     )  # fmt: skip
-    p.add_argument("--unit", choices=("mps2", "g"), default="mps2", help="unit of ax, ay, az in --stops")
+    p.add_argument(
+        "--unit",
+        choices=("mps2", "g"),
+        default=None,
+        help="unit of ax, ay, az in --stops (default: as calibrate read it)",
+    )
     p.add_argument("--figures", choices=("svg", "png"), default="svg", help="inline SVG (default) or base64 PNG")
     p.set_defaults(run=run)
 
@@ -43,6 +48,21 @@ def _output(value: str | None, result: str) -> Path | None:
 def _writes(value: str | None, args: argparse.Namespace) -> list[tuple[str, str]]:
     output = _output(value, args.input)
     return [] if output is None else [(str(output), "" if value is not None else "(default)")]
+
+
+def _reading(stops: Path, cal: Any, unit: str | None) -> dict[str, Any]:
+    """How to read ``--stops``: as calibrate read it when it is the very file the result was fitted to (its
+    SHA-256 in the provenance), else as the table states itself (a table `mountcal stops` wrote from a log)."""
+    import hashlib
+
+    from mountcal.input_conventions import stop_table_reading
+
+    options: dict[str, Any] = {}
+    if stops.is_file() and hashlib.sha256(stops.read_bytes()).hexdigest() in cal.provenance.input_sha256:
+        options = stop_table_reading(cal.provenance.conventions)
+        if not cal.provenance.conventions:  # a result written before the conventions were recorded
+            options = {"headings": cal.fit.headings or "uphill"}
+    return options | ({} if unit is None else {"unit": unit})
 
 
 def run(args: argparse.Namespace) -> int:
@@ -60,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
     doc = read_json(result)  # the whole document: entries Calibration may not keep
     table = None
     if args.stops:
-        table = read_stop_table(args.stops, unit=args.unit, headings=cal.fit.headings or "uphill")
+        table = read_stop_table(args.stops, **_reading(Path(args.stops), cal, args.unit))
         stored = cal.provenance.stops_fingerprint
         if stored is None or not same_stops(stored, table):
             raise InputError(
