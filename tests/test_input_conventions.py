@@ -480,3 +480,43 @@ def test_every_refusal_of_a_convention_names_its_option() -> None:
             parse_quantity(bad, GRAVITY)
     with pytest.raises(InputError, match=r"signed permutation"):
         parse_axes("x,y,y")
+
+
+@pytest.mark.parametrize("suffix", [".parquet", ".mcap"])
+def test_rotate_takes_the_axes_the_calibration_was_made_with_and_gives_the_same_vehicle_frame(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], suffix: str
+) -> None:
+    """Metamorphic: a right-handed axis map changes the sensor frame, not the vehicle-frame data."""
+    log, protocol = str(DATA / "parking.mcap"), ["--protocol", str(DATA / "parking_protocol.csv")]
+    plain, turned = tmp_path / "plain.json", tmp_path / "turned.json"
+    assert main(["calibrate", log, *protocol, "-o", str(plain)]) == 0
+    assert main(["calibrate", log, *protocol, "--axes", "-y,x,z", "-o", str(turned)]) == 0
+    assert main(["rotate", log, "--calibration", str(turned), "-o", str(tmp_path / f"x{suffix}")]) == 2
+    assert "--axes -y,x,z" in capsys.readouterr().err
+    a, b = tmp_path / f"a{suffix}", tmp_path / f"b{suffix}"
+    assert main(["rotate", log, "--calibration", str(plain), "-o", str(a)]) == 0
+    assert main(["rotate", log, "--calibration", str(turned), "--axes", "-y,x,z", "-o", str(b)]) == 0
+    if suffix == ".parquet":
+        da, db = pd.read_parquet(a), pd.read_parquet(b)
+        for c in ("ax", "ay", "az", "gx", "gy", "gz"):
+            np.testing.assert_allclose(db[c], da[c], atol=2e-3, err_msg=c)  # the two fits agree to their noise
+    else:
+        va = read_log(a, LogOptions(topic="/imu/data/vehicle"))
+        vb = read_log(b, LogOptions(topic="/imu/data/vehicle"))
+        np.testing.assert_allclose(vb.acc_s, va.acc_s, atol=2e-3)
+
+
+def test_the_table_slips_of_the_benchmark_end_right_not_confident_or_refused_naming_the_fix(tmp_path: Path) -> None:
+    """One draw of benchmarks/convention_slips.py's stop-table slips (the long run is the benchmark)."""
+    import sys
+
+    sys.path.insert(0, str(REPO / "benchmarks"))
+    import convention_slips as slips
+
+    good = {"answered, right", "answered, not confident", "refused, names the fix"}
+    for name, case in slips.table_slips(np.random.default_rng(7), tmp_path).items():
+        outcome, detail = slips.run_case(case, tmp_path)
+        if case.cannot_tell:
+            assert outcome != "traceback", name
+        else:
+            assert outcome in good, f"{name}: {outcome} ({detail})"

@@ -433,6 +433,29 @@ def acceleration_unit(unit: str, stated: bool) -> Convention:
     )
 
 
+def stated_axes(conventions: Sequence[Convention]) -> AxisMap | None:
+    """The ``axes`` map a result was made with (None: the axes as read)."""
+    c = next((c for c in conventions if c.name == "axes"), None)
+    if c is None or c.how != "stated" or not c.by.startswith(option("axes")):
+        return None
+    return parse_axes(c.value.split(" ")[0])
+
+
+def check_same_axes(conventions: Sequence[Convention], given: AxisMap | None, where: str) -> None:
+    """Refuse applying a calibration to samples read with other axes than the ones it was made with."""
+    made = stated_axes(conventions)
+    same = (made is None or made.identity) if given is None else (made is not None and made.text == given.text)
+    if not same and not (made is None and given is not None and given.identity):
+        was = "the axes as logged" if made is None else made.text
+        now = "the axes as logged" if given is None or given.identity else given.text
+        raise InputError(
+            where,
+            f"the log read with the axes the calibration was made with ({was})",
+            now,
+            f"Give the same map: {option('axes', made.text) if made is not None else 'no ' + option('axes')}.",
+        )
+
+
 def stop_table_reading(conventions: Sequence[Convention]) -> dict[str, object]:
     """The arguments of :func:`mountcal.stoptable.read_stop_table` that read a stop table again as a result's
     ``provenance.conventions`` say it was read (what was stated is stated again; defaults stay defaults)."""
