@@ -520,3 +520,34 @@ def test_the_table_slips_of_the_benchmark_end_right_not_confident_or_refused_nam
             assert outcome != "traceback", name
         else:
             assert outcome in good, f"{name}: {outcome} ({detail})"
+
+
+def test_two_readings_of_a_heading_that_turn_opposite_ways_are_not_confident() -> None:
+    """β (counter-clockwise from uphill) and a compass heading (clockwise from north) must add up to one
+    azimuth; a heading column that turns the other way (an ENU yaw) contradicts the protocol's β."""
+    table, _ = simulate_stops(seed=11)
+    beta = np.degrees(table.beta_rad)  # type: ignore[arg-type]
+    right = calibrate(dataclasses.replace(table, heading_deg=(30.0 - beta) % 360.0))
+    check = next(c for c in right.checks if c.name == "heading_directions")
+    assert check.passed is True and "30.0°" in check.reason and right.confident
+    wrong = calibrate(dataclasses.replace(table, heading_deg=(30.0 + beta) % 360.0))
+    check = next(c for c in wrong.checks if c.name == "heading_directions")
+    assert check.passed is False and not wrong.confident
+
+
+def test_a_stop_table_s_axis_map_turns_its_means_and_covariances() -> None:
+    table, _ = simulate_stops(seed=12)
+    df = table.to_frame()
+    mapped = read_stop_table_frame(df, "-y,x,z")
+    p = parse_axes("-y,x,z").matrix
+    np.testing.assert_allclose(mapped.acc_s, table.acc_s @ p.T)
+    assert table.cov_s is not None and mapped.cov_s is not None
+    np.testing.assert_allclose(mapped.cov_s, p @ table.cov_s @ p.T, rtol=1e-12)
+    vehicle = calibrate(mapped).rot_vs * Rotation.from_matrix(p)  # a turned sensor: the same vehicle frame
+    assert np.degrees((vehicle * calibrate(table).rot_vs.inv()).magnitude()) < 1e-6
+
+
+def read_stop_table_frame(df: pd.DataFrame, axes: str):  # type: ignore[no-untyped-def]
+    from mountcal.stoptable import stop_table_from_frame
+
+    return stop_table_from_frame(df, axes=parse_axes(axes))

@@ -37,7 +37,7 @@ from mountcal.version import software_version
 
 Use = Literal["auto", "stops", "driving"]
 STOP_TABLE_SUFFIXES = (".csv", ".parquet", ".pq")
-STOP_TABLE_MARKERS = {"beta_deg", "n", "sx"}
+STOP_TABLE_MARKERS = {"beta_deg", "heading_ref", "n", "sx"}
 
 
 @dataclass(frozen=True)
