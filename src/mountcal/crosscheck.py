@@ -164,9 +164,13 @@ def _turn_advice(wrong: set[tuple[str, str]], tested: set[tuple[str, str]], rot_
     lateral_axis = AXES[int(np.argmax(np.abs(matrix[1])))]  # the sensor axis nearest the vehicle's y
     vertical_axis = AXES[int(np.argmax(np.abs(matrix[2])))]
     flip_lateral = negated(AXES.index(lateral_axis)).text
-    odd = {c for c in ("gyro", "heading", "lateral") if all(c in p for p in wrong) and len(wrong) >= 1}
-    if len(wrong) == 1 and len(tested) == 1:
-        odd = set()
+    # the cue that disagrees: in every pair that turns the wrong way, and in no pair that agrees
+    odd = {
+        c
+        for c in ("gyro", "heading", "lateral")
+        if all(c in p for p in wrong) and all(p in wrong for p in tested if c in p)
+    }
+    odd = odd if len(odd) == 1 else set()
     mirrored = (
         f"the sensor is a mirror image (a left-handed triad: one axis reversed): state its axes with "
         f"{option('axes', flip_lateral)} (here the axis nearest the vehicle's lateral axis, sensor {lateral_axis}; "

@@ -337,17 +337,18 @@ NOISE_RANGE_MG = (0.05, 200.0)  # a bare --noise (mg per sample): below is a g o
 
 @dataclass(frozen=True)
 class Quantity:
-    """An acceleration option with units: its name (for :func:`option`), unit, and plausible range."""
+    """An acceleration option with units: its key (for :func:`option`), unit, plausible range, an example."""
 
     key: str
     what: str
     unit: str  # the unit of a bare number, one of _ACC_UNITS
     plausible: tuple[float, float]  # in ``unit``
     suffix_plausible: bool  # whether a value given with a unit must also lie in ``plausible``
+    example: str
 
 
-GRAVITY = Quantity("gravity", "local gravity", "m/s2", GRAVITY_RANGE_MPS2, True)
-NOISE = Quantity("noise", "the accelerometer noise per sample, 1σ per axis", "mg", NOISE_RANGE_MG, False)
+GRAVITY = Quantity("gravity", "local gravity", "m/s2", GRAVITY_RANGE_MPS2, True, "9.81")
+NOISE = Quantity("noise", "the noise per sample (1σ per axis)", "mg", NOISE_RANGE_MG, False, "5")
 
 
 def parse_quantity(text: str | float, q: Quantity) -> tuple[float, Convention]:
@@ -357,7 +358,7 @@ def parse_quantity(text: str | float, q: Quantity) -> tuple[float, Convention]:
     ------
     InputError
         Not a finite positive number; an unknown unit; a bare number outside the plausible range
-        (the message asks for the unit and names the likely one).
+        (the message asks for the unit and names the one the number fits).
     """
     raw = str(text).strip()
     match = re.fullmatch(r"([-+0-9.eE]+)\s*([a-zA-Zµ/²^0-9]*)", raw)
@@ -365,40 +366,27 @@ def parse_quantity(text: str | float, q: Quantity) -> tuple[float, Convention]:
         number = float(match.group(1)) if match else float("nan")
     except ValueError:
         number = float("nan")
-    suffix = match.group(2).lower().replace("mps²", "mps2") if match else ""
+    suffix = match.group(2).lower() if match else ""
     lo, hi = q.plausible
-    units = ", ".join(f"{lo * _ACC_UNITS[q.unit] / f:g}{u}" for u, f in (("g", G_N), ("mg", 1e-3 * G_N)) if u != q.unit)
+    expected = f"{q.what} in {q.unit}: a bare number from {lo:g} to {hi:g}, or a number with its unit (g, mg, m/s2)"
     if not math.isfinite(number) or number <= 0 or (suffix and suffix not in _ACC_UNITS):
-        raise InputError(
-            option(q.key),
-            f"{q.what}: a positive number in {q.unit}, or with a unit (g, mg, m/s2)",
-            repr(raw),
-            f"For example {option(q.key, f'{lo:g}')} or {option(q.key, f'{lo * _ACC_UNITS[q.unit] / G_N:g}g')}.",
-        )
+        raise InputError(option(q.key), expected, repr(raw), f"For example {option(q.key, q.example)}.")
     value = number * _ACC_UNITS[suffix or q.unit] / _ACC_UNITS[q.unit]
     if not suffix and not lo <= value <= hi:
-        likely = [
+        fits = [
             u for u in ("g", "m/s2", "mg") if u != q.unit and lo <= number * _ACC_UNITS[u] / _ACC_UNITS[q.unit] <= hi
         ]
-        guess = (
-            f"; as {likely[0]} it would be {number * _ACC_UNITS[likely[0]] / _ACC_UNITS[q.unit]:.4g} {q.unit}"
-            if likely
-            else ""
-        )
-        raise InputError(
-            option(q.key),
-            f"{q.what} in {q.unit}, between {lo:g} and {hi:g} (or a value with its unit: g, mg, m/s2)",
-            f"{raw}, which is no {q.what} in {q.unit}{guess}",
-            f"Write the unit: e.g. {option(q.key, raw + (likely[0] if likely else q.unit))}"
-            + (f" (other units: {units})" if units else "")
-            + ".",
-        )
+        if fits:
+            as_unit = number * _ACC_UNITS[fits[0]] / _ACC_UNITS[q.unit]
+            found = f"{raw}, outside that range; in {fits[0]} it would be {as_unit:.4g} {q.unit}"
+            todo = f"Write it with its unit: {option(q.key, raw + fits[0])}."
+        else:
+            found = f"{raw}, outside that range in any unit"
+            todo = f"Check the value; if it really is {raw} {q.unit}, write {option(q.key, raw + q.unit)}."
+        raise InputError(option(q.key), expected, found, todo)
     if suffix and q.suffix_plausible and not lo <= value <= hi:
         raise InputError(
-            option(q.key),
-            f"{q.what} between {lo:g} and {hi:g} {q.unit}",
-            f"{raw} = {value:.5g} {q.unit}",
-            "Check the value and its unit.",
+            option(q.key), f"{q.what} from {lo:g} to {hi:g} {q.unit}", f"{raw} = {value:.5g} {q.unit}", "Check it."
         )
     by = f"{option(q.key)} {raw}" + ("" if suffix else f" (a bare number: {q.unit}, checked to lie in {lo:g}–{hi:g})")
     return value, Convention(q.key, f"{value:.6g} {q.unit}", "stated", by)
