@@ -551,3 +551,22 @@ def read_stop_table_frame(df: pd.DataFrame, axes: str):  # type: ignore[no-untyp
     from mountcal.stoptable import stop_table_from_frame
 
     return stop_table_from_frame(df, axes=parse_axes(axes))
+
+
+def test_a_stop_table_written_with_an_axis_map_says_so_and_rotate_asks_for_the_same(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    log, protocol = str(DATA / "parking.mcap"), ["--protocol", str(DATA / "parking_protocol.csv")]
+    table = tmp_path / "s.csv"
+    assert main(["stops", log, *protocol, "--axes", "-y,x,z", "-o", str(table)]) == 0
+    assert set(pd.read_csv(table)["axes"]) == {"-y,x,z"}
+    result = tmp_path / "r.json"
+    assert main(["calibrate", str(table), "-o", str(result)]) == 0  # not mapped a second time
+    direct = tmp_path / "d.json"
+    assert main(["calibrate", log, *protocol, "--axes", "-y,x,z", "-o", str(direct)]) == 0
+    _same_answer(Calibration.load(result), Calibration.load(direct))
+    assert main(["rotate", log, "--calibration", str(result), "-o", str(tmp_path / "v.parquet")]) == 2
+    assert "--axes -y,x,z" in capsys.readouterr().err
+    assert (
+        main(["rotate", log, "--calibration", str(result), "--axes", "-y,x,z", "-o", str(tmp_path / "v.parquet")]) == 0
+    )

@@ -31,9 +31,12 @@ from mountcal.input_conventions import (
     AxisMap,
     HeadingUnit,
     acceleration_unit,
+    axes_convention,
     beta_from_compass,
     heading_reference,
     headings_in_degrees,
+    parse_axes,
+    stated_axes,
 )
 from mountcal.input_conventions import Headings as Headings  # one definition, imported from here by many
 from mountcal.io.inputs import check_parquet_rows
@@ -58,7 +61,10 @@ LAT = "lat_deg"
 LON = "lon_deg"
 ALT = "alt_m"
 REQUIRED = ACC
-OPTIONAL = (BETA, HEADING_REF, *STD, COUNT, *STD_MEAN, *CORR, TIME, DURATION, TEMPERATURE, SITE, LAT, LON, ALT, HEADING)
+AXES = "axes"  # the axis map already applied to ax, ay, az (by `mountcal stops --axes`)
+OPTIONAL = (
+    BETA, HEADING_REF, *STD, COUNT, *STD_MEAN, *CORR, TIME, DURATION, TEMPERATURE, SITE, LAT, LON, ALT, HEADING, AXES
+)  # fmt: skip
 COLUMNS = (BETA, HEADING_REF, *ACC, *OPTIONAL[2:])
 
 Unit = Literal["mps2", "g"]
@@ -162,6 +168,9 @@ class StopTable:
         ):
             if values is not None:
                 columns[name] = values
+        applied = stated_axes(self.conventions)
+        if applied is not None and not applied.identity:  # the frame of ax, ay, az, for whoever reads it next
+            columns[AXES] = applied.text
         return pd.DataFrame(columns)
 
 
@@ -298,13 +307,17 @@ def stop_table_from_frame(
         )
     if any(c in df.columns for c in CORR):
         cov = _with_correlations(cov, _numeric(df, [c for c in CORR if c in df.columns], source), df, source)
+    applied = _applied_axes(df, source)
     if axes is not None and not axes.identity:  # the device's axes onto the sensor frame, as for a log
         acc = axes.apply(acc)
         cov = None if cov is None else axes.apply_cov(cov)
         sample_std = None if sample_std is None else np.abs(axes.apply(sample_std))
-    if axes is not None:
-        from mountcal.input_conventions import axes_convention
-
+    if applied is not None:  # ax, ay, az were mapped when the table was written
+        total = applied if axes is None else axes.after(applied)
+        conventions.append(
+            Convention("axes", total.describe(), "stated", f"{option('axes')} {applied.text} (the table's column axes)")
+        )
+    elif axes is not None:
         conventions.append(axes_convention(axes, "x,y,z", ""))
 
     def optional(name: str) -> FloatArray | None:
@@ -336,6 +349,21 @@ def stop_table_from_frame(
         source=source,
         conventions=tuple(conventions),
     )
+
+
+def _applied_axes(df: pd.DataFrame, source: str) -> AxisMap | None:
+    """The axis map a table's column ``axes`` says was applied to its means (one value in every row)."""
+    if AXES not in df.columns:
+        return None
+    values = {str(v).strip() for v in df[AXES]}
+    if len(values) != 1:
+        raise InputError(
+            source,
+            f"one axis map in the column {AXES}",
+            ", ".join(sorted(values)),
+            "Give every row the map that was applied to ax, ay, az, or drop the column.",
+        )
+    return parse_axes(values.pop(), f"{source}: column {AXES}")
 
 
 def _check_same_beta(beta_deg: FloatArray, from_compass: FloatArray, azimuth: float, source: str) -> None:
