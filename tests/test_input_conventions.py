@@ -570,3 +570,16 @@ def test_a_stop_table_written_with_an_axis_map_says_so_and_rotate_asks_for_the_s
     assert (
         main(["rotate", log, "--calibration", str(result), "--axes", "-y,x,z", "-o", str(tmp_path / "v.parquet")]) == 0
     )
+
+
+def test_samples_read_outside_read_log_get_the_log_conventions_in_the_pipeline(tmp_path: Path) -> None:
+    """The fleet reads a log's splits itself: the pipeline applies --axes to them all the same (once)."""
+    from mountcal.io.registry import reader_for
+    from mountcal.pipeline import LogJob, calibrate_job
+
+    path = DATA / "parking.mcap"
+    job = LogJob(paths=(str(path),), log=LogOptions(axes="-y,x,z"), protocol=str(DATA / "parking_protocol.csv"))
+    raw = reader_for(path, job.log).read(path, job.log)
+    given, read = calibrate_job(job, raw), calibrate_job(job)
+    assert given.calibration.provenance.conventions[0].value == "-y,x,z"
+    _same_answer(given.calibration, read.calibration)
