@@ -74,8 +74,6 @@ OPTIONS_OUT_OF_RANGE = [
     ["calibrate", str(STOPS), "--slope-reference", "5", "1e308"],
     ["calibrate", str(STOPS), "--slope-reference", "95", "1"],
     ["calibrate", str(STOPS), "--max-yaw-sigma", "nan"],
-    ["calibrate", str(STOPS), "--gravity", "inf"],
-    ["plan", "--target", "roll=1", "--noise", "5e-324"],
     ["plan", "--target", "roll=1", "--noise", "1", "--stop-s", "nan"],
     ["plan", "--target", "roll=1", "--noise", "1", "--rate-hz", "-1"],
     ["plan", "--target", "roll=1", "--noise", "1", "--max-stops", "1000000"],
@@ -113,6 +111,45 @@ def test_an_option_outside_its_range_is_refused_by_the_parser(
     err = capsys.readouterr().err
     assert stop.value.code == 2 and re.search(r"argument [-\w/]+: expected .* in [\[(]", err), err
     assert list(tmp_path.iterdir()) == []
+
+
+# options that take a unit (`--gravity 1g`, `--noise 5mg`): text for argparse, the number checked when read
+UNIT_OPTIONS_OUT_OF_RANGE = [
+    ["calibrate", str(STOPS), "--gravity", "inf"],
+    ["calibrate", str(STOPS), "--gravity", "1e308g"],
+    ["triad", str(STOPS), "-o", "t.json", "--gravity", "nan"],
+    ["plan", "--target", "roll=1", "--noise", "5e-324"],
+    ["plan", "--target", "roll=1", "--noise", "5e-324mg"],
+    ["plan", "--target", "roll=1", "--noise", "1e308g"],
+]
+
+
+@pytest.mark.parametrize("args", UNIT_OPTIONS_OUT_OF_RANGE, ids=lambda a: " ".join(a[:1] + a[-2:]))
+def test_an_option_with_a_unit_outside_its_range_is_refused(
+    args: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A unit can carry a number out of any range: `plan --noise 1e308g` was an infinite noise."""
+    monkeypatch.chdir(tmp_path)
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert f"error: {args[-2]}: expected" in err and "nan" not in err.replace(args[-1], ""), err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_the_options_with_a_unit_are_declared_with_the_range_they_are_checked_against() -> None:
+    from mountcal.input_conventions import GRAVITY, NOISE
+
+    declared = {
+        (command, action.option_strings[-1]): ranges.option_quantities(action)
+        for command, parser in _commands()
+        for action in parser._actions
+        if action.option_strings and action.option_strings[-1] in ("--gravity", "--noise")
+    }
+    assert declared == {
+        ("calibrate", "--gravity"): (GRAVITY.limit,),
+        ("triad", "--gravity"): (GRAVITY.limit,),
+        ("plan", "--noise"): (NOISE.limit,),
+    }
 
 
 def test_plan_targets_are_in_range(capsys: pytest.CaptureFixture[str]) -> None:

@@ -16,11 +16,15 @@ from contextvars import ContextVar
 # key -> (Python spelling, CLI flag). A nested parameter is spelled with its options class.
 OPTIONS: dict[str, tuple[str, str]] = {
     "accept_unconfident": ("accept_unconfident", "--accept-unconfident"),
+    "axes": ("LogOptions.axes", "--axes"),
     "columns": ("LogOptions.columns", "--columns"),
     "dbc": ("LogOptions.dbc", "--dbc"),
     "field": ("LogOptions.field", "--field"),
     "figures": ("image_format", "--figures"),
     "format": ("fmt", "--format"),
+    "gravity": ("Options.gravity_mps2", "--gravity"),
+    "heading_unit": ("heading_unit", "--heading-unit"),
+    "headings": ("headings", "--headings"),
     "level_only": ("level_only", "--level-only"),
     "mapping": ("LogOptions.mapping", "--mapping"),
     "max_acc_std": ("StopDetection.max_acc_std_mps2", "--max-acc-std"),
@@ -31,6 +35,7 @@ OPTIONS: dict[str, tuple[str, str]] = {
     "method": ("Options.method", "--method"),
     "min_stop": ("StopDetection.min_duration_s", "--min-stop-s"),
     "model": ("Options.model", "--model"),
+    "noise": ("Noise.sample_sigma_mps2", "--noise"),
     "parent": ("Frames.parent", "--parent"),
     "parent_pose": ("Frames.parent_pose", "--parent-pose"),
     "protocol": ("protocol", "--protocol"),

@@ -27,8 +27,6 @@ from typing import Any
 
 from mountcal.errors import InputError
 
-G_N = 9.80665  # standard gravity (mountcal.conventions holds it too; this module imports no numpy)
-
 
 @dataclass(frozen=True)
 class Quantity:
@@ -82,7 +80,7 @@ QUANTITIES: dict[str, Quantity] = {
     "simulated_rate_hz": Quantity(1, 10_000, "Hz", "a simulated sample rate"),
     # accelerations
     "acc_mps2": Quantity(-1_000, 1_000, "m/s²", "an acceleration (±100 g)"),
-    "gravity_mps2": Quantity(0.7 * G_N, 1.3 * G_N, "m/s²", "local gravity (the stop tables' band, 0.7–1.3 g)"),
+    "gravity_mps2": Quantity(9.70, 9.90, "m/s²", "local gravity (anywhere a vehicle drives: 9.78–9.84, with margin)"),
     "acc_limit_mps2": Quantity(0, 100, "m/s²", "a stillness threshold on the accelerometer", open_lo=True),
     "sample_std_mps2": Quantity(1e-9, 1_000, "m/s²", "the spread of a stop's samples (0.1 µg to 100 g)"),
     "mean_std_mps2": Quantity(1e-12, 1_000, "m/s²", "the 1σ of a stop mean"),
@@ -263,11 +261,27 @@ def numbers(*quantities: str) -> type[argparse.Action]:
     return Numbers
 
 
+def add_quantity(
+    parser: argparse.ArgumentParser | argparse._ArgumentGroup, *flags: str, quantity: str, **argument: Any
+) -> argparse.Action:
+    """``parser.add_argument(*flags, **argument)`` for a number that may carry its unit (``--gravity 1g``,
+    ``--noise 5mg``): the text is kept for :func:`mountcal.input_conventions.parse_quantity`, which converts
+    it and refuses a value outside ``quantity``'s range; declared here so that the option walk and the
+    table of the docs know it."""
+    action = parser.add_argument(*flags, **argument)
+    setattr(action, _QUANTITIES, (quantity,))
+    return action
+
+
+_QUANTITIES = "mountcal_quantities"
+
+
 def option_quantities(action: argparse.Action) -> tuple[str, ...] | None:
     """The quantities an option is declared with (None: not a checked number)."""
     if isinstance(action.type, Number):
         return (action.type.quantity,)
-    return getattr(type(action), "QUANTITIES", None)
+    declared: tuple[str, ...] | None = getattr(action, _QUANTITIES, None)
+    return declared if declared is not None else getattr(type(action), "QUANTITIES", None)
 
 
 def markdown(parser: argparse.ArgumentParser) -> str:
@@ -317,4 +331,14 @@ if __name__ == "__main__":  # the table of docs/reliability.md (run as a script:
 
     print(table(build_parser()), end="")
 
-__all__ = ["COLUMNS", "QUANTITIES", "Number", "Quantity", "check", "check_values", "markdown", "numbers"]
+__all__ = [
+    "COLUMNS",
+    "QUANTITIES",
+    "Number",
+    "Quantity",
+    "add_quantity",
+    "check",
+    "check_values",
+    "markdown",
+    "numbers",
+]

@@ -33,9 +33,10 @@ from mountcal.conventions import GIMBAL_LOCK_PITCH_DEG
 from mountcal.errors import MountcalError
 from mountcal.fleet.inputs import FleetJob
 from mountcal.fleet.storage import is_url, local_copies
+from mountcal.input_conventions import parse_axes
 from mountcal.io.logs import join
 from mountcal.io.registry import reader_for
-from mountcal.option_names import as_flags
+from mountcal.option_names import as_flags, option
 from mountcal.pipeline import STOP_TABLE_MARKERS, calibrate_job, is_stop_table
 from mountcal.result import STRUCTURE_P, Calibration
 from mountcal.samples import Samples
@@ -171,7 +172,12 @@ def _read_splits(job: FleetJob, record: dict[str, Any]) -> Samples:
 def _calibrate(job: FleetJob, record: dict[str, Any]) -> dict[str, Any]:
     lj = job.job
     if len(lj.paths) == 1 and _is_stop_table(lj.paths[0], lj.log.dbc is not None, lj.log.columns is not None):
-        table = read_stop_table(lj.paths[0], headings=job.headings)
+        table = read_stop_table(
+            lj.paths[0],
+            headings=job.headings,
+            heading_unit=lj.log.heading_unit,
+            axes=None if lj.log.axes is None else parse_axes(lj.log.axes, option("axes")),
+        )
         cal = calibrate(table, lj.options)
         record = calibration_record(cal)
         record.update(input_kind="stop table", n_stops=len(table), headings=table.headings)
