@@ -188,10 +188,13 @@ def check(quantity: str, value: float, name: str, where: str = "", todo: str = "
     return value
 
 
-def check_values(quantity: str, values: Any, where: str, name: str, *, scale: float = 1.0, first: int = 0) -> None:
+def check_values(
+    quantity: str, values: Any, where: str, name: str, *, scale: float = 1.0, first: int = 0, todo: str = ""
+) -> None:
     """Refuse an array (rows × columns) holding a value outside ``quantity``'s range, naming the
     first rows. ``values`` are in the quantity's unit; ``scale`` converts them back for the message
-    (the file's own unit). ``name`` names the column(s); ``first`` is the number of rows before these."""
+    (the file's own unit). ``name`` names the column(s); ``first`` is the number of rows before these;
+    ``todo`` replaces the message's advice."""
     import numpy as np
 
     q = QUANTITIES[quantity]
@@ -206,7 +209,7 @@ def check_values(quantity: str, values: Any, where: str, name: str, *, scale: fl
         where,
         f"{name}: {q.what}, {q.expected()}",
         f"{shown}{more}",
-        "Fix or remove those rows; mountcal refuses numbers no sensor or vehicle produces.",
+        todo or "Fix or remove those rows; mountcal refuses numbers no sensor or vehicle produces.",
     )
 
 

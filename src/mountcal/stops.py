@@ -26,7 +26,7 @@ from mountcal.io.timestamps import increasing_times, time_ordered
 from mountcal.option_names import option
 from mountcal.result import Convention
 from mountcal.samples import Channel, Samples
-from mountcal.stoptable import Headings, StopTable, checked
+from mountcal.stoptable import Headings, StopTable, check_degrees, checked
 
 BATCHES = 10  # batch means for the variance of a stop mean
 BLOCKS_PER_WINDOW = 40
@@ -526,8 +526,7 @@ def read_protocol(path: str, heading_unit: HeadingUnit | None = None) -> pd.Data
         )
     check_values("time_s", values[["t_start_s", "t_end_s"]].to_numpy(), path, "t_start_s, t_end_s")
     values["beta_deg"], unit = headings_in_degrees(values["beta_deg"].to_numpy(dtype=float), heading_unit, path)
-    scale = 1.0 if unit.value == "deg" else float(np.degrees(1.0))  # the message shows the file's own numbers
-    check_values("heading_deg", values[["beta_deg"]].to_numpy(), path, "beta_deg", scale=scale)
+    check_degrees(values["beta_deg"].to_numpy(), unit, path, "beta_deg")
     values.attrs["conventions"] = (
         Convention("heading_reference", "uphill", "stated", f"the protocol sheet ({option('protocol')})"),
         unit,

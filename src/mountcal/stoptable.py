@@ -378,11 +378,26 @@ def _applied_axes(df: pd.DataFrame, source: str) -> AxisMap | None:
 
 def _in_degrees(df: pd.DataFrame, column: str, unit: HeadingUnit | None, source: str) -> tuple[FloatArray, Convention]:
     """A heading column in degrees (its unit stated, or checked), within the headings' physical range
-    (:mod:`mountcal.ranges`) as read and once converted."""
-    degrees, known = headings_in_degrees(_numeric(df, [column], source, "heading_deg")[:, 0], unit, source, column)
-    scale = 1.0 if known.value == "deg" else float(np.degrees(1.0))  # the message shows the file's own numbers
-    check_values("heading_deg", degrees, source, column, scale=scale)
+    (:mod:`mountcal.ranges`) once in degrees."""
+    degrees, known = headings_in_degrees(_numeric(df, [column], source)[:, 0], unit, source, column)
+    check_degrees(degrees, known, source, column)
     return degrees, known
+
+
+def check_degrees(degrees: FloatArray, known: Convention, source: str, column: str) -> None:
+    """Refuse headings outside their physical range once in degrees; when they were stated to be
+    radians, the message shows the file's numbers and names the option that said so."""
+    if known.value == "deg":
+        check_values("heading_deg", degrees, source, column)
+        return
+    check_values(
+        "heading_deg",
+        degrees,
+        source,
+        f"{column} read as radians ({option('heading_unit', 'rad')})",
+        scale=float(np.degrees(1.0)),
+        todo=f"If {column} holds degrees, drop {option('heading_unit', 'rad')}; else fix or remove those rows.",
+    )
 
 
 def _check_same_beta(beta_deg: FloatArray, from_compass: FloatArray, azimuth: float, source: str) -> None:
