@@ -4,9 +4,10 @@ Each command module has ``add_parser(subparsers)`` and ``run(args) -> int``. Bui
 imports no numerical library (``mountcal --help`` and ``mountcal CMD --help`` stay fast); a
 command imports what it needs when it runs.
 
-Conventions: results go to the file named by ``-o`` or to stdout (``-o -``, ``--json``); status
-lines, warnings and progress bars go to stderr; ``-q`` keeps only warnings and errors, ``-v`` adds
-detail.
+Conventions: results go to the file named by ``-o`` or to stdout (``-o -``, ``--json``), written
+through :func:`mountcal.cli.results.result_stream`; status lines, warnings, progress bars and
+whatever a library prints go to stderr (:mod:`mountcal.cli.results`); ``-q`` keeps only warnings
+and errors, ``-v`` adds detail.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import sys
 from collections.abc import Sequence
 
 from mountcal.cli.options import EXIT_CODES, configure_logging
+from mountcal.cli.results import results_only
 from mountcal.errors import MountcalError
 from mountcal.option_names import as_flags
 from mountcal.paths import SystemFailure
@@ -34,7 +36,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     configure_logging(args.verbose - args.quiet)
     try:
-        with as_flags():  # library messages name the flags, not the Python parameters
+        # library messages name the flags, not the Python parameters; stdout holds the results alone
+        with as_flags(), results_only():
             return int(args.run(args))
     except MountcalError as err:
         log.error("error: %s", safe(err, keep=chr(10)))

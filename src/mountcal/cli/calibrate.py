@@ -19,6 +19,7 @@ from mountcal.cli.options import (
     require,
     working,
 )
+from mountcal.cli.results import result_stream
 from mountcal.terminal import safe
 
 if TYPE_CHECKING:
@@ -85,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
         log.info("%s", summary(cal))
         print_json(cal.to_dict())
     else:
-        print(summary(cal))
+        print(summary(cal), file=result_stream())
     if args.output not in (None, STDOUT):
         cal.save(args.output)
         log.info("wrote %s", safe(args.output))
@@ -97,5 +98,5 @@ def run(args: argparse.Namespace) -> int:
         with atomic_path(args.report) as tmp:
             tmp.write_text(html, encoding="utf-8")
         log.info("wrote %s", safe(args.report))
-    sys.stdout.flush()
+    result_stream().flush()
     return 0

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import argparse
 import logging
-import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import IO, Any
 
 from mountcal.cli.options import STDOUT, add_command
+from mountcal.cli.results import result_stream
 from mountcal.terminal import safe
 
 log = logging.getLogger("mountcal")
@@ -69,10 +69,11 @@ def run(args: argparse.Namespace) -> int:
             str(err),
             "Check the interface name, the channel and that the device is up.",
         ) from err
-    sinks: list[Callable[[dict[str, Any]], None]] = [lambda e: print(line_of(e), flush=True)]
+    stdout = result_stream()
+    sinks: list[Callable[[dict[str, Any]], None]] = [lambda e: print(line_of(e), flush=True, file=stdout)]
     events_file: IO[str] | None = None
     if args.json_events == STDOUT:
-        sinks = [json_sink(sys.stdout)]
+        sinks = [json_sink(stdout)]
     elif args.json_events:
         try:
             events_file = open(args.json_events, "w", encoding="utf-8")  # open for the session
@@ -103,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
     if args.json_events == STDOUT:
         log.info("%s", summary(session.calibration))
     else:
-        print(summary(session.calibration))
+        print(summary(session.calibration), file=stdout)
     if args.report and session.table is not None:
         from mountcal.outputs.report import render
         from mountcal.outputs.report.timeline import timeline

@@ -44,23 +44,31 @@ log = logging.getLogger("mountcal")
 
 
 class _Stderr(logging.Handler):
-    """Status lines of ``mountcal.*`` loggers on the current stderr (never stdout), prefixed ``mountcal:``."""
+    """Status lines of ``mountcal.*`` loggers on the current stderr (never stdout), prefixed ``mountcal:``;
+    another library's records (asammdf, python-can, Python warnings) name that library."""
 
     def emit(self, record: logging.LogRecord) -> None:
         from tqdm import tqdm  # writes above a progress bar being drawn, instead of through it
 
         level = "" if record.levelno in (logging.INFO, logging.ERROR) else f"{record.levelname.lower()}: "
-        tqdm.write(f"mountcal: {level}{record.getMessage()}", file=sys.stderr)
+        origin = "" if record.name.startswith("mountcal") else f"[{record.name}] "
+        tqdm.write(f"mountcal: {level}{origin}{record.getMessage()}", file=sys.stderr)
         sys.stderr.flush()
 
 
 def configure_logging(verbosity: int) -> None:
-    """One logging set-up for every command: -q (warnings and errors), default (status), -v (detail)."""
+    """One logging set-up for every command: -q (warnings and errors), default (status), -v (detail).
+
+    Other libraries' warnings (their loggers, and Python warnings while a command runs) join the
+    log on stderr through the root logger."""
     root = logging.getLogger("mountcal")
     if not any(isinstance(h, _Stderr) for h in root.handlers):
         root.addHandler(_Stderr())
     root.propagate = False
     root.setLevel(logging.WARNING if verbosity < 0 else logging.INFO if verbosity == 0 else logging.DEBUG)
+    libraries = logging.getLogger()
+    if not any(isinstance(h, _Stderr) for h in libraries.handlers):
+        libraries.addHandler(_Stderr(logging.WARNING))
 
 
 def common_options() -> argparse.ArgumentParser:
@@ -268,8 +276,11 @@ def require(module: str, extra: str, needed_by: str) -> None:
 
 def print_json(document: Any) -> None:
     """A machine-readable result on stdout (one JSON document)."""
-    sys.stdout.write(json.dumps(document, indent=2, allow_nan=False, default=str) + "\n")
-    sys.stdout.flush()
+    from mountcal.cli.results import result_stream
+
+    out = result_stream()
+    out.write(json.dumps(document, indent=2, allow_nan=False, default=str) + "\n")
+    out.flush()
 
 
 def progress_wanted(args: argparse.Namespace) -> bool:

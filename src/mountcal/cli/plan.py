@@ -12,6 +12,7 @@ import math
 from typing import Any
 
 from mountcal.cli.options import add_command, add_log_options, add_sensor_options, log_options, working
+from mountcal.cli.results import result_stream
 from mountcal.terminal import safe
 
 log = logging.getLogger("mountcal")
@@ -72,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
     )
     with working(args, "planning"):
         plan = make_plan(req)
-    print("\n".join(plan.lines()))
+    print("\n".join(plan.lines()), file=result_stream())
     if not plan.reachable:
         return NotEnoughInformation.exit_code
     if args.output is not None:

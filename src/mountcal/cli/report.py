@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from mountcal.cli.options import STDOUT, add_command, print_json, require, working
+from mountcal.cli.results import result_stream
 from mountcal.terminal import safe
 
 log = logging.getLogger("mountcal")
@@ -63,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
         html = render(doc, table, image_format=args.figures)
     shown = html.count("<figure>")
     if to_stdout:
-        print(html, end="")
+        print(html, end="", file=result_stream())
         return 0
     with atomic_path(output) as tmp:
         tmp.write_text(html, encoding="utf-8")

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import argparse
 import logging
-import sys
 from typing import Any
 
 from mountcal.cli.options import STDOUT, add_command, add_log_options, log_inputs, log_job, print_json, working
+from mountcal.cli.results import result_stream
 from mountcal.terminal import safe
 
 log = logging.getLogger("mountcal")
@@ -40,7 +40,7 @@ def run(args: argparse.Namespace) -> int:
     for line in describe((samples, found), len(args.input)):
         log.info("%s", safe(line))
     if to_stdout:
-        found.table.to_frame().to_csv(sys.stdout, index=False, float_format="%.15g")
+        found.table.to_frame().to_csv(result_stream(), index=False, float_format="%.15g")
     else:
         write_stop_table(found.table, args.output)
         log.info("wrote %s (%d stops; headings: %s)", safe(args.output), len(found.table), found.heading_source)
