@@ -193,7 +193,12 @@ class StopsFingerprint:
 
 @dataclass(frozen=True)
 class Provenance:
-    """Where a result came from: the input (with the SHA-256 of each file), the software, when."""
+    """Where a result came from: the input (with the SHA-256 of each file), the software, when.
+
+    ``input_kind`` says what the input was taken for and why (:mod:`mountcal.io.kind`);
+    ``incomplete_inputs`` names the files read although cut short (``--allow-truncated``), or whose
+    end could not be verified, with where each ends (:mod:`mountcal.io.whole`).
+    """
 
     input: str
     software: str
@@ -202,6 +207,8 @@ class Provenance:
     created_utc: str
     input_sha256: tuple[str, ...] = ()
     stops_fingerprint: StopsFingerprint | None = None
+    input_kind: str = ""
+    incomplete_inputs: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)

@@ -27,6 +27,7 @@ import pandas as pd
 from mountcal.conventions import G_N, FloatArray
 from mountcal.errors import InputError, NotEnoughInformation
 from mountcal.io.inputs import check_parquet_rows
+from mountcal.io.whole import parquet_end, text_bytes_end
 from mountcal.option_names import option
 from mountcal.paths import read_input_bytes
 from mountcal.result import StopsFingerprint
@@ -100,6 +101,7 @@ class StopTable:
     source: str = "<memory>"
     sha256: str = ""
     notes: tuple[str, ...] = field(default=())
+    incomplete: tuple[str, ...] = ()  # the input was cut short and read in part (mountcal.io.whole)
 
     def __post_init__(self) -> None:
         if self.beta_rad is None and self.headings != "none":
@@ -165,13 +167,18 @@ def read_stop_table(path: str | Path, unit: Unit = "mps2", headings: Headings = 
     path = Path(path)
     where = str(path)
     raw = read_input_bytes(path, "a stop table file")  # a regular file, size bounded
+    cut = None  # a CSV's last row without its line break: cut short, read to the row before (if allowed)
     if path.suffix.lower() in (".parquet", ".pq"):
+        parquet_end(raw=raw, where=where)
         check_parquet_rows(path)
+    else:
+        cut = text_bytes_end(raw, where)
     try:
         if path.suffix.lower() in (".parquet", ".pq"):
             df = pd.read_parquet(io.BytesIO(raw))
         else:
-            df = pd.read_csv(io.BytesIO(raw), comment="#", skipinitialspace=True)
+            rows = raw if cut is None else memoryview(raw)[: cut.whole]
+            df = pd.read_csv(io.BytesIO(rows), comment="#", skipinitialspace=True)
     except Exception as err:  # pandas/pyarrow raise many types for malformed files
         raise InputError(
             where,
@@ -180,7 +187,8 @@ def read_stop_table(path: str | Path, unit: Unit = "mps2", headings: Headings = 
             "Write one row per stop with columns beta_deg, ax, ay, az.",
         ) from err
     table = stop_table_from_frame(df, unit=unit, headings=headings, source=where)
-    return replace(table, sha256=hashlib.sha256(raw).hexdigest())
+    incomplete = () if cut is None else (cut.sentence,)
+    return replace(table, sha256=hashlib.sha256(raw).hexdigest(), incomplete=incomplete)
 
 
 def stop_table_from_frame(

@@ -57,11 +57,13 @@ from mountcal.atomic import atomic_output
 from mountcal.conventions import CONVENTIONS, FloatArray
 from mountcal.errors import InputError
 from mountcal.io.logs import CHUNK_SAMPLES, LogOptions, iter_log
+from mountcal.io.mcap.chunks import open_log
 from mountcal.io.mcap.copy import copy_mcap_with_imu
 from mountcal.io.mcap.write import McapImuSamples
 from mountcal.io.registry import reader_for
 from mountcal.io.ros2.imu import ImuMessages
 from mountcal.io.table.write import CsvSamples, ParquetSamples
+from mountcal.io.whole import Cut, reading
 from mountcal.option_names import option
 from mountcal.result import VEHICLE_FRAME, Calibration
 from mountcal.samples import Samples
@@ -99,6 +101,7 @@ class RotateReport:
     nonfinite: int = 0
     frame: str = VEHICLE_FRAME
     warnings: tuple[str, ...] = ()  # what check_applicable found: not confident, levelled only
+    incomplete: tuple[str, ...] = ()  # inputs cut short, read in part (--allow-truncated): where each ends
 
     def lines(self) -> list[str]:
         """Lines for the user."""
@@ -118,6 +121,7 @@ class RotateReport:
             )
         if self.nonfinite:
             out.append(f"{self.nonfinite} IMU messages hold NaN or infinite values: kept, rotated to NaN")
+        out += [f"read in part (cut short): {line}" for line in self.incomplete]
         return out
 
 
@@ -207,7 +211,8 @@ def rotate_log(
                 f"{len(files)} files",
                 "Rotate each MCAP file to its own output, or write Parquet/CSV (which joins splits).",
             )
-        report = _rotate_mcap_copy(files[0], cal, out, opts.topic, frame_id)
+        with reading(opts.allow_truncated) as cuts:
+            report = _rotate_mcap_copy(files[0], cal, out, opts.topic, frame_id, cuts)
     else:
         report = _rotate_stream(files, cal, out, kind, opts, chunk_samples, frame_id)
     return replace(report, frame=cal.frame, warnings=found)
@@ -225,7 +230,7 @@ def _check_not_an_input(out: Path, files: Sequence[Path]) -> None:
             )
 
 
-def _metadata(cal: Calibration, files: Sequence[Path]) -> dict[str, str]:
+def _metadata(cal: Calibration, files: Sequence[Path], incomplete: Sequence[str] = ()) -> dict[str, str]:
     version = software_version()
     return {
         "mountcal.frame": cal.frame,
@@ -246,6 +251,7 @@ def _metadata(cal: Calibration, files: Sequence[Path]) -> dict[str, str]:
             }
         ),
         "mountcal.inputs": json.dumps([str(f) for f in files]),
+        "mountcal.incomplete_inputs": json.dumps(list(incomplete)),  # cut short, read in part
         "mountcal.software": f"mountcal {version}",
     }
 
@@ -269,7 +275,7 @@ def _rotate_stream(
     acc_to_vehicle(first.acc_s, cal, check_units=True, level_only=True)  # g units refused before any output
     tally = _Tally(gyro=first.gyro_s is not None, several=len(files) > 1)
     with atomic_output(out) as f, ThreadPoolExecutor(max_workers=1) as encoder:
-        writer = _writer(f, kind, tally.gyro, cal, files, frame_id)
+        writer = _writer(f, kind, tally.gyro, cal, files, frame_id, first.incomplete)
         # Encoding and compressing chunk k (pyarrow releases the GIL) overlaps reading chunk k + 1;
         # one chunk in flight keeps memory bounded.
         overlap = helpers_allowed()
@@ -301,6 +307,7 @@ def _rotate_stream(
         largest_chunk=tally.largest,
         gyro=tally.gyro,
         topic=_topic("/imu", cal) if kind == "mcap" else None,
+        incomplete=tuple(tally.incomplete),
     )
 
 
@@ -314,10 +321,12 @@ class _Tally:
     chunks: int = 0
     largest: int = 0
     dropped: Counter[str] = field(default_factory=Counter)
+    incomplete: list[str] = field(default_factory=list)
 
     def rotate(self, chunk: Samples, cal: Calibration) -> tuple[FloatArray, FloatArray, FloatArray | None] | None:
         """The chunk's rows to write, in the vehicle frame (None for an empty chunk), counted."""
         self.dropped.update(chunk.dropped)
+        self.incomplete += chunk.incomplete
         n = len(chunk)
         if n == 0:
             return None
@@ -343,9 +352,15 @@ def _chain(first: Samples, rest: Iterator[Samples]) -> Iterator[Samples]:
 
 
 def _writer(
-    f: BinaryIO, kind: str, gyro: bool, cal: Calibration, files: Sequence[Path], frame_id: str
+    f: BinaryIO,
+    kind: str,
+    gyro: bool,
+    cal: Calibration,
+    files: Sequence[Path],
+    frame_id: str,
+    incomplete: Sequence[str],
 ) -> ParquetSamples | CsvSamples | McapImuSamples:
-    meta = _metadata(cal, files)
+    meta = _metadata(cal, files, incomplete)
     if kind == "parquet":
         return ParquetSamples(f, gyro, meta, descriptions=_descriptions(cal))
     if kind == "csv":
@@ -375,8 +390,12 @@ def _descriptions(cal: Calibration) -> dict[str, str]:
 # --------------------------------------------------------------------------- MCAP copied through
 
 
-def _rotate_mcap_copy(src: Path, cal: Calibration, out: Path, topic: str | None, frame_id: str) -> RotateReport:
-    meta = {k.removeprefix("mountcal."): v for k, v in _metadata(cal, [src]).items()}
+def _rotate_mcap_copy(
+    src: Path, cal: Calibration, out: Path, topic: str | None, frame_id: str, cuts: Sequence[Cut]
+) -> RotateReport:
+    open_log(src, discover=False).file.close()  # a cut file is refused, or its cut recorded in `cuts`, before writing
+    incomplete = tuple(c.sentence for c in cuts)
+    meta = {k.removeprefix("mountcal."): v for k, v in _metadata(cal, [src], incomplete).items()}
     checked = False
 
     def transform(msgs: ImuMessages) -> tuple[ImuMessages, int]:
@@ -403,6 +422,7 @@ def _rotate_mcap_copy(src: Path, cal: Calibration, out: Path, topic: str | None,
         copied_messages=stats.copied_messages,
         copied_channels=stats.copied_channels,
         nonfinite=stats.nonfinite,
+        incomplete=tuple(c.sentence for c in cuts),
     )
 
 

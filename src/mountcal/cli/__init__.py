@@ -21,6 +21,7 @@ from collections.abc import Sequence
 from mountcal.cli.options import EXIT_CODES, configure_logging
 from mountcal.cli.results import results_only
 from mountcal.errors import MountcalError
+from mountcal.io.whole import reading
 from mountcal.option_names import as_flags
 from mountcal.paths import SystemFailure
 from mountcal.terminal import safe
@@ -37,7 +38,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     configure_logging(args.verbose - args.quiet)
     try:
         # library messages name the flags, not the Python parameters; stdout holds the results alone
-        with as_flags(), results_only():
+        with as_flags(), results_only(), reading(getattr(args, "allow_truncated", False)):
             return int(args.run(args))
     except MountcalError as err:
         log.error("error: %s", safe(err, keep=chr(10)))

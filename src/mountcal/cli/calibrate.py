@@ -5,14 +5,14 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from mountcal.cli.options import (
     STDOUT,
     add_command,
     add_fit_options,
+    add_input_kind,
     add_log_options,
-    fit_options,
     log_inputs,
     log_job,
     print_json,
@@ -21,10 +21,6 @@ from mountcal.cli.options import (
 )
 from mountcal.cli.results import result_stream
 from mountcal.terminal import safe
-
-if TYPE_CHECKING:
-    from mountcal.pipeline import LogResult
-    from mountcal.stoptable import StopTable
 
 log = logging.getLogger("mountcal")
 
@@ -40,6 +36,7 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument("--report", default=None, help="also write a self-contained HTML report here")
     add_log_options(p)
+    add_input_kind(p)
     g = p.add_argument_group("fit")
     add_fit_options(
         g, headings_help="a stop table's beta_deg is from the uphill direction (default), relative, or none"
@@ -56,11 +53,9 @@ def add_parser(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from mountcal.atomic import atomic_path
-    from mountcal.calibrate import calibrate
     from mountcal.errors import InputError
     from mountcal.paths import check_outputs
-    from mountcal.pipeline import calibrate_job, describe, is_stop_table
-    from mountcal.stoptable import read_stop_table
+    from mountcal.pipeline import calibrate_input, describe
     from mountcal.summary import summary
 
     to_stdout = args.json or args.output == STDOUT
@@ -69,19 +64,13 @@ def run(args: argparse.Namespace) -> int:
     check_outputs({"-o": None if args.output == STDOUT else args.output, "--report": args.report}, log_inputs(args))
     if args.report is not None:
         require("matplotlib", "report", "calibrate --report")  # before any work: nothing is written without it
-    table: StopTable | None
-    done: LogResult | None = None  # the log's result, when the input is a log
-    mapped = args.columns is not None or (args.mapping is not None and not args.dbc)  # a table's column map
-    if args.input == [STDOUT] or (len(args.input) == 1 and is_stop_table(args.input[0], bool(args.dbc), mapped)):
-        table = read_stop_table(args.input[0], unit=args.unit, headings=args.headings)
-        with working(args, "fitting"):
-            cal = calibrate(table, fit_options(args))
-    else:
-        with working(args, "reading and fitting the log"):
-            done = calibrate_job(log_job(args))
-        for line in describe(done, len(args.input)):
+    with working(args, "reading and fitting"):
+        done = calibrate_input(log_job(args), unit=args.unit, headings=args.headings, declared=args.input_kind)
+    log.info("%s", safe(f"input: {done.kind.sentence}"))
+    if done.log is not None:
+        for line in describe(done.log, len(args.input)):
             log.info("%s", safe(line))
-        cal, table = done.calibration, done.table  # no stop table: calibrated from driving alone
+    cal, table = done.calibration, done.table  # no stop table: calibrated from driving alone
     if to_stdout:
         log.info("%s", summary(cal))
         print_json(cal.to_dict())
@@ -94,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
         from mountcal.outputs.report import render, timeline_of  # matplotlib is needed for reports only
 
         with working(args, "writing the report"):
-            html = render(cal.to_dict(), table, timeline=None if done is None else timeline_of(done))
+            html = render(cal.to_dict(), table, timeline=None if done.log is None else timeline_of(done.log))
         with atomic_path(args.report) as tmp:
             tmp.write_text(html, encoding="utf-8")
         log.info("wrote %s", safe(args.report))

@@ -41,4 +41,6 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {safe(st.name):<32} {safe(st.kind):<28} {st.count:>9} msgs {st.rate_hz:>9.2f} Hz{fields}", file=out)
     for note in info.notes:
         print(f"  note: {safe(note)}", file=out)
+    for line in info.incomplete:
+        print(safe(f"  input file: {line}"), file=out)
     return 0

@@ -82,7 +82,25 @@ def common_options() -> argparse.ArgumentParser:
         action="store_true",
         help="progress bars on stderr even when it is not a terminal (never with -q)",
     )
+    i = common.add_argument_group("input")
+    i.add_argument(
+        "--allow-truncated",
+        action="store_true",
+        help="read the whole part of an input file that was cut short (an interrupted copy or recording); "
+        "the result names it. Without it such a file is refused",
+    )
     return common
+
+
+def add_input_kind(p: argparse.ArgumentParser) -> None:
+    """``--input-kind``: what the input is, where its name and content leave it open (:mod:`mountcal.io.kind`)."""
+    p.add_argument(
+        "--input-kind",
+        choices=("auto", "stop-table", "log"),
+        default="auto",
+        help="a CSV/Parquet input is a stop table or a sample log: by default told from its columns and rows "
+        "(and said); name it where they do not settle it",
+    )
 
 
 def add_command(
@@ -216,6 +234,7 @@ def log_options(args: argparse.Namespace) -> LogOptions:
         field=args.field,
         columns=None if columns is None else parse_columns(columns),
         unit=None if unit in (None, "mps2") else unit,
+        allow_truncated=getattr(args, "allow_truncated", False),
     )
 
 

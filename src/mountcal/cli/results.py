@@ -70,12 +70,13 @@ def _private_stdout(stream: TextIO | None) -> tuple[TextIO | None, int | None]:
     Only the process's own stdout (fd 1) is moved; a stream put in its place (a test's capture, a
     notebook) is used as it is.
     """
-    if stream is None or stream is not sys.__stdout__:
+    real = sys.__stdout__
+    if stream is None or real is None or stream is not real:
         return stream, None
     try:
-        if stream.fileno() != 1:
+        if real.fileno() != 1:
             return stream, None
-        stream.flush()
+        real.flush()
         saved = os.dup(1)
     except (OSError, ValueError):  # no descriptor (closed, or not a real file)
         return stream, None
@@ -86,9 +87,9 @@ def _private_stdout(stream: TextIO | None) -> tuple[TextIO | None, int | None]:
         return stream, None
     handle = io.TextIOWrapper(
         open(saved, "wb", closefd=True),  # closed with the wrapper, by results_only
-        encoding=stream.encoding,
-        errors=stream.errors,
-        line_buffering=stream.line_buffering,
+        encoding=real.encoding,
+        errors=real.errors,
+        line_buffering=real.line_buffering,
     )
     return handle, saved
 

@@ -51,6 +51,7 @@ def run(args: argparse.Namespace) -> int:
                 "stops": len(found.table),
                 "headings": found.table.headings,
                 "samples": len(samples),
+                "incomplete_inputs": list(samples.incomplete),
             }
         )
     return 0

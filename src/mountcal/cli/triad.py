@@ -14,7 +14,7 @@ import logging
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from mountcal.cli.options import add_command, print_json
+from mountcal.cli.options import add_command, add_input_kind, print_json
 from mountcal.terminal import safe
 
 if TYPE_CHECKING:
@@ -42,6 +42,7 @@ def add_parser(subparsers: Any) -> None:
         "--columns", default=None, help="a sample table's columns as ROLE=COLUMN[:UNIT] pairs (see calibrate --help)"
     )
     p.add_argument("--mapping", default=None, help="a TOML with a sample table's [columns]")
+    add_input_kind(p)
     p.set_defaults(run=run)
 
 
@@ -58,7 +59,12 @@ def run(args: argparse.Namespace) -> int:
 
     columns = None if args.columns is None else parse_columns(args.columns)
     acc, cov = session_stops(
-        args.input, args.unit, args.min_stop_s, args.trim_s, LogOptions(mapping=args.mapping, columns=columns)
+        args.input,
+        args.unit,
+        args.min_stop_s,
+        args.trim_s,
+        LogOptions(mapping=args.mapping, columns=columns, allow_truncated=args.allow_truncated),
+        declared=args.input_kind,
     )
     g = G_N if args.gravity is None else float(args.gravity)
     source = " + ".join(str(Path(p)) for p in args.input)
