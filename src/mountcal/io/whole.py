@@ -61,11 +61,14 @@ class TruncatedInput(InputError):
             cut.path,
             f"a complete file: {cut.expected}",
             f"a file that ends at byte {cut.ends_at}",
-            todo
-            or f"Copy the file again if it was transferred; {ALLOW_OPTION} reads the whole part of it "
-            "(the result then says so).",
+            todo or _TODO,
         )
         self.cut = cut
+
+
+_TODO = (
+    f"Copy the file again if it was transferred; {ALLOW_OPTION} reads the whole part of it (the result then says so)."
+)
 
 
 @dataclass
@@ -117,7 +120,7 @@ def _merge(into: list[Cut], new: list[Cut]) -> None:
     into.extend(c for c in new if c.path not in known)
 
 
-def found_cut(path: str | os.PathLike[str], ends_at: int, expected: str, *, whole: int = -1) -> Cut:
+def found_cut(path: str | os.PathLike[str], ends_at: int, expected: str, *, whole: int = -1, hint: str = "") -> Cut:
     """A reader found ``path`` ending at byte ``ends_at`` before ``expected``.
 
     Returns the cut when the current policy allows reading the whole part (the reader goes on);
@@ -131,7 +134,7 @@ def found_cut(path: str | os.PathLike[str], ends_at: int, expected: str, *, whol
     cut = Cut(str(path), int(ends_at), expected, whole)
     policy = _policy.get()
     if policy is None or not policy.allow:
-        raise TruncatedInput(cut)
+        raise TruncatedInput(cut, f"{_TODO} {hint}".rstrip())
     for known in policy.cuts:
         if known.path == cut.path:
             return known

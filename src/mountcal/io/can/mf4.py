@@ -95,7 +95,7 @@ def _mf4_layout(path: Path, ident: bytes) -> _Layout:
         return _Layout(size, unfinalised, 0, None)  # asammdf says what is wrong with a file this short
     with path.open("rb") as f, mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as data:
         seen, todo, last = {64}, [(64, 0)], 64
-        crossing: tuple[int, int, bytes, int] | None = None  # (address, end, id, linked from)
+        crossing: list[tuple[int, int, bytes, int]] = []  # (address, end, id, linked from)
         while todo:
             at, parent = todo.pop()
             if at + 24 > size:
@@ -114,11 +114,15 @@ def _mf4_layout(path: Path, ident: bytes) -> _Layout:
                             raise _mf4_error(path, f"more than {_MAX_WALKED_BLOCKS} linked blocks")
                         seen.add(link)
                         todo.append((link, at))
-            if end > size and (crossing is None or at < crossing[0]):
-                crossing = (at, end, kind, parent)
+            if end > size:
+                crossing.append((at, end, kind, parent))
+    # Past a cut, every block is gone: a block running past the end with whole blocks after it
+    # states a damaged length (left to asammdf), it is not where the file was cut.
+    intact = max((a for a in seen if a < size and a not in {c[0] for c in crossing}), default=0)
+    crossing = [c for c in crossing if c[0] > intact or c[0] + 24 > size]
     cut = None
-    if crossing is not None:
-        at, end, kind, parent = crossing
+    if crossing:
+        at, end, kind, parent = min(crossing)
         name = kind.decode("ascii", "replace").strip("#") + " block" if kind.startswith(b"##") else "block"
         if at < size:
             cut = found_cut(path, size, f"the rest of its {name} at byte {at} (which runs to byte {end})")

@@ -189,6 +189,9 @@ def damaged(where: str, found: str, todo: str = "") -> InputError:
     )
 
 
+_RECOVER = "`mcap recover` (the mcap CLI) salvages the readable part of an interrupted recording into a new file."
+
+
 def read_layout(file: BinaryIO, where: str) -> Log:
     size = os.fstat(file.fileno()).st_size
     if size == 0:
@@ -206,7 +209,7 @@ def read_layout(file: BinaryIO, where: str) -> Log:
     tail_bytes = len(MAGIC) + _FOOTER.size
     file.seek(max(0, size - len(MAGIC)))
     if size < 2 * len(MAGIC) + tail_bytes or file.read(len(MAGIC)) != MAGIC:
-        found_cut(where, size, "its footer and the closing MCAP magic")
+        found_cut(where, size, "its footer and the closing MCAP magic", hint=_RECOVER)
         return Log(file, where, size, {}, {}, None, cut=True)  # allowed: read up to the last whole record
     file.seek(size - tail_bytes)
     footer = file.read(_FOOTER.size)

@@ -34,8 +34,9 @@ def read_table(path: Path) -> Samples:
     if parquet:
         parquet_end(path)
         check_parquet_rows(path)
+    source = path if parquet else _csv_input(path)  # a cut CSV: refused, or its whole lines (allowed)
     try:
-        df = pd.read_parquet(path) if parquet else pd.read_csv(_csv_input(path))
+        df = pd.read_parquet(source) if parquet else pd.read_csv(source)
     except FileNotFoundError as err:
         raise InputError(str(path), "a readable sample table", "no such file", "Check the path.") from err
     except Exception as err:  # pandas raises many types for malformed files
@@ -101,6 +102,10 @@ def iter_table(path: Path, max_samples: int) -> Iterator[Samples]:
     where = str(path)
     if not path.is_file():
         raise InputError(where, "a readable sample table", "no such file", "Check the path.")
+    if path.suffix.lower() == ".csv":
+        text_end(path)  # a cut CSV: refused here, before any parse (allowed: its whole lines are read)
+    else:
+        parquet_end(path)
     try:
         if path.suffix.lower() == ".csv":
             names = pa_csv.open_csv(_csv_input(path)).schema.names
@@ -113,7 +118,6 @@ def iter_table(path: Path, max_samples: int) -> Iterator[Samples]:
                 ),
             )
         else:
-            parquet_end(path)
             parquet = pq.ParquetFile(path)
             names = parquet.schema_arrow.names
             wanted = [c for c in (*_REQUIRED, "gx", "gy", "gz", *TABLE_CHANNELS) if c in names]
