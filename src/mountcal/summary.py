@@ -43,7 +43,7 @@ def summary(cal: Calibration) -> str:
     lines += [f"  note: {n}" for n in cal.notes]
     if cal.provenance.input_kind:
         lines.append(f"  input: {cal.provenance.input_kind}")
-    lines += [f"  input read in part: {line}" for line in cal.provenance.incomplete_inputs]
+    lines += [f"  input file: {line}" for line in cal.provenance.incomplete_inputs]
     if not cal.confident:
         found = "; ".join(f"{u.what} ({u.size})" for u in cal.unexplained) or "see the notes"
         lines.append(f"  NOT CONFIDENT: {found}; rotating with it warns, requiring a confident result refuses it")

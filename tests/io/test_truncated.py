@@ -262,7 +262,7 @@ def test_a_stop_table_cut_inside_its_last_row_is_refused_or_fitted_without_it(
     out = capsys.readouterr().out
     result = json.loads((tmp_path / "r.json").read_text())
     assert result["provenance"]["incomplete_inputs"] == list(part.incomplete)
-    assert "input read in part" in out and "stops.csv ends at byte" in out
+    assert "input file: " in out and "stops.csv ends at byte" in out and "read in part" in out
 
 
 def test_rotate_of_a_cut_log_records_the_cut_in_the_output(tmp_path: Path) -> None:

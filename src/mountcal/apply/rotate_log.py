@@ -121,7 +121,7 @@ class RotateReport:
             )
         if self.nonfinite:
             out.append(f"{self.nonfinite} IMU messages hold NaN or infinite values: kept, rotated to NaN")
-        out += [f"read in part (cut short): {line}" for line in self.incomplete]
+        out += [f"input file: {line}" for line in self.incomplete]
         return out
 
 

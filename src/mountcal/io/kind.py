@@ -117,8 +117,9 @@ def _kind_of(path: Path, dbc: bool, columns: bool, declared: Declared) -> InputK
     suffix = path.suffix.lower()
     table = suffix in TABLE_SUFFIXES and not (dbc and suffix == ".csv" and not _stop_columns_given_dbc(path))
     form = "CSV" if suffix == ".csv" else "Parquet"
-    if special_kind(path) is not None:  # refused by the reader, without opening it
-        return InputKind(declared != "log", f"a {special_kind(path)}", "not a regular file")
+    special = None if path.is_dir() else special_kind(path)  # a folder may be a log (a comma2k19 segment)
+    if special is not None:  # refused by the reader, without opening it
+        return InputKind(declared != "log", special, "not a regular file")
     if declared == "stop-table":
         if not table:
             raise InputError(
@@ -143,8 +144,9 @@ def _kind_of(path: Path, dbc: bool, columns: bool, declared: Declared) -> InputK
         return InputKind(False, f"a CAN log ({suffix.lstrip('.').upper()})", how)
     if reader.name == "mcap":
         return InputKind(False, "an MCAP log", f"by its suffix {suffix}")
-    how = "by the folder's layout" if path.is_dir() else f"by its suffix {suffix}"
-    return InputKind(False, f"a log ({reader.description or reader.name})", how)
+    if path.is_dir():
+        return InputKind(False, f"a {reader.description or reader.name}", "by the folder's layout")
+    return InputKind(False, f"a log ({reader.description or reader.name})", f"by its suffix {suffix}")
 
 
 def _stop_columns_given_dbc(path: Path) -> bool:

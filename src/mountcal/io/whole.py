@@ -50,7 +50,7 @@ class Cut:
         """The cut in one sentence, as results and summaries record it."""
         if self.ends_at < 0:  # an end that cannot be verified (found_unverified)
             return f"{self.path}: {self.expected}"
-        return f"{self.path} ends at byte {self.ends_at}, before {self.expected}"
+        return f"{self.path} ends at byte {self.ends_at}, before {self.expected}: read in part"
 
 
 class TruncatedInput(InputError):
