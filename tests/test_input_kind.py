@@ -127,4 +127,5 @@ def test_calibrate_reads_a_comma2k19_folder_as_the_other_commands_do(
     assert code in (0, 3), err  # a calibration, or a reason the minute of highway does not support one
     if code == 0:
         provenance = json.loads(out.read_text())["provenance"]
-        assert provenance["input_kind"].startswith("a comma2k19 segment folder") and len(provenance["input_sha256"][0]) == 64
+        assert provenance["input_kind"].startswith("a comma2k19 segment folder")
+        assert len(provenance["input_sha256"][0]) == 64  # the folder's files, hashed
