@@ -17,6 +17,7 @@ from scipy.spatial.transform import Rotation
 from mountcal.atomic import atomic_path
 from mountcal.conventions import CONVENTIONS, FloatArray, levelled
 from mountcal.errors import InputError
+from mountcal.option_names import option
 from mountcal.result_file import check_document, read_json
 from mountcal.typed_json import from_plain, schema_of, to_plain
 
@@ -343,7 +344,10 @@ class Calibration:
         }
 
     def save(self, path: str | Path) -> None:
-        """Write the JSON file atomically."""
+        """Write the JSON file atomically (a name ending in another format's suffix is refused)."""
+        from mountcal.output_suffix import check_output_suffix
+
+        check_output_suffix(option("output"), path, (".json",))
         text = json.dumps(self.to_dict(), indent=2, allow_nan=False)
         with atomic_path(path) as tmp:
             tmp.write_text(text + "\n", encoding="utf-8")

@@ -29,6 +29,7 @@ from mountcal.errors import InputError, NotEnoughInformation
 from mountcal.io.inputs import check_parquet_rows
 from mountcal.io.whole import parquet_end, text_bytes_end
 from mountcal.option_names import option
+from mountcal.output_suffix import check_output_suffix
 from mountcal.paths import read_input_bytes
 from mountcal.result import StopsFingerprint
 
@@ -388,6 +389,7 @@ def write_stop_table(table: StopTable, path: str | Path) -> None:
     from mountcal.atomic import atomic_path
 
     path = Path(path)
+    check_output_suffix(option("output"), path, (".csv", ".parquet", ".pq"))  # another format's name: refused
     df = table.to_frame()
     with atomic_path(path) as tmp:
         if path.suffix.lower() in (".parquet", ".pq"):

@@ -22,6 +22,8 @@ from mountcal.errors import InputError
 from mountcal.estimate import sphere
 from mountcal.estimate.effects.scale import SCALE_NAMES
 from mountcal.io.kind import Declared
+from mountcal.option_names import option
+from mountcal.output_suffix import check_output_suffix
 from mountcal.result_file import read_json
 from mountcal.sensor_spec import SensorSpec
 from mountcal.stoptable import StopTable, Unit, read_stop_table
@@ -93,6 +95,7 @@ class Triad:
         }
 
     def save(self, path: str | Path) -> None:
+        check_output_suffix(option("output"), path, (".json",))
         with atomic_path(path) as tmp:
             tmp.write_text(json.dumps(self.to_dict(), indent=2, allow_nan=False) + "\n", encoding="utf-8")
 

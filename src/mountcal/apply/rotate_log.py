@@ -65,6 +65,7 @@ from mountcal.io.ros2.imu import ImuMessages
 from mountcal.io.table.write import CsvSamples, ParquetSamples
 from mountcal.io.whole import Cut, reading
 from mountcal.option_names import option
+from mountcal.output_suffix import check_output_suffix
 from mountcal.result import VEHICLE_FRAME, Calibration
 from mountcal.samples import Samples
 from mountcal.threads import helpers_allowed
@@ -126,12 +127,25 @@ class RotateReport:
 
 
 def output_format(path: str | os.PathLike[str], fmt: str | None = None) -> str:
-    """``parquet``, ``csv`` or ``mcap``: the one asked for, else from the suffix, else Parquet."""
-    if fmt is not None:
-        if fmt not in ("parquet", "csv", "mcap"):
-            raise InputError(option("format"), "parquet, csv or mcap", repr(fmt), "Choose one of them.")
-        return fmt
-    return FORMATS.get(Path(path).suffix.lower(), "parquet")
+    """``parquet``, ``csv`` or ``mcap``: the one asked for, else from the suffix, else Parquet.
+
+    A name whose suffix says another format (``out.blf``, or ``out.csv`` with ``fmt="parquet"``)
+    is refused (:func:`~mountcal.output_suffix.check_output_suffix`).
+    """
+    by_name = FORMATS[check_output_suffix(option("output"), path, tuple(FORMATS))]
+    if fmt is None:
+        return by_name
+    if fmt not in ("parquet", "csv", "mcap"):
+        raise InputError(option("format"), "parquet, csv or mcap", repr(fmt), "Choose one of them.")
+    suffix = Path(path).suffix.lower()
+    if suffix in FORMATS and by_name != fmt:
+        raise InputError(
+            f"{option('output')} {path}",
+            f"a name ending in the suffix of {option('format', fmt)}",
+            f"one ending in {suffix} ({by_name})",
+            f"Drop {option('format')} to write {by_name}, or name the output {Path(path).with_suffix('.' + fmt).name}.",
+        )
+    return fmt
 
 
 def rotate_log(

@@ -18,7 +18,7 @@ import logging
 import sys
 from collections.abc import Sequence
 
-from mountcal.cli.options import EXIT_CODES, configure_logging
+from mountcal.cli.options import EXIT_CODES, check_output_suffixes, configure_logging
 from mountcal.cli.results import results_only
 from mountcal.errors import MountcalError
 from mountcal.io.whole import reading
@@ -39,6 +39,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         # library messages name the flags, not the Python parameters; stdout holds the results alone
         with as_flags(), results_only(), reading(getattr(args, "allow_truncated", False)):
+            check_output_suffixes(args)  # before any work: an output named for another format
             return int(args.run(args))
     except MountcalError as err:
         log.error("error: %s", safe(err, keep=chr(10)))

@@ -13,6 +13,7 @@ from mountcal.cli.options import (
     add_fit_options,
     add_input_kind,
     add_log_options,
+    declare_output_suffixes,
     log_inputs,
     log_job,
     print_json,
@@ -48,6 +49,7 @@ def add_parser(sub: Any) -> None:
         default=None,
         help="local gravity in m/s² (default: from lat_deg/alt_m when the data have them, else 9.80665)",
     )
+    declare_output_suffixes(p, {"output": (".json",), "report": (".html", ".htm")})
     p.set_defaults(run=run)
 
 

@@ -8,7 +8,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import IO, Any
 
-from mountcal.cli.options import STDOUT, add_command
+from mountcal.cli.options import STDOUT, add_command, declare_output_suffixes
 from mountcal.cli.results import result_stream
 from mountcal.terminal import safe
 
@@ -32,6 +32,7 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--json-events", default=None, help="also write the events as JSON lines here ('-': stdout)")
     p.add_argument("-o", "--output", default="session", help="prefix: PREFIX.blf, PREFIX.json, PREFIX_stops.csv")
     p.add_argument("--report", default=None, help="also write the HTML report here")
+    declare_output_suffixes(p, {"json_events": (".jsonl", ".ndjson", ".json"), "report": (".html", ".htm")})
     p.set_defaults(run=run)
 
 

@@ -11,7 +11,14 @@ import logging
 import math
 from typing import Any
 
-from mountcal.cli.options import add_command, add_log_options, add_sensor_options, log_options, working
+from mountcal.cli.options import (
+    add_command,
+    add_log_options,
+    add_sensor_options,
+    declare_output_suffixes,
+    log_options,
+    working,
+)
 from mountcal.cli.results import result_stream
 from mountcal.terminal import safe
 
@@ -32,6 +39,7 @@ def add_parser(sub: Any) -> None:
     p.add_argument("-o", "--output", default=None, help="protocol sheet CSV to write")
     add_sensor_options(p)
     add_log_options(p, repeat_dbc=False, stops=False)
+    declare_output_suffixes(p, {"output": (".csv",)})
     p.set_defaults(run=run)
 
 

@@ -7,7 +7,7 @@ import logging
 from pathlib import Path
 from typing import Any
 
-from mountcal.cli.options import STDOUT, add_command, print_json, require, working
+from mountcal.cli.options import STDOUT, add_command, declare_output_suffixes, print_json, require, working
 from mountcal.cli.results import result_stream
 from mountcal.terminal import safe
 
@@ -29,6 +29,7 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument("--unit", choices=("mps2", "g"), default="mps2", help="unit of ax, ay, az in --stops")
     p.add_argument("--figures", choices=("svg", "png"), default="svg", help="inline SVG (default) or base64 PNG")
+    declare_output_suffixes(p, {"output": (".html", ".htm")})
     p.set_defaults(run=run)
 
 

@@ -7,7 +7,15 @@ import logging
 from dataclasses import asdict
 from typing import Any
 
-from mountcal.cli.options import add_command, add_log_options, log_inputs, log_options, print_json, working
+from mountcal.cli.options import (
+    add_command,
+    add_log_options,
+    declare_output_suffixes,
+    log_inputs,
+    log_options,
+    print_json,
+    working,
+)
 from mountcal.terminal import safe
 
 log = logging.getLogger("mountcal")
@@ -35,6 +43,7 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument("--require-confident", action="store_true", help="refuse a calibration that is not confident")
     add_log_options(p, stops=False)
+    declare_output_suffixes(p, {"output": (".parquet", ".pq", ".csv", ".mcap")})
     p.set_defaults(run=run, protocol=None)
 
 

@@ -6,7 +6,16 @@ import argparse
 import logging
 from typing import Any
 
-from mountcal.cli.options import STDOUT, add_command, add_log_options, log_inputs, log_job, print_json, working
+from mountcal.cli.options import (
+    STDOUT,
+    add_command,
+    add_log_options,
+    declare_output_suffixes,
+    log_inputs,
+    log_job,
+    print_json,
+    working,
+)
 from mountcal.cli.results import result_stream
 from mountcal.terminal import safe
 
@@ -24,6 +33,7 @@ def add_parser(sub: Any) -> None:
         output_required=True,
     )
     add_log_options(p)
+    declare_output_suffixes(p, {"output": (".csv", ".parquet", ".pq")})
     p.set_defaults(run=run)
 
 

@@ -14,7 +14,7 @@ import logging
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from mountcal.cli.options import add_command, add_input_kind, print_json
+from mountcal.cli.options import add_command, add_input_kind, declare_output_suffixes, print_json
 from mountcal.terminal import safe
 
 if TYPE_CHECKING:
@@ -43,6 +43,7 @@ def add_parser(subparsers: Any) -> None:
     )
     p.add_argument("--mapping", default=None, help="a TOML with a sample table's [columns]")
     add_input_kind(p)
+    declare_output_suffixes(p, {"output": (".json",)})
     p.set_defaults(run=run)
 
 

@@ -31,8 +31,8 @@ from dataclasses import dataclass, field
 from typing import Any, BinaryIO, TypeVar
 
 from mountcal.errors import InputError
+from mountcal.option_names import option
 
-ALLOW_OPTION = "--allow-truncated"
 _T = TypeVar("_T")
 
 
@@ -61,14 +61,14 @@ class TruncatedInput(InputError):
             cut.path,
             f"a complete file: {cut.expected}",
             f"a file that ends at byte {cut.ends_at}",
-            todo or _TODO,
+            todo or _todo(),
         )
         self.cut = cut
 
 
-_TODO = (
-    f"Copy the file again if it was transferred; {ALLOW_OPTION} reads the whole part of it (the result then says so)."
-)
+def _todo() -> str:
+    allow = option("allow_truncated", True)
+    return f"Copy the file again if it was transferred; {allow} reads the whole part of it (the result then says so)."
 
 
 @dataclass
@@ -134,7 +134,7 @@ def found_cut(path: str | os.PathLike[str], ends_at: int, expected: str, *, whol
     cut = Cut(str(path), int(ends_at), expected, whole)
     policy = _policy.get()
     if policy is None or not policy.allow:
-        raise TruncatedInput(cut, f"{_TODO} {hint}".rstrip())
+        raise TruncatedInput(cut, f"{_todo()} {hint}".rstrip())
     for known in policy.cuts:
         if known.path == cut.path:
             return known
@@ -278,7 +278,6 @@ def _starts_parquet(path: str | os.PathLike[str] | None, raw: bytes | None) -> b
 
 
 __all__ = [
-    "ALLOW_OPTION",
     "Cut",
     "TruncatedInput",
     "found_cut",
