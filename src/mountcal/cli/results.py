@@ -88,7 +88,7 @@ def _private_stdout(stream: TextIO | None) -> tuple[TextIO | None, int | None]:
     handle = io.TextIOWrapper(
         open(saved, "wb", closefd=True),  # closed with the wrapper, by results_only
         encoding=real.encoding,
-        errors=real.errors,
+        errors="backslashreplace",  # a character the terminal's encoding lacks: shown escaped, not a traceback
         line_buffering=real.line_buffering,
     )
     return handle, saved
