@@ -302,3 +302,14 @@ def test_can_log_readers_refuse_a_cut_blf_by_default(
     path = cut_copy(DATA / "parking.blf", tmp_path, 0.5)
     with pytest.raises(InputError, match=f"ends at byte {path.stat().st_size}"):
         reader(path)
+
+
+def test_a_cut_blf_streams_in_chunks_as_it_reads_whole(tmp_path: Path) -> None:
+    """iter_log (rotate's reader) consumes a reader's generator one step at a time: the cut found
+    at the header and the object cut at the end are one cut, in every step."""
+    path = cut_copy(DATA / "parking.blf", tmp_path, 0.55)
+    options = LogOptions(dbc=str(DBC), allow_truncated=True)
+    whole = read_log(path, options)
+    chunks = list(iter_log(path, options, 2000))
+    assert sum(len(c) for c in chunks) == len(whole) > 0
+    assert [c.incomplete for c in chunks if c.incomplete] == [whole.incomplete]

@@ -150,9 +150,8 @@ def _empty(source: str) -> Samples:
 def _chunks(path: Path, opts: LogOptions, max_samples: int, cuts: list[Cut]) -> Iterator[Samples]:
     """A file's chunks read under the completeness policy (a reader may check the file before its
     generator starts); the cuts found are added to ``cuts``."""
-    with reading(opts.allow_truncated) as found:
+    with reading(opts.allow_truncated, cuts):
         chunks = _reader(path, opts).iter_chunks(path, opts, max_samples)
-    cuts += found
     return read_under(chunks, opts.allow_truncated, cuts)
 
 

@@ -81,10 +81,10 @@ _policy: ContextVar[_Policy | None] = ContextVar("mountcal_whole_files", default
 
 
 @contextmanager
-def reading(allow_truncated: bool = False) -> Iterator[list[Cut]]:
+def reading(allow_truncated: bool = False, cuts: list[Cut] | None = None) -> Iterator[list[Cut]]:
     """Within this block readers refuse a cut file, or (``allow_truncated``) read its whole part;
-    yields the list of the cuts found (one per file)."""
-    policy = _Policy(allow_truncated)
+    yields the list of the cuts found (one per file): ``cuts``, when given, to go on with."""
+    policy = _Policy(allow_truncated, [] if cuts is None else cuts)
     token = _policy.set(policy)
     try:
         yield policy.cuts
@@ -94,30 +94,22 @@ def reading(allow_truncated: bool = False) -> Iterator[list[Cut]]:
 
 def read_under(chunks: Iterator[_T], allow_truncated: bool, cuts: list[Cut]) -> Iterator[_T]:
     """``chunks`` (a reader's generator) consumed under the policy of :func:`reading`, each step
-    inside it; the cuts found are added to ``cuts`` as they are found."""
+    inside it, one policy for all steps; the cuts found are added to ``cuts`` as they are found."""
+    policy = _Policy(allow_truncated, cuts)
     try:
         while True:
-            with reading(allow_truncated) as found:
-                try:
-                    item = next(chunks)
-                except StopIteration:
-                    item = None
-                    done = True
-                else:
-                    done = False
-            _merge(cuts, found)
-            if done:
+            token = _policy.set(policy)
+            try:
+                item = next(chunks)
+            except StopIteration:
                 return
-            yield item  # type: ignore[misc]  # an item of the reader's own type, never the None above
+            finally:
+                _policy.reset(token)
+            yield item
     finally:
         close = getattr(chunks, "close", None)
         if close is not None:
             close()
-
-
-def _merge(into: list[Cut], new: list[Cut]) -> None:
-    known = {c.path for c in into}
-    into.extend(c for c in new if c.path not in known)
 
 
 def found_cut(path: str | os.PathLike[str], ends_at: int, expected: str, *, whole: int = -1, hint: str = "") -> Cut:
