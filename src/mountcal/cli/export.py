@@ -7,7 +7,7 @@ import logging
 from pathlib import Path
 from typing import Any
 
-from mountcal.cli.options import STDOUT, add_command, declare_output_suffixes
+from mountcal.cli.options import STDOUT, add_command
 from mountcal.cli.results import result_stream
 from mountcal.terminal import safe
 
@@ -24,20 +24,6 @@ FORMAT_NAMES = (
     "json",
     "yaml",
 )
-
-# the suffixes of what each format writes (the default first): `-o` named for another format is refused
-SUFFIXES: dict[str, tuple[str, ...]] = {
-    "ublox": (".txt",),
-    "ublox-ucenter": (".txt",),
-    "ublox-ubx": (".ubx",),
-    "novatel": (".txt",),
-    "ros2-static-tf": (".sh", ".txt"),
-    "urdf": (".urdf", ".xml", ".xacro"),
-    "tf2": (".txt",),
-    "autoware": (".yaml", ".yml"),
-    "json": (".json",),
-    "yaml": (".yaml", ".yml"),
-}
 
 log = logging.getLogger("mountcal")
 
@@ -80,7 +66,6 @@ def add_parser(sub: Any) -> None:
         default=None,
         help="the IMU's position in the parent frame, m (ROS, Autoware; mountcal does not estimate it; default 0)",
     )
-    declare_output_suffixes(p, {"output": lambda args: SUFFIXES[args.to]})
     p.set_defaults(run=run)
 
 
