@@ -14,7 +14,6 @@ from mountcal.cli.options import (
     add_command,
     add_fit_options,
     add_log_options,
-    declare_output_suffixes,
     detection,
     fit_options,
     log_options,
@@ -69,7 +68,6 @@ def add_parser(sub: Any) -> None:
     add_log_options(p, repeat_dbc=False, protocol=False)
     g = p.add_argument_group("fit of every log (a manifest's cells take precedence)")
     add_fit_options(g, headings_help="beta_deg of stop tables: from uphill (default), relative, or none")
-    declare_output_suffixes(p, {"output": (".parquet",)})
     p.set_defaults(run=run, protocol=None)
 
 

@@ -110,10 +110,27 @@ def check_output_suffixes(args: argparse.Namespace) -> None:
 
     for dest, declared in getattr(args, _SUFFIXES, {}).items():
         value = getattr(args, dest, None)
-        if value is None or value == STDOUT:
-            continue
+        if value is None or value == STDOUT or _names_another_argument(args, dest, str(value)):
+            continue  # an output onto another argument's file: the command refuses that for what it is
         flag = "-o" if dest == "output" else "--" + dest.replace("_", "-")
         check_output_suffix(f"{args.command} {flag}", value, declared(args) if callable(declared) else declared)
+
+
+def _names_another_argument(args: argparse.Namespace, dest: str, value: str) -> bool:
+    """Whether an output names the same file as another argument (an input, or a second output)."""
+    import os
+    from pathlib import Path
+
+    def same(other: object) -> bool:
+        if not isinstance(other, str) or other == STDOUT:
+            return False
+        try:
+            return Path(other).resolve() == Path(value).resolve() or os.path.samefile(other, value)
+        except (OSError, ValueError):
+            return False
+
+    others = [v for key, v in vars(args).items() if key != dest]
+    return any(same(v) or (isinstance(v, list | tuple) and any(same(x) for x in v)) for v in others)
 
 
 def add_input_kind(p: argparse.ArgumentParser) -> None:
