@@ -313,3 +313,17 @@ def test_a_cut_blf_streams_in_chunks_as_it_reads_whole(tmp_path: Path) -> None:
     chunks = list(iter_log(path, options, 2000))
     assert sum(len(c) for c in chunks) == len(whole) > 0
     assert [c.incomplete for c in chunks if c.incomplete] == [whole.incomplete]
+
+
+@pytest.mark.real_data
+def test_a_comma2k19_array_cut_short_is_refused_with_the_byte_where_it_ends(real_data: Path, tmp_path: Path) -> None:
+    import shutil
+
+    folder = tmp_path / "seg"
+    shutil.copytree(real_data / "comma2k19" / "rav4_2018-08-02--08-34-47_seg40", folder)
+    values = folder / "processed_log" / "IMU" / "accelerometer" / "value"
+    data = values.read_bytes()
+    values.write_bytes(data[: len(data) * 2 // 3])
+    for allow in (False, True):
+        with pytest.raises(TruncatedInput, match=f"ends at byte {len(data) * 2 // 3}"):
+            read_log(folder, LogOptions(allow_truncated=allow))
