@@ -129,3 +129,15 @@ def test_calibrate_reads_a_comma2k19_folder_as_the_other_commands_do(
         provenance = json.loads(out.read_text())["provenance"]
         assert provenance["input_kind"].startswith("a comma2k19 segment folder")
         assert len(provenance["input_sha256"][0]) == 64  # the folder's files, hashed
+
+
+def test_a_fleet_worker_flags_a_cut_stop_table_read_in_part(timed_stops: Path, tmp_path: Path) -> None:
+    from mountcal.io.logs import LogOptions
+
+    cut = tmp_path / "cut.csv"
+    cut.write_bytes(timed_stops.read_bytes()[:-4])  # the last row loses its last digits and line break
+    job = LogJob(paths=(str(cut),), log=LogOptions(allow_truncated=True))
+    record = run_job(FleetJob("v", str(cut), job, headings="none"))
+    assert record["status"] == "ok" and "input_incomplete" in record["flags"], record
+    refused = run_job(FleetJob("v", str(cut), LogJob(paths=(str(cut),)), headings="none"))
+    assert refused["status"] == "failed" and "ends at byte" in refused["error"]

@@ -34,6 +34,7 @@ from mountcal.errors import InputError
 from mountcal.option_names import option
 
 _T = TypeVar("_T")
+_READ_IN_PART = ": read in part"
 
 
 @dataclass(frozen=True)
@@ -50,7 +51,7 @@ class Cut:
         """The cut in one sentence, as results and summaries record it."""
         if self.ends_at < 0:  # an end that cannot be verified (found_unverified)
             return f"{self.path}: {self.expected}"
-        return f"{self.path} ends at byte {self.ends_at}, before {self.expected}: read in part"
+        return f"{self.path} ends at byte {self.ends_at}, before {self.expected}{_READ_IN_PART}"
 
 
 class TruncatedInput(InputError):
@@ -151,6 +152,12 @@ def found_unverified(path: str | os.PathLike[str], why: str) -> None:
     policy = _policy.get()
     if policy is not None and all(c.path != str(path) for c in policy.cuts):
         policy.cuts.append(Cut(str(path), -1, why))
+
+
+def is_cut(sentence: str) -> bool:
+    """Whether a sentence of ``Samples.incomplete`` / ``provenance.incomplete_inputs`` is a cut (the
+    file was read in part), not an end that could not be verified."""
+    return sentence.endswith(_READ_IN_PART)
 
 
 def unreadable_part(cut: Cut, why: str) -> TruncatedInput:
@@ -274,6 +281,7 @@ __all__ = [
     "TruncatedInput",
     "found_cut",
     "found_unverified",
+    "is_cut",
     "open_prefix",
     "parquet_end",
     "read_under",
