@@ -327,3 +327,22 @@ def test_a_comma2k19_array_cut_short_is_refused_with_the_byte_where_it_ends(real
     for allow in (False, True):
         with pytest.raises(TruncatedInput, match=f"ends at byte {len(data) * 2 // 3}"):
             read_log(folder, LogOptions(allow_truncated=allow))
+
+
+def test_a_cut_phone_export_is_refused_or_read_without_its_last_line(tmp_path: Path) -> None:
+    """A known export is read through its column map (mountcal.io.table.mapped): the same rule."""
+    t = np.arange(2000) * 0.01
+    frame = pd.DataFrame(
+        {
+            "Time (s)": t,
+            **{f"Acceleration {c} (m/s^2)": 0.0 * t + v for c, v in zip("xyz", (0.1, 0.2, 9.8), strict=True)},
+        }
+    )
+    path = tmp_path / "phyphox.csv"
+    frame.to_csv(path, index=False)
+    path.write_bytes(path.read_bytes()[:-3])
+    with pytest.raises(TruncatedInput, match=f"ends at byte {path.stat().st_size}"):
+        read_log(path)
+    part = read_log(path, LogOptions(allow_truncated=True))
+    assert len(part) == len(t) - 1 and part.incomplete
+    assert sum(len(c) for c in iter_log(path, LogOptions(allow_truncated=True), 500)) == len(t) - 1

@@ -215,6 +215,13 @@ def _last_line_start(f: BinaryIO, size: int) -> int:
     return 0
 
 
+def text_source(path: str | os.PathLike[str]) -> str | os.PathLike[str] | io.BufferedReader:
+    """What a parser of a line-oriented text reads: the file when it is whole, its whole lines when it
+    was cut and that is allowed (:func:`text_end` refuses it otherwise)."""
+    whole = text_end(path)
+    return path if whole == os.stat(path).st_size else open_prefix(path, whole)
+
+
 def open_prefix(path: str | os.PathLike[str], limit: int) -> io.BufferedReader:
     """The first ``limit`` bytes of a file as a binary stream: the whole lines of a cut text file,
     for a parser that would otherwise read the incomplete last one."""
@@ -288,6 +295,7 @@ __all__ = [
     "reading",
     "text_bytes_end",
     "text_end",
+    "text_source",
     "unreadable_part",
     "was_cut",
 ]

@@ -20,7 +20,7 @@ import pyarrow.parquet as pq
 
 from mountcal.errors import InputError
 from mountcal.io.inputs import check_parquet_rows, check_regular_file
-from mountcal.io.whole import open_prefix, parquet_end, text_end
+from mountcal.io.whole import parquet_end, text_end, text_source
 from mountcal.option_names import option
 from mountcal.samples import Channel, FloatArray, Samples
 
@@ -34,7 +34,7 @@ def read_table(path: Path) -> Samples:
     if parquet:
         parquet_end(path)
         check_parquet_rows(path)
-    source = path if parquet else _csv_input(path)  # a cut CSV: refused, or its whole lines (allowed)
+    source = path if parquet else text_source(path)  # a cut CSV: refused, or its whole lines (allowed)
     try:
         df = pd.read_parquet(source) if parquet else pd.read_csv(source)
     except FileNotFoundError as err:
@@ -91,10 +91,6 @@ def read_table(path: Path) -> Samples:
 _REQUIRED = ("t_s", "ax", "ay", "az")
 
 
-def _csv_input(path: Path) -> Any:
-    """What a CSV parser reads: the file, or the whole lines of a cut one (``--allow-truncated``)."""
-    whole = text_end(path)
-    return path if whole == path.stat().st_size else open_prefix(path, whole)
 
 
 def iter_table(path: Path, max_samples: int) -> Iterator[Samples]:
@@ -108,10 +104,10 @@ def iter_table(path: Path, max_samples: int) -> Iterator[Samples]:
         parquet_end(path)
     try:
         if path.suffix.lower() == ".csv":
-            names = pa_csv.open_csv(_csv_input(path)).schema.names
+            names = pa_csv.open_csv(text_source(path)).schema.names
             wanted = [c for c in (*_REQUIRED, "gx", "gy", "gz", *TABLE_CHANNELS) if c in names]
             reader: Any = pa_csv.open_csv(
-                _csv_input(path),
+                text_source(path),
                 read_options=pa_csv.ReadOptions(block_size=1 << 22),
                 convert_options=pa_csv.ConvertOptions(
                     include_columns=wanted, column_types=dict.fromkeys(wanted, pa.float64())
