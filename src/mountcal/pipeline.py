@@ -9,7 +9,9 @@ in (:func:`mountcal.estimate.driving.combine`), saying which and why the others 
 from __future__ import annotations
 
 import hashlib
+import threading
 from collections.abc import Callable, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
@@ -17,15 +19,18 @@ from typing import Literal
 
 import numpy as np
 
+from mountcal import crosscheck, plausibility
 from mountcal.calibrate import Options, calibrate, local_gravity
 from mountcal.errors import InputError, NotEnoughInformation
 from mountcal.estimate.driving import DrivingFit, DrivingOptions, estimate_driving
 from mountcal.estimate.driving_combine import combine, driving_calibration, not_combined
+from mountcal.input_conventions import merged, parse_axes
 from mountcal.io.kind import Declared, InputKind, input_kind
-from mountcal.io.logs import LogOptions, read_log
+from mountcal.io.logs import LogOptions, read_log, stated
 from mountcal.io.timestamps import increasing_times
 from mountcal.io.whole import reading
 from mountcal.option_names import option
+from mountcal.paths import special_kind
 from mountcal.result import Calibration, Provenance
 from mountcal.samples import Samples
 from mountcal.stops import StopDetection, StopTableFromLog, read_protocol, tabulate
@@ -139,15 +144,16 @@ class InputResult:
 def calibrate_input(
     job: LogJob,
     *,
-    unit: Unit = "mps2",
-    headings: Headings = "uphill",
+    unit: Unit | None = None,
+    headings: Headings | None = None,
     declared: Declared = "auto",
     read: Callable[[LogJob], Samples] | None = None,
 ) -> InputResult:
     """Calibrate whatever the job's paths are: a stop table fitted as it is, or a log
     (:func:`calibrate_job`), as :func:`mountcal.io.kind.input_kind` decides; the result's provenance
     says which kind it was taken for and why. ``unit`` and ``headings`` are a stop table's (a log
-    finds its own); ``declared`` is what the user said the input is (``--input-kind``); ``read`` reads
+    finds its own; the job's axis map, heading unit and uphill azimuth apply to both); ``declared`` is
+    what the user said the input is (``--input-kind``); ``read`` reads
     a log's files (default :func:`~mountcal.io.logs.read_log`; the fleet reads splits itself).
 
     What ``mountcal calibrate`` and every fleet worker do with an input.
@@ -157,7 +163,14 @@ def calibrate_input(
     table: StopTable | None
     if kind.stop_table:
         with reading(job.log.allow_truncated):  # a cut CSV: refused, or its whole rows read and said
-            table = read_stop_table(job.paths[0], unit=unit, headings=headings)
+            table = read_stop_table(
+                job.paths[0],
+                unit=unit,
+                headings=headings,
+                heading_unit=job.log.heading_unit,
+                axes=None if job.log.axes is None else parse_axes(job.log.axes, option("axes")),
+                uphill_azimuth_deg=job.uphill_azimuth_deg,
+            )
         cal, done = calibrate(table, job.options), None
     else:
         done = calibrate_job(job, None if read is None else read(job))
@@ -168,8 +181,25 @@ def calibrate_input(
 
 def calibrate_job(job: LogJob, samples: Samples | None = None) -> LogResult:
     """:func:`calibrate_log` of a prepared job (the fleet's and the command line's form); ``samples``
-    are the job's files already read (the fleet reads a log's splits itself to count their gaps)."""
-    samples = with_gravity(read_log(list(job.paths), job.log) if samples is None else samples)
+    are the job's files already read (the fleet reads a log's splits itself to count their gaps).
+
+    Besides the fit: each file's SHA-256 (hashed beside the reading), the log's conventions, the
+    cross-checks between its cues (:mod:`mountcal.crosscheck`: turns, the stops' yaw against the
+    drive's) and the answer's plausibility (:mod:`mountcal.plausibility`) go into the result.
+    """
+    stop = threading.Event()  # a failed read ends the hashing too
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        hashes = pool.submit(lambda: tuple(_sha256(Path(p), stop) for p in job.paths))  # overlaps the reading
+        try:
+            done = _calibrate_job(job, samples)
+            return replace(done, calibration=_checked(done, job, hashes))
+        finally:
+            stop.set()
+
+
+def _calibrate_job(job: LogJob, samples: Samples | None) -> LogResult:
+    # samples read elsewhere get the log conventions here (idempotent: read_log's are kept)
+    samples = with_gravity(read_log(list(job.paths), job.log) if samples is None else stated(samples, job.log))
     source = _source(job.paths)
     skipped: dict[str, str] = {}
     static = found = table = None
@@ -205,6 +235,34 @@ def calibrate_job(job: LogJob, samples: Samples | None = None) -> LogResult:
     assert fit is not None
     cal = _driving_alone(fit, samples, job)
     return LogResult(cal, increasing_times(samples), "driving", None, fit, found, None, skipped)  # counts merged stamps
+
+
+def _checked(done: LogResult, job: LogJob, hashes: Future[tuple[str, ...]]) -> Calibration:
+    """The log's calibration with its files' hashes, its conventions and the cross-checks of its cues.
+
+    Raises
+    ------
+    InputError
+        The gyro, the heading and the lateral acceleration turn opposite ways (a mirrored sensor).
+    """
+    cal = done.calibration
+    stated = merged(done.samples.conventions, cal.provenance.conventions)
+    checks = []
+    disagree = any(u.test == "stops_vs_driving" for u in cal.unexplained)
+    if done.static is not None and done.driving is not None:
+        check, found = crosscheck.half_turn(
+            done.static.yaw_deg, done.driving.yaw_deg, job.uphill_azimuth_deg, job.protocol is not None
+        )
+        checks.append(check)
+        if found is not None:
+            cal = replace(cal, unexplained=(*cal.unexplained, found), confident=False)
+    # the lateral cue needs a yaw both sources agree on; the yaw rate needs only the up axis
+    yaw_known = cal.yaw_deg is not None and not disagree
+    checks.append(crosscheck.turn_handedness(done.samples, cal.rot_vs, yaw_known))
+    if cal.method == "driving":
+        checks += plausibility.answer_checks(cal)
+    cal = replace(cal, provenance=replace(cal.provenance, input_sha256=hashes.result(), conventions=stated))
+    return plausibility.with_checks(cal, checks)
 
 
 def stops_of_log(job: LogJob) -> tuple[Samples, StopTableFromLog]:
@@ -294,7 +352,7 @@ def describe(result: LogResult | tuple[Samples, StopTableFromLog], n_files: int)
 
 
 def _tabulate(samples: Samples, job: LogJob) -> StopTableFromLog:
-    protocol = read_protocol(job.protocol) if job.protocol else None
+    protocol = read_protocol(job.protocol, job.log.heading_unit) if job.protocol else None
     return tabulate(samples, job.detection, protocol, job.uphill_azimuth_deg)
 
 
@@ -330,18 +388,24 @@ def _provenance(paths: Sequence[str]) -> Provenance:
         method="driving",
         model=("rotation",),
         created_utc=datetime.now(UTC).isoformat(timespec="seconds"),
-        input_sha256=tuple(_sha256(Path(p)) for p in paths),
-    )
+    )  # the files' hashes: calibrate_job, hashed beside the reading
 
 
-def _sha256(path: Path) -> str:
-    """The SHA-256 of a file; of a folder (a comma2k19 segment), that of each file's relative path and hash."""
-    digest = hashlib.sha256()
+def _sha256(path: Path, stop: threading.Event | None = None) -> str:
+    """The SHA-256 of a file, streamed in 1 MiB blocks; of a folder (a comma2k19 segment), the SHA-256 of
+    its files' relative paths and hashes, in sorted order. A FIFO or device is not opened (its reader
+    refuses it); ``stop`` ends the hashing early (the result is then not used)."""
     if path.is_dir():
-        for file in sorted(p for p in path.rglob("*") if p.is_file()):
-            digest.update(f"{file.relative_to(path).as_posix()}\0{_sha256(file)}\0".encode())
+        digest = hashlib.sha256()
+        for item in sorted(p for p in path.rglob("*") if p.is_file()):
+            digest.update(f"{item.relative_to(path).as_posix()}\0{_sha256(item, stop)}\n".encode())
         return digest.hexdigest()
+    if special_kind(path) is not None:
+        return ""
+    digest = hashlib.sha256()
     with path.open("rb") as f:
         for block in iter(lambda: f.read(1 << 20), b""):
+            if stop is not None and stop.is_set():
+                return ""
             digest.update(block)
     return digest.hexdigest()

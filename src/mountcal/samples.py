@@ -8,9 +8,13 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
+
+if TYPE_CHECKING:
+    from mountcal.result import Convention
 
 FloatArray = NDArray[np.float64]
 
@@ -52,6 +56,8 @@ class Samples:
     incomplete : tuple of str
         Files read although cut short (``--allow-truncated``): where each ends and what its format
         expected there (:mod:`mountcal.io.whole`); empty when every file was whole.
+    conventions : tuple of Convention
+        How the log's conventions were known (axes, heading unit): set by :func:`mountcal.io.logs.read_log`.
     """
 
     t_s: FloatArray
@@ -64,6 +70,7 @@ class Samples:
     notes: tuple[str, ...] = ()
     gravity_free: str = ""
     incomplete: tuple[str, ...] = ()
+    conventions: tuple[Convention, ...] = ()
 
     def __post_init__(self) -> None:
         n = self.t_s.shape[0]

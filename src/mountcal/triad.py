@@ -193,8 +193,9 @@ def session_stops(
     declared: Declared = "auto",
 ) -> tuple[FloatArray, FloatArray | None]:
     """Stop means (n, 3) in m/s² and their covariances, from a stop table or from logs (read as ``log``
-    says; ``unit`` is a stop table's, and a sample table's where ``log`` gives none).
-    :func:`mountcal.io.kind.input_kind` decides which; ``declared`` is ``--input-kind``."""
+    says, its ``axes`` too for a stop table; ``unit`` is a stop table's, and a sample table's where ``log``
+    gives none). :func:`mountcal.io.kind.input_kind` decides which; ``declared`` is ``--input-kind``."""
+    from mountcal.input_conventions import parse_axes
     from mountcal.io.kind import input_kind
     from mountcal.io.logs import LogOptions, read_log
     from mountcal.io.whole import reading
@@ -204,8 +205,9 @@ def session_stops(
     log = log or LogOptions()
     mapped = log.columns is not None or log.mapping is not None
     if input_kind(paths, columns=mapped, declared=declared).stop_table:
+        axes = None if log.axes is None else parse_axes(log.axes, option("axes"))
         with reading(log.allow_truncated):  # a cut CSV: refused, or its whole rows read
-            table = read_stop_table(paths[0], unit=unit, headings="none")
+            table = read_stop_table(paths[0], unit=unit, headings="none", axes=axes)
         return table.acc_s, table.cov_s
     if log.unit is None and unit != "mps2":
         log = replace(log, unit=unit)

@@ -37,8 +37,10 @@ def add_parser(sub: Any) -> None:
             "INPUTS",
             "folders of logs, globs, manifest CSVs or storage URLs (s3://bucket/LOG); see --layout",
         ),
+        reads={"what": "a folder, log, manifest or URL", "folders": True, "globs": True},
         output="per-log Parquet table (vehicles go to <stem>_vehicles)",
         output_required=True,
+        writes={"what": "the fleet table", "writes": _writes},
     )
     p.add_argument("--workers", type=int, default=None, help="local worker processes (default: all cores)")
     p.add_argument("--scheduler", default=None, help="run on this Dask scheduler, tcp://HOST:PORT")
@@ -84,6 +86,14 @@ def terminated_as_interrupt() -> Iterator[None]:
         yield
     finally:
         signal.signal(signal.SIGTERM, previous)
+
+
+def _writes(value: str, _: argparse.Namespace) -> list[tuple[str, str]]:
+    """The per-log table and the per-vehicle table beside it (the part files' folder is checked by its store)."""
+    from mountcal.fleet import outputs_of
+
+    table, vehicles = outputs_of(value)[:2]
+    return [(str(table), ""), (str(vehicles), f"{value}, writing")]
 
 
 def run(args: argparse.Namespace) -> int:

@@ -7,6 +7,7 @@ from dataclasses import asdict
 from typing import Any
 
 from mountcal.cli.options import add_command, log_options, print_json, working
+from mountcal.cli.path_options import add_path
 from mountcal.cli.results import result_stream
 from mountcal.terminal import safe
 
@@ -20,7 +21,10 @@ def add_parser(sub: Any) -> None:
         inputs=("LOG", "the log"),
         many=False,
     )
-    p.add_argument("--dbc", action="append", default=None, help="DBC naming the CAN messages (repeat for several)")
+    add_path(
+        p, "--dbc", role="input", what="a DBC", small=True, action="append", default=None,
+        help="DBC naming the CAN messages (repeat for several)",
+    )  # fmt: skip
     p.add_argument("--columns", default=None, help="a table's columns as ROLE=COLUMN[:UNIT] pairs (see calibrate)")
     p.set_defaults(run=run, mapping=None, channel=None, topic=None, field=None)
 

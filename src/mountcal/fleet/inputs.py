@@ -70,7 +70,7 @@ class JobDefaults:
     detection: StopDetection = field(default_factory=StopDetection)
     uphill_azimuth_deg: float | None = None
     options: Options = field(default_factory=Options)
-    headings: Headings = "uphill"  # what a stop table's beta_deg is measured from
+    headings: Headings | None = None  # what a stop table's beta_deg is from (None: its heading_ref, else uphill)
     use: Use = "auto"  # a log's parked stops, its driving, or whatever it supports (as `mountcal calibrate`)
 
 
@@ -86,8 +86,9 @@ class FleetJob:
     job : LogJob
         What :func:`mountcal.pipeline.calibrate_job` needs, with absolute paths, so that a worker
         on another machine of a shared file system finds the files.
-    headings : {"uphill", "relative", "none"}
-        What ``beta_deg`` of a stop table is measured from (logs find their own headings).
+    headings : {"uphill", "relative", "none"} or None
+        What ``beta_deg`` of a stop table is measured from (None: as its ``heading_ref`` column states, else
+        uphill; logs find their own headings).
     start_time : str or None
         The log's start (ISO 8601, UTC) from the manifest; None to take it from the log's clock.
     origin : str
@@ -110,7 +111,7 @@ class FleetJob:
     vehicle_id: str
     log: str
     job: LogJob
-    headings: Headings = "uphill"
+    headings: Headings | None = None
     start_time: str | None = None
     origin: str = ""
     layout: str = "folders"
