@@ -40,6 +40,9 @@ NOT_PATHS = {
     "channel",
     "parent",
     "child",
+    "axes",  # a signed axis map (x,-y,z)
+    "gravity",  # a number with its unit (9.81, 1g)
+    "noise",  # a number with its unit (0.5mg)
 }
 # values for required options that are not paths
 REQUIRED_VALUES = {"interface": "virtual", "channel": "test-paths", "target": "roll=1"}

@@ -148,13 +148,16 @@ def calibrate_input(
     headings: Headings | None = None,
     declared: Declared = "auto",
     read: Callable[[LogJob], Samples] | None = None,
+    table_azimuth: bool = True,
 ) -> InputResult:
     """Calibrate whatever the job's paths are: a stop table fitted as it is, or a log
     (:func:`calibrate_job`), as :func:`mountcal.io.kind.input_kind` decides; the result's provenance
     says which kind it was taken for and why. ``unit`` and ``headings`` are a stop table's (a log
     finds its own; the job's axis map, heading unit and uphill azimuth apply to both); ``declared`` is
     what the user said the input is (``--input-kind``); ``read`` reads
-    a log's files (default :func:`~mountcal.io.logs.read_log`; the fleet reads splits itself).
+    a log's files (default :func:`~mountcal.io.logs.read_log`; the fleet reads splits itself);
+    ``table_azimuth``: a stop table's β come from its compass column ``heading_deg`` and the job's
+    uphill azimuth (off for a fleet, whose azimuth is for its logs' heading channels).
 
     What ``mountcal calibrate`` and every fleet worker do with an input.
     """
@@ -169,7 +172,7 @@ def calibrate_input(
                 headings=headings,
                 heading_unit=job.log.heading_unit,
                 axes=None if job.log.axes is None else parse_axes(job.log.axes, option("axes")),
-                uphill_azimuth_deg=job.uphill_azimuth_deg,
+                uphill_azimuth_deg=job.uphill_azimuth_deg if table_azimuth else None,
             )
         cal, done = calibrate(table, job.options), None
     else:

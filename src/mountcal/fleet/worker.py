@@ -153,7 +153,9 @@ def _read_splits(job: FleetJob, record: dict[str, Any]) -> Samples:
 def _calibrate(job: FleetJob, record: dict[str, Any]) -> dict[str, Any]:
     splits = record  # a log's split gaps are counted into the run's record as its files are read
     # what `mountcal calibrate` does with an input: a stop table fitted, or the log's stops, driving or both
-    result = calibrate_input(job.job, headings=job.headings, read=lambda _: _read_splits(job, splits))
+    result = calibrate_input(  # the fleet's --uphill-azimuth-deg is for its logs: a stop table keeps its β
+        job.job, headings=job.headings, read=lambda _: _read_splits(job, splits), table_azimuth=False
+    )
     record = calibration_record(result.calibration)
     ends = result.calibration.provenance.incomplete_inputs
     if any(is_cut(e) for e in ends):
