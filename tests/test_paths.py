@@ -40,7 +40,7 @@ NOT_PATHS = {
     "channel",
     "parent",
     "child",
-    "axes",
+    "axes",  # a signed axis map (x,-y,z)
 }
 # values for required options that are not paths
 REQUIRED_VALUES = {"interface": "virtual", "channel": "test-paths", "target": "roll=1"}

@@ -302,7 +302,10 @@ def document(raw: bytes, where: str, what: str, *, toml: bool = False, charged: 
         text = raw.decode("utf-8")
     except UnicodeDecodeError as err:
         raise InputError(
-            where, f"{what} in UTF-8", f"byte 0x{raw[err.start]:02x} at {err.start}", "Save it as UTF-8."
+            where,
+            f"{what} in UTF-8",
+            f"byte 0x{raw[err.start]:02x} at byte {err.start}, which is not UTF-8",
+            "Save it as UTF-8 (a comment in another encoding is the usual cause).",
         ) from err
     try:
         if toml:

@@ -8,6 +8,7 @@ from typing import Any
 
 from mountcal.cli.options import add_command, log_options, print_json, working
 from mountcal.cli.path_options import add_path
+from mountcal.cli.results import result_stream
 from mountcal.terminal import safe
 
 
@@ -36,11 +37,14 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print_json(asdict(info))
         return 0
-    print(safe(f"{info.source}: {info.format}, {info.duration_s:.1f} s"))
+    out = result_stream()
+    print(safe(f"{info.source}: {info.format}, {info.duration_s:.1f} s"), file=out)
     for st in info.streams:  # names come from the file: shown escaped (no terminal control, no bidi)
         fields = f"  [{', '.join(map(safe, st.fields))}]" if st.fields else ""
         fields += f"  DLC {','.join(map(str, st.dlcs))}" if st.dlcs else ""
-        print(f"  {safe(st.name):<32} {safe(st.kind):<28} {st.count:>9} msgs {st.rate_hz:>9.2f} Hz{fields}")
+        print(f"  {safe(st.name):<32} {safe(st.kind):<28} {st.count:>9} msgs {st.rate_hz:>9.2f} Hz{fields}", file=out)
     for note in info.notes:
-        print(f"  note: {safe(note)}")
+        print(f"  note: {safe(note)}", file=out)
+    for line in info.incomplete:
+        print(safe(f"  input file: {line}"), file=out)
     return 0
