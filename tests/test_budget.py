@@ -120,7 +120,9 @@ def _blf_of_empty_containers(path: Path, count: int) -> Path:
     raw = real.read_bytes()
     header = raw[: struct.unpack_from("<L", raw, 4)[0]]
     container = struct.pack("<4sHHLL", b"LOBJ", 16, 1, 32, 10) + struct.pack("<H6xL4x", 0, 0)
-    path.write_bytes(header + container * count)
+    body = header + container * count
+    size = struct.calcsize("<4sLBBBBBBBB")  # the file's size follows these fields, as a closed writer records it
+    path.write_bytes(body[:size] + struct.pack("<Q", len(body)) + body[size + 8 :])
     return path
 
 

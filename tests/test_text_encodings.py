@@ -27,7 +27,7 @@ def test_a_mapping_with_a_byte_that_is_not_utf8_is_refused_naming_it(
     args = ["calibrate", str(DATA / "parking.blf"), "--dbc", str(DATA / "imu_mm5_10.dbc"), "--mapping", str(mapping)]
     assert main(args) == 2
     err = capsys.readouterr().err
-    assert "byte 0x81" in err and "not UTF-8" in err and "Save the mapping as UTF-8" in err
+    assert "byte 0x81" in err and "not UTF-8" in err and "Save it as UTF-8" in err
 
 
 def test_a_dbc_with_a_byte_0x81_in_a_comment_is_read(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
