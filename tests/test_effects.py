@@ -151,6 +151,28 @@ def test_a_heading_pattern_is_not_taken_for_a_temperature_drift_that_follows_the
     assert refused >= RUNS - 1
 
 
+def _cooling(rng: np.random.Generator, n: int = 12) -> StopTable:
+    """The circle of stops in heading order while the sensor cools linearly by 15 °C, its bias drifting 0.5 mg/°C in
+    a random direction (no constant bias): a ramp of temperature, about 80 % of it a heading harmonic."""
+    return simulate_stops(
+        rot_vs=Rotation.from_euler("ZYX", [rng.uniform(-180, 180), *rng.uniform(-10, 10, 2)], degrees=True),
+        beta_deg=np.arange(n) * 360.0 / n,
+        temperature_c=np.linspace(40.0, 25.0, n),
+        temp_coeff_mps2_per_c=random_bias(0.5 * MG, rng),
+        temp_ref_c=30.0,
+        seed=rng,
+    )[0]
+
+
+@pytest.mark.parametrize("n", [8, 12])
+def test_a_linear_cooling_the_residual_names_is_taken_as_temperature(n: int) -> None:
+    # Issue 25: the loop declined it as a heading pattern in about one run in four (the guard had little power on a
+    # ramp), or excluded the hottest stop first, and the residual test named temperature after all.
+    rng = np.random.default_rng(40 if n == 12 else 33)  # seeds where the loop before missed 5 and 6 of 12
+    models = [calibrate(_cooling(rng, n)).model for _ in range(RUNS)]
+    assert sum("temperature" in m for m in models) >= RUNS - 1
+
+
 def test_the_result_carries_the_before_after_table() -> None:
     table, _ = simulate_preset("zhang2011", seed=4, bias_mps2=np.array([0.1, -0.15, 0.12]))
     doc = calibrate(table).to_dict()
