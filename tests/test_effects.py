@@ -16,6 +16,7 @@ from mountcal.conventions import G_N
 from mountcal.diagnose import leave_one_out, leave_one_out_refit
 from mountcal.effects import BASE, PROGRESS_STOPS, close_the_loop, with_surface
 from mountcal.estimate import full
+from mountcal.result import Calibration
 from mountcal.simulate.stops import random_bias, simulate_preset, simulate_stops
 from mountcal.stoptable import StopTable, write_stop_table
 
@@ -171,6 +172,29 @@ def test_a_linear_cooling_the_residual_names_is_taken_as_temperature(n: int) -> 
     rng = np.random.default_rng(40 if n == 12 else 33)  # seeds where the loop before missed 5 and 6 of 12
     models = [calibrate(_cooling(rng, n)).model for _ in range(RUNS)]
     assert sum("temperature" in m for m in models) >= RUNS - 1
+
+
+def test_three_stops_without_headings_at_different_places_give_a_result_with_the_reason_not_a_failed_fit(
+    tmp_path: Path,
+) -> None:
+    # Issue 25: `--headings none` on a 3-stop table (stops at different places) ended with exit 4 "no convergence
+    # in 500 iterations": the random road tilt per stop left the refit adrift. It is now declined with the reason.
+    rng = np.random.default_rng(23)
+    table, _ = simulate_stops(
+        rot_vs=Rotation.random(random_state=23),
+        slope_deg=rng.uniform(1, 4),
+        beta_deg=rng.uniform(0, 360, 3),
+        bias_mps2=rng.normal(0, 0.5, 3),
+        noise_g=0.0005,
+        seed=23,
+    )
+    path = tmp_path / "three.csv"
+    write_stop_table(replace(table, lat_deg=np.array([55.0, 55.01, 55.02]), lon_deg=np.full(3, 10.0)), path)
+    out = tmp_path / "cal.json"
+    assert main(["calibrate", str(path), "--headings", "none", "-o", str(out), "-q"]) == 0
+    cal = Calibration.load(out)
+    why = [d.why for d in cal.model_selection.declined if d.effect == "surface"]
+    assert why and "its fit failed" in why[0] and "free parameter" in why[0]
 
 
 def test_the_result_carries_the_before_after_table() -> None:

@@ -228,7 +228,11 @@ def _next_step(
     k = len(names) + 1  # the outlier test is one more candidate
     for name in names:
         if name == "surface":
-            option = _surface(cur, g, k)
+            try:
+                option = _surface(cur, g, k)
+            except FitFailed as err:  # a random road tilt that leaves the fit adrift is not taken
+                _decline(declined, name, f"its fit failed ({err}): {_why_adrift(cur)}", len(cur.excluded))
+                continue
             if option is not None:
                 options.append(option)
             continue
@@ -355,6 +359,16 @@ def _named_by_residual(
     return None
 
 
+def _why_adrift(cur: Step) -> str:
+    """Why a fit of these stops may wander without converging: the parameters the values leave nearly free."""
+    n, p = len(cur.table), len(cur.fit.names)
+    free = " (each stop's heading is a free parameter: the table gives none)" if cur.fit.state.beta_rad.size else ""
+    return (
+        f"{n} stops give {3 * n} values for the model's {p} parameters{free}, and with a random road tilt per stop "
+        "their horizontal readings weigh almost nothing, so some parameters are left nearly undetermined"
+    )
+
+
 def _covariate_or_outlier(outlier: Step, rivals: list[Step], cur: Step, declined: list[dict[str, Any]]) -> Step:
     """The outlier, or a significant term driven by a logged covariate that explains the stops better.
 
@@ -404,7 +418,10 @@ def _outlier(cur: Step, table: StopTable, g: float, k: int) -> tuple[float, Step
     keep[i] = False
     sub = cur.table.subset(keep)
     start = cur.fit.state if cur.fit.state.beta_rad.size == 0 else _without_beta(cur.fit.state, i)
-    f = full.fit(sub, cur.terms, g, start)
+    try:
+        f = full.fit(sub, cur.terms, g, start)
+    except FitFailed:  # the others alone cannot be fitted: they cannot judge it either
+        return None
     beta = "" if table.beta_rad is None else f", β = {np.degrees(table.beta_rad[original]) % 360:.0f}°"
     reason = (
         f"stop {original + 1}{beta} is not predicted by the others: held-out miss {press[i] * 1e3:.3g} mm/s², "

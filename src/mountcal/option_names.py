@@ -21,6 +21,7 @@ OPTIONS: dict[str, tuple[str, str]] = {
     "field": ("LogOptions.field", "--field"),
     "figures": ("image_format", "--figures"),
     "format": ("fmt", "--format"),
+    "headings": ("headings", "--headings"),
     "level_only": ("level_only", "--level-only"),
     "mapping": ("LogOptions.mapping", "--mapping"),
     "max_acc_std": ("StopDetection.max_acc_std_mps2", "--max-acc-std"),
