@@ -27,7 +27,7 @@ from mountcal.option_names import option
 from mountcal.paths import special_kind
 from mountcal.result import Calibration, Provenance
 from mountcal.samples import Samples
-from mountcal.stops import StopDetection, StopTableFromLog, read_protocol, tabulate
+from mountcal.stops import StopDetection, StopTableFromLog, near_miss_advice, read_protocol, tabulate
 from mountcal.stoptable import StopTable
 from mountcal.version import software_version
 
@@ -139,9 +139,11 @@ def calibrate_job(job: LogJob) -> LogResult:
             table = replace(found.table, source=source)
             static = calibrate(table, job.options)
         except NotEnoughInformation as err:
+            missed = near_miss_advice(found.near_misses) if found is not None else ""
+            refusal = NotEnoughInformation(str(err) + missed) if missed else err  # the stops a driver made, dropped
             if job.use == "stops":
-                raise
-            skipped["stops"] = str(err)
+                raise refusal from err
+            skipped["stops"] = str(refusal)
     fit = None
     if job.use in ("auto", "driving"):
         try:

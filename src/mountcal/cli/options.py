@@ -135,6 +135,11 @@ def add_log_options(
         default=None,
         help="compass azimuth of the slope's uphill direction, with a heading signal in the log",
     )
+    add_detection_options(p)
+
+
+def add_detection_options(p: argparse.ArgumentParser) -> None:
+    """The thresholds of stop detection (unset: the library's defaults, some set from the log)."""
     d = p.add_argument_group("stop detection (default: mountcal.stops.StopDetection, some from the log)")
     for flag, text in _DETECTION.values():
         d.add_argument(flag, type=float, default=None, help=text)
