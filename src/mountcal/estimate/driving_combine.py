@@ -16,6 +16,7 @@ from scipy.spatial.transform import Rotation
 
 from mountcal.conventions import angles_from_rot_vs
 from mountcal.estimate.driving import AGREE_Z, DISAGREE_Z, DrivingFit, euler_sigma
+from mountcal.estimate.driving_checks import YAW_TESTS
 from mountcal.estimate.driving_intervals import tilt_rotation
 from mountcal.result import Calibration, Finding, FitQuality, ModelSelection, Provenance
 
@@ -65,6 +66,8 @@ def driving_calibration(
         model_selection=ModelSelection(mode="driving", chosen=("rotation",)),
         provenance=provenance,
         notes=tuple(notes),
+        unexplained=fit.findings,
+        confident=not fit.findings,
     )
 
 
@@ -199,6 +202,7 @@ def combine(static: Calibration, fit: DrivingFit) -> Calibration:
     combination.update(yaw_deg=yaw_e, yaw_sigma_about_vehicle_z_deg=s_z)
     if fit.tilt_check is not None:
         combination["tilt_check"] = fit.tilt_check
+    doubts = tuple(f for f in fit.findings if f.test in YAW_TESTS)  # what the drive's own tests say of its yaw
     return replace(
         static,
         rot_vs=rot_vs,
@@ -210,4 +214,6 @@ def combine(static: Calibration, fit: DrivingFit) -> Calibration:
         rotation_sigma_deg=(static.rotation_sigma_deg[0], static.rotation_sigma_deg[1], s_z),
         fit=replace(static.fit, calibrated_from="stops + driving", driving=fit.to_dict(), combination=combination),
         notes=tuple(notes),
+        unexplained=(*static.unexplained, *doubts),
+        confident=static.confident and not doubts,
     )
