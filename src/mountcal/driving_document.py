@@ -106,7 +106,7 @@ class DrivingEffect:
 @dataclass(frozen=True)
 class ModelError:
     """The model-error terms added in quadrature to the σ (deg): half the largest disagreement a finding shows, and
-    for yaw at least half of what the cues' difference holds beyond its noise when their test is suggestive."""
+    for yaw at least half of what the cues' difference holds beyond its noise, √max(0, Δ² − σ_Δ²) / 2."""
 
     yaw_about_vehicle_z_deg: float
     about_vehicle_x_deg: float

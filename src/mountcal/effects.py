@@ -167,7 +167,7 @@ def close_the_loop(
         )
         step = _next_step(steps[-1], table, g_mps2, gravity_known, alpha, declined)
         if step is None:
-            step = _named_by_residual(steps[-1], len(table), g_mps2, gravity_known, alpha, declined)
+            step, analysed = _named_by_residual(steps[-1], len(table), g_mps2, gravity_known, alpha, declined)
         took = time.perf_counter() - t0
         log.log(
             level,
@@ -177,14 +177,15 @@ def close_the_loop(
             took,
         )
         if step is None:
-            break
+            return _finish(steps, declined, analysed)
         steps.append(step)
     return _finish(steps, declined)
 
 
-def _finish(steps: list[Step], declined: list[dict[str, Any]]) -> Loop:
+def _finish(steps: list[Step], declined: list[dict[str, Any]], findings: list[Finding] | None = None) -> Loop:
+    """The loop's result; ``findings``: the final model's residual analysis, when already made."""
     last, n_rows = steps[-1], len(steps[0].table)
-    findings = analyse(last.table, last.fit, _rows(last, n_rows))
+    findings = findings if findings is not None else analyse(last.table, last.fit, _rows(last, n_rows))
     doubts = [d for i in range(1, len(steps)) if (d := _step_or_covariate(steps[i - 1], steps[i], n_rows))]
     return Loop(steps, declined, findings, doubts)
 
@@ -302,23 +303,30 @@ def _next_step(
 
 def _named_by_residual(
     cur: Step, n_rows: int, g: float, gravity_known: bool, alpha: float, declined: list[dict[str, Any]]
-) -> Step | None:
+) -> tuple[Step | None, list[Finding] | None]:
     """The term the final residual names, when the loop declined it: tried against what it competes with.
 
     A residual test that carries an effect's name (``temperature``) and that the family's test rejects says
-    the model lacks that effect — yet the loop may have declined it: as a heading pattern (the guard of
-    :func:`_heading_alias` has little power when a temperature that follows time only partly follows the
-    headings), or because the candidates' Bonferroni cost hid it. The term is then fitted and compared, by
-    Akaike's criterion on the same residual, with the structures it competes with — a heading pattern, a bias
-    step at one stop, a slow drift (:func:`mountcal.diagnose.competing_explanations`). It is taken when it
-    explains the stops better for its number of parameters than each of them, and its likelihood ratio
-    passes at ``alpha``; otherwise the finding stays, with the better explanation in the reason.
+    the model lacks that effect — yet the loop may have declined it, because the candidates' Bonferroni cost hid
+    it, or because it excluded a stop the covariate explains. The term is then fitted and compared, by Akaike's
+    criterion on the same residual, with the structures that follow time as it does — a bias step at one stop, a
+    slow drift (:func:`mountcal.diagnose.competing_explanations`). It is taken when it explains the stops better
+    for its number of parameters than each of them and its likelihood ratio passes at ``alpha``; otherwise the
+    finding stays, with the better explanation in the reason. A covariate that itself follows the headings
+    (:func:`heading_share`) is left to the guard of :func:`_heading_alias`: no stop data can tell it from a
+    heading pattern.
     """
-    named = {f.test for f in unexplained(analyse(cur.table, cur.fit, _rows(cur, n_rows)))}
-    for name in sorted(named & set(registry.registered()) - set(cur.terms)):
+    covariates = sorted(
+        name
+        for name, effect in registry.registered().items()
+        if name not in cur.terms and _covariate(name) and effect.candidate(cur.table, gravity_known)
+    )
+    if not covariates:  # no logged covariate a residual test could name: nothing to analyse for
+        return None, None
+    findings = analyse(cur.table, cur.fit, _rows(cur, n_rows))
+    named = {f.test for f in unexplained(findings)}
+    for name in (c for c in covariates if c in named):
         effect = registry.get(name)
-        if not effect.candidate(cur.table, gravity_known):
-            continue
         terms = (*cur.terms, *(r for r in effect.requires if r not in cur.terms), name)
         added = sum(registry.get(t).extra(cur.table) for t in terms if t not in cur.terms)
         if _inseparable(cur, terms, g) is not None or cur.fit.dof - added < 1:
@@ -355,8 +363,8 @@ def _named_by_residual(
             f"named by the residual test; {test}, p = {np.exp(logp):.3g}; it explains the stops better for its size "
             f"than what it competes with (Akaike {2 * k - gain:.1f} against {versus or 'nothing testable'})"
         )
-        return Step(name, reason, terms, cur.excluded, cur.table, f, _loo_rms(cur))
-    return None
+        return Step(name, reason, terms, cur.excluded, cur.table, f, _loo_rms(cur)), None
+    return None, findings
 
 
 def _why_adrift(cur: Step) -> str:

@@ -18,6 +18,7 @@ from typing import Any, Literal
 import numpy as np
 
 from mountcal.calibrate import Options, calibrate, local_gravity
+from mountcal.driving_document import Comparison, DrivingConsistency
 from mountcal.errors import InputError, NotEnoughInformation
 from mountcal.estimate.driving import DrivingFit, DrivingOptions, estimate_driving
 from mountcal.estimate.driving_combine import combine, driving_calibration, not_combined
@@ -294,9 +295,26 @@ def describe(result: LogResult | tuple[Samples, StopTableFromLog], n_files: int)
             f"speed clock offset {offset} ({'found' if d.time_offset_searched else 'given'}); "
             f"straightness from the {d.straightness_source}"
         )
+        if d.consistency is not None:
+            lines.append(_driving_tests(d.consistency))
     lines.append(f"calibrated from: {done.used}")
     lines += [f"not used: {k} — {v}" for k, v in done.skipped.items()]
     return lines
+
+
+def _driving_tests(c: DrivingConsistency) -> str:
+    """One line of the drive's residual tests: the split-half z-scores, the cues, what the family found."""
+
+    def z(x: Comparison) -> str:
+        return "—" if x.z is None else f"{x.z:+.1f}"
+
+    cue = c.cues.comparison
+    cues = "no test" if cue.difference is None else f"{cue.difference:+.2f}° apart (z {z(cue)})"
+    return (
+        f"driving tests: halves z yaw {z(c.halves.yaw)}, roll {z(c.halves.roll_about_vehicle_x)}, pitch "
+        f"{z(c.halves.pitch_about_vehicle_y)}, clock {z(c.halves.clock_offset)}; longitudinal and lateral cues {cues}; "
+        f"findings: {', '.join(c.findings) or 'none'}"
+    )
 
 
 def _tabulate(samples: Samples, job: LogJob) -> StopTableFromLog:

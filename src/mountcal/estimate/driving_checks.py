@@ -30,9 +30,9 @@ intervals the blocks do not); a test needs ``MIN_BLOCKS`` blocks per side. The f
 Holm's procedure at :data:`FAMILY_ALPHA`; what it rejects is a finding: the result is not confident, and the
 σ of what the finding concerns is widened by a model-error term — half the disagreement (both estimates then
 lie within 1σ of their mean) — stated in the result. The reported yaw rests on the longitudinal cue, the one
-that defines the vehicle's x axis; when the cues' own test is suggestive (p < ``SUGGESTIVE_P``), half of what
-their difference holds beyond its noise widens yaw's σ as well (a horizontal cross-axis error moves each cue
-by half their difference, in opposite directions).
+that defines the vehicle's x axis; half of what the cues' difference holds beyond its noise widens yaw's σ
+whether or not their test is significant (a horizontal cross-axis error moves each cue by half their
+difference, in opposite directions, and the lateral cue is too noisy to see every such error).
 
 **Effects of the body and the road**, each taken only when the data choose it, with the value before and after:
 
@@ -87,7 +87,6 @@ if TYPE_CHECKING:
     from mountcal.estimate.driving import DrivingOptions
 
 FAMILY_ALPHA = 0.01  # all tests together flag a drive the model explains with at most this probability
-SUGGESTIVE_P = 0.05  # the cues' own test below this: what their difference holds beyond noise widens yaw's σ
 MIN_BLOCKS = 5  # blocks of units per side of a comparison: fewer give no σ worth a test
 MAX_BLOCKS = 20
 MIN_UNIT = 3  # intervals
@@ -397,14 +396,15 @@ def _excess(difference: float, sigma: float) -> float:
 
 
 def _model_error(findings: tuple[Finding, ...], comparisons: list[Comparison], parts: Parts, cues: Cues) -> ModelError:
-    """Half the largest disagreement each finding shows, per what it concerns; for yaw at least half the cues'
-    difference beyond its noise when their test is suggestive."""
+    """Half the largest disagreement each finding shows, per what it concerns; for yaw at least half of what the cues'
+    difference holds beyond its noise, finding or not (a moment estimate of a cue's bias, as of the spread between
+    studies: a horizontal cross-axis error moves each cue by half their difference, in opposite directions)."""
     size = {c.test: abs(c.difference or 0.0) / 2.0 for c in comparisons}
     size["driving_parts"] = (parts.spread_deg or 0.0) / 2.0
     named = {f.test for f in findings}
     yaw = max((size[t] for t in named & set(YAW_TESTS)), default=0.0)
     cue = cues.comparison
-    if cue.p_value is not None and cue.p_value < SUGGESTIVE_P and cue.z and cue.difference is not None:
+    if cue.z and cue.difference is not None:
         yaw = max(yaw, _excess(cue.difference, abs(cue.difference / cue.z)) / 2.0)
     return ModelError(
         yaw,

@@ -32,10 +32,17 @@ def driving_calibration(
     and cross slope), yaw from the speed changes; slope and bias are not applicable (no stops) and
     the result says so. The full driving fit is in ``fit["driving"]``.
     """
+    grade = None if fit.consistency is None else fit.consistency.effect("grade")
+    road = (
+        f"the route's mean grade is {grade.value:+.2f}° ± {grade.sigma:.2f}° (from the altitude, taken out) and its "
+        f"cross slope 0 ± {fit.options.road_cross_slope_sigma_deg:g}°"
+        if grade is not None and grade.chosen and grade.value is not None and grade.sigma is not None
+        else f"the route's mean grade and cross slope are 0 ± {fit.options.road_grade_sigma_deg:g}° and 0 ± "
+        f"{fit.options.road_cross_slope_sigma_deg:g}°"
+    )
     notes = [
-        "from driving only: no parked stops; roll and pitch are the mean gravity direction while driving, "
-        "whose σ assume the route's mean grade and cross slope are 0 ± "
-        f"{fit.options.road_grade_sigma_deg:g}° and 0 ± {fit.options.road_cross_slope_sigma_deg:g}°",
+        f"from driving only: no parked stops; roll and pitch are the mean gravity direction while driving, whose σ "
+        f"assume {road}",
         "an accelerometer bias b tilts the mean gravity by b/g (20 mg → 1.1°) and cannot be told from a tilt "
         "while driving; parked stops on a slope can (docs/conventions.md §4)",
         "slope: not applicable (no parked stops)",
