@@ -89,7 +89,7 @@ def test_a_horizontal_cross_axis_error_turns_the_cues_apart_and_sigma_covers_yaw
     assert c.model_error.yaw_about_vehicle_z_deg == pytest.approx(0.5 * abs(c.cues.comparison.difference), rel=0.05)
     cal = calibration(fit)
     assert not cal.confident and any(f.test == "driving_cues" for f in cal.unexplained)
-    assert any("cross-axis" in n for n in cal.notes) and any("widened" in n for n in cal.notes)
+    assert any("cross-axis" in n for n in cal.notes) and any("model-error term" in n for n in cal.notes)
 
 
 def test_a_remount_halfway_is_found_and_sigma_covers_both_mountings() -> None:

@@ -106,11 +106,13 @@ class DrivingEffect:
 @dataclass(frozen=True)
 class ModelError:
     """The model-error terms added in quadrature to the σ (deg): half the largest disagreement a finding shows, and
-    for yaw at least half of what the cues' difference holds beyond its noise, √max(0, Δ² − σ_Δ²) / 2."""
+    for yaw at least what the horizontal axes' scale and cross-axis errors may leave, given the cues."""
 
     yaw_about_vehicle_z_deg: float
     about_vehicle_x_deg: float
     about_vehicle_y_deg: float
+    horizontal_axes_deg: float  # the horizontal axes' share of yaw, narrowed by the cues (1σ)
+    horizontal_axes_prior_deg: float  # … before the cues narrowed it: the sensor class's limits
 
 
 @dataclass(frozen=True)

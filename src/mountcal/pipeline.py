@@ -20,7 +20,7 @@ import numpy as np
 from mountcal.calibrate import Options, calibrate, local_gravity
 from mountcal.driving_document import Comparison, DrivingConsistency
 from mountcal.errors import InputError, NotEnoughInformation
-from mountcal.estimate.driving import DrivingFit, DrivingOptions, estimate_driving
+from mountcal.estimate.driving import DrivingFit, DrivingOptions, estimate_driving, horizontal_axes_sigma_deg
 from mountcal.estimate.driving_combine import combine, driving_calibration, not_combined
 from mountcal.io.logs import LogOptions, read_log
 from mountcal.io.timestamps import increasing_times
@@ -148,7 +148,7 @@ def calibrate_job(job: LogJob) -> LogResult:
     fit = None
     if job.use in ("auto", "driving"):
         try:
-            fit = estimate_driving(increasing_times(samples), job.driving, tilt_from=static)  # duplicate stamps merged
+            fit = estimate_driving(increasing_times(samples), _driving_options(job), tilt_from=static)  # stamps merged
         except NotEnoughInformation as err:
             if job.use == "driving":
                 raise
@@ -210,7 +210,7 @@ def stops_with_drive(
     found = next((u for u in cal.unexplained if u.test == "stops_vs_driving"), None)
     if found is None or _up_is_up(static, table):
         return cal
-    alone = estimate_driving(samples, job.driving)  # levelled by its own mean gravity: +g up by construction
+    alone = estimate_driving(samples, _driving_options(job))  # levelled by its own mean gravity: +g up by construction
     cal = not_combined(_driving_alone(alone, samples, job), fit, found)
     return replace(
         cal,
@@ -300,6 +300,15 @@ def describe(result: LogResult | tuple[Samples, StopTableFromLog], n_files: int)
     lines.append(f"calibrated from: {done.used}")
     lines += [f"not used: {k} — {v}" for k, v in done.skipped.items()]
     return lines
+
+
+def _driving_options(job: LogJob) -> DrivingOptions:
+    """The job's driving options, the sensor's horizontal axes from its spec (the default class without one)."""
+    opts = job.driving or DrivingOptions()
+    spec = job.options.spec
+    if spec.is_default:
+        return opts
+    return replace(opts, horizontal_axes_sigma_deg=horizontal_axes_sigma_deg(spec.scale, spec.cross_axis))
 
 
 def _driving_tests(c: DrivingConsistency) -> str:

@@ -71,6 +71,19 @@ AGREE_Z = 2.0  # |z| above this: the two estimates disagree beyond their uncerta
 DISAGREE_Z = 3.0  # |z| above this (tilt or yaw): a finding; the stops and the drive are not combined
 
 
+def horizontal_axes_sigma_deg(scale: float, cross_axis: float) -> float:
+    """The 1σ turn of the longitudinal cue by the horizontal axes' scale and cross-axis errors within ± limits.
+
+    A symmetric distortion of the horizontal axes turns a direction ψ by ``(s_y − s_x)/2·sin 2ψ + c·cos 2ψ``
+    (and the perpendicular one by the opposite); with the limits read as rectangular distributions and ψ
+    anywhere, its variance is ``(scale²/6 + cross_axis²/3)/2``.
+    """
+    return float(np.degrees(np.sqrt((scale**2 / 6.0 + cross_axis**2 / 3.0) / 2.0)))
+
+
+HORIZONTAL_AXES_SIGMA_DEG = horizontal_axes_sigma_deg(0.03, 0.02)  # the default sensor class (mountcal.sensor_spec)
+
+
 @dataclass(frozen=True)
 class DrivingOptions:
     """Gates and settings of the driving estimator (defaults suit cars; units in the names)."""
@@ -90,6 +103,9 @@ class DrivingOptions:
     road_grade_sigma_deg: float = 0.5
     road_cross_slope_sigma_deg: float = 1.5
     max_yaw_sigma_deg: float = 5.0
+    # How far the accelerometer's horizontal scale and cross-axis errors may turn the longitudinal cue (1σ, before the
+    # cues narrow it): the default sensor class's ±3 % and ±2 % (mountcal.sensor_spec), see horizontal_axes_sigma_deg.
+    horizontal_axes_sigma_deg: float = HORIZONTAL_AXES_SIGMA_DEG
 
 
 @dataclass(frozen=True)
@@ -497,12 +513,19 @@ def _result(
             "not Euler angles; the rotation about the vehicle z axis is what the drive measures"
         )
     notes += found.notes
-    if sigma_z > 1.1 * sigma_stat and yaw_reason is None:
+    if yaw_reason is None and model_error.yaw_about_vehicle_z_deg > 0:
+        found_part = model_error.yaw_about_vehicle_z_deg > model_error.horizontal_axes_deg
         notes.append(
-            f"yaw rests on the longitudinal cue (speed changes on straight road); its σ about the vehicle z axis is "
-            f"widened from {sigma_stat:.3g}° to {sigma_z:.3g}° by a model-error term of "
-            f"{model_error.yaw_about_vehicle_z_deg:.3g}° (half the disagreement of the cues beyond their noise, or "
-            "of what a finding shows)"
+            f"yaw rests on the longitudinal cue (speed changes on straight road); its σ about the vehicle z axis, "
+            f"{sigma_z:.3g}°, holds {sigma_stat:.3g}° of noise and "
+            + (
+                f"a model-error term of {model_error.yaw_about_vehicle_z_deg:.3g}° (half the disagreement a finding "
+                "shows)"
+                if found_part
+                else f"{model_error.horizontal_axes_deg:.3g}° for what the accelerometer's horizontal scale and "
+                f"cross-axis errors may leave (±{model_error.horizontal_axes_prior_deg:.2g}° for the sensor class, "
+                "narrowed by the turns' cue; a sensor spec, --sensor-spec, narrows it)"
+            )
         )
     return DrivingFit(
         rot_vs=rot_vs,

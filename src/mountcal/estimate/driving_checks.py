@@ -30,9 +30,10 @@ intervals the blocks do not); a test needs ``MIN_BLOCKS`` blocks per side. The f
 Holm's procedure at :data:`FAMILY_ALPHA`; what it rejects is a finding: the result is not confident, and the
 σ of what the finding concerns is widened by a model-error term — half the disagreement (both estimates then
 lie within 1σ of their mean) — stated in the result. The reported yaw rests on the longitudinal cue, the one
-that defines the vehicle's x axis; half of what the cues' difference holds beyond its noise widens yaw's σ
-whether or not their test is significant (a horizontal cross-axis error moves each cue by half their
-difference, in opposite directions, and the lateral cue is too noisy to see every such error).
+that defines the vehicle's x axis. Its σ also holds what the accelerometer's horizontal scale and cross-axis
+errors may leave (the sensor class's limits, ±3 % and ±2 % by default, as for the stops' systematic part),
+narrowed by the cues: such an error turns the two cues by half their difference each, in opposite directions,
+so the lateral cue measures it when the drive turns enough (:func:`_axes`).
 
 **Effects of the body and the road**, each taken only when the data choose it, with the value before and after:
 
@@ -340,7 +341,7 @@ def run(inp: Inputs) -> Checks:
     comparisons += [accelerating_braking, cues.comparison, left_right]
     tests = [_finding(x) for x in comparisons[:4]] + [_parts_finding(parts)] + [_finding(x) for x in comparisons[4:]]
     findings = tuple(unexplained(tests, FAMILY_ALPHA))
-    model_error = _model_error(findings, comparisons, parts, cues)
+    model_error = _model_error(findings, comparisons, parts, cues, inp.opts.horizontal_axes_sigma_deg)
     notes = [_note(f) for f in findings]
     if scale.noted:
         notes.append(
@@ -390,27 +391,40 @@ def _note(f: Finding) -> str:
     )
 
 
-def _excess(difference: float, sigma: float) -> float:
-    """What a difference holds beyond its noise: √max(0, Δ² − σ²)."""
-    return float(np.sqrt(max(difference * difference - sigma * sigma, 0.0)))
-
-
-def _model_error(findings: tuple[Finding, ...], comparisons: list[Comparison], parts: Parts, cues: Cues) -> ModelError:
-    """Half the largest disagreement each finding shows, per what it concerns; for yaw at least half of what the cues'
-    difference holds beyond its noise, finding or not (a moment estimate of a cue's bias, as of the spread between
-    studies: a horizontal cross-axis error moves each cue by half their difference, in opposite directions)."""
+def _model_error(
+    findings: tuple[Finding, ...], comparisons: list[Comparison], parts: Parts, cues: Cues, prior_deg: float
+) -> ModelError:
+    """Half the largest disagreement each finding shows, per what it concerns; for yaw at least what the horizontal
+    axes' scale and cross-axis errors may leave, given the cues (:func:`_axes`)."""
     size = {c.test: abs(c.difference or 0.0) / 2.0 for c in comparisons}
     size["driving_parts"] = (parts.spread_deg or 0.0) / 2.0
     named = {f.test for f in findings}
     yaw = max((size[t] for t in named & set(YAW_TESTS)), default=0.0)
-    cue = cues.comparison
-    if cue.z and cue.difference is not None:
-        yaw = max(yaw, _excess(cue.difference, abs(cue.difference / cue.z)) / 2.0)
+    axes = _axes(cues.comparison, prior_deg)
     return ModelError(
-        yaw,
+        max(yaw, axes),
         size["driving_halves_roll"] if "driving_halves_roll" in named else 0.0,
         size["driving_halves_pitch"] if "driving_halves_pitch" in named else 0.0,
+        axes,
+        prior_deg,
     )
+
+
+def _axes(cue: Comparison, prior_deg: float) -> float:
+    """What the horizontal axes' scale and cross-axis errors may leave in yaw, given the cues (deg, 1σ).
+
+    Such an error turns each cue by ε, in opposite directions: the cues' difference Δ measures 2ε with the noise
+    σ_Δ. With the sensor class's ε ~ N(0, prior²), ε given Δ has mean ``m = (Δ/2)·p/(p + s)`` and variance
+    ``v = p·s/(p + s)`` (p = prior², s = (σ_Δ/2)²); yaw rests on the longitudinal cue uncorrected, so its error
+    from this source has the second moment ``m² + v``. An uninformative lateral cue (few turns) leaves the prior, an
+    informative one what it shows.
+    """
+    p = prior_deg**2
+    if cue.difference is None or not cue.z or p == 0:
+        return prior_deg
+    s = (cue.difference / cue.z / 2.0) ** 2
+    m = cue.difference / 2.0 * p / (p + s)
+    return float(np.sqrt(m * m + p * s / (p + s)))
 
 
 def _halves(sums: Sums) -> np.ndarray:
