@@ -598,7 +598,7 @@ def tabulate(
         raise NotEnoughInformation(
             f"{where}: no parked period found (no still run ≥ {(cfg or StopDetection()).min_duration_s:g} s)."
             + (near_miss_advice(search.near_misses) or f" Check that the log holds parked periods, or {relax()}.")
-            + f" Used: {'; '.join(search.thresholds.lines())}."
+            + f" Used: {'; '.join(search.thresholds.lines() + [f'{k}: {v}' for k, v in search.counts.items()])}."
         )
     heading = np.array([s.channels.get("heading_deg", np.nan) for s in stops])
     if np.all(np.isfinite(heading)):
