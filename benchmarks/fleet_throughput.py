@@ -1,4 +1,5 @@
-"""Throughput of ``mountcal fleet``: 200 simulated logs in mixed formats, 1 and 2 local workers, Dask.
+"""Throughput of ``mountcal fleet``: 200 simulated logs in mixed formats, 1 → 2 workers on the local
+engine and on a Dask LocalCluster side by side, and the cost model of docs/performance-fleet.md.
 
 The fleet: 20 vehicles × 10 parking sessions of 5.5 minutes each (12 headings 30° apart, 20 s
 stops, 200 Hz IMU, 65 600 samples), written by real writers in turn as a CSV sample table, a
@@ -11,22 +12,28 @@ start-up, the calibrations and the consolidation are all inside:
 
 1. ``--workers 1``;
 2. ``--workers 2``;
-3. ``--scheduler`` to a Dask ``LocalCluster(n_workers=2, threads_per_worker=1, processes=True)``
-   started just before the run and closed after it (its start-up is reported separately: it is the
-   cluster owner's cost). No cluster exists during the local runs: an idle one's heartbeats would
-   load them.
+3. ``--scheduler`` to a Dask ``LocalCluster(n_workers=1, threads_per_worker=1, processes=True)``;
+4. the same with ``n_workers=2``.
 
-The runs of a repetition are interleaved, so a slow moment of the machine hits all alike; the
-best and the median over ``--runs`` are reported (the best is the least disturbed by other loads).
-The three configurations of a run must write identical tables (``elapsed_s`` aside), and ``v07``
-must be the only vehicle flagged as remounted.
+Each cluster is started just before its run and closed after it (its start-up is reported
+separately: it is the cluster owner's cost); no cluster exists during the local runs (an idle one's
+heartbeats would load them). The four runs of a repetition are back to back, so a slow moment of the
+machine hits all alike; the speed-up 1 → 2 workers of each engine is given best over best, median
+over median, and paired within repetitions. The four configurations must write identical tables
+(``elapsed_s`` aside) and ``v07`` must be the only vehicle flagged as remounted.
 
-Then the engines alone, in this process: workers started and warm, logs hashed, the time from
-submitting the 200 jobs to the last result (the steady-state throughput a long fleet sees).
+Then the engines alone (workers started and warm, logs hashed: submitting the 200 jobs to the last
+result), and the **cost model** ``T(W) = a + s·N + (Σ_i (c_log + c_byte·bytes_i) + n_tasks·c_task) / W``:
+a fixed part ``a`` and a serial part per log ``s`` of the command (start, hashing, storing,
+consolidation) from two resumed runs (everything stored) on the whole fleet and on half of it; the
+work per log and per byte from a least-squares fit of each log's calibration time (one worker) on
+its size; the engines' overhead per task from no-op tasks. Its predictions of the four runs are
+printed beside the measured medians, with its prediction for 10 000 vehicles × 100 sessions on a
+32-worker cluster.
 
 Run from the repository root::
 
-    .venv/bin/python benchmarks/fleet_throughput.py --runs 5
+    .venv/bin/python benchmarks/fleet_throughput.py --runs 5 --workdir /tmp/fleet-bench
 
 ``--workdir DIR`` keeps the generated fleet (it is reused when its parameters match).
 """
@@ -134,19 +141,19 @@ def run_cli(logs: Path, output: Path, extra: list[str]) -> float:
 
 
 ENGINE_RUNS = 3
+TASK_PROBES = 200
 
 
 def report(title: str, times: dict[str, list[float]], n_logs: int, busy: dict[str, list[float]] | None = None) -> None:
-    """Per configuration: best and median wall time with their speed-ups over one worker, and the
-    paired speed-up (the median over repetitions of one worker's time over this configuration's
-    time in the same repetition: the runs of a repetition are back to back, so a slow spell of the
-    machine hits both sides of each ratio alike)."""
+    """Per configuration: best and median wall time, and the speed-up over the same engine's one
+    worker best over best, median over median, and paired (the median over repetitions of the
+    one-worker time over this time in the same repetition)."""
     print(f"{title}:")
     head = f"  {'configuration':<30} {'best s':>7} {'logs/s':>7} {'speed-up':>8} {'median s':>9} {'speed-up':>8}"
     print(head + f" {'paired':>7}" + (f" {'busy s':>7}" if busy else ""), "  runs (s)")
-    one = times["local, 1 worker"]
-    best0, median0 = min(one), statistics.median(one)
     for name, values in times.items():
+        one = times[name.replace("2 workers", "1 worker")]
+        best0, median0 = min(one), statistics.median(one)
         best, median = min(values), statistics.median(values)
         paired = statistics.median(a / b for a, b in zip(one, values, strict=True))
         line = f"  {name:<30} {best:>7.1f} {n_logs / best:>7.2f} {best0 / best:>7.2f}×"
@@ -154,6 +161,10 @@ def report(title: str, times: dict[str, list[float]], n_logs: int, busy: dict[st
         if busy:
             line += f" {statistics.median(busy[name]):>7.1f}"
         print(line, "  " + ", ".join(f"{v:.1f}" for v in values))
+
+
+def workers_of(name: str) -> int:
+    return 2 if "2 workers" in name else 1
 
 
 def engine_only(logs: Path, name: str, address: str | None) -> list[float]:
@@ -164,7 +175,7 @@ def engine_only(logs: Path, name: str, address: str | None) -> list[float]:
     jobs = collect_jobs([logs], JobDefaults(uphill_azimuth_deg=UPHILL_AZIMUTH_DEG))
     todo = {job_hash(j): j for j in jobs}
     warm = dict(list(todo.items())[:4])
-    engine = DaskEngine(address) if address else LocalEngine(1 if "1 worker" in name else 2)
+    engine = DaskEngine(address) if address else LocalEngine(workers_of(name))
     times = []
     with engine:
         for _ in engine.results(warm.items()):
@@ -178,15 +189,109 @@ def engine_only(logs: Path, name: str, address: str | None) -> list[float]:
 
 
 @contextlib.contextmanager
-def dask_cluster(startup_s: list[float]) -> Iterator[str]:
-    """A fresh LocalCluster (2 single-threaded worker processes) for the Dask runs only, so that its
-    idle heartbeats never load the local runs; its start-up time is appended to ``startup_s``."""
+def dask_cluster(startup_s: list[float], workers: int) -> Iterator[str]:
+    """A fresh LocalCluster (single-threaded worker processes) for one configuration's runs only;
+    its start-up time is appended to ``startup_s``."""
     from distributed import LocalCluster
 
     started = time.perf_counter()
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
         startup_s.append(time.perf_counter() - started)
         yield cluster.scheduler_address
+
+
+def cluster_for(name: str, startup_s: list[float]) -> contextlib.AbstractContextManager[str | None]:
+    if name.startswith("Dask"):
+        return dask_cluster(startup_s, workers_of(name))
+    return contextlib.nullcontext()
+
+
+def _noop(x: int) -> int:
+    return x
+
+
+def task_overhead() -> dict[str, float]:
+    """Seconds per no-op task, all submitted at once: the local pool, and a one-worker Dask cluster."""
+    from distributed import Client
+
+    from mountcal.fleet.engines import worker_context
+
+    out = {}
+    with ProcessPoolExecutor(1, mp_context=worker_context()) as pool:
+        pool.submit(_noop, 0).result()
+        started = time.perf_counter()
+        for f in [pool.submit(_noop, i) for i in range(TASK_PROBES)]:
+            f.result()
+        out["local"] = (time.perf_counter() - started) / TASK_PROBES
+    with dask_cluster([], 1) as address, Client(address) as client:
+        client.submit(_noop, -1).result()
+        started = time.perf_counter()
+        client.gather([client.submit(_noop, i, pure=False) for i in range(TASK_PROBES)])
+        out["dask"] = (time.perf_counter() - started) / TASK_PROBES
+    return out
+
+
+def resumed_run(inputs: list[Path], output: Path, engine: tuple[str, ...] = ("--workers", "1")) -> float:
+    """Wall time of a `mountcal fleet` run that finds every log already stored: the serial part."""
+    command = [sys.executable, "-m", "mountcal", "fleet", *map(str, inputs), "-o", str(output), "-q", *engine]
+    command += ["--uphill-azimuth-deg", str(UPHILL_AZIMUTH_DEG)]
+    started = time.perf_counter()
+    subprocess.run(command, check=True, stdout=subprocess.DEVNULL)
+    return time.perf_counter() - started
+
+
+def cost_model(logs: Path, output: Path, times: dict[str, list[float]], overhead: dict[str, float]) -> None:
+    """Fit the model's constants, print its predictions beside the measured medians, and extrapolate."""
+    from mountcal.fleet.engines import BATCH_TARGET_S
+
+    table = pd.read_parquet(output)  # a one-worker run: every log stored, its calibration time measured alone
+    vehicles = sorted(p for p in logs.iterdir() if p.is_dir())
+    half = vehicles[: len(vehicles) // 2]
+    n_all = len(table)
+    n_half = int(table["vehicle_id"].isin([v.name for v in half]).sum())
+    t_all = statistics.median(resumed_run([logs], output) for _ in range(3))
+    t_half = statistics.median(resumed_run(half, output) for _ in range(3))  # the same parts: nothing computed
+    s = max(0.0, (t_all - t_half) / (n_all - n_half))  # negative only when the machine's noise dominates
+    a = t_all - s * n_all
+    with dask_cluster([], 1) as address:  # the Dask command's own fixed cost: importing distributed, connecting
+        a_dask = statistics.median(resumed_run([logs], output, ("--scheduler", address)) for _ in range(3)) - s * n_all
+    sizes = np.array([sum(Path(p).stat().st_size for p in str(log).split(" + ")) for log in table["log"]], dtype=float)
+    from scipy.optimize import nnls
+
+    scale = sizes.mean()  # fit in units of the mean log, then back to per byte (a well-conditioned problem)
+    design = np.column_stack([np.ones_like(sizes), sizes / scale])
+    (c_log, c_mean), _ = nnls(design, table["elapsed_s"].to_numpy(float))  # neither cost can be negative
+    c_byte = c_mean / scale
+    work = float(np.sum(c_log + c_byte * sizes))
+    per_log = work / n_all
+    batch = max(1.0, BATCH_TARGET_S / per_log)
+    print("cost model: T(W) = a + s·N + (Σ (c_log + c_byte·bytes) + n_tasks·c_task) / W")
+    resumed = f"resumed: {t_all:.2f} s for {n_all}, {t_half:.2f} s for {n_half}"
+    print(f"  a = {a:.2f} s local, {a_dask:.2f} s Dask; s = {1e3 * s:.2f} ms per log ({resumed})")
+    print(
+        f"  c_log = {1e3 * c_log:.1f} ms, c_byte = {1e9 * c_byte:.0f} ms/GB "
+        f"(mean log {sizes.mean() / 1e6:.2f} MB: {1e3 * per_log:.0f} ms of work)"
+    )
+    local, dask = 1e3 * overhead["local"], 1e3 * overhead["dask"]
+    print(f"  c_task = {local:.2f} ms local, {dask:.2f} ms Dask ({batch:.0f} logs a task)")
+    print(f"  {'configuration':<30} {'predicted':>10} {'measured':>9} {'error':>7}")
+    for name, values in times.items():
+        dask = name.startswith("Dask")
+        tasks, c_task = (n_all / batch, overhead["dask"]) if dask else (n_all, overhead["local"])
+        predicted = (a_dask if dask else a) + s * n_all + (work + tasks * c_task) / workers_of(name)
+        measured = statistics.median(values)
+        print(f"  {name:<30} {predicted:>9.1f}s {measured:>8.1f}s {100 * (predicted / measured - 1):>+6.0f}%")
+    n, w = 10_000 * 100, 32
+    tasks = n / batch
+    parallel = (n * per_log + tasks * overhead["dask"]) / w
+    scheduler = tasks * overhead["dask"]  # the scheduler and the command see every task one at a time
+    serial = a_dask + s * n
+    print(
+        f"  10 000 vehicles × 100 sessions of these logs on {w} Dask workers: "
+        f"{(serial + max(parallel, scheduler)) / 3600:.2f} h "
+        f"= serial {serial / 3600:.2f} h + workers {parallel / 3600:.2f} h "
+        f"(the scheduler's {scheduler / 3600:.2f} h for {tasks:.0f} tasks runs beside them)"
+    )
 
 
 def same(a: tuple[pd.DataFrame, pd.DataFrame], b: tuple[pd.DataFrame, pd.DataFrame]) -> bool:
@@ -219,6 +324,7 @@ def main(argv: list[str] | None = None) -> int:
         configs = {
             "local, 1 worker": ["--workers", "1"],
             "local, 2 workers": ["--workers", "2"],
+            "Dask LocalCluster, 1 worker": ["--scheduler"],
             "Dask LocalCluster, 2 workers": ["--scheduler"],
         }
         times: dict[str, list[float]] = {name: [] for name in configs}
@@ -226,12 +332,11 @@ def main(argv: list[str] | None = None) -> int:
         loads: list[float] = []
         cluster_s: list[float] = []
         mismatches: list[str] = []
+        tables: dict[str, tuple[pd.DataFrame, pd.DataFrame]] = {}
         for rep in range(args.runs):
-            tables = {}
             for k, (name, extra) in enumerate(configs.items()):
                 output = workdir / f"out{k}" / "fleet.parquet"
-                # each configuration alone on the machine: the Dask cluster exists only for its own runs
-                with dask_cluster(cluster_s) if name.startswith("Dask") else contextlib.nullcontext() as address:
+                with cluster_for(name, cluster_s) as address:
                     loads.append(os.getloadavg()[0])
                     times[name].append(run_cli(logs, output, extra + ([address] if address else [])))
                 tables[name] = (
@@ -244,11 +349,11 @@ def main(argv: list[str] | None = None) -> int:
             ]
         engine_s = {}
         for name in configs:
-            with dask_cluster(cluster_s) if name.startswith("Dask") else contextlib.nullcontext() as address:
+            with cluster_for(name, cluster_s) as address:
                 engine_s[name] = engine_only(logs, name, address)
         reference_logs, reference_vehicles = tables["local, 1 worker"]
         ok = int((reference_logs["status"] == "ok").sum())
-        remounted = sorted(reference_vehicles.loc[reference_vehicles["remount"], "vehicle_id"])
+        remounted = sorted(reference_vehicles.loc[reference_vehicles["n_remounts"] > 0, "vehicle_id"])
         print(f"Dask LocalCluster start-up (not in the runs, median): {statistics.median(cluster_s):.1f} s")
         print(f"{ok}/{len(reference_logs)} logs ok; remounts flagged: {remounted}")
         print(f"tables identical across the configurations of each run: {'yes' if not mismatches else mismatches}")
@@ -258,6 +363,7 @@ def main(argv: list[str] | None = None) -> int:
         print("busy s: the logs' calibration times summed (median); it grows when the workers do not get a")
         print("core each (another load on the machine), and the speed-up falls with it.")
         report("engines alone (warm workers, hashed logs)", engine_s, args.logs)
+        cost_model(logs, workdir / "out0" / "fleet.parquet", times, task_overhead())
         return 0 if remounted == [REMOUNTED] and ok == args.logs and not mismatches else 1
     finally:
         if args.workdir is None:

@@ -59,3 +59,54 @@ def test_atomic_path_renames_on_success_and_cleans_up_on_error(tmp_path: Path, d
         raise Boom
     assert target.read_text() == "a,b\n1,2\n"
     assert [p.name for p in tmp_path.iterdir()] == ["table.csv"]
+
+
+def test_atomic_path_can_keep_the_target_s_file_name(tmp_path: Path) -> None:
+    target = tmp_path / "log.mf4"
+    with atomic_path(target, keep_name=True) as tmp:
+        assert tmp.name == "log.mf4" and tmp.parent.parent == tmp_path and tmp.parent.name.startswith(".log.mf4.")
+        tmp.write_bytes(b"whole")
+        (tmp.parent / "side.tmp").write_bytes(b"a writer's own temporary")
+    assert target.read_bytes() == b"whole" and [p.name for p in tmp_path.iterdir()] == ["log.mf4"]
+    with pytest.raises(Boom), atomic_path(target, keep_name=True) as tmp:
+        tmp.write_bytes(b"half")
+        raise Boom
+    assert target.read_bytes() == b"whole" and [p.name for p in tmp_path.iterdir()] == ["log.mf4"]
+
+
+def test_a_growing_file_is_cut_back_to_its_last_whole_record(tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    code = (
+        "import resource, signal, sys\n"
+        "from mountcal.atomic import GrowingFile\n"
+        "from mountcal.paths import SystemFailure\n"
+        "signal.signal(signal.SIGXFSZ, signal.SIG_IGN)\n"
+        "resource.setrlimit(resource.RLIMIT_FSIZE, (10000, 10000))\n"
+        "f = GrowingFile(sys.argv[1], 'the records', hidden=4)\n"
+        "try:\n"
+        "    for i in range(100):\n"
+        "        f.write(b'HEAD' + bytes([i]) * 996)\n"
+        "        f.commit()\n"
+        "except SystemFailure as err:\n"
+        "    print(err)\n"
+        "f.close()\n"
+    )
+    path = tmp_path / "records.bin"
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1] / "src")}
+    done = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True, text=True, env=env, check=True)
+    assert "File too large" in done.stdout and "10000 bytes, whole records only" in done.stdout
+    data = path.read_bytes()
+    assert len(data) == 10000 and all(data[k * 1000 : k * 1000 + 4] == b"HEAD" for k in range(10))
+
+
+def test_a_growing_file_replaces_a_link_instead_of_writing_through_it(tmp_path: Path) -> None:
+    victim = tmp_path / "victim.txt"
+    victim.write_text("keep me")
+    link = tmp_path / "rec.blf"
+    link.symlink_to(victim)
+    f = atomic.GrowingFile(link, "the recording")
+    f.write(b"new")
+    f.close()
+    assert victim.read_text() == "keep me" and link.read_bytes() == b"new" and not link.is_symlink()

@@ -159,6 +159,7 @@ def test_every_log_gets_one_row_and_corrupt_or_empty_logs_fail_with_clear_errors
         assert (off[steady] < 5 * ok.loc[steady, f"{angle}_sigma_deg"] + 0.01).all(), angle
     broken_vehicle = fleet["vehicles"].set_index("vehicle_id").loc["broken"]
     assert broken_vehicle["status"] == "no calibration" and "all 6 logs failed" in broken_vehicle["reason"]
+    assert not broken_vehicle["latest_confident"] and broken_vehicle["n_failed"] == 6
 
 
 def test_each_format_is_read_with_its_headings_and_start_time(fleet: dict) -> None:
@@ -176,11 +177,15 @@ def test_each_format_is_read_with_its_headings_and_start_time(fleet: dict) -> No
 
 
 def test_a_2deg_remount_half_way_is_flagged_at_the_right_log_and_a_steady_vehicle_is_not(fleet: dict) -> None:
-    vehicles = fleet["vehicles"].set_index(["vehicle_id", "segment"])
-    assert not vehicles.loc[("steady", 0), "remount"] and vehicles.loc[("steady", 0), "n_segments"] == 1
-    moved = vehicles.loc[("moved", 1)]
-    assert moved["remount"] and Path(moved["remount_log"]).name == "log_05.csv"
-    assert abs(moved["remount_change_deg"] - 2.0) < 4 * moved["remount_change_sigma_deg"] + 1e-3
+    vehicles = fleet["vehicles"].set_index("vehicle_id")
+    assert vehicles.index.is_unique  # one row per vehicle, its mountings over time nested
+    assert vehicles.loc["steady", "n_remounts"] == 0 and vehicles.loc["steady", "n_mountings"] == 1
+    moved = vehicles.loc["moved"]
+    assert moved["n_remounts"] == 1 and len(moved["mountings"]) == 2 and moved["latest_confident"]
+    (remount,) = moved["remounts"]
+    assert Path(remount["log"]).name == "log_05.csv" and Path(moved["since_log"]).name == "log_05.csv"
+    assert abs(remount["change_deg"] - 2.0) < 4 * remount["change_sigma_deg"] + 1e-3
+    assert moved["roll_deg"] == pytest.approx(moved["mountings"][1]["roll_deg"])
     assert "remount moved at" in fleet["stdout"] and "log_05.csv" in fleet["stdout"]
     flagged = fleet["logs"][fleet["logs"]["flags"].map(lambda f: "remount" in list(f))]
     assert [Path(p).name for p in flagged["log"]] == ["log_05.csv"]
@@ -289,10 +294,11 @@ def test_a_manifest_names_vehicles_joins_split_logs_and_orders_by_start_time(tmp
     assert split["start_time_source"] == "manifest"
     missing = logs.loc[f"{data}/missing.csv"]
     assert missing["status"] == "failed" and "missing.csv" in missing["error"] and "No such file" in missing["error"]
-    vehicles = pd.read_parquet(outputs_of(output)[1]).set_index(["vehicle_id", "segment"])
-    assert vehicles.loc[("truck8", 1), "remount"]
-    assert Path(vehicles.loc[("truck8", 1), "remount_log"]).name == "log_01.csv"  # the change, in time order
-    assert vehicles.loc[("truck8", 0), "order"] == "start_time"
+    vehicles = pd.read_parquet(outputs_of(output)[1]).set_index("vehicle_id")
+    (remount,) = vehicles.loc["truck8", "remounts"]
+    assert Path(remount["log"]).name == "log_01.csv"  # the change, in time order
+    assert remount["time"] == pd.Timestamp("2024-06-05", tz="UTC")
+    assert vehicles.loc["truck8", "order"] == "start_time"
     assert len(list(outputs_of(output)[2].glob("*.json"))) == 7  # the missing log is retried next time
 
 

@@ -18,6 +18,7 @@ import tempfile
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pyarrow.parquet as pq
 import pytest
@@ -354,3 +355,57 @@ def test_a_malformed_scheduler_address_is_one_message_at_once(files: dict[str, P
     assert time.monotonic() - started < 20
     assert done.returncode == 2 and "tcp://HOST:PORT" in done.stderr
     assert "Traceback" not in done.stderr and "Exception ignored" not in done.stderr
+
+
+# ------------------------------------------------------------------ signals and closed standard streams
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT, signal.SIGHUP], ids=lambda s: s.name)
+def test_a_signal_during_a_write_leaves_no_temporary_file(files: dict[str, Path], sig: signal.Signals) -> None:
+    folder = files["dir"] / f"signal_{sig.name}"
+    folder.mkdir()
+    args = ["simulate", "--log", str(folder / "s.blf"), "--dbc", str(files["dbc"]), "--rate-hz", "400"]
+    with subprocess.Popen(
+        [sys.executable, "-m", "mountcal", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV
+    ) as proc:
+        deadline = time.monotonic() + 300
+        while not any(p.name.startswith(".") for p in folder.iterdir()):  # the hidden temporary exists: writing
+            if proc.poll() is not None or time.monotonic() > deadline:
+                proc.kill()
+                pytest.fail(f"the write ended before it could be stopped: {proc.communicate()[1]}")
+            time.sleep(0.05)
+        time.sleep(0.5)
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 128 + sig, err
+    assert "Traceback" not in err and ("interrupted" if sig == signal.SIGINT else sig.name) in err
+    assert list(folder.iterdir()) == []
+
+
+def _close(fd: int) -> Any:
+    return lambda: os.close(fd)
+
+
+def test_a_closed_stdout_is_a_message_not_a_traceback(files: dict[str, Path]) -> None:
+    out = files["dir"] / "closed.json"
+    for args in (
+        ["export", str(files["result"]), "--to", "json"],
+        ["calibrate", str(files["stops"]), "-o", str(out)],
+    ):
+        done = run_process(args, preexec_fn=_close(1))
+        assert done.returncode == 2, done.stderr
+        assert "stdout" in done.stderr and "closed" in done.stderr and "Traceback" not in done.stderr
+    assert not out.exists()
+
+
+def test_a_closed_stderr_leaves_stdout_to_the_result(files: dict[str, Path]) -> None:
+    import json
+
+    done = run_process(["calibrate", str(files["stops"]), "--json", "-v"], preexec_fn=_close(2))
+    assert done.returncode == 0
+    assert json.loads(done.stdout)["mounting"]  # no status line mixed in
+
+
+def test_a_closed_stdin_is_an_empty_input(files: dict[str, Path]) -> None:
+    done = run_process(["calibrate", "-"], preexec_fn=_close(0))
+    assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr

@@ -44,10 +44,15 @@ def sim_blf(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
-def replay(path: Path, channel: str, extra: list[can.Message] | None = None) -> can.BusABC:
-    """A receiving virtual bus with every frame of ``path`` queued (faster than real time)."""
+def replay(
+    path: Path, channel: str, extra: list[can.Message] | None = None, first: list[can.Message] | None = None
+) -> can.BusABC:
+    """A receiving virtual bus with every frame of ``path`` queued (faster than real time), after ``first``
+    and before ``extra``."""
     rx = can.Bus(interface="virtual", channel=channel)
     with can.Bus(interface="virtual", channel=channel, preserve_timestamps=True) as tx:
+        for msg in first or []:
+            tx.send(msg)
         with can.LogReader(str(path)) as reader:
             for msg in reader:
                 tx.send(msg)
@@ -257,3 +262,148 @@ def test_a_mapped_message_missing_from_the_whole_session_gives_no_result_as_offl
         fail_if_empty(session)
     with pytest.raises(InputError, match="SIM_GNSS_POSITION"):
         calibrate_job(LogJob(paths=(str(tmp_path / "rec.blf"),), log=LogOptions(dbc=DBC, mapping=MAPPING)))
+
+
+# ------------------------------------------------------------------ faults (issue 27): stamps, timeout, disk, crash
+
+
+def test_frames_with_stamps_a_recording_cannot_hold_are_counted_and_the_session_kept(
+    sim_blf: Path, tmp_path: Path
+) -> None:
+    with can.LogReader(str(sim_blf)) as reader:
+        first = next(iter(reader))
+    bad = [np.nan, np.inf, -np.inf, 1e12, first.timestamp + 1e12, -5.0, 3e11]
+    frames = [can.Message(timestamp=t, arbitration_id=first.arbitration_id, is_extended_id=first.is_extended_id,
+                          data=bytes(first.data)) for t in bad]  # fmt: skip
+    bus = replay(sim_blf, "stamps", extra=frames, first=frames[:3])
+    opts = LiveOptions(DBC, MAPPING, target_deg={"roll": 1e-4}, plan_beta_deg=BETA, silence_s=0.5)
+    session, _ = run_session(bus, opts, tmp_path / "rec.blf")
+    assert session.reason == "bus silent" and session.calibration is not None
+    refused = {k: v for k, v in session.dropped.items() if "timestamp" in k}
+    assert sum(refused.values()) == 3 + len(bad), session.dropped
+    with can.BLFReader(str(tmp_path / "rec.blf")) as reader:
+        recorded = list(reader)
+    assert all(np.isfinite(m.timestamp) and m.timestamp < 1e11 for m in recorded)
+    assert len(recorded) == session.frames
+    assert_same(session.calibration, offline(tmp_path / "rec.blf", session, LogOptions(dbc=DBC, mapping=MAPPING)))
+
+
+@pytest.mark.parametrize("timeout", ["-1", "0", "nan", "inf"])
+def test_a_timeout_that_is_not_a_positive_number_is_a_message(
+    timeout: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    code = main(["live", "--interface", "virtual", "--channel", "t", "--dbc", DBC, "--timeout", timeout,
+                 "-o", str(tmp_path / "s")])  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 2 and "--timeout" in err and "Traceback" not in err
+    assert list(tmp_path.iterdir()) == []
+
+
+LIVE_SCRIPT = textwrap.dedent(
+    """
+    import sys, threading, time
+    import can
+    from mountcal.cli import main
+
+    def feed():
+        time.sleep(1.0)  # the session's bus is open by then
+        with can.Bus(interface="virtual", channel=sys.argv[2], preserve_timestamps=True) as tx:
+            for msg in can.LogReader(sys.argv[1]):
+                tx.send(msg)
+                time.sleep(0.0002)  # ≈ 50× real time
+    threading.Thread(target=feed, daemon=True).start()
+    sys.exit(main(["live", "--interface", "virtual", "--channel", sys.argv[2], *sys.argv[3:]]))
+    """
+)
+
+
+def live_process(blf: Path, channel: str, *args: str) -> subprocess.Popen[str]:
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1] / "src")}
+    return subprocess.Popen(
+        [sys.executable, "-c", LIVE_SCRIPT, str(blf), channel, *args],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+    )  # fmt: skip
+
+
+def frames_read(recording: Path) -> int:
+    """The frames mountcal's own reader gives (it refuses a file cut inside a block)."""
+    from mountcal.io.can.frames import read_frames
+
+    return len(read_frames(recording).t_s)
+
+
+def on_the_bus_clock(recording: Path, sent: Path) -> bool:
+    """Whether the recording's first frame has the stamp of a frame sent (its header's start is the bus's)."""
+    from mountcal.io.can.frames import read_frames
+
+    first = read_frames(recording).t_s[0]
+    return bool(np.min(np.abs(read_frames(sent).t_s - first)) < 1e-4)
+
+
+def test_a_full_disk_keeps_a_readable_recording_and_says_so(sim_blf: Path) -> None:
+    from tests.test_hostile_paths import small_tmpfs
+
+    with small_tmpfs("96k") as folder:
+        proc = live_process(sim_blf, "full", "--dbc", DBC, "--mapping", MAPPING, "--timeout", "3",
+                            "-o", str(folder / "session"))  # fmt: skip
+        out, err = proc.communicate(timeout=300)
+        assert proc.returncode == 5, out + err
+        assert "No space left on device" in err and "Traceback" not in err
+        assert "no partial file was left" not in err
+        recording = folder / "session.blf"
+        assert "session.blf" in err and "kept" in err
+        n = frames_read(recording)
+        assert 0 < n < 54910  # a prefix of the session, as far as the disk held
+        assert on_the_bus_clock(recording, sim_blf)
+        with can.BLFReader(str(recording)) as reader:
+            assert sum(1 for _ in reader) == n
+        assert [p.name for p in folder.iterdir()] == ["session.blf"]  # no partial result, table or sheet
+
+
+def test_a_killed_session_leaves_a_readable_recording(sim_blf: Path, tmp_path: Path) -> None:
+    prefix = tmp_path / "killed"
+    proc = live_process(sim_blf, "killed", "--dbc", DBC, "--mapping", MAPPING, "--timeout", "60", "-o", str(prefix))
+    assert proc.stdout is not None
+    deadline = time.monotonic() + 120
+    for line in proc.stdout:
+        if line.startswith("STOP 2 ended") or time.monotonic() > deadline:
+            break
+    proc.kill()
+    proc.communicate(timeout=60)
+    n = frames_read(prefix.with_suffix(".blf"))
+    assert n > 1000  # every whole block written before the kill
+    assert on_the_bus_clock(prefix.with_suffix(".blf"), sim_blf)  # the header was kept current
+
+
+def test_the_recording_reads_whole_at_every_moment_it_can_be_cut(tmp_path: Path) -> None:
+    """Each state the file passes through on disk (after each container and header) is a BLF both readers
+    read to the same frames, every frame whole: what a kill at that moment leaves."""
+    from mountcal.io.can.bus import Recording
+    from mountcal.io.can.frames import read_frames
+
+    rng = np.random.default_rng(4)
+    path = tmp_path / "rec.blf"
+    recording = Recording(path)
+    states, t = [], 1714557600.0
+    for k in range(40_000):
+        t += float(rng.uniform(0, 2e-3))
+        size = int(rng.choice([0, 3, 8]))
+        recording.add(can.Message(timestamp=t, arbitration_id=int(rng.integers(0, 0x7FF)), data=bytes(size),
+                                  is_error_frame=k % 997 == 0))  # fmt: skip
+        if recording.file.size != (states[-1][0] if states else 0):
+            states.append((recording.file.size, path.read_bytes()))
+    recording.close()
+    states.append((path.stat().st_size, path.read_bytes()))
+    assert len(states) > 5
+    counts = []
+    for i, (_, data) in enumerate(states):
+        cut = tmp_path / f"cut{i}.blf"
+        cut.write_bytes(data)
+        with can.BLFReader(str(cut)) as reader:
+            theirs = [m for m in reader if not m.is_error_frame]
+        ours = read_frames(cut)
+        assert len(ours.t_s) == len(theirs)
+        if theirs:
+            assert abs(ours.t_s[0] - theirs[0].timestamp) < 1e-6 and abs(ours.t_s[0] - 1714557600.0) < 1
+        counts.append(len(theirs))
+    assert counts == sorted(counts) and counts[-1] == 40_000 - len(range(0, 40_000, 997))

@@ -18,6 +18,7 @@ from mountcal.option_names import OPTIONS, as_flags, option
 from mountcal.outputs.exporters import Frames, export
 from mountcal.outputs.report.html import render
 from mountcal.pipeline import calibrate_log
+from mountcal.plan import Noise
 from mountcal.simulate.stops import simulate_preset
 from mountcal.stops import StopDetection, relax
 from mountcal.stoptable import read_stop_table, write_stop_table
@@ -37,7 +38,9 @@ def test_every_flag_in_the_table_is_a_flag_of_the_parsers() -> None:
 
 
 def test_every_python_spelling_in_the_table_is_a_parameter() -> None:
-    owners = (StopDetection, Options, LogOptions, Frames)
+    from mountcal.fleet import FleetOptions
+
+    owners = (StopDetection, Options, LogOptions, Frames, FleetOptions, Noise)
     classes = {c.__name__: {f.name for f in dataclasses.fields(c)} for c in owners}
     parameters = set().union(
         *(

@@ -15,13 +15,17 @@ from collections.abc import Sequence
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the console script."""
     args = list(sys.argv[1:] if argv is None else argv)
-    if _local_fleet(args):
-        from mountcal.fleet.engines import start_worker_server
+    try:
+        if _local_fleet(args):
+            from mountcal.fleet.engines import start_worker_server
 
-        start_worker_server()
-    from mountcal.cli import main as run
+            start_worker_server()
+        from mountcal.cli import main as run
 
-    return run(args)
+        return run(args)  # handles Ctrl-C itself once the command runs
+    except KeyboardInterrupt:  # Ctrl-C while starting up or parsing: nothing was read or written yet
+        sys.stderr.write("mountcal: interrupted; no output was written\n")
+        return 130
 
 
 def _local_fleet(args: list[str]) -> bool:

@@ -18,7 +18,7 @@ from typing import Literal
 
 import numpy as np
 
-from mountcal import slope_reference
+from mountcal import crosscheck, plausibility, slope_reference
 from mountcal import terms as model_terms
 from mountcal.conventions import (
     G_N,
@@ -35,12 +35,14 @@ from mountcal.estimate.bound import crb_deg, euler_gradients
 from mountcal.estimate.effects.temperature import MIN_TEMPERATURE_SPAN_C
 from mountcal.estimate.geometry import span_ratio
 from mountcal.estimate.observability import separability
+from mountcal.input_conventions import check_gravity_value, merged
 from mountcal.option_names import option
 from mountcal.pvalues import chi2_logsf, chi2_sf
 from mountcal.result import (
     Angles,
     AngleValues,
     Calibration,
+    Convention,
     Declined,
     FitQuality,
     ModelSelection,
@@ -81,19 +83,43 @@ class Options:
 
 
 def calibrate(table: StopTable, options: Options | None = None) -> Calibration:
-    """Estimate the mounting rotation (and slope, and bias when called for) from a stop table."""
+    """Estimate the mounting rotation (and slope, and bias when called for) from a stop table.
+
+    Besides the fit, the stops' headings are checked against their pattern (a mirrored sensor is
+    refused, :func:`mountcal.crosscheck.stops_sense`) and the answer's plausibility
+    (:mod:`mountcal.plausibility`); the checks and the input's conventions are in the result.
+    """
     opts = options or Options()
     if opts.triad is not None:
         table = opts.triad.correct(table)
     _check_geometry(table)
+    sense = crosscheck.stops_sense(table)  # before the fit: a mirror image fits as the mirror branch
     if opts.slope_reference is not None:
         _check_slope_reference(table, opts)
     g, g_source = local_gravity(table.lat_deg, table.alt_m, opts.gravity_mps2)
     if opts.method == "paper":
-        return _paper(table, g, g_source, opts)
-    if opts.method != "full":
+        cal = _paper(table, g, g_source, opts)
+    elif opts.method == "full":
+        cal = _full(table, g, g_source, opts)
+    else:
         raise InputError(option("method"), "paper or full", repr(opts.method), "Choose one of them.")
-    return _full(table, g, g_source, opts)
+    stated = merged(table.conventions, (_gravity_convention(g_source),))
+    cal = replace(cal, provenance=replace(cal.provenance, conventions=stated))
+    checks = (
+        *plausibility.convention_checks(stated),
+        sense,
+        crosscheck.heading_agreement(table),
+        *plausibility.answer_checks(cal),
+    )
+    return plausibility.with_checks(cal, checks)
+
+
+def _gravity_convention(g_source: str) -> Convention:
+    if g_source == GIVEN:
+        return Convention("gravity", "given", "stated", f"{option('gravity')} (in m/s², checked to be Earth's)")
+    if g_source.startswith("WGS 84"):
+        return Convention("gravity", g_source, "inferred", "the stops' lat_deg (and alt_m)")
+    return Convention("gravity", "9.80665 m/s²", "default", "no position in the input: standard gravity gₙ")
 
 
 def parse_model(spec: str) -> tuple[str, ...] | None:
@@ -580,6 +606,7 @@ def _not_converged(table: StopTable, fixed: tuple[str, ...] | None, err: str) ->
 def local_gravity(lat_deg: FloatArray | None, alt_m: FloatArray | None, given: float | None) -> tuple[float, str]:
     """Gravity and its source: ``given``, else WGS 84 normal gravity at the mean position, else standard."""
     if given is not None:
+        check_gravity_value(float(given), option("gravity"))
         return float(given), GIVEN
     if lat_deg is not None and lat_deg.size and np.all(np.isfinite(lat_deg)):
         lat = float(np.mean(lat_deg))

@@ -34,8 +34,11 @@ from mountcal.calibrate import Options, calibrate
 from mountcal.conventions import specific_force_v
 from mountcal.errors import InputError, MountcalError, NotEnoughInformation
 from mountcal.estimate.bound import crb_deg, true_state
-from mountcal.io.can.bus import BusFrames, recorder
+from mountcal.input_conventions import parse_axes
+from mountcal.io.can.bus import BusFrames, Recording
 from mountcal.io.can.read import samples_from_frames
+from mountcal.io.logs import LogOptions, stated
+from mountcal.option_names import option
 from mountcal.result import Calibration
 from mountcal.samples import Samples
 from mountcal.stops import StillPeriod, StopDetection, detect_stops, tabulate
@@ -58,6 +61,7 @@ class LiveOptions:
     uphill_azimuth_deg: float | None = None
     plan_beta_deg: tuple[float, ...] | None = None  # headings in driving order (a plan's sheet)
     silence_s: float = 10.0  # a bus silent this long ends the session
+    axes: str | None = None  # the device's axes onto the sensor frame (--axes), after the mapping's
     evaluate_every_s: float = 2.0  # bus time between evaluations
 
 
@@ -139,6 +143,7 @@ class Live:
     """One session: feed it a bus; it calls ``emit`` with each event (a dict)."""
 
     def __init__(self, opts: LiveOptions, recording: Path, emit: Callable[[dict[str, Any]], None]) -> None:
+        self.axes = None if opts.axes is None else parse_axes(opts.axes, option("axes"))  # refused before the bus
         self.opts, self.recording, self.emit = opts, recording, emit
         self.frames = BusFrames()
         self.ignored = 0
@@ -150,7 +155,33 @@ class Live:
         self.told_unreachable = False
 
     def run(self, bus: Any) -> Session:
-        writer = recorder(self.recording)
+        """Listen until the target is met, the bus is silent or Ctrl-C (SIGTERM likewise); the recording is
+        closed however the session ends.
+
+        Raises
+        ------
+        SystemFailure
+            The recording could not be written (no space, ...): it is kept up to its last whole
+            container, and the message says so.
+        """
+        recording = Recording(self.recording)
+        try:
+            reason = self._listen(bus, recording)
+        finally:
+            recording.close()
+        try:
+            self._evaluate(final=True)
+        except KeyboardInterrupt:  # a second Ctrl-C: the recording is closed already
+            pass
+        self.last.reason = reason
+        self.last.frames = self.frames.count
+        self.last.ignored_frames = self.ignored
+        self.last.dropped = {**self.last.dropped, **recording.refused}
+        self.emit({"event": "ended", "reason": reason, "frames": self.last.frames, "recording": str(self.recording)})
+        return self.last
+
+    def _listen(self, bus: Any, recording: Recording) -> str:
+        """Receive, record and evaluate until the session ends; why it ended."""
         reason = "interrupted"
         last_eval = -np.inf
         last_rx = time.monotonic()
@@ -170,11 +201,12 @@ class Live:
                             break
                         continue
                     last_rx = time.monotonic()
-                    writer.on_message_received(msg)
+                    if not recording.add(msg):  # a stamp the recording cannot hold: counted there
+                        continue
                     if msg.is_error_frame or msg.is_remote_frame:
                         self.ignored += 1
                         continue
-                    self.frames.add(msg)
+                    self.frames.add(msg, recording.writer.start_timestamp)
                     if self.frames.last_t - last_eval >= self.opts.evaluate_every_s:
                         last_eval = self.frames.last_t
                         if self._evaluate(final=False):
@@ -183,17 +215,7 @@ class Live:
         except KeyboardInterrupt:
             reason = "interrupted"
             self.emit({"event": "interrupted"})
-        finally:
-            writer.stop()
-        try:
-            self._evaluate(final=True)
-        except KeyboardInterrupt:  # a second Ctrl-C: the recording is closed already
-            pass
-        self.last.reason = reason
-        self.last.frames = self.frames.count
-        self.last.ignored_frames = self.ignored
-        self.emit({"event": "ended", "reason": reason, "frames": self.last.frames, "recording": str(self.recording)})
-        return self.last
+        return reason
 
     # --- evaluation -------------------------------------------------------------------------
 
@@ -211,6 +233,7 @@ class Live:
                 self.last.calibration = None
             self._waiting(str(err))
             return False
+        samples = stated(samples, LogOptions(axes=self.opts.axes), self.axes, check=False)
         self.last.samples, self.last.dropped = samples, dict(samples.dropped)
         cfg = self.opts.detection
         if len(samples) < 3 or samples.t_s[-1] - samples.t_s[0] < cfg.min_duration_s + 2 * cfg.trim_s:
@@ -331,30 +354,39 @@ def line_of(event: dict[str, Any]) -> str:
     return json.dumps(event)
 
 
+def event_line(event: dict[str, Any]) -> str:
+    """An event as a JSON line, stamped with the wall-clock time."""
+    return json.dumps({"time_utc": datetime.now(UTC).isoformat(timespec="milliseconds"), **event}) + "\n"
+
+
 def json_sink(stream: IO[str]) -> Callable[[dict[str, Any]], None]:
     def write(event: dict[str, Any]) -> None:
-        stream.write(json.dumps({"time_utc": datetime.now(UTC).isoformat(timespec="milliseconds"), **event}) + "\n")
+        stream.write(event_line(event))
         stream.flush()
 
     return write
 
 
+def session_files(prefix: Path) -> dict[str, Path]:
+    """The files a session writes beside ``prefix``: its recording, stop table, protocol sheet and result."""
+    names = {"recording": ".blf", "stops": "_stops.csv", "protocol": "_protocol.csv", "result": ".json"}
+    return {key: prefix.with_name(prefix.name + end) for key, end in names.items()}
+
+
 def write_outputs(session: Session, prefix: Path) -> list[Path]:
     """The session's stop table, protocol sheet (log clock) and result, as ``calibrate`` writes them."""
     written = []
+    files = session_files(prefix)
     if session.table is not None:
-        path = prefix.with_name(prefix.name + "_stops.csv")
-        write_stop_table(session.table, path)
-        written.append(path)
+        write_stop_table(session.table, files["stops"])
+        written.append(files["stops"])
     if session.protocol is not None and not session.protocol.empty:
-        path = prefix.with_name(prefix.name + "_protocol.csv")
-        with atomic_path(path) as tmp:
+        with atomic_path(files["protocol"]) as tmp:
             session.protocol.to_csv(tmp, index=False, float_format="%.17g")
-        written.append(path)
+        written.append(files["protocol"])
     if session.calibration is not None:
-        path = prefix.with_name(prefix.name + ".json")
-        session.calibration.save(path)
-        written.append(path)
+        session.calibration.save(files["result"])
+        written.append(files["result"])
     return written
 
 
@@ -374,7 +406,7 @@ def fail_if_empty(session: Session) -> None:
 
 @contextlib.contextmanager
 def _ctrl_c_sets(flag: threading.Event) -> Iterator[None]:
-    """Ctrl-C (SIGINT) sets ``flag`` instead of raising wherever the main thread happens to be.
+    """Ctrl-C (SIGINT), SIGTERM and SIGHUP set ``flag`` instead of raising wherever the main thread happens to be.
 
     The session loop checks the flag between two steps, so an interrupt never lands between a
     stop being counted and its event being sent (the events would then miss a stop the result has).
@@ -382,8 +414,10 @@ def _ctrl_c_sets(flag: threading.Event) -> Iterator[None]:
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = signal.signal(signal.SIGINT, lambda *_: flag.set())
+    asked = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)  # a session ended by the system keeps its data too
+    previous = {sig: signal.signal(sig, lambda *_: flag.set()) for sig in asked}
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)

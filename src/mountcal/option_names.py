@@ -16,11 +16,14 @@ from contextvars import ContextVar
 # key -> (Python spelling, CLI flag). A nested parameter is spelled with its options class.
 OPTIONS: dict[str, tuple[str, str]] = {
     "accept_unconfident": ("accept_unconfident", "--accept-unconfident"),
+    "axes": ("LogOptions.axes", "--axes"),
     "columns": ("LogOptions.columns", "--columns"),
     "dbc": ("LogOptions.dbc", "--dbc"),
     "field": ("LogOptions.field", "--field"),
     "figures": ("image_format", "--figures"),
     "format": ("fmt", "--format"),
+    "gravity": ("Options.gravity_mps2", "--gravity"),
+    "heading_unit": ("heading_unit", "--heading-unit"),
     "headings": ("headings", "--headings"),
     "level_only": ("level_only", "--level-only"),
     "mapping": ("LogOptions.mapping", "--mapping"),
@@ -32,6 +35,7 @@ OPTIONS: dict[str, tuple[str, str]] = {
     "method": ("Options.method", "--method"),
     "min_stop": ("StopDetection.min_duration_s", "--min-stop-s"),
     "model": ("Options.model", "--model"),
+    "noise": ("Noise.sample_sigma_mps2", "--noise"),
     "parent": ("Frames.parent", "--parent"),
     "parent_pose": ("Frames.parent_pose", "--parent-pose"),
     "protocol": ("protocol", "--protocol"),
@@ -47,6 +51,8 @@ OPTIONS: dict[str, tuple[str, str]] = {
     "unit": ("unit", "--unit"),
     "uphill_azimuth": ("uphill_azimuth_deg", "--uphill-azimuth-deg"),
     "yaw_undetermined": ("yaw", "--yaw-undetermined"),
+    "workers": ("FleetOptions.workers", "--workers"),
+    "scheduler": ("FleetOptions.scheduler", "--scheduler"),
 }
 
 _FLAGS: ContextVar[bool] = ContextVar("mountcal_option_flags", default=False)
@@ -64,6 +70,11 @@ def option(key: str, value: str | float | bool | None = None) -> str:
     return f"{python}=" if value is None else f"{python}={value!r}"
 
 
+def flags_on() -> bool:
+    """Whether :func:`option` spells flags here (the fleet passes it on to its worker processes)."""
+    return _FLAGS.get()
+
+
 @contextmanager
 def as_flags() -> Iterator[None]:
     """Within this block, :func:`option` spells options as the CLI's flags."""
@@ -74,4 +85,4 @@ def as_flags() -> Iterator[None]:
         _FLAGS.reset(token)
 
 
-__all__ = ["OPTIONS", "as_flags", "option"]
+__all__ = ["OPTIONS", "as_flags", "flags_on", "option"]

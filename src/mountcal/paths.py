@@ -2,12 +2,14 @@
 
 - An input (protocol sheet, mapping, DBC, calibration JSON, stop table, manifest) is a regular file
   of bounded size: a device, FIFO or directory is refused before it is opened, so reading it ends
-  in a time bounded by its size. :func:`input_file` checks one.
+  in a time bounded by its size. :func:`input_file` checks one (or a folder, where one is taken).
 - An output lands only on a regular file or a new path, never on a file the command reads nor on
   another output of the same command (same resolved path, or the same inode: hard links,
-  symlinks). :func:`check_outputs` checks them all at once, before any work is done.
+  symlinks). :func:`check_outputs` checks them all at once, before any work is done. The command
+  line calls both from the paths each parser declares (:mod:`mountcal.cli.path_options`).
 - An ``OSError`` is a :class:`SystemFailure` naming the path, the operation and what to do.
-- :func:`output_lock` keeps two runs from writing one output at the same time.
+- :func:`output_lock` keeps two runs from writing one output at the same time; its lock file is
+  created with ``O_EXCL|O_NOFOLLOW``, so a symlink planted under its name truncates nothing.
 """
 
 from __future__ import annotations
@@ -34,18 +36,20 @@ class SystemFailure(MountcalError):
 
     exit_code = 5
 
-    def __init__(self, path: str, operation: str, err: OSError) -> None:
+    def __init__(self, path: str, operation: str, err: OSError, *, left: str = "no partial file was left") -> None:
+        """``left`` says what the failed write left behind (said where space ran out)."""
         self.path, self.operation, self.errno = path, operation, err.errno
         reason = err.strerror or str(err)
         code = errno.errorcode.get(err.errno or 0, "")
-        super().__init__(f"{path}: {operation} failed: {reason}{f' ({code})' if code else ''}. {_todo(err.errno)}")
+        todo = _todo(err.errno).replace("{left}", left)
+        super().__init__(f"{path}: {operation} failed: {reason}{f' ({code})' if code else ''}. {todo}")
 
 
 def _todo(code: int | None) -> str:
     todo = {
-        errno.ENOSPC: "Free space on that disk or write to another one; no partial file was left.",
-        errno.EDQUOT: "Free space within your quota or write elsewhere; no partial file was left.",
-        errno.EFBIG: "The file is larger than this system allows (see `ulimit -f`); write elsewhere.",
+        errno.ENOSPC: "Free space on that disk or write to another one; {left}.",
+        errno.EDQUOT: "Free space within your quota or write elsewhere; {left}.",
+        errno.EFBIG: "The file is larger than this system allows (see `ulimit -f`); write elsewhere; {left}.",
         errno.EACCES: "Choose a folder you may write to (or a file you may read), or fix its permissions.",
         errno.EPERM: "Choose a folder you may write to (or a file you may read), or fix its permissions.",
         errno.EROFS: "That file system is read-only: write elsewhere.",
@@ -91,8 +95,9 @@ def special_kind(path: PathLike) -> str | None:
     return None if stat.S_ISREG(mode) else _kind(mode)
 
 
-def input_file(path: PathLike, what: str, *, limit: int | None = None) -> Path:
-    """Check that ``path`` is a regular file of at most ``limit`` bytes; return it as a Path.
+def input_file(path: PathLike, what: str, *, limit: int | None = None, folders: bool = False) -> Path:
+    """Check that ``path`` is a regular file of at most ``limit`` bytes (or, with ``folders``, a
+    folder); return it as a Path.
 
     ``what`` names the input in the message ("the protocol sheet"). The file is not opened: a FIFO
     or a device would block or never end.
@@ -101,9 +106,14 @@ def input_file(path: PathLike, what: str, *, limit: int | None = None) -> Path:
     try:
         st = os.stat(path)
     except FileNotFoundError as err:
-        raise InputError(str(path), f"{what} (a file)", "no such file", "Check the path.") from err
+        raise InputError(str(path), f"{what} ({_a_file(folders)})", "no such file", "Check the path.") from err
     except OSError as err:
+        if err.errno == errno.ELOOP:
+            found, todo = "a symlink loop", f"Point the path at {_a_file(folders)}."
+            raise InputError(str(path), f"{what} ({_a_file(folders)})", found, todo) from err
         raise SystemFailure(str(path), f"reading {what}", err) from err
+    if folders and stat.S_ISDIR(st.st_mode):
+        return path
     if not stat.S_ISREG(st.st_mode):
         raise InputError(
             str(path), f"{what} as a regular file", _kind(st.st_mode), "Pass a regular file; mountcal reads no devices."
@@ -117,6 +127,10 @@ def input_file(path: PathLike, what: str, *, limit: int | None = None) -> Path:
             f"Check that this is the right file, or raise the limit with {LIMIT_VARIABLE}=N (MiB).",
         )
     return path
+
+
+def _a_file(folders: bool) -> str:
+    return "a file or folder" if folders else "a file"
 
 
 def read_input_bytes(path: PathLike, what: str, *, limit: int | None = None) -> bytes:
@@ -139,12 +153,26 @@ def read_input_bytes(path: PathLike, what: str, *, limit: int | None = None) -> 
 
 
 def _same(a: Path, b: Path) -> bool:
-    if a.resolve() == b.resolve():
+    """Whether ``a`` and ``b`` name one file: the same path once ``..`` and symlinks are resolved, or
+    the same inode (a hard link; a case-insensitive file system's other spelling)."""
+    if os.path.realpath(a) == os.path.realpath(b):
         return True
     try:
         return os.path.samefile(a, b)
     except OSError:  # one of them does not exist (yet)
         return False
+
+
+def _output_stat(name: str, out: Path) -> os.stat_result | None:
+    """What is at an output's path now (None: nothing yet); a symlink loop on the way is refused."""
+    try:
+        return os.stat(out)
+    except OSError as err:
+        if err.errno == errno.ELOOP:
+            raise InputError(
+                f"{name} {out}", "a path to write", "a symlink loop", "Remove the loop or name another path."
+            ) from err
+        return None
 
 
 def check_outputs(
@@ -170,16 +198,13 @@ def check_outputs(
         if value is None:
             continue
         out = Path(value)
-        try:
-            st = os.stat(out)
-        except OSError:
-            st = None
+        st = _output_stat(name, out)
         if st is not None and not stat.S_ISREG(st.st_mode):
             raise InputError(
                 f"{name} {out}",
                 "a regular file or a new path to write",
                 _kind(st.st_mode),
-                "Name a file; mountcal never replaces a directory, device or FIFO.",
+                "Name a file; mountcal never replaces a directory, device, FIFO or socket.",
             )
         clashes = [
             (
@@ -216,9 +241,9 @@ def output_lock(output: PathLike) -> Iterator[None]:
     lock = output.with_name(f".{output.name}.lock")
     try:
         output.parent.mkdir(parents=True, exist_ok=True)
-        fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
     except OSError as err:
         raise SystemFailure(str(lock), "creating the lock file", err) from err
+    fd = _open_lock_file(lock, output)
     try:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -235,6 +260,37 @@ def output_lock(output: PathLike) -> Iterator[None]:
         yield
     finally:
         os.close(fd)  # releases the lock; the file stays (removing it would race a waiting run)
+
+
+def _open_lock_file(lock: Path, output: Path) -> int:
+    """The lock file, created with ``O_EXCL|O_NOFOLLOW`` or opened without following a symlink.
+
+    Whatever else is planted under its name (a symlink to a file of yours, a hard link, a FIFO) is
+    refused before anything is written: the holder's pid is written into the file, which would
+    otherwise truncate the file a link points at.
+    """
+    flags = os.O_RDWR | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC
+    try:
+        try:
+            fd = os.open(lock, flags | os.O_CREAT | os.O_EXCL, 0o644)
+        except FileExistsError:  # left by an earlier run (it is never removed: see output_lock)
+            fd = os.open(lock, flags)
+    except OSError as err:
+        if err.errno != errno.ELOOP:
+            raise SystemFailure(str(lock), "creating the lock file", err) from err
+        found = "a symlink"
+    else:
+        st = os.fstat(fd)
+        if stat.S_ISREG(st.st_mode) and st.st_nlink == 1:
+            return fd
+        os.close(fd)
+        found = "a hard link to another file" if stat.S_ISREG(st.st_mode) else _kind(st.st_mode)
+    raise InputError(
+        str(lock),
+        f"the lock file of {output} (a regular file mountcal creates)",
+        found,
+        "Remove it (mountcal writes nothing through it), then run again.",
+    )
 
 
 __all__ = [

@@ -9,7 +9,9 @@ in (:func:`mountcal.estimate.driving.combine`), saying which and why the others 
 from __future__ import annotations
 
 import hashlib
+import threading
 from collections.abc import Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
@@ -17,12 +19,14 @@ from typing import Any, Literal
 
 import numpy as np
 
+from mountcal import crosscheck, plausibility
 from mountcal.calibrate import Options, calibrate, local_gravity
 from mountcal.driving_document import Comparison, DrivingConsistency
 from mountcal.errors import InputError, NotEnoughInformation
 from mountcal.estimate.driving import DrivingFit, DrivingOptions, estimate_driving, horizontal_axes_sigma_deg
 from mountcal.estimate.driving_combine import combine, driving_calibration, not_combined
-from mountcal.io.logs import LogOptions, read_log
+from mountcal.input_conventions import merged
+from mountcal.io.logs import LogOptions, read_log, stated
 from mountcal.io.timestamps import increasing_times
 from mountcal.option_names import option
 from mountcal.paths import special_kind
@@ -34,7 +38,7 @@ from mountcal.version import software_version
 
 Use = Literal["auto", "stops", "driving"]
 STOP_TABLE_SUFFIXES = (".csv", ".parquet", ".pq")
-STOP_TABLE_MARKERS = {"beta_deg", "n", "sx"}
+STOP_TABLE_MARKERS = {"beta_deg", "heading_ref", "n", "sx"}
 
 
 @dataclass(frozen=True)
@@ -128,9 +132,27 @@ def calibrate_log(
     return calibrate_job(job)
 
 
-def calibrate_job(job: LogJob) -> LogResult:
-    """:func:`calibrate_log` of a prepared job (the fleet's and the command line's form)."""
-    samples = with_gravity(read_log(list(job.paths), job.log))
+def calibrate_job(job: LogJob, samples: Samples | None = None) -> LogResult:
+    """:func:`calibrate_log` of a prepared job (the fleet's and the command line's form); ``samples``
+    are the job's files already read (the fleet reads a log's splits itself to count their gaps).
+
+    Besides the fit: each file's SHA-256 (hashed beside the reading), the log's conventions, the
+    cross-checks between its cues (:mod:`mountcal.crosscheck`: turns, the stops' yaw against the
+    drive's) and the answer's plausibility (:mod:`mountcal.plausibility`) go into the result.
+    """
+    stop = threading.Event()  # a failed read ends the hashing too
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        hashes = pool.submit(lambda: tuple(_sha256(Path(p), stop) for p in job.paths))  # overlaps the reading
+        try:
+            done = _calibrate_job(job, samples)
+            return replace(done, calibration=_checked(done, job, hashes))
+        finally:
+            stop.set()
+
+
+def _calibrate_job(job: LogJob, samples: Samples | None) -> LogResult:
+    # samples read elsewhere get the log conventions here (idempotent: read_log's are kept)
+    samples = with_gravity(read_log(list(job.paths), job.log) if samples is None else stated(samples, job.log))
     source = _source(job.paths)
     skipped: dict[str, str] = {}
     static = found = table = None
@@ -168,6 +190,40 @@ def calibrate_job(job: LogJob) -> LogResult:
     assert fit is not None
     cal = _driving_alone(fit, samples, job)
     return LogResult(cal, increasing_times(samples), "driving", None, fit, found, None, skipped)  # counts merged stamps
+
+
+def _checked(done: LogResult, job: LogJob, hashes: Future[tuple[str, ...]]) -> Calibration:
+    """The log's calibration with its files' hashes, its conventions and the cross-checks of its cues.
+
+    Raises
+    ------
+    InputError
+        The gyro, the heading and the lateral acceleration turn opposite ways (a mirrored sensor).
+    """
+    cal = done.calibration
+    stated = merged(done.samples.conventions, cal.provenance.conventions)
+    checks = []
+    disagree = any(u.test == "stops_vs_driving" for u in cal.unexplained)
+    if done.static is not None and done.driving is not None:
+        check, found = crosscheck.half_turn(
+            done.static.yaw_deg, done.driving.yaw_deg, job.uphill_azimuth_deg, job.protocol is not None
+        )
+        checks.append(check)
+        if found is not None:
+            cal = replace(cal, unexplained=(*cal.unexplained, found), confident=False)
+    # the lateral cue needs a yaw both sources agree on; the yaw rate needs only the up axis
+    yaw_known = cal.yaw_deg is not None and not disagree
+    rot_vs = cal.rot_vs
+    if not yaw_known and not disagree and done.driving is not None and done.driving.rot_vs_longitudinal is not None:
+        # yaw left undetermined by the drive's residual tests (a mirrored sensor turns its longitudinal and lateral
+        # cues half a turn apart, and the model-error term that follows exceeds the limit): the longitudinal cue's
+        # yaw still tells left from right, so the turns are compared and the mirror is named, not passed over
+        rot_vs, yaw_known = done.driving.rot_vs_longitudinal, True
+    checks.append(crosscheck.turn_handedness(done.samples, rot_vs, yaw_known))
+    if cal.method == "driving":
+        checks += plausibility.answer_checks(cal)
+    cal = replace(cal, provenance=replace(cal.provenance, input_sha256=hashes.result(), conventions=stated))
+    return plausibility.with_checks(cal, checks)
 
 
 def stops_of_log(job: LogJob) -> tuple[Samples, StopTableFromLog]:
@@ -327,7 +383,7 @@ def _driving_tests(c: DrivingConsistency) -> str:
 
 
 def _tabulate(samples: Samples, job: LogJob) -> StopTableFromLog:
-    protocol = read_protocol(job.protocol) if job.protocol else None
+    protocol = read_protocol(job.protocol, job.log.heading_unit) if job.protocol else None
     return tabulate(samples, job.detection, protocol, job.uphill_azimuth_deg)
 
 
@@ -375,13 +431,24 @@ def _provenance(paths: Sequence[str]) -> Provenance:
         method="driving",
         model=("rotation",),
         created_utc=datetime.now(UTC).isoformat(timespec="seconds"),
-        input_sha256=tuple(_sha256(Path(p)) for p in paths),
-    )
+    )  # the files' hashes: calibrate_job, hashed beside the reading
 
 
-def _sha256(path: Path) -> str:
+def _sha256(path: Path, stop: threading.Event | None = None) -> str:
+    """The SHA-256 of a file, streamed in 1 MiB blocks; of a folder (a comma2k19 segment), the SHA-256 of
+    its files' relative paths and hashes, in sorted order. A FIFO or device is not opened (its reader
+    refuses it); ``stop`` ends the hashing early (the result is then not used)."""
+    if path.is_dir():
+        digest = hashlib.sha256()
+        for item in sorted(p for p in path.rglob("*") if p.is_file()):
+            digest.update(f"{item.relative_to(path).as_posix()}\0{_sha256(item, stop)}\n".encode())
+        return digest.hexdigest()
+    if special_kind(path) is not None:
+        return ""
     digest = hashlib.sha256()
     with path.open("rb") as f:
         for block in iter(lambda: f.read(1 << 20), b""):
+            if stop is not None and stop.is_set():
+                return ""
             digest.update(block)
     return digest.hexdigest()

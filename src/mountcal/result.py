@@ -192,8 +192,30 @@ class StopsFingerprint:
 
 
 @dataclass(frozen=True)
+class Convention:
+    """One convention of the input (docs/conventions.md, "Conventions of the inputs"): its value, and
+    whether it was stated (by whom), inferred from the data (from what), or assumed by default."""
+
+    name: str  # heading_reference, heading_unit, acceleration_unit, axes, gravity, ...
+    value: str
+    how: Literal["stated", "inferred", "default"]
+    by: str  # the option, column or file that stated it; what it was inferred from; or why the default
+
+
+@dataclass(frozen=True)
+class Check:
+    """A plausibility check of the input's conventions or of the answer: passed, failed (the result is
+    then not confident), or not tested (``passed`` None), each with the reason."""
+
+    name: str
+    passed: bool | None
+    reason: str
+
+
+@dataclass(frozen=True)
 class Provenance:
-    """Where a result came from: the input (with the SHA-256 of each file), the software, when."""
+    """Where a result came from: the input (with the SHA-256 of each file), the software, when, and the
+    conventions of the input, each stated, inferred or assumed."""
 
     input: str
     software: str
@@ -202,6 +224,7 @@ class Provenance:
     created_utc: str
     input_sha256: tuple[str, ...] = ()
     stops_fingerprint: StopsFingerprint | None = None
+    conventions: tuple[Convention, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -256,6 +279,7 @@ class Calibration:
     effects: tuple[EffectValue, ...] = ()  # fitted effect values ± σ
     confident: bool = True  # False when the residual shows structure the model does not explain
     systematic: Systematic | None = None  # the statistical and systematic parts of the σ above (their total)
+    checks: tuple[Check, ...] = ()  # plausibility checks (mountcal.plausibility); a failed one: not confident
 
     def __post_init__(self) -> None:
         if self.yaw_deg is None:  # a yaw nobody determined is never kept, whoever built the value
@@ -333,6 +357,7 @@ class Calibration:
             "diagnostics": to_plain(self.diagnostics),
             "notes": list(self.notes),
             "systematic": to_plain(self.systematic),
+            "checks": to_plain(self.checks),
         }
 
     def save(self, path: str | Path) -> None:

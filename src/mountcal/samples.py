@@ -8,9 +8,13 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
+
+if TYPE_CHECKING:
+    from mountcal.result import Convention
 
 FloatArray = NDArray[np.float64]
 
@@ -49,6 +53,8 @@ class Samples:
     gravity_free : str
         Why ``acc_s`` is known to lack gravity (a "linear acceleration" export), else "": such samples
         rotate, but do not calibrate (the mounting is measured against gravity).
+    conventions : tuple of Convention
+        How the log's conventions were known (axes, heading unit): set by :func:`mountcal.io.logs.read_log`.
     """
 
     t_s: FloatArray
@@ -60,6 +66,7 @@ class Samples:
     dropped: dict[str, int] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
     gravity_free: str = ""
+    conventions: tuple[Convention, ...] = ()
 
     def __post_init__(self) -> None:
         n = self.t_s.shape[0]

@@ -21,8 +21,10 @@ import pandas as pd
 
 from mountcal.conventions import FloatArray
 from mountcal.errors import NotEnoughInformation
+from mountcal.input_conventions import HeadingUnit, compass_to_beta, headings_in_degrees, uphill_azimuth
 from mountcal.io.timestamps import increasing_times, time_ordered
 from mountcal.option_names import option
+from mountcal.result import Convention
 from mountcal.samples import Channel, Samples
 from mountcal.stop_near_misses import Criterion, NearMiss, near_misses
 from mountcal.stoptable import Headings, StopTable, checked
@@ -374,7 +376,11 @@ def _steady_heading(
 
 
 def stop_table(
-    stops: list[Stop], beta_deg: FloatArray | None = None, headings: Headings = "uphill", source: str = "log"
+    stops: list[Stop],
+    beta_deg: FloatArray | None = None,
+    headings: Headings = "uphill",
+    source: str = "log",
+    conventions: tuple[Convention, ...] = (),
 ) -> StopTable:
     """The stop table of detected stops (checked like a table read from a file).
 
@@ -405,14 +411,13 @@ def stop_table(
             duration_s=np.array([s.duration_s for s in stops], dtype=float),
             heading_deg=channel("heading_deg"),
             source=source,
+            conventions=conventions,
         ),
         min_stops=1,  # a log may hold fewer stops than a fit needs: calibrate says so
     )
 
 
-def beta_from_heading(heading_deg: FloatArray, uphill_azimuth_deg: float) -> FloatArray:
-    """β (counter-clockwise from uphill) from compass headings (clockwise from north)."""
-    return (uphill_azimuth_deg - np.asarray(heading_deg, dtype=float)) % 360.0
+beta_from_heading = compass_to_beta  # β (counter-clockwise from uphill) from compass headings (clockwise from north)
 
 
 def _stop_stats(samples: Samples, sel: slice, lsb: FloatArray) -> Stop:
@@ -534,8 +539,9 @@ def near_miss_advice(missed: tuple[NearMiss, ...] | list[NearMiss]) -> str:
     )
 
 
-def read_protocol(path: str) -> pd.DataFrame:
-    """A protocol sheet: CSV ``t_start_s, t_end_s, beta_deg`` (times on the log's clock)."""
+def read_protocol(path: str, heading_unit: HeadingUnit | None = None) -> pd.DataFrame:
+    """A protocol sheet: CSV ``t_start_s, t_end_s, beta_deg`` (times on the log's clock; β in degrees
+    unless ``heading_unit`` says radians, checked). ``attrs["conventions"]`` says how β's unit is known."""
     from mountcal.errors import InputError
     from mountcal.paths import input_file
 
@@ -558,6 +564,11 @@ def read_protocol(path: str) -> pd.DataFrame:
             f"missing columns {missing}" if missing else "empty or non-numeric cells",
             "Write one row per stop.",
         )
+    values["beta_deg"], unit = headings_in_degrees(values["beta_deg"].to_numpy(dtype=float), heading_unit, path)
+    values.attrs["conventions"] = (
+        Convention("heading_reference", "uphill", "stated", f"the protocol sheet ({option('protocol')})"),
+        unit,
+    )
     return values
 
 
@@ -584,8 +595,9 @@ def tabulate(
                 f"the sheet's times are on the log's clock, or {relax()}. Used: {'; '.join(search.lines())}."
             )
         beta = protocol["beta_deg"].to_numpy()[kept]
+        stated = (*samples.conventions, *protocol.attrs.get("conventions", ()))
         return StopTableFromLog(
-            stop_table(stops, beta, "uphill", where),
+            stop_table(stops, beta, "uphill", where, stated),
             "protocol sheet",
             len(windows) - len(kept),
             tuple(search.lines()),
@@ -603,22 +615,37 @@ def tabulate(
     heading = np.array([s.channels.get("heading_deg", np.nan) for s in stops])
     if np.all(np.isfinite(heading)):
         if uphill_azimuth_deg is not None:
+            stated = uphill_azimuth(uphill_azimuth_deg, "the log's heading channel")
             return StopTableFromLog(
-                stop_table(stops, beta_from_heading(heading, uphill_azimuth_deg), "uphill", where),
+                stop_table(
+                    stops,
+                    beta_from_heading(heading, uphill_azimuth_deg),
+                    "uphill",
+                    where,
+                    (*samples.conventions, *stated),
+                ),
                 f"heading channel with uphill azimuth {uphill_azimuth_deg:g}°",
                 notes=notes,
                 dropped=search.dropped,
                 near_misses=search.near_misses,
             )
+        inferred = Convention(
+            "heading_reference",
+            "relative",
+            "inferred",
+            f"the log's heading channel without the slope's uphill azimuth ({option('uphill_azimuth')} or "
+            f"{option('protocol')} would make the headings uphill)",
+        )
         return StopTableFromLog(
-            stop_table(stops, beta_from_heading(heading, 0.0), "relative", where),
+            stop_table(stops, beta_from_heading(heading, 0.0), "relative", where, (*samples.conventions, inferred)),
             "heading channel without the uphill azimuth (relative)",
             notes=notes,
             dropped=search.dropped,
             near_misses=search.near_misses,
         )
+    none = Convention("heading_reference", "none", "inferred", "no protocol sheet and no heading channel in the log")
     return StopTableFromLog(
-        stop_table(stops, None, "none", where),
+        stop_table(stops, None, "none", where, (*samples.conventions, none)),
         "none",
         notes=notes,
         dropped=search.dropped,

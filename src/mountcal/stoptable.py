@@ -26,10 +26,23 @@ import pandas as pd
 
 from mountcal.conventions import G_N, FloatArray
 from mountcal.errors import InputError, NotEnoughInformation
+from mountcal.input_conventions import (
+    HEADING_REF,
+    AxisMap,
+    HeadingUnit,
+    acceleration_unit,
+    axes_convention,
+    beta_from_compass,
+    heading_reference,
+    headings_in_degrees,
+    parse_axes,
+    stated_axes,
+)
+from mountcal.input_conventions import Headings as Headings  # one definition, imported from here by many
 from mountcal.io.inputs import check_parquet_rows
 from mountcal.option_names import option
 from mountcal.paths import read_input_bytes
-from mountcal.result import StopsFingerprint
+from mountcal.result import Convention, StopsFingerprint
 
 # Column names of the stop table file.
 BETA = "beta_deg"
@@ -48,10 +61,12 @@ LAT = "lat_deg"
 LON = "lon_deg"
 ALT = "alt_m"
 REQUIRED = ACC
-OPTIONAL = (BETA, *STD, COUNT, *STD_MEAN, *CORR, TIME, DURATION, TEMPERATURE, SITE, LAT, LON, ALT, HEADING)
-COLUMNS = (BETA, *ACC, *OPTIONAL[1:])
+AXES = "axes"  # the axis map already applied to ax, ay, az (by `mountcal stops --axes`)
+OPTIONAL = (
+    BETA, HEADING_REF, *STD, COUNT, *STD_MEAN, *CORR, TIME, DURATION, TEMPERATURE, SITE, LAT, LON, ALT, HEADING, AXES
+)  # fmt: skip
+COLUMNS = (BETA, HEADING_REF, *ACC, *OPTIONAL[2:])
 
-Headings = Literal["uphill", "relative", "none"]
 Unit = Literal["mps2", "g"]
 MIN_STOPS = 3
 GRAVITY_BAND = (0.7, 1.3)  # a static reading outside this fraction of g is not gravity
@@ -81,6 +96,9 @@ class StopTable:
     site : ndarray of str, shape (n,), or None
     source : str
         Where the table came from; ``sha256`` is the hash of that file's bytes.
+    conventions : tuple of Convention
+        How the table's conventions (heading reference and unit, acceleration unit, axes) are known:
+        stated, inferred or assumed (:mod:`mountcal.input_conventions`); the result's provenance keeps them.
     """
 
     acc_s: FloatArray
@@ -100,6 +118,7 @@ class StopTable:
     source: str = "<memory>"
     sha256: str = ""
     notes: tuple[str, ...] = field(default=())
+    conventions: tuple[Convention, ...] = field(default=())
 
     def __post_init__(self) -> None:
         if self.beta_rad is None and self.headings != "none":
@@ -122,8 +141,9 @@ class StopTable:
     def to_frame(self) -> pd.DataFrame:
         """The table as a DataFrame with the file's column names (m/s², degrees), for writing it."""
         columns: dict[str, Any] = {}
-        if self.beta_rad is not None:
+        if self.beta_rad is not None:  # with what it is measured from: a column survives a spreadsheet
             columns[BETA] = np.degrees(self.beta_rad)
+            columns[HEADING_REF] = self.headings
         columns |= dict(zip(ACC, self.acc_s.T, strict=True))
         if self.cov_s is not None:
             sigma = np.sqrt(np.diagonal(self.cov_s, axis1=1, axis2=2))
@@ -148,19 +168,37 @@ class StopTable:
         ):
             if values is not None:
                 columns[name] = values
+        applied = stated_axes(self.conventions)
+        if applied is not None and not applied.identity:  # the frame of ax, ay, az, for whoever reads it next
+            columns[AXES] = applied.text
         return pd.DataFrame(columns)
 
 
-def read_stop_table(path: str | Path, unit: Unit = "mps2", headings: Headings = "uphill") -> StopTable:
+def read_stop_table(
+    path: str | Path,
+    unit: Unit | None = None,
+    headings: Headings | None = None,
+    heading_unit: HeadingUnit | None = None,
+    axes: AxisMap | None = None,
+    uphill_azimuth_deg: float | None = None,
+) -> StopTable:
     """Read and validate a stop table file (CSV, or Parquet by its ``.parquet`` suffix).
 
     Parameters
     ----------
     path : str or Path
-    unit : {"mps2", "g"}
-        Unit of ``ax, ay, az`` (and ``sx, sy, sz``) in the file.
-    headings : {"uphill", "relative", "none"}
-        What ``beta_deg`` is measured from; ignored when the file has no ``beta_deg``.
+    unit : {"mps2", "g"}, optional
+        Unit of ``ax, ay, az`` (and ``sx, sy, sz``) in the file; m/s² when not stated (checked by |a|).
+    headings : {"uphill", "relative", "none"}, optional
+        What ``beta_deg`` is measured from; by default what the table's ``heading_ref`` column states,
+        else uphill (and the result says it was assumed). See
+        :func:`mountcal.input_conventions.heading_reference`.
+    heading_unit : {"deg", "rad"}, optional
+        Unit of ``beta_deg``; when not stated, degrees, checked (values all within ±2π are refused).
+    axes : AxisMap, optional
+        The device's axes onto the sensor frame (``--axes``), applied to the means and their covariances.
+    uphill_azimuth_deg : float, optional
+        Compass azimuth of the slope's uphill direction: β from the table's compass column ``heading_deg``.
     """
     path = Path(path)
     where = str(path)
@@ -179,14 +217,23 @@ def read_stop_table(path: str | Path, unit: Unit = "mps2", headings: Headings = 
             f"a file that does not parse ({err})",
             "Write one row per stop with columns beta_deg, ax, ay, az.",
         ) from err
-    table = stop_table_from_frame(df, unit=unit, headings=headings, source=where)
+    table = stop_table_from_frame(
+        df, unit, headings, source=where, heading_unit=heading_unit, axes=axes, uphill_azimuth_deg=uphill_azimuth_deg
+    )
     return replace(table, sha256=hashlib.sha256(raw).hexdigest())
 
 
 def stop_table_from_frame(
-    df: pd.DataFrame, unit: Unit = "mps2", headings: Headings = "uphill", source: str = "<DataFrame>"
+    df: pd.DataFrame,
+    unit: Unit | None = None,
+    headings: Headings | None = None,
+    source: str = "<DataFrame>",
+    heading_unit: HeadingUnit | None = None,
+    axes: AxisMap | None = None,
+    uphill_azimuth_deg: float | None = None,
 ) -> StopTable:
-    """Validate a DataFrame with the stop-table columns and convert it to a :class:`StopTable`."""
+    """Validate a DataFrame with the stop-table columns and convert it to a :class:`StopTable`
+    (the parameters as :func:`read_stop_table`'s)."""
     df = df.rename(columns=lambda c: str(c).strip())
     missing = [c for c in REQUIRED if c not in df.columns]
     if missing:
@@ -197,14 +244,38 @@ def stop_table_from_frame(
             "Rename the columns or write the stop table with `mountcal stops`.",
         )
     check_count(len(df), source)
+    conventions = [acceleration_unit(unit or "mps2", unit is not None)]
+    unit = unit or "mps2"
     scale = G_N if unit == "g" else 1.0
     with np.errstate(over="ignore"):  # a huge value becomes inf here and is refused by the gravity check
         acc = _numeric(df, list(ACC), source) * scale
     _check_gravity(acc, unit, source)
 
     beta = None
-    if BETA in df.columns and headings != "none":
-        beta = np.radians(_numeric(df, [BETA], source)[:, 0])
+    marker = df[HEADING_REF].tolist() if HEADING_REF in df.columns else None
+    reference: Headings = "none"
+    if uphill_azimuth_deg is not None and headings != "none":
+        compass = None
+        if HEADING in df.columns:
+            compass, unit_known = headings_in_degrees(
+                _numeric(df, [HEADING], source)[:, 0], heading_unit, source, HEADING
+            )
+            conventions.append(unit_known)
+        beta_deg, from_compass = beta_from_compass(compass, uphill_azimuth_deg, source)
+        if BETA in df.columns and marker is not None and heading_reference(marker, None, source)[0] == "uphill":
+            _check_same_beta(_numeric(df, [BETA], source)[:, 0], beta_deg, uphill_azimuth_deg, source)
+        beta, reference = np.radians(beta_deg), "uphill"
+        conventions += from_compass
+    elif BETA in df.columns and headings != "none":
+        compass = _numeric(df, [HEADING], source)[:, 0] if HEADING in df.columns else None
+        reference, stated = heading_reference(marker, headings, source, _numeric(df, [BETA], source)[:, 0], compass)
+        if reference != "none":
+            beta_deg, unit_known = headings_in_degrees(_numeric(df, [BETA], source)[:, 0], heading_unit, source)
+            beta = np.radians(beta_deg)
+            conventions += [stated, unit_known]
+    if beta is None:
+        why = option("headings", "none") if BETA in df.columns else "the table has no beta_deg"
+        conventions.append(Convention("heading_reference", "none", "stated", why))
     cov = sample_std = sample_count = None
     noise_columns = [c for c in (*STD, COUNT) if c in df.columns]
     if noise_columns and not all(c in df.columns for c in STD):
@@ -236,6 +307,18 @@ def stop_table_from_frame(
         )
     if any(c in df.columns for c in CORR):
         cov = _with_correlations(cov, _numeric(df, [c for c in CORR if c in df.columns], source), df, source)
+    applied = _applied_axes(df, source)
+    if axes is not None and not axes.identity:  # the device's axes onto the sensor frame, as for a log
+        acc = axes.apply(acc)
+        cov = None if cov is None else axes.apply_cov(cov)
+        sample_std = None if sample_std is None else np.abs(axes.apply(sample_std))
+    if applied is not None:  # ax, ay, az were mapped when the table was written
+        total = applied if axes is None else axes.after(applied)
+        conventions.append(
+            Convention("axes", total.describe(), "stated", f"{option('axes')} {applied.text} (the table's column axes)")
+        )
+    elif axes is not None:
+        conventions.append(axes_convention(axes, "x,y,z", ""))
 
     def optional(name: str) -> FloatArray | None:
         return _numeric(df, [name], source)[:, 0] if name in df.columns else None
@@ -251,7 +334,7 @@ def stop_table_from_frame(
     return StopTable(
         acc_s=acc,
         beta_rad=beta,
-        headings=headings if beta is not None else "none",
+        headings=reference if beta is not None else "none",
         cov_s=cov,
         temperature_c=optional(TEMPERATURE),
         t_s=optional(TIME),
@@ -264,7 +347,36 @@ def stop_table_from_frame(
         duration_s=optional(DURATION),
         heading_deg=optional(HEADING),
         source=source,
+        conventions=tuple(conventions),
     )
+
+
+def _applied_axes(df: pd.DataFrame, source: str) -> AxisMap | None:
+    """The axis map a table's column ``axes`` says was applied to its means (one value in every row)."""
+    if AXES not in df.columns:
+        return None
+    values = {str(v).strip() for v in df[AXES]}
+    if len(values) != 1:
+        raise InputError(
+            source,
+            f"one axis map in the column {AXES}",
+            ", ".join(sorted(values)),
+            "Give every row the map that was applied to ax, ay, az, or drop the column.",
+        )
+    return parse_axes(values.pop(), f"{source}: column {AXES}")
+
+
+def _check_same_beta(beta_deg: FloatArray, from_compass: FloatArray, azimuth: float, source: str) -> None:
+    """Refuse an uphill azimuth that contradicts the table's own β from uphill (beyond 1°)."""
+    off = np.abs((from_compass - beta_deg + 180.0) % 360.0 - 180.0)
+    if np.max(off) > 1.0:
+        implied = float(np.degrees(np.angle(np.mean(np.exp(1j * np.radians(beta_deg + (azimuth - from_compass)))))))
+        raise InputError(
+            f"{source} with {option('uphill_azimuth', f'{azimuth:g}')}",
+            f"β from the compass column heading_deg that agree with the table's beta_deg ({HEADING_REF} uphill)",
+            f"differences up to {np.max(off):.1f}° (the table's β imply an uphill azimuth of {implied % 360.0:.1f}°)",
+            f"Leave {option('uphill_azimuth')} out to use the table's β, or correct one of them.",
+        )
 
 
 def checked(table: StopTable, min_stops: int = MIN_STOPS) -> StopTable:

@@ -40,9 +40,16 @@ def summary(cal: Calibration) -> str:
         lines.append(f"  yaw not determined: {cal.yaw_reason}")
     if cal.slope_deg is None:
         lines.append("  slope not determined (see notes)")
+    known = {"stated": "stated by", "inferred": "inferred from", "default": "assumed:"}
+    lines += [f"  input {c.name}: {c.value} ({known[c.how]} {c.by})" for c in cal.provenance.conventions]
+    if cal.checks:
+        by = {True: "passed", False: "FAILED", None: "not tested"}
+        groups = {v: [c.name for c in cal.checks if c.passed is k] for k, v in by.items()}
+        lines.append("  checks " + "; ".join(f"{k}: {', '.join(v)}" for k, v in groups.items() if v))
     lines += [f"  note: {n}" for n in cal.notes]
     if not cal.confident:
-        found = "; ".join(f"{u.what} ({u.size})" for u in cal.unexplained) or "see the notes"
+        failed = [f"{c.name} ({c.reason})" for c in cal.checks if c.passed is False]
+        found = "; ".join([*(f"{u.what} ({u.size})" for u in cal.unexplained), *failed]) or "see the notes"
         lines.append(f"  NOT CONFIDENT: {found}; rotating with it warns, requiring a confident result refuses it")
     lines.append("  (uncertainties are 1σ)")
     return "\n".join(lines)

@@ -21,6 +21,7 @@ from mountcal.conventions import FloatArray
 from mountcal.errors import InputError
 from mountcal.estimate import sphere
 from mountcal.estimate.effects.scale import SCALE_NAMES
+from mountcal.option_names import option
 from mountcal.result_file import read_json
 from mountcal.sensor_spec import SensorSpec
 from mountcal.stoptable import StopTable, Unit, read_stop_table
@@ -187,7 +188,9 @@ def session_stops(
     log: LogOptions | None = None,
 ) -> tuple[FloatArray, FloatArray | None]:
     """Stop means (n, 3) in m/s² and their covariances, from a stop table or from logs (read as ``log``
-    says; ``unit`` is a stop table's, and a sample table's where ``log`` gives none)."""
+    says, its ``axes`` too for a stop table; ``unit`` is a stop table's, and a sample table's where ``log``
+    gives none)."""
+    from mountcal.input_conventions import parse_axes
     from mountcal.io.logs import LogOptions, read_log
     from mountcal.pipeline import is_stop_table, with_gravity
     from mountcal.stops import StopDetection, detect_stops
@@ -195,7 +198,8 @@ def session_stops(
     log = log or LogOptions()
     mapped = log.columns is not None or log.mapping is not None
     if len(paths) == 1 and is_stop_table(paths[0], columns=mapped):
-        table = read_stop_table(paths[0], unit=unit, headings="none")
+        axes = None if log.axes is None else parse_axes(log.axes, option("axes"))
+        table = read_stop_table(paths[0], unit=unit, headings="none", axes=axes)
         return table.acc_s, table.cov_s
     if log.unit is None and unit != "mps2":
         log = replace(log, unit=unit)

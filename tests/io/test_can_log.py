@@ -184,12 +184,18 @@ def test_mapping_as_dict_overrides_units_and_channel_argument_wins(tmp_path: Pat
     np.testing.assert_allclose(in_g.acc_s, as_is.acc_s * G_N)
 
 
-def test_left_handed_axes_are_refused_unless_allowed(tmp_path: Path) -> None:
+def test_a_left_handed_axis_map_is_a_statement_recorded_as_a_reflection(tmp_path: Path) -> None:
+    """A reflection in the mapping states that the device's triad is left-handed (as --axes does): it is
+    applied and recorded; whether the mapped axes are right-handed is checked where the data can tell."""
     path = _write(tmp_path / "mm5.blf", _mm5_messages(50))
-    with pytest.raises(InputError, match=r"right-handed.*'y,x,z', a reflection"):
-        read_can(path, OWN_DBC, mapping={"axes": "y,x,z"})
+    plain = read_can(path, OWN_DBC)
+    mirrored = read_can(path, OWN_DBC, mapping={"axes": "y,x,z"})
+    assert mirrored.axis_map == "y,x,z (a reflection: the device's own triad is left-handed)"
+    np.testing.assert_array_equal(mirrored.acc_s, plain.acc_s[:, [1, 0, 2]])
     samples = read_can(path, OWN_DBC, mapping={"axes": "y,x,z", "allow_left_handed": "device triad is left-handed"})
-    assert samples.axis_map == "y,x,z (reflection allowed: device triad is left-handed)"
+    assert samples.axis_map == "y,x,z (a reflection: device triad is left-handed)"
+    with pytest.raises(InputError, match=r"signed permutation"):
+        read_can(path, OWN_DBC, mapping={"axes": "x,x,z"})
 
 
 def test_extended_id_imu_with_validity_flag(tmp_path: Path) -> None:

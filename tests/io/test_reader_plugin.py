@@ -172,3 +172,77 @@ def test_the_log_front_loads_no_numerical_library() -> None:
     env = {**os.environ, "PYTHONPATH": str(SRC)}
     done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
     assert done.stdout.strip() == "[]"
+
+
+# ------------------------------------------------------------------ plugins isolated (issue 27)
+
+READ = "    def read(self, path: Path, options: object) -> Samples:\n"
+RAISING = PLUGIN.replace(READ, READ + "        raise {error}\n")
+CLAIMING = (
+    PLUGIN
+    + """
+
+class Claimer(ImuTxtReader):
+    def claims(self, path, options):
+        raise {error}
+"""
+)
+
+
+def _stop_table(folder: Path) -> Path:
+    """A stop table a built-in reader reads (so a fleet has a log besides the plugin's)."""
+    from mountcal.cli import main
+
+    path = folder / "car_1" / "stops.csv"
+    assert main(["simulate", "-o", str(path), "--seed", "2"]) == 0
+    return path
+
+
+@pytest.mark.parametrize("at_import", ["import sys; sys.exit(0)", "raise KeyboardInterrupt", "raise SystemExit(3)"])
+def test_a_plugin_that_exits_or_interrupts_at_import_is_named_and_nothing_else_stops(
+    tmp_path: Path, session: tuple[dict[str, str], Path, ParkingLog], at_import: str
+) -> None:
+    _, log_path, _ = session
+    env = install(tmp_path / "site", "mountcal_exits", at_import + "\n", "mountcal_exits:Reader")
+    result = tmp_path / "result.json"
+    done = mountcal(env, "calibrate", log_path, "-o", result)  # only a plugin could read .imutxt: plugins load
+    assert done.returncode == 2 and not result.exists(), done.stderr
+    assert "mountcal_exits" in done.stderr and "Traceback" not in done.stderr
+    assert ("SystemExit" if "xit" in at_import else "KeyboardInterrupt") in done.stderr
+    stops = _stop_table(tmp_path / "fleet")
+    done = mountcal(env, "fleet", stops.parent.parent, "-o", tmp_path / "fleet.parquet", "--workers", "1", "-q")
+    assert done.returncode == 0 and (tmp_path / "fleet.parquet").is_file(), done.stderr
+    assert "mountcal_exits" in done.stderr and "left out" in done.stderr and "Traceback" not in done.stderr
+
+
+def test_output_of_a_plugin_at_import_goes_to_stderr_named(
+    tmp_path: Path, session: tuple[dict[str, str], Path, ParkingLog]
+) -> None:
+    import json
+
+    _, log_path, _ = session
+    noisy = "import os, sys\nprint('hello from the plugin')\nos.write(1, b'raw bytes from the plugin\\n')\n" + PLUGIN
+    env = install(tmp_path / "site", "mountcal_noisy", noisy, "mountcal_noisy:ImuTxtReader")
+    done = mountcal(env, "inspect", log_path, "--json")
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout)["format"]  # stdout holds the JSON alone
+    assert "hello from the plugin" in done.stderr and "raw bytes from the plugin" in done.stderr
+    assert "mountcal_noisy" in done.stderr  # the printed text is reported with the plugin's name
+
+
+@pytest.mark.parametrize("where", ["read", "claims"])
+@pytest.mark.parametrize("error", ["ZeroDivisionError('bug in the plugin')", "SystemExit(0)"])
+def test_a_plugin_raising_in_claims_or_read_is_a_message_naming_it(
+    tmp_path: Path, session: tuple[dict[str, str], Path, ParkingLog], where: str, error: str
+) -> None:
+    _, log_path, _ = session
+    source = (RAISING if where == "read" else CLAIMING).replace("{error}", error)
+    entry = "mountcal_raising:" + ("ImuTxtReader" if where == "read" else "Claimer")
+    env = install(tmp_path / "site", "mountcal_raising", source, entry)
+    result = tmp_path / "result.json"
+    done = mountcal(env, "calibrate", log_path, "-o", result)
+    assert done.returncode == 2 and not result.exists(), done.stderr
+    assert "Traceback" not in done.stderr and "mountcal_raising" in done.stderr
+    assert error.split("(")[0] in done.stderr
+    if where == "read":
+        assert str(log_path) in done.stderr

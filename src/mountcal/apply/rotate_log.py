@@ -56,6 +56,7 @@ from mountcal.apply.rotate import acc_to_vehicle, check_applicable, rate_to_vehi
 from mountcal.atomic import atomic_output
 from mountcal.conventions import CONVENTIONS, FloatArray
 from mountcal.errors import InputError
+from mountcal.input_conventions import AxisMap, check_same_axes, parse_axes
 from mountcal.io.logs import CHUNK_SAMPLES, LogOptions, iter_log
 from mountcal.io.mcap.copy import copy_mcap_with_imu
 from mountcal.io.mcap.write import McapImuSamples
@@ -188,6 +189,8 @@ def rotate_log(
     kind = output_format(out, fmt)
     _check_not_an_input(out, files)
     found = tuple(check_applicable(cal, level_only=level_only, require_confident=require_confident))
+    axes = None if opts.axes is None else parse_axes(opts.axes, option("axes"))
+    check_same_axes(cal.provenance.conventions, axes, " + ".join(map(str, files)))
     if not cal.yaw_determined:
         if kind == "csv":
             raise InputError(
@@ -207,7 +210,7 @@ def rotate_log(
                 f"{len(files)} files",
                 "Rotate each MCAP file to its own output, or write Parquet/CSV (which joins splits).",
             )
-        report = _rotate_mcap_copy(files[0], cal, out, opts.topic, frame_id)
+        report = _rotate_mcap_copy(files[0], cal, out, opts.topic, frame_id, axes)
     else:
         report = _rotate_stream(files, cal, out, kind, opts, chunk_samples, frame_id)
     return replace(report, frame=cal.frame, warnings=found)
@@ -375,13 +378,15 @@ def _descriptions(cal: Calibration) -> dict[str, str]:
 # --------------------------------------------------------------------------- MCAP copied through
 
 
-def _rotate_mcap_copy(src: Path, cal: Calibration, out: Path, topic: str | None, frame_id: str) -> RotateReport:
+def _rotate_mcap_copy(
+    src: Path, cal: Calibration, out: Path, topic: str | None, frame_id: str, axes: AxisMap | None = None
+) -> RotateReport:
     meta = {k.removeprefix("mountcal."): v for k, v in _metadata(cal, [src]).items()}
     checked = False
 
     def transform(msgs: ImuMessages) -> tuple[ImuMessages, int]:
         nonlocal checked
-        rotated = _to_vehicle(msgs, cal, check_units=not checked)
+        rotated = _to_vehicle(msgs if axes is None or axes.identity else _mapped(msgs, axes), cal, not checked)
         checked = checked or len(msgs) >= 10
         return rotated
 
@@ -430,6 +435,27 @@ def _to_vehicle(msgs: ImuMessages, cal: Calibration, check_units: bool) -> tuple
             linear_acceleration_covariance=_rotate_covariance(msgs.linear_acceleration_covariance, rot),
         ),
         int((~finite).sum()),
+    )
+
+
+def _mapped(msgs: ImuMessages, axes: AxisMap) -> ImuMessages:
+    """The messages in the sensor frame of the axis map (as the log readers apply it). An orientation
+    turns with a proper map; under a reflection (no rotation) it is marked unknown, as ROS does."""
+    p = axes.matrix
+    orientation, orientation_cov = msgs.orientation.copy(), msgs.orientation_covariance.copy()
+    if axes.reflection:
+        orientation_cov[:, 0] = -1.0
+    else:  # R_w,sensor = R_w,device · Pᵀ
+        known = np.isfinite(orientation).all(axis=1) & (np.linalg.norm(orientation, axis=1) > 0.5)
+        orientation[known] = (Rotation.from_quat(orientation[known]) * Rotation.from_matrix(p).inv()).as_quat()
+    return replace(
+        msgs,
+        orientation=orientation,
+        orientation_covariance=orientation_cov,
+        angular_velocity=axes.apply(msgs.angular_velocity),
+        angular_velocity_covariance=_rotate_covariance(msgs.angular_velocity_covariance, p),
+        linear_acceleration=axes.apply(msgs.linear_acceleration),
+        linear_acceleration_covariance=_rotate_covariance(msgs.linear_acceleration_covariance, p),
     )
 
 

@@ -14,11 +14,15 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
+import re
 import sys
 from collections.abc import Sequence
 
+from mountcal.atomic import Terminated, removed_on_signals
 from mountcal.cli.options import EXIT_CODES, configure_logging
-from mountcal.errors import MountcalError
+from mountcal.cli.path_options import check_paths, command_parser
+from mountcal.errors import InputError, MountcalError
 from mountcal.option_names import as_flags
 from mountcal.paths import SystemFailure
 from mountcal.terminal import safe
@@ -30,11 +34,20 @@ log = logging.getLogger("mountcal")
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run one command; return its exit code (see :data:`mountcal.cli.options.EXIT_CODES`)."""
+    stdout_closed = _standard_streams()
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(_signed_maps(sys.argv[1:] if argv is None else list(argv)))
     configure_logging(args.verbose - args.quiet)
     try:
-        with as_flags():  # library messages name the flags, not the Python parameters
+        if stdout_closed:
+            raise InputError(
+                "stdout",
+                "an open standard output (mountcal writes results and summaries there)",
+                "it closed (`>&-`)",
+                "Redirect it to a file or to /dev/null instead. Nothing was written.",
+            )
+        with as_flags(), removed_on_signals():  # messages name flags; SIGTERM/SIGHUP unwind like Ctrl-C
+            check_paths(command_parser(parser, args.command), args)  # every declared path, before any work
             return int(args.run(args))
     except MountcalError as err:
         log.error("error: %s", safe(err, keep=chr(10)))
@@ -46,9 +59,49 @@ def main(argv: Sequence[str] | None = None) -> int:
         failure = SystemFailure(str(err.filename or f"mountcal {args.command}"), "reading or writing", err)
         log.error("error: %s", safe(failure))
         return failure.exit_code
+    except Terminated as err:
+        log.error("terminated by %s; no output was written", err)
+        return 128 + err.signum
     except KeyboardInterrupt:
         log.error("interrupted; no output was written")
         return 130
+
+
+def _standard_streams() -> bool:
+    """Give a closed stdin, stdout or stderr ``/dev/null`` (so that no file mountcal opens takes its
+    descriptor, and no child process writes into one); True when stdout was closed."""
+    closed = False
+    for fd, name in ((0, "stdin"), (1, "stdout"), (2, "stderr")):
+        try:
+            os.fstat(fd)
+            continue
+        except OSError:
+            pass
+        null = os.open(os.devnull, os.O_RDWR)
+        if null != fd:
+            os.dup2(null, fd)
+            os.close(null)
+        if getattr(sys, name) is None:  # closed when Python started
+            setattr(sys, name, open(fd, "w" if fd else "r", encoding="utf-8", closefd=False))
+        closed = closed or fd == 1
+    return closed
+
+
+_AXIS_MAP = re.compile(r"-[xyzXYZ]\s*,.*")
+
+
+def _signed_maps(argv: list[str]) -> list[str]:
+    """``--axes -y,x,z`` as ``--axes=-y,x,z``: argparse would take a value starting with "-" for an option."""
+    out: list[str] = []
+    i = 0
+    while i < len(argv):
+        if argv[i] == "--axes" and i + 1 < len(argv) and _AXIS_MAP.fullmatch(argv[i + 1]):
+            out.append(f"--axes={argv[i + 1]}")
+            i += 2
+        else:
+            out.append(argv[i])
+            i += 1
+    return out
 
 
 def build_parser() -> argparse.ArgumentParser:

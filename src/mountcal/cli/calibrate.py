@@ -13,12 +13,12 @@ from mountcal.cli.options import (
     add_fit_options,
     add_log_options,
     fit_options,
-    log_inputs,
     log_job,
     print_json,
     require,
     working,
 )
+from mountcal.cli.path_options import add_path
 from mountcal.terminal import safe
 
 if TYPE_CHECKING:
@@ -35,20 +35,29 @@ def add_parser(sub: Any) -> None:
         "estimate the mounting from a stop table or a log",
         json_help="write the result JSON on stdout (the summary goes to stderr)",
         inputs=("STOPS|LOG", "stop table (beta_deg, ax, ay, az, ...; '-': CSV on stdin) or log file(s)"),
+        reads={"what": "a stop table or log", "folders": True, "stdio": True},
         output="result JSON to write ('-': stdout)",
+        writes={"what": "the result", "stdio": True},
     )
-    p.add_argument("--report", default=None, help="also write a self-contained HTML report here")
+    add_path(
+        p, "--report", role="output", what="the HTML report", default=None,
+        help="also write a self-contained HTML report here",
+    )  # fmt: skip
     add_log_options(p)
     g = p.add_argument_group("fit")
     add_fit_options(
-        g, headings_help="a stop table's beta_deg is from the uphill direction (default), relative, or none"
+        g,
+        headings_help="what a stop table's beta_deg is measured from: the uphill direction, relative (an unknown "
+        "common offset), or none (default: the table's heading_ref column, else uphill, said in the result)",
     )
-    g.add_argument("--unit", choices=("mps2", "g"), default="mps2", help="unit of a stop table's ax, ay, az")
+    g.add_argument(
+        "--unit", choices=("mps2", "g"), default=None, help="unit of a stop table's ax, ay, az (default m/s², checked)"
+    )
     g.add_argument(
         "--gravity",
-        type=float,
         default=None,
-        help="local gravity in m/s² (default: from lat_deg/alt_m when the data have them, else 9.80665)",
+        help="local gravity in m/s², or with its unit (1g; default: from lat_deg/alt_m when the data have them, "
+        "else 9.80665); a bare number outside 9.7–9.9 is refused",
     )
     p.set_defaults(run=run)
 
@@ -57,7 +66,8 @@ def run(args: argparse.Namespace) -> int:
     from mountcal.atomic import atomic_path
     from mountcal.calibrate import calibrate
     from mountcal.errors import InputError
-    from mountcal.paths import check_outputs
+    from mountcal.input_conventions import parse_axes
+    from mountcal.option_names import option
     from mountcal.pipeline import calibrate_job, describe, is_stop_table
     from mountcal.stoptable import read_stop_table
     from mountcal.summary import summary
@@ -65,14 +75,20 @@ def run(args: argparse.Namespace) -> int:
     to_stdout = args.json or args.output == STDOUT
     if args.input == [STDOUT] and sys.stdin.isatty():
         raise InputError("-", "a CSV stop table piped on stdin", "a terminal", "Pipe one in, or name the file.")
-    check_outputs({"-o": None if args.output == STDOUT else args.output, "--report": args.report}, log_inputs(args))
     if args.report is not None:
         require("matplotlib", "report", "calibrate --report")  # before any work: nothing is written without it
     table: StopTable | None
     done: LogResult | None = None  # the log's result, when the input is a log
     mapped = args.columns is not None or (args.mapping is not None and not args.dbc)  # a table's column map
     if args.input == [STDOUT] or (len(args.input) == 1 and is_stop_table(args.input[0], bool(args.dbc), mapped)):
-        table = read_stop_table(args.input[0], unit=args.unit, headings=args.headings)
+        table = read_stop_table(
+            args.input[0],
+            unit=args.unit,
+            headings=args.headings,
+            heading_unit=args.heading_unit,
+            axes=None if args.axes is None else parse_axes(args.axes, option("axes")),
+            uphill_azimuth_deg=args.uphill_azimuth_deg,
+        )
         with working(args, "fitting"):
             cal = calibrate(table, fit_options(args))
     else:

@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from mountcal.cli.options import STDOUT, add_command
+from mountcal.cli.path_options import add_path
 from mountcal.terminal import safe
 
 # the keys of mountcal.outputs.exporters.FORMATS (a test keeps them equal), here so that `--help` stays light
@@ -34,8 +35,10 @@ def add_parser(sub: Any) -> None:
         "export",
         "write the mounting for u-blox, NovAtel, ROS 2, Autoware, or as JSON/YAML",
         inputs=("RESULT.json", "result written by `mountcal calibrate -o`"),
+        reads={"what": "a result JSON", "small": True},
         many=False,
         output="file to write; none or '-' writes to stdout",
+        writes={"what": "the export", "stdio": True},
     )
     p.add_argument("--to", required=True, choices=FORMAT_NAMES, help="target format (see docs/exporters.md)")
     p.add_argument(
@@ -50,8 +53,12 @@ def add_parser(sub: Any) -> None:
         default=None,
         help="parent frame (ROS: base_link, which must be a REP 103 body frame; Autoware: sensor_kit_base_link)",
     )
-    p.add_argument(
+    add_path(
+        p,
         "--parent-pose",
+        role="input",
+        what="a sensors_calibration.yaml",
+        small=True,
         default=None,
         metavar="YAML",
         help="Autoware's sensors_calibration.yaml: the parent's pose in base_link, composed with the mounting "
@@ -73,13 +80,10 @@ def run(args: argparse.Namespace) -> int:
     from mountcal.atomic import atomic_path
     from mountcal.errors import InputError
     from mountcal.outputs.exporters import DEFAULT_FRAMES, Frames, check_suffix, export, read_parent_pose
-    from mountcal.paths import check_outputs
     from mountcal.result import Calibration
 
     result = Path(args.input)
     to_stdout = args.output in (None, STDOUT)
-    inputs = {"RESULT.json": result, "--parent-pose": args.parent_pose}
-    check_outputs({"-o": None if to_stdout else args.output}, inputs)
     if not to_stdout:
         check_suffix(args.to, args.output)
     cal = Calibration.load(result)

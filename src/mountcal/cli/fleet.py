@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
+import signal
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -29,12 +32,33 @@ def add_parser(sub: Any) -> None:
         "fleet",
         "calibrate many logs of many vehicles: consensus per vehicle, remounts",
         json_help="the run's summary (logs, vehicles, failures, outputs) as JSON on stdout",
-        inputs=("INPUTS", "folders of logs (vehicle = parent folder), globs, manifest CSVs"),
+        inputs=(
+            "INPUTS",
+            "folders of logs, globs, manifest CSVs or storage URLs (s3://bucket/LOG); see --layout",
+        ),
+        reads={"what": "a folder, log, manifest or URL", "folders": True, "globs": True},
         output="per-log Parquet table (vehicles go to <stem>_vehicles)",
         output_required=True,
+        writes={"what": "the fleet table", "writes": _writes},
     )
     p.add_argument("--workers", type=int, default=None, help="local worker processes (default: all cores)")
     p.add_argument("--scheduler", default=None, help="run on this Dask scheduler, tcp://HOST:PORT")
+    p.add_argument(
+        "--layout",
+        choices=("auto", "canedge", "folders", "manifest"),
+        default="auto",
+        help="how folders map to vehicles and logs: canedge (<device>/<session>/<split>.MF4, a session's splits "
+        "joined), folders (each file a log of its parent folder's vehicle), manifest (CSVs only); "
+        "default: inferred from the names",
+    )
+    p.add_argument(
+        "--storage-option",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="an fsspec option for storage URLs, e.g. endpoint_url=http://HOST:9000 (repeatable; "
+        "credentials also come from the AWS variables and profiles)",
+    )
     p.add_argument("--retry-failed", action="store_true", help="recalculate logs an earlier run recorded as failed")
     p.add_argument(
         "--floor-deg", type=float, default=0.0, help="mounting scatter between logs added to each log's σ (deg)"
@@ -48,8 +72,32 @@ def add_parser(sub: Any) -> None:
     p.set_defaults(run=run, protocol=None)
 
 
+@contextlib.contextmanager
+def terminated_as_interrupt() -> Iterator[None]:
+    """SIGTERM (a scheduler's stop, ``kill``) ends the run as Ctrl-C does: the workers are stopped
+    and what finished is kept (the default would end the process without that)."""
+
+    def interrupt(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _writes(value: str, _: argparse.Namespace) -> list[tuple[str, str]]:
+    """The per-log table and the per-vehicle table beside it (the part files' folder is checked by its store)."""
+    from mountcal.fleet import outputs_of
+
+    table, vehicles = outputs_of(value)[:2]
+    return [(str(table), ""), (str(vehicles), f"{value}, writing")]
+
+
 def run(args: argparse.Namespace) -> int:
     from mountcal.fleet import FleetOptions, JobDefaults, collect_jobs, outputs_of, run_fleet, summary_lines
+    from mountcal.fleet.storage import parse_storage_options
 
     if args.scheduler is not None:
         require("distributed", "fleet", "fleet --scheduler")  # before any log is read or hashed
@@ -62,10 +110,21 @@ def run(args: argparse.Namespace) -> int:
         use=args.use,
     )
     ours: list[Path] = []
-    jobs = collect_jobs(args.input, defaults, exclude=outputs_of(args.output), set_aside=ours)
+    discarded: dict[str, int] = {}
+    jobs = collect_jobs(
+        args.input,
+        defaults,
+        exclude=outputs_of(args.output),
+        set_aside=ours,
+        layout=args.layout,
+        storage_options=parse_storage_options(args.storage_option),
+        discarded=discarded,
+    )
     if ours:
         listed = ", ".join(map(str, ours[:5])) + (" …" if len(ours) > 5 else "")
         log.info("%s", safe(f"set aside {len(ours)} file(s) mountcal wrote (fleet tables, rotated logs): {listed}"))
+    for reason, n in discarded.items():
+        log.warning("%s", safe(f"set aside {n} {reason}"))
     options = FleetOptions(
         workers=args.workers,
         scheduler=args.scheduler,
@@ -75,7 +134,8 @@ def run(args: argparse.Namespace) -> int:
         require_confident=args.require_confident,
     )
     try:
-        result = run_fleet(jobs, args.output, options)
+        with terminated_as_interrupt():
+            result = run_fleet(jobs, args.output, options, set_aside=discarded)
     except KeyboardInterrupt:
         log.error(
             "interrupted; the logs finished so far are kept in %s: run the same command again to resume",
@@ -103,6 +163,12 @@ def run(args: argparse.Namespace) -> int:
                 "logs": len(result.logs),
                 "status": {str(k): int(v) for k, v in status.items()},
                 "vehicles": len(result.vehicles),
+                "layout": result.layout,
+                "sessions": result.sessions,
+                "splits": result.splits,
+                "vehicles_not_confident": [
+                    str(row.vehicle_id) for row in result.vehicles.itertuples() if not row.latest_confident
+                ],
                 "computed": result.computed,
                 "reused": result.reused,
                 "engine": result.engine,

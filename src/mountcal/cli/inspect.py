@@ -8,6 +8,7 @@ from dataclasses import asdict, replace
 from typing import Any
 
 from mountcal.cli.options import add_command, add_detection_options, detection, log_options, print_json, working
+from mountcal.cli.path_options import add_path
 from mountcal.terminal import safe
 
 
@@ -20,7 +21,10 @@ def add_parser(sub: Any) -> None:
         inputs=("LOG", "the log"),
         many=False,
     )
-    p.add_argument("--dbc", action="append", default=None, help="DBC naming the CAN messages (repeat for several)")
+    add_path(
+        p, "--dbc", role="input", what="a DBC", small=True, action="append", default=None,
+        help="DBC naming the CAN messages (repeat for several)",
+    )  # fmt: skip
     p.add_argument("--columns", default=None, help="a table's columns as ROLE=COLUMN[:UNIT] pairs (see calibrate)")
     p.add_argument(
         "--stops",
@@ -28,7 +32,10 @@ def add_parser(sub: Any) -> None:
         help="also read the IMU and list its parked periods: the stops found, and those that nearly became stops "
         "(which threshold failed, by how much, and the option that would keep each)",
     )
-    p.add_argument("--mapping", default=None, help="with --stops: TOML naming the accelerometer signals (CAN)")
+    add_path(
+        p, "--mapping", role="input", what="a mapping", small=True, default=None,
+        help="with --stops: TOML naming the accelerometer signals (CAN)",
+    )  # fmt: skip
     p.add_argument("--channel", type=int, default=None, help="with --stops: CAN channel of the IMU")
     p.add_argument("--topic", default=None, help="with --stops: IMU topic (MCAP)")
     add_detection_options(p)

@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
-from mountcal.cli.options import STDOUT, add_command
+from mountcal.cli.options import STDOUT, add_axes_option, add_command
+from mountcal.cli.path_options import add_path
 from mountcal.terminal import safe
 
 log = logging.getLogger("mountcal")
@@ -19,34 +21,76 @@ def add_parser(sub: Any) -> None:
     p = add_command(sub, "live", "run a session on a live CAN bus: record, refit at each stop, suggest")
     p.add_argument("--interface", required=True, help="python-can interface: socketcan, virtual, pcan, vector, …")
     p.add_argument("--channel", required=True, help="bus channel, e.g. can0")
-    p.add_argument("--dbc", required=True, help="DBC describing the bus")
-    p.add_argument("--mapping", default=None, help="TOML naming the accelerometer signals")
+    add_path(p, "--dbc", role="input", what="a DBC", small=True, required=True, help="DBC describing the bus")
+    add_path(
+        p, "--mapping", role="input", what="a mapping", small=True, default=None,
+        help="TOML naming the accelerometer signals",
+    )  # fmt: skip
+    add_axes_option(p)
     p.add_argument("--can-channel", type=int, default=None, help="channel number of the IMU frames (recorded)")
     p.add_argument("--target", default="roll=0.1,pitch=0.1,yaw=0.5", help="stop when every 1σ is below (deg)")
     p.add_argument("--model", default="auto", help="auto (default), rotation,slope or rotation,slope,bias")
-    p.add_argument("--plan", default=None, help="protocol sheet from `mountcal plan`: stops take its β in order")
+    add_path(
+        p, "--plan", role="input", what="a protocol sheet", small=True, default=None,
+        help="protocol sheet from `mountcal plan`: stops take its β in order",
+    )  # fmt: skip
     p.add_argument("--uphill-azimuth-deg", type=float, default=None, help="β from the bus's heading signal")
     p.add_argument("--timeout", type=float, default=10.0, help="a bus silent this long ends the session (s)")
     p.add_argument("--max-acc-std", type=float, default=None, help="stillness (m/s²; default: StopDetection's)")
     p.add_argument("--min-stop-s", type=float, default=None, help="shortest stop (s; default: StopDetection's)")
-    p.add_argument("--json-events", default=None, help="also write the events as JSON lines here ('-': stdout)")
-    p.add_argument("-o", "--output", default="session", help="prefix: PREFIX.blf, PREFIX.json, PREFIX_stops.csv")
-    p.add_argument("--report", default=None, help="also write the HTML report here")
+    add_path(
+        p, "--json-events", role="output", what="the events", stdio=True, default=None,
+        help="also write the events as JSON lines here ('-': stdout)",
+    )  # fmt: skip
+    add_path(
+        p, "-o", "--output", role="output", what="the session's files", writes=_writes, default="session",
+        help="prefix: PREFIX.blf, PREFIX.json, PREFIX_stops.csv, PREFIX_protocol.csv",
+    )  # fmt: skip
+    add_path(p, "--report", role="output", what="the HTML report", default=None, help="also write the HTML report here")
     p.set_defaults(run=run)
 
 
+def _writes(prefix: str, _: argparse.Namespace) -> list[tuple[str, str]]:
+    from mountcal.live import session_files
+
+    return [(str(path), f"{prefix}, writing") for path in session_files(Path(prefix)).values()]
+
+
+def _file_sink(file: Any, line: Callable[[dict[str, Any]], str]) -> Callable[[dict[str, Any]], None]:
+    """Each event appended as one whole line (a GrowingFile: a full disk leaves whole lines only)."""
+
+    def write(event: dict[str, Any]) -> None:
+        file.write(line(event).encode("utf-8"))
+        file.commit()
+
+    return write
+
+
 def run(args: argparse.Namespace) -> int:
-    from mountcal.atomic import atomic_path
+    from mountcal.atomic import GrowingFile, atomic_path
     from mountcal.calibrate import Options
     from mountcal.errors import InputError
     from mountcal.io.can.bus import BUS_ERRORS, open_bus
-    from mountcal.live import Live, LiveOptions, fail_if_empty, json_sink, line_of, write_outputs
+    from mountcal.live import (
+        Live,
+        LiveOptions,
+        event_line,
+        fail_if_empty,
+        json_sink,
+        line_of,
+        session_files,
+        write_outputs,
+    )
     from mountcal.plan import parse_target
     from mountcal.stops import StopDetection, read_protocol
     from mountcal.summary import summary
 
+    if not (math.isfinite(args.timeout) and args.timeout > 0):
+        raise InputError(
+            "--timeout", "a positive number of seconds", f"{args.timeout:g}", "Pass the silence that ends the session."
+        )
     prefix = Path(args.output)
-    recording = prefix.with_name(prefix.name + ".blf")
+    recording = session_files(prefix)["recording"]
     plan_beta = tuple(float(b) for b in read_protocol(args.plan)["beta_deg"]) if args.plan else None
     stillness = {"max_acc_std_mps2": args.max_acc_std, "min_duration_s": args.min_stop_s}
     opts = LiveOptions(
@@ -59,6 +103,7 @@ def run(args: argparse.Namespace) -> int:
         uphill_azimuth_deg=args.uphill_azimuth_deg,
         plan_beta_deg=plan_beta,
         silence_s=args.timeout,
+        axes=args.axes,
     )
     try:
         bus = open_bus(args.interface, args.channel)
@@ -70,16 +115,16 @@ def run(args: argparse.Namespace) -> int:
             "Check the interface name, the channel and that the device is up.",
         ) from err
     sinks: list[Callable[[dict[str, Any]], None]] = [lambda e: print(line_of(e), flush=True)]
-    events_file: IO[str] | None = None
+    events_file: GrowingFile | None = None
     if args.json_events == STDOUT:
         sinks = [json_sink(sys.stdout)]
     elif args.json_events:
         try:
-            events_file = open(args.json_events, "w", encoding="utf-8")  # open for the session
-        except OSError as err:
+            events_file = GrowingFile(args.json_events, "the events")  # a line at a time, whole
+        except BaseException:
             bus.shutdown()
-            raise InputError(str(args.json_events), "a writable events file", str(err), "Check the path.") from err
-        sinks.append(json_sink(events_file))
+            raise
+        sinks.append(_file_sink(events_file, event_line))
 
     def emit(event: dict[str, Any]) -> None:
         for sink in sinks:

@@ -15,6 +15,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import TYPE_CHECKING, Any
 
+from mountcal.cli.path_options import add_path
 from mountcal.errors import InputError
 
 if TYPE_CHECKING:
@@ -32,6 +33,7 @@ EXIT_CODES = {
     4: "the fit failed",
     5: "the system refused a read or a write",
     130: "interrupted (nothing partial is written)",
+    143: "terminated by SIGTERM (129: SIGHUP; nothing partial is written)",
 }
 STDOUT = "-"
 MODEL_HELP = (
@@ -84,17 +86,37 @@ def add_command(
     *,
     json_help: str | None = None,
     inputs: tuple[str, str] | None = None,
+    reads: dict[str, Any] | None = None,
     many: bool = True,
     output: str | None = None,
     output_required: bool = False,
+    writes: dict[str, Any] | None = None,
 ) -> argparse.ArgumentParser:
     """A subcommand with the common options; its inputs (``args.input``: metavar, help), its ``-o`` and,
-    when it has a machine-readable result, ``--json``."""
+    when it has a machine-readable result, ``--json``. ``reads`` and ``writes`` declare the inputs and
+    ``-o`` (:func:`mountcal.cli.path_options.add_path`; default: logs, which may be folders, and a file)."""
     p: argparse.ArgumentParser = sub.add_parser(name, help=help_text, description=help_text, parents=[common_options()])
     if inputs is not None:
-        p.add_argument("input", nargs="+" if many else None, metavar=inputs[0], help=inputs[1])
+        add_path(
+            p,
+            "input",
+            role="input",
+            **(reads or {"what": "a log", "folders": True}),
+            nargs="+" if many else None,
+            metavar=inputs[0],
+            help=inputs[1],
+        )
     if output is not None:
-        p.add_argument("-o", "--output", required=output_required, default=None, help=output)
+        add_path(
+            p,
+            "-o",
+            "--output",
+            role="output",
+            **(writes or {"what": "the output"}),
+            required=output_required,
+            default=None,
+            help=output,
+        )
     if json_help is not None:
         p.add_argument("--json", action="store_true", help=json_help)
     return p
@@ -106,12 +128,16 @@ def add_log_options(
     """How to read a log (and, with ``stops``, how to find its stops and their headings)."""
     g = p.add_argument_group("logs")
     if repeat_dbc:
-        g.add_argument("--dbc", action="append", default=None, help="DBC to decode a CAN log (repeat for several)")
+        add_path(
+            g, "--dbc", role="input", what="a DBC", small=True, action="append", default=None,
+            help="DBC to decode a CAN log (repeat for several)",
+        )  # fmt: skip
     else:
-        g.add_argument("--dbc", default=None, help="DBC to decode CAN logs")
-    g.add_argument(
-        "--mapping", default=None, help="TOML naming the accelerometer signals (CAN) or a table's [columns]"
-    )
+        add_path(g, "--dbc", role="input", what="a DBC", small=True, default=None, help="DBC to decode CAN logs")
+    add_path(
+        g, "--mapping", role="input", what="a mapping", small=True, default=None,
+        help="TOML naming the accelerometer signals (CAN) or a table's [columns]",
+    )  # fmt: skip
     g.add_argument(
         "--columns",
         default=None,
@@ -125,15 +151,27 @@ def add_log_options(
         default=None,
         help="the Imu or Vector3 inside the topic's message, e.g. imu or imu.linear_acceleration (MCAP, ROS bags)",
     )
+    add_axes_option(g)
+    g.add_argument(
+        "--heading-unit",
+        choices=("deg", "rad"),
+        default=None,
+        help="unit of the headings (a heading channel, a protocol's or stop table's beta_deg); default degrees, "
+        "checked: headings that look like radians are refused",
+    )
     if not stops:
         return
     if protocol:
-        g.add_argument("--protocol", default=None, help="protocol sheet CSV: t_start_s, t_end_s, beta_deg")
+        add_path(
+            g, "--protocol", role="input", what="a protocol sheet", small=True, default=None,
+            help="protocol sheet CSV: t_start_s, t_end_s, beta_deg",
+        )  # fmt: skip
     g.add_argument(
         "--uphill-azimuth-deg",
         type=float,
         default=None,
-        help="compass azimuth of the slope's uphill direction, with a heading signal in the log",
+        help="compass azimuth of the slope's uphill direction, with a heading signal in the log (or a stop table's "
+        "compass column heading_deg)",
     )
     add_detection_options(p)
 
@@ -143,6 +181,17 @@ def add_detection_options(p: argparse.ArgumentParser) -> None:
     d = p.add_argument_group("stop detection (default: mountcal.stops.StopDetection, some from the log)")
     for flag, text in _DETECTION.values():
         d.add_argument(flag, type=float, default=None, help=text)
+
+
+def add_axes_option(g: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
+    """``--axes``: the device's axes onto the right-handed sensor frame, for every input of samples."""
+    g.add_argument(
+        "--axes",
+        default=None,
+        metavar="MAP",
+        help='the device\'s axes as the sensor frame: a signed permutation, e.g. "x,-y,z" (sensor x, y, z in turn; a '
+        "reflection states a left-handed device), applied to accelerometer and gyro after a mapping's own axes",
+    )
 
 
 # StopDetection field → (flag, help); unset flags keep the library's defaults
@@ -160,20 +209,27 @@ _DETECTION = {
 
 def add_sensor_options(g: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
     """The sensor's limits and triad calibration: the systematic part of every σ."""
-    g.add_argument(
+    add_path(
+        g,
         "--sensor-spec",
+        role="input",
+        what="a sensor spec",
+        small=True,
         default=None,
         help="limits for the systematic σ (TOML/JSON): scale, cross_axis, bias_mg, bias_tempco_mg_per_c, "
         "heading_deg (the headings' common error against the fall line); without it, the default class",
     )
-    g.add_argument("--triad", default=None, help="triad calibration from `mountcal triad`, applied to the stops")
+    add_path(
+        g, "--triad", role="input", what="a triad calibration", small=True, default=None,
+        help="triad calibration from `mountcal triad`, applied to the stops",
+    )  # fmt: skip
 
 
 def add_fit_options(g: argparse.ArgumentParser | argparse._ArgumentGroup, *, headings_help: str) -> None:
     """Method, model, headings and the yaw threshold of the fit."""
     g.add_argument("--method", choices=("full", "paper"), default="full")
     g.add_argument("--model", default="auto", help=MODEL_HELP)
-    g.add_argument("--headings", choices=HEADINGS, default="uphill", help=headings_help)
+    g.add_argument("--headings", choices=HEADINGS, default=None, help=headings_help)
     g.add_argument("--max-yaw-sigma", type=float, default=5.0, help="report yaw only below this 1σ (deg)")
     add_sensor_options(g)
     g.add_argument(
@@ -213,6 +269,8 @@ def log_options(args: argparse.Namespace) -> LogOptions:
         field=args.field,
         columns=None if columns is None else parse_columns(columns),
         unit=None if unit in (None, "mps2") else unit,
+        axes=getattr(args, "axes", None),
+        heading_unit=getattr(args, "heading_unit", None),
     )
 
 
@@ -232,11 +290,21 @@ def fit_options(args: argparse.Namespace) -> Options:
     options = Options(
         method=args.method,
         model=args.model,
-        gravity_mps2=getattr(args, "gravity", None),
+        gravity_mps2=gravity(args),
         max_yaw_sigma_deg=args.max_yaw_sigma,
         slope_reference=None if reference is None else SlopeReference(*reference),
     )
     return sensor_options(options, getattr(args, "sensor_spec", None), getattr(args, "triad", None))
+
+
+def gravity(args: argparse.Namespace) -> float | None:
+    """``--gravity`` in m/s²: a bare number in m/s² (checked to be Earth's), or a value with its unit (``1g``)."""
+    text = getattr(args, "gravity", None)
+    if text is None:
+        return None
+    from mountcal.input_conventions import GRAVITY, parse_quantity
+
+    return parse_quantity(text, GRAVITY)[0]
 
 
 def log_job(args: argparse.Namespace, options: Options | None = None) -> LogJob:
@@ -251,11 +319,6 @@ def log_job(args: argparse.Namespace, options: Options | None = None) -> LogJob:
         options=options if options is not None else fit_options(args),
         use=getattr(args, "use", "auto"),
     )
-
-
-def log_inputs(args: argparse.Namespace) -> dict[str, Any]:
-    """Every file a log command reads, by option name (for :func:`mountcal.paths.check_outputs`)."""
-    return {"input": args.input, **{f"--{k}": getattr(args, k, None) for k in ("dbc", "mapping", "protocol")}}
 
 
 def require(module: str, extra: str, needed_by: str) -> None:

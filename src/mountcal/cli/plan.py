@@ -12,6 +12,7 @@ import math
 from typing import Any
 
 from mountcal.cli.options import add_command, add_log_options, add_sensor_options, log_options, working
+from mountcal.cli.path_options import add_path
 from mountcal.terminal import safe
 
 log = logging.getLogger("mountcal")
@@ -20,15 +21,25 @@ log = logging.getLogger("mountcal")
 def add_parser(sub: Any) -> None:
     p = add_command(sub, "plan", "plan a session from the bound: stops, headings, dwell, slope")
     p.add_argument("--target", required=True, help="1σ targets in degrees, e.g. roll=0.1,pitch=0.1,yaw=0.5")
-    p.add_argument("--noise", type=float, default=None, help="accelerometer noise per sample, 1σ per axis (mg)")
+    p.add_argument(
+        "--noise",
+        default=None,
+        help="accelerometer noise per sample, 1σ per axis: mg, or with its unit (0.005g, 0.05m/s2); a bare number "
+        "outside 0.05–200 mg is refused",
+    )
     p.add_argument("--rate-hz", type=float, default=100.0, help="sample rate with --noise (Hz; default 100)")
-    p.add_argument("--from-log", nargs="+", default=None, metavar="LOG", help="measure noise and rate on a log")
+    add_path(
+        p, "--from-log", role="input", what="a log", folders=True, nargs="+", default=None, metavar="LOG",
+        help="measure noise and rate on a log",
+    )  # fmt: skip
     p.add_argument("--slope-deg", type=float, default=None, help="the slope available (default: find one)")
     p.add_argument("--model", default="rotation,slope,bias", help="rotation,slope,bias (default) or rotation,slope")
     p.add_argument("--max-stops", type=int, default=24, help="most stops to plan (default 24)")
     p.add_argument("--stop-s", type=float, default=None, help="dwell of each stop (s; default: chosen)")
     p.add_argument("--drive-s", type=float, default=60.0, help="time between stops, for the session length (s)")
-    p.add_argument("-o", "--output", default=None, help="protocol sheet CSV to write")
+    add_path(
+        p, "-o", "--output", role="output", what="the protocol sheet", default=None, help="protocol sheet CSV to write"
+    )
     add_sensor_options(p)
     add_log_options(p, repeat_dbc=False, stops=False)
     p.set_defaults(run=run)
@@ -49,14 +60,12 @@ def run(args: argparse.Namespace) -> int:
             "Give the sensor's per-sample noise in mg, or a log with parked periods to measure it on.",
         )
     if args.noise is not None:
-        if not (math.isfinite(args.noise) and args.noise > 0 and math.isfinite(args.rate_hz) and args.rate_hz > 0):
-            raise InputError(
-                "--noise/--rate-hz",
-                "positive numbers",
-                f"{args.noise:g} mg at {args.rate_hz:g} Hz",
-                "Give the sensor's values.",
-            )
-        noise = Noise(args.noise * 1e-3 * G_N, args.rate_hz, "given by --noise and --rate-hz")
+        from mountcal.input_conventions import NOISE, parse_quantity
+
+        noise_mg, _ = parse_quantity(args.noise, NOISE)
+        if not (math.isfinite(args.rate_hz) and args.rate_hz > 0):
+            raise InputError("--rate-hz", "a positive number", f"{args.rate_hz:g} Hz", "Give the sensor's sample rate.")
+        noise = Noise(noise_mg * 1e-3 * G_N, args.rate_hz, f"given by --noise ({noise_mg:.6g} mg) and --rate-hz")
     else:
         with working(args, "measuring the noise on the log"):
             noise = noise_from_log(list(args.from_log), log_options(args))

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from mountcal.cli.options import STDOUT, add_command, print_json, require, working
+from mountcal.cli.path_options import add_path
 from mountcal.terminal import safe
 
 log = logging.getLogger("mountcal")
@@ -20,15 +21,48 @@ def add_parser(sub: Any) -> None:
         "write a self-contained HTML report of a calibration result",
         json_help="the output and its figures as JSON on stdout",
         inputs=("RESULT.json", "result written by `mountcal calibrate -o`"),
+        reads={"what": "a result JSON", "small": True},
         many=False,
         output="HTML file to write (default: RESULT with .html; '-': stdout)",
+        writes={"what": "the HTML report", "stdio": True, "writes": _writes},
     )
+    add_path(
+        p, "--stops", role="input", what="a stop table", small=True, default=None,
+        help="the stop table the result was fitted to (adds the 3-D figure, headings, σ)",
+    )  # fmt: skip
     p.add_argument(
-        "--stops", default=None, help="the stop table the result was fitted to (adds the 3-D figure, headings, σ)"
+        "--unit",
+        choices=("mps2", "g"),
+        default=None,
+        help="unit of ax, ay, az in --stops (default: as calibrate read it)",
     )
-    p.add_argument("--unit", choices=("mps2", "g"), default="mps2", help="unit of ax, ay, az in --stops")
     p.add_argument("--figures", choices=("svg", "png"), default="svg", help="inline SVG (default) or base64 PNG")
     p.set_defaults(run=run)
+
+
+def _output(value: str | None, result: str) -> Path | None:
+    """The HTML file written: -o, or the result's name with .html; None for stdout."""
+    return None if value == STDOUT else Path(value) if value is not None else Path(result).with_suffix(".html")
+
+
+def _writes(value: str | None, args: argparse.Namespace) -> list[tuple[str, str]]:
+    output = _output(value, args.input)
+    return [] if output is None else [(str(output), "" if value is not None else "(default)")]
+
+
+def _reading(stops: Path, cal: Any, unit: str | None) -> dict[str, Any]:
+    """How to read ``--stops``: as calibrate read it when it is the very file the result was fitted to (its
+    SHA-256 in the provenance), else as the table states itself (a table `mountcal stops` wrote from a log)."""
+    import hashlib
+
+    from mountcal.input_conventions import stop_table_reading
+
+    options: dict[str, Any] = {}
+    if stops.is_file() and hashlib.sha256(stops.read_bytes()).hexdigest() in cal.provenance.input_sha256:
+        options = stop_table_reading(cal.provenance.conventions)
+        if not cal.provenance.conventions:  # a result written before the conventions were recorded
+            options = {"headings": cal.fit.headings or "uphill"}
+    return options | ({} if unit is None else {"unit": unit})
 
 
 def run(args: argparse.Namespace) -> int:
@@ -36,20 +70,17 @@ def run(args: argparse.Namespace) -> int:
     from mountcal.atomic import atomic_path
     from mountcal.errors import InputError
     from mountcal.outputs.report import render  # matplotlib is needed by this command only
-    from mountcal.paths import check_outputs
     from mountcal.result import Calibration
     from mountcal.result_file import read_json
     from mountcal.stoptable import read_stop_table, same_stops
 
     result = Path(args.input)
-    to_stdout = args.output == STDOUT
-    output = Path(args.output) if args.output is not None else result.with_suffix(".html")
-    check_outputs({"-o": None if to_stdout else output}, {"result": result, "--stops": args.stops})
+    output = _output(args.output, args.input)
     cal = Calibration.load(result)  # validates format and version
     doc = read_json(result)  # the whole document: entries Calibration may not keep
     table = None
     if args.stops:
-        table = read_stop_table(args.stops, unit=args.unit, headings=cal.fit.headings or "uphill")
+        table = read_stop_table(args.stops, **_reading(Path(args.stops), cal, args.unit))
         stored = cal.provenance.stops_fingerprint
         if stored is None or not same_stops(stored, table):
             raise InputError(
@@ -62,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
     with working(args, "drawing the report"):
         html = render(doc, table, image_format=args.figures)
     shown = html.count("<figure>")
-    if to_stdout:
+    if output is None:
         print(html, end="")
         return 0
     with atomic_path(output) as tmp:

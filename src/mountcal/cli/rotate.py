@@ -7,7 +7,8 @@ import logging
 from dataclasses import asdict
 from typing import Any
 
-from mountcal.cli.options import add_command, add_log_options, log_inputs, log_options, print_json, working
+from mountcal.cli.options import add_command, add_log_options, log_options, print_json, working
+from mountcal.cli.path_options import add_path
 from mountcal.terminal import safe
 
 log = logging.getLogger("mountcal")
@@ -22,8 +23,12 @@ def add_parser(sub: Any) -> None:
         inputs=("LOG", "log file(s); splits of one log are joined"),
         output="file to write (.parquet, .csv or .mcap)",
         output_required=True,
+        writes={"what": "the rotated log"},
     )
-    p.add_argument("--calibration", required=True, help="result JSON written by `mountcal calibrate`")
+    add_path(
+        p, "--calibration", role="input", what="a calibration JSON", small=True, required=True,
+        help="result JSON written by `mountcal calibrate`",
+    )  # fmt: skip
     p.add_argument(
         "--format", choices=("parquet", "csv", "mcap"), default=None, help="default: from -o's suffix, else parquet"
     )
@@ -42,10 +47,8 @@ def run(args: argparse.Namespace) -> int:
     from mountcal.apply.rotate import check_applicable
     from mountcal.apply.rotate_log import rotate_log
     from mountcal.errors import InputError
-    from mountcal.paths import check_outputs
     from mountcal.result import Calibration
 
-    check_outputs({"-o": args.output}, log_inputs(args) | {"--calibration": args.calibration})
     if args.chunk < 1:
         raise InputError("--chunk", "a number of samples ≥ 1", str(args.chunk), "Pass --chunk 100000 (the default).")
     cal = Calibration.load(args.calibration)

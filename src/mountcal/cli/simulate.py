@@ -7,6 +7,7 @@ import logging
 from typing import Any
 
 from mountcal.cli.options import HEADINGS, add_command, bar
+from mountcal.cli.path_options import add_path
 from mountcal.errors import InputError
 from mountcal.terminal import safe
 
@@ -25,14 +26,24 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--headings", choices=HEADINGS, default="uphill")
     p.add_argument("--heading-offset", type=float, default=0.0, help="common offset added to β (deg)")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--truth", default=None, help="also write the truth as JSON")
-    p.add_argument("-o", "--output", default=None, help="stop table to write (CSV or .parquet)")
+    add_path(p, "--truth", role="output", what="the truth", default=None, help="also write the truth as JSON")
+    add_path(
+        p, "-o", "--output", role="output", what="the stop table", default=None,
+        help="stop table to write (CSV or .parquet)",
+    )  # fmt: skip
     lg = p.add_argument_group("parking session as logs (--noise-g and --headings apply to stop tables only)")
-    lg.add_argument(
-        "--log", nargs="+", default=None, metavar="LOG", help="logs to write: .mcap, .blf, .mf4, .asc, .log, .trc, .csv"
-    )
-    lg.add_argument("--protocol", default=None, help="also write the protocol sheet (t_start_s, t_end_s, beta_deg)")
-    lg.add_argument("--dbc", default=None, help="DBC to encode CAN logs (data/imu_mm5_10.dbc: Bosch MM5.10)")
+    add_path(
+        lg, "--log", role="output", what="a log", nargs="+", default=None, metavar="LOG",
+        help="logs to write: .mcap, .blf, .mf4, .asc, .log, .trc, .csv",
+    )  # fmt: skip
+    add_path(
+        lg, "--protocol", role="output", what="the protocol sheet", default=None,
+        help="also write the protocol sheet (t_start_s, t_end_s, beta_deg)",
+    )  # fmt: skip
+    add_path(
+        lg, "--dbc", role="input", what="a DBC", small=True, default=None,
+        help="DBC to encode CAN logs (data/imu_mm5_10.dbc: Bosch MM5.10)",
+    )  # fmt: skip
     lg.add_argument(
         "--fix", type=float, nargs=3, metavar=("LAT", "LON", "ALT"), help="site position logged (deg, deg, m)"
     )
@@ -48,7 +59,6 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from mountcal.paths import check_outputs
     from mountcal.simulate.session import FieldEffects, session_params, write_log_session, write_stop_session
 
     overrides = {k: getattr(args, k) for k in ("roll_deg", "pitch_deg", "yaw_deg", "slope_deg", "noise_g")}
@@ -61,8 +71,6 @@ def run(args: argparse.Namespace) -> int:
                 "-o",
                 "Name the logs with --log, and the protocol sheet and the truth with their options.",
             )
-        logs = {f"--log #{i + 1}" if len(args.log) > 1 else "--log": p for i, p in enumerate(args.log)}
-        check_outputs(logs | {"--protocol": args.protocol, "--truth": args.truth}, {"--dbc": args.dbc})
         session = {k: getattr(args, k) for k in ("stop_s", "drive_s", "rate_hz") if getattr(args, k) is not None}
         effects = FieldEffects(
             gyro_bias_dps=None if args.gyro_bias_dps is None else tuple(args.gyro_bias_dps),
@@ -85,7 +93,6 @@ def run(args: argparse.Namespace) -> int:
                 each_log=lambda _: shown.update(),
             )
     elif args.output is not None:
-        check_outputs({"-o": args.output, "--truth": args.truth}, {})
         lines = write_stop_session(
             args.output,
             params,

@@ -7,7 +7,7 @@ import logging
 import sys
 from typing import Any
 
-from mountcal.cli.options import STDOUT, add_command, add_log_options, log_inputs, log_job, print_json, working
+from mountcal.cli.options import STDOUT, add_command, add_log_options, log_job, print_json, working
 from mountcal.terminal import safe
 
 log = logging.getLogger("mountcal")
@@ -21,6 +21,7 @@ def add_parser(sub: Any) -> None:
         json_help="a summary (stops, headings, output) on stdout",
         inputs=("LOG", "log file(s); splits of one log are joined"),
         output="stop table to write (CSV or .parquet; '-': CSV on stdout)",
+        writes={"what": "the stop table", "stdio": True},
         output_required=True,
     )
     add_log_options(p)
@@ -29,12 +30,10 @@ def add_parser(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from mountcal.calibrate import Options
-    from mountcal.paths import check_outputs
     from mountcal.pipeline import describe, stops_of_log
     from mountcal.stoptable import write_stop_table
 
     to_stdout = args.output == STDOUT
-    check_outputs({"-o": None if to_stdout else args.output}, log_inputs(args))
     with working(args, "reading the log and finding its stops"):
         samples, found = stops_of_log(log_job(args, Options()))
     for line in describe((samples, found), len(args.input)):

@@ -14,7 +14,8 @@ import logging
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from mountcal.cli.options import add_command, print_json
+from mountcal.cli.options import add_axes_option, add_command, gravity, print_json
+from mountcal.cli.path_options import add_path
 from mountcal.terminal import safe
 
 if TYPE_CHECKING:
@@ -30,37 +31,47 @@ def add_parser(subparsers: Any) -> None:
         "fit bias, scale and cross-axis from a multi-position session",
         json_help="write the triad JSON on stdout as well",
         inputs=("LOG_OR_STOPTABLE", "the session's log(s), or its stop table"),
+        reads={"what": "a log or stop table", "folders": True},
         output="triad JSON to write (for calibrate --triad)",
         output_required=True,
+        writes={"what": "the triad calibration"},
     )
     p.add_argument("--unit", choices=("mps2", "g"), default="mps2", help="unit of ax, ay, az in a stop table")
-    p.add_argument("--gravity", type=float, default=None, help="local gravity in m/s² (default 9.80665)")
-    p.add_argument("--imucal", default=None, help="imucal's Ferraris calibration JSON made from this session")
+    p.add_argument("--gravity", default=None, help="local gravity in m/s², or with its unit (1g; default 9.80665)")
+    add_axes_option(p)
+    add_path(
+        p, "--imucal", role="input", what="an imucal calibration", small=True, default=None,
+        help="imucal's Ferraris calibration JSON made from this session",
+    )  # fmt: skip
     p.add_argument("--min-stop-s", type=float, default=3.0, help="shortest still period in a log (s; hand-held: short)")
     p.add_argument("--trim-s", type=float, default=0.5, help="cut from each end of a still period in a log (s)")
     p.add_argument(
         "--columns", default=None, help="a sample table's columns as ROLE=COLUMN[:UNIT] pairs (see calibrate --help)"
     )
-    p.add_argument("--mapping", default=None, help="a TOML with a sample table's [columns]")
+    add_path(
+        p, "--mapping", role="input", what="a mapping", small=True, default=None,
+        help="a TOML with a sample table's [columns]",
+    )  # fmt: skip
     p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from mountcal.conventions import G_N
     from mountcal.estimate import sphere
-    from mountcal.paths import check_outputs
-    from mountcal.triad import describe, fit_all, from_sphere, session_stops, with_imucal_values
-
-    inputs = {f"input {i + 1}": p for i, p in enumerate(args.input)}
-    check_outputs({"-o": args.output}, {**inputs, "--mapping": args.mapping})
     from mountcal.io.logs import LogOptions
     from mountcal.io.table.layout import parse_columns
+    from mountcal.triad import describe, fit_all, from_sphere, session_stops, with_imucal_values
 
     columns = None if args.columns is None else parse_columns(args.columns)
     acc, cov = session_stops(
-        args.input, args.unit, args.min_stop_s, args.trim_s, LogOptions(mapping=args.mapping, columns=columns)
+        args.input,
+        args.unit,
+        args.min_stop_s,
+        args.trim_s,
+        LogOptions(mapping=args.mapping, columns=columns, axes=args.axes),
     )
-    g = G_N if args.gravity is None else float(args.gravity)
+    given = gravity(args)
+    g = G_N if given is None else given
     source = " + ".join(str(Path(p)) for p in args.input)
     for _, why in sphere.loop(acc, g, cov):
         log.info("  %s", why)

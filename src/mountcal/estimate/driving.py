@@ -158,6 +158,9 @@ class DrivingFit:
     segments_s: FloatArray = field(default_factory=lambda: np.empty((0, 2)))
     consistency: DrivingConsistency | None = None  # the residual tests (:mod:`mountcal.estimate.driving_checks`)
     findings: tuple[Finding, ...] = ()  # those the family's test rejects: the model lacks an effect
+    # ``rot_vs`` with the longitudinal cue's yaw whenever its noise alone determines it, a model-error term aside
+    # (what the turns' handedness check levels the lateral acceleration with); None: the noise does not
+    rot_vs_longitudinal: Rotation | None = None
 
     @property
     def yaw_model_error_deg(self) -> float:
@@ -474,6 +477,10 @@ def _result(
         )
     yaw_rad = fit.yaw_rad if yaw_reason is None else 0.0
     rot_vs = Rotation.from_euler("z", yaw_rad) * rot_tilt
+    # The longitudinal cue's yaw wherever its noise alone determines it: a finding's model-error term (the cues half
+    # a turn apart: a mirrored sensor) may leave yaw undetermined, yet the vehicle's axes are known well enough for the
+    # sign of its turns (:func:`mountcal.crosscheck.turn_handedness`).
+    longitudinal = Rotation.from_euler("z", fit.yaw_rad) * rot_tilt if sigma_stat <= opts.max_yaw_sigma_deg else None
     # Tilt σ about the vehicle x (cross slope) and y (grade) axes: the unknown mean road attitude
     # dominates the scatter of the mean; tilt from a static calibration keeps that one's σ.
     stat = np.degrees(fit.longitudinal_rms / 9.8 / np.sqrt(max(fit.n, 1)))
@@ -482,7 +489,9 @@ def _result(
         # The route's mean grade from the altitude: the mean gravity leans by it about the vehicle's y axis
         # (nose up on an uphill route), so the body's up axis is the mean gravity turned back by it.
         before = float(np.degrees(angles_from_rot_vs(rot_vs)[1]))
-        rot_vs = Rotation.from_euler("y", np.radians(found.grade.value)) * rot_vs
+        grade = Rotation.from_euler("y", np.radians(found.grade.value))
+        rot_vs = grade * rot_vs
+        longitudinal = None if longitudinal is None else grade * longitudinal
         grade_sigma = found.grade.sigma
         found = checks.changed(found, "grade", "pitch_deg", before, np.degrees(angles_from_rot_vs(rot_vs)[1]))
     road = (float(np.hypot(stat, opts.road_cross_slope_sigma_deg)), float(np.hypot(stat, grade_sigma)))
@@ -558,6 +567,7 @@ def _result(
         notes=tuple(notes),
         consistency=found.document,
         findings=found.findings,
+        rot_vs_longitudinal=longitudinal,
     )
 
 

@@ -80,6 +80,7 @@ from mountcal.estimate.driving_intervals import (
     turned_tilt_removed,
     yaw_from_sums,
 )
+from mountcal.option_names import option
 from mountcal.pvalues import chi2_sf
 from mountcal.result import Finding
 from mountcal.samples import Channel
@@ -98,6 +99,7 @@ EFFECT_Z = 3.0  # an effect of the body or road is taken beyond this many σ
 TURN_RATE_DEG_S = 45.0  # the lateral cue keeps turns up to this yaw rate
 TURNING_MPS2 = 0.3  # |v·ω| beyond this: a left or a right turn
 SPEEDING_MPS2 = 0.3  # |d(speed)/dt| beyond this: accelerating or braking
+MIRRORED_DEG = 90.0  # cues further apart than this: a mirror image (the model's effects turn them a few degrees)
 G = 9.80665
 YAW_TESTS = (
     "driving_cues",
@@ -342,7 +344,7 @@ def run(inp: Inputs) -> Checks:
     tests = [_finding(x) for x in comparisons[:4]] + [_parts_finding(parts)] + [_finding(x) for x in comparisons[4:]]
     findings = tuple(unexplained(tests, FAMILY_ALPHA))
     model_error = _model_error(findings, comparisons, parts, cues, inp.opts.horizontal_axes_sigma_deg)
-    notes = [_note(f) for f in findings]
+    notes = [_note(f, cues.comparison) for f in findings]
     if scale.noted:
         notes.append(
             f"the IMU's longitudinal acceleration is {scale.value:.3f} ± {scale.sigma:.3f} × d(speed)/dt (errors in "
@@ -384,11 +386,15 @@ def changed(checks: Checks, name: str, quantity: str, before: float, after: floa
     return replace(checks, document=replace(checks.document, effects=effects))
 
 
-def _note(f: Finding) -> str:
-    return (
-        f"{f.what}: they DISAGREE beyond their σ ({f.size}; p = {f.p_value:.2g}); likely "
-        f"{CAUSES.get(f.test, 'an effect the model lacks')}"
-    )
+def _note(f: Finding, cues: Comparison) -> str:
+    cause = CAUSES.get(f.test, "an effect the model lacks")
+    if f.test == "driving_cues" and abs(cues.difference or 0.0) > MIRRORED_DEG:
+        cause = (
+            f"a mirrored sensor (one axis reversed: a left-handed triad; state its axes with {option('axes')}) or a "
+            "yaw rate or lateral acceleration with the wrong sign at its source: no scale or cross-axis error, body "
+            "roll or lever arm turns the cues this far apart"
+        )
+    return f"{f.what}: they DISAGREE beyond their σ ({f.size}; p = {f.p_value:.2g}); likely {cause}"
 
 
 def _model_error(

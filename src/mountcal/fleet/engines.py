@@ -8,10 +8,16 @@
   a second, and its workers die with the parent. At most two jobs per worker are in flight, so
   when a worker process dies (out of memory, a crash in a native library) the suspects are known:
   they are retried one at a time, and a log that kills its worker twice is recorded as failed.
+  Workers ignore Ctrl-C (the command handles it and stops them) and die with the command however
+  it ends, SIGKILL included: each watches the command's process (a pidfd, else a poll) and kills
+  itself when it is gone, so no worker outlives its run holding the terminal or a pipe.
 - :class:`DaskEngine` (``--scheduler tcp://HOST:PORT``): the same jobs on an existing Dask
   distributed cluster via ``distributed.Client(address)``. Workers need only the installed
-  mountcal and the log files at the same paths (a shared file system). A task whose worker dies
-  repeatedly comes back as ``KilledWorker`` and is recorded as failed.
+  mountcal and the log files at the same paths (a shared file system) or in object storage. Jobs
+  go to the workers as paths, never bytes, in batches sized so that a batch holds about
+  :data:`BATCH_TARGET_S` of work (estimated from the logs done so far; smaller at the end, so that
+  the workers finish together): a task costs the scheduler a few milliseconds, a log ~0.1 s. A
+  batch whose worker dies repeatedly comes back as ``KilledWorker`` and its logs are recorded as failed.
 
 This module imports nothing heavy, so that the command line can start the worker server
 (:func:`start_worker_server`) before it imports mountcal's numerical code itself: the two imports
@@ -21,13 +27,17 @@ then run at the same time, on two cores.
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import importlib
 import itertools
 import multiprocessing
 import multiprocessing.forkserver
 import os
 import secrets
+import select
+import signal
 import threading
+import time
 from collections import deque
 from collections.abc import Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, CancelledError, Future, ProcessPoolExecutor, wait
@@ -35,11 +45,14 @@ from concurrent.futures.process import BrokenProcessPool
 from typing import TYPE_CHECKING, Any, Protocol
 
 from mountcal.errors import InputError, MountcalError
+from mountcal.option_names import option
 
 if TYPE_CHECKING:
     from mountcal.fleet.inputs import FleetJob
 
 WORKER_MODULE = "mountcal.fleet.worker"  # what the worker server imports before forking workers
+SERVER_MODULE = "mountcal.fleet.server"  # imported first by the worker server: it ignores Ctrl-C
+PASSED_VARIABLES = ("AWS_",)  # the workers see these as the command has them now (object storage)
 THREAD_VARIABLES = (
     "OMP_NUM_THREADS",
     "OPENBLAS_NUM_THREADS",
@@ -49,6 +62,9 @@ THREAD_VARIABLES = (
 )
 QUEUED_PER_WORKER = 2  # jobs in flight per worker: one running, one waiting (no idle gap between logs)
 MAX_WORKER_DEATHS = 2  # a log in flight when its worker died this often is recorded as failed
+BATCH_TARGET_S = 0.5  # Dask: work per task (a task costs the scheduler and the network milliseconds)
+MAX_BATCH = 64
+WATCH_PERIOD_S = 1.0  # where there is no pidfd, a worker checks this often whether the command lives
 
 
 class Engine(Protocol):
@@ -83,7 +99,9 @@ class LocalEngine:
 
     def __init__(self, workers: int | None = None) -> None:
         if workers is not None and workers < 1:
-            raise InputError("workers", "a number of worker processes ≥ 1", str(workers), "Ask for 1 or more.")
+            raise InputError(
+                option("workers", str(workers)), "a number of worker processes ≥ 1", str(workers), "Ask for 1 or more."
+            )
         available = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
         self.workers = workers or available or 1
         self.name = f"local, {self.workers} worker process{'es' if self.workers > 1 else ''}"
@@ -96,7 +114,18 @@ class LocalEngine:
         return self
 
     def __exit__(self, *exc: object) -> None:
+        if isinstance(exc[1], KeyboardInterrupt | SystemExit):
+            self.kill()
         self.close()
+
+    def kill(self) -> None:
+        """Stop the workers now, logs in flight and all (an interrupted run: they are redone next time)."""
+        if self._starting is not None:
+            self._starting.join()
+        processes = getattr(self._pool, "_processes", None) or {}
+        for process in list(processes.values()):
+            with contextlib.suppress(Exception):
+                process.kill()
 
     def start(self) -> None:
         """Start the workers in a background thread (the forkserver imports mountcal meanwhile)."""
@@ -193,7 +222,49 @@ class LocalEngine:
                 self._pool = self._new_pool()
 
     def _new_pool(self) -> ProcessPoolExecutor:
-        return ProcessPoolExecutor(max_workers=self.workers, mp_context=worker_context())
+        passed = {k: v for k, v in os.environ.items() if k.startswith(PASSED_VARIABLES) or k in THREAD_VARIABLES}
+        return ProcessPoolExecutor(
+            max_workers=self.workers,
+            mp_context=worker_context(),
+            initializer=worker_started,
+            initargs=(os.getpid(), passed),
+        )
+
+
+def worker_started(parent: int, environment: dict[str, str]) -> None:
+    """A worker's first act: ignore Ctrl-C, take the command's environment as it is now (the worker
+    server may be older than a change to it), and watch the command to die with it."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    with contextlib.suppress(OSError, AttributeError):  # glibc: recycle a log's arrays (see worker.heap_for_logs)
+        libc = ctypes.CDLL(None)
+        libc.mallopt(-3, 32 << 20)  # M_MMAP_THRESHOLD
+        libc.mallopt(-1, 64 << 20)  # M_TRIM_THRESHOLD
+    for key in [k for k in os.environ if k.startswith(PASSED_VARIABLES)]:
+        os.environ.pop(key)
+    os.environ.update(environment)
+    threading.Thread(target=_die_with, args=(parent,), name="mountcal-parent-watch", daemon=True).start()
+
+
+def _die_with(parent: int) -> None:
+    """Return never: kill this process as soon as ``parent`` has ended (SIGKILL to it included)."""
+    try:
+        fd = os.pidfd_open(parent)
+    except ProcessLookupError:
+        fd = -1  # already gone
+    except (AttributeError, OSError):  # no pidfd (not Linux ≥ 5.3): poll
+        fd = None
+    if fd is None:
+        while True:
+            time.sleep(WATCH_PERIOD_S)
+            try:
+                os.kill(parent, 0)
+            except ProcessLookupError:
+                break
+            except PermissionError:  # alive, another user's: cannot be ours
+                pass
+    elif fd >= 0:
+        select.select([fd], [], [])
+    os.kill(os.getpid(), signal.SIGKILL)
 
 
 def worker_context() -> multiprocessing.context.BaseContext:
@@ -201,7 +272,7 @@ def worker_context() -> multiprocessing.context.BaseContext:
     the first), else ``spawn``; never a plain ``fork`` of a process that may hold threads."""
     if "forkserver" in multiprocessing.get_all_start_methods():
         context = multiprocessing.get_context("forkserver")
-        context.set_forkserver_preload([WORKER_MODULE])
+        context.set_forkserver_preload([SERVER_MODULE, WORKER_MODULE])
         return context
     return multiprocessing.get_context("spawn")
 
@@ -215,7 +286,27 @@ def start_worker_server() -> None:
     """
     os.environ.update({k: "1" for k in THREAD_VARIABLES})
     if worker_context().get_start_method() == "forkserver":
-        multiprocessing.forkserver.ensure_running()
+        # started with Ctrl-C ignored, which Python then keeps: a Ctrl-C while the server (or a
+        # worker forked from it) starts is the command's to handle, not a traceback of theirs
+        with _sigint_ignored():
+            multiprocessing.forkserver.ensure_running()
+
+
+@contextlib.contextmanager
+def _sigint_ignored() -> Iterator[None]:
+    """SIGINT ignored in this process for the block (where signals can be set: the main thread)."""
+    try:
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except ValueError:  # not the main thread: the server's first import ignores it instead
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+NETWORK_SCHEMES = ("tcp", "tls", "ws", "wss")
 
 
 class DaskEngine:
@@ -224,6 +315,7 @@ class DaskEngine:
     def __init__(self, address: str, timeout_s: float = 20.0) -> None:
         self.address, self.timeout_s = address, timeout_s
         self.name = f"Dask scheduler {address}"
+        self.live_workers = 0  # the cluster's workers when last looked (the progress bar shows them)
         self._client: Any = None
         self._distributed: Any = None
 
@@ -241,7 +333,7 @@ class DaskEngine:
             self._distributed = importlib.import_module("distributed")  # optional: mountcal[fleet]
         except ImportError as err:
             raise InputError(
-                f"the Dask scheduler {self.address}",
+                option("scheduler", self.address),
                 "the Dask distributed package",
                 "it is not installed",
                 "Install it: pip install 'mountcal[fleet]'; or run on the local cores (no scheduler).",
@@ -251,26 +343,28 @@ class DaskEngine:
             self._client = self._distributed.Client(self.address, timeout=self.timeout_s, set_as_default=False)
         except (OSError, TimeoutError, ValueError) as err:
             raise InputError(
-                f"the Dask scheduler {self.address}",
+                option("scheduler", self.address),
                 "a reachable Dask scheduler (tcp://HOST:PORT)",
                 f"no connection ({type(err).__name__}: {err})",
                 "Start one (`dask scheduler`, then `dask worker ADDRESS` on each machine) or check the address.",
             ) from err
 
     def _check_address(self) -> None:
-        """Refuse a malformed address before a Client exists: a Client that failed to parse one
-        still runs its finaliser, which waits 40 s and prints a traceback."""
+        """Refuse an address that cannot name a scheduler of another process before a Client exists
+        (a Client that failed on one still runs its finaliser, which waits 40 s and prints a
+        traceback): a network scheme with a host and port."""
         from distributed.comm.addressing import parse_address, parse_host_port
 
         try:
             scheme, location = parse_address(self.address)
-            if scheme in ("tcp", "tls", "ws", "wss"):
-                parse_host_port(location)
+            if scheme not in NETWORK_SCHEMES:
+                raise ValueError(f"the scheme {scheme}:// reaches no scheduler outside this process")
+            parse_host_port(location)
         except ValueError as err:
             raise InputError(
-                f"the Dask scheduler {self.address}",
-                "a Dask scheduler address, tcp://HOST:PORT",
-                f"not an address ({err})",
+                option("scheduler", self.address),
+                "a Dask scheduler address, tcp://HOST:PORT (or tls://, ws://, wss://)",
+                f"not such an address ({err})",
                 "Write it as tcp://HOST:PORT, e.g. tcp://10.0.0.5:8786 (the port `dask scheduler` prints).",
             ) from err
 
@@ -280,23 +374,64 @@ class DaskEngine:
                 self._client.close()
             self._client = None
 
+    def workers(self) -> int:
+        """The cluster's workers now (at least 1: a cluster still starting is given time)."""
+        try:
+            return max(1, len(self._client.scheduler_info(n_workers=-1).get("workers", {})))
+        except Exception:  # a scheduler too old for n_workers, or busy: the batching only needs a guess
+            return max(1, len(self._client.scheduler_info().get("workers", {})))
+
     def results(self, jobs: Iterable[tuple[str, FleetJob]]) -> Iterator[tuple[str, dict[str, Any]]]:
-        from mountcal.fleet.worker import run_job
+        from mountcal.fleet.worker import run_batch
 
         self.start()
         client = self._client
         token = secrets.token_hex(4)
-        futures: dict[Any, str] = {}
+        source = iter(jobs)
+        waiting: deque[tuple[str, FleetJob]] = deque()  # hashed, not yet submitted
+        alone: deque[tuple[str, FleetJob]] = deque()  # the logs of a failed batch, to be run one per task
+        serial = itertools.count()  # task keys are unique, also for a log submitted again alone
+        batches: dict[Any, list[tuple[str, FleetJob]]] = {}
+        sizing = _BatchSizing()
         finished = self._distributed.as_completed([], loop=client.loop)
+        exhausted = False
+        workers, looked = self.workers(), time.monotonic()
+        self.live_workers = workers
         try:
-            for key, job in jobs:  # submit as the logs are hashed; collect what is already done meanwhile
-                future = client.submit(run_job, job, key=f"mountcal-fleet-{token}-{key[:16]}", pure=False)
-                futures[future] = key
-                finished.add(future)
-                while finished.has_ready():
-                    yield from self._collect(finished.next_batch(block=False), futures)
-            while not finished.is_empty():
-                yield from self._collect(finished.next_batch(block=True), futures)
+            while True:
+                # keep two batches per worker queued; look ahead so that the last batches can be shrunk
+                ahead = 2 * workers * sizing.size(MAX_BATCH * workers, False, workers) + 1
+                while not exhausted and len(waiting) < ahead:
+                    pair = next(source, None)
+                    if pair is None:
+                        exhausted = True
+                    else:
+                        waiting.append(pair)
+                while (alone or waiting) and len(batches) < 2 * workers:
+                    if alone:
+                        batch = [alone.popleft()]
+                    else:
+                        size = sizing.size(len(waiting), exhausted, workers)
+                        batch = [waiting.popleft() for _ in range(min(size, len(waiting)))]
+                    name = f"mountcal-fleet-{token}-{next(serial)}-{batch[0][0][:16]}"
+                    future = client.submit(run_batch, [job for _, job in batch], key=name, pure=False)
+                    batches[future] = batch
+                    finished.add(future)
+                if not batches:
+                    break
+                for future in finished.next_batch(block=True):
+                    batch = batches.pop(future)
+                    records = self._records(future, len(batch))
+                    if records is None and len(batch) > 1:  # a batch whose worker died: find which log, alone
+                        future.release()
+                        alone.extend(batch)
+                        continue
+                    for (key, _), record in zip(batch, records or self._failures(future, len(batch)), strict=True):
+                        sizing.done(record)
+                        yield key, record
+                if time.monotonic() - looked > WATCH_PERIOD_S:  # the cluster may grow or shrink
+                    workers, looked = self.workers(), time.monotonic()
+                    self.live_workers = workers
         except CancelledError as err:
             raise MountcalError(
                 f"{self.address}: lost the Dask scheduler ({err}); the logs finished so far are "
@@ -304,20 +439,50 @@ class DaskEngine:
             ) from err
         finally:
             with contextlib.suppress(Exception):
-                client.cancel([f for f in futures if not f.done()])
+                client.cancel([f for f in batches if not f.done()])
 
     @staticmethod
-    def _collect(batch: Iterable[Any], futures: dict[Any, str]) -> Iterator[tuple[str, dict[str, Any]]]:
-        for future in batch:
-            key = futures.pop(future)
-            try:
-                record = future.result()
-            except (CancelledError, MountcalError):
-                raise
-            except Exception as err:  # KilledWorker and the like: this log, not the batch
-                record = engine_failure(err, "the Dask cluster could not run this log")
-            future.release()
-            yield key, record
+    def _records(future: Any, n: int) -> list[dict[str, Any]] | None:
+        """The batch's records; None when the cluster could not run it (KilledWorker and the like)."""
+        try:
+            records = future.result()
+        except (CancelledError, MountcalError):
+            raise
+        except Exception:  # these logs, not the run
+            return None
+        future.release()
+        return list(records)
+
+    @staticmethod
+    def _failures(future: Any, n: int) -> list[dict[str, Any]]:
+        error = future.exception()
+        future.release()
+        return [engine_failure(error, "the Dask cluster could not run this log")] * n
+
+
+class _BatchSizing:
+    """How many logs a Dask task takes: about BATCH_TARGET_S of work at the rate seen so far (one log
+    until a log has been timed), and at the end no more than an even share of what is left, so that
+    the workers finish together."""
+
+    def __init__(self) -> None:
+        self.seconds = 0.0
+        self.logs = 0
+
+    def done(self, record: dict[str, Any]) -> None:
+        elapsed = record.get("elapsed_s")
+        if isinstance(elapsed, float | int):
+            self.seconds += float(elapsed)
+            self.logs += 1
+
+    def size(self, waiting: int, exhausted: bool, workers: int) -> int:
+        if not self.logs:
+            return 1
+        per_log = max(self.seconds / self.logs, 1e-3)
+        size = int(min(MAX_BATCH, max(1, BATCH_TARGET_S / per_log)))
+        if exhausted:  # the tail: at most a share of what is left for each of two batches per worker
+            size = min(size, max(1, waiting // (2 * workers)))
+        return size
 
 
 def make_engine(workers: int | None = None, scheduler: str | None = None) -> Engine:

@@ -10,6 +10,13 @@
   required); ``log`` may be a glob matching the split files of one log. Relative paths are
   relative to the manifest's folder; empty cells take the command-line defaults.
 - Any other file is one log of the vehicle named by its parent folder.
+- A **URL** (``s3://bucket/LOG``, any fsspec protocol) is listed like a folder
+  (:mod:`mountcal.fleet.storage`); its objects are keyed by their ETag, size and time, and fetched
+  by the worker that calibrates them.
+
+Folders, globs and URLs are read in a **layout** (:mod:`mountcal.fleet.layout`): ``folders`` (each
+file one log of its parent folder's vehicle) or ``canedge`` (``<device>/<session>/<split>.MF4``: the
+splits of a session joined into one log of the device), stated or inferred from the names.
 
 Stop tables (CSV/Parquet with ``beta_deg, ax, ay, az``) are accepted wherever a log is.
 """
@@ -23,14 +30,18 @@ from collections.abc import Collection, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from glob import glob
 from pathlib import Path
+from typing import Any, Literal
 
 import pandas as pd
 
 from mountcal.calibrate import Options
 from mountcal.errors import InputError
+from mountcal.fleet.layout import Found, Grouped, Layout, group, infer_layout, unreadable_split
+from mountcal.fleet.storage import is_url, list_objects
 from mountcal.io.logs import LogOptions
 from mountcal.io.mcap.write import written_by_mountcal
 from mountcal.io.registry import is_log, log_suffixes
+from mountcal.option_names import flags_on
 from mountcal.paths import input_file, special_kind
 from mountcal.pipeline import LogJob, Use
 from mountcal.stops import StopDetection
@@ -59,7 +70,7 @@ class JobDefaults:
     detection: StopDetection = field(default_factory=StopDetection)
     uphill_azimuth_deg: float | None = None
     options: Options = field(default_factory=Options)
-    headings: Headings = "uphill"  # what a stop table's beta_deg is measured from
+    headings: Headings | None = None  # what a stop table's beta_deg is from (None: its heading_ref, else uphill)
     use: Use = "auto"  # a log's parked stops, its driving, or whatever it supports (as `mountcal calibrate`)
 
 
@@ -75,20 +86,40 @@ class FleetJob:
     job : LogJob
         What :func:`mountcal.pipeline.calibrate_job` needs, with absolute paths, so that a worker
         on another machine of a shared file system finds the files.
-    headings : {"uphill", "relative", "none"}
-        What ``beta_deg`` of a stop table is measured from (logs find their own headings).
+    headings : {"uphill", "relative", "none"} or None
+        What ``beta_deg`` of a stop table is measured from (None: as its ``heading_ref`` column states, else
+        uphill; logs find their own headings).
     start_time : str or None
         The log's start (ISO 8601, UTC) from the manifest; None to take it from the log's clock.
     origin : str
         Where the job came from (a folder, a glob, a manifest row), for messages.
+    layout : str
+        ``folders``, ``canedge`` or ``manifest``.
+    session : str or None
+        The CANedge session folder's name; None in the other layouts.
+    shown : tuple of str
+        Each of ``job.paths`` as the user sees it (as given, or the object's URL): messages use these.
+    stamps : tuple of str or None
+        Per path, the listed version of an object in storage (its ETag, size and time: the resume
+        key); None for a local file, whose bytes are hashed. Empty: all local.
+    storage : tuple of (str, value)
+        fsspec options for the paths that are URLs.
+    flags : bool
+        Messages spell options as command-line flags (the job came from the command line).
     """
 
     vehicle_id: str
     log: str
     job: LogJob
-    headings: Headings = "uphill"
+    headings: Headings | None = None
     start_time: str | None = None
     origin: str = ""
+    layout: str = "folders"
+    session: str | None = None
+    shown: tuple[str, ...] = ()
+    stamps: tuple[str | None, ...] = ()
+    storage: tuple[tuple[str, Any], ...] = ()
+    flags: bool = False
 
 
 def collect_jobs(
@@ -96,6 +127,9 @@ def collect_jobs(
     defaults: JobDefaults | None = None,
     exclude: Collection[str | Path] = (),
     set_aside: list[Path] | None = None,
+    layout: Layout = "auto",
+    storage_options: dict[str, Any] | None = None,
+    discarded: dict[str, int] | None = None,
 ) -> list[FleetJob]:
     """The jobs of folders, globs, log files and manifests, in input order.
 
@@ -111,6 +145,13 @@ def collect_jobs(
     set_aside : list, optional
         Receives the files of folders and globs that were not taken because mountcal wrote them
         (:func:`written_by_mountcal`: fleet tables, rotated logs), whatever their names.
+    layout : {"auto", "canedge", "folders", "manifest"}
+        How folders, globs and URLs map to vehicles and logs (:mod:`mountcal.fleet.layout`);
+        ``manifest`` accepts manifests only.
+    storage_options : dict, optional
+        fsspec options for URL inputs (``endpoint_url``, ``anon`` …).
+    discarded : dict, optional
+        Receives the files the layout set aside, counted by reason.
 
     Raises
     ------
@@ -118,9 +159,14 @@ def collect_jobs(
         An input names nothing, a manifest is malformed, or no log is found at all.
     """
     defaults = defaults or JobDefaults()
-    skip = {Path(p).resolve() for p in exclude}
-    ours: list[Path] = [] if set_aside is None else set_aside
-    jobs = [job for item in inputs for job in _jobs_of_input(str(item), defaults, skip, ours)]
+    skip = {_resolved(Path(p)) for p in exclude}
+    context = _Context(
+        defaults, skip, [] if set_aside is None else set_aside, layout, dict(storage_options or {}), flags_on()
+    )
+    jobs = [job for item in inputs for job in _jobs_of_input(str(item), context)]
+    for reason, n in context.discarded.items():
+        if discarded is not None:
+            discarded[reason] = discarded.get(reason, 0) + n
     if not jobs:
         raise InputError(
             ", ".join(map(str, inputs)) or "INPUTS",
@@ -131,18 +177,52 @@ def collect_jobs(
     return jobs
 
 
-def _jobs_of_input(item: str, defaults: JobDefaults, skip: set[Path], ours: list[Path]) -> Iterator[FleetJob]:
+@dataclass
+class _Context:
+    defaults: JobDefaults
+    skip: set[Path]
+    ours: list[Path]
+    layout: Layout
+    storage: dict[str, Any]
+    flags: bool
+    discarded: dict[str, int] = field(default_factory=dict)
+
+
+def _resolved(path: Path) -> Path:
+    """The absolute path with symlinks resolved; as it is where they loop (a loop fails its own row)."""
+    try:
+        return path.resolve()
+    except (OSError, RuntimeError):
+        return Path(os.path.abspath(path))
+
+
+def _jobs_of_input(item: str, ctx: _Context) -> Iterator[FleetJob]:
     path = Path(item)
-    if path.is_dir() and is_log(path, defaults.log):  # a log that is a folder (a comma2k19 segment)
-        yield _file_job(path, defaults, origin=item)
+    if ctx.layout == "manifest" and not (path.is_file() and _is_manifest(path)):
+        raise InputError(
+            item,
+            "a manifest CSV (columns vehicle_id, log, …), as --layout manifest says",
+            special_kind(path) or ("a folder" if path.is_dir() else "a file without those columns"),
+            "Pass the manifest, or choose another --layout.",
+        )
+    if is_url(item):
+        objects = list_objects(item, ctx.storage)
+        found = [Found(o.url, o.url, o.stamp) for o in objects if _is_candidate(Path(o.url.split("://", 1)[1]), ctx)]
+        if not found:
+            raise InputError(item, "log objects (" + ", ".join(sorted(log_suffixes())) + ")", "none", "Check the URL.")
+        yield from _grouped_jobs(found, item, ctx, origin=f"storage {item}")
+    elif path.is_dir() and is_log(path, ctx.defaults.log):  # a log that is a folder (a comma2k19 segment)
+        yield _file_job(Found(item, str(_resolved(path))), ctx, origin=item)
     elif path.is_dir():
-        for file in _walk_logs(path, skip, defaults.log):
+        files = []
+        for file in _walk_logs(path, ctx.skip, ctx.defaults.log):
             if written_by_mountcal(file):
-                ours.append(file)
+                ctx.ours.append(file)
                 continue
-            yield _file_job(file, defaults, origin=f"folder {item}")
+            files.append(Found(str(file), str(_resolved(file))))
+        yield from _grouped_jobs(files, item, ctx, origin=f"folder {item}")
     elif path.is_file():
-        if path.resolve() in skip:
+        if _resolved(path) in ctx.skip:
             raise InputError(
                 item,
                 "an input other than the fleet's own output",
@@ -150,7 +230,7 @@ def _jobs_of_input(item: str, defaults: JobDefaults, skip: set[Path], ours: list
                 "Choose another -o path; mountcal never overwrites its input.",
             )
         if _is_manifest(path):
-            yield from read_manifest(path, defaults)
+            yield from read_manifest(path, ctx.defaults)
         elif written_by_mountcal(path):
             raise InputError(
                 item,
@@ -159,24 +239,66 @@ def _jobs_of_input(item: str, defaults: JobDefaults, skip: set[Path], ours: list
                 "Pass the original log.",
             )
         else:
-            yield _file_job(path, defaults, origin=item)
+            yield _file_job(Found(item, str(_resolved(path))), ctx, origin=item)
     elif _GLOB_CHARS.search(item):
         matches = [Path(m) for m in sorted(glob(item, recursive=True), key=natural_key)]
-        files = [m for m in matches if m.is_file() and m.resolve() not in skip and not _is_protocol(m)]
-        if not files:
+        matched = [m for m in matches if m.is_file() and _resolved(m) not in ctx.skip and not _is_protocol(m)]
+        if not matched:
             raise InputError(item, "a glob matching log files", "no match", "Check the pattern (quote it).")
-        for file in files:
+        taken = []
+        for file in matched:
             if written_by_mountcal(file):
-                ours.append(file)
+                ctx.ours.append(file)
                 continue
-            yield _file_job(file, defaults, origin=f"glob {item}")
+            taken.append(Found(str(file), str(_resolved(file))))
+        yield from _grouped_jobs(taken, item, ctx, origin=f"glob {item}")
     else:
         kind = special_kind(path)
         raise InputError(
             item,
-            "a log file, a folder of logs, a glob or a manifest CSV",
+            "a log file, a folder of logs, a glob, a manifest CSV or a storage URL (s3://bucket/LOG)",
             kind or "nothing at this path",
             "Check the path." if kind is None else "Pass a regular file; mountcal reads no devices or FIFOs.",
+        )
+
+
+def _is_candidate(path: Path, ctx: _Context) -> bool:
+    """A file some reader takes, or a CANedge split the layout counts as unreadable."""
+    return (is_log(path, ctx.defaults.log) or unreadable_split(path.name)) and not _is_protocol(path)
+
+
+def _grouped_jobs(files: Sequence[Found], item: str, ctx: _Context, origin: str) -> Iterator[FleetJob]:
+    """The jobs of a folder's, glob's or URL's files in the chosen (or inferred) layout."""
+    layout: Literal["canedge", "folders"] = (
+        "canedge" if ctx.layout == "canedge" else "folders" if ctx.layout == "folders" else infer_layout(files, item)
+    )
+    grouped: Grouped = group(files, layout)
+    for reason, n in grouped.set_aside.items():
+        ctx.discarded[reason] = ctx.discarded.get(reason, 0) + n
+    for single in grouped.singles:
+        yield _file_job(single, ctx, origin=origin)
+    for session in grouped.sessions:
+        splits = session.splits
+        yield FleetJob(
+            vehicle_id=session.device,
+            log=session.folder,
+            job=LogJob(
+                paths=tuple(f.path for f in splits),
+                log=ctx.defaults.log,
+                detection=ctx.defaults.detection,
+                protocol=None,
+                uphill_azimuth_deg=ctx.defaults.uphill_azimuth_deg,
+                options=ctx.defaults.options,
+                use=ctx.defaults.use,
+            ),
+            headings=ctx.defaults.headings,
+            origin=origin,
+            layout="canedge",
+            session=session.session,
+            shown=tuple(f.shown for f in splits),
+            stamps=tuple(f.stamp for f in splits) if any(f.stamp for f in splits) else (),
+            storage=tuple(sorted(ctx.storage.items())) if any(f.stamp for f in splits) else (),
+            flags=ctx.flags,
         )
 
 
@@ -184,15 +306,15 @@ def _walk_logs(folder: Path, skip: set[Path], options: LogOptions) -> Iterator[P
     for root, dirs, files in os.walk(folder):
         here = Path(root)
         dirs[:] = sorted(
-            (d for d in dirs if not d.startswith(".") and (here / d).resolve() not in skip), key=natural_key
+            (d for d in dirs if not d.startswith(".") and _resolved(here / d) not in skip), key=natural_key
         )
         for name in sorted(files, key=natural_key):
             file = here / name
             if (
                 not name.startswith(".")
-                and is_log(file, options)
+                and (is_log(file, options) or unreadable_split(name))
                 and not _is_protocol(file)
-                and file.resolve() not in skip
+                and _resolved(file) not in skip
             ):
                 yield file
 
@@ -201,23 +323,30 @@ def _is_protocol(path: Path) -> bool:
     return path.name.lower().endswith(PROTOCOL_SUFFIX)
 
 
-def _file_job(path: Path, defaults: JobDefaults, origin: str) -> FleetJob:
+def _file_job(found: Found, ctx: _Context, origin: str) -> FleetJob:
+    """One file (or a log folder), one log of the vehicle named by its parent folder."""
+    defaults = ctx.defaults
+    remote = found.stamp is not None
+    path = Path(found.path.split("://", 1)[1]) if remote else Path(found.path)
     sheet = path.with_name(path.name.rsplit(".", 1)[0] + PROTOCOL_SUFFIX)
-    vehicle = path.resolve().parent.name
     return FleetJob(
-        vehicle_id=vehicle,
-        log=str(path),
+        vehicle_id=path.parent.name,
+        log=found.shown,
         job=LogJob(
-            paths=(str(path.resolve()),),
+            paths=(found.path,),
             log=defaults.log,
             detection=defaults.detection,
-            protocol=str(sheet.resolve()) if sheet.is_file() else None,
+            protocol=str(sheet) if not remote and sheet.is_file() else None,
             uphill_azimuth_deg=defaults.uphill_azimuth_deg,
             options=defaults.options,
             use=defaults.use,
         ),
         headings=defaults.headings,
         origin=origin,
+        shown=(found.shown,),
+        stamps=(found.stamp,) if remote else (),
+        storage=tuple(sorted(ctx.storage.items())) if remote else (),
+        flags=ctx.flags,
     )
 
 
@@ -258,6 +387,7 @@ def read_manifest(path: str | Path, defaults: JobDefaults | None = None) -> list
             "Rename the columns (a misspelt column would silently lose its setting).",
         )
     base = path.resolve().parent
+    flags = flags_on()
     jobs = []
     for i, row in enumerate(df.to_dict("records")):
         where = f"{path} row {i + 2}"  # the header is line 1
@@ -294,6 +424,9 @@ def read_manifest(path: str | Path, defaults: JobDefaults | None = None) -> list
                 headings=defaults.headings,
                 start_time=parse_start_time(cells["start_time"], where) if cells.get("start_time") else None,
                 origin=where,
+                layout="manifest",
+                shown=tuple(_as_given(p, base, path.parent) for p in paths),
+                flags=flags,
             )
         )
     return jobs
@@ -306,6 +439,14 @@ def _manifest_log_paths(entry: str, base: Path) -> list[Path]:
         matches = sorted((Path(m) for m in glob(pattern, recursive=True) if Path(m).is_file()), key=natural_key)
         return matches or [Path(pattern)]
     return [Path(pattern)]
+
+
+def _as_given(file: Path, base: Path, given_base: Path) -> str:
+    """A manifest's file as the user would write it: below the manifest's folder as they named it."""
+    try:
+        return str(given_base / file.relative_to(base))
+    except ValueError:
+        return str(file)
 
 
 def _rel(value: str | None, base: Path) -> str | None:

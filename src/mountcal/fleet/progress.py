@@ -28,7 +28,7 @@ class Progress:
 
     def __init__(self, total: int, stream: TextIO | None = None, enabled: bool = True) -> None:
         self.total = total
-        self.done = self.failed = self.reused = 0
+        self.done = self.failed = self.reused = self._workers = 0
         stream = stream if stream is not None else sys.stderr
         tty = bool(getattr(stream, "isatty", lambda: False)())
         self.bar = tqdm(
@@ -55,6 +55,12 @@ class Progress:
     def finish(self) -> None:
         """Draw the last state and end the line."""
         self.bar.close()
+
+    def workers(self, n: int) -> None:
+        """Show the cluster's workers now (a Dask cluster may grow or shrink during the run)."""
+        if n and n != self._workers:
+            self._workers = n
+            self.bar.set_description_str(f"mountcal: fleet on {n} Dask worker{'s' if n > 1 else ''}", refresh=False)
 
     def _step(self) -> None:
         self.bar.set_postfix_str(f"{self.failed} failed, {self.reused} reused", refresh=False)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections import Counter
 from collections.abc import Iterator, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -20,9 +21,12 @@ import pandas as pd
 from mountcal.errors import InputError, MountcalError
 from mountcal.fleet.engines import make_engine
 from mountcal.fleet.inputs import FleetJob
+from mountcal.fleet.overview import check_overview_overwritable, overview_path, write_overview
 from mountcal.fleet.progress import Progress
+from mountcal.fleet.storage import is_url
 from mountcal.fleet.store import (
     LOG_COLUMNS,
+    MOUNTING_COLUMNS,
     VEHICLE_COLUMNS,
     PartStore,
     check_overwritable,
@@ -30,7 +34,7 @@ from mountcal.fleet.store import (
     schema,
     write_table,
 )
-from mountcal.fleet.vehicles import ALPHA, analyse_fleet
+from mountcal.fleet.vehicles import ALPHA, analyse_fleet, vehicle_table
 from mountcal.paths import check_outputs, output_lock
 from mountcal.version import software_version
 
@@ -76,7 +80,9 @@ class FleetResult:
     Attributes
     ----------
     logs, vehicles : DataFrame
-        The tables written to ``output`` and ``vehicles_path``.
+        The tables written to ``output`` (one row per log) and ``vehicles_path`` (one row per vehicle).
+    mountings : DataFrame
+        One row per vehicle and mounting period (the ``mountings`` of the vehicles table, flat).
     computed : int
         Logs calibrated by this run.
     reused : int
@@ -90,6 +96,7 @@ class FleetResult:
 
     logs: pd.DataFrame
     vehicles: pd.DataFrame
+    mountings: pd.DataFrame
     output: Path
     vehicles_path: Path
     parts: Path
@@ -99,6 +106,9 @@ class FleetResult:
     elapsed_s: float
     discarded: dict[str, int] = field(default_factory=dict)
     not_confident: tuple[str, ...] = ()  # logs whose calibration is not confident (flag not_confident)
+    layout: dict[str, int] = field(default_factory=dict)  # logs by layout: folders, canedge, manifest
+    sessions: int = 0  # CANedge sessions
+    splits: int = 0  # files read, a session's splits each
 
 
 def outputs_of(output: str | Path) -> tuple[Path, Path, Path]:
@@ -107,7 +117,12 @@ def outputs_of(output: str | Path) -> tuple[Path, Path, Path]:
     return output, output.with_name(f"{output.stem}_vehicles{output.suffix}"), output.with_name(output.name + ".parts")
 
 
-def run_fleet(jobs: Sequence[FleetJob], output: str | Path, options: FleetOptions | None = None) -> FleetResult:
+def run_fleet(
+    jobs: Sequence[FleetJob],
+    output: str | Path,
+    options: FleetOptions | None = None,
+    set_aside: Mapping[str, int] | None = None,
+) -> FleetResult:
     """Calibrate every job (skipping those an earlier run finished) and write the two tables.
 
     Parameters
@@ -117,6 +132,9 @@ def run_fleet(jobs: Sequence[FleetJob], output: str | Path, options: FleetOption
     output : str or Path
         The per-log Parquet table; ``<stem>_vehicles.parquet`` and ``<output>.parts/`` go beside it.
     options : FleetOptions, optional
+    set_aside : mapping of str to int, optional
+        Files the inputs' layout set aside, by reason (``collect_jobs(discarded=…)``): reported
+        with the run's own.
 
     Raises
     ------
@@ -125,10 +143,12 @@ def run_fleet(jobs: Sequence[FleetJob], output: str | Path, options: FleetOption
         another run is writing the same output (it holds the lock).
     """
     with output_lock(outputs_of(output)[0]):  # two runs on one output would redo each other's work
-        return _run_locked(jobs, output, options)
+        return _run_locked(jobs, output, options, dict(set_aside or {}))
 
 
-def _run_locked(jobs: Sequence[FleetJob], output: str | Path, options: FleetOptions | None) -> FleetResult:
+def _run_locked(
+    jobs: Sequence[FleetJob], output: str | Path, options: FleetOptions | None, set_aside: dict[str, int]
+) -> FleetResult:
     options = options or FleetOptions()
     started = time.monotonic()
     output, vehicles_path, parts = outputs_of(output)
@@ -174,13 +194,15 @@ def _run_locked(jobs: Sequence[FleetJob], output: str | Path, options: FleetOpti
                 if not record.pop("_transient", False):
                     store.save(key, record)
                 results[key] = record
+                progress.workers(getattr(engine, "live_workers", 0))
                 progress.update(record.get("status") == "ok")
         finally:
             progress.finish()
     computed = len(pending)
     logs = _log_table(jobs, keys, setup_failures, results)
-    logs, vehicles = analyse_fleet(logs, options.alpha, options.floor_deg)
-    vehicles = _complete(vehicles, VEHICLE_COLUMNS)
+    logs, mountings = analyse_fleet(logs, options.alpha, options.floor_deg)
+    mountings = _complete(mountings, MOUNTING_COLUMNS)
+    vehicles = _complete(vehicle_table(mountings, logs), VEHICLE_COLUMNS)
     doubtful = tuple(str(log) for log, flag in zip(logs["log"], logs["flags"], strict=True) if "not_confident" in flag)
     if doubtful and options.require_confident:
         raise InputError(
@@ -192,9 +214,11 @@ def _run_locked(jobs: Sequence[FleetJob], output: str | Path, options: FleetOpti
     said = {"mountcal.confident": json.dumps(not doubtful), "mountcal.not_confident_logs": json.dumps(doubtful)}
     write_table(vehicles, schema(VEHICLE_COLUMNS, "vehicles"), vehicles_path, said)
     write_table(logs, schema(LOG_COLUMNS, "logs"), output, said)
+    write_overview(overview_path(output), vehicles, logs, f"mountcal fleet: {output.name}")
     return FleetResult(
         logs=logs,
         vehicles=vehicles,
+        mountings=mountings,
         output=output,
         vehicles_path=vehicles_path,
         parts=parts,
@@ -203,11 +227,15 @@ def _run_locked(jobs: Sequence[FleetJob], output: str | Path, options: FleetOpti
         engine=engine.name,
         elapsed_s=time.monotonic() - started,
         discarded={
+            **set_aside,
             "inputs naming a log already listed": duplicates,
             "temporary files of a killed run": stale,
             "unreadable part files (their logs were recalculated)": unreadable,
         },
         not_confident=doubtful,
+        layout=dict(Counter(job.layout for job in jobs)),
+        sessions=sum(job.session is not None for job in jobs),
+        splits=sum(len(job.job.paths) for job in jobs),
     )
 
 
@@ -218,14 +246,27 @@ def _check_output(output: Path, jobs: Sequence[FleetJob]) -> None:
         )
     table, vehicles, _ = outputs_of(output)
     check_outputs(
-        {"fleet table": table, "vehicles table": vehicles},
+        {"fleet table": table, "vehicles table": vehicles, "overview page": overview_path(output)},
         {
-            "log": [p for job in jobs for p in job.job.paths],
-            "DBC, mapping or protocol sheet": [p for job in jobs for p in _settings_files(job)],
+            "log": [p for job in jobs for p in job.job.paths if _local(p)],
+            "DBC, mapping or protocol sheet": [p for job in jobs for p in _settings_files(job) if _local(p)],
         },
     )
     for path in (table, vehicles):
         check_overwritable(path)
+    check_overview_overwritable(overview_path(output))
+
+
+def _local(path: str) -> bool:
+    """A local file that could be the output: not an object in storage, nor a symlink loop (which
+    resolves to nothing, and fails its own row)."""
+    if is_url(path):
+        return False
+    try:
+        Path(path).resolve()
+    except (OSError, RuntimeError):
+        return False
+    return True
 
 
 def _settings_files(job: FleetJob) -> list[str]:

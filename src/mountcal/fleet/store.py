@@ -49,7 +49,7 @@ def file_digest(path: str | Path, where: str | None = None) -> str:
         raise InputError(
             where or str(path),
             "a regular file",
-            f"{kind} ({path})",
+            kind if where else f"{kind} ({path})",
             "Point the manifest or option at the file itself; the other logs are calibrated regardless.",
         )
     try:
@@ -58,7 +58,7 @@ def file_digest(path: str | Path, where: str | None = None) -> str:
         raise InputError(
             where or str(path),
             "a readable file",
-            f"{err.strerror or err or type(err).__name__} ({path})",
+            f"{err.strerror or err or type(err).__name__}" + ("" if where else f" ({path})"),
             "Check the path; the other logs are calibrated regardless.",
         ) from err
     return f"blake3:{digest.hexdigest()}"
@@ -69,9 +69,11 @@ def job_hash(job: FleetJob) -> str:
 
     Paths and the vehicle id are not part of it (a renamed or moved log is the same log); the file
     suffixes (they choose the reader), the contents of the DBC, mapping and protocol sheet are, as
-    is the mountcal version.
+    is the mountcal version. An object in storage counts by its listed stamp (ETag, size, time), not
+    its bytes: a resumed run reads no object twice.
     """
     lj = job.job
+    stamps = job.stamps or (None,) * len(lj.paths)
     log = asdict(lj.log)
     for key in ("dbc", "mapping"):
         if log[key] is not None:
@@ -80,7 +82,10 @@ def job_hash(job: FleetJob) -> str:
         "key": PART_FORMAT,
         "version": PART_VERSION,
         "mountcal": software_version(),
-        "files": [(Path(p).suffix.lower(), file_digest(p, where=job.log)) for p in lj.paths],  # suffix: the reader
+        "files": [  # the suffix chooses the reader
+            (Path(p).suffix.lower(), stamp or file_digest(p, where=shown))
+            for p, shown, stamp in zip(lj.paths, job.shown or lj.paths, stamps, strict=True)
+        ],
         "log": log,
         "protocol": None if lj.protocol is None else file_digest(lj.protocol, where=f"{job.log}: protocol sheet"),
         "detection": asdict(lj.detection),
@@ -196,7 +201,12 @@ _L = pa.list_(pa.string())
 
 LOG_COLUMNS: tuple[tuple[str, pa.DataType, str], ...] = (
     ("vehicle_id", _S, "vehicle (manifest, or the log's parent folder name)"),
-    ("log", _S, "the log file(s) as found; split files joined with ' + '"),
+    ("log", _S, "the log as found: a file, split files joined with ' + ', or a CANedge session folder"),
+    ("session", _S, "the CANedge session (folder name); null in the other layouts"),
+    ("n_splits", _I, "files joined into this log (a CANedge session's splits)"),
+    ("split_gaps", _I, "gaps between consecutive splits: more than 1 s without a sample"),
+    ("split_gap_s", _F, "the gaps' total duration (s)"),
+    ("split_overlaps", _I, "splits starting before the previous one ends (the log then fails: not one recording)"),
     ("status", _S, "ok or failed"),
     ("start_time", _T, "start of the log (manifest, or the log's clock when it is Unix time)"),
     ("start_time_source", _S, "manifest, log clock, or null"),
@@ -252,7 +262,7 @@ LOG_COLUMNS: tuple[tuple[str, pa.DataType, str], ...] = (
     ("elapsed_s", _F, "wall time of the calibration on its worker (s)"),
 )
 
-VEHICLE_COLUMNS: tuple[tuple[str, pa.DataType, str], ...] = (
+MOUNTING_COLUMNS: tuple[tuple[str, pa.DataType, str], ...] = (  # FleetResult.mountings: per mounting period
     ("vehicle_id", _S, "vehicle"),
     ("segment", _I, "mounting period, 0 = the first; a new one starts at each remount"),
     ("n_segments", _I, "mounting periods of the vehicle"),
@@ -297,6 +307,78 @@ VEHICLE_COLUMNS: tuple[tuple[str, pa.DataType, str], ...] = (
     ("remount_statistic", _F, "χ² of the change against the two-segment consensus"),
     ("remount_dof", _I, "its degrees of freedom"),
     ("remount_p_value", _F, "Bonferroni-corrected p-value of the change point (flagged below 0.001)"),
+)
+
+
+_MOUNTING = pa.struct(
+    [
+        ("segment", _I),
+        ("first_log", _S),
+        ("last_log", _S),
+        ("first_start_time", _T),
+        ("last_start_time", _T),
+        ("n_logs", _I),
+        ("n_used", _I),
+        ("roll_deg", _F),
+        ("roll_sigma_deg", _F),
+        ("pitch_deg", _F),
+        ("pitch_sigma_deg", _F),
+        ("yaw_deg", _F),
+        ("yaw_sigma_deg", _F),
+        ("sigma_scale", _F),
+    ]
+)
+_REMOUNT = pa.struct(
+    [
+        ("time", _T),
+        ("log", _S),
+        ("change_deg", _F),
+        ("change_sigma_deg", _F),
+        ("change_x_deg", _F),
+        ("change_y_deg", _F),
+        ("change_z_deg", _F),
+        ("p_value", _F),
+    ]
+)
+
+VEHICLE_COLUMNS: tuple[tuple[str, pa.DataType, str], ...] = (  # fleet_vehicles.parquet: one row per vehicle
+    ("vehicle_id", _S, "vehicle"),
+    ("status", _S, "ok, or no calibration (no log of the vehicle succeeded)"),
+    ("reason", _S, "why there is no calibration"),
+    ("order", _S, "how the logs were put in time order: start_time or log name"),
+    ("n_logs", _I, "successful logs of the vehicle"),
+    ("n_failed", _I, "failed logs of the vehicle"),
+    ("n_mountings", _I, "mounting periods (1 + remounts)"),
+    ("first_start_time", _T, "start of the vehicle's first successful log"),
+    ("last_start_time", _T, "start of its last"),
+    ("roll_deg", _F, "current mounting: consensus roll (deg)"),
+    ("roll_sigma_deg", _F, "its 1σ (deg)"),
+    ("pitch_deg", _F, "current mounting: consensus pitch (deg)"),
+    ("pitch_sigma_deg", _F, "its 1σ (deg)"),
+    ("yaw_deg", _F, "current mounting: consensus yaw (deg); null when no log of the period determined it"),
+    ("yaw_sigma_deg", _F, "its 1σ (deg)"),
+    ("yaw_reason", _S, "why yaw is not determined"),
+    ("rot_sigma_x_deg", _F, "1σ of the current mounting about vehicle x (deg)"),
+    ("rot_sigma_y_deg", _F, ""),
+    ("rot_sigma_z_deg", _F, ""),
+    ("quat_x", _F, "current mounting, rot_vs as a quaternion (x, y, z, w)"),
+    ("quat_y", _F, ""),
+    ("quat_z", _F, ""),
+    ("quat_w", _F, ""),
+    ("n_used", _I, "logs in the current mounting's consensus"),
+    ("n_disagreeing", _I, "logs of the current mounting that disagree with its consensus"),
+    ("disagreeing_logs", _L, "those logs"),
+    ("chi2", _F, "χ² of the used logs about the current consensus"),
+    ("dof", _I, "its degrees of freedom"),
+    ("p_value", _F, "P(χ² ≥ chi2)"),
+    ("sigma_scale", _F, "factor applied to the current σ: √(χ²/dof) when the logs scatter beyond their σ, else 1"),
+    ("since_log", _S, "first log of the current mounting"),
+    ("since_time", _T, "its start"),
+    ("latest_confident", _B, "whether the current mounting is confident (see confidence_note)"),
+    ("confidence_note", _S, "why it is not: its logs are not confident, or they scatter beyond their σ"),
+    ("n_remounts", _I, "remounts found"),
+    ("remounts", pa.list_(_REMOUNT), "each remount: time and log where the new mounting starts, change ± σ, p"),
+    ("mountings", pa.list_(_MOUNTING), "the mounting over time: each period's extent and angles ± σ"),
 )
 
 

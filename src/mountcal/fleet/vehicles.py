@@ -544,3 +544,125 @@ def _change_row(before: Segment, after: Segment) -> dict[str, Any]:
         "remount_dof": change.dof,
         "remount_p_value": change.p_value,
     }
+
+
+# --- one row per vehicle ------------------------------------------------------------------------
+
+MOUNTING_KEYS = (
+    "segment",
+    "first_log",
+    "last_log",
+    "first_start_time",
+    "last_start_time",
+    "n_logs",
+    "n_used",
+    "roll_deg",
+    "roll_sigma_deg",
+    "pitch_deg",
+    "pitch_sigma_deg",
+    "yaw_deg",
+    "yaw_sigma_deg",
+    "sigma_scale",
+)
+LATEST_KEYS = (
+    "roll_deg",
+    "roll_sigma_deg",
+    "pitch_deg",
+    "pitch_sigma_deg",
+    "yaw_deg",
+    "yaw_sigma_deg",
+    "yaw_reason",
+    "rot_sigma_x_deg",
+    "rot_sigma_y_deg",
+    "rot_sigma_z_deg",
+    "quat_x",
+    "quat_y",
+    "quat_z",
+    "quat_w",
+    "n_used",
+    "n_disagreeing",
+    "disagreeing_logs",
+    "chi2",
+    "dof",
+    "p_value",
+    "sigma_scale",
+)
+
+
+def vehicle_table(mountings: pd.DataFrame, logs: pd.DataFrame) -> pd.DataFrame:
+    """One row per vehicle from :func:`analyse_fleet`'s tables: the current mounting ± σ, whether it
+    is confident (and why not), its remounts (time, log, size ± σ) and every mounting period in time
+    order (``mountings``: a list of records, the vehicle's mounting over time)."""
+    rows = []
+    for vehicle, periods in mountings.groupby("vehicle_id", sort=False):
+        periods = periods.sort_values("segment")
+        mine = logs[logs["vehicle_id"] == vehicle]
+        latest = periods.iloc[-1]
+        ok = latest["status"] == "ok"
+        confident, note = _confidence(latest, mine[mine["segment"] == latest["segment"]]) if ok else (False, None)
+        starts = mine.loc[mine["status"] == "ok", "start_time"].dropna()
+        rows.append(
+            {
+                "vehicle_id": vehicle,
+                "status": latest["status"],
+                "reason": latest.get("reason"),
+                "order": latest.get("order") if ok else None,
+                "n_logs": int((mine["status"] == "ok").sum()),
+                "n_failed": int((mine["status"] != "ok").sum()),
+                "n_mountings": len(periods) if ok else 0,
+                "first_start_time": starts.min() if not starts.empty else None,
+                "last_start_time": starts.max() if not starts.empty else None,
+                **({k: _plain(latest.get(k)) for k in LATEST_KEYS} if ok else {"disagreeing_logs": []}),
+                "since_log": latest.get("first_log") if ok else None,
+                "since_time": latest.get("first_start_time") if ok else None,
+                "latest_confident": confident,
+                "confidence_note": note if ok else latest.get("reason"),
+                "n_remounts": int(periods["remount"].fillna(False).astype(bool).sum()),
+                "remounts": [_remount(p) for _, p in periods.iterrows() if bool(p.get("remount"))],
+                "mountings": [{k: _plain(p.get(k)) for k in MOUNTING_KEYS} for _, p in periods.iterrows()]
+                if ok
+                else [],
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def _confidence(latest: pd.Series, period_logs: pd.DataFrame) -> tuple[bool, str | None]:
+    """Whether the current mounting can be trusted as stated, and if not why (for fleet people)."""
+    reasons = []
+    used = period_logs[period_logs["in_consensus"].fillna(False).astype(bool)]
+    doubtful = int(used["flags"].map(lambda f: "not_confident" in list(f)).sum())
+    if len(used) and doubtful == len(used):
+        reasons.append(f"its {doubtful} log(s) are not confident (flag not_confident)")
+    scale = latest.get("sigma_scale")
+    if scale is not None and np.isfinite(scale) and scale > 1.0:
+        reasons.append(
+            f"its logs scatter beyond their σ (σ scaled by {scale:.2g}: an effect the model lacks, or a loose mount)"
+        )
+    return not reasons, "; ".join(reasons) or None
+
+
+def _remount(period: pd.Series) -> dict[str, Any]:
+    return {
+        "time": period.get("first_start_time"),
+        "log": period.get("remount_log"),
+        "change_deg": _plain(period.get("remount_change_deg")),
+        "change_sigma_deg": _plain(period.get("remount_change_sigma_deg")),
+        "change_x_deg": _plain(period.get("remount_change_x_deg")),
+        "change_y_deg": _plain(period.get("remount_change_y_deg")),
+        "change_z_deg": _plain(period.get("remount_change_z_deg")),
+        "p_value": _plain(period.get("remount_p_value")),
+    }
+
+
+def _plain(value: Any) -> Any:
+    """None for a missing number (a struct field in Parquet is null, not NaN), else the value."""
+    if value is None or value is pd.NA or value is pd.NaT:
+        return None
+    if isinstance(value, float | np.floating) and not np.isfinite(value):
+        return None
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    return value

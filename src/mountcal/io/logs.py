@@ -8,6 +8,12 @@ comma2k19 segment folders; and the formats of installed plugins (entry points ``
 A log split over several files (a logger's 10-minute MF4 splits) is read file by file and joined
 in time order. Files whose clocks overlap are not splits of one log (two loggers, or one session
 given twice): joining them would interleave two recordings, so they are refused.
+
+The conventions every reader shares are applied here, once, whatever the format
+(:mod:`mountcal.input_conventions`): the axis map ``axes`` (after a reader's own map: a CAN mapping's
+``axes``, a format's documented frame) to the accelerometer and the gyro, and the unit of the heading
+channel (stated by ``heading_unit``, or checked: radians are refused). ``Samples.conventions`` says
+how each was known.
 """
 
 from __future__ import annotations
@@ -18,12 +24,13 @@ from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from itertools import pairwise
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Literal
 
 from mountcal.errors import InputError
 from mountcal.io.registry import reader_for
 
 if TYPE_CHECKING:  # numpy and the readers load when a log is read: `mountcal --help` needs neither
+    from mountcal.input_conventions import AxisMap
     from mountcal.io.reader import LogReader
     from mountcal.samples import LogSummary, Samples
 
@@ -33,7 +40,9 @@ CHUNK_SAMPLES = 100_000  # samples per chunk of iter_log: its memory bound
 @dataclass(frozen=True)
 class LogOptions:
     """How to read a log: the DBC and mapping for CAN, the topic (and field) for MCAP and ROS bags, the
-    column map and acceleration unit for tables (:mod:`mountcal.io.table.layout`)."""
+    column map and acceleration unit for tables (:mod:`mountcal.io.table.layout`); for every format, the
+    axis map (``"x,-y,z"``: a signed permutation of the device's axes, applied after the reader's own)
+    and the unit of the heading channel (``"deg"`` or ``"rad"``; unstated, degrees are checked)."""
 
     dbc: str | tuple[str, ...] | None = None  # several DBCs: their messages together (no clash allowed)
     mapping: str | None = None
@@ -42,6 +51,8 @@ class LogOptions:
     field: str | None = None  # the Imu or Vector3 inside the topic's message ("imu", "imu.linear_acceleration")
     columns: tuple[tuple[str, str], ...] | None = None  # a table's column map: (role, "COLUMN[:UNIT]") pairs
     unit: str | None = None  # a table's acceleration unit where neither the table nor the map gives it ("g")
+    axes: str | None = None  # every format: the device's axes onto the sensor frame
+    heading_unit: Literal["deg", "rad"] | None = None  # every format: the heading channel's unit
 
 
 # options only some formats read: given for another, they would be silently ignored
@@ -70,8 +81,57 @@ def read_log(paths: str | Path | Sequence[str | Path], options: LogOptions | Non
     files = [Path(p) for p in ([paths] if isinstance(paths, str | Path) else paths)]
     if not files:
         raise InputError("LOG", "at least one log file", "none", "Name the log file(s).")
+    axes = _axes(opts)  # a bad map is refused before any file is read
     parts = [_reader(f, opts).read(f, opts) for f in files]
-    return parts[0] if len(parts) == 1 else join(parts)
+    return stated(parts[0] if len(parts) == 1 else join(parts), opts, axes)
+
+
+def _axes(opts: LogOptions) -> AxisMap | None:
+    from mountcal.input_conventions import parse_axes
+    from mountcal.option_names import option
+
+    return None if opts.axes is None else parse_axes(opts.axes, option("axes"))
+
+
+def stated(samples: Samples, opts: LogOptions, axes: AxisMap | None = None, check: bool = True) -> Samples:
+    """The samples with the log conventions of ``opts`` applied and recorded (see the module's docstring);
+    samples that carry them already are returned as they are.
+
+    ``check``: infer the heading channel's unit from the whole log (a chunk of a stream cannot).
+    """
+    from dataclasses import replace
+
+    import numpy as np
+
+    from mountcal.input_conventions import axes_convention, heading_channel_unit
+    from mountcal.samples import Channel
+
+    if any(c.name == "axes" for c in samples.conventions):
+        return samples
+    axes = _axes(opts) if axes is None else axes
+    reader_map = samples.axis_map
+    conventions = [axes_convention(axes, reader_map, f"the reader ({samples.axis_map})")]
+    if axes is not None and not axes.identity:
+        samples = replace(
+            samples,
+            acc_s=axes.apply(samples.acc_s),
+            gyro_s=None if samples.gyro_s is None else axes.apply(samples.gyro_s),
+            axis_map=conventions[0].value if reader_map == "x,y,z" else f"{reader_map}, then {conventions[0].value}",
+        )
+    heading = samples.channels.get("heading_deg")
+    if heading is not None and (check or opts.heading_unit is not None):
+        turned = None
+        if check and samples.gyro_s is not None and len(samples) > 1:
+            up = samples.acc_s.mean(axis=0)
+            rate = samples.gyro_s @ (up / max(float(np.linalg.norm(up)), 1e-12))
+            yaw = np.concatenate([[0.0], np.cumsum(0.5 * (rate[1:] + rate[:-1]) * np.diff(samples.t_s))])
+            turned = float(np.degrees(np.ptp(yaw)))
+        factor, unit = heading_channel_unit(heading.t_s, heading.value, turned, opts.heading_unit, samples.source)
+        conventions.append(unit)
+        if factor != 1.0:
+            channels = dict(samples.channels) | {"heading_deg": Channel(heading.t_s, (heading.value * factor) % 360.0)}
+            samples = replace(samples, channels=channels)
+    return replace(samples, conventions=(*samples.conventions, *conventions))
 
 
 def inspect_log(path: str | Path, options: LogOptions | None = None) -> LogSummary:
@@ -99,6 +159,7 @@ def iter_log(
         raise InputError("LOG", "at least one log file", "none", "Name the log file(s).")
     if len(files) > 1:
         files = sorted(files, key=lambda f: _first_time(f, opts))
+    axes = _axes(opts)
     previous: tuple[str, float] | None = None  # the file before and its last time
     for f in files:
         first = True
@@ -107,7 +168,7 @@ def iter_log(
                 if first and previous is not None and float(chunk.t_s[0]) < previous[1]:
                     raise overlap_error(previous[0], previous[1], str(f), float(chunk.t_s[0]))
                 first, previous = False, (str(f), float(chunk.t_s[-1]))
-            yield chunk
+            yield stated(chunk, opts, axes, check=False)
 
 
 def _first_time(path: Path, opts: LogOptions) -> float:
@@ -157,6 +218,7 @@ def join(parts: Sequence[Samples]) -> Samples:
         dropped=dict(dropped),
         notes=tuple(dict.fromkeys(n for p in parts for n in p.notes)),
         gravity_free=next((p.gravity_free for p in parts if p.gravity_free), ""),
+        conventions=parts[0].conventions,
     )
 
 

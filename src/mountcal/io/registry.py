@@ -22,18 +22,21 @@ out; a file only it could have read is then refused with its name and the cause.
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import logging
+from collections.abc import Iterator
 from functools import cache
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from mountcal.errors import InputError
+from mountcal.errors import InputError, MountcalError
 from mountcal.io.reader import LogReader
-from mountcal.plugins import entry_points_of
+from mountcal.plugins import Plugin, entry_points_of, output_to_stderr
 
 if TYPE_CHECKING:
     from mountcal.io.logs import LogOptions
+    from mountcal.samples import LogSummary, Samples
 
 GROUP = "mountcal.readers"
 BUILTIN = (
@@ -52,16 +55,55 @@ def _load_builtin(spec: str) -> LogReader:
     return cls()
 
 
-def _as_reader(obj: object, where: str) -> LogReader:
-    reader = obj() if isinstance(obj, type) and issubclass(obj, LogReader) else obj
+def _as_reader(plugin: Plugin) -> LogReader:
+    obj = plugin.load()
+    try:
+        reader = obj() if isinstance(obj, type) and issubclass(obj, LogReader) else obj
+    except (Exception, SystemExit) as err:
+        raise plugin.failed("a reader class that can be made, as an", err) from err
     if not isinstance(reader, LogReader):
         raise InputError(
-            where,
+            plugin.where,
             "a mountcal.io.reader.LogReader subclass or instance",
             f"{type(obj).__name__} {obj!r}"[:200],
             "Point the entry point at the reader class.",
         )
-    return reader
+    return _PluginReader(reader, plugin)
+
+
+class _PluginReader(LogReader):
+    """A plugin's reader, whose every call is isolated: an exception of the plugin's own (a bug, a
+    ``sys.exit``) is an InputError naming the plugin and the file, its prints go to stderr."""
+
+    def __init__(self, reader: LogReader, plugin: Plugin) -> None:
+        self._reader, self._plugin = reader, plugin
+        self.name, self.suffixes, self.description = reader.name, reader.suffixes, reader.description  # type: ignore[misc]
+
+    @contextlib.contextmanager
+    def _call(self, what: str, path: Path) -> Iterator[None]:
+        try:
+            with output_to_stderr(self._plugin.where):
+                yield
+        except MountcalError:
+            raise
+        except (Exception, SystemExit) as err:
+            raise self._plugin.failed(f"a reader that can {what} {path}, as an", err) from err
+
+    def claims(self, path: Path, options: LogOptions) -> bool:
+        with self._call("judge", path):
+            return bool(self._reader.claims(path, options))
+
+    def read(self, path: Path, options: LogOptions) -> Samples:
+        with self._call("read", path):
+            return self._reader.read(path, options)
+
+    def iter_chunks(self, path: Path, options: LogOptions, max_samples: int) -> Iterator[Samples]:
+        with self._call("read", path):
+            yield from self._reader.iter_chunks(path, options, max_samples)
+
+    def inspect(self, path: Path, options: LogOptions) -> LogSummary:
+        with self._call("list", path):
+            return self._reader.inspect(path, options)
 
 
 @cache
@@ -74,9 +116,8 @@ def _registry() -> tuple[tuple[LogReader, ...], tuple[InputError, ...]]:
     readers = list(_builtin())
     broken = []
     for plugin in entry_points_of(GROUP):
-        where = f"plugin {plugin.name!r} ({plugin.value})"
         try:
-            readers.append(_as_reader(plugin.load(), where))
+            readers.append(_as_reader(plugin))
         except InputError as err:
             _log.warning("a log-format plugin is left out: %s", err)
             broken.append(err)

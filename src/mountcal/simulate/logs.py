@@ -33,11 +33,8 @@ from __future__ import annotations
 import heapq
 import math
 import os
-import shutil
-import tempfile
 from collections import Counter
 from collections.abc import Iterator, Mapping
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -45,6 +42,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from mountcal.atomic import atomic_path
 from mountcal.errors import InputError
 from mountcal.io.can.dbc import load_dbc
 from mountcal.io.can.signals import UNIT_KIND
@@ -59,7 +57,6 @@ from mountcal.io.can.write import (
 )
 from mountcal.io.ros2.definitions import ros2_definition
 from mountcal.option_names import option
-from mountcal.paths import SystemFailure
 from mountcal.samples import FloatArray, Samples
 
 if TYPE_CHECKING:
@@ -232,7 +229,7 @@ def write_mcap(
     ]
     counts: Counter[str] = Counter()
     schemas: dict[str, Any] = {}
-    with _output(path) as tmp, open(tmp, "wb") as f:
+    with atomic_path(path, keep_name=True) as tmp, open(tmp, "wb") as f:
         writer: Any = Writer(f)
         for t_ns, topic, type_name, message in heapq.merge(*streams, key=lambda m: m[0]):
             if topic not in schemas:
@@ -345,27 +342,6 @@ def _odometry_messages(series: _Series, start_ns: int) -> Iterator[_Message]:
         )
 
 
-@contextmanager
-def _output(target: str | os.PathLike[str]) -> Iterator[Path]:
-    """A temporary path with the target's own file name (writers embed it), renamed onto the target.
-
-    Nothing is left behind on failure, and a failure to write is a SystemFailure naming the target.
-    """
-    target = Path(target)
-    try:
-        target.parent.mkdir(parents=True, exist_ok=True)
-        folder = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
-    except OSError as err:
-        raise SystemFailure(str(target), "creating a temporary folder beside it", err) from err
-    try:
-        yield folder / target.name
-        os.replace(folder / target.name, target)
-    except OSError as err:
-        raise SystemFailure(str(target), "writing", err) from err
-    finally:
-        shutil.rmtree(folder, ignore_errors=True)
-
-
 def _held(t_s: FloatArray, t_ch: FloatArray, value: FloatArray) -> FloatArray:
     """The channel's latest value at each time (its first before it starts): no interpolation of angles."""
     index = np.clip(np.searchsorted(t_ch, t_s, side="right") - 1, 0, t_ch.size - 1)
@@ -463,7 +439,7 @@ def write_can_log(
     skipped: Counter[str] = Counter()
     encoded = _encode_imu(series, layout, saturated, skipped, str(dbc_path))
     encoded += _encode_aux(series, layout, saturated, skipped, str(dbc_path))
-    with _output(path) as tmp:
+    with atomic_path(path, keep_name=True) as tmp:
         write_frames(tmp, fmt, encoded, start_time_s, Path(dbc_path), channel)
     first = min(float(e.t_s.min()) for e in encoded if e.t_s.size)
     clock = -first if fmt == "asc" else start_time_s  # python-can reads ASC from its first frame on
@@ -554,7 +530,7 @@ def write_protocol(path: str | os.PathLike[str], log: ParkingLog, *, start_time_
     rows = np.asarray(log.protocol, dtype=np.float64).reshape(-1, 3)
     lines = ["t_start_s,t_end_s,beta_deg"]
     lines += [f"{t0 + start_time_s:.6f},{t1 + start_time_s:.6f},{beta:.10g}" for t0, t1, beta in rows.tolist()]
-    with _output(path) as tmp:
+    with atomic_path(path, keep_name=True) as tmp:
         tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
 
 

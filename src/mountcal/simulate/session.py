@@ -1,8 +1,8 @@
 """Simulated sessions written to files: a stop table, or a parking session as logs (``mountcal simulate``).
 
-The command line parses and checks that no output lands on an input (:func:`mountcal.paths.check_outputs`
-with its option names); this module simulates, writes atomically and says what it wrote (lines for the
-user). The truth goes to a JSON file when asked.
+The command line parses and checks that no output lands on an input (from the paths its parser
+declares: :mod:`mountcal.cli.path_options`); this module simulates, writes atomically and says what
+it wrote (lines for the user). The truth goes to a JSON file when asked.
 """
 
 from __future__ import annotations

@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mountcal.errors import InputError
+from mountcal.input_conventions import parse_axes
 from mountcal.io.can.dbc import frame_id_text, id_match, load_dbcs
 from mountcal.io.can.frames import iter_frames, log_format
 from mountcal.io.can.mismatch import SHOWN, Want, log_mismatch
@@ -511,30 +512,15 @@ def _assign_validity(sources: list[Source], valid: Any, db: Any, where: str, pre
 
 
 def _axes(text: Any, allow: Any) -> tuple[NDArray[np.float64], str]:
-    """The signed permutation "-y,x,z" as a matrix (row i: device components of sensor axis i)."""
-    tokens = [t.strip().lower() for t in str(text).split(",")]
-    parsed = [re.fullmatch(r"([+-]?)([xyz])", t) for t in tokens]
-    letters = [m.group(2) for m in parsed if m]
-    if len(tokens) != 3 or not all(parsed) or sorted(letters) != ["x", "y", "z"]:
-        raise InputError(
-            "the mapping",
-            'axes as a signed permutation of x, y, z such as "-y,x,z"',
-            repr(text),
-            "List, for sensor axes x, y, z in turn, the device axis (with its sign) that points along it.",
-        )
-    matrix = np.zeros((3, 3))
-    for row, match in enumerate(parsed):
-        assert match is not None
-        matrix[row, "xyz".index(match.group(2))] = -1.0 if match.group(1) == "-" else 1.0
-    canonical = ",".join(t.lstrip("+") for t in tokens)
-    if np.linalg.det(matrix) > 0:
-        return matrix, canonical
-    if allow is False or allow is None or allow == "":
-        raise InputError(
-            "the mapping",
-            "axes that keep the frame right-handed (an even number of swaps and sign flips)",
-            f"{canonical!r}, a reflection that makes it left-handed",
-            'Flip one more sign, or set allow_left_handed = "<reason>" if the device itself is left-handed.',
-        )
-    reason = allow if isinstance(allow, str) else "by the mapping"
-    return matrix, f"{canonical} (reflection allowed: {reason})"
+    """The mapping's ``axes`` (a signed permutation, :func:`mountcal.input_conventions.parse_axes`) as a
+    matrix (row i: device components of sensor axis i) and its description.
+
+    A reflection states that the device's own triad is left-handed (the map makes it right-handed), as
+    ``--axes`` does; ``allow_left_handed`` (older mappings needed it) may still give the reason. Whether
+    the mapped axes are right-handed is checked where the data can tell (the stops' headings, turns).
+    """
+    axes = parse_axes(str(text), "the mapping's axes")
+    if not axes.reflection:
+        return axes.matrix, axes.text
+    reason = allow if isinstance(allow, str) and allow else "the device's own triad is left-handed"
+    return axes.matrix, f"{axes.text} (a reflection: {reason})"

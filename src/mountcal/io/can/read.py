@@ -5,8 +5,9 @@ auxiliary channels, in which units, on which channel, and how the device's axes 
 right-handed sensor frame. It is a small TOML file (or the equivalent dict)::
 
     channel = 2                    # optional: CAN channel, python-can numbering
-    axes = "x,y,z"                 # optional: sensor axis i = signed device axis, e.g. "-y,x,z"
-    allow_left_handed = false      # optional: true or a reason, to accept a reflection
+    axes = "x,y,z"                 # optional: sensor axis i = signed device axis, e.g. "-y,x,z";
+                                   # a reflection ("x,-y,z") states a left-handed device (--axes alike)
+    allow_left_handed = "reason"   # optional: why the device is left-handed (recorded with the map)
     valid = ["gnss_imu.ImuValid"]  # optional: frames whose validity signal is 0 are dropped
 
     [signals]                      # message.signal; the message by name or by id ("0x9")

@@ -44,6 +44,7 @@ from numpy.typing import NDArray
 from mountcal.io.mcap.records import MAGIC, MESSAGE_HEAD, RECORD_HEAD, U8Array
 from mountcal.io.ros2.definitions import ros2_definition
 from mountcal.io.ros2.imu import ImuMessages, encode_imu_messages
+from mountcal.paths import special_kind
 
 FloatArray = NDArray[np.float64]
 
@@ -345,6 +346,8 @@ def written_by_mountcal(path: Path) -> bool:
     output, never a log to calibrate (a rotated log would calibrate to the identity).
     """
     suffix = path.suffix.lower()
+    if special_kind(path) is not None:  # a FIFO would block the look inside; its reader refuses it
+        return False
     try:
         if suffix in (".parquet", ".pq"):
             keys = (pq.read_schema(path).metadata or {}).keys()

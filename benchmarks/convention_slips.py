@@ -1,0 +1,400 @@
+"""Convention slips a user makes, run through the command line: how many end in a confident wrong
+answer, a traceback, or a refusal that does not name the option (or column) that fixes it.
+
+Each slip changes a *convention* of a correct input — a sign, an axis swap, a unit, a heading
+reference, a direction — the way a person does: a DBC sign, a spreadsheet column, a value typed in
+g, an azimuth taken from the wrong end of the slope. Inputs are stop tables and logs (sample tables
+of a simulated parking session, with and without a drive with speed) of random mountings; every case
+runs `mountcal` in-process on the files, as a user would, and is scored:
+
+- answered: right (within 5σ + 0.5° per determined angle, the tilt and the yaw about the vertical),
+  not confident (an honest doubt), or **confident and wrong**;
+- refused (exit 2 or 3): the message names the fix (one of the slip's options or columns), or **not**;
+- **traceback**: anything but a clean exit.
+
+Slips whose effect the data cannot show are listed apart ("the data cannot tell"): β from downhill or
+with an unknown offset in a hand-made table without a drive turns the answer about the vertical and
+fits exactly as well; the result states the assumption (``provenance.conventions``).
+
+Usage::
+
+    python benchmarks/convention_slips.py --cases 4 --seed 1 [--markdown]
+
+The table in docs/conventions.md was made with ``--cases 4 --seed 1``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import dataclasses
+import io
+import json
+import sys
+import tempfile
+import time
+import traceback
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from scipy.spatial.transform import Rotation
+
+from mountcal.apply.rotate_log import to_frame
+from mountcal.cli import main
+from mountcal.samples import Channel, Samples
+from mountcal.simulate.drive import simulate_drive
+from mountcal.simulate.stops import simulate_parking_log, simulate_stops
+
+G = 9.80665
+LOG_DETECTION = ["--min-stop-s", "25"]  # the parking stops (36 s), not a drive's waits at junctions
+
+
+@dataclass
+class Case:
+    """One run: the command line, the truth, and what names the fix when it is refused."""
+
+    argv: list[str]
+    truth: Rotation | None  # None: any answer is wrong (a mirror image has no right rotation)
+    fixes: tuple[str, ...]  # strings one of which a refusal must name
+    cannot_tell: bool = False  # the data cannot show this slip
+
+
+@dataclass
+class Tally:
+    counts: Counter[str] = field(default_factory=Counter)
+    examples: dict[str, str] = field(default_factory=dict)
+
+
+# --------------------------------------------------------------------------- scenarios
+
+
+def _truth(rng: np.random.Generator) -> tuple[float, float, float, float]:
+    return (
+        float(rng.uniform(-20, 20)),
+        float(rng.uniform(-20, 20)),
+        float(rng.uniform(-180, 180)),
+        float(rng.uniform(3, 15)),
+    )
+
+
+def _table(rng: np.random.Generator, headings: str = "uphill") -> tuple[pd.DataFrame, Rotation]:
+    roll, pitch, yaw, slope = _truth(rng)
+    table, truth = simulate_stops(
+        roll,
+        pitch,
+        yaw,
+        slope_deg=slope,
+        noise_g=float(rng.uniform(0.0005, 0.002)),
+        headings=headings,  # type: ignore[arg-type]
+        heading_offset_deg=float(rng.uniform(10, 350)) if headings == "relative" else 0.0,
+        seed=int(rng.integers(1 << 30)),
+    )
+    return table.to_frame(), truth.rot_vs
+
+
+def _csv(df: pd.DataFrame, folder: Path, name: str) -> str:
+    path = folder / name
+    df.to_csv(path, index=False, float_format="%.15g")
+    return str(path)
+
+
+def _flip(df: pd.DataFrame, col: str) -> pd.DataFrame:
+    out = df.copy()
+    out[col] = -out[col]
+    return out
+
+
+def table_slips(rng: np.random.Generator, folder: Path) -> dict[str, Case]:
+    """Slips on a stop table (each from its own random mounting)."""
+    cases: dict[str, Case] = {}
+    for axis in "xyz":
+        df, truth = _table(rng)
+        cases[f"table: a{axis} negated (a DBC sign)"] = Case(
+            ["calibrate", _csv(_flip(df, f"a{axis}"), folder, f"neg_{axis}.csv")], None, ("--axes",)
+        )
+    df, truth = _table(rng)
+    swapped = df.rename(columns={"ax": "ay", "ay": "ax"})
+    cases["table: ax and ay swapped"] = Case(["calibrate", _csv(swapped, folder, "swap.csv")], None, ("--axes",))
+    df, truth = _table(rng)
+    in_g = df.copy()
+    for c in ("ax", "ay", "az", "sx", "sy", "sz"):
+        in_g[c] = in_g[c] / G
+    cases["table: in g, no --unit"] = Case(["calibrate", _csv(in_g, folder, "g.csv")], truth, ("--unit g",))
+    df, truth = _table(rng)
+    cases["table: --unit g on m/s²"] = Case(
+        ["calibrate", _csv(df, folder, "mps2.csv"), "--unit", "g"], truth, ("--unit g",)
+    )
+    df, truth = _table(rng)
+    noisy = df.copy()
+    for c in ("ax", "ay", "az"):
+        noisy[c] = noisy[c] / G
+    cases["table: ax, ay, az in g, sx, sy, sz left in m/s² (--unit g)"] = Case(
+        ["calibrate", _csv(noisy, folder, "noise_unit.csv"), "--unit", "g"], truth, ()
+    )
+    df, truth = _table(rng)
+    rad = df.copy()
+    rad["beta_deg"] = np.radians(rad["beta_deg"])
+    cases["table: β in radians"] = Case(["calibrate", _csv(rad, folder, "rad.csv")], truth, ("--heading-unit",))
+    df, truth = _table(rng)
+    cw = df.copy()
+    cw["beta_deg"] = (-cw["beta_deg"]) % 360.0
+    cases["table: β clockwise (compass-like)"] = Case(
+        ["calibrate", _csv(cw, folder, "cw.csv")], truth, ("--axes", "--uphill-azimuth-deg")
+    )
+    df, truth = _table(rng)
+    cases["table: --heading-unit rad on degrees"] = Case(
+        ["calibrate", _csv(df, folder, "deg.csv"), "--heading-unit", "rad"], truth, ("--heading-unit",)
+    )
+    df, truth = _table(rng, "relative")
+    edited = df.drop(columns=["heading_ref"]).assign(heading_deg=(-df["beta_deg"]) % 360.0)
+    cases["table from `stops` (relative): heading_ref deleted in a spreadsheet"] = Case(
+        ["calibrate", _csv(edited, folder, "edited.csv")], truth, ("heading_ref",)
+    )
+    df, truth = _table(rng, "relative")
+    parquet = folder / "rel.parquet"
+    df.to_parquet(parquet, index=False)
+    cases["table (Parquet): relative β, --headings uphill"] = Case(
+        ["calibrate", str(parquet), "--headings", "uphill"], truth, ("heading_ref",)
+    )
+    df, truth = _table(rng, "relative")
+    cases["table: relative β, --headings uphill"] = Case(
+        ["calibrate", _csv(df, folder, "rel.csv"), "--headings", "uphill"], truth, ("heading_ref",)
+    )
+    df, truth = _table(rng)
+    cases["table: --gravity 1 (g for m/s²)"] = Case(
+        ["calibrate", _csv(df, folder, "grav.csv"), "--gravity", "1"], truth, ("--gravity",)
+    )
+    df, truth = _table(rng)
+    down = df.drop(columns=["heading_ref"])
+    down["beta_deg"] = (down["beta_deg"] + 180.0) % 360.0
+    cases["table: β from downhill, no heading_ref (hand-made)"] = Case(
+        ["calibrate", _csv(down, folder, "down.csv")], truth, (), cannot_tell=True
+    )
+    df, truth = _table(rng, "relative")
+    cases["table: relative β, no heading_ref (hand-made)"] = Case(
+        ["calibrate", _csv(df.drop(columns=["heading_ref"]), folder, "rel_bare.csv")], truth, (), cannot_tell=True
+    )
+    return cases
+
+
+def _parking(
+    rng: np.random.Generator, drive_s: float = 0.0
+) -> tuple[Samples, Rotation, list[tuple[float, float, float]]]:
+    """A parking session on a slope (uphill azimuth 30°), optionally followed by a drive, as one log."""
+    roll, pitch, yaw, slope = _truth(rng)
+    park = simulate_parking_log(roll, pitch, yaw, slope_deg=slope, seed=int(rng.integers(1 << 30)))
+    t, acc, gyro = park.t_s, park.acc_s, park.gyro_s
+    speed_t, speed, heading = park.t_s, park.speed_mps, park.heading_deg
+    if drive_s > 0:
+        d = simulate_drive(roll, pitch, yaw, duration_s=drive_s, seed=int(rng.integers(1 << 30)))
+        t0 = t[-1] + 10.0
+        speed_t = np.concatenate([speed_t, d.speed_t_s + t0])
+        speed = np.concatenate([speed, d.speed_mps])
+        heading = np.concatenate([heading, d.heading_deg])
+        t, acc, gyro = np.concatenate([t, d.t_s + t0]), np.concatenate([acc, d.acc_s]), np.concatenate([gyro, d.gyro_s])
+    channels = {"speed_mps": Channel(speed_t, speed), "heading_deg": Channel(t, heading)}
+    return Samples(t, acc, gyro, channels, source="<simulated>"), park.truth.rot_vs, park.protocol
+
+
+def _log(samples: Samples, folder: Path, name: str) -> str:
+    path = folder / name
+    to_frame(samples).to_parquet(path, index=False)
+    return str(path)
+
+
+def _protocol(rows: list[tuple[float, float, float]], folder: Path, name: str, f: Callable[[float], float]) -> str:
+    path = folder / name
+    pd.DataFrame([(a, b, f(c)) for a, b, c in rows], columns=["t_start_s", "t_end_s", "beta_deg"]).to_csv(
+        path, index=False
+    )
+    return str(path)
+
+
+def log_slips(rng: np.random.Generator, folder: Path) -> dict[str, Case]:
+    """Slips on logs: a parking session (and a drive with speed) as a sample table."""
+    cases: dict[str, Case] = {}
+    s, truth, rows = _parking(rng)
+    flip = np.array([1.0, -1.0, 1.0])
+    mirrored = dataclasses.replace(s, acc_s=s.acc_s * flip, gyro_s=s.gyro_s * flip)  # type: ignore[operator]
+    cases["log: y negated (accelerometer and gyro), protocol"] = Case(
+        ["calibrate", _log(mirrored, folder, "mirror.parquet"), "--protocol", _protocol(rows, folder, "p.csv", float)],
+        None,
+        ("--axes",),
+    )
+    s, truth, rows = _parking(rng)
+    cases["log: --axes x,-y,z given on a right-handed log"] = Case(
+        ["calibrate", _log(s, folder, "right.parquet"), "--uphill-azimuth-deg", "30", "--axes", "x,-y,z"],
+        None,
+        ("--axes",),
+    )
+    s, truth, rows = _parking(rng)
+    cases["log: protocol β in radians"] = Case(
+        ["calibrate", _log(s, folder, "a.parquet"), "--protocol", _protocol(rows, folder, "r.csv", np.radians)],
+        truth,
+        ("--heading-unit",),
+    )
+    s, truth, rows = _parking(rng)
+    cases["log: protocol β clockwise"] = Case(
+        ["calibrate", _log(s, folder, "b.parquet"), "--protocol", _protocol(rows, folder, "c.csv", lambda b: -b % 360)],
+        truth,
+        ("--axes", "clockwise"),
+    )
+    s, truth, rows = _parking(rng)
+    h = s.channels["heading_deg"]
+    rad = dataclasses.replace(s, channels={**s.channels, "heading_deg": Channel(h.t_s, np.radians(h.value))})
+    cases["log: heading channel in radians, --uphill-azimuth-deg"] = Case(
+        ["calibrate", _log(rad, folder, "hrad.parquet"), "--uphill-azimuth-deg", "30"], truth, ("--heading-unit",)
+    )
+    s, truth, rows = _parking(rng)
+    enu = dataclasses.replace(s, channels={**s.channels, "heading_deg": Channel(h.t_s, (90.0 - h.value) % 360.0)})
+    cases["log: ENU yaw as the compass heading, --uphill-azimuth-deg"] = Case(
+        ["calibrate", _log(enu, folder, "enu.parquet"), "--uphill-azimuth-deg", "30"], truth, ("--axes", "compass")
+    )
+    s, truth, rows = _parking(rng, drive_s=500.0)
+    log = _log(s, folder, "drive.parquet")
+    cases["log + drive: uphill azimuth given downhill"] = Case(
+        ["calibrate", log, "--uphill-azimuth-deg", "210", *LOG_DETECTION], truth, ("--uphill-azimuth-deg",)
+    )
+    cases["log + drive: uphill azimuth counter-clockwise from east"] = Case(
+        ["calibrate", log, "--uphill-azimuth-deg", "60", *LOG_DETECTION], truth, ("--uphill-azimuth-deg",)
+    )
+    cases["log + drive: relative β called uphill (azimuth 0)"] = Case(
+        ["calibrate", log, "--uphill-azimuth-deg", "0", *LOG_DETECTION], truth, ("--uphill-azimuth-deg",)
+    )
+    mirrored = dataclasses.replace(s, acc_s=s.acc_s * flip, gyro_s=s.gyro_s * flip)  # type: ignore[operator]
+    cases["log + drive: y negated, driving only"] = Case(
+        ["calibrate", _log(mirrored, folder, "dm.parquet"), "--use", "driving"], None, ("--axes",)
+    )
+    vertical = dataclasses.replace(s, acc_s=s.acc_s * np.array([1.0, 1.0, -1.0]))
+    cases["log + drive: accelerometer z negated alone, driving only"] = Case(
+        ["calibrate", _log(vertical, folder, "dz.parquet"), "--use", "driving"], None, ("--axes", "sign")
+    )
+    cases["plan: --noise 0.005 (g for mg)"] = Case(
+        ["plan", "--target", "roll=0.5,pitch=0.5", "--slope-deg", "5", "--noise", "0.005"], None, ("--noise",)
+    )
+    return cases
+
+
+# --------------------------------------------------------------------------- scoring
+
+
+def _angle_errors(doc: dict, truth: Rotation) -> tuple[float, float | None, float, float | None]:  # type: ignore[type-arg]
+    """Tilt error and yaw error (about the vertical; None when yaw is not determined), with their 1σ."""
+    rot = Rotation.from_quat(doc["rotation"]["quaternion_xyzw"])
+    up_est, up_true = rot.inv().apply([0, 0, 1.0]), truth.inv().apply([0, 0, 1.0])
+    tilt = float(np.degrees(np.arccos(np.clip(up_est @ up_true, -1, 1))))
+    sig = doc["uncertainty"]["rotation_about_vehicle_xyz_deg"]
+    s_tilt = max(s for s in (sig[0], sig[1], doc["uncertainty"]["roll_deg"], doc["uncertainty"]["pitch_deg"]) if s)
+    if doc["mounting"]["yaw_deg"] is None:
+        return tilt, None, s_tilt, None
+    x = rot.apply(truth.inv().apply([1.0, 0, 0]))
+    yaw = abs(float(np.degrees(np.arctan2(x[1], x[0]))))
+    return tilt, yaw, s_tilt, sig[2] or doc["uncertainty"]["yaw_deg"]
+
+
+def run_case(case: Case, folder: Path) -> tuple[str, str]:
+    """The outcome of one case and the text behind it."""
+    out = folder / "result.json"
+    out.unlink(missing_ok=True)
+    argv = case.argv + (["-o", str(out)] if case.argv[0] == "calibrate" else [])
+    err, std = io.StringIO(), io.StringIO()
+    try:
+        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(std):
+            code = main(argv)
+    except SystemExit as exc:  # argparse
+        code = int(exc.code or 0)
+    except BaseException:
+        return "traceback", traceback.format_exc(limit=3)
+    text = err.getvalue()
+    if code in (2, 3):
+        named = any(f in text for f in case.fixes)
+        return ("refused, names the fix" if named else "refused, fix NOT named"), text.strip().splitlines()[-1][:300]
+    if code != 0:
+        return f"exit {code}", text[-300:]
+    if case.argv[0] != "calibrate":
+        return "answered, not checked", ""
+    doc = json.loads(out.read_text(encoding="utf-8"))
+    if not doc["confident"]:
+        return "answered, not confident", "; ".join(c["name"] for c in doc.get("checks", []) if c["passed"] is False)
+    if case.truth is None:
+        return "CONFIDENT WRONG", f"a rotation for a mirror image: {doc['mounting']}"
+    tilt, yaw, s_tilt, s_yaw = _angle_errors(doc, case.truth)
+    wrong = tilt > 5 * s_tilt + 0.5 or (yaw is not None and s_yaw is not None and yaw > 5 * s_yaw + 0.5)
+    detail = f"tilt off {tilt:.2f}° (σ {s_tilt:.2f}), yaw off {yaw}°"
+    return ("CONFIDENT WRONG" if wrong else "answered, right"), detail
+
+
+def main_cli(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--cases", type=int, default=4, help="random inputs per slip")
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--markdown", action="store_true", help="print the table as Markdown")
+    args = parser.parse_args(argv)
+    rng = np.random.default_rng(args.seed)
+    tallies: dict[str, Tally] = {}
+    cannot: set[str] = set()
+    start = time.perf_counter()
+    with tempfile.TemporaryDirectory() as tmp:
+        for k in range(args.cases):
+            folder = Path(tmp) / f"case{k}"
+            folder.mkdir()
+            for name, case in {**table_slips(rng, folder), **log_slips(rng, folder)}.items():
+                outcome, detail = run_case(case, folder)
+                tally = tallies.setdefault(name, Tally())
+                tally.counts[outcome] += 1
+                tally.examples.setdefault(outcome, detail)
+                if case.cannot_tell:
+                    cannot.add(name)
+    columns = [
+        "answered, right",
+        "answered, not confident",
+        "refused, names the fix",
+        "CONFIDENT WRONG",
+        "refused, fix NOT named",
+        "traceback",
+    ]
+    _print(tallies, cannot, columns, args)
+    bad = sum(t.counts[c] for n, t in tallies.items() if n not in cannot for c in columns[3:])
+    bad += sum(t.counts[o] for t in tallies.values() for o in t.counts if o.startswith("exit"))
+    print(
+        f"\n{sum(sum(t.counts.values()) for t in tallies.values())} runs in {time.perf_counter() - start:.0f} s; "
+        f"slips the data can show ending badly: {bad}"
+    )
+    for name, tally in tallies.items():
+        for outcome in ("CONFIDENT WRONG", "refused, fix NOT named", "traceback"):
+            if outcome in tally.examples and name not in cannot:
+                print(f"  {name} — {outcome}: {tally.examples[outcome]}", file=sys.stderr)
+    return 0
+
+
+def _print(tallies: dict[str, Tally], cannot: set[str], columns: list[str], args: argparse.Namespace) -> None:
+    def row(name: str, t: Tally) -> list[str]:
+        other = sum(v for k, v in t.counts.items() if k not in columns)
+        return [name, *(str(t.counts[c]) for c in columns), str(other)]
+
+    header = ["slip", *columns, "other"]
+    groups = [
+        ("the data can show the slip", [n for n in tallies if n not in cannot]),
+        ("the data cannot tell (the assumption is stated in the result)", [n for n in tallies if n in cannot]),
+    ]
+    if args.markdown:
+        print("| " + " | ".join(header) + " |")
+        print("|" + "---|" * len(header))
+        for title, names in groups:
+            print(f"| *{title}* |" + " |" * (len(header) - 1))
+            for n in names:
+                print("| " + " | ".join(row(n, tallies[n])) + " |")
+        return
+    for title, names in groups:
+        print(f"\n{title}:")
+        print("  " + " | ".join(header))
+        for n in names:
+            print("  " + " | ".join(row(n, tallies[n])))
+
+
+if __name__ == "__main__":
+    sys.exit(main_cli())

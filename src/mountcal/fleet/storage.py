@@ -1,0 +1,238 @@
+"""Logs in object storage (S3, MinIO, any fsspec URL): list, identify and fetch them in bounded memory.
+
+- :func:`list_objects` lists every object under a URL (``s3://bucket/LOG``) with its size and a
+  *stamp* — ETag, size and modification time — which keys its result instead of a hash of its
+  bytes: resuming a fleet in a bucket reads no log again.
+- :func:`local_copies` fetches the objects of one log (the splits of one session) to a private
+  scratch folder on the worker, in blocks of :data:`BLOCK_BYTES` (the memory one fetch holds),
+  and deletes them when the log is calibrated. mountcal's readers work on files (memory maps,
+  seeks), so a worker holds one log's objects on its scratch disk at a time — never the fleet.
+
+Endpoint and credentials come from the standard AWS variables and profiles (``AWS_ACCESS_KEY_ID``,
+``AWS_SECRET_ACCESS_KEY``, ``AWS_PROFILE``, ``AWS_ENDPOINT_URL`` for MinIO or another S3-compatible
+server), read by botocore, or from ``--storage-option KEY=VALUE`` (fsspec's options of the
+protocol, e.g. ``endpoint_url=…``, ``anon=true``). s3fs comes with ``pip install 'mountcal[fleet]'``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import shutil
+import tempfile
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path, PurePosixPath
+from typing import Any
+
+from mountcal.errors import InputError
+
+BLOCK_BYTES = 8 << 20  # one ranged read of a fetch: the memory a worker's fetch holds
+SCRATCH_PREFIX = "mountcal-fetch-"  # + the worker's pid: a killed worker's folder is removed by the next fetch
+_URL = re.compile(r"^[A-Za-z][A-Za-z0-9+.-]*://")
+STORAGE_OPTION = "--storage-option"
+
+
+def is_url(text: str) -> bool:
+    """Whether ``text`` names an object store (``s3://…``, ``gcs://…``, ``memory://…``), not a local path."""
+    return bool(_URL.match(text))
+
+
+@dataclass(frozen=True)
+class RemoteObject:
+    """One listed object: its URL, size in bytes and stamp (what identifies this version of it)."""
+
+    url: str
+    size: int
+    stamp: str
+
+
+def parse_storage_options(items: Sequence[str]) -> dict[str, Any]:
+    """``KEY=VALUE`` strings as fsspec options; ``true``/``false`` and numbers are converted.
+
+    Raises
+    ------
+    InputError
+        An item without ``=`` or without a key.
+    """
+    options: dict[str, Any] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise InputError(
+                f"{STORAGE_OPTION} {item}",
+                "KEY=VALUE (an fsspec storage option, e.g. endpoint_url=http://127.0.0.1:9000)",
+                repr(item),
+                "Write the option as KEY=VALUE.",
+            )
+        options[key.strip()] = _typed(value.strip())
+    return options
+
+
+def _typed(value: str) -> Any:
+    if value.lower() in ("true", "false"):
+        return value.lower() == "true"
+    for kind in (int, float):
+        try:
+            return kind(value)
+        except ValueError:
+            pass
+    return value
+
+
+def filesystem(url: str, options: Mapping[str, Any]) -> tuple[Any, str]:
+    """The fsspec filesystem of ``url`` and the path inside it.
+
+    Raises
+    ------
+    InputError
+        The protocol's package is missing, or the options do not fit it.
+    """
+    import fsspec
+
+    try:
+        return fsspec.core.url_to_fs(url, **dict(options))
+    except ImportError as err:
+        raise InputError(
+            url,
+            "a storage URL mountcal can open",
+            f"the package for it is not installed ({err})",
+            "Install it: pip install 'mountcal[fleet]' (s3fs for s3://).",
+        ) from err
+    except (TypeError, ValueError) as err:
+        raise InputError(
+            url, "storage options the protocol takes", str(err), f"Check {STORAGE_OPTION} and the URL."
+        ) from err
+
+
+def storage_error(url: str, err: BaseException, doing: str) -> InputError:
+    """A storage failure (no such bucket, no credentials, no endpoint) in the user's terms."""
+    if isinstance(err, FileNotFoundError):
+        found, todo = "no such bucket, folder or object", "Check the URL."
+    elif isinstance(err, PermissionError):
+        found, todo = f"access denied ({err})", "Check the credentials (AWS_PROFILE, AWS_ACCESS_KEY_ID …)."
+    else:
+        found = f"{type(err).__name__}: {err}"
+        todo = (
+            "Check the endpoint and credentials: the AWS variables (AWS_ENDPOINT_URL for MinIO or another "
+            "S3-compatible server, AWS_ACCESS_KEY_ID, AWS_SECRET_ACCESS_KEY, AWS_PROFILE) "
+            f"or {STORAGE_OPTION} KEY=VALUE."
+        )
+    return InputError(url, f"a readable object store ({doing})", found, todo)
+
+
+_STORAGE_ERRORS: tuple[type[BaseException], ...] = (OSError, ValueError, RuntimeError)
+
+
+def _storage_errors() -> tuple[type[BaseException], ...]:
+    """The exceptions a storage call raises for the user's reasons (botocore's, when it is installed)."""
+    try:
+        from botocore.exceptions import BotoCoreError, ClientError
+    except ImportError:
+        return _STORAGE_ERRORS
+    return (*_STORAGE_ERRORS, BotoCoreError, ClientError)
+
+
+def stamp_of(info: Mapping[str, Any]) -> str:
+    """What identifies one version of an object: its ETag (or checksum), size and modification time."""
+    tag = next((info[k] for k in ("ETag", "etag", "md5", "checksum") if info.get(k)), None)
+    mtime = next((info[k] for k in ("LastModified", "mtime", "last_modified", "updated") if info.get(k)), None)
+    size = info.get("size", info.get("Size"))
+    return f"etag={str(tag).strip(chr(34))} size={size} mtime={mtime}"
+
+
+def list_objects(url: str, options: Mapping[str, Any]) -> list[RemoteObject]:
+    """Every object under ``url`` (recursively; hidden names skipped), sorted by URL.
+
+    Raises
+    ------
+    InputError
+        Nothing there, or the store refused (the message says what to check).
+    """
+    fs, root = filesystem(url, options)
+    try:
+        found = fs.find(root, detail=True, withdirs=False) if fs.isdir(root) else {root: fs.info(root)}
+    except _storage_errors() as err:
+        raise storage_error(url, err, "listing") from err
+    protocol = url.split("://", 1)[0]
+    objects = []
+    for path, info in found.items():
+        if info.get("type", "file") != "file":
+            continue
+        relative = PurePosixPath(path).parts[len(PurePosixPath(root).parts) :]
+        if any(part.startswith(".") for part in relative):
+            continue
+        objects.append(RemoteObject(f"{protocol}://{path}", int(info.get("size") or 0), stamp_of(info)))
+    if not objects:
+        raise InputError(url, "objects under this URL", "none", "Check the bucket and prefix.")
+    return sorted(objects, key=lambda o: o.url)
+
+
+@contextlib.contextmanager
+def local_copies(urls: Sequence[str], options: Mapping[str, Any], stamps: Sequence[str | None]) -> Iterator[list[str]]:
+    """Local files holding the objects ``urls`` for the block (each under its own name, so the reader
+    sees its suffix), fetched in :data:`BLOCK_BYTES` reads; deleted afterwards however the block ends.
+
+    Raises
+    ------
+    InputError
+        An object is missing, unreadable, or changed since it was listed (its stamp differs).
+    """
+    _remove_orphans()
+    scratch = tempfile.mkdtemp(prefix=f"{SCRATCH_PREFIX}{os.getpid()}-")
+    try:
+        paths = []
+        for i, (url, stamp) in enumerate(zip(urls, stamps, strict=True)):
+            fs, path = filesystem(url, options)
+            target = os.path.join(scratch, str(i), PurePosixPath(path).name)
+            os.mkdir(os.path.dirname(target))
+            try:
+                info = fs.info(path)
+                if stamp is not None and stamp_of(info) != stamp:
+                    raise InputError(
+                        url,
+                        "the object as it was listed",
+                        f"another version ({stamp_of(info)}; listed {stamp})",
+                        "It changed during the run: run the same command again.",
+                    )
+                with fs.open(path, "rb", block_size=BLOCK_BYTES, cache_type="none") as src, open(target, "wb") as out:
+                    shutil.copyfileobj(src, out, BLOCK_BYTES)
+            except InputError:
+                raise
+            except _storage_errors() as err:
+                raise storage_error(url, err, "reading an object") from err
+            paths.append(target)
+        yield paths
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+
+
+def _remove_orphans() -> None:
+    """Delete the scratch folders of workers that were killed while fetching (their pid is gone)."""
+    for folder in Path(tempfile.gettempdir()).glob(f"{SCRATCH_PREFIX}*-*"):
+        pid = folder.name[len(SCRATCH_PREFIX) :].split("-", 1)[0]
+        if pid.isdigit() and not _alive(int(pid)):
+            shutil.rmtree(folder, ignore_errors=True)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process: alive, and not ours to clean
+        return True
+    return True
+
+
+__all__ = [
+    "BLOCK_BYTES",
+    "RemoteObject",
+    "filesystem",
+    "is_url",
+    "list_objects",
+    "local_copies",
+    "parse_storage_options",
+    "stamp_of",
+]
