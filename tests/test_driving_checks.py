@@ -92,6 +92,26 @@ def test_a_horizontal_cross_axis_error_turns_the_cues_apart_and_sigma_covers_yaw
     assert any("cross-axis" in n for n in cal.notes) and any("model-error term" in n for n in cal.notes)
 
 
+def test_cues_half_a_turn_apart_name_a_mirrored_sensor_and_keep_the_longitudinal_axes(clean) -> None:  # type: ignore[no-untyped-def]
+    # A device that reports y negated (accelerometer and gyro): the turns show the y axis where the x axis's
+    # left should be. The model-error term leaves yaw undetermined; the note names the mirror, not a scale error,
+    # and the longitudinal cue's axes stay for the turns' handedness check (tests/test_input_conventions.py).
+    drive, right = clean
+    s = drive.to_samples()
+    flip = np.array([1.0, -1.0, 1.0])
+    fit = estimate_driving(dataclasses.replace(s, acc_s=s.acc_s * flip, gyro_s=s.gyro_s * flip))
+    c = fit.consistency
+    assert c is not None and "driving_cues" in c.findings and abs(c.cues.comparison.difference) > 150.0
+    assert fit.yaw_deg is None and fit.rot_vs_longitudinal is not None
+    (note,) = [n for n in fit.notes if "lateral cue" in n and "DISAGREE" in n]
+    assert "mirrored sensor" in note and "axes" in note and "cross-axis error of the accelerometer" not in note
+    # the longitudinal cue finds the same x axis in the mirrored device (x is not reversed)
+    x_right = right.rot_vs.inv().apply([1.0, 0.0, 0.0])
+    x_mirrored = fit.rot_vs_longitudinal.inv().apply([1.0, 0.0, 0.0]) * flip
+    assert np.degrees(np.arccos(np.clip(x_right @ x_mirrored, -1.0, 1.0))) < 3.0
+    assert right.rot_vs_longitudinal is not None and right.rot_vs_longitudinal.approx_equal(right.rot_vs)
+
+
 def test_a_remount_halfway_is_found_and_sigma_covers_both_mountings() -> None:
     first = Rotation.from_euler("ZYX", [30.0, 5.0, -4.0], degrees=True)
     second = Rotation.from_euler("zy", [3.0, 1.0], degrees=True) * first
