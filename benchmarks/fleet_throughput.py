@@ -195,7 +195,7 @@ def dask_cluster(startup_s: list[float], workers: int) -> Iterator[str]:
     from distributed import LocalCluster
 
     started = time.perf_counter()
-    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster:
         startup_s.append(time.perf_counter() - started)
         yield cluster.scheduler_address
 

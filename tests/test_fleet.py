@@ -195,7 +195,7 @@ def test_a_dask_cluster_gives_the_same_tables_as_the_embedded_run(fleet: dict, t
     from distributed import LocalCluster
 
     output = tmp_path / "dask.parquet"
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster:
         address = cluster.scheduler_address
         code = main(
             [

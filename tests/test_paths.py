@@ -40,9 +40,9 @@ NOT_PATHS = {
     "channel",
     "parent",
     "child",
-    "axes",  # a signed permutation, "x,-y,z"
-    "gravity",  # a quantity with its unit, "1g"
-    "noise",
+    "axes",  # a signed axis map (x,-y,z)
+    "gravity",  # a number with its unit (9.81, 1g)
+    "noise",  # a number with its unit (0.5mg)
 }
 # values for required options that are not paths
 REQUIRED_VALUES = {"interface": "virtual", "channel": "test-paths", "target": "roll=1"}

@@ -627,4 +627,5 @@ def _provenance(table: StopTable, method: str, terms: tuple[str, ...]) -> Proven
         created_utc=datetime.now(UTC).isoformat(timespec="seconds"),
         input_sha256=(table.sha256,) if table.sha256 else (),
         stops_fingerprint=fingerprint(table),  # lets `report --stops` check it has the right table
+        incomplete_inputs=table.incomplete,
     )

@@ -16,6 +16,7 @@ from contextvars import ContextVar
 # key -> (Python spelling, CLI flag). A nested parameter is spelled with its options class.
 OPTIONS: dict[str, tuple[str, str]] = {
     "accept_unconfident": ("accept_unconfident", "--accept-unconfident"),
+    "allow_truncated": ("LogOptions.allow_truncated", "--allow-truncated"),
     "axes": ("LogOptions.axes", "--axes"),
     "columns": ("LogOptions.columns", "--columns"),
     "dbc": ("LogOptions.dbc", "--dbc"),
@@ -35,6 +36,7 @@ OPTIONS: dict[str, tuple[str, str]] = {
     "method": ("Options.method", "--method"),
     "min_stop": ("StopDetection.min_duration_s", "--min-stop-s"),
     "model": ("Options.model", "--model"),
+    "output": ("output", "-o"),
     "noise": ("Noise.sample_sigma_mps2", "--noise"),
     "parent": ("Frames.parent", "--parent"),
     "parent_pose": ("Frames.parent_pose", "--parent-pose"),

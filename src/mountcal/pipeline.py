@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import hashlib
 import threading
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, Literal
+from typing import Literal
 
 import numpy as np
 
@@ -25,20 +25,20 @@ from mountcal.driving_document import Comparison, DrivingConsistency
 from mountcal.errors import InputError, NotEnoughInformation
 from mountcal.estimate.driving import DrivingFit, DrivingOptions, estimate_driving, horizontal_axes_sigma_deg
 from mountcal.estimate.driving_combine import combine, driving_calibration, not_combined
-from mountcal.input_conventions import merged
+from mountcal.input_conventions import merged, parse_axes
+from mountcal.io.kind import Declared, InputKind, input_kind
 from mountcal.io.logs import LogOptions, read_log, stated
 from mountcal.io.timestamps import increasing_times
+from mountcal.io.whole import reading
 from mountcal.option_names import option
 from mountcal.paths import special_kind
 from mountcal.result import Calibration, Provenance
 from mountcal.samples import Samples
 from mountcal.stops import StopDetection, StopTableFromLog, near_miss_advice, read_protocol, tabulate
-from mountcal.stoptable import StopTable
+from mountcal.stoptable import Headings, StopTable, Unit, read_stop_table
 from mountcal.version import software_version
 
 Use = Literal["auto", "stops", "driving"]
-STOP_TABLE_SUFFIXES = (".csv", ".parquet", ".pq")
-STOP_TABLE_MARKERS = {"beta_deg", "heading_ref", "n", "sx"}
 
 
 @dataclass(frozen=True)
@@ -132,6 +132,57 @@ def calibrate_log(
     return calibrate_job(job)
 
 
+@dataclass(frozen=True)
+class InputResult:
+    """The calibration of an input, what kind of input it was, and the stop table or log result behind it."""
+
+    kind: InputKind
+    calibration: Calibration
+    table: StopTable | None  # the stop table fitted (None: calibrated from driving alone)
+    log: LogResult | None  # how a log was used (None for a stop table)
+
+
+def calibrate_input(
+    job: LogJob,
+    *,
+    unit: Unit | None = None,
+    headings: Headings | None = None,
+    declared: Declared = "auto",
+    read: Callable[[LogJob], Samples] | None = None,
+    table_azimuth: bool = True,
+) -> InputResult:
+    """Calibrate whatever the job's paths are: a stop table fitted as it is, or a log
+    (:func:`calibrate_job`), as :func:`mountcal.io.kind.input_kind` decides; the result's provenance
+    says which kind it was taken for and why. ``unit`` and ``headings`` are a stop table's (a log
+    finds its own; the job's axis map, heading unit and uphill azimuth apply to both); ``declared`` is
+    what the user said the input is (``--input-kind``); ``read`` reads
+    a log's files (default :func:`~mountcal.io.logs.read_log`; the fleet reads splits itself);
+    ``table_azimuth``: a stop table's β come from its compass column ``heading_deg`` and the job's
+    uphill azimuth (off for a fleet, whose azimuth is for its logs' heading channels).
+
+    What ``mountcal calibrate`` and every fleet worker do with an input.
+    """
+    mapped = job.log.columns is not None or (job.log.mapping is not None and job.log.dbc is None)  # a column map
+    kind = input_kind(job.paths, dbc=job.log.dbc is not None, columns=mapped, declared=declared)
+    table: StopTable | None
+    if kind.stop_table:
+        with reading(job.log.allow_truncated):  # a cut CSV: refused, or its whole rows read and said
+            table = read_stop_table(
+                job.paths[0],
+                unit=unit,
+                headings=headings,
+                heading_unit=job.log.heading_unit,
+                axes=None if job.log.axes is None else parse_axes(job.log.axes, option("axes")),
+                uphill_azimuth_deg=job.uphill_azimuth_deg if table_azimuth else None,
+            )
+        cal, done = calibrate(table, job.options), None
+    else:
+        done = calibrate_job(job, None if read is None else read(job))
+        cal, table = done.calibration, done.table
+    cal = replace(cal, provenance=replace(cal.provenance, input_kind=kind.sentence))
+    return InputResult(kind, cal, table, done)
+
+
 def calibrate_job(job: LogJob, samples: Samples | None = None) -> LogResult:
     """:func:`calibrate_log` of a prepared job (the fleet's and the command line's form); ``samples``
     are the job's files already read (the fleet reads a log's splits itself to count their gaps).
@@ -159,7 +210,7 @@ def _calibrate_job(job: LogJob, samples: Samples | None) -> LogResult:
     if job.use in ("auto", "stops"):
         try:
             found = _tabulate(samples, job)
-            table = replace(found.table, source=source)
+            table = replace(found.table, source=source, incomplete=samples.incomplete)
             static = calibrate(table, job.options)
         except NotEnoughInformation as err:
             missed = near_miss_advice(found.near_misses) if found is not None else ""
@@ -279,51 +330,6 @@ def stops_with_drive(
     )
 
 
-def is_stop_table(path: str | Path, has_dbc: bool = False, columns: bool = False) -> bool:
-    """Whether a CSV/Parquet file is a stop table (``beta_deg``, ``n`` or ``sx``, or no ``t_s`` and no known
-    sample export).
-
-    A CSV read with a DBC is a CAN log; a table read with a column map (``columns``) is a sample table. A
-    FIFO or a device counts as a stop table, so that the stop-table reader refuses it without opening it.
-
-    Raises
-    ------
-    InputError
-        The file is missing, empty, unreadable or does not parse as CSV or Parquet.
-    """
-    path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix not in STOP_TABLE_SUFFIXES or (has_dbc and suffix == ".csv") or columns:
-        return False
-    if special_kind(path) is not None:
-        return True
-    try:
-        if path.stat().st_size == 0:
-            found = "an empty file (0 bytes)"
-        else:
-            if suffix == ".csv":
-                import pandas as pd
-
-                names = pd.read_csv(path, nrows=0, comment="#", skipinitialspace=True).columns
-            else:
-                import pyarrow.parquet as pq
-
-                names = pq.read_schema(path).names
-            return _stop_columns(names, path)
-    except FileNotFoundError:
-        found = "no such file"
-    except OSError as err:
-        found = f"a file that cannot be read ({err.strerror or err})"
-    except Exception as err:  # pandas and pyarrow raise many types for malformed files
-        found = f"a file that does not parse ({type(err).__name__}: {err})"
-    raise InputError(
-        str(path),
-        "a CSV or Parquet stop table (beta_deg, ax, ay, az) or sample table (t_s, ax, ay, az)",
-        found,
-        "Check the path, or replace the file.",
-    )
-
-
 def describe(result: LogResult | tuple[Samples, StopTableFromLog], n_files: int) -> Sequence[str]:
     """Lines for the user: what was read and dropped, the stops found, which sources were used and why not others."""
     done = None if isinstance(result, tuple) else result
@@ -332,6 +338,7 @@ def describe(result: LogResult | tuple[Samples, StopTableFromLog], n_files: int)
     dropped = ", ".join(f"{k}: {v}" for k, v in samples.dropped.items())
     lines = [f"read {len(samples)} samples from {n_files} file(s)" + (f"; dropped {dropped}" if dropped else "")]
     lines += samples.notes
+    lines += [f"input file: {line}" for line in samples.incomplete]
     if found is not None:
         unmatched = found.unmatched_protocol_rows
         lines.append(
@@ -387,25 +394,13 @@ def _tabulate(samples: Samples, job: LogJob) -> StopTableFromLog:
     return tabulate(samples, job.detection, protocol, job.uphill_azimuth_deg)
 
 
-def _stop_columns(columns: Any, path: Path) -> bool:
-    from mountcal.io.table.layout import detect
-    from mountcal.io.table.mapped import header
-
-    names = {str(c).strip() for c in columns}
-    if names & STOP_TABLE_MARKERS:
-        return True
-    if "t_s" in names:
-        return False
-    exported = detect(header(path)[0], path) if path.suffix.lower() == ".csv" else detect(sorted(names), path)
-    return exported is None  # a known export (a phone's, imucal's) holds samples
-
-
 def _driving_alone(fit: DrivingFit, samples: Samples, job: LogJob) -> Calibration:
     lat, alt = samples.channels.get("lat_deg"), samples.channels.get("alt_m")
     g, g_source = local_gravity(
         None if lat is None else lat.value, None if alt is None else alt.value, job.options.gravity_mps2
     )
-    cal = driving_calibration(fit, gravity_mps2=g, gravity_source=g_source, provenance=_provenance(job.paths))
+    provenance = replace(_provenance(job.paths), incomplete_inputs=samples.incomplete)
+    cal = driving_calibration(fit, gravity_mps2=g, gravity_source=g_source, provenance=provenance)
     if job.options.slope_reference is None:
         return cal
     unused = f"{option('slope_reference')} was not checked: this result is from driving, which measures no slope"

@@ -29,6 +29,7 @@ from mountcal.errors import InputError, NotEnoughInformation
 from mountcal.estimate.bound import crb_deg, true_state
 from mountcal.io.logs import LogOptions, read_log
 from mountcal.option_names import option
+from mountcal.output_suffix import check_output_suffix
 from mountcal.sensor_spec import DEFAULT as DEFAULT_SPEC
 from mountcal.simulate.stops import simulate_stops
 from mountcal.stops import StopDetection, detect_stops
@@ -132,7 +133,9 @@ class Plan:
         ]
 
     def write_protocol(self, path: str | Path) -> None:
-        """Write the protocol sheet that ``calibrate --protocol`` reads (atomically)."""
+        """Write the protocol sheet that ``calibrate --protocol`` reads (atomically; CSV, whatever the name
+        says but another format)."""
+        check_output_suffix(option("output"), path, (".csv",))
         header = (
             f"# mountcal plan: {self.n_stops} stops of {self.stop_s:g} s on a {self.slope_deg:g}° slope. The times are "
             "placeholders from the session start: replace t_start_s, t_end_s with the log's clock.\n"

@@ -17,6 +17,7 @@ from scipy.spatial.transform import Rotation
 from mountcal.atomic import atomic_path
 from mountcal.conventions import CONVENTIONS, FloatArray, levelled
 from mountcal.errors import InputError
+from mountcal.option_names import option
 from mountcal.result_file import check_document, read_json
 from mountcal.typed_json import from_plain, schema_of, to_plain
 
@@ -215,7 +216,12 @@ class Check:
 @dataclass(frozen=True)
 class Provenance:
     """Where a result came from: the input (with the SHA-256 of each file), the software, when, and the
-    conventions of the input, each stated, inferred or assumed."""
+    conventions of the input, each stated, inferred or assumed.
+
+    ``input_kind`` says what the input was taken for and why (:mod:`mountcal.io.kind`);
+    ``incomplete_inputs`` names the files read although cut short (``--allow-truncated``), or whose
+    end could not be verified, with where each ends (:mod:`mountcal.io.whole`).
+    """
 
     input: str
     software: str
@@ -224,6 +230,8 @@ class Provenance:
     created_utc: str
     input_sha256: tuple[str, ...] = ()
     stops_fingerprint: StopsFingerprint | None = None
+    input_kind: str = ""
+    incomplete_inputs: tuple[str, ...] = ()
     conventions: tuple[Convention, ...] = ()
 
 
@@ -361,7 +369,10 @@ class Calibration:
         }
 
     def save(self, path: str | Path) -> None:
-        """Write the JSON file atomically."""
+        """Write the JSON file atomically (a name ending in another format's suffix is refused)."""
+        from mountcal.output_suffix import check_output_suffix
+
+        check_output_suffix(option("output"), path, (".json",))
         text = json.dumps(self.to_dict(), indent=2, allow_nan=False)
         with atomic_path(path) as tmp:
             tmp.write_text(text + "\n", encoding="utf-8")

@@ -53,6 +53,9 @@ class Samples:
     gravity_free : str
         Why ``acc_s`` is known to lack gravity (a "linear acceleration" export), else "": such samples
         rotate, but do not calibrate (the mounting is measured against gravity).
+    incomplete : tuple of str
+        Files read although cut short (``--allow-truncated``): where each ends and what its format
+        expected there (:mod:`mountcal.io.whole`); empty when every file was whole.
     conventions : tuple of Convention
         How the log's conventions were known (axes, heading unit): set by :func:`mountcal.io.logs.read_log`.
     """
@@ -66,6 +69,7 @@ class Samples:
     dropped: dict[str, int] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
     gravity_free: str = ""
+    incomplete: tuple[str, ...] = ()
     conventions: tuple[Convention, ...] = ()
 
     def __post_init__(self) -> None:
@@ -100,13 +104,14 @@ class LogSummary:
     duration_s: float
     streams: tuple[Stream, ...]
     notes: tuple[str, ...] = ()  # what the reader inferred (a recognised export and its units)
+    incomplete: tuple[str, ...] = ()  # as Samples.incomplete: the file was cut and read in part
 
 
 def slices(samples: Samples, max_samples: int) -> Iterator[Samples]:
     """``samples`` in consecutive pieces of at most ``max_samples`` (views, not copies).
 
     Each auxiliary sample goes with the piece whose time span holds it (the first and last piece
-    take those before and after the IMU samples); ``dropped`` goes with the first piece.
+    take those before and after the IMU samples); ``dropped`` and ``incomplete`` go with the first piece.
     """
     if max_samples < 1:
         raise ValueError(f"max_samples must be >= 1; got {max_samples}")
@@ -128,6 +133,7 @@ def slices(samples: Samples, max_samples: int) -> Iterator[Samples]:
             channels=channels,
             dropped=samples.dropped if k == 0 else {},
             notes=samples.notes if k == 0 else (),
+            incomplete=samples.incomplete if k == 0 else (),
         )
 
 

@@ -40,7 +40,9 @@ from mountcal.input_conventions import (
 )
 from mountcal.input_conventions import Headings as Headings  # one definition, imported from here by many
 from mountcal.io.inputs import check_parquet_rows
+from mountcal.io.whole import parquet_end, text_bytes_end
 from mountcal.option_names import option
+from mountcal.output_suffix import check_output_suffix
 from mountcal.paths import read_input_bytes
 from mountcal.result import Convention, StopsFingerprint
 
@@ -118,6 +120,7 @@ class StopTable:
     source: str = "<memory>"
     sha256: str = ""
     notes: tuple[str, ...] = field(default=())
+    incomplete: tuple[str, ...] = ()  # the input was cut short and read in part (mountcal.io.whole)
     conventions: tuple[Convention, ...] = field(default=())
 
     def __post_init__(self) -> None:
@@ -203,13 +206,18 @@ def read_stop_table(
     path = Path(path)
     where = str(path)
     raw = read_input_bytes(path, "a stop table file")  # a regular file, size bounded
+    cut = None  # a CSV's last row without its line break: cut short, read to the row before (if allowed)
     if path.suffix.lower() in (".parquet", ".pq"):
+        parquet_end(raw=raw, where=where)
         check_parquet_rows(path)
+    else:
+        cut = text_bytes_end(raw, where)
     try:
         if path.suffix.lower() in (".parquet", ".pq"):
             df = pd.read_parquet(io.BytesIO(raw))
         else:
-            df = pd.read_csv(io.BytesIO(raw), comment="#", skipinitialspace=True)
+            rows = raw if cut is None else memoryview(raw)[: cut.whole]
+            df = pd.read_csv(io.BytesIO(rows), comment="#", skipinitialspace=True)
     except Exception as err:  # pandas/pyarrow raise many types for malformed files
         raise InputError(
             where,
@@ -220,7 +228,8 @@ def read_stop_table(
     table = stop_table_from_frame(
         df, unit, headings, source=where, heading_unit=heading_unit, axes=axes, uphill_azimuth_deg=uphill_azimuth_deg
     )
-    return replace(table, sha256=hashlib.sha256(raw).hexdigest())
+    incomplete = () if cut is None else (cut.sentence,)
+    return replace(table, sha256=hashlib.sha256(raw).hexdigest(), incomplete=incomplete)
 
 
 def stop_table_from_frame(
@@ -492,6 +501,7 @@ def write_stop_table(table: StopTable, path: str | Path) -> None:
     from mountcal.atomic import atomic_path
 
     path = Path(path)
+    check_output_suffix(option("output"), path, (".csv", ".parquet", ".pq"))  # another format's name: refused
     df = table.to_frame()
     with atomic_path(path) as tmp:
         if path.suffix.lower() in (".parquet", ".pq"):

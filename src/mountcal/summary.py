@@ -47,6 +47,9 @@ def summary(cal: Calibration) -> str:
         groups = {v: [c.name for c in cal.checks if c.passed is k] for k, v in by.items()}
         lines.append("  checks " + "; ".join(f"{k}: {', '.join(v)}" for k, v in groups.items() if v))
     lines += [f"  note: {n}" for n in cal.notes]
+    if cal.provenance.input_kind:
+        lines.append(f"  input: {cal.provenance.input_kind}")
+    lines += [f"  input file: {line}" for line in cal.provenance.incomplete_inputs]
     if not cal.confident:
         failed = [f"{c.name} ({c.reason})" for c in cal.checks if c.passed is False]
         found = "; ".join([*(f"{u.what} ({u.size})" for u in cal.unexplained), *failed]) or "see the notes"

@@ -21,7 +21,9 @@ from mountcal.conventions import FloatArray
 from mountcal.errors import InputError
 from mountcal.estimate import sphere
 from mountcal.estimate.effects.scale import SCALE_NAMES
+from mountcal.io.kind import Declared
 from mountcal.option_names import option
+from mountcal.output_suffix import check_output_suffix
 from mountcal.result_file import read_json
 from mountcal.sensor_spec import SensorSpec
 from mountcal.stoptable import StopTable, Unit, read_stop_table
@@ -93,6 +95,7 @@ class Triad:
         }
 
     def save(self, path: str | Path) -> None:
+        check_output_suffix(option("output"), path, (".json",))
         with atomic_path(path) as tmp:
             tmp.write_text(json.dumps(self.to_dict(), indent=2, allow_nan=False) + "\n", encoding="utf-8")
 
@@ -186,20 +189,25 @@ def session_stops(
     min_stop_s: float = 3.0,
     trim_s: float = 0.5,
     log: LogOptions | None = None,
+    *,
+    declared: Declared = "auto",
 ) -> tuple[FloatArray, FloatArray | None]:
     """Stop means (n, 3) in m/s² and their covariances, from a stop table or from logs (read as ``log``
     says, its ``axes`` too for a stop table; ``unit`` is a stop table's, and a sample table's where ``log``
-    gives none)."""
+    gives none). :func:`mountcal.io.kind.input_kind` decides which; ``declared`` is ``--input-kind``."""
     from mountcal.input_conventions import parse_axes
+    from mountcal.io.kind import input_kind
     from mountcal.io.logs import LogOptions, read_log
-    from mountcal.pipeline import is_stop_table, with_gravity
+    from mountcal.io.whole import reading
+    from mountcal.pipeline import with_gravity
     from mountcal.stops import StopDetection, detect_stops
 
     log = log or LogOptions()
     mapped = log.columns is not None or log.mapping is not None
-    if len(paths) == 1 and is_stop_table(paths[0], columns=mapped):
+    if input_kind(paths, columns=mapped, declared=declared).stop_table:
         axes = None if log.axes is None else parse_axes(log.axes, option("axes"))
-        table = read_stop_table(paths[0], unit=unit, headings="none", axes=axes)
+        with reading(log.allow_truncated):  # a cut CSV: refused, or its whole rows read
+            table = read_stop_table(paths[0], unit=unit, headings="none", axes=axes)
         return table.acc_s, table.cov_s
     if log.unit is None and unit != "mps2":
         log = replace(log, unit=unit)

@@ -58,12 +58,15 @@ from mountcal.conventions import CONVENTIONS, FloatArray
 from mountcal.errors import InputError
 from mountcal.input_conventions import AxisMap, check_same_axes, parse_axes
 from mountcal.io.logs import CHUNK_SAMPLES, LogOptions, iter_log
+from mountcal.io.mcap.chunks import open_log
 from mountcal.io.mcap.copy import copy_mcap_with_imu
 from mountcal.io.mcap.write import McapImuSamples
 from mountcal.io.registry import reader_for
 from mountcal.io.ros2.imu import ImuMessages
 from mountcal.io.table.write import CsvSamples, ParquetSamples
+from mountcal.io.whole import Cut, reading
 from mountcal.option_names import option
+from mountcal.output_suffix import check_output_suffix
 from mountcal.result import VEHICLE_FRAME, Calibration
 from mountcal.samples import Samples
 from mountcal.threads import helpers_allowed
@@ -100,6 +103,7 @@ class RotateReport:
     nonfinite: int = 0
     frame: str = VEHICLE_FRAME
     warnings: tuple[str, ...] = ()  # what check_applicable found: not confident, levelled only
+    incomplete: tuple[str, ...] = ()  # inputs cut short, read in part (--allow-truncated): where each ends
 
     def lines(self) -> list[str]:
         """Lines for the user."""
@@ -119,16 +123,30 @@ class RotateReport:
             )
         if self.nonfinite:
             out.append(f"{self.nonfinite} IMU messages hold NaN or infinite values: kept, rotated to NaN")
+        out += [f"input file: {line}" for line in self.incomplete]
         return out
 
 
 def output_format(path: str | os.PathLike[str], fmt: str | None = None) -> str:
-    """``parquet``, ``csv`` or ``mcap``: the one asked for, else from the suffix, else Parquet."""
-    if fmt is not None:
-        if fmt not in ("parquet", "csv", "mcap"):
-            raise InputError(option("format"), "parquet, csv or mcap", repr(fmt), "Choose one of them.")
-        return fmt
-    return FORMATS.get(Path(path).suffix.lower(), "parquet")
+    """``parquet``, ``csv`` or ``mcap``: the one asked for, else from the suffix, else Parquet.
+
+    A name whose suffix says another format (``out.blf``, or ``out.csv`` with ``fmt="parquet"``)
+    is refused (:func:`~mountcal.output_suffix.check_output_suffix`).
+    """
+    by_name = FORMATS[check_output_suffix(option("output"), path, tuple(FORMATS))]
+    if fmt is None:
+        return by_name
+    if fmt not in ("parquet", "csv", "mcap"):
+        raise InputError(option("format"), "parquet, csv or mcap", repr(fmt), "Choose one of them.")
+    suffix = Path(path).suffix.lower()
+    if suffix in FORMATS and by_name != fmt:
+        raise InputError(
+            f"{option('output')} {path}",
+            f"a name ending in the suffix of {option('format', fmt)}",
+            f"one ending in {suffix} ({by_name})",
+            f"Drop {option('format')} to write {by_name}, or name the output {Path(path).with_suffix('.' + fmt).name}.",
+        )
+    return fmt
 
 
 def rotate_log(
@@ -210,7 +228,8 @@ def rotate_log(
                 f"{len(files)} files",
                 "Rotate each MCAP file to its own output, or write Parquet/CSV (which joins splits).",
             )
-        report = _rotate_mcap_copy(files[0], cal, out, opts.topic, frame_id, axes)
+        with reading(opts.allow_truncated) as cuts:
+            report = _rotate_mcap_copy(files[0], cal, out, opts.topic, frame_id, cuts, axes)
     else:
         report = _rotate_stream(files, cal, out, kind, opts, chunk_samples, frame_id)
     return replace(report, frame=cal.frame, warnings=found)
@@ -228,7 +247,7 @@ def _check_not_an_input(out: Path, files: Sequence[Path]) -> None:
             )
 
 
-def _metadata(cal: Calibration, files: Sequence[Path]) -> dict[str, str]:
+def _metadata(cal: Calibration, files: Sequence[Path], incomplete: Sequence[str] = ()) -> dict[str, str]:
     version = software_version()
     return {
         "mountcal.frame": cal.frame,
@@ -249,6 +268,7 @@ def _metadata(cal: Calibration, files: Sequence[Path]) -> dict[str, str]:
             }
         ),
         "mountcal.inputs": json.dumps([str(f) for f in files]),
+        "mountcal.incomplete_inputs": json.dumps(list(incomplete)),  # cut short, read in part
         "mountcal.software": f"mountcal {version}",
     }
 
@@ -272,7 +292,7 @@ def _rotate_stream(
     acc_to_vehicle(first.acc_s, cal, check_units=True, level_only=True)  # g units refused before any output
     tally = _Tally(gyro=first.gyro_s is not None, several=len(files) > 1)
     with atomic_output(out) as f, ThreadPoolExecutor(max_workers=1) as encoder:
-        writer = _writer(f, kind, tally.gyro, cal, files, frame_id)
+        writer = _writer(f, kind, tally.gyro, cal, files, frame_id, first.incomplete)
         # Encoding and compressing chunk k (pyarrow releases the GIL) overlaps reading chunk k + 1;
         # one chunk in flight keeps memory bounded.
         overlap = helpers_allowed()
@@ -304,6 +324,7 @@ def _rotate_stream(
         largest_chunk=tally.largest,
         gyro=tally.gyro,
         topic=_topic("/imu", cal) if kind == "mcap" else None,
+        incomplete=tuple(tally.incomplete),
     )
 
 
@@ -317,10 +338,12 @@ class _Tally:
     chunks: int = 0
     largest: int = 0
     dropped: Counter[str] = field(default_factory=Counter)
+    incomplete: list[str] = field(default_factory=list)
 
     def rotate(self, chunk: Samples, cal: Calibration) -> tuple[FloatArray, FloatArray, FloatArray | None] | None:
         """The chunk's rows to write, in the vehicle frame (None for an empty chunk), counted."""
         self.dropped.update(chunk.dropped)
+        self.incomplete += chunk.incomplete
         n = len(chunk)
         if n == 0:
             return None
@@ -346,9 +369,15 @@ def _chain(first: Samples, rest: Iterator[Samples]) -> Iterator[Samples]:
 
 
 def _writer(
-    f: BinaryIO, kind: str, gyro: bool, cal: Calibration, files: Sequence[Path], frame_id: str
+    f: BinaryIO,
+    kind: str,
+    gyro: bool,
+    cal: Calibration,
+    files: Sequence[Path],
+    frame_id: str,
+    incomplete: Sequence[str],
 ) -> ParquetSamples | CsvSamples | McapImuSamples:
-    meta = _metadata(cal, files)
+    meta = _metadata(cal, files, incomplete)
     if kind == "parquet":
         return ParquetSamples(f, gyro, meta, descriptions=_descriptions(cal))
     if kind == "csv":
@@ -379,9 +408,17 @@ def _descriptions(cal: Calibration) -> dict[str, str]:
 
 
 def _rotate_mcap_copy(
-    src: Path, cal: Calibration, out: Path, topic: str | None, frame_id: str, axes: AxisMap | None = None
+    src: Path,
+    cal: Calibration,
+    out: Path,
+    topic: str | None,
+    frame_id: str,
+    cuts: Sequence[Cut],
+    axes: AxisMap | None = None,
 ) -> RotateReport:
-    meta = {k.removeprefix("mountcal."): v for k, v in _metadata(cal, [src]).items()}
+    open_log(src, discover=False).file.close()  # a cut file is refused, or its cut recorded in `cuts`, before writing
+    incomplete = tuple(c.sentence for c in cuts)
+    meta = {k.removeprefix("mountcal."): v for k, v in _metadata(cal, [src], incomplete).items()}
     checked = False
 
     def transform(msgs: ImuMessages) -> tuple[ImuMessages, int]:
@@ -408,6 +445,7 @@ def _rotate_mcap_copy(
         copied_messages=stats.copied_messages,
         copied_channels=stats.copied_channels,
         nonfinite=stats.nonfinite,
+        incomplete=tuple(c.sentence for c in cuts),
     )
 
 

@@ -4,9 +4,10 @@ Each command module has ``add_parser(subparsers)`` and ``run(args) -> int``. Bui
 imports no numerical library (``mountcal --help`` and ``mountcal CMD --help`` stay fast); a
 command imports what it needs when it runs.
 
-Conventions: results go to the file named by ``-o`` or to stdout (``-o -``, ``--json``); status
-lines, warnings and progress bars go to stderr; ``-q`` keeps only warnings and errors, ``-v`` adds
-detail.
+Conventions: results go to the file named by ``-o`` or to stdout (``-o -``, ``--json``), written
+through :func:`mountcal.cli.results.result_stream`; status lines, warnings, progress bars and
+whatever a library prints go to stderr (:mod:`mountcal.cli.results`); ``-q`` keeps only warnings
+and errors, ``-v`` adds detail.
 """
 
 from __future__ import annotations
@@ -20,9 +21,11 @@ import sys
 from collections.abc import Sequence
 
 from mountcal.atomic import Terminated, removed_on_signals
-from mountcal.cli.options import EXIT_CODES, configure_logging
+from mountcal.cli.options import EXIT_CODES, check_output_suffixes, configure_logging
 from mountcal.cli.path_options import check_paths, command_parser
+from mountcal.cli.results import results_only
 from mountcal.errors import InputError, MountcalError
+from mountcal.io.whole import reading
 from mountcal.option_names import as_flags
 from mountcal.paths import SystemFailure
 from mountcal.terminal import safe
@@ -46,8 +49,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                 "it closed (`>&-`)",
                 "Redirect it to a file or to /dev/null instead. Nothing was written.",
             )
-        with as_flags(), removed_on_signals():  # messages name flags; SIGTERM/SIGHUP unwind like Ctrl-C
+        # messages name flags; SIGTERM/SIGHUP unwind like Ctrl-C; stdout holds the results alone
+        with as_flags(), removed_on_signals(), results_only(), reading(getattr(args, "allow_truncated", False)):
             check_paths(command_parser(parser, args.command), args)  # every declared path, before any work
+            check_output_suffixes(args)  # an output named for another format
             return int(args.run(args))
     except MountcalError as err:
         log.error("error: %s", safe(err, keep=chr(10)))

@@ -5,25 +5,23 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from mountcal.cli.options import (
     STDOUT,
     add_command,
     add_fit_options,
+    add_input_kind,
     add_log_options,
-    fit_options,
+    declare_output_suffixes,
     log_job,
     print_json,
     require,
     working,
 )
 from mountcal.cli.path_options import add_path
+from mountcal.cli.results import result_stream
 from mountcal.terminal import safe
-
-if TYPE_CHECKING:
-    from mountcal.pipeline import LogResult
-    from mountcal.stoptable import StopTable
 
 log = logging.getLogger("mountcal")
 
@@ -44,6 +42,7 @@ def add_parser(sub: Any) -> None:
         help="also write a self-contained HTML report here",
     )  # fmt: skip
     add_log_options(p)
+    add_input_kind(p)
     g = p.add_argument_group("fit")
     add_fit_options(
         g,
@@ -59,17 +58,14 @@ def add_parser(sub: Any) -> None:
         help="local gravity in m/s², or with its unit (1g; default: from lat_deg/alt_m when the data have them, "
         "else 9.80665); a bare number outside 9.7–9.9 is refused",
     )
+    declare_output_suffixes(p, {"output": (".json",), "report": (".html", ".htm")})
     p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from mountcal.atomic import atomic_path
-    from mountcal.calibrate import calibrate
     from mountcal.errors import InputError
-    from mountcal.input_conventions import parse_axes
-    from mountcal.option_names import option
-    from mountcal.pipeline import calibrate_job, describe, is_stop_table
-    from mountcal.stoptable import read_stop_table
+    from mountcal.pipeline import calibrate_input, describe
     from mountcal.summary import summary
 
     to_stdout = args.json or args.output == STDOUT
@@ -77,31 +73,18 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("-", "a CSV stop table piped on stdin", "a terminal", "Pipe one in, or name the file.")
     if args.report is not None:
         require("matplotlib", "report", "calibrate --report")  # before any work: nothing is written without it
-    table: StopTable | None
-    done: LogResult | None = None  # the log's result, when the input is a log
-    mapped = args.columns is not None or (args.mapping is not None and not args.dbc)  # a table's column map
-    if args.input == [STDOUT] or (len(args.input) == 1 and is_stop_table(args.input[0], bool(args.dbc), mapped)):
-        table = read_stop_table(
-            args.input[0],
-            unit=args.unit,
-            headings=args.headings,
-            heading_unit=args.heading_unit,
-            axes=None if args.axes is None else parse_axes(args.axes, option("axes")),
-            uphill_azimuth_deg=args.uphill_azimuth_deg,
-        )
-        with working(args, "fitting"):
-            cal = calibrate(table, fit_options(args))
-    else:
-        with working(args, "reading and fitting the log"):
-            done = calibrate_job(log_job(args))
-        for line in describe(done, len(args.input)):
+    with working(args, "reading and fitting"):
+        done = calibrate_input(log_job(args), unit=args.unit, headings=args.headings, declared=args.input_kind)
+    log.info("%s", safe(f"input: {done.kind.sentence}"))
+    if done.log is not None:
+        for line in describe(done.log, len(args.input)):
             log.info("%s", safe(line))
-        cal, table = done.calibration, done.table  # no stop table: calibrated from driving alone
+    cal, table = done.calibration, done.table  # no stop table: calibrated from driving alone
     if to_stdout:
         log.info("%s", summary(cal))
         print_json(cal.to_dict())
     else:
-        print(summary(cal))
+        print(summary(cal), file=result_stream())
     if args.output not in (None, STDOUT):
         cal.save(args.output)
         log.info("wrote %s", safe(args.output))
@@ -109,9 +92,9 @@ def run(args: argparse.Namespace) -> int:
         from mountcal.outputs.report import render, timeline_of  # matplotlib is needed for reports only
 
         with working(args, "writing the report"):
-            html = render(cal.to_dict(), table, timeline=None if done is None else timeline_of(done))
+            html = render(cal.to_dict(), table, timeline=None if done.log is None else timeline_of(done.log))
         with atomic_path(args.report) as tmp:
             tmp.write_text(html, encoding="utf-8")
         log.info("wrote %s", safe(args.report))
-    sys.stdout.flush()
+    result_stream().flush()
     return 0

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import argparse
 import logging
-import sys
 from pathlib import Path
 from typing import Any
 
 from mountcal.cli.options import STDOUT, add_command
 from mountcal.cli.path_options import add_path
+from mountcal.cli.results import result_stream
 from mountcal.terminal import safe
 
 # the keys of mountcal.outputs.exporters.FORMATS (a test keeps them equal), here so that `--help` stays light
@@ -100,18 +100,19 @@ def run(args: argparse.Namespace) -> int:
         )
     out = export(cal, args.to, yaw=args.yaw_undetermined, accept_unconfident=args.accept_unconfident, frames=frames)
     if to_stdout:
+        stdout = result_stream()
         if isinstance(out, bytes):
-            if sys.stdout.isatty():
+            if stdout.isatty():
                 raise InputError(
                     "mountcal export --to ublox-ubx",
                     "-o FILE or a pipe for the binary message",
                     "a terminal",
                     "Pass -o FILE.ubx (the text format `--to ublox` shows the message in hex).",
                 )
-            sys.stdout.buffer.write(out)
-            sys.stdout.flush()
+            stdout.buffer.write(out)
+            stdout.flush()
         else:
-            sys.stdout.write(out)
+            stdout.write(out)
         return 0
     with atomic_path(args.output) as tmp:
         if isinstance(out, bytes):

@@ -21,6 +21,7 @@ from mountcal.cli.options import (
     progress_wanted,
     require,
 )
+from mountcal.cli.results import result_stream
 from mountcal.terminal import safe
 
 log = logging.getLogger("mountcal")
@@ -178,5 +179,5 @@ def run(args: argparse.Namespace) -> int:
             }
         )
     else:
-        print(safe("\n".join(lines), keep="\n"))
+        print(safe("\n".join(lines), keep="\n"), file=result_stream())
     return 0

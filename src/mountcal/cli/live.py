@@ -5,13 +5,13 @@ from __future__ import annotations
 import argparse
 import logging
 import math
-import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from mountcal.cli.options import STDOUT, add_axes_option, add_command
+from mountcal.cli.options import STDOUT, add_axes_option, add_command, declare_output_suffixes
 from mountcal.cli.path_options import add_path
+from mountcal.cli.results import result_stream
 from mountcal.terminal import safe
 
 log = logging.getLogger("mountcal")
@@ -47,6 +47,7 @@ def add_parser(sub: Any) -> None:
         help="prefix: PREFIX.blf, PREFIX.json, PREFIX_stops.csv, PREFIX_protocol.csv",
     )  # fmt: skip
     add_path(p, "--report", role="output", what="the HTML report", default=None, help="also write the HTML report here")
+    declare_output_suffixes(p, {"json_events": (".jsonl", ".ndjson", ".json"), "report": (".html", ".htm")})
     p.set_defaults(run=run)
 
 
@@ -114,10 +115,11 @@ def run(args: argparse.Namespace) -> int:
             str(err),
             "Check the interface name, the channel and that the device is up.",
         ) from err
-    sinks: list[Callable[[dict[str, Any]], None]] = [lambda e: print(line_of(e), flush=True)]
+    stdout = result_stream()
+    sinks: list[Callable[[dict[str, Any]], None]] = [lambda e: print(line_of(e), flush=True, file=stdout)]
     events_file: GrowingFile | None = None
     if args.json_events == STDOUT:
-        sinks = [json_sink(sys.stdout)]
+        sinks = [json_sink(stdout)]
     elif args.json_events:
         try:
             events_file = GrowingFile(args.json_events, "the events")  # a line at a time, whole
@@ -148,7 +150,7 @@ def run(args: argparse.Namespace) -> int:
     if args.json_events == STDOUT:
         log.info("%s", summary(session.calibration))
     else:
-        print(summary(session.calibration))
+        print(summary(session.calibration), file=stdout)
     if args.report and session.table is not None:
         from mountcal.outputs.report import render
         from mountcal.outputs.report.timeline import timeline

@@ -11,7 +11,7 @@ import json
 import logging
 import sys
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import TYPE_CHECKING, Any
 
@@ -46,23 +46,31 @@ log = logging.getLogger("mountcal")
 
 
 class _Stderr(logging.Handler):
-    """Status lines of ``mountcal.*`` loggers on the current stderr (never stdout), prefixed ``mountcal:``."""
+    """Status lines of ``mountcal.*`` loggers on the current stderr (never stdout), prefixed ``mountcal:``;
+    another library's records (asammdf, python-can, Python warnings) name that library."""
 
     def emit(self, record: logging.LogRecord) -> None:
         from tqdm import tqdm  # writes above a progress bar being drawn, instead of through it
 
         level = "" if record.levelno in (logging.INFO, logging.ERROR) else f"{record.levelname.lower()}: "
-        tqdm.write(f"mountcal: {level}{record.getMessage()}", file=sys.stderr)
+        origin = "" if record.name.startswith("mountcal") else f"[{record.name}] "
+        tqdm.write(f"mountcal: {level}{origin}{record.getMessage()}", file=sys.stderr)
         sys.stderr.flush()
 
 
 def configure_logging(verbosity: int) -> None:
-    """One logging set-up for every command: -q (warnings and errors), default (status), -v (detail)."""
+    """One logging set-up for every command: -q (warnings and errors), default (status), -v (detail).
+
+    Other libraries' warnings (their loggers, and Python warnings while a command runs) join the
+    log on stderr through the root logger."""
     root = logging.getLogger("mountcal")
     if not any(isinstance(h, _Stderr) for h in root.handlers):
         root.addHandler(_Stderr())
     root.propagate = False
     root.setLevel(logging.WARNING if verbosity < 0 else logging.INFO if verbosity == 0 else logging.DEBUG)
+    libraries = logging.getLogger()
+    if not any(isinstance(h, _Stderr) for h in libraries.handlers):
+        libraries.addHandler(_Stderr(logging.WARNING))
 
 
 def common_options() -> argparse.ArgumentParser:
@@ -76,7 +84,66 @@ def common_options() -> argparse.ArgumentParser:
         action="store_true",
         help="progress bars on stderr even when it is not a terminal (never with -q)",
     )
+    i = common.add_argument_group("input")
+    i.add_argument(
+        "--allow-truncated",
+        action="store_true",
+        help="read the whole part of an input file that was cut short (an interrupted copy or recording); "
+        "the result names it. Without it such a file is refused",
+    )
     return common
+
+
+Suffixes = tuple[str, ...] | Callable[[argparse.Namespace], tuple[str, ...]]
+_SUFFIXES = "output_suffixes"  # the parser default that holds a command's declaration
+
+
+def declare_output_suffixes(p: argparse.ArgumentParser, suffixes: dict[str, Suffixes]) -> None:
+    """Declare, by option destination (``"output"`` is ``-o``), the suffixes of the formats each
+    output option writes (the default first), or a function of the parsed arguments giving them
+    (``export --to``). :func:`check_output_suffixes` checks them before the command runs."""
+    p.set_defaults(**{_SUFFIXES: suffixes})
+
+
+def check_output_suffixes(args: argparse.Namespace) -> None:
+    """Refuse an output named for another format than its option writes, from the parser's
+    declaration (:func:`declare_output_suffixes`; :func:`mountcal.output_suffix.check_output_suffix`)."""
+    from mountcal.output_suffix import check_output_suffix
+
+    for dest, declared in getattr(args, _SUFFIXES, {}).items():
+        value = getattr(args, dest, None)
+        if value is None or value == STDOUT or _names_another_argument(args, dest, str(value)):
+            continue  # an output onto another argument's file: the command refuses that for what it is
+        flag = "-o" if dest == "output" else "--" + dest.replace("_", "-")
+        check_output_suffix(f"{args.command} {flag}", value, declared(args) if callable(declared) else declared)
+
+
+def _names_another_argument(args: argparse.Namespace, dest: str, value: str) -> bool:
+    """Whether an output names the same file as another argument (an input, or a second output)."""
+    import os
+    from pathlib import Path
+
+    def same(other: object) -> bool:
+        if not isinstance(other, str) or other == STDOUT:
+            return False
+        try:
+            return Path(other).resolve() == Path(value).resolve() or os.path.samefile(other, value)
+        except (OSError, ValueError):
+            return False
+
+    others = [v for key, v in vars(args).items() if key != dest]
+    return any(same(v) or (isinstance(v, list | tuple) and any(same(x) for x in v)) for v in others)
+
+
+def add_input_kind(p: argparse.ArgumentParser) -> None:
+    """``--input-kind``: what the input is, where its name and content leave it open (:mod:`mountcal.io.kind`)."""
+    p.add_argument(
+        "--input-kind",
+        choices=("auto", "stop-table", "log"),
+        default="auto",
+        help="a CSV/Parquet input is a stop table or a sample log: by default told from its columns and rows "
+        "(and said); name it where they do not settle it",
+    )
 
 
 def add_command(
@@ -269,6 +336,7 @@ def log_options(args: argparse.Namespace) -> LogOptions:
         field=args.field,
         columns=None if columns is None else parse_columns(columns),
         unit=None if unit in (None, "mps2") else unit,
+        allow_truncated=getattr(args, "allow_truncated", False),
         axes=getattr(args, "axes", None),
         heading_unit=getattr(args, "heading_unit", None),
     )
@@ -336,8 +404,11 @@ def require(module: str, extra: str, needed_by: str) -> None:
 
 def print_json(document: Any) -> None:
     """A machine-readable result on stdout (one JSON document)."""
-    sys.stdout.write(json.dumps(document, indent=2, allow_nan=False, default=str) + "\n")
-    sys.stdout.flush()
+    from mountcal.cli.results import result_stream
+
+    out = result_stream()
+    out.write(json.dumps(document, indent=2, allow_nan=False, default=str) + "\n")
+    out.flush()
 
 
 def progress_wanted(args: argparse.Namespace) -> bool:

@@ -11,8 +11,16 @@ import logging
 import math
 from typing import Any
 
-from mountcal.cli.options import add_command, add_log_options, add_sensor_options, log_options, working
+from mountcal.cli.options import (
+    add_command,
+    add_log_options,
+    add_sensor_options,
+    declare_output_suffixes,
+    log_options,
+    working,
+)
 from mountcal.cli.path_options import add_path
+from mountcal.cli.results import result_stream
 from mountcal.terminal import safe
 
 log = logging.getLogger("mountcal")
@@ -42,6 +50,7 @@ def add_parser(sub: Any) -> None:
     )
     add_sensor_options(p)
     add_log_options(p, repeat_dbc=False, stops=False)
+    declare_output_suffixes(p, {"output": (".csv",)})
     p.set_defaults(run=run)
 
 
@@ -81,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
     )
     with working(args, "planning"):
         plan = make_plan(req)
-    print("\n".join(plan.lines()))
+    print("\n".join(plan.lines()), file=result_stream())
     if not plan.reachable:
         return NotEnoughInformation.exit_code
     if args.output is not None:

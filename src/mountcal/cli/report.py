@@ -7,8 +7,9 @@ import logging
 from pathlib import Path
 from typing import Any
 
-from mountcal.cli.options import STDOUT, add_command, print_json, require, working
+from mountcal.cli.options import STDOUT, add_command, declare_output_suffixes, print_json, require, working
 from mountcal.cli.path_options import add_path
+from mountcal.cli.results import result_stream
 from mountcal.terminal import safe
 
 log = logging.getLogger("mountcal")
@@ -37,6 +38,7 @@ def add_parser(sub: Any) -> None:
         help="unit of ax, ay, az in --stops (default: as calibrate read it)",
     )
     p.add_argument("--figures", choices=("svg", "png"), default="svg", help="inline SVG (default) or base64 PNG")
+    declare_output_suffixes(p, {"output": (".html", ".htm")})
     p.set_defaults(run=run)
 
 
@@ -94,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
         html = render(doc, table, image_format=args.figures)
     shown = html.count("<figure>")
     if output is None:
-        print(html, end="")
+        print(html, end="", file=result_stream())
         return 0
     with atomic_path(output) as tmp:
         tmp.write_text(html, encoding="utf-8")

@@ -7,7 +7,14 @@ import logging
 from dataclasses import asdict
 from typing import Any
 
-from mountcal.cli.options import add_command, add_log_options, log_options, print_json, working
+from mountcal.cli.options import (
+    add_command,
+    add_log_options,
+    declare_output_suffixes,
+    log_options,
+    print_json,
+    working,
+)
 from mountcal.cli.path_options import add_path
 from mountcal.terminal import safe
 
@@ -40,6 +47,7 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument("--require-confident", action="store_true", help="refuse a calibration that is not confident")
     add_log_options(p, stops=False)
+    declare_output_suffixes(p, {"output": (".parquet", ".pq", ".csv", ".mcap")})
     p.set_defaults(run=run, protocol=None)
 
 

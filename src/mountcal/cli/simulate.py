@@ -6,7 +6,7 @@ import argparse
 import logging
 from typing import Any
 
-from mountcal.cli.options import HEADINGS, add_command, bar
+from mountcal.cli.options import HEADINGS, add_command, bar, declare_output_suffixes
 from mountcal.cli.path_options import add_path
 from mountcal.errors import InputError
 from mountcal.terminal import safe
@@ -55,6 +55,7 @@ def add_parser(sub: Any) -> None:
     lg.add_argument("--acc-lsb", type=float, default=0.0, help="accelerometer quantisation step (m/s²; default none)")
     lg.add_argument("--gyro-lsb-dps", type=float, default=0.0, help="gyro quantisation step (°/s; default none)")
     lg.add_argument("--paired-stamps", action="store_true", help="stamp the IMU samples in pairs, as some loggers do")
+    declare_output_suffixes(p, {"output": (".csv", ".parquet", ".pq"), "truth": (".json",), "protocol": (".csv",)})
     p.set_defaults(run=run)
 
 

@@ -4,10 +4,18 @@ from __future__ import annotations
 
 import argparse
 import logging
-import sys
 from typing import Any
 
-from mountcal.cli.options import STDOUT, add_command, add_log_options, log_job, print_json, working
+from mountcal.cli.options import (
+    STDOUT,
+    add_command,
+    add_log_options,
+    declare_output_suffixes,
+    log_job,
+    print_json,
+    working,
+)
+from mountcal.cli.results import result_stream
 from mountcal.terminal import safe
 
 log = logging.getLogger("mountcal")
@@ -25,6 +33,7 @@ def add_parser(sub: Any) -> None:
         output_required=True,
     )
     add_log_options(p)
+    declare_output_suffixes(p, {"output": (".csv", ".parquet", ".pq")})
     p.set_defaults(run=run)
 
 
@@ -39,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
     for line in describe((samples, found), len(args.input)):
         log.info("%s", safe(line))
     if to_stdout:
-        found.table.to_frame().to_csv(sys.stdout, index=False, float_format="%.15g")
+        found.table.to_frame().to_csv(result_stream(), index=False, float_format="%.15g")
     else:
         write_stop_table(found.table, args.output)
         log.info("wrote %s (%d stops; headings: %s)", safe(args.output), len(found.table), found.heading_source)
@@ -50,6 +59,7 @@ def run(args: argparse.Namespace) -> int:
                 "stops": len(found.table),
                 "headings": found.table.headings,
                 "samples": len(samples),
+                "incomplete_inputs": list(samples.incomplete),
             }
         )
     return 0

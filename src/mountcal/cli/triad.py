@@ -14,7 +14,14 @@ import logging
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from mountcal.cli.options import add_axes_option, add_command, gravity, print_json
+from mountcal.cli.options import (
+    add_axes_option,
+    add_command,
+    add_input_kind,
+    declare_output_suffixes,
+    gravity,
+    print_json,
+)
 from mountcal.cli.path_options import add_path
 from mountcal.terminal import safe
 
@@ -52,6 +59,8 @@ def add_parser(subparsers: Any) -> None:
         p, "--mapping", role="input", what="a mapping", small=True, default=None,
         help="a TOML with a sample table's [columns]",
     )  # fmt: skip
+    add_input_kind(p)
+    declare_output_suffixes(p, {"output": (".json",)})
     p.set_defaults(run=run)
 
 
@@ -68,7 +77,8 @@ def run(args: argparse.Namespace) -> int:
         args.unit,
         args.min_stop_s,
         args.trim_s,
-        LogOptions(mapping=args.mapping, columns=columns, axes=args.axes),
+        LogOptions(mapping=args.mapping, columns=columns, allow_truncated=args.allow_truncated, axes=args.axes),
+        declared=args.input_kind,
     )
     given = gravity(args)
     g = G_N if given is None else given

@@ -27,19 +27,16 @@ from typing import Any
 
 import numpy as np
 
-from mountcal.calibrate import calibrate
 from mountcal.conventions import GIMBAL_LOCK_PITCH_DEG
 from mountcal.errors import MountcalError
 from mountcal.fleet.inputs import FleetJob
 from mountcal.fleet.storage import is_url, local_copies
-from mountcal.input_conventions import parse_axes
-from mountcal.io.logs import join
-from mountcal.io.registry import reader_for
-from mountcal.option_names import as_flags, option
-from mountcal.pipeline import STOP_TABLE_MARKERS, calibrate_job, is_stop_table
+from mountcal.io.logs import join, read_file
+from mountcal.io.whole import is_cut
+from mountcal.option_names import as_flags
+from mountcal.pipeline import calibrate_input
 from mountcal.result import STRUCTURE_P, Calibration
 from mountcal.samples import Samples
-from mountcal.stoptable import read_stop_table
 
 UNIX_TIME_S = (1.0e9, 4.1e9)  # a log clock in this range is Unix time (2001 … 2099)
 GAP_S = 1.0  # more than this without a sample between two splits is a gap
@@ -137,24 +134,10 @@ def _in_user_terms(message: str, job: FleetJob, local: Sequence[str]) -> str:
     return message
 
 
-def _is_stop_table(path: str, has_dbc: bool, columns: bool) -> bool:
-    """Whether the file is a stop table. With a DBC a CSV may be a CAN log or a stop table: only its
-    stop-table columns (beta_deg, n, sx) make it one (not the absence of t_s, as without a DBC).
-
-    Minimal here until the single input-kind decision (one function for every command) lands.
-    """
-    if columns or not (has_dbc and path.lower().endswith(".csv")) or not is_stop_table(path):
-        return is_stop_table(path, has_dbc, columns)
-    import pandas as pd
-
-    header = pd.read_csv(path, nrows=0, comment="#", skipinitialspace=True).columns
-    return bool({str(c).strip() for c in header} & STOP_TABLE_MARKERS)
-
-
 def _read_splits(job: FleetJob, record: dict[str, Any]) -> Samples:
     """The log's files read one by one and joined in time order; gaps and overlaps counted in ``record``."""
     paths = [Path(p) for p in job.job.paths]
-    parts = [reader_for(p, job.job.log).read(p, job.job.log) for p in paths]
+    parts = [read_file(p, job.job.log) for p in paths]  # each under the completeness policy
     if len(parts) == 1:
         return parts[0]
     spans = sorted((float(s.t_s[0]), float(s.t_s[-1])) for s in parts if len(s))
@@ -168,22 +151,25 @@ def _read_splits(job: FleetJob, record: dict[str, Any]) -> Samples:
 
 
 def _calibrate(job: FleetJob, record: dict[str, Any]) -> dict[str, Any]:
-    lj = job.job
-    if len(lj.paths) == 1 and _is_stop_table(lj.paths[0], lj.log.dbc is not None, lj.log.columns is not None):
-        table = read_stop_table(
-            lj.paths[0],
-            headings=job.headings,
-            heading_unit=lj.log.heading_unit,
-            axes=None if lj.log.axes is None else parse_axes(lj.log.axes, option("axes")),
-        )
-        cal = calibrate(table, lj.options)
-        record = calibration_record(cal)
+    splits = record  # a log's split gaps are counted into the run's record as its files are read
+    # what `mountcal calibrate` does with an input: a stop table fitted, or the log's stops, driving or both
+    result = calibrate_input(  # the fleet's --uphill-azimuth-deg is for its logs: a stop table keeps its β
+        job.job, headings=job.headings, read=lambda _: _read_splits(job, splits), table_azimuth=False
+    )
+    record = calibration_record(result.calibration)
+    ends = result.calibration.provenance.incomplete_inputs
+    if any(is_cut(e) for e in ends):
+        record["flags"].append("input_incomplete")  # cut short, read in part (--allow-truncated)
+    elif ends:
+        record["flags"].append("input_end_unverified")  # an unfinalised MF4: a cut between records is invisible
+    if result.log is None:
+        table = result.table
+        assert table is not None
         record.update(input_kind="stop table", n_stops=len(table), headings=table.headings)
         if table.t_s is not None and table.t_s.size:
             record["log_start_time"] = _unix_time(float(np.min(table.t_s)))
         return record
-    done = calibrate_job(lj, _read_splits(job, record))  # `mountcal calibrate LOG`'s pipeline: stops, driving, or both
-    record = calibration_record(done.calibration)
+    done = result.log
     samples = done.samples
     record.update(
         input_kind="log",

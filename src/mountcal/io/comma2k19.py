@@ -23,6 +23,7 @@ and ``YAW_RATE`` follow −v·ω and +ω of a counter-clockwise turn (correlatio
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,6 +35,7 @@ from mountcal.errors import InputError
 from mountcal.io.can.dbc import decode, load_dbc
 from mountcal.io.can.frames import DATA_WIDTH, CanFrames
 from mountcal.io.reader import LogReader
+from mountcal.io.whole import found_cut, unreadable_part
 from mountcal.samples import Channel, FloatArray, Samples
 
 if TYPE_CHECKING:
@@ -77,7 +79,25 @@ def _array(folder: Path, *parts: str) -> FloatArray:
             "Pass the segment folder itself (e.g. rav4_2018-08-02--08-34-47_seg40).",
         ) from err
     except (OSError, ValueError) as err:
+        _check_whole(path)
         raise InputError(str(path), "a NumPy array file", f"an unreadable file ({err})", "Check the download.") from err
+
+
+def _check_whole(path: Path) -> None:
+    """A ``.npy`` file shorter than its header's shape and dtype say: cut short (:mod:`mountcal.io.whole`);
+    an array cut short is not read in part."""
+    try:
+        with path.open("rb") as f:
+            major, _ = np.lib.format.read_magic(f)
+            header = np.lib.format.read_array_header_1_0 if major == 1 else np.lib.format.read_array_header_2_0
+            shape, _, dtype = header(f)
+            expected = f.tell() + math.prod(shape) * dtype.itemsize
+    except (OSError, ValueError):
+        return  # not a .npy header: the error above says what is wrong
+    size = path.stat().st_size
+    if size < expected:
+        cut = found_cut(path, size, f"the rest of its {dtype} array of shape {shape} (to byte {expected})")
+        raise unreadable_part(cut, "a NumPy array is only whole")
 
 
 def _signal(folder: Path, *parts: str) -> tuple[FloatArray, FloatArray]:

@@ -14,6 +14,10 @@ The conventions every reader shares are applied here, once, whatever the format
 ``axes``, a format's documented frame) to the accelerometer and the gyro, and the unit of the heading
 channel (stated by ``heading_unit``, or checked: radians are refused). ``Samples.conventions`` says
 how each was known.
+
+Each file is read under the completeness policy of :mod:`mountcal.io.whole`: a file cut short is
+refused, or with ``LogOptions.allow_truncated`` read to its last whole record and named in
+``Samples.incomplete`` (``LogSummary.incomplete`` for a listing).
 """
 
 from __future__ import annotations
@@ -21,13 +25,14 @@ from __future__ import annotations
 import os
 from collections import Counter
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from itertools import pairwise
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal
 
 from mountcal.errors import InputError
 from mountcal.io.registry import reader_for
+from mountcal.io.whole import Cut, read_under, reading
 
 if TYPE_CHECKING:  # numpy and the readers load when a log is read: `mountcal --help` needs neither
     from mountcal.input_conventions import AxisMap
@@ -51,6 +56,7 @@ class LogOptions:
     field: str | None = None  # the Imu or Vector3 inside the topic's message ("imu", "imu.linear_acceleration")
     columns: tuple[tuple[str, str], ...] | None = None  # a table's column map: (role, "COLUMN[:UNIT]") pairs
     unit: str | None = None  # a table's acceleration unit where neither the table nor the map gives it ("g")
+    allow_truncated: bool = False  # read the whole part of a file cut short, and say so (mountcal.io.whole)
     axes: str | None = None  # every format: the device's axes onto the sensor frame
     heading_unit: Literal["deg", "rad"] | None = None  # every format: the heading channel's unit
 
@@ -82,7 +88,7 @@ def read_log(paths: str | Path | Sequence[str | Path], options: LogOptions | Non
     if not files:
         raise InputError("LOG", "at least one log file", "none", "Name the log file(s).")
     axes = _axes(opts)  # a bad map is refused before any file is read
-    parts = [_reader(f, opts).read(f, opts) for f in files]
+    parts = [read_file(f, opts) for f in files]
     return stated(parts[0] if len(parts) == 1 else join(parts), opts, axes)
 
 
@@ -134,12 +140,29 @@ def stated(samples: Samples, opts: LogOptions, axes: AxisMap | None = None, chec
     return replace(samples, conventions=(*samples.conventions, *conventions))
 
 
+def read_file(path: Path, opts: LogOptions) -> Samples:
+    """One file's samples, read under the completeness policy (:mod:`mountcal.io.whole`): refused when
+    cut short, or read in part and named in ``incomplete`` with ``opts.allow_truncated``."""
+    with reading(opts.allow_truncated) as cuts:
+        samples = _reader(path, opts).read(path, opts)
+    return _marked(samples, cuts)
+
+
+def _marked(samples: Samples, cuts: Sequence[Cut]) -> Samples:
+    """``samples`` naming the files that were read although cut short."""
+    if not cuts:
+        return samples
+    return replace(samples, incomplete=(*samples.incomplete, *(c.sentence for c in cuts)))
+
+
 def inspect_log(path: str | Path, options: LogOptions | None = None) -> LogSummary:
     """What a log holds: topics or messages, signals, rates, duration (a CAN log without a DBC too:
     ids per channel with counts, rates and DLCs)."""
     opts = options or LogOptions()
     path = Path(path)
-    return _reader(path, opts).inspect(path, opts)
+    with reading(opts.allow_truncated) as cuts:
+        info = _reader(path, opts).inspect(path, opts)
+    return replace(info, incomplete=(*info.incomplete, *(c.sentence for c in cuts))) if cuts else info
 
 
 def iter_log(
@@ -163,16 +186,38 @@ def iter_log(
     previous: tuple[str, float] | None = None  # the file before and its last time
     for f in files:
         first = True
-        for chunk in _reader(f, opts).iter_chunks(f, opts, max_samples):
+        cuts: list[Cut] = []
+        told = 0
+        for chunk in _chunks(f, opts, max_samples, cuts):
+            if len(cuts) > told:  # a cut goes with the first chunk read after it was found
+                chunk, told = _marked(chunk, cuts[told:]), len(cuts)
             if len(chunk):
                 if first and previous is not None and float(chunk.t_s[0]) < previous[1]:
                     raise overlap_error(previous[0], previous[1], str(f), float(chunk.t_s[0]))
                 first, previous = False, (str(f), float(chunk.t_s[-1]))
             yield stated(chunk, opts, axes, check=False)
+        if len(cuts) > told:  # found after the last chunk: carried by an empty one
+            yield stated(_marked(_empty(str(f)), cuts[told:]), opts, axes, check=False)
+
+
+def _empty(source: str) -> Samples:
+    import numpy as np
+
+    from mountcal.samples import Samples
+
+    return Samples(np.empty(0), np.empty((0, 3)), source=source)
+
+
+def _chunks(path: Path, opts: LogOptions, max_samples: int, cuts: list[Cut]) -> Iterator[Samples]:
+    """A file's chunks read under the completeness policy (a reader may check the file before its
+    generator starts); the cuts found are added to ``cuts``."""
+    with reading(opts.allow_truncated, cuts):
+        chunks = _reader(path, opts).iter_chunks(path, opts, max_samples)
+    return read_under(chunks, opts.allow_truncated, cuts)
 
 
 def _first_time(path: Path, opts: LogOptions) -> float:
-    chunks = reader_for(path, opts).iter_chunks(path, opts, 1)
+    chunks = _chunks(path, opts, 1, [])
     try:
         for chunk in chunks:
             if len(chunk):
@@ -218,6 +263,7 @@ def join(parts: Sequence[Samples]) -> Samples:
         dropped=dict(dropped),
         notes=tuple(dict.fromkeys(n for p in parts for n in p.notes)),
         gravity_free=next((p.gravity_free for p in parts if p.gravity_free), ""),
+        incomplete=tuple(line for p in parts for line in p.incomplete),
         conventions=parts[0].conventions,
     )
 

@@ -1,5 +1,10 @@
 """BLF (Vector binary logging format) parsed directly into :class:`~mountcal.io.can.frames.CanFrames`:
 containers inflated on one background thread, object headers found and decoded on whole arrays.
+
+Whole (:mod:`mountcal.io.whole`): the file is as long as its header records (the writer records
+the size when it closes the file: python-can's BLFWriter leaves only the header's own size in a
+file it never closed), and its last object is complete. A cut file read with ``--allow-truncated``
+gives the frames of its complete containers.
 """
 
 from __future__ import annotations
@@ -19,6 +24,7 @@ from numpy.typing import NDArray
 from mountcal.errors import InputError
 from mountcal.io.can.frames import CLASSIC_WIDTH, DATA_WIDTH, CanFrames, Filter, FloatArray, IntArray, pad_payload
 from mountcal.io.inputs import block_too_large, max_block_bytes
+from mountcal.io.whole import found_cut, was_cut
 from mountcal.threads import helpers_allowed
 
 # ---------------------------------------------------------------------------------------------
@@ -63,7 +69,10 @@ def _read_blf_header(f: BinaryIO, path: Path) -> float:
     file_size = header[10]
     actual = path.stat().st_size
     if file_size and actual < file_size:
-        raise _blf_error(path, f"{file_size} bytes as the BLF header records", f"{actual} bytes")
+        found_cut(path, actual, f"byte {file_size}, where its header says it ends")
+    elif 0 < file_size <= header[1] < actual:  # the size of the header alone: never closed
+        found_cut(path, actual, "the end its header records (the writer never closed the file: the header gives "
+                  f"{file_size} bytes, its own size)")  # fmt: skip
     return _blf_start_time(header)
 
 
@@ -82,7 +91,8 @@ def _blf_compressed_containers(f: BinaryIO, path: Path) -> Iterator[tuple[int, i
         if not raw.strip(b"\0"):  # end of file (or trailing padding)
             return
         if len(raw) < _BLF_OBJ_BASE.size:
-            raise _blf_error(path, f"an object header at byte {offset}", f"{len(raw)} bytes before the end")
+            found_cut(path, offset + len(raw), f"the rest of its object header at byte {offset}")
+            return  # allowed: the complete objects before it are read
         signature, _, _, size, kind = _BLF_OBJ_BASE.unpack(raw)
         if signature != b"LOBJ" or size < _BLF_OBJ_BASE.size:
             raise _blf_error(path, f"an object signature b'LOBJ' at byte {offset}", f"{raw[:4]!r}")
@@ -92,8 +102,8 @@ def _blf_compressed_containers(f: BinaryIO, path: Path) -> Iterator[tuple[int, i
         if len(block) - pos < size:
             block, pos = block[pos:] + f.read(max(_BLF_READ_BYTES, stride)), 0
         if len(block) - pos < size:
-            found = f"the file ends {len(block) - pos} bytes into it"
-            raise _blf_error(path, f"a {size}-byte object at byte {offset}", found)
+            found_cut(path, offset + len(block) - pos, f"the rest of its {size}-byte object at byte {offset}")
+            return  # allowed: the complete objects before it are read
         if kind == _LOG_CONTAINER:
             if size < _BLF_OBJ_BASE.size + _BLF_CONTAINER.size:
                 raise _blf_error(path, "a log container header", f"a {size}-byte container")
@@ -173,7 +183,7 @@ def iter_blf(path: Path, keep: Filter) -> Iterator[CanFrames]:
                 filled -= used
         frames, used = _scan_blf(memoryview(buf)[:filled], start, keep, path)
         yield frames
-        if bytes(buf[used:filled]).strip(b"\0"):
+        if bytes(buf[used:filled]).strip(b"\0") and not was_cut(path):  # a cut: the object ran on past it
             raise _blf_error(path, "complete objects up to the last container", "an object cut off at the end")
 
 

@@ -62,7 +62,7 @@ def _load_cached(path: str, mtime_ns: int, size: int) -> Any:
                 errors.append(f"{type(err).__name__}: {err}")
                 last = err
         if path.lower().endswith(".dbc"):
-            text = Path(path).read_text(encoding="cp1252")
+            text = Path(path).read_text(encoding="cp1252", errors="replace")  # as cantools reads it
             cleaned, dropped = _NAMELESS_COMMENT.subn("", text)
             if dropped:
                 try:

@@ -28,6 +28,8 @@ formats.
 
 from __future__ import annotations
 
+import io
+import locale
 from collections.abc import Callable, Collection, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -38,6 +40,7 @@ from numpy.typing import NDArray
 
 from mountcal.errors import InputError
 from mountcal.io.inputs import check_regular_file, hold
+from mountcal.io.whole import open_prefix, text_end
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -304,7 +307,8 @@ def pad_payload(payload: NDArray[np.uint8], length: NDArray[Any]) -> NDArray[np.
 # Text formats, through python-can's readers
 
 
-def _text_reader(path: Path, fmt: str) -> Any:
+def _text_reader(path: Path, fmt: str, whole: int) -> Any:
+    """python-can's reader of the format, on the file's first ``whole`` bytes (its whole lines)."""
     import can
 
     readers: dict[str, Callable[..., Any]] = {
@@ -313,7 +317,10 @@ def _text_reader(path: Path, fmt: str) -> Any:
         "trc": can.TRCReader,
         "csv": can.CSVReader,
     }
-    return readers[fmt](str(path))
+    if whole == path.stat().st_size:
+        return readers[fmt](str(path))
+    # a cut file read in part: its last, incomplete line left out (python-can would parse what is there)
+    return readers[fmt](io.TextIOWrapper(open_prefix(path, whole), encoding=locale.getpreferredencoding(False)))
 
 
 def _iter_text(path: Path, fmt: str, keep: Filter, max_frames: int) -> Iterator[CanFrames]:
@@ -321,8 +328,9 @@ def _iter_text(path: Path, fmt: str, keep: Filter, max_frames: int) -> Iterator[
 
     rows: list[tuple[float, int, int, bool, int, bytes]] = []
     line_error = (ValueError, IndexError, KeyError, TypeError)
+    whole = text_end(path, asc=fmt == "asc")  # a last line without its line break: a cut file
     try:
-        reader = _text_reader(path, fmt)
+        reader = _text_reader(path, fmt, whole)
         with reader:
             for msg in reader:
                 if msg.is_error_frame or msg.is_remote_frame:

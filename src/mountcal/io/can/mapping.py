@@ -189,6 +189,13 @@ def _mapping_dict(mapping: str | Path | Mapping[str, Any] | None) -> dict[str, A
             raise InputError(where, "a mapping TOML file", f"an unreadable path ({err})", "Check the path.") from err
         except tomllib.TOMLDecodeError as err:
             raise InputError(where, "valid TOML", f"a syntax error ({err})", "Fix the mapping file.") from err
+        except UnicodeDecodeError as err:  # tomllib reads UTF-8 only
+            raise InputError(
+                where,
+                "a mapping TOML file in UTF-8 (as TOML is)",
+                f"byte 0x{err.object[err.start]:02x} at byte {err.start}, which is not UTF-8",
+                "Save the mapping as UTF-8 (signal names are ASCII; a comment in another encoding is the usual cause).",
+            ) from err
     else:
         spec = dict(mapping)
     _check_keys(spec, _MAPPING_KEYS, where, "")

@@ -1,5 +1,13 @@
 """MF4 (ASAM MDF 4 bus logging) read with asammdf into :class:`~mountcal.io.can.frames.CanFrames`, after
-checking the blocks asammdf would trust (channel groups, variable-length signal data).
+checking the blocks asammdf would trust (channel groups, variable-length signal data) and that the
+file is whole (:mod:`mountcal.io.whole`).
+
+Whole means: every block the file links to lies inside it (a finalised file states every block's
+length), and an unfinalised file (``UnFinMF``: CANedge loggers, which write no length for the
+last data block, so it runs to the end of the file) ends on a whole record — its data block holds
+exactly the bytes of the records asammdf reads from it, and every frame's variable-length payload
+follows it. A copy cut exactly between two records of an unfinalised file cannot be told from a
+file the logger closed there: its samples say so (:func:`mountcal.io.whole.found_unverified`).
 """
 
 from __future__ import annotations
@@ -7,10 +15,12 @@ from __future__ import annotations
 import gc
 import logging
 import math
+import mmap
 import struct
 import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -21,6 +31,7 @@ from mountcal.errors import InputError
 from mountcal.io.can.blf import DLC2LEN, le_field
 from mountcal.io.can.frames import DATA_WIDTH, CanFrames, Filter, FloatArray, pad_payload
 from mountcal.io.inputs import block_too_large, max_block_bytes
+from mountcal.io.whole import Cut, found_cut, found_unverified, unreadable_part
 
 # ---------------------------------------------------------------------------------------------
 # MF4 (ASAM MDF 4 bus logging), read with asammdf
@@ -35,21 +46,89 @@ def _mf4_error(path: Path, found: str) -> InputError:
     )
 
 
-def _open_mdf(path: Path) -> Any:
+@dataclass(frozen=True)
+class _Layout:
+    """What the block walk found: the file's size, whether it is unfinalised, its last block."""
+
+    size: int
+    unfinalised: bool  # "UnFinMF" with flags: the last data block's length was never written
+    last_block: int  # address of the block that starts last (an unfinalised file's open data block)
+    cut: Cut | None  # where a block the file links to runs past its end
+
+
+def _open_mdf(path: Path) -> tuple[Any, _Layout]:
     from asammdf import MDF
 
     with path.open("rb") as f:
-        magic = f.read(8)
+        ident = f.read(64)
+    magic = ident[:8]
     if not magic.startswith((b"MDF", b"UnFinMF")):  # CANedge writes unfinalised files
         raise _mf4_error(path, f"no MDF file identification (the file starts {magic!r})")
+    layout = _mf4_layout(path, ident)
     _check_mf4_channel_groups(path)
     try:
         with _asammdf_quiet():
-            return MDF(path)
+            return MDF(path), layout
     except Exception as err:  # asammdf raises bare Exception, struct.error, ValueError, ... on bad files
         cause = err
     _release_quietly(cause)
-    raise _mf4_error(path, f"a file asammdf cannot open ({type(cause).__name__}: {cause})") from cause
+    found = f"a file asammdf cannot open ({type(cause).__name__}: {cause})"
+    if layout.cut is not None:  # allowed to read in part, but what is left cannot be opened
+        raise unreadable_part(layout.cut, found) from cause
+    raise _mf4_error(path, found) from cause
+
+
+_ID_UNFINALISED_FLAGS = 60  # the identification block's standard flags of an unfinalised file (u16)
+_MAX_WALKED_BLOCKS = 1 << 22
+
+
+def _mf4_layout(path: Path, ident: bytes) -> _Layout:
+    """Walk every block the file links to, from the header, reading block heads only; a block that
+    runs past the end of the file is a cut (:func:`~mountcal.io.whole.found_cut`).
+
+    A link is the address of a block (or 0): following all of them reaches every block of a sound
+    file, metadata and data alike, without reading any data.
+    """
+    size = path.stat().st_size
+    unfinalised = ident[:7] == b"UnFinMF" and len(ident) >= 64 and struct.unpack_from("<H", ident, 60)[0] != 0
+    if size < 64 + 24:
+        return _Layout(size, unfinalised, 0, None)  # asammdf says what is wrong with a file this short
+    with path.open("rb") as f, mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as data:
+        seen, todo, last = {64}, [(64, 0)], 64
+        crossing: list[tuple[int, int, bytes, int]] = []  # (address, end, id, linked from)
+        while todo:
+            at, parent = todo.pop()
+            if at + 24 > size:
+                end, kind = at + 24, b"a block"
+            else:
+                kind = bytes(data[at : at + 4])
+                length, n_links = struct.unpack_from("<QQ", data, at + 8)
+                end = at + max(length, 24)
+                if kind[:2] != b"##" or n_links > (1 << 20):
+                    continue  # not a block head: damage, left to asammdf's checks
+                last = max(last, at)
+                links = struct.unpack_from(f"<{n_links}Q", data, at + 24) if at + 24 + 8 * n_links <= size else ()
+                for link in links:
+                    if link and link not in seen and link % 8 == 0:
+                        if len(seen) >= _MAX_WALKED_BLOCKS:
+                            raise _mf4_error(path, f"more than {_MAX_WALKED_BLOCKS} linked blocks")
+                        seen.add(link)
+                        todo.append((link, at))
+            if end > size:
+                crossing.append((at, end, kind, parent))
+    # Past a cut, every block is gone: a block running past the end with whole blocks after it
+    # states a damaged length (left to asammdf), it is not where the file was cut.
+    intact = max((a for a in seen if a < size and a not in {c[0] for c in crossing}), default=0)
+    crossing = [c for c in crossing if c[0] > intact or c[0] + 24 > size]
+    cut = None
+    if crossing:
+        at, end, kind, parent = min(crossing)
+        name = kind.decode("ascii", "replace").strip("#") + " block" if kind.startswith(b"##") else "block"
+        if at < size:
+            cut = found_cut(path, size, f"the rest of its {name} at byte {at} (which runs to byte {end})")
+        else:
+            cut = found_cut(path, size, f"its {name} at byte {at} (linked from the block at byte {parent})")
+    return _Layout(size, unfinalised, last, cut)
 
 
 _CG_DATA_BYTES = 32  # an MDF 4.x channel group's data section: record id, cycles, flags, sizes
@@ -154,14 +233,16 @@ def _mf4_can_groups(mdf: Any) -> list[int]:
     ]
 
 
-def _mf4_records(path: Path, mdf: Any, group: int, start: float, keep: Filter, max_frames: int) -> Iterator[CanFrames]:
-    """One group's frames, a record range at a time."""
-    total = int(mdf.groups[group].channel_group.cycles_nr)
+def _mf4_records(
+    path: Path, mdf: Any, group: int, start: float, keep: Filter, max_frames: int, total: int
+) -> Iterator[CanFrames]:
+    """One group's first ``total`` frames (its whole ones), a record range at a time."""
     conversions = _mf4_conversions(mdf, group)
     for offset in range(0, total, max_frames):
+        count = min(max_frames, total - offset)
         try:
             with _asammdf_quiet():
-                sig = mdf.get("CAN_DataFrame", group=group, record_offset=offset, record_count=max_frames, raw=True)
+                sig = mdf.get("CAN_DataFrame", group=group, record_offset=offset, record_count=count, raw=True)
             table = _mf4_table(sig.samples, np.asarray(sig.timestamps, np.float64) + start, keep, conversions, path)
         except Exception as err:  # asammdf reports damaged data blocks with assorted exceptions
             raise _mf4_error(path, f"unreadable records from {offset} ({type(err).__name__}: {err})") from err
@@ -241,16 +322,19 @@ def _mf4_payload(data: NDArray[Any]) -> NDArray[np.uint8]:
 
 
 def iter_mf4(path: Path, keep: Filter, max_frames: int) -> Iterator[CanFrames]:
-    mdf = _open_mdf(path)
+    mdf, layout = _open_mdf(path)
     try:
         groups = _mf4_can_groups(mdf)
         if not groups and not any(any(c.name == "CAN_DataFrame" for c in g.channels) for g in mdf.groups):
             raise _mf4_error(path, "no CAN_DataFrame channel group (not a bus log)")
+        whole, values = {}, {}
         for g in groups:
             _check_mf4_blocks(path, mdf.groups[g])
-            _check_mf4_vlsd(path, mdf, g)
+            whole[g], values[g] = _check_mf4_vlsd(path, mdf, g, layout)
+        if layout.unfinalised and all(whole[g] == mdf.groups[g].channel_group.cycles_nr for g in groups):
+            _check_unfinalised_end(path, mdf, layout, values)
         start = float(mdf.header.start_time.timestamp())
-        sources = [_mf4_records(path, mdf, g, start, keep, max_frames) for g in groups]
+        sources = [_mf4_records(path, mdf, g, start, keep, max_frames, whole[g]) for g in groups]
         if len(sources) == 1:
             yield from sources[0]
         elif sources:  # CAN frames split over several channel groups: merge them in time
@@ -277,17 +361,24 @@ def _check_mf4_blocks(path: Path, group: Any) -> None:
 
 
 _VLSD = 1  # cn_type of a variable-length signal data channel (CANedge: DataBytes)
+_VlsdStats = list[tuple[int, int] | None]  # bytes and values of each variable-length channel of a group
 
 
-def _check_mf4_vlsd(path: Path, mdf: Any, index: int) -> None:
-    """Refuse variable-length data whose records point outside it, before asammdf reads it.
+def _check_mf4_vlsd(path: Path, mdf: Any, index: int, layout: _Layout) -> tuple[int, _VlsdStats]:
+    """Refuse variable-length data whose records point outside it, before asammdf reads it; return
+    how many of the group's records are whole (all of them, but in a cut unfinalised file), and the
+    bytes and values of each variable-length channel (None where its values do not follow each other).
 
     asammdf's C ``extract`` copies each value at the offset its record states without a bounds
     check: a damaged offset or length would make it read past its buffer (a segfault). A sound
     file has each record's offset, ascending, at a 4-byte length and that many bytes inside the
-    channel's signal data.
+    channel's signal data. In an unfinalised file the last records may point past it: the file
+    was cut between a frame and its payload, or inside the payload (a cut, not damage); only the
+    records before them are read.
     """
     group = mdf.groups[index]
+    whole = int(group.channel_group.cycles_nr)
+    stats: _VlsdStats = []
     for ch_nr, channel in enumerate(group.channels):
         if channel.channel_type != _VLSD:
             continue
@@ -300,10 +391,15 @@ def _check_mf4_vlsd(path: Path, mdf: Any, index: int) -> None:
                 data, offsets = _mf4_vlsd_arrays(mdf._mdf, group, ch_nr)  # the MDF4 object under MDF
         except Exception as err:  # asammdf reports damaged data blocks with assorted exceptions
             raise _mf4_error(path, f"unreadable {channel.name} ({type(err).__name__}: {err})") from err
+        ends = _value_ends(data, offsets)
+        stats.append((data.shape[0], offsets.shape[0]) if int(ends.max(initial=0)) == data.shape[0] else None)
         if not offsets.shape[0]:
             continue
         name = f"{channel.name} (channel group {index})"
         size = data.shape[0]
+        if layout.unfinalised:
+            offsets = offsets[: _whole_values(path, data, offsets, name, layout)]
+            whole = min(whole, offsets.shape[0])
         outside = np.flatnonzero(offsets > size - 4) if size >= 4 else np.arange(offsets.shape[0])
         if outside.shape[0]:
             k = int(outside[0])
@@ -319,6 +415,92 @@ def _check_mf4_vlsd(path: Path, mdf: Any, index: int) -> None:
         if descending.shape[0]:
             k = int(descending[0]) + 1
             raise _mf4_error(path, f"{name}: record {k} points back, to byte {starts[k]} after {starts[k - 1]}")
+    return whole, stats
+
+
+def _value_ends(data: NDArray[np.uint8], offsets: NDArray[np.uint64]) -> NDArray[np.int64]:
+    """Where each variable-length value ends (its 4-byte length and bytes); past the data where its
+    length is not there to read."""
+    size = data.shape[0]
+    starts = offsets.astype(np.int64)
+    inside = starts <= size - 4
+    lengths = le_field(data, np.where(inside, starts, 0), "<u4").astype(np.int64)
+    return np.where(inside, starts + 4 + lengths, size + 1)
+
+
+def _whole_values(path: Path, data: NDArray[np.uint8], offsets: NDArray[np.uint64], name: str, layout: _Layout) -> int:
+    """How many leading records of an unfinalised file have their value in the signal data; the
+    records after them (a trailing run only) are the cut (:func:`~mountcal.io.whole.found_cut`)."""
+    beyond = _value_ends(data, offsets) > data.shape[0]
+    if not beyond[-1]:
+        return int(offsets.shape[0])
+    first = int(offsets.shape[0]) - int(np.argmin(beyond[::-1])) if not beyond.all() else 0
+    if beyond[first:].all() and not beyond[:first].any():
+        found_cut(path, layout.size, f"the payload of its last frame record ({name}, record {first})")
+        return first
+    return int(offsets.shape[0])  # not a trailing run: damage, refused by the checks that follow
+
+
+def _check_unfinalised_end(path: Path, mdf: Any, layout: _Layout, values: dict[int, _VlsdStats]) -> None:
+    """An unfinalised file's open data block (its last block, running to the end of the file) must
+    hold exactly the bytes of the records asammdf found in it: record ids, fixed records, and the
+    variable-length values with their lengths. More bytes are a record cut off at the end.
+
+    ``values`` holds the variable-length channels' bytes and values of the CAN groups, measured
+    already; those of other groups with records (LIN, error frames with payloads) are read here.
+    Only a data group whose data link is that one DT block is checked (CANedge's layout); a
+    file that ends on a whole record is recorded as unverifiable (:func:`~mountcal.io.whole.found_unverified`).
+    """
+    by_group: dict[int, list[tuple[int, Any]]] = {}
+    for index, group in enumerate(mdf.groups):
+        by_group.setdefault(int(group.data_group.address), []).append((index, group))
+    for groups in by_group.values():
+        data_group = groups[0][1].data_group
+        at = int(data_group.data_block_addr or 0)
+        if at != layout.last_block or _block_id(path, at) != b"##DT":
+            continue
+        held = layout.size - (at + 24)
+        rid = int(data_group.record_id_len)
+        used = 0
+        for index, group in groups:
+            cg = group.channel_group
+            if cg.flags & _CG_VLSD or not cg.cycles_nr:
+                continue
+            used += int(cg.cycles_nr) * (rid + int(cg.samples_byte_nr) + int(cg.invalidation_bytes_nr))
+            for stat in values[index] if index in values else _vlsd_stats(mdf, group):
+                if stat is None:
+                    found_unverified(path, _UNVERIFIED + " (its payloads are not stored one after the other)")
+                    return
+                used += rid * stat[1] + stat[0]
+        if held > used:
+            found_cut(path, layout.size, f"the end of its last record ({held - used} bytes of one are there)")
+            return
+    found_unverified(path, _UNVERIFIED)
+
+
+_CG_VLSD = 1  # cg_flags bit: the channel group holds variable-length signal data
+_UNVERIFIED = (
+    "an unfinalised MF4 (its logger writes no length for the last data block): it ends on a whole "
+    "record, but a copy cut exactly between two records cannot be told from the whole file"
+)
+
+
+def _vlsd_stats(mdf: Any, group: Any) -> _VlsdStats:
+    """The bytes and values of each variable-length channel of a group (None: not one after the other)."""
+    out: _VlsdStats = []
+    for ch_nr, channel in enumerate(group.channels):
+        if channel.channel_type == _VLSD:
+            with _asammdf_quiet():
+                data, offsets = _mf4_vlsd_arrays(mdf._mdf, group, ch_nr)
+            ends = _value_ends(data, offsets)
+            out.append((data.shape[0], offsets.shape[0]) if int(ends.max(initial=0)) == data.shape[0] else None)
+    return out
+
+
+def _block_id(path: Path, at: int) -> bytes:
+    with path.open("rb") as f:
+        f.seek(at)
+        return f.read(4)
 
 
 def _mf4_vlsd_arrays(mdf4: Any, group: Any, ch_nr: int) -> tuple[NDArray[np.uint8], NDArray[np.uint64]]:

@@ -1,6 +1,10 @@
 """The MCAP file, record by record: magic, footer, summary (schemas, channels, statistics) and the
 top-level walk of the data section, each checked against the file's bounds. Damage is an
 :class:`~mountcal.errors.InputError` naming the byte.
+
+A file without its footer and closing magic was cut short (:mod:`mountcal.io.whole`): refused,
+or with ``--allow-truncated`` read without a summary, its data section walked up to the last
+whole record (the channels found on the way).
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ from numpy.typing import NDArray
 
 from mountcal.errors import InputError
 from mountcal.io.ros2 import cdr
+from mountcal.io.whole import found_cut
 
 I64Array = NDArray[np.int64]
 U8Array = NDArray[np.uint8]
@@ -151,6 +156,7 @@ class Log:
     schemas: dict[int, Schema]
     channels: dict[int, McapChannel]
     statistics: _Statistics | None
+    cut: bool = False  # cut short (allowed): the data section runs to the last whole record
 
     def kind(self, channel: McapChannel) -> str | None:
         schema = self.schemas.get(channel.schema_id)
@@ -183,6 +189,9 @@ def damaged(where: str, found: str, todo: str = "") -> InputError:
     )
 
 
+_RECOVER = "`mcap recover` (the mcap CLI) salvages the readable part of an interrupted recording into a new file."
+
+
 def read_layout(file: BinaryIO, where: str) -> Log:
     size = os.fstat(file.fileno()).st_size
     if size == 0:
@@ -200,7 +209,8 @@ def read_layout(file: BinaryIO, where: str) -> Log:
     tail_bytes = len(MAGIC) + _FOOTER.size
     file.seek(max(0, size - len(MAGIC)))
     if size < 2 * len(MAGIC) + tail_bytes or file.read(len(MAGIC)) != MAGIC:
-        raise Corrupt(f"a file of {size} bytes without the closing MCAP magic: it is truncated")
+        found_cut(where, size, "its footer and the closing MCAP magic", hint=_RECOVER)
+        return Log(file, where, size, {}, {}, None, cut=True)  # allowed: read up to the last whole record
     file.seek(size - tail_bytes)
     footer = file.read(_FOOTER.size)
     opcode, length, summary_start, _, summary_crc = _FOOTER.unpack(footer)
@@ -265,9 +275,13 @@ def walk_file(log: Log) -> Iterator[tuple[int, int, int]]:
         log.file.seek(pos)
         head = log.file.read(RECORD_HEAD.size)
         if len(head) < RECORD_HEAD.size:
+            if log.cut:
+                return  # the cut: the whole records before it are the file
             raise Corrupt(f"a record header cut off at byte {pos}")
         opcode, length = RECORD_HEAD.unpack(head)
         body = pos + RECORD_HEAD.size
+        if log.cut and body + length > log.data_end:
+            return
         if body + length > log.data_end:
             raise Corrupt(
                 f"a record (opcode 0x{opcode:02x}) at byte {pos} claiming {length} bytes, past the data section"

@@ -21,6 +21,7 @@ import pandas as pd
 from mountcal.errors import InputError
 from mountcal.io.inputs import check_parquet_rows, check_regular_file, max_rows, too_many_rows
 from mountcal.io.table.layout import ACC, CHANNELS, G_N, GYRO, TIME_UNITS, Layout
+from mountcal.io.whole import parquet_end, text_end, text_source
 from mountcal.option_names import option
 from mountcal.samples import Channel, FloatArray, Samples
 
@@ -39,12 +40,14 @@ def header(path: Path) -> tuple[list[str], dict[str, str]]:
     if path.suffix.lower() in PARQUET:
         import pyarrow.parquet as pq
 
+        parquet_end(path)  # cut short: refused with the byte where it ends (mountcal.io.whole)
         try:
             return [str(n) for n in pq.read_schema(path).names], {}
         except Exception as err:  # pyarrow raises many types for malformed files
             raise InputError(
                 where, "a Parquet table", f"a file that does not parse ({err})", "Check the file."
             ) from err
+    text_end(path)  # a last line without its line break: cut short, refused unless allowed
     with path.open("r", encoding="utf-8-sig", errors="replace", newline="") as f:
         lines = [f.readline() for _ in range(2)]
     first = lines[0].rstrip("\r\n")
@@ -73,7 +76,7 @@ def _frames(path: Path, layout: Layout, read_as: dict[str, str], rows: int | Non
                 yield batch.to_pandas()
             return
         reader = pd.read_csv(
-            path,
+            text_source(path),  # a cut file read with --allow-truncated: its whole lines
             usecols=lambda c: str(c).strip() in used,
             dtype={layout.time.name: str} if layout.time.unit == "iso" else None,
             chunksize=rows,

@@ -1,6 +1,9 @@
 """CSV and Parquet sample tables: ``t_s, ax, ay, az`` (s, m/s²), optionally ``gx, gy, gz`` (rad/s)
 and the channels :data:`TABLE_CHANNELS`; read whole (:func:`read_table`) or in batches
 (:func:`iter_table`, bounded memory). Rows with a missing or non-numeric value are dropped and counted.
+
+A CSV whose last line has no line break, or a Parquet file without its footer, was cut short
+(:mod:`mountcal.io.whole`): refused, or a CSV's whole lines read with ``--allow-truncated``.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ import pyarrow.parquet as pq
 
 from mountcal.errors import InputError
 from mountcal.io.inputs import check_parquet_rows, check_regular_file
+from mountcal.io.whole import parquet_end, text_end, text_source
 from mountcal.option_names import option
 from mountcal.samples import Channel, FloatArray, Samples
 
@@ -28,9 +32,11 @@ def read_table(path: Path) -> Samples:
     check_regular_file(path, "sample table")
     parquet = path.suffix.lower() in (".parquet", ".pq")
     if parquet:
+        parquet_end(path)
         check_parquet_rows(path)
+    source = path if parquet else text_source(path)  # a cut CSV: refused, or its whole lines (allowed)
     try:
-        df = pd.read_parquet(path) if parquet else pd.read_csv(path)
+        df = pd.read_parquet(source) if parquet else pd.read_csv(source)
     except FileNotFoundError as err:
         raise InputError(str(path), "a readable sample table", "no such file", "Check the path.") from err
     except Exception as err:  # pandas raises many types for malformed files
@@ -85,17 +91,23 @@ def read_table(path: Path) -> Samples:
 _REQUIRED = ("t_s", "ax", "ay", "az")
 
 
+
+
 def iter_table(path: Path, max_samples: int) -> Iterator[Samples]:
     """A CSV or Parquet sample table in batches; rows with a non-finite value dropped and counted."""
     where = str(path)
     if not path.is_file():
         raise InputError(where, "a readable sample table", "no such file", "Check the path.")
+    if path.suffix.lower() == ".csv":
+        text_end(path)  # a cut CSV: refused here, before any parse (allowed: its whole lines are read)
+    else:
+        parquet_end(path)
     try:
         if path.suffix.lower() == ".csv":
-            names = pa_csv.open_csv(path).schema.names
+            names = pa_csv.open_csv(text_source(path)).schema.names
             wanted = [c for c in (*_REQUIRED, "gx", "gy", "gz", *TABLE_CHANNELS) if c in names]
             reader: Any = pa_csv.open_csv(
-                path,
+                text_source(path),
                 read_options=pa_csv.ReadOptions(block_size=1 << 22),
                 convert_options=pa_csv.ConvertOptions(
                     include_columns=wanted, column_types=dict.fromkeys(wanted, pa.float64())

@@ -5,11 +5,12 @@ from __future__ import annotations
 import base64
 import io
 import re
-from html import escape
 from typing import Literal
 
 import matplotlib as mpl
 from matplotlib.figure import Figure
+
+from mountcal.terminal import html_text as escape
 
 ImageFormat = Literal["svg", "png"]
 

@@ -14,7 +14,6 @@ import math
 import os
 from collections.abc import Mapping
 from datetime import UTC, datetime
-from html import escape
 from pathlib import PurePath
 from typing import Any
 
@@ -30,6 +29,7 @@ from mountcal.outputs.report.loop import steps_section
 from mountcal.outputs.report.timeline import Timeline
 from mountcal.result import FORMAT, FORMAT_VERSION, STRUCTURE_P, Calibration, FitQuality, ModelStep
 from mountcal.stoptable import StopTable
+from mountcal.terminal import html_text as escape
 from mountcal.typed_json import to_plain
 
 _CSS = """

@@ -4,10 +4,10 @@ the final model's effects and its residual tests."""
 from __future__ import annotations
 
 from collections.abc import Sequence
-from html import escape
 
 from mountcal.outputs.report.document import ANGLES, angle_estimates, format_effect, format_pm, moved_deg, step_label
 from mountcal.result import STRUCTURE_P, Calibration, Finding, ModelStep
+from mountcal.terminal import html_text as escape
 
 
 def steps_section(cal: Calibration) -> str:
