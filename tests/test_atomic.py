@@ -110,3 +110,29 @@ def test_a_growing_file_replaces_a_link_instead_of_writing_through_it(tmp_path: 
     f.write(b"new")
     f.close()
     assert victim.read_text() == "keep me" and link.read_bytes() == b"new" and not link.is_symlink()
+
+
+def test_a_ctrl_c_python_drops_in_a_callback_is_kept_not_printed(capsys: pytest.CaptureFixture[str]) -> None:
+    """A KeyboardInterrupt raised in a weakref callback is only printed by Python ("Exception ignored")
+    and lost; within removed_on_signals it is kept for raise_if_interrupted, silently."""
+    import gc
+    import weakref
+
+    from mountcal.atomic import raise_if_interrupted, removed_on_signals
+
+    class Thing:
+        pass
+
+    def callback(_: object) -> None:
+        raise KeyboardInterrupt  # where a Ctrl-C's handler raises when the signal lands in a callback
+
+    with removed_on_signals():
+        thing = Thing()
+        ref = weakref.ref(thing, callback)
+        del thing
+        gc.collect()
+        assert ref() is None
+        with pytest.raises(KeyboardInterrupt):
+            raise_if_interrupted()
+    assert "KeyboardInterrupt" not in capsys.readouterr().err
+    raise_if_interrupted()  # outside its block a dropped Ctrl-C is not kept

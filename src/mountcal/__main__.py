@@ -14,7 +14,16 @@ from collections.abc import Sequence
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the console script."""
-    args = list(sys.argv[1:] if argv is None else argv)
+    code = _run(list(sys.argv[1:] if argv is None else argv))
+    # A Ctrl-C that lands in code run from a string (a dataclass's generated methods, while modules
+    # import) marks the interpreter as ended by an unhandled KeyboardInterrupt even once it is
+    # handled, and CPython then ends itself by SIGINT at exit (status -2, not 130). Running any
+    # string clears that mark.
+    exec("pass")
+    return code
+
+
+def _run(args: list[str]) -> int:
     try:
         if _local_fleet(args):
             from mountcal.fleet.engines import start_worker_server

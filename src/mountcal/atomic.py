@@ -30,13 +30,17 @@ import errno
 import os
 import shutil
 import signal
+import sys
 import tempfile
 import threading
 from collections.abc import Iterator
 from pathlib import Path
-from typing import BinaryIO
+from typing import TYPE_CHECKING, BinaryIO
 
 from mountcal.paths import SystemFailure
+
+if TYPE_CHECKING:
+    from sys import UnraisableHookArgs
 
 
 @contextlib.contextmanager
@@ -260,12 +264,28 @@ class Terminated(KeyboardInterrupt):
 CLEAN_UP_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
 
 
+_INTERRUPTED = threading.Event()  # a Ctrl-C arrived within removed_on_signals
+
+
+def raise_if_interrupted() -> None:
+    """Raise KeyboardInterrupt if a Ctrl-C arrived that Python could not raise where it landed.
+
+    A signal handler's exception raised inside a callback (a weakref's, an import lock's) is only
+    printed as "Exception ignored" and the code goes on; :func:`removed_on_signals` keeps such a
+    Ctrl-C here instead, and loops that wait (the fleet's) call this between their waits.
+    """
+    if _INTERRUPTED.is_set():
+        raise KeyboardInterrupt
+
+
 @contextlib.contextmanager
 def removed_on_signals() -> Iterator[None]:
     """Within the block, SIGTERM and SIGHUP raise :class:`Terminated` (as SIGINT raises
     KeyboardInterrupt), so every write in progress unwinds: the temporary files of
     :func:`atomic_path` are removed, an :func:`atomic_output` is never named, a lock is released.
-    A second signal ends the process at once. Outside the main thread: no change.
+    A second signal ends the process at once. A Ctrl-C that lands in a callback (where Python
+    drops the exception with a traceback) is kept, silently, for :func:`raise_if_interrupted`.
+    Outside the main thread: no change.
     """
     if threading.current_thread() is not threading.main_thread():
         yield
@@ -276,12 +296,28 @@ def removed_on_signals() -> Iterator[None]:
             signal.signal(sig, signal.SIG_DFL)
         raise Terminated(signum)
 
+    def interrupt(signum: int, frame: object) -> None:
+        _INTERRUPTED.set()
+        signal.default_int_handler(signum, frame)  # type: ignore[arg-type]
+
+    def unraisable(info: UnraisableHookArgs) -> None:
+        if info.exc_type is not None and issubclass(info.exc_type, KeyboardInterrupt):
+            _INTERRUPTED.set()  # a Ctrl-C dropped in a callback: kept for raise_if_interrupted
+            return
+        hook(info)
+
+    _INTERRUPTED.clear()
     previous = {sig: signal.signal(sig, terminate) for sig in CLEAN_UP_SIGNALS}
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # not where Ctrl-C is ignored
+        previous[signal.SIGINT] = signal.signal(signal.SIGINT, interrupt)
+    hook, sys.unraisablehook = sys.unraisablehook, unraisable
     try:
         yield
     finally:
+        _INTERRUPTED.clear()  # its block is over: what it held has been raised or is moot
+        sys.unraisablehook = hook
         for sig, handler in previous.items():
             signal.signal(sig, handler)
 
 
-__all__ = ["GrowingFile", "Terminated", "atomic_output", "atomic_path", "removed_on_signals"]
+__all__ = ["GrowingFile", "Terminated", "atomic_output", "atomic_path", "raise_if_interrupted", "removed_on_signals"]

@@ -44,6 +44,7 @@ from concurrent.futures import FIRST_COMPLETED, CancelledError, Future, ProcessP
 from concurrent.futures.process import BrokenProcessPool
 from typing import TYPE_CHECKING, Any, Protocol
 
+from mountcal.atomic import raise_if_interrupted
 from mountcal.errors import InputError, MountcalError
 from mountcal.option_names import option
 
@@ -60,6 +61,7 @@ THREAD_VARIABLES = (
     "VECLIB_MAXIMUM_THREADS",
     "NUMEXPR_NUM_THREADS",
 )
+WAKE_S = 0.25  # the longest a wait for the workers goes without looking for a dropped Ctrl-C
 QUEUED_PER_WORKER = 2  # jobs in flight per worker: one running, one waiting (no idle gap between logs)
 MAX_WORKER_DEATHS = 2  # a log in flight when its worker died this often is recorded as failed
 BATCH_TARGET_S = 0.5  # Dask: work per task (a task costs the scheduler and the network milliseconds)
@@ -195,7 +197,8 @@ class LocalEngine:
                         inflight[pool.submit(run_job, pair[1])] = pair[0]
             if not inflight:
                 continue
-            done, _ = wait(inflight, return_when=FIRST_COMPLETED)
+            done, _ = wait(inflight, timeout=WAKE_S, return_when=FIRST_COMPLETED)
+            raise_if_interrupted()  # a Ctrl-C Python dropped in a callback ends the run all the same
             broken = any(isinstance(f.exception(), BrokenProcessPool) for f in done)
             if broken:  # a dead worker fails the whole pool: collect every job in flight
                 done = wait(inflight).done
