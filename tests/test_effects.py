@@ -16,6 +16,7 @@ from mountcal.conventions import G_N
 from mountcal.diagnose import leave_one_out, leave_one_out_refit
 from mountcal.effects import BASE, PROGRESS_STOPS, close_the_loop, with_surface
 from mountcal.estimate import full
+from mountcal.result import Calibration
 from mountcal.simulate.stops import random_bias, simulate_preset, simulate_stops
 from mountcal.stoptable import StopTable, write_stop_table
 
@@ -149,6 +150,51 @@ def test_a_heading_pattern_is_not_taken_for_a_temperature_drift_that_follows_the
         why = [d.why for d in cal.model_selection.declined if d.effect == "temperature"]
         refused += "temperature" not in cal.model and any("heading pattern" in w for w in why) and not cal.confident
     assert refused >= RUNS - 1
+
+
+def _cooling(rng: np.random.Generator, n: int = 12) -> StopTable:
+    """The circle of stops in heading order while the sensor cools linearly by 15 °C, its bias drifting 0.5 mg/°C in
+    a random direction (no constant bias): a ramp of temperature, about 80 % of it a heading harmonic."""
+    return simulate_stops(
+        rot_vs=Rotation.from_euler("ZYX", [rng.uniform(-180, 180), *rng.uniform(-10, 10, 2)], degrees=True),
+        beta_deg=np.arange(n) * 360.0 / n,
+        temperature_c=np.linspace(40.0, 25.0, n),
+        temp_coeff_mps2_per_c=random_bias(0.5 * MG, rng),
+        temp_ref_c=30.0,
+        seed=rng,
+    )[0]
+
+
+@pytest.mark.parametrize("n", [8, 12])
+def test_a_linear_cooling_the_residual_names_is_taken_as_temperature(n: int) -> None:
+    # Issue 25: the loop declined it as a heading pattern in about one run in four (the guard had little power on a
+    # ramp), or excluded the hottest stop first, and the residual test named temperature after all.
+    rng = np.random.default_rng(40 if n == 12 else 33)  # seeds where the loop before missed 5 and 6 of 12
+    models = [calibrate(_cooling(rng, n)).model for _ in range(RUNS)]
+    assert sum("temperature" in m for m in models) >= RUNS - 1
+
+
+def test_three_stops_without_headings_at_different_places_give_a_result_with_the_reason_not_a_failed_fit(
+    tmp_path: Path,
+) -> None:
+    # Issue 25: `--headings none` on a 3-stop table (stops at different places) ended with exit 4 "no convergence
+    # in 500 iterations": the random road tilt per stop left the refit adrift. It is now declined with the reason.
+    rng = np.random.default_rng(23)
+    table, _ = simulate_stops(
+        rot_vs=Rotation.random(random_state=23),
+        slope_deg=rng.uniform(1, 4),
+        beta_deg=rng.uniform(0, 360, 3),
+        bias_mps2=rng.normal(0, 0.5, 3),
+        noise_g=0.0005,
+        seed=23,
+    )
+    path = tmp_path / "three.csv"
+    write_stop_table(replace(table, lat_deg=np.array([55.0, 55.01, 55.02]), lon_deg=np.full(3, 10.0)), path)
+    out = tmp_path / "cal.json"
+    assert main(["calibrate", str(path), "--headings", "none", "-o", str(out), "-q"]) == 0
+    cal = Calibration.load(out)
+    why = [d.why for d in cal.model_selection.declined if d.effect == "surface"]
+    assert why and "its fit failed" in why[0] and "free parameter" in why[0]
 
 
 def test_the_result_carries_the_before_after_table() -> None:

@@ -29,7 +29,7 @@ from mountcal.conventions import (
 )
 from mountcal.diagnose import unexplained
 from mountcal.effects import Loop, Step, close_the_loop, effect_values
-from mountcal.errors import InputError, NotEnoughInformation
+from mountcal.errors import FitFailed, InputError, NotEnoughInformation
 from mountcal.estimate import full, paper
 from mountcal.estimate.bound import crb_deg, euler_gradients
 from mountcal.estimate.effects.temperature import MIN_TEMPERATURE_SPAN_C
@@ -177,14 +177,17 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
     if fixed is not None:
         check_model(table, fixed)
     from_position = g_source.startswith("WGS 84")
-    loop = close_the_loop(
-        table,
-        g,
-        gravity_known=from_position or g_source == GIVEN,
-        alpha=opts.selection_alpha,
-        fixed=fixed,
-        g_prior=G_N if from_position else None,
-    )
+    try:
+        loop = close_the_loop(
+            table,
+            g,
+            gravity_known=from_position or g_source == GIVEN,
+            alpha=opts.selection_alpha,
+            fixed=fixed,
+            g_prior=G_N if from_position else None,
+        )
+    except FitFailed as err:
+        raise FitFailed(_not_converged(table, fixed, str(err))) from err
     final = loop.final
     f = final.fit
     angles = _angles(final.table, f, opts)
@@ -577,6 +580,27 @@ def _check_geometry(table: StopTable) -> None:
         raise NotEnoughInformation(
             f"{table.source}: the stop means lie on a line, so they span no plane. Park at more different headings."
         )
+
+
+def _not_converged(table: StopTable, fixed: tuple[str, ...] | None, err: str) -> str:
+    """Why the fit of these stops did not converge, and what to change: the values against the parameters."""
+    terms = fixed or BASE
+    n = len(table)
+    free = table.beta_rad is None or table.headings == "none"
+    params = len(full.StaticModel(table, terms, G_N).names)
+    why = (
+        f"{n} stops give {3 * n} values for the model's {params} parameters"
+        + (" (each stop's heading is a free parameter: the table gives none)" if free else "")
+        + f"; {max(3 * n - params, 0)} are left to fix the rest, too few to guide the search"
+        if 3 * n - params < 6
+        else "the model's terms leave some direction of the parameters nearly undetermined by these stops"
+    )
+    fixes = [f"fit fewer terms ({option('model', 'rotation,slope')})"] if fixed not in (None, BASE) else []
+    if free:
+        given = option("headings", "uphill")
+        fixes.insert(0, f"give the stops' headings (a beta_deg column read with {given} or 'relative')")
+    fixes.append("add stops at other headings")
+    return f"{table.source}: the fit did not converge ({err}): {why}. To fix it: {'; or '.join(fixes)}."
 
 
 def local_gravity(lat_deg: FloatArray | None, alt_m: FloatArray | None, given: float | None) -> tuple[float, str]:

@@ -144,6 +144,30 @@ def heading_harmonics(whiten: FloatArray, beta: FloatArray, ks: tuple[int, ...])
     return _per_axis(whiten, np.hstack(x)) if x else None
 
 
+def competing_explanations(table: StopTable, fit: full.Fit) -> dict[str, tuple[float, int]]:
+    """What the structures that follow time, as a covariate term does, explain of the fit's residual beyond its
+    model: ``{name: (Δχ², parameters)}`` for a bias step at one stop in time order (its location one parameter
+    more) and a slow drift (the first cosine modes of stop order per axis). Δχ² in units of the stop noise
+    (scaled by the fit's noise estimate when the noise is not known)."""
+    model = full.StaticModel(table, fit.terms, fit.state.g_mps2)
+    r = model.residual(fit.state)
+    jac = model.jacobian(fit.state)
+    n = len(table)
+    scale = 1.0 if fit.noise_known else max(fit.noise_scale, 1e-300) ** 2
+    out: dict[str, tuple[float, int]] = {}
+    explained, at = step_alternative(table, r, model.whiten, jac)
+    if at >= 0:
+        out["a bias step"] = (explained / scale, 4)
+    if n > 2 * DRIFT_MODES:
+        rank = np.empty(n)
+        rank[time_order(table)] = np.arange(n)
+        x = np.cos(np.pi * np.outer(rank + 0.5, np.arange(1, DRIFT_MODES + 1)) / n)
+        found = projection_test(r, _per_axis(model.whiten, x), jac, "drift", fit)
+        if found.statistic is not None and found.dof:
+            out["a slow drift"] = (float(found.statistic) / scale, int(found.dof))
+    return out
+
+
 def projection_test(r: FloatArray, d: FloatArray, basis: FloatArray, test: str, fit: full.Fit) -> Finding:
     """Does adding the (whitened) directions ``d`` to those of ``basis`` explain significantly more of ``r``?
     (Its ``size`` is in whitened units.)"""

@@ -21,7 +21,16 @@ import numpy as np
 from scipy import optimize
 from scipy.spatial.transform import Rotation
 
-from mountcal.diagnose import analyse, heading_harmonics, leave_one_out, projection_test, step_alternative, unexplained
+from mountcal.conventions import FloatArray
+from mountcal.diagnose import (
+    analyse,
+    competing_explanations,
+    heading_harmonics,
+    leave_one_out,
+    projection_test,
+    step_alternative,
+    unexplained,
+)
 from mountcal.errors import FitFailed, NotEnoughInformation
 from mountcal.estimate import effects as registry
 from mountcal.estimate import full
@@ -42,6 +51,10 @@ ALIAS_HARMONICS = (1, 2)
 # The level of that check: it confirms one candidate the loop has already chosen (no search over many, so no
 # Bonferroni). Passing it wrongly is a confident wrong answer, failing it wrongly only a flag: 1 %.
 ALIAS_ALPHA = 0.01
+# A covariate whose variance the heading harmonics explain at least this share of is taken to follow the headings:
+# only then can a term driven by it take a heading pattern up whole, and only then does the guard act (a tent of
+# temperatures once around the circle: 0.99; a ramp over one circle: 0.76).
+ALIAS_SHARE = 0.9
 PLACE_COLUMNS = ("site", "lat_deg", "lon_deg", "alt_m")  # where a stop is: the geometry, not a logged covariate
 PROGRESS_STOPS = 2000  # from this many stops a model choice takes seconds: its rounds are logged at INFO
 
@@ -153,6 +166,8 @@ def close_the_loop(
             ", ".join(steps[-1].terms),
         )
         step = _next_step(steps[-1], table, g_mps2, gravity_known, alpha, declined)
+        if step is None:
+            step, analysed = _named_by_residual(steps[-1], len(table), g_mps2, gravity_known, alpha, declined)
         took = time.perf_counter() - t0
         log.log(
             level,
@@ -162,14 +177,15 @@ def close_the_loop(
             took,
         )
         if step is None:
-            break
+            return _finish(steps, declined, analysed)
         steps.append(step)
     return _finish(steps, declined)
 
 
-def _finish(steps: list[Step], declined: list[dict[str, Any]]) -> Loop:
+def _finish(steps: list[Step], declined: list[dict[str, Any]], findings: list[Finding] | None = None) -> Loop:
+    """The loop's result; ``findings``: the final model's residual analysis, when already made."""
     last, n_rows = steps[-1], len(steps[0].table)
-    findings = analyse(last.table, last.fit, _rows(last, n_rows))
+    findings = findings if findings is not None else analyse(last.table, last.fit, _rows(last, n_rows))
     doubts = [d for i in range(1, len(steps)) if (d := _step_or_covariate(steps[i - 1], steps[i], n_rows))]
     return Loop(steps, declined, findings, doubts)
 
@@ -213,7 +229,11 @@ def _next_step(
     k = len(names) + 1  # the outlier test is one more candidate
     for name in names:
         if name == "surface":
-            option = _surface(cur, g, k)
+            try:
+                option = _surface(cur, g, k)
+            except FitFailed as err:  # a random road tilt that leaves the fit adrift is not taken
+                _decline(declined, name, f"its fit failed ({err}): {_why_adrift(cur)}", len(cur.excluded))
+                continue
             if option is not None:
                 options.append(option)
             continue
@@ -263,6 +283,8 @@ def _next_step(
                 len(cur.excluded),
             )
         return None
+    if best.added == "outlier":
+        best = _covariate_or_outlier(best, [o for lp, o in options[1:] if lp < np.log(alpha)], cur, declined)
     if best.added not in NOISE_MODEL_STEPS:  # those change the noise model, not the prediction
         best = _among_exclusive(best, [o for lp, o in options[1:] if lp < np.log(alpha)], g, declined)
         cur_loo, new_loo = _loo_rms(cur), _loo_rms(best)
@@ -277,6 +299,115 @@ def _next_step(
             return None
         return Step(best.added, best.reason, best.terms, best.excluded, best.table, best.fit, new_loo)
     return best
+
+
+def _named_by_residual(
+    cur: Step, n_rows: int, g: float, gravity_known: bool, alpha: float, declined: list[dict[str, Any]]
+) -> tuple[Step | None, list[Finding] | None]:
+    """The term the final residual names, when the loop declined it: tried against what it competes with.
+
+    A residual test that carries an effect's name (``temperature``) and that the family's test rejects says
+    the model lacks that effect — yet the loop may have declined it, because the candidates' Bonferroni cost hid
+    it, or because it excluded a stop the covariate explains. The term is then fitted and compared, by Akaike's
+    criterion on the same residual, with the structures that follow time as it does — a bias step at one stop, a
+    slow drift (:func:`mountcal.diagnose.competing_explanations`). It is taken when it explains the stops better
+    for its number of parameters than each of them and its likelihood ratio passes at ``alpha``; otherwise the
+    finding stays, with the better explanation in the reason. A covariate that itself follows the headings
+    (:func:`heading_share`) is left to the guard of :func:`_heading_alias`: no stop data can tell it from a
+    heading pattern.
+    """
+    covariates = sorted(
+        name
+        for name, effect in registry.registered().items()
+        if name not in cur.terms and _covariate(name) and effect.candidate(cur.table, gravity_known)
+    )
+    if not covariates:  # no logged covariate a residual test could name: nothing to analyse for
+        return None, None
+    findings = analyse(cur.table, cur.fit, _rows(cur, n_rows))
+    named = {f.test for f in unexplained(findings)}
+    for name in (c for c in covariates if c in named):
+        effect = registry.get(name)
+        terms = (*cur.terms, *(r for r in effect.requires if r not in cur.terms), name)
+        added = sum(registry.get(t).extra(cur.table) for t in terms if t not in cur.terms)
+        if _inseparable(cur, terms, g) is not None or cur.fit.dof - added < 1:
+            continue
+        try:
+            f = full.fit(cur.table, terms, g, cur.fit.state)
+        except FitFailed:
+            continue
+        if any(e.implausible(f.state.values[e.name], g) for e in registry.chain(terms)):
+            continue
+        beta = cur.table.beta_rad if cur.table.beta_rad is not None else cur.fit.state.beta_rad
+        if beta is not None and beta.size == len(cur.table) and heading_share(cur.table, effect, beta) >= ALIAS_SHARE:
+            continue  # it follows the headings: the stops cannot tell it from a heading pattern (the guard said so)
+        k = len(f.names) - len(cur.fit.names)
+        scale = 1.0 if cur.fit.noise_known else max(cur.fit.noise_scale, 1e-300) ** 2
+        gain = (cur.fit.chi2 - f.chi2) / scale
+        rivals = competing_explanations(cur.table, cur.fit)
+        aic = {rival: 2 * dof - explained for rival, (explained, dof) in rivals.items()}
+        best = min(aic, key=lambda x: aic[x], default=None)
+        logp, test = nested_test(cur.fit.chi2, f.chi2, k, f.noise_known, f.dof)
+        if best is not None and aic[best] <= 2 * k - gain:
+            _decline(
+                declined,
+                name,
+                f"the residual names it, but {best} explains these stops better for its size (Akaike: "
+                f"{aic[best]:.1f} against {2 * k - gain:.1f})",
+                len(cur.excluded),
+            )
+            continue
+        if logp >= np.log(alpha):
+            continue
+        versus = ", ".join(f"{rival} {aic[rival]:.1f}" for rival in aic)
+        reason = (
+            f"named by the residual test; {test}, p = {np.exp(logp):.3g}; it explains the stops better for its size "
+            f"than what it competes with (Akaike {2 * k - gain:.1f} against {versus or 'nothing testable'})"
+        )
+        return Step(name, reason, terms, cur.excluded, cur.table, f, _loo_rms(cur)), None
+    return None, findings
+
+
+def _why_adrift(cur: Step) -> str:
+    """Why a fit of these stops may wander without converging: the parameters the values leave nearly free."""
+    n, p = len(cur.table), len(cur.fit.names)
+    free = " (each stop's heading is a free parameter: the table gives none)" if cur.fit.state.beta_rad.size else ""
+    return (
+        f"{n} stops give {3 * n} values for the model's {p} parameters{free}, and with a random road tilt per stop "
+        "their horizontal readings weigh almost nothing, so some parameters are left nearly undetermined"
+    )
+
+
+def _covariate_or_outlier(outlier: Step, rivals: list[Step], cur: Step, declined: list[dict[str, Any]]) -> Step:
+    """The outlier, or a significant term driven by a logged covariate that explains the stops better.
+
+    A sensor drifting with temperature over a session makes its first or last stop the one the others
+    predict worst: excluding it is then significant too, and more so than the term with its extra parameters,
+    and once it is gone the rest of the covariate may follow the headings (which the guard declines). The two
+    are compared by Akaike's criterion, the excluded stop counted as three free parameters (its own mean).
+    """
+    terms = [s for s in rivals if s.added not in NOISE_MODEL_STEPS and _covariate(s.added)]
+    if not terms:
+        return outlier
+    scale = 1.0 if cur.fit.noise_known else max(cur.fit.noise_scale, 1e-300) ** 2
+    aic_out = (outlier.fit.chi2 / scale) + 2 * (len(outlier.fit.names) + 3)
+    best = min(terms, key=lambda s: s.fit.chi2 / scale + 2 * len(s.fit.names))
+    aic_term = best.fit.chi2 / scale + 2 * len(best.fit.names)
+    if aic_term >= aic_out:
+        return outlier
+    _decline(
+        declined,
+        "outlier",
+        f"{outlier.reason}; but the {best.added} term explains the stops better for its size (Akaike {aic_term:.1f} "
+        f"against {aic_out:.1f} with the stop left out)",
+        len(cur.excluded),
+    )
+    return best
+
+
+def _covariate(name: str) -> bool:
+    """Is the effect driven by a logged covariate (a column other than the place)?"""
+    effect = registry.registered().get(name)
+    return effect is not None and any(c not in PLACE_COLUMNS for c in effect.needs)
 
 
 def _outlier(cur: Step, table: StopTable, g: float, k: int) -> tuple[float, Step] | None:
@@ -295,7 +426,10 @@ def _outlier(cur: Step, table: StopTable, g: float, k: int) -> tuple[float, Step
     keep[i] = False
     sub = cur.table.subset(keep)
     start = cur.fit.state if cur.fit.state.beta_rad.size == 0 else _without_beta(cur.fit.state, i)
-    f = full.fit(sub, cur.terms, g, start)
+    try:
+        f = full.fit(sub, cur.terms, g, start)
+    except FitFailed:  # the others alone cannot be fitted: they cannot judge it either
+        return None
     beta = "" if table.beta_rad is None else f", β = {np.degrees(table.beta_rad[original]) % 360:.0f}°"
     reason = (
         f"stop {original + 1}{beta} is not predicted by the others: held-out miss {press[i] * 1e3:.3g} mm/s², "
@@ -463,6 +597,8 @@ def _heading_alias(cur: Step, f: full.Fit, name: str) -> str | None:
     beta = cur.table.beta_rad if cur.table.beta_rad is not None else cur.fit.state.beta_rad
     if not any(c not in PLACE_COLUMNS for c in effect.needs) or beta is None or beta.size != len(cur.table):
         return None
+    if heading_share(cur.table, effect, beta) < ALIAS_SHARE:
+        return None  # the covariate is no heading pattern itself: it cannot take one up whole
     model = full.StaticModel(cur.table, f.terms, f.state.g_mps2)
     jac = model.jacobian(f.state)
     own = list(f.owned[name])
@@ -480,6 +616,25 @@ def _heading_alias(cur: Step, f: full.Fit, name: str) -> str | None:
         f"{', '.join(effect.needs)} follows the "
         "order the headings were visited in — visit them in another order (or the circle twice) to separate it"
     )
+
+
+def heading_share(table: StopTable, effect: registry.Effect, beta: FloatArray) -> float:
+    """The share of the variance of the effect's logged covariates (temperature) that the heading harmonics
+    (:data:`ALIAS_HARMONICS`) explain: 1 when the covariate follows the order the headings were visited in
+    (it rises and falls once around the circle), about 0.76 for a ramp over one circle, near 0 when the
+    headings were visited in another order."""
+    h = np.column_stack(
+        [np.ones(beta.size)] + [f(k * beta) for k in ALIAS_HARMONICS if 2 * k < beta.size for f in (np.cos, np.sin)]
+    )
+    share = 0.0
+    for column in (c for c in effect.needs if c not in PLACE_COLUMNS):
+        x = getattr(table, column, None)
+        if x is None or np.ptp(x) == 0:
+            continue
+        x = np.asarray(x, dtype=float) - np.mean(x)
+        fitted = h @ np.linalg.lstsq(h, x, rcond=None)[0]
+        share = max(share, float(fitted @ fitted / (x @ x)))
+    return share
 
 
 def _refuse_inseparable(base: Step, fixed: tuple[str, ...], g: float) -> None:

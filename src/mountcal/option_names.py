@@ -60,7 +60,7 @@ OPTIONS: dict[str, tuple[str, str]] = {
 _FLAGS: ContextVar[bool] = ContextVar("mountcal_option_flags", default=False)
 
 
-def option(key: str, value: str | bool | None = None) -> str:
+def option(key: str, value: str | float | bool | None = None) -> str:
     """The option ``key`` of :data:`OPTIONS` (with ``value``, if given) as the reader will type it.
 
     ``option("unit", "g")`` is ``unit='g'`` in Python and ``--unit g`` on the command line;

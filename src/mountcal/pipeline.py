@@ -21,8 +21,9 @@ import numpy as np
 
 from mountcal import crosscheck, plausibility
 from mountcal.calibrate import Options, calibrate, local_gravity
+from mountcal.driving_document import Comparison, DrivingConsistency
 from mountcal.errors import InputError, NotEnoughInformation
-from mountcal.estimate.driving import DrivingFit, DrivingOptions, estimate_driving
+from mountcal.estimate.driving import DrivingFit, DrivingOptions, estimate_driving, horizontal_axes_sigma_deg
 from mountcal.estimate.driving_combine import combine, driving_calibration, not_combined
 from mountcal.input_conventions import merged, parse_axes
 from mountcal.io.kind import Declared, InputKind, input_kind
@@ -33,7 +34,7 @@ from mountcal.option_names import option
 from mountcal.paths import special_kind
 from mountcal.result import Calibration, Provenance
 from mountcal.samples import Samples
-from mountcal.stops import StopDetection, StopTableFromLog, read_protocol, tabulate
+from mountcal.stops import StopDetection, StopTableFromLog, near_miss_advice, read_protocol, tabulate
 from mountcal.stoptable import Headings, StopTable, Unit, read_stop_table
 from mountcal.version import software_version
 
@@ -212,13 +213,15 @@ def _calibrate_job(job: LogJob, samples: Samples | None) -> LogResult:
             table = replace(found.table, source=source, incomplete=samples.incomplete)
             static = calibrate(table, job.options)
         except NotEnoughInformation as err:
+            missed = near_miss_advice(found.near_misses) if found is not None else ""
+            refusal = NotEnoughInformation(str(err) + missed) if missed else err  # the stops a driver made, dropped
             if job.use == "stops":
-                raise
-            skipped["stops"] = str(err)
+                raise refusal from err
+            skipped["stops"] = str(refusal)
     fit = None
     if job.use in ("auto", "driving"):
         try:
-            fit = estimate_driving(increasing_times(samples), job.driving, tilt_from=static)  # duplicate stamps merged
+            fit = estimate_driving(increasing_times(samples), _driving_options(job), tilt_from=static)  # stamps merged
         except NotEnoughInformation as err:
             if job.use == "driving":
                 raise
@@ -261,7 +264,13 @@ def _checked(done: LogResult, job: LogJob, hashes: Future[tuple[str, ...]]) -> C
             cal = replace(cal, unexplained=(*cal.unexplained, found), confident=False)
     # the lateral cue needs a yaw both sources agree on; the yaw rate needs only the up axis
     yaw_known = cal.yaw_deg is not None and not disagree
-    checks.append(crosscheck.turn_handedness(done.samples, cal.rot_vs, yaw_known))
+    rot_vs = cal.rot_vs
+    if not yaw_known and not disagree and done.driving is not None and done.driving.rot_vs_longitudinal is not None:
+        # yaw left undetermined by the drive's residual tests (a mirrored sensor turns its longitudinal and lateral
+        # cues half a turn apart, and the model-error term that follows exceeds the limit): the longitudinal cue's
+        # yaw still tells left from right, so the turns are compared and the mirror is named, not passed over
+        rot_vs, yaw_known = done.driving.rot_vs_longitudinal, True
+    checks.append(crosscheck.turn_handedness(done.samples, rot_vs, yaw_known))
     if cal.method == "driving":
         checks += plausibility.answer_checks(cal)
     cal = replace(cal, provenance=replace(cal.provenance, input_sha256=hashes.result(), conventions=stated))
@@ -308,7 +317,7 @@ def stops_with_drive(
     found = next((u for u in cal.unexplained if u.test == "stops_vs_driving"), None)
     if found is None or _up_is_up(static, table):
         return cal
-    alone = estimate_driving(samples, job.driving)  # levelled by its own mean gravity: +g up by construction
+    alone = estimate_driving(samples, _driving_options(job))  # levelled by its own mean gravity: +g up by construction
     cal = not_combined(_driving_alone(alone, samples, job), fit, found)
     return replace(
         cal,
@@ -349,9 +358,35 @@ def describe(result: LogResult | tuple[Samples, StopTableFromLog], n_files: int)
             f"speed clock offset {offset} ({'found' if d.time_offset_searched else 'given'}); "
             f"straightness from the {d.straightness_source}"
         )
+        if d.consistency is not None:
+            lines.append(_driving_tests(d.consistency))
     lines.append(f"calibrated from: {done.used}")
     lines += [f"not used: {k} — {v}" for k, v in done.skipped.items()]
     return lines
+
+
+def _driving_options(job: LogJob) -> DrivingOptions:
+    """The job's driving options, the sensor's horizontal axes from its spec (the default class without one)."""
+    opts = job.driving or DrivingOptions()
+    spec = job.options.spec
+    if spec.is_default:
+        return opts
+    return replace(opts, horizontal_axes_sigma_deg=horizontal_axes_sigma_deg(spec.scale, spec.cross_axis))
+
+
+def _driving_tests(c: DrivingConsistency) -> str:
+    """One line of the drive's residual tests: the split-half z-scores, the cues, what the family found."""
+
+    def z(x: Comparison) -> str:
+        return "—" if x.z is None else f"{x.z:+.1f}"
+
+    cue = c.cues.comparison
+    cues = "no test" if cue.difference is None else f"{cue.difference:+.2f}° apart (z {z(cue)})"
+    return (
+        f"driving tests: halves z yaw {z(c.halves.yaw)}, roll {z(c.halves.roll_about_vehicle_x)}, pitch "
+        f"{z(c.halves.pitch_about_vehicle_y)}, clock {z(c.halves.clock_offset)}; longitudinal and lateral cues {cues}; "
+        f"findings: {', '.join(c.findings) or 'none'}"
+    )
 
 
 def _tabulate(samples: Samples, job: LogJob) -> StopTableFromLog:

@@ -485,8 +485,14 @@ def schema_defs() -> dict[str, Any]:
     The published schema (``mountcal/schema/calibration.schema.json``) holds exactly these; a test
     fails when they drift apart (regenerate with ``python -m mountcal.result``).
     """
+    from mountcal.driving_document import DrivingConsistency  # it uses Finding: imported here, not at the top
+
     defs: dict[str, Any] = {}
     properties = {name: schema_of(tp, defs) for name, tp in _TYPED.items()}
+    # ``fit.driving`` is the driving fit's own document, open to new keys; its residual tests are typed.
+    consistency = {"anyOf": [schema_of(DrivingConsistency, defs), {"type": "null"}]}
+    driving = {"type": "object", "properties": {"consistency": consistency}, "additionalProperties": {}}
+    defs["FitQuality"]["properties"]["driving"] = {"anyOf": [driving, {"type": "null"}]}
     return {"$defs": dict(sorted(defs.items())), "properties": properties}
 
 

@@ -26,6 +26,7 @@ from mountcal.io.timestamps import increasing_times, time_ordered
 from mountcal.option_names import option
 from mountcal.result import Convention
 from mountcal.samples import Channel, Samples
+from mountcal.stop_near_misses import Criterion, NearMiss, near_misses
 from mountcal.stoptable import Headings, StopTable, check_degrees, checked
 
 BATCHES = 10  # batch means for the variance of a stop mean
@@ -122,15 +123,30 @@ class StillPeriod:
 
 @dataclass(frozen=True)
 class StopSearch:
-    """The stops of a log, the thresholds that found them, and what was changed or left out."""
+    """The stops of a log, the thresholds that found them, what was changed or left out, and the parked periods
+    that nearly became stops (:mod:`mountcal.stop_near_misses`)."""
 
     stops: list[Stop]
     thresholds: Thresholds
     counts: dict[str, int] = field(default_factory=dict)
     dropped: tuple[StillPeriod, ...] = ()
+    near_misses: tuple[NearMiss, ...] = ()
 
     def lines(self) -> list[str]:
-        return self.thresholds.lines() + [f"{k}: {v}" for k, v in self.counts.items()]
+        return self.thresholds.lines() + [f"{k}: {v}" for k, v in self.counts.items()] + self.near_miss_lines()
+
+    def near_miss_lines(self) -> list[str]:
+        return [m.line() for m in self.near_misses]
+
+
+@dataclass(frozen=True)
+class Blocks:
+    """The moving statistics per block: its times, each criterion's values and threshold, and which are judged."""
+
+    t_start_s: FloatArray
+    t_end_s: FloatArray
+    criteria: list[Criterion]
+    judged: np.ndarray
 
 
 def still_mask(samples: Samples, cfg: StopDetection) -> np.ndarray:
@@ -141,9 +157,9 @@ def still_mask(samples: Samples, cfg: StopDetection) -> np.ndarray:
 
 def _stillness(
     samples: Samples, cfg: StopDetection, acc_lsb: FloatArray, gyro_lsb: FloatArray | None
-) -> tuple[np.ndarray, Thresholds, int]:
-    """The still mask, the thresholds it used, and how many samples could not be judged (their
-    window holds too few samples, or a gap in time: see :func:`_judged_blocks`).
+) -> tuple[np.ndarray, Thresholds, int, Blocks | None]:
+    """The still mask, the thresholds it used, how many samples could not be judged (their
+    window holds too few samples, or a gap in time: see :func:`_judged_blocks`), and the blocks' criteria.
 
     The moving statistics run on short blocks (≈ 1/40 of the window) rather than on every sample:
     stillness over seconds does not need the sample rate's resolution, and an hour at 200 Hz then
@@ -154,7 +170,7 @@ def _stillness(
     steps = np.diff(t)
     steps = steps[steps > 0]  # stamps in pairs have a median step of 0; find_stops merges them first
     if n < MIN_WINDOW_SAMPLES or steps.size == 0:
-        return np.zeros(n, dtype=bool), Thresholds(cfg.max_acc_std_mps2 or ACC_STD_FLOOR, np.zeros(3), acc_lsb), n
+        return np.zeros(n, dtype=bool), Thresholds(cfg.max_acc_std_mps2 or ACC_STD_FLOOR, np.zeros(3), acc_lsb), n, None
     rate = 1.0 / float(np.median(steps))
     block = max(int(cfg.window_s * rate) // BLOCKS_PER_WINDOW, 1)
     starts = np.arange(0, n, block)
@@ -180,10 +196,13 @@ def _stillness(
         floor = ACC_STD_FLOOR_WITH_SPEED if has_speed else ACC_STD_FLOOR
         max_std = max(floor, REST_FACTOR * float(acc_rest.max()), float(acc_lsb.max()))
     still = (std.max(axis=1) < max_std) & judged
+    ends = np.minimum(starts + block - 1, n - 1)
+    criteria = [Criterion("accelerometer moving std", std.max(axis=1), max_std, "max_acc_std", "m/s²")]
     if speed is not None and has_speed:
         # a block is still only if the speed is low at both of its ends
-        still &= np.abs(_hold(speed, t[starts])) <= cfg.max_speed_mps
-        still &= np.abs(_hold(speed, t[np.minimum(starts + block - 1, n - 1)])) <= cfg.max_speed_mps
+        v = np.maximum(np.abs(_hold(speed, t[starts])), np.abs(_hold(speed, t[ends])))
+        still &= v <= cfg.max_speed_mps
+        criteria.append(Criterion("speed", v, cfg.max_speed_mps, "max_speed", "m/s"))
     found = Thresholds(max_std, acc_rest, acc_lsb, speed_mps=cfg.max_speed_mps if has_speed else None)
     if samples.gyro_s is not None:
         g_mean, g_std = moving(samples.gyro_s)
@@ -197,9 +216,15 @@ def _stillness(
             max_rate = max(GYRO_RATE_FLOOR, 2.0 * float(g_lsb.max()))
         quiet = still & (g_std.max(axis=1) < max_g_std)
         bias = _gyro_bias(g_mean[quiet] if quiet.sum() >= w else g_mean, max_rate)
-        still &= (g_std.max(axis=1) < max_g_std) & (np.linalg.norm(g_mean - bias, axis=1) < max_rate)
+        rate = np.linalg.norm(g_mean - bias, axis=1)
+        still &= (g_std.max(axis=1) < max_g_std) & (rate < max_rate)
         found = Thresholds(max_std, acc_rest, acc_lsb, max_g_std, max_rate, bias, g_rest, g_lsb, found.speed_mps)
-    return np.repeat(still, count[:, 0].astype(int)), found, int(count[~judged, 0].sum())
+        criteria += [
+            Criterion("gyro moving std", g_std.max(axis=1), max_g_std, "max_gyro_std", "rad/s"),
+            Criterion("angular rate off the gyro bias", rate, max_rate, "max_gyro_rate", "rad/s"),
+        ]
+    blocks = Blocks(t[starts], t[ends], criteria, judged)
+    return np.repeat(still, count[:, 0].astype(int)), found, int(count[~judged, 0].sum()), blocks
 
 
 def _judged_blocks(t: FloatArray, starts: np.ndarray, count: FloatArray, w: int, window_s: float) -> np.ndarray:
@@ -262,7 +287,7 @@ def find_stops(
     logged = time_ordered(samples)  # every sample as logged, for the stops' statistics
     samples = increasing_times(logged)  # equal stamps merged, for the moving windows and the runs
     counts = {k: v - before.get(k, 0) for k, v in samples.dropped.items() if v != before.get(k, 0)}
-    still, thresholds, unjudged = _stillness(samples, cfg, acc_lsb, gyro_lsb)
+    still, thresholds, unjudged, blocks = _stillness(samples, cfg, acc_lsb, gyro_lsb)
     if unjudged:
         counts[
             f"samples whose {cfg.window_s:g} s window holds fewer than {MIN_WINDOW_SAMPLES} samples or a gap "
@@ -317,7 +342,13 @@ def find_stops(
         counts["pieces of those not kept as a stop (too short, or not the longest in a protocol row)"] = pieces_dropped
     if too_few:
         counts[f"still periods with fewer than {MIN_WINDOW_SAMPLES} samples once trimmed (not kept)"] = too_few
-    return StopSearch(stops, thresholds, counts, tuple(dropped))
+    missed: list[NearMiss] = []
+    if blocks is not None and windows is None:  # with a protocol sheet the rows say where the stops are
+        kept = [(stop.t_start_s - cfg.trim_s, stop.t_end_s + cfg.trim_s) for stop in stops]
+        missed = near_misses(
+            blocks.t_start_s, blocks.t_end_s, blocks.criteria, blocks.judged, kept, cfg.min_duration_s, cfg.trim_s
+        )
+    return StopSearch(stops, thresholds, counts, tuple(dropped), tuple(missed))
 
 
 def _steady_heading(
@@ -494,6 +525,18 @@ class StopTableFromLog:
     unmatched_protocol_rows: int = 0
     notes: tuple[str, ...] = ()  # the thresholds used and what detection changed or dropped
     dropped: tuple[StillPeriod, ...] = ()  # still periods not kept as a stop
+    near_misses: tuple[NearMiss, ...] = ()  # parked periods that nearly became stops
+
+
+def near_miss_advice(missed: tuple[NearMiss, ...] | list[NearMiss]) -> str:
+    """A sentence for a refusal: the parked periods that nearly became stops, and the option that keeps each."""
+    if not missed:
+        return ""
+    many = len(missed) > 1
+    return (
+        f" The log holds {len(missed)} parked period{'s' if many else ''} that nearly became "
+        f"{'stops' if many else 'a stop'}: " + "; ".join(m.line() for m in missed) + "."
+    )
 
 
 def read_protocol(path: str, heading_unit: HeadingUnit | None = None) -> pd.DataFrame:
@@ -570,8 +613,9 @@ def tabulate(
     notes = tuple(search.lines())
     if not stops:
         raise NotEnoughInformation(
-            f"{where}: no parked period found (no still run ≥ {(cfg or StopDetection()).min_duration_s:g} s). "
-            f"Check that the log holds parked periods, or {relax()}. Used: {'; '.join(notes)}."
+            f"{where}: no parked period found (no still run ≥ {(cfg or StopDetection()).min_duration_s:g} s)."
+            + (near_miss_advice(search.near_misses) or f" Check that the log holds parked periods, or {relax()}.")
+            + f" Used: {'; '.join(search.thresholds.lines() + [f'{k}: {v}' for k, v in search.counts.items()])}."
         )
     heading = np.array([s.channels.get("heading_deg", np.nan) for s in stops])
     if np.all(np.isfinite(heading)):
@@ -588,6 +632,7 @@ def tabulate(
                 f"heading channel with uphill azimuth {uphill_azimuth_deg:g}°",
                 notes=notes,
                 dropped=search.dropped,
+                near_misses=search.near_misses,
             )
         inferred = Convention(
             "heading_reference",
@@ -601,6 +646,7 @@ def tabulate(
             "heading channel without the uphill azimuth (relative)",
             notes=notes,
             dropped=search.dropped,
+            near_misses=search.near_misses,
         )
     none = Convention("heading_reference", "none", "inferred", "no protocol sheet and no heading channel in the log")
     return StopTableFromLog(
@@ -608,6 +654,7 @@ def tabulate(
         "none",
         notes=notes,
         dropped=search.dropped,
+        near_misses=search.near_misses,
     )
 
 

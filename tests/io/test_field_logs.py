@@ -275,14 +275,16 @@ def test_field_logs_doc_commands(
     _truck_with_mm5(tmp_path / "truck_mm5.blf", real_data / J1939_DBC)
     monkeypatch.chdir(tmp_path)
     commands = _doc_commands()
-    assert [c[0] for c in commands] == ["inspect", "inspect", "stops", "inspect", "inspect", "stops"]
+    assert [c[0] for c in commands] == ["inspect", "inspect", "stops", "inspect", "inspect", "inspect", "stops"]
     outputs = []
     for argv in commands:
         assert main(argv) == 0, argv
         outputs.append(capsys.readouterr().out)
     assert "0x0CF00400" in outputs[1] and "DLC 8" in outputs[1]
-    assert "EEC1" in outputs[3] and "CCVS1" in outputs[3] and "WheelBasedVehicleSpeed" in outputs[3]
-    assert "MM5_10_TX2" in outputs[4] and "CCVS1" in outputs[4] and "0x174" in outputs[4]
+    assert "parked periods: 1 stops, 1 near misses" in outputs[3]  # the 11.6 s stop under a 15 s minimum
+    assert "under the --min-stop-s of 15 s; --min-stop-s 11.6 would keep it" in outputs[3]
+    assert "EEC1" in outputs[4] and "CCVS1" in outputs[4] and "WheelBasedVehicleSpeed" in outputs[4]
+    assert "MM5_10_TX2" in outputs[5] and "CCVS1" in outputs[5] and "0x174" in outputs[5]
     assert len(pd.read_csv(tmp_path / "stops.csv")) >= 3  # the car parks several times
     truck_stops = pd.read_csv(tmp_path / "truck_stops.csv")
     assert len(truck_stops) == 1 and truck_stops["duration_s"].iloc[0] > 30.0

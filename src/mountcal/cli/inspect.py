@@ -1,12 +1,13 @@
-"""``mountcal inspect LOG``: list what the log holds (streams, signals, counts, rates)."""
+"""``mountcal inspect LOG``: list what the log holds (streams, signals, counts, rates) and, with ``--stops``, its
+parked periods: the stops found and those that nearly became stops."""
 
 from __future__ import annotations
 
 import argparse
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from typing import Any
 
-from mountcal.cli.options import add_command, log_options, print_json, working
+from mountcal.cli.options import add_command, add_detection_options, detection, log_options, print_json, working
 from mountcal.cli.path_options import add_path
 from mountcal.cli.results import result_stream
 from mountcal.terminal import safe
@@ -26,16 +27,31 @@ def add_parser(sub: Any) -> None:
         help="DBC naming the CAN messages (repeat for several)",
     )  # fmt: skip
     p.add_argument("--columns", default=None, help="a table's columns as ROLE=COLUMN[:UNIT] pairs (see calibrate)")
-    p.set_defaults(run=run, mapping=None, channel=None, topic=None, field=None)
+    p.add_argument(
+        "--stops",
+        action="store_true",
+        help="also read the IMU and list its parked periods: the stops found, and those that nearly became stops "
+        "(which threshold failed, by how much, and the option that would keep each)",
+    )
+    add_path(
+        p, "--mapping", role="input", what="a mapping", small=True, default=None,
+        help="with --stops: TOML naming the accelerometer signals (CAN)",
+    )  # fmt: skip
+    p.add_argument("--channel", type=int, default=None, help="with --stops: CAN channel of the IMU")
+    p.add_argument("--topic", default=None, help="with --stops: IMU topic (MCAP)")
+    add_detection_options(p)
+    p.set_defaults(run=run, field=None)
 
 
 def run(args: argparse.Namespace) -> int:
     from mountcal.io.logs import inspect_log
 
+    opts = log_options(args)
     with working(args, "reading the log"):
-        info = inspect_log(args.input, log_options(args))
+        info = inspect_log(args.input, replace(opts, mapping=None, channel=None, topic=None))  # every stream
+    parked = _parked(args, opts) if args.stops else None
     if args.json:
-        print_json(asdict(info))
+        print_json(asdict(info) | ({} if parked is None else {"parked": parked}))
         return 0
     out = result_stream()
     print(safe(f"{info.source}: {info.format}, {info.duration_s:.1f} s"), file=out)
@@ -47,4 +63,24 @@ def run(args: argparse.Namespace) -> int:
         print(f"  note: {safe(note)}", file=out)
     for line in info.incomplete:
         print(safe(f"  input file: {line}"), file=out)
+    if parked is not None:
+        print(f"parked periods: {len(parked['stops'])} stops, {len(parked['near_misses'])} near misses", file=out)
+        for stop in parked["stops"]:
+            print(f"  stop at {stop['t_start_s']:.1f}–{stop['t_end_s']:.1f} s ({stop['duration_s']:.1f} s)", file=out)
+        for line in parked["lines"]:
+            print(f"  {line}", file=out)
     return 0
+
+
+def _parked(args: argparse.Namespace, opts: Any) -> dict[str, Any]:
+    """The stops of the log and its near misses, with the thresholds used (lines for the reader)."""
+    from mountcal.io.logs import read_log
+    from mountcal.stops import find_stops
+
+    with working(args, "reading the IMU and finding its parked periods"):
+        search = find_stops(read_log([args.input], opts), detection(args))
+    return {
+        "stops": [{"t_start_s": s.t_start_s, "t_end_s": s.t_end_s, "duration_s": s.duration_s} for s in search.stops],
+        "near_misses": [m.to_dict() for m in search.near_misses],
+        "lines": search.thresholds.lines() + search.near_miss_lines(),
+    }

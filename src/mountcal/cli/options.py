@@ -241,6 +241,11 @@ def add_log_options(
         help="compass azimuth of the slope's uphill direction, with a heading signal in the log (or a stop table's "
         "compass column heading_deg)",
     )
+    add_detection_options(p)
+
+
+def add_detection_options(p: argparse.ArgumentParser) -> None:
+    """The thresholds of stop detection (unset: the library's defaults, some set from the log)."""
     d = p.add_argument_group("stop detection (default: mountcal.stops.StopDetection, some from the log)")
     for flag, text, quantity in _DETECTION.values():
         d.add_argument(flag, type=Number(quantity), default=None, help=text)

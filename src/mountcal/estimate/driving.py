@@ -45,26 +45,43 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from mountcal.conventions import FloatArray, angles_from_rot_vs
+from mountcal.driving_document import DrivingConsistency
 from mountcal.errors import NotEnoughInformation
+from mountcal.estimate import driving_checks as checks
 from mountcal.estimate.driving_intervals import (
     MIN_INTERVALS,
     Imu,
     IntArray,
     Intervals,
-    SegmentLines,
     layout_intervals,
     speed_channel,
     speed_intervals,
     tilt_rotation,
     time_offset,
+    turned_tilt_removed,
     unit_vector,
+    yaw_from_sums,
 )
 from mountcal.option_names import option
-from mountcal.result import Calibration
+from mountcal.result import Calibration, Finding
 from mountcal.samples import Samples
+from mountcal.typed_json import to_plain
 
 AGREE_Z = 2.0  # |z| above this: the two estimates disagree beyond their uncertainties (≈ 95 %)
 DISAGREE_Z = 3.0  # |z| above this (tilt or yaw): a finding; the stops and the drive are not combined
+
+
+def horizontal_axes_sigma_deg(scale: float, cross_axis: float) -> float:
+    """The 1σ turn of the longitudinal cue by the horizontal axes' scale and cross-axis errors within ± limits.
+
+    A symmetric distortion of the horizontal axes turns a direction ψ by ``(s_y − s_x)/2·sin 2ψ + c·cos 2ψ``
+    (and the perpendicular one by the opposite); with the limits read as rectangular distributions and ψ
+    anywhere, its variance is ``(scale²/6 + cross_axis²/3)/2``.
+    """
+    return float(np.degrees(np.sqrt((scale**2 / 6.0 + cross_axis**2 / 3.0) / 2.0)))
+
+
+HORIZONTAL_AXES_SIGMA_DEG = horizontal_axes_sigma_deg(0.03, 0.02)  # the default sensor class (mountcal.sensor_spec)
 
 
 @dataclass(frozen=True)
@@ -86,6 +103,9 @@ class DrivingOptions:
     road_grade_sigma_deg: float = 0.5
     road_cross_slope_sigma_deg: float = 1.5
     max_yaw_sigma_deg: float = 5.0
+    # How far the accelerometer's horizontal scale and cross-axis errors may turn the longitudinal cue (1σ, before the
+    # cues narrow it): the default sensor class's ±3 % and ±2 % (mountcal.sensor_spec), see horizontal_axes_sigma_deg.
+    horizontal_axes_sigma_deg: float = HORIZONTAL_AXES_SIGMA_DEG
 
 
 @dataclass(frozen=True)
@@ -136,6 +156,16 @@ class DrivingFit:
     options: DrivingOptions
     notes: tuple[str, ...] = field(default=())
     segments_s: FloatArray = field(default_factory=lambda: np.empty((0, 2)))
+    consistency: DrivingConsistency | None = None  # the residual tests (:mod:`mountcal.estimate.driving_checks`)
+    findings: tuple[Finding, ...] = ()  # those the family's test rejects: the model lacks an effect
+    # ``rot_vs`` with the longitudinal cue's yaw whenever its noise alone determines it, a model-error term aside
+    # (what the turns' handedness check levels the lateral acceleration with); None: the noise does not
+    rot_vs_longitudinal: Rotation | None = None
+
+    @property
+    def yaw_model_error_deg(self) -> float:
+        """The model-error term in the σ about the vehicle z axis (0 when the tests found nothing)."""
+        return 0.0 if self.consistency is None else self.consistency.model_error.yaw_about_vehicle_z_deg
 
     def to_dict(self) -> dict[str, Any]:
         """Plain types, for the result JSON (``fit["driving"]``)."""
@@ -149,6 +179,7 @@ class DrivingFit:
                 "yaw_deg": self.yaw_sigma_deg,
                 "yaw_newey_west_deg": self.yaw_sigma_hac_deg,
                 "yaw_jackknife_deg": self.yaw_sigma_jackknife_deg,
+                "yaw_model_error_deg": self.yaw_model_error_deg,
                 "rotation_about_vehicle_xyz_deg": list(self.rotation_sigma_deg),
                 "level": "1 sigma",
             },
@@ -172,6 +203,7 @@ class DrivingFit:
             "straightness_from": self.straightness_source,
             "gates": asdict(self.options),
             "notes": list(self.notes),
+            "consistency": None if self.consistency is None else to_plain(self.consistency),
         }
 
 
@@ -240,15 +272,41 @@ def estimate_driving(
     rot_tilt = tilt_rotation(up)
     last = tilt_from is not None and bool(straight)
     layout = layout_intervals(imu, speed, rot_tilt, heading, opts, None)
-    offset, offset_sigma, searched = time_offset(layout, opts, notes if last else [])
-    used = layout.at(offset)
-    fit = _fit(used, opts, where)
+    offset, offset_sigma, searched, search = time_offset(layout, opts, notes if last else [])
+    fit = _fit(layout.at(offset), opts, where)
     if not last:
         rot_tilt = rot_tilt if tilt_from is not None else tilt_rotation(fit.up_s(rot_tilt))
         layout = layout_intervals(imu, speed, rot_tilt, heading, opts, None if straight else fit.yaw_rad)
-        offset, offset_sigma, searched = time_offset(layout, opts, notes)
-        used = layout.at(offset)
-        fit = _fit(used, opts, where)
+        offset, offset_sigma, searched, search = time_offset(layout, opts, notes)
+        fit = _fit(layout.at(offset), opts, where)
+    iv = used = layout.at(offset)
+    inputs = checks.Inputs(
+        iv,
+        *_centred(iv, fit.yaw_rad),
+        fit.yaw_rad,
+        fit.scale,
+        1.0,
+        max(fit.sigma_hac_rad, fit.sigma_jack_rad or 0.0),
+        layout,
+        speed,
+        rot_tilt,
+        offset,
+        search,
+        samples.channels.get("alt_m"),
+        opts,
+        bool(straight),
+        gyro is not None,
+    )
+    found = checks.run(inputs)
+    if found.lateral_scale is not None:  # the data chose it: refit yaw with the lateral acceleration it measured
+        before = fit
+        fit = _fit(iv, opts, where, found.lateral_scale)
+        sigma = max(fit.sigma_hac_rad, fit.sigma_jack_rad or 0.0)
+        u = _centred(iv, fit.yaw_rad)[0]
+        found = checks.run(
+            replace(inputs, u=u, yaw_rad=fit.yaw_rad, lateral_scale=found.lateral_scale, sigma_rad=sigma)
+        )
+        found = checks.changed(found, "lateral_scale", "yaw_deg", np.degrees(before.yaw_rad), np.degrees(fit.yaw_rad))
     if not straight:
         straight = f"lateral acceleration (|a_y| ≤ {opts.max_lateral_mps2:g} m/s² after a first pass)"
     up_driving = fit.up_s(rot_tilt)
@@ -266,8 +324,18 @@ def estimate_driving(
         straight,
         opts,
         notes,
+        found,
     )
     return replace(result, segments_s=used.segment_spans())
+
+
+def _centred(iv: Intervals, yaw: float) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """``u``, ``a_ref`` and ``a_lat`` as the fit uses them: detrended per segment, turning's share of the road tilt
+    out of ``u``."""
+    u, a, lat = iv.centred()
+    if np.any(iv.turned_rad):
+        u = turned_tilt_removed(iv, yaw)
+    return u, a, lat
 
 
 @dataclass(frozen=True)
@@ -294,7 +362,7 @@ class _Fit:
         return unit_vector(self.mean_acc_s - self.mean_a_ref * scale * np.asarray(x_s))
 
 
-def _fit(iv: Intervals, opts: DrivingOptions, where: str) -> _Fit:
+def _fit(iv: Intervals, opts: DrivingOptions, where: str, lateral_scale: float = 1.0) -> _Fit:
     """Yaw from the intervals: the direction in which the levelled IMU follows the speed change.
 
     With ``A, B = Σ a·u_x, Σ a·u_y`` and ``C = Σ a·a_lat`` (segment-centred; ``a`` the speed
@@ -308,6 +376,7 @@ def _fit(iv: Intervals, opts: DrivingOptions, where: str) -> _Fit:
             f"(accelerating and braking), or stops on a slope with headings ({option('protocol')})"
         )
     u, a, lat = iv.centred()
+    lat = lateral_scale * lat  # the IMU's lateral specific force per v·ω, when the data chose to fit it
     saa = float(a @ a)
     if saa <= 1e-12 * a.size:  # the speed never changes: nothing points along the vehicle's x axis
         rms = float(np.sqrt(np.mean(u**2)))
@@ -326,13 +395,13 @@ def _fit(iv: Intervals, opts: DrivingOptions, where: str) -> _Fit:
             mean_acc,
             0.0,
         )
-    yaw, slope = _yaw_from_sums(float(u[:, 0] @ a), float(u[:, 1] @ a), float(lat @ a))
+    yaw, slope = yaw_from_sums(float(u[:, 0] @ a), float(u[:, 1] @ a), float(lat @ a))
     if np.any(iv.turned_rad):
         # The road's tilt of the body at a segment's start, h₀ (its horizontal gravity share), turns
         # with the heading: f ≈ f₀ − δ × f₀ adds (δ_z·h₀_y, −δ_z·h₀_x). h₀ is the segment's mean
         # levelled horizontal specific force less its mean kinematic acceleration.
-        u = _turned_tilt_removed(iv, yaw)
-        yaw, slope = _yaw_from_sums(float(u[:, 0] @ a), float(u[:, 1] @ a), float(lat @ a))
+        u = turned_tilt_removed(iv, yaw)
+        yaw, slope = yaw_from_sums(float(u[:, 0] @ a), float(u[:, 1] @ a), float(lat @ a))
     along = np.cos(yaw) * u[:, 0] - np.sin(yaw) * u[:, 1]  # vehicle x
     across = np.sin(yaw) * u[:, 0] + np.cos(yaw) * u[:, 1] - lat  # vehicle y, less the centripetal part
     n_seg = int(iv.segment.max()) + 1
@@ -343,7 +412,7 @@ def _fit(iv: Intervals, opts: DrivingOptions, where: str) -> _Fit:
     if n_seg >= 3:
         sums = [np.bincount(iv.segment, x * a, n_seg) for x in (u[:, 0], u[:, 1], lat)]
         loo = [float(x.sum()) - x for x in sums]
-        yaw_loo = np.array([_yaw_from_sums(loo[0][k], loo[1][k], loo[2][k])[0] for k in range(n_seg)])
+        yaw_loo = np.array([yaw_from_sums(loo[0][k], loo[1][k], loo[2][k])[0] for k in range(n_seg)])
         d = np.angle(np.exp(1j * (yaw_loo - yaw)))
         sigma_jack = float(np.sqrt((n_seg - 1) / n_seg * np.sum((d - d.mean()) ** 2)))
     # IMU longitudinal / d(speed)/dt, from regressing the speed change on the IMU: the noise of a
@@ -365,27 +434,6 @@ def _fit(iv: Intervals, opts: DrivingOptions, where: str) -> _Fit:
         mean_acc_s=weights @ iv.acc_s,
         mean_a_ref=float(weights @ iv.a_ref),
     )
-
-
-def _turned_tilt_removed(iv: Intervals, yaw: float) -> FloatArray:
-    """Detrended ``u`` less the share of the body's road tilt that turning rotates into it."""
-    lines = SegmentLines(iv.segment, iv.t_mid_s)
-    seg = iv.segment
-    x_l = np.array([np.cos(yaw), -np.sin(yaw)])  # vehicle x and y in levelled coordinates
-    y_l = np.array([np.sin(yaw), np.cos(yaw)])
-    h0 = np.column_stack([lines.mean(iv.u_raw[:, j]) for j in range(2)])
-    h0 -= np.outer(lines.mean(iv.a_ref), x_l) + np.outer(lines.mean(iv.a_lat), y_l)
-    u = iv.u - iv.turned_rad[:, None] * np.column_stack([h0[seg, 1], -h0[seg, 0]])
-    return np.column_stack([lines.residual(u[:, 0]), lines.residual(u[:, 1])])
-
-
-def _yaw_from_sums(a_x: float, a_y: float, a_lat: float) -> tuple[float, float]:
-    """Yaw solving ``sin(yaw)·a_x + cos(yaw)·a_y = a_lat`` near ``atan2(−a_y, a_x)``, and the slope there."""
-    r = float(np.hypot(a_x, a_y))
-    beta = float(np.arctan2(a_y, a_x))
-    phase = float(np.arcsin(np.clip(a_lat / r, -1.0, 1.0))) if r > 0 else 0.0
-    yaw = float(np.angle(np.exp(1j * (phase - beta))))
-    return yaw, max(r * np.cos(phase), 1e-300)
 
 
 def _long_run_variance(e: FloatArray, segment: IntArray) -> float:
@@ -416,8 +464,11 @@ def _result(
     straight: str,
     opts: DrivingOptions,
     notes: list[str],
+    found: checks.Checks,
 ) -> DrivingFit:
-    sigma_z = float(np.degrees(max(fit.sigma_hac_rad, fit.sigma_jack_rad or 0.0)))  # about the vehicle z axis
+    sigma_stat = float(np.degrees(max(fit.sigma_hac_rad, fit.sigma_jack_rad or 0.0)))  # about the vehicle z axis
+    model_error = found.document.model_error
+    sigma_z = float(np.hypot(sigma_stat, model_error.yaw_about_vehicle_z_deg))  # the model-error term, stated
     yaw_reason = None
     if sigma_z > opts.max_yaw_sigma_deg:
         yaw_reason = (
@@ -426,15 +477,30 @@ def _result(
         )
     yaw_rad = fit.yaw_rad if yaw_reason is None else 0.0
     rot_vs = Rotation.from_euler("z", yaw_rad) * rot_tilt
+    # The longitudinal cue's yaw wherever its noise alone determines it: a finding's model-error term (the cues half
+    # a turn apart: a mirrored sensor) may leave yaw undetermined, yet the vehicle's axes are known well enough for the
+    # sign of its turns (:func:`mountcal.crosscheck.turn_handedness`).
+    longitudinal = Rotation.from_euler("z", fit.yaw_rad) * rot_tilt if sigma_stat <= opts.max_yaw_sigma_deg else None
     # Tilt σ about the vehicle x (cross slope) and y (grade) axes: the unknown mean road attitude
     # dominates the scatter of the mean; tilt from a static calibration keeps that one's σ.
     stat = np.degrees(fit.longitudinal_rms / 9.8 / np.sqrt(max(fit.n, 1)))
-    road = (float(np.hypot(stat, opts.road_cross_slope_sigma_deg)), float(np.hypot(stat, opts.road_grade_sigma_deg)))
+    grade_sigma = opts.road_grade_sigma_deg
+    if found.grade is not None and tilt_from is None and found.grade.sigma is not None:
+        # The route's mean grade from the altitude: the mean gravity leans by it about the vehicle's y axis
+        # (nose up on an uphill route), so the body's up axis is the mean gravity turned back by it.
+        before = float(np.degrees(angles_from_rot_vs(rot_vs)[1]))
+        grade = Rotation.from_euler("y", np.radians(found.grade.value))
+        rot_vs = grade * rot_vs
+        longitudinal = None if longitudinal is None else grade * longitudinal
+        grade_sigma = found.grade.sigma
+        found = checks.changed(found, "grade", "pitch_deg", before, np.degrees(angles_from_rot_vs(rot_vs)[1]))
+    road = (float(np.hypot(stat, opts.road_cross_slope_sigma_deg)), float(np.hypot(stat, grade_sigma)))
     if tilt_from is not None:
         sx = tilt_from.rotation_sigma_deg[0] or tilt_from.roll_sigma_deg
         sy = tilt_from.rotation_sigma_deg[1] or tilt_from.pitch_sigma_deg
     else:
-        sx, sy = road
+        errors = (model_error.about_vehicle_x_deg, model_error.about_vehicle_y_deg)
+        sx, sy = (float(np.hypot(r, e)) for r, e in zip(road, errors, strict=True))
     r, p, _ = angles_from_rot_vs(rot_vs)
     roll, pitch = float(np.degrees(r)), float(np.degrees(p))
     roll_sigma, pitch_sigma, yaw_sigma = euler_sigma(rot_vs, (sx, sy, 0.0 if yaw_reason else sigma_z))
@@ -455,10 +521,20 @@ def _result(
             f"pitch {pitch:.1f}° is near ±90°: roll and yaw then trade off (gimbal lock), so compare rotations, "
             "not Euler angles; the rotation about the vehicle z axis is what the drive measures"
         )
-    if np.isfinite(fit.scale) and abs(fit.scale - 1.0) > 0.1:
+    notes += found.notes
+    if yaw_reason is None and model_error.yaw_about_vehicle_z_deg > 0:
+        found_part = model_error.yaw_about_vehicle_z_deg > model_error.horizontal_axes_deg
         notes.append(
-            f"the IMU's longitudinal acceleration is {fit.scale:.3f} × d(speed)/dt: a speed scale error, "
-            "an accelerometer scale error or a strongly graded route"
+            f"yaw rests on the longitudinal cue (speed changes on straight road); its σ about the vehicle z axis, "
+            f"{sigma_z:.3g}°, holds {sigma_stat:.3g}° of noise and "
+            + (
+                f"a model-error term of {model_error.yaw_about_vehicle_z_deg:.3g}° (half the disagreement a finding "
+                "shows)"
+                if found_part
+                else f"{model_error.horizontal_axes_deg:.3g}° for what the accelerometer's horizontal scale and "
+                f"cross-axis errors may leave (±{model_error.horizontal_axes_prior_deg:.2g}° for the sensor class, "
+                "narrowed by the turns' cue; a sensor spec, --sensor-spec, narrows it)"
+            )
         )
     return DrivingFit(
         rot_vs=rot_vs,
@@ -480,7 +556,7 @@ def _result(
         n_segments=fit.n_segments,
         usable_s=fit.usable_s,
         moving_s=moving_s,
-        speed_scale=fit.scale,
+        speed_scale=float(found.document.speed_scale.value or fit.scale),
         correlation=fit.correlation,
         longitudinal_rms_mps2=fit.longitudinal_rms,
         lateral_rms_mps2=fit.lateral_rms,
@@ -489,6 +565,9 @@ def _result(
         straightness_source=straight,
         options=opts,
         notes=tuple(notes),
+        consistency=found.document,
+        findings=found.findings,
+        rot_vs_longitudinal=longitudinal,
     )
 
 

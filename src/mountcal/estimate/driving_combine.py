@@ -16,6 +16,7 @@ from scipy.spatial.transform import Rotation
 
 from mountcal.conventions import angles_from_rot_vs
 from mountcal.estimate.driving import AGREE_Z, DISAGREE_Z, DrivingFit, euler_sigma
+from mountcal.estimate.driving_checks import YAW_TESTS
 from mountcal.estimate.driving_intervals import tilt_rotation
 from mountcal.result import Calibration, Finding, FitQuality, ModelSelection, Provenance
 
@@ -31,10 +32,17 @@ def driving_calibration(
     and cross slope), yaw from the speed changes; slope and bias are not applicable (no stops) and
     the result says so. The full driving fit is in ``fit["driving"]``.
     """
+    grade = None if fit.consistency is None else fit.consistency.effect("grade")
+    road = (
+        f"the route's mean grade is {grade.value:+.2f}° ± {grade.sigma:.2f}° (from the altitude, taken out) and its "
+        f"cross slope 0 ± {fit.options.road_cross_slope_sigma_deg:g}°"
+        if grade is not None and grade.chosen and grade.value is not None and grade.sigma is not None
+        else f"the route's mean grade and cross slope are 0 ± {fit.options.road_grade_sigma_deg:g}° and 0 ± "
+        f"{fit.options.road_cross_slope_sigma_deg:g}°"
+    )
     notes = [
-        "from driving only: no parked stops; roll and pitch are the mean gravity direction while driving, "
-        "whose σ assume the route's mean grade and cross slope are 0 ± "
-        f"{fit.options.road_grade_sigma_deg:g}° and 0 ± {fit.options.road_cross_slope_sigma_deg:g}°",
+        f"from driving only: no parked stops; roll and pitch are the mean gravity direction while driving, whose σ "
+        f"assume {road}",
         "an accelerometer bias b tilts the mean gravity by b/g (20 mg → 1.1°) and cannot be told from a tilt "
         "while driving; parked stops on a slope can (docs/conventions.md §4)",
         "slope: not applicable (no parked stops)",
@@ -65,6 +73,8 @@ def driving_calibration(
         model_selection=ModelSelection(mode="driving", chosen=("rotation",)),
         provenance=provenance,
         notes=tuple(notes),
+        unexplained=fit.findings,
+        confident=not fit.findings,
     )
 
 
@@ -199,6 +209,7 @@ def combine(static: Calibration, fit: DrivingFit) -> Calibration:
     combination.update(yaw_deg=yaw_e, yaw_sigma_about_vehicle_z_deg=s_z)
     if fit.tilt_check is not None:
         combination["tilt_check"] = fit.tilt_check
+    doubts = tuple(f for f in fit.findings if f.test in YAW_TESTS)  # what the drive's own tests say of its yaw
     return replace(
         static,
         rot_vs=rot_vs,
@@ -210,4 +221,6 @@ def combine(static: Calibration, fit: DrivingFit) -> Calibration:
         rotation_sigma_deg=(static.rotation_sigma_deg[0], static.rotation_sigma_deg[1], s_z),
         fit=replace(static.fit, calibrated_from="stops + driving", driving=fit.to_dict(), combination=combination),
         notes=tuple(notes),
+        unexplained=(*static.unexplained, *doubts),
+        confident=static.confident and not doubts,
     )

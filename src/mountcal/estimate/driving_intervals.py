@@ -304,10 +304,58 @@ class SegmentLines:
         return self._sums(x) / self._sums(np.ones_like(x))
 
 
+def turned_share(iv: Intervals, yaw: float) -> FloatArray:
+    """The share of the body's road tilt that turning rotates into ``u`` (m, 2), levelled coordinates.
+
+    The road's tilt of the body at a segment's start, h₀ (its horizontal gravity share), turns with the heading:
+    f ≈ f₀ − δ × f₀ adds (δ_z·h₀_y, −δ_z·h₀_x). h₀ is the segment's mean levelled horizontal specific force less
+    its mean kinematic acceleration.
+    """
+    lines = SegmentLines(iv.segment, iv.t_mid_s)
+    x_l = np.array([np.cos(yaw), -np.sin(yaw)])  # vehicle x and y in levelled coordinates
+    y_l = np.array([np.sin(yaw), np.cos(yaw)])
+    h0 = np.column_stack([lines.mean(iv.u_raw[:, j]) for j in range(2)])
+    h0 -= np.outer(lines.mean(iv.a_ref), x_l) + np.outer(lines.mean(iv.a_lat), y_l)
+    return np.asarray(iv.turned_rad[:, None] * np.column_stack([h0[iv.segment, 1], -h0[iv.segment, 0]]), dtype=float)
+
+
+def turned_tilt_removed(iv: Intervals, yaw: float) -> FloatArray:
+    """Detrended ``u`` less the share of the body's road tilt that turning rotates into it."""
+    lines = SegmentLines(iv.segment, iv.t_mid_s)
+    u = iv.u - turned_share(iv, yaw)
+    return np.column_stack([lines.residual(u[:, 0]), lines.residual(u[:, 1])])
+
+
+def yaw_from_sums(a_x: float, a_y: float, a_lat: float) -> tuple[float, float]:
+    """Yaw solving ``sin(yaw)·a_x + cos(yaw)·a_y = a_lat`` near ``atan2(−a_y, a_x)``, and the slope there."""
+    r = float(np.hypot(a_x, a_y))
+    beta = float(np.arctan2(a_y, a_x))
+    phase = float(np.arcsin(np.clip(a_lat / r, -1.0, 1.0))) if r > 0 else 0.0
+    yaw = float(np.angle(np.exp(1j * (phase - beta))))
+    return yaw, max(r * np.cos(phase), 1e-300)
+
+
 # --------------------------------------------------------------------------- time offset and fit
 
 
-def time_offset(layout: Layout, opts: DrivingOptions, notes: list[str]) -> tuple[float, float | None, bool]:
+@dataclass(frozen=True)
+class OffsetSearch:
+    """The correlation of the fine lags per segment (at lag 0's segments), to find the offset of any segments."""
+
+    lags_s: FloatArray  # (k,)
+    cross: FloatArray  # (k, segments) Σ along·a_ref per segment
+    energy: FloatArray  # (k, segments) Σ along² per segment
+    segment_t_s: FloatArray  # (segments,) mean time of each segment
+
+    def offset(self, segments: np.ndarray) -> float:
+        """The lag of the largest correlation over the chosen segments (a boolean mask or indices)."""
+        c, e = self.cross[:, segments].sum(axis=1), self.energy[:, segments].sum(axis=1)
+        return peak(self.lags_s, c / np.sqrt(np.maximum(e, 1e-300)))
+
+
+def time_offset(
+    layout: Layout, opts: DrivingOptions, notes: list[str]
+) -> tuple[float, float | None, bool, OffsetSearch | None]:
     """The lag that best aligns the IMU with the speed change (jackknife σ over segments), or the given one.
 
     The IMU's longitudinal specific force (along the direction of the cross covariance at lag 0,
@@ -318,10 +366,10 @@ def time_offset(layout: Layout, opts: DrivingOptions, notes: list[str]) -> tuple
     intervals are those of lag 0, so every lag is judged on the same intervals.
     """
     if opts.time_offset_s is not None:
-        return float(opts.time_offset_s), None, False
+        return float(opts.time_offset_s), None, False, None
     base = layout.at(0.0)
     if base.a_ref.size < MIN_INTERVALS:
-        return 0.0, None, False
+        return 0.0, None, False, None
     lines = SegmentLines(base.segment, base.t_mid_s)
     _, a_ref, _ = base.centred()
     t_a, t_b = layout.t_a[base.index], layout.t_b[base.index]
@@ -363,7 +411,8 @@ def time_offset(layout: Layout, opts: DrivingOptions, notes: list[str]) -> tuple
         c_all, e_all = cross.sum(axis=1), energy.sum(axis=1)
         loo = np.array([peak(fine, correlation(c_all - cross[:, k], e_all - energy[:, k])) for k in range(n_seg)])
         sigma = float(np.sqrt((n_seg - 1) / n_seg * np.sum((loo - loo.mean()) ** 2)))
-    return best, sigma, True
+    times = np.bincount(base.segment, base.t_mid_s, n_seg) / np.bincount(base.segment, minlength=n_seg)
+    return best, sigma, True, OffsetSearch(fine, cross, energy, times)
 
 
 def peak(x: FloatArray, y: FloatArray) -> float:

@@ -38,6 +38,11 @@ class DriveTruth:
     gyro_bias_rad_s: FloatArray = field(default_factory=lambda: np.zeros(3))
     speed_delay_s: float = 0.0  # the speed clock lags the IMU clock by this much
     speed_scale: float = 1.0  # logged speed / true speed
+    scale_matrix: FloatArray = field(default_factory=lambda: np.eye(3))  # acc_s = M · R_vsᵀ f_v + b
+    pitch_per_acc_rad: float = 0.0  # body pitch (nose up) per m/s² of longitudinal acceleration
+    roll_per_acc_rad: float = 0.0  # body roll (outward) per m/s² of lateral acceleration
+    remount_at_s: float | None = None  # from this time on the sensor is mounted by remount_rot_vs
+    remount_rot_vs: Rotation | None = None
 
     @property
     def angles_deg(self) -> tuple[float, float, float]:
@@ -63,6 +68,8 @@ class DriveLog:
         True along-road speed and its time derivative on the IMU clock.
     grade_rad, bank_rad : ndarray, shape (n,)
         Road grade (uphill positive) and cross slope (right side down positive).
+    alt_m : ndarray, shape (n,)
+        True altitude above the start, m, on the IMU clock.
     f_v, omega_v : ndarray, shape (n, 3)
         True specific force (m/s²) and angular rate (rad/s) in the vehicle frame.
     truth : DriveTruth
@@ -81,12 +88,17 @@ class DriveLog:
     f_v: FloatArray
     omega_v: FloatArray
     truth: DriveTruth
+    alt_m: FloatArray = field(default_factory=lambda: np.zeros(0))
+    altitude: Channel | None = None  # the logged altitude (a GNSS's, with noise), when simulated
 
     def to_samples(self, gyro: bool = True, heading: bool = False) -> Samples:
-        """The drive as a reader would deliver it: IMU samples with a ``speed_mps`` channel."""
+        """The drive as a reader would deliver it: IMU samples with a ``speed_mps`` channel (and ``alt_m``
+        when an altitude was simulated)."""
         channels = {"speed_mps": Channel(self.speed_t_s.copy(), self.speed_mps.copy())}
         if heading:
             channels["heading_deg"] = Channel(self.t_s.copy(), self.heading_deg.copy())
+        if self.altitude is not None:
+            channels["alt_m"] = Channel(self.altitude.t_s.copy(), self.altitude.value.copy())
         return Samples(
             self.t_s.copy(),
             self.acc_s.copy(),
@@ -119,6 +131,12 @@ def simulate_drive(
     cross_slope_variation: float = 0.01,
     g_mps2: float = G_N,
     seed: int | np.random.Generator | None = None,
+    scale_matrix: FloatArray | None = None,
+    pitch_per_acc_rad: float = PITCH_PER_ACC_RAD,
+    roll_per_acc_rad: float = ROLL_PER_ACC_RAD,
+    remount_at_s: float | None = None,
+    remount_rot_vs: Rotation | None = None,
+    altitude_noise_m: float | None = None,
 ) -> DriveLog:
     """Simulate a mixed drive of ``duration_s`` seconds.
 
@@ -144,6 +162,15 @@ def simulate_drive(
     g_mps2 : float
         Local gravity.
     seed : int or Generator, optional
+    scale_matrix : array_like, shape (3, 3), optional
+        Scale and cross-axis errors of the accelerometer: ``acc_s = M · R_vsᵀ f_v + b``.
+    pitch_per_acc_rad, roll_per_acc_rad : float
+        The body's pitch (nose up) per m/s² of longitudinal acceleration and roll (outward) per m/s² of
+        lateral acceleration on its suspension.
+    remount_at_s, remount_rot_vs : float and Rotation, optional
+        The sensor is mounted by ``remount_rot_vs`` from ``remount_at_s`` on (a remount mid-drive).
+    altitude_noise_m : float, optional
+        Log an altitude channel (``alt_m``, 1 Hz, as a GNSS would) with this white noise.
     """
     rng = np.random.default_rng(seed)
     rot = rot_vs if rot_vs is not None else rot_vs_from_angles(*np.radians([roll_deg, pitch_deg, yaw_deg]))
@@ -166,22 +193,45 @@ def simulate_drive(
     acc_n = np.gradient(vel_n, dt, axis=0)
     # Body attitude: road (heading, grade, cross slope) plus suspension pitch and roll.
     a_lat = v * yaw_rate
-    body_pitch_up = grade + PITCH_PER_ACC_RAD * acc_long
-    body_roll_right = bank + ROLL_PER_ACC_RAD * a_lat
+    body_pitch_up = grade + pitch_per_acc_rad * acc_long
+    body_roll_right = bank + roll_per_acc_rad * a_lat
     rot_nv = Rotation.from_euler("ZYX", np.column_stack([heading, -body_pitch_up, body_roll_right]))
     f_v = rot_nv.inv().apply(acc_n + np.array([0.0, 0.0, g_mps2]))
     omega_v = _body_rate(rot_nv, dt)
 
     vibration = _vibration(t, v, vibration_mps2, rng)
-    acc_s = rot.inv().apply(f_v + vibration) + bias + rng.normal(0.0, noise_mps2, size=(n, 3))
-    gyro_s = rot.inv().apply(omega_v) + gyro_bias + rng.normal(0.0, gyro_noise_rad_s, size=(n, 3))
+    scale_m = np.eye(3) if scale_matrix is None else np.asarray(scale_matrix, dtype=float)
+    sensed, turned = rot.inv().apply(f_v + vibration), rot.inv().apply(omega_v)
+    if remount_at_s is not None and remount_rot_vs is not None:
+        late = t >= remount_at_s
+        sensed[late] = remount_rot_vs.inv().apply((f_v + vibration)[late])
+        turned[late] = remount_rot_vs.inv().apply(omega_v[late])
+    acc_s = sensed @ scale_m.T + bias + rng.normal(0.0, noise_mps2, size=(n, 3))
+    gyro_s = turned + gyro_bias + rng.normal(0.0, gyro_noise_rad_s, size=(n, 3))
 
     speed_t_true = np.arange(0.0, t[-1], 1.0 / speed_rate_hz)
     speed = np.interp(speed_t_true, t, v) * speed_scale + rng.normal(0.0, speed_noise_mps, speed_t_true.size)
     if speed_resolution_mps > 0:
         speed = np.round(speed / speed_resolution_mps) * speed_resolution_mps
     speed = np.clip(speed, 0.0, None)  # wheel speed and GNSS speed are unsigned
-    truth = DriveTruth(rot, g_mps2, bias, gyro_bias, speed_delay_s, speed_scale)
+    alt = np.cumsum(vel_n[:, 2]) * dt
+    altitude = None
+    if altitude_noise_m is not None:  # drawn last: the rest of the drive is the same with or without it
+        t_alt = np.arange(0.0, t[-1], 1.0)
+        altitude = Channel(t_alt, np.interp(t_alt, t, alt) + rng.normal(0.0, altitude_noise_m, t_alt.size))
+    truth = DriveTruth(
+        rot,
+        g_mps2,
+        bias,
+        gyro_bias,
+        speed_delay_s,
+        speed_scale,
+        scale_m,
+        pitch_per_acc_rad,
+        roll_per_acc_rad,
+        remount_at_s,
+        remount_rot_vs,
+    )
     return DriveLog(
         t_s=t,
         acc_s=acc_s,
@@ -196,6 +246,8 @@ def simulate_drive(
         f_v=f_v,
         omega_v=omega_v,
         truth=truth,
+        alt_m=alt,
+        altitude=altitude,
     )
 
 
