@@ -390,3 +390,23 @@ def test_a_real_canedge_drive_split_at_10_minutes_calibrates_as_the_unsplit_file
     for angle in ("roll", "pitch", "yaw"):
         assert row[f"{angle}_deg"] == pytest.approx(getattr(single, f"{angle}_deg"), abs=1e-9)
         assert row[f"{angle}_sigma_deg"] == pytest.approx(getattr(single, f"{angle}_sigma_deg"), abs=1e-9)
+
+
+def test_a_fetch_folder_is_removed_once_its_owner_is_gone_even_if_its_pid_lives(tmp_path: Path) -> None:
+    """A killed worker's scratch folder goes with the next fetch; a pid is no proof (pids are reused), its lock is."""
+    import fcntl
+
+    from mountcal.fleet.storage import SCRATCH_LOCK, SCRATCH_PREFIX, _remove_orphans
+
+    alive = os.getpid()  # a live pid: the folder's owner died and its pid went to another process
+    left = Path(tempfile.mkdtemp(prefix=f"{SCRATCH_PREFIX}{alive}-"))
+    (left / SCRATCH_LOCK).touch()
+    held_by_us = Path(tempfile.mkdtemp(prefix=f"{SCRATCH_PREFIX}{alive}-"))
+    (held_by_us / SCRATCH_LOCK).touch()
+    starting = Path(tempfile.mkdtemp(prefix=f"{SCRATCH_PREFIX}{alive}-"))  # no lock yet: its pid decides
+    with open(held_by_us / SCRATCH_LOCK) as f:
+        fcntl.flock(f, fcntl.LOCK_EX)
+        _remove_orphans()
+        assert not left.exists() and held_by_us.exists() and starting.exists()
+    for folder in (held_by_us, starting):
+        shutil.rmtree(folder)

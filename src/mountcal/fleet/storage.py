@@ -17,6 +17,7 @@ protocol, e.g. ``endpoint_url=…``, ``anon=true``). s3fs comes with ``pip insta
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import os
 import re
 import shutil
@@ -29,7 +30,8 @@ from typing import Any
 from mountcal.errors import InputError
 
 BLOCK_BYTES = 8 << 20  # one ranged read of a fetch: the memory a worker's fetch holds
-SCRATCH_PREFIX = "mountcal-fetch-"  # + the worker's pid: a killed worker's folder is removed by the next fetch
+SCRATCH_PREFIX = "mountcal-fetch-"  # + the worker's pid; a killed worker's folder is removed by the next fetch
+SCRATCH_LOCK = ".held"  # locked by the fetch that owns the folder: the kernel releases it when the worker dies
 _URL = re.compile(r"^[A-Za-z][A-Za-z0-9+.-]*://")
 STORAGE_OPTION = "--storage-option"
 
@@ -181,7 +183,11 @@ def local_copies(urls: Sequence[str], options: Mapping[str, Any], stamps: Sequen
     """
     _remove_orphans()
     scratch = tempfile.mkdtemp(prefix=f"{SCRATCH_PREFIX}{os.getpid()}-")
+    lock = os.path.join(scratch, SCRATCH_LOCK)
+    held = os.open(lock + ".new", os.O_CREAT | os.O_WRONLY, 0o600)
     try:
+        fcntl.flock(held, fcntl.LOCK_EX)
+        os.rename(lock + ".new", lock)  # seen by others only once locked
         paths = []
         for i, (url, stamp) in enumerate(zip(urls, stamps, strict=True)):
             fs, path = filesystem(url, options)
@@ -206,14 +212,30 @@ def local_copies(urls: Sequence[str], options: Mapping[str, Any], stamps: Sequen
         yield paths
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
+        os.close(held)
 
 
 def _remove_orphans() -> None:
-    """Delete the scratch folders of workers that were killed while fetching (their pid is gone)."""
+    """Delete the scratch folders of workers that were killed while fetching: their lock is free (a
+    pid alone is not proof: on a busy machine a dead worker's pid is soon another process's)."""
     for folder in Path(tempfile.gettempdir()).glob(f"{SCRATCH_PREFIX}*-*"):
-        pid = folder.name[len(SCRATCH_PREFIX) :].split("-", 1)[0]
-        if pid.isdigit() and not _alive(int(pid)):
+        if _orphaned(folder):
             shutil.rmtree(folder, ignore_errors=True)
+
+
+def _orphaned(folder: Path) -> bool:
+    pid = folder.name[len(SCRATCH_PREFIX) :].split("-", 1)[0]
+    try:
+        held = os.open(folder / SCRATCH_LOCK, os.O_RDONLY | os.O_NOFOLLOW)
+    except OSError:  # no lock yet (a fetch starting) or not ours: only a dead pid says so
+        return pid.isdigit() and not _alive(int(pid))
+    try:
+        fcntl.flock(held, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        return False  # its fetch holds it
+    finally:
+        os.close(held)
+    return True
 
 
 def _alive(pid: int) -> bool:
