@@ -1,8 +1,8 @@
 """An output's suffix means its format, or the output is refused before anything is written
 (issue 23, reproduction 5: ``rotate -o out.blf`` wrote Parquet under a BLF name, exit 0).
 
-Each output option declares the suffixes of what it writes, where its parser is built
-(:func:`mountcal.cli.options.declare_output_suffixes`); the one check
+Each output option declares the suffixes of what it writes where its parser is built, in its path
+declaration (``add_path(..., formats=...)``, :mod:`mountcal.cli.path_options`); the one check
 (:func:`mountcal.output_suffix.check_output_suffix`) runs from that declaration before every
 command, and the library's writers that choose a format by name apply it too.
 """
@@ -16,6 +16,7 @@ import pytest
 
 from mountcal.apply.rotate_log import rotate_log
 from mountcal.cli import COMMANDS, build_parser, main
+from mountcal.cli.path_options import declared, label
 from mountcal.errors import InputError
 from mountcal.output_suffix import check_output_suffix
 from mountcal.result import Calibration
@@ -86,16 +87,32 @@ def test_every_output_option_is_checked_before_the_command_runs(
     assert list(tmp_path.iterdir()) == []
 
 
-def test_every_command_with_a_file_output_declares_its_suffixes() -> None:
+# outputs whose names are not one format's: the command checks them itself
+OWN_NAMES = {
+    ("live", "-o"): "a prefix: PREFIX.blf, PREFIX.json, PREFIX_stops.csv, PREFIX_protocol.csv",
+    ("fleet", "-o"): "must end in .parquet: run_fleet refuses any other name, a missing suffix too",
+    ("simulate", "--log"): "each log is written in the format its own suffix names (.mcap, .blf, .mf4, ...)",
+}
+
+
+def test_every_output_declares_the_formats_it_writes() -> None:
+    """Walks every command's path declarations: an output added later without its formats fails here."""
     sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    outputs = []
     for name in COMMANDS:
-        parser = sub.choices[name]
-        declared = parser.get_default("output_suffixes") or {}
-        outputs = {a.dest for a in parser._actions if a.dest in ("output", "report", "truth", "json_events")}
-        if name == "live":  # -o is a prefix: PREFIX.blf, PREFIX.json, PREFIX_stops.csv
-            outputs.discard("output")
-        if name == "export":  # its suffixes follow --to: mountcal.outputs.exporters.SUFFIXES, checked by export
-            outputs.discard("output")
-        if name == "fleet":  # -o must end in .parquet: run_fleet refuses any other name, a missing suffix too
-            outputs.discard("output")
-        assert outputs <= set(declared), (name, outputs - set(declared))
+        for action in sub.choices[name]._actions:
+            spec = declared(action)
+            if spec is not None and spec.role == "output":
+                outputs.append((name, label(action)))
+                assert spec.formats or (name, label(action)) in OWN_NAMES, (name, label(action))
+    assert len(outputs) >= 15 and set(OWN_NAMES) <= set(outputs)
+
+
+def test_export_takes_the_suffixes_of_its_format(
+    result: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["export", str(result), "--to", "yaml", "-o", str(tmp_path / "m.blf")]) == 2
+    assert "a name ending in .blf" in capsys.readouterr().err and not (tmp_path / "m.blf").exists()
+    assert main(["export", str(result), "--to", "json", "-o", str(tmp_path / "m.sh")]) == 2
+    assert main(["export", str(result), "--to", "yaml", "-o", str(tmp_path / "m.yml")]) == 0
+

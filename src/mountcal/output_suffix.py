@@ -49,6 +49,8 @@ DATA_SUFFIXES: dict[str, str] = {
     ".yaml": "YAML",
     ".yml": "YAML",
     ".xml": "XML",
+    ".xacro": "Xacro",
+    ".sh": "shell script",
     ".urdf": "URDF",
     ".ubx": "UBX",
     ".html": "HTML",

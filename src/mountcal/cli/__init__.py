@@ -22,7 +22,7 @@ from collections.abc import Sequence
 
 from mountcal import budget
 from mountcal.atomic import Terminated, removed_on_signals
-from mountcal.cli.options import EXIT_CODES, check_output_suffixes, configure_logging
+from mountcal.cli.options import EXIT_CODES, configure_logging
 from mountcal.cli.path_options import check_paths, command_parser
 from mountcal.cli.results import results_only
 from mountcal.errors import InputError, MountcalError
@@ -60,7 +60,6 @@ def main(argv: Sequence[str] | None = None) -> int:
             reading(getattr(args, "allow_truncated", False)),
         ):
             check_paths(command_parser(parser, args.command), args)  # every declared path, before any work
-            check_output_suffixes(args)  # an output named for another format
             return int(args.run(args))
     except MountcalError as err:
         log.error("error: %s", safe(err, keep=chr(10)))

@@ -13,7 +13,6 @@ from mountcal.cli.options import (
     add_fit_options,
     add_input_kind,
     add_log_options,
-    declare_output_suffixes,
     log_job,
     print_json,
     require,
@@ -36,10 +35,10 @@ def add_parser(sub: Any) -> None:
         inputs=("STOPS|LOG", "stop table (beta_deg, ax, ay, az, ...; '-': CSV on stdin) or log file(s)"),
         reads={"what": "a stop table or log", "folders": True, "stdio": True},
         output="result JSON to write ('-': stdout)",
-        writes={"what": "the result", "stdio": True},
+        writes={"what": "the result", "stdio": True, "formats": (".json",)},
     )
     add_path(
-        p, "--report", role="output", what="the HTML report", default=None,
+        p, "--report", role="output", what="the HTML report", formats=(".html", ".htm"), default=None,
         help="also write a self-contained HTML report here",
     )  # fmt: skip
     add_log_options(p)
@@ -61,7 +60,6 @@ def add_parser(sub: Any) -> None:
         help="local gravity in m/s², or with its unit (1g; default: from lat_deg/alt_m when the data have them, "
         "else 9.80665); a bare number outside 9.7–9.9 is refused",
     )
-    declare_output_suffixes(p, {"output": (".json",), "report": (".html", ".htm")})
     p.set_defaults(run=run)
 
 

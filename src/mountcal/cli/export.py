@@ -39,7 +39,7 @@ def add_parser(sub: Any) -> None:
         reads={"what": "a result JSON", "small": True},
         many=False,
         output="file to write; none or '-' writes to stdout",
-        writes={"what": "the export", "stdio": True},
+        writes={"what": "the export", "stdio": True, "formats": _suffixes, "formats_by": "--to"},
     )
     p.add_argument("--to", required=True, choices=FORMAT_NAMES, help="target format (see docs/exporters.md)")
     p.add_argument(
@@ -77,16 +77,21 @@ def add_parser(sub: Any) -> None:
     p.set_defaults(run=run)
 
 
+def _suffixes(args: argparse.Namespace) -> tuple[str, ...]:
+    """The suffixes ``-o`` may end in for ``--to`` (the first is the format's own)."""
+    from mountcal.outputs.exporters import SUFFIXES
+
+    return tuple(suffix for suffix, formats in SUFFIXES.items() if args.to in formats)
+
+
 def run(args: argparse.Namespace) -> int:
     from mountcal.atomic import atomic_path
     from mountcal.errors import InputError
-    from mountcal.outputs.exporters import DEFAULT_FRAMES, Frames, check_suffix, export, read_parent_pose
+    from mountcal.outputs.exporters import DEFAULT_FRAMES, Frames, export, read_parent_pose
     from mountcal.result import Calibration
 
     result = Path(args.input)
     to_stdout = args.output in (None, STDOUT)
-    if not to_stdout:
-        check_suffix(args.to, args.output)
     cal = Calibration.load(result)
     frames = None
     if args.parent or args.child or args.translation or args.parent_pose:

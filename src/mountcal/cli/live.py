@@ -8,7 +8,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from mountcal.cli.options import STDOUT, add_axes_option, add_command, declare_output_suffixes
+from mountcal.cli.options import STDOUT, add_axes_option, add_command
 from mountcal.cli.path_options import add_path
 from mountcal.cli.results import result_stream
 from mountcal.ranges import Number
@@ -49,15 +49,18 @@ def add_parser(sub: Any) -> None:
         "--min-stop-s", type=Number("duration_s"), default=None, help="shortest stop (s; default: StopDetection's)"
     )
     add_path(
-        p, "--json-events", role="output", what="the events", stdio=True, default=None,
+        p, "--json-events", role="output", what="the events", stdio=True, formats=(".jsonl", ".ndjson", ".json"),
+        default=None,
         help="also write the events as JSON lines here ('-': stdout)",
     )  # fmt: skip
     add_path(
         p, "-o", "--output", role="output", what="the session's files", writes=_writes, default="session",
         help="prefix: PREFIX.blf, PREFIX.json, PREFIX_stops.csv, PREFIX_protocol.csv",
     )  # fmt: skip
-    add_path(p, "--report", role="output", what="the HTML report", default=None, help="also write the HTML report here")
-    declare_output_suffixes(p, {"json_events": (".jsonl", ".ndjson", ".json"), "report": (".html", ".htm")})
+    add_path(
+        p, "--report", role="output", what="the HTML report", formats=(".html", ".htm"), default=None,
+        help="also write the HTML report here",
+    )  # fmt: skip
     p.set_defaults(run=run)
 
 

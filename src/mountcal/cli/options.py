@@ -11,7 +11,7 @@ import json
 import logging
 import sys
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import TYPE_CHECKING, Any
 
@@ -93,47 +93,6 @@ def common_options() -> argparse.ArgumentParser:
         "the result names it. Without it such a file is refused",
     )
     return common
-
-
-Suffixes = tuple[str, ...] | Callable[[argparse.Namespace], tuple[str, ...]]
-_SUFFIXES = "output_suffixes"  # the parser default that holds a command's declaration
-
-
-def declare_output_suffixes(p: argparse.ArgumentParser, suffixes: dict[str, Suffixes]) -> None:
-    """Declare, by option destination (``"output"`` is ``-o``), the suffixes of the formats each
-    output option writes (the default first), or a function of the parsed arguments giving them
-    (``export --to``). :func:`check_output_suffixes` checks them before the command runs."""
-    p.set_defaults(**{_SUFFIXES: suffixes})
-
-
-def check_output_suffixes(args: argparse.Namespace) -> None:
-    """Refuse an output named for another format than its option writes, from the parser's
-    declaration (:func:`declare_output_suffixes`; :func:`mountcal.output_suffix.check_output_suffix`)."""
-    from mountcal.output_suffix import check_output_suffix
-
-    for dest, declared in getattr(args, _SUFFIXES, {}).items():
-        value = getattr(args, dest, None)
-        if value is None or value == STDOUT or _names_another_argument(args, dest, str(value)):
-            continue  # an output onto another argument's file: the command refuses that for what it is
-        flag = "-o" if dest == "output" else "--" + dest.replace("_", "-")
-        check_output_suffix(f"{args.command} {flag}", value, declared(args) if callable(declared) else declared)
-
-
-def _names_another_argument(args: argparse.Namespace, dest: str, value: str) -> bool:
-    """Whether an output names the same file as another argument (an input, or a second output)."""
-    import os
-    from pathlib import Path
-
-    def same(other: object) -> bool:
-        if not isinstance(other, str) or other == STDOUT:
-            return False
-        try:
-            return Path(other).resolve() == Path(value).resolve() or os.path.samefile(other, value)
-        except (OSError, ValueError):
-            return False
-
-    others = [v for key, v in vars(args).items() if key != dest]
-    return any(same(v) or (isinstance(v, list | tuple) and any(same(x) for x in v)) for v in others)
 
 
 def add_input_kind(p: argparse.ArgumentParser) -> None:

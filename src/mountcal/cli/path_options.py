@@ -10,7 +10,9 @@ declarations alone:
   DBC, a mapping, a protocol sheet, a result JSON, ...) are at most the small-input limit
   (:func:`mountcal.paths.input_file`);
 - no output equals, aliases or replaces an input of the same command, another output, a
-  directory, a device, a FIFO or a socket (:func:`mountcal.paths.check_outputs`).
+  directory, a device, a FIFO or a socket (:func:`mountcal.paths.check_outputs`);
+- no output is named for another format than it writes (``rotate -o out.blf``; its declared
+  ``formats``, :func:`mountcal.output_suffix.check_output_suffix`).
 
 So an option added later is checked without a line in its command; ``tests/test_paths.py`` fails
 for a path option added with plain ``add_argument``.
@@ -25,6 +27,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 STDIO = "-"
+Formats = tuple[str, ...] | Callable[[argparse.Namespace], tuple[str, ...]]
 _ATTRIBUTE = "mountcal_path"
 
 
@@ -45,8 +48,13 @@ class PathOption:
         An input may be a glob pattern (expanded by the command).
     stdio : bool
         ``-`` is stdin (input) or stdout (output).
-    formats : tuple of str
-        The suffixes it takes (lower case, with the dot); empty: any.
+    formats : tuple of str, or a function of the parsed arguments giving them
+        For an output, the suffixes of the formats it writes (lower case, with the dot; the default
+        first): a name ending in another data format's suffix is refused
+        (:func:`mountcal.output_suffix.check_output_suffix`). Empty: the command decides (live's
+        prefix, fleet's ``.parquet``).
+    formats_by : str, optional
+        The option whose value chooses the format (``export``'s ``--to``), named in the refusal.
     writes : callable, optional
         For an output: ``(value, args) -> [(path, note)]``, the files it writes (``note`` says
         which, for messages); default: the value itself.
@@ -58,8 +66,13 @@ class PathOption:
     small: bool = False
     globs: bool = False
     stdio: bool = False
-    formats: tuple[str, ...] = ()
+    formats: Formats = ()
     writes: Callable[[Any, argparse.Namespace], list[tuple[str, str]]] | None = None
+    formats_by: str | None = None
+
+    def suffixes(self, args: argparse.Namespace) -> tuple[str, ...]:
+        """The suffixes of what it writes, for these arguments."""
+        return self.formats(args) if callable(self.formats) else self.formats
 
 
 def add_path(
@@ -71,13 +84,14 @@ def add_path(
     small: bool = False,
     globs: bool = False,
     stdio: bool = False,
-    formats: tuple[str, ...] = (),
+    formats: Formats = (),
     writes: Callable[[Any, argparse.Namespace], list[tuple[str, str]]] | None = None,
+    formats_by: str | None = None,
     **argument: Any,
 ) -> argparse.Action:
     """``parser.add_argument(*flags, **argument)``, declared as a path the command reads or writes."""
     action = parser.add_argument(*flags, **argument)
-    setattr(action, _ATTRIBUTE, PathOption(role, what, folders, small, globs, stdio, formats, writes))
+    setattr(action, _ATTRIBUTE, PathOption(role, what, folders, small, globs, stdio, formats, writes, formats_by))
     return action
 
 
@@ -136,13 +150,19 @@ def check_paths(parser: argparse.ArgumentParser, args: argparse.Namespace) -> No
     InputError
         Naming the option, the path, what was found and what to do.
     """
+    from mountcal.output_suffix import check_output_suffix
     from mountcal.paths import check_outputs, input_file
 
     inputs: dict[str, list[str]] = {}
     written: list[tuple[str, str]] = []
+    named: list[tuple[str, str, tuple[str, ...]]] = []  # outputs whose suffix says their format
     for _, spec, name, path in paths_of(parser, args):
         if spec.role == "output":
             written.append((name, path))
+            if spec.formats:
+                by = spec.formats_by
+                chosen = "" if by is None else f" with {by} {getattr(args, by.lstrip('-').replace('-', '_'))}"
+                named.append((f"{args.command} {name.split(' ')[0]}{chosen}", path, spec.suffixes(args)))
             continue
         if spec.globs and not Path(path).exists():
             continue  # a pattern, or nothing: the command expands it and says what it found
@@ -154,7 +174,10 @@ def check_paths(parser: argparse.ArgumentParser, args: argparse.Namespace) -> No
         name if names.count(name) == 1 else f"{name} #{names[:i].count(name) + 1}": path
         for i, (name, path) in enumerate(written)
     }
-    check_outputs(outputs, inputs)
+    check_outputs(outputs, inputs)  # first: an output onto an input is refused for what it is
+    for option, path, suffixes in named:
+        if suffixes:
+            check_output_suffix(option, path, suffixes)
 
 
 __all__ = ["PathOption", "add_path", "check_paths", "command_parser", "declared", "label", "paths_of"]

@@ -15,7 +15,6 @@ from mountcal.cli.options import (
     add_command,
     add_log_options,
     add_sensor_options,
-    declare_output_suffixes,
     log_options,
     working,
 )
@@ -55,11 +54,11 @@ def add_parser(sub: Any) -> None:
         "--drive-s", type=Number("drive_s"), default=60.0, help="time between stops, for the session length (s)"
     )
     add_path(
-        p, "-o", "--output", role="output", what="the protocol sheet", default=None, help="protocol sheet CSV to write"
-    )
+        p, "-o", "--output", role="output", what="the protocol sheet", formats=(".csv",), default=None,
+        help="protocol sheet CSV to write",
+    )  # fmt: skip
     add_sensor_options(p)
     add_log_options(p, repeat_dbc=False, stops=False)
-    declare_output_suffixes(p, {"output": (".csv",)})
     p.set_defaults(run=run)
 
 

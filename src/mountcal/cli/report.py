@@ -7,7 +7,7 @@ import logging
 from pathlib import Path
 from typing import Any
 
-from mountcal.cli.options import STDOUT, add_command, declare_output_suffixes, print_json, require, working
+from mountcal.cli.options import STDOUT, add_command, print_json, require, working
 from mountcal.cli.path_options import add_path
 from mountcal.cli.results import result_stream
 from mountcal.terminal import safe
@@ -25,7 +25,7 @@ def add_parser(sub: Any) -> None:
         reads={"what": "a result JSON", "small": True},
         many=False,
         output="HTML file to write (default: RESULT with .html; '-': stdout)",
-        writes={"what": "the HTML report", "stdio": True, "writes": _writes},
+        writes={"what": "the HTML report", "stdio": True, "writes": _writes, "formats": (".html", ".htm")},
     )
     add_path(
         p, "--stops", role="input", what="a stop table", small=True, default=None,
@@ -38,7 +38,6 @@ def add_parser(sub: Any) -> None:
         help="unit of ax, ay, az in --stops (default: as calibrate read it)",
     )
     p.add_argument("--figures", choices=("svg", "png"), default="svg", help="inline SVG (default) or base64 PNG")
-    declare_output_suffixes(p, {"output": (".html", ".htm")})
     p.set_defaults(run=run)
 
 

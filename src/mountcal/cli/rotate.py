@@ -10,7 +10,6 @@ from typing import Any
 from mountcal.cli.options import (
     add_command,
     add_log_options,
-    declare_output_suffixes,
     log_options,
     print_json,
     working,
@@ -31,7 +30,7 @@ def add_parser(sub: Any) -> None:
         inputs=("LOG", "log file(s); splits of one log are joined"),
         output="file to write (.parquet, .csv or .mcap)",
         output_required=True,
-        writes={"what": "the rotated log"},
+        writes={"what": "the rotated log", "formats": (".parquet", ".pq", ".csv", ".mcap")},
     )
     add_path(
         p, "--calibration", role="input", what="a calibration JSON", small=True, required=True,
@@ -53,7 +52,6 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument("--require-confident", action="store_true", help="refuse a calibration that is not confident")
     add_log_options(p, stops=False)
-    declare_output_suffixes(p, {"output": (".parquet", ".pq", ".csv", ".mcap")})
     p.set_defaults(run=run, protocol=None)
 
 

@@ -6,7 +6,7 @@ import argparse
 import logging
 from typing import Any
 
-from mountcal.cli.options import HEADINGS, add_command, bar, declare_output_suffixes
+from mountcal.cli.options import HEADINGS, add_command, bar
 from mountcal.cli.path_options import add_path
 from mountcal.errors import InputError
 from mountcal.ranges import Number, numbers
@@ -27,9 +27,12 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--headings", choices=HEADINGS, default="uphill")
     p.add_argument("--heading-offset", type=Number("angle_deg"), default=0.0, help="common offset added to β (deg)")
     p.add_argument("--seed", type=Number("seed"), default=0)
-    add_path(p, "--truth", role="output", what="the truth", default=None, help="also write the truth as JSON")
     add_path(
-        p, "-o", "--output", role="output", what="the stop table", default=None,
+        p, "--truth", role="output", what="the truth", formats=(".json",), default=None,
+        help="also write the truth as JSON",
+    )  # fmt: skip
+    add_path(
+        p, "-o", "--output", role="output", what="the stop table", formats=(".csv", ".parquet", ".pq"), default=None,
         help="stop table to write (CSV or .parquet)",
     )  # fmt: skip
     lg = p.add_argument_group("parking session as logs (--noise-g and --headings apply to stop tables only)")
@@ -38,7 +41,7 @@ def add_parser(sub: Any) -> None:
         help="logs to write: .mcap, .blf, .mf4, .asc, .log, .trc, .csv",
     )  # fmt: skip
     add_path(
-        lg, "--protocol", role="output", what="the protocol sheet", default=None,
+        lg, "--protocol", role="output", what="the protocol sheet", formats=(".csv",), default=None,
         help="also write the protocol sheet (t_start_s, t_end_s, beta_deg)",
     )  # fmt: skip
     add_path(
@@ -75,7 +78,6 @@ def add_parser(sub: Any) -> None:
         "--gyro-lsb-dps", type=Number("gyro_lsb_dps"), default=0.0, help="gyro quantisation step (°/s; default none)"
     )
     lg.add_argument("--paired-stamps", action="store_true", help="stamp the IMU samples in pairs, as some loggers do")
-    declare_output_suffixes(p, {"output": (".csv", ".parquet", ".pq"), "truth": (".json",), "protocol": (".csv",)})
     p.set_defaults(run=run)
 
 

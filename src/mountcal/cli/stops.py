@@ -10,7 +10,6 @@ from mountcal.cli.options import (
     STDOUT,
     add_command,
     add_log_options,
-    declare_output_suffixes,
     log_job,
     print_json,
     working,
@@ -29,11 +28,10 @@ def add_parser(sub: Any) -> None:
         json_help="a summary (stops, headings, output) on stdout",
         inputs=("LOG", "log file(s); splits of one log are joined"),
         output="stop table to write (CSV or .parquet; '-': CSV on stdout)",
-        writes={"what": "the stop table", "stdio": True},
+        writes={"what": "the stop table", "stdio": True, "formats": (".csv", ".parquet", ".pq")},
         output_required=True,
     )
     add_log_options(p)
-    declare_output_suffixes(p, {"output": (".csv", ".parquet", ".pq")})
     p.set_defaults(run=run)
 
 

@@ -18,7 +18,6 @@ from mountcal.cli.options import (
     add_axes_option,
     add_command,
     add_input_kind,
-    declare_output_suffixes,
     gravity,
     print_json,
 )
@@ -42,7 +41,7 @@ def add_parser(subparsers: Any) -> None:
         reads={"what": "a log or stop table", "folders": True},
         output="triad JSON to write (for calibrate --triad)",
         output_required=True,
-        writes={"what": "the triad calibration"},
+        writes={"what": "the triad calibration", "formats": (".json",)},
     )
     p.add_argument("--unit", choices=("mps2", "g"), default="mps2", help="unit of ax, ay, az in a stop table")
     add_quantity(
@@ -74,7 +73,6 @@ def add_parser(subparsers: Any) -> None:
         help="a TOML with a sample table's [columns]",
     )  # fmt: skip
     add_input_kind(p)
-    declare_output_suffixes(p, {"output": (".json",)})
     p.set_defaults(run=run)
 
 

@@ -8,7 +8,6 @@ yaw is not determined or that is not confident unless told otherwise. Definition
 from __future__ import annotations
 
 from collections.abc import Callable
-from pathlib import Path
 
 from mountcal.errors import InputError
 from mountcal.option_names import option
@@ -44,7 +43,7 @@ FORMATS: dict[str, Writer] = {
 }
 DEFAULT_FRAMES = {"ros2-static-tf": Frames(), "urdf": Frames(), "tf2": Frames(), "autoware": AUTOWARE_FRAMES}
 TEXT_FORMATS = tuple(f for f in FORMATS if f != "ublox-ubx")
-SUFFIXES: dict[str, tuple[str, ...]] = {  # an output file's suffix → the formats it can hold; others: any
+SUFFIXES: dict[str, tuple[str, ...]] = {  # an output file's suffix → the formats it can hold (export -o)
     ".ubx": ("ublox-ubx",),
     ".json": ("json",),
     ".yaml": ("yaml", "autoware"),
@@ -55,19 +54,6 @@ SUFFIXES: dict[str, tuple[str, ...]] = {  # an output file's suffix → the form
     ".txt": TEXT_FORMATS,
     ".sh": ("ros2-static-tf",),
 }
-
-
-def check_suffix(fmt: str, path: str | Path) -> None:
-    """Refuse an output name whose suffix says another format (``--to ublox -o mount.ubx``: text, not UBX)."""
-    suffix = Path(path).suffix.lower()
-    allowed = SUFFIXES.get(suffix)
-    if allowed is not None and fmt not in allowed:
-        raise InputError(
-            f"-o {path}",
-            f"a name whose suffix matches --to {fmt}",
-            f"{suffix}, the suffix of {' or '.join(allowed)}",
-            f"Write {fmt} to another name, or choose --to {allowed[0]}.",
-        )
 
 
 def export(
@@ -110,7 +96,6 @@ __all__ = [
     "Frames",
     "Mounting",
     "ParentPose",
-    "check_suffix",
     "export",
     "mounting",
     "read_parent_pose",
