@@ -17,7 +17,7 @@ Counted per category, for each command:
 - **traceback**: ``Traceback`` on stderr;
 - **hang**: killed at the time bound;
 - **input changed**: an input's bytes (SHA-256), or its kind (a FIFO, a device), differ afterwards;
-- **unclear exit**: killed by a signal, an exit code outside 0, 2, 3, 4, 5, 130, or a non-zero exit
+- **unclear exit**: killed by a signal, an exit code outside 0, 2, 3, 4, 5, 129, 130, 143, or a non-zero exit
   without an ``error:`` line (or a report on stdout: ``plan``'s "not reachable");
 - **over bound**: peak RSS above ``A · (input bytes) + B`` (the bound of docs/reliability.md);
 - **other**: what the case checks beyond these (stdout that no longer parses, a NaN in a written
@@ -58,7 +58,7 @@ MIB = 1 << 20
 # The memory bound of docs/reliability.md: peak RSS ≤ A · (bytes of the command's inputs) + B.
 BOUND_A = 64.0
 BOUND_B_MB = 1024.0
-CLEAR_EXITS = {0, 2, 3, 4, 5, 130}
+CLEAR_EXITS = {0, 2, 3, 4, 5, 129, 130, 143}  # mountcal.cli.options.EXIT_CODES (129, 143: SIGHUP, SIGTERM)
 CATEGORIES = {
     "readers": "every reader and command on sound inputs (the memory bound)",
     "memory": "2. memory bounded in total, not per block",

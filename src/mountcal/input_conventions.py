@@ -177,7 +177,8 @@ def heading_reference(
             "uphill",
             "default",
             f"the table states no {HEADING_REF}: beta_deg taken as from the slope's uphill direction, "
-            f"counter-clockwise (say {option('headings', 'relative')} if it is not)",
+            f"counter-clockwise (state it: {option('headings', 'uphill')}, {option('headings', 'relative')} if it is "
+            f"not, or a {HEADING_REF} column)",
         )
     if stated is None:
         assert given is not None

@@ -102,9 +102,16 @@ def answer_checks(cal: Calibration) -> tuple[Check, ...]:
 
 
 def convention_checks(conventions: Sequence[Convention]) -> tuple[Check, ...]:
-    """The conventions checked where the input was read (a refusal there), listed as passed checks."""
+    """The conventions checked where the input was read (a refusal there), listed as passed checks;
+    and a heading reference that nothing stated (``heading_reference``), a failed one: stops alone
+    cannot tell β from uphill, from downhill or with a common offset (each turns the answer about the
+    vertical), so a yaw resting on an assumed reference is not a confident one."""
     checked = {"heading_unit", "acceleration_unit"}  # refused where read when they fail
-    return tuple(Check(c.name, True, f"{c.value}: {c.by}") for c in conventions if c.name in checked)
+    out = [Check(c.name, True, f"{c.value}: {c.by}") for c in conventions if c.name in checked]
+    for c in conventions:
+        if c.name == "heading_reference" and c.how == "default" and c.value == "uphill":
+            out.append(Check(c.name, False, f"assumed, not stated: {c.by}"))
+    return tuple(out)
 
 
 def with_checks(cal: Calibration, checks: Sequence[Check]) -> Calibration:

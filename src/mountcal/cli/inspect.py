@@ -10,6 +10,7 @@ from typing import Any
 from mountcal.cli.options import add_command, add_detection_options, detection, log_options, print_json, working
 from mountcal.cli.path_options import add_path
 from mountcal.cli.results import result_stream
+from mountcal.ranges import Number
 from mountcal.terminal import safe
 
 
@@ -37,7 +38,7 @@ def add_parser(sub: Any) -> None:
         p, "--mapping", role="input", what="a mapping", small=True, default=None,
         help="with --stops: TOML naming the accelerometer signals (CAN)",
     )  # fmt: skip
-    p.add_argument("--channel", type=int, default=None, help="with --stops: CAN channel of the IMU")
+    p.add_argument("--channel", type=Number("can_channel"), default=None, help="with --stops: CAN channel of the IMU")
     p.add_argument("--topic", default=None, help="with --stops: IMU topic (MCAP)")
     add_detection_options(p)
     p.set_defaults(run=run, field=None)

@@ -501,7 +501,7 @@ def _result(
     else:
         errors = (model_error.about_vehicle_x_deg, model_error.about_vehicle_y_deg)
         sx, sy = (float(np.hypot(r, e)) for r, e in zip(road, errors, strict=True))
-    r, p, _ = angles_from_rot_vs(rot_vs)
+    r, p, y = angles_from_rot_vs(rot_vs)  # after the grade: it turns the Euler yaw too where the sensor is rolled
     roll, pitch = float(np.degrees(r)), float(np.degrees(p))
     roll_sigma, pitch_sigma, yaw_sigma = euler_sigma(rot_vs, (sx, sy, 0.0 if yaw_reason else sigma_z))
     if tilt_from is not None:  # the static fit's own marginals know its correlations
@@ -540,7 +540,7 @@ def _result(
         rot_vs=rot_vs,
         roll_deg=float(roll),
         pitch_deg=float(pitch),
-        yaw_deg=None if yaw_reason else float(np.degrees(yaw_rad)),
+        yaw_deg=None if yaw_reason else float(np.degrees(y)),
         roll_sigma_deg=float(roll_sigma),
         pitch_sigma_deg=float(pitch_sigma),
         yaw_sigma_deg=None if yaw_reason else yaw_sigma,
