@@ -360,13 +360,14 @@ def main_cli(argv: list[str] | None = None) -> int:
     _print(tallies, cannot, columns, args)
     bad = sum(t.counts[c] for n, t in tallies.items() if n not in cannot for c in columns[3:])
     bad += sum(t.counts[o] for t in tallies.values() for o in t.counts if o.startswith("exit"))
+    unsaid = sum(t.counts["CONFIDENT WRONG"] for n, t in tallies.items() if n in cannot)
     print(
         f"\n{sum(sum(t.counts.values()) for t in tallies.values())} runs in {time.perf_counter() - start:.0f} s; "
-        f"slips the data can show ending badly: {bad}"
+        f"slips the data can show ending badly: {bad}; slips they cannot show ending confident and wrong: {unsaid}"
     )
     for name, tally in tallies.items():
         for outcome in ("CONFIDENT WRONG", "refused, fix NOT named", "traceback"):
-            if outcome in tally.examples and name not in cannot:
+            if outcome in tally.examples and (name not in cannot or outcome == "CONFIDENT WRONG"):
                 print(f"  {name} — {outcome}: {tally.examples[outcome]}", file=sys.stderr)
     return 0
 
@@ -379,7 +380,7 @@ def _print(tallies: dict[str, Tally], cannot: set[str], columns: list[str], args
     header = ["slip", *columns, "other"]
     groups = [
         ("the data can show the slip", [n for n in tallies if n not in cannot]),
-        ("the data cannot tell (the assumption is stated in the result)", [n for n in tallies if n in cannot]),
+        ("the data cannot tell (not confident until the convention is stated)", [n for n in tallies if n in cannot]),
     ]
     if args.markdown:
         print("| " + " | ".join(header) + " |")
