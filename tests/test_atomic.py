@@ -136,3 +136,33 @@ def test_a_ctrl_c_python_drops_in_a_callback_is_kept_not_printed(capsys: pytest.
             raise_if_interrupted()
     assert "KeyboardInterrupt" not in capsys.readouterr().err
     raise_if_interrupted()  # outside its block a dropped Ctrl-C is not kept
+
+
+def test_an_output_is_not_named_after_a_ctrl_c_python_dropped(tmp_path: Path) -> None:
+    """The Ctrl-C kept by removed_on_signals stops an atomic write at its commit: nothing is named."""
+    import gc
+    import weakref
+
+    from mountcal.atomic import atomic_output, atomic_path, removed_on_signals
+
+    class Thing:
+        pass
+
+    def callback(_: object) -> None:
+        raise KeyboardInterrupt
+
+    with removed_on_signals():
+        thing = Thing()
+        ref = weakref.ref(thing, callback)
+        del thing
+        gc.collect()
+        assert ref() is None
+        for write in (atomic_path, atomic_output):
+            target = tmp_path / f"{write.__name__}.json"
+            with pytest.raises(KeyboardInterrupt), write(target) as out:
+                if isinstance(out, Path):
+                    out.write_text("{}")
+                else:
+                    out.write(b"{}")
+            assert not target.exists()
+    assert list(tmp_path.iterdir()) == []

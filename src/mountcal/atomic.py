@@ -66,6 +66,7 @@ def atomic_output(target: str | os.PathLike[str]) -> Iterator[BinaryIO]:
         yield f
         f.flush()
         os.fsync(f.fileno())
+        raise_if_interrupted()  # a Ctrl-C Python dropped while writing: the file is not named
         _link_into_place(f.fileno(), folder, path.name)
 
 
@@ -96,6 +97,7 @@ def atomic_path(target: str | os.PathLike[str], *, durable: bool = True, keep_na
             if durable:
                 with tmp.open("rb+") as f:
                     os.fsync(f.fileno())
+            raise_if_interrupted()  # a Ctrl-C Python dropped while writing: the file is not named
             os.replace(tmp, target)
     finally:
         if keep_name:
@@ -272,7 +274,8 @@ def raise_if_interrupted() -> None:
 
     A signal handler's exception raised inside a callback (a weakref's, an import lock's) is only
     printed as "Exception ignored" and the code goes on; :func:`removed_on_signals` keeps such a
-    Ctrl-C here instead, and loops that wait (the fleet's) call this between their waits.
+    Ctrl-C here instead: an atomic output checks it before it names its file, the command line
+    when a command returns, and loops that wait (the fleet's) between their waits.
     """
     if _INTERRUPTED.is_set():
         raise KeyboardInterrupt

@@ -21,7 +21,7 @@ import sys
 from collections.abc import Sequence
 
 from mountcal import budget
-from mountcal.atomic import Terminated, removed_on_signals
+from mountcal.atomic import Terminated, raise_if_interrupted, removed_on_signals
 from mountcal.cli.options import EXIT_CODES, configure_logging
 from mountcal.cli.path_options import check_paths, command_parser
 from mountcal.cli.results import results_only
@@ -60,7 +60,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             reading(getattr(args, "allow_truncated", False)),
         ):
             check_paths(command_parser(parser, args.command), args)  # every declared path, before any work
-            return int(args.run(args))
+            code = int(args.run(args))
+            raise_if_interrupted()  # a Ctrl-C Python dropped in a callback still ends the command as one
+            return code
     except MountcalError as err:
         log.error("error: %s", safe(err, keep=chr(10)))
         return err.exit_code
