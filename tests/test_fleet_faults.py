@@ -127,6 +127,7 @@ def test_ctrl_c_at_any_moment_ends_cleanly_and_the_run_resumes(tmp_path: Path, d
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         start_new_session=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),  # as a foreground job: not ignored
     )
     deadline = time.monotonic() + 60
     while not _children(proc.pid) and proc.poll() is None and time.monotonic() < deadline:

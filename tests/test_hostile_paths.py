@@ -368,7 +368,12 @@ def test_a_signal_during_a_write_leaves_no_temporary_file(files: dict[str, Path]
     folder.mkdir()
     args = ["simulate", "--log", str(folder / "s.blf"), "--dbc", str(files["dbc"]), "--rate-hz", "400"]
     with subprocess.Popen(
-        [sys.executable, "-m", "mountcal", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV
+        [sys.executable, "-m", "mountcal", *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=ENV,
+        preexec_fn=_as_a_foreground_job,
     ) as proc:
         deadline = time.monotonic() + 300
         while not any(p.name.startswith(".") for p in folder.iterdir()):  # the hidden temporary exists: writing
@@ -382,6 +387,12 @@ def test_a_signal_during_a_write_leaves_no_temporary_file(files: dict[str, Path]
     assert proc.returncode == 128 + sig, err
     assert "Traceback" not in err and ("interrupted" if sig == signal.SIGINT else sig.name) in err
     assert list(folder.iterdir()) == []
+
+
+def _as_a_foreground_job() -> None:
+    """Ctrl-C as a terminal's foreground job gets it: a test run started in the background of a
+    non-interactive shell inherits SIGINT ignored, and an ignored signal is no test of its handling."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def _close(fd: int) -> Any:
