@@ -61,7 +61,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         ):
             check_paths(command_parser(parser, args.command), args)  # every declared path, before any work
             code = int(args.run(args))
-            raise_if_interrupted()  # a Ctrl-C Python dropped in a callback still ends the command as one
+            if code == 0:  # a command that returned 130 has handled its Ctrl-C already
+                raise_if_interrupted()  # a Ctrl-C Python dropped in a callback still ends the command as one
             return code
     except MountcalError as err:
         log.error("error: %s", safe(err, keep=chr(10)))

@@ -152,6 +152,7 @@ class LocalEngine:
             self._starting.join()
         if self._pool is not None:
             self._pool.shutdown(wait=False, cancel_futures=True)
+            _forget_when_done(self._pool)
             self._pool = None
         if self._saved_env is not None:
             for k, v in self._saved_env.items():
@@ -293,6 +294,20 @@ def start_worker_server() -> None:
         # worker forked from it) starts is the command's to handle, not a traceback of theirs
         with _sigint_ignored():
             multiprocessing.forkserver.ensure_running()
+
+
+def _forget_when_done(pool: ProcessPoolExecutor, timeout_s: float = 5.0) -> None:
+    """Wait a little for the pool's manager thread and, once it has ended, drop it from the exit hook's
+    list: CPython 3.11's hook writes to the thread's wake-up pipe even after the thread closed it
+    (an "Exception ignored … Bad file descriptor" traceback after a Ctrl-C)."""
+    import concurrent.futures.process as process
+
+    thread = getattr(pool, "_executor_manager_thread", None)
+    if thread is None:
+        return
+    thread.join(timeout_s)
+    if not thread.is_alive():
+        getattr(process, "_threads_wakeups", {}).pop(thread, None)
 
 
 @contextlib.contextmanager
