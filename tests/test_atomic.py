@@ -112,26 +112,31 @@ def test_a_growing_file_replaces_a_link_instead_of_writing_through_it(tmp_path: 
     assert victim.read_text() == "keep me" and link.read_bytes() == b"new" and not link.is_symlink()
 
 
-def test_a_ctrl_c_python_drops_in_a_callback_is_kept_not_printed(capsys: pytest.CaptureFixture[str]) -> None:
-    """A KeyboardInterrupt raised in a weakref callback is only printed by Python ("Exception ignored")
-    and lost; within removed_on_signals it is kept for raise_if_interrupted, silently."""
+def _drop_a_ctrl_c_in_a_callback() -> None:
+    """Raise KeyboardInterrupt in a weakref callback: where a Ctrl-C's handler raises when the signal
+    lands in one, and Python only prints it ("Exception ignored") and goes on."""
     import gc
     import weakref
-
-    from mountcal.atomic import raise_if_interrupted, removed_on_signals
 
     class Thing:
         pass
 
     def callback(_: object) -> None:
-        raise KeyboardInterrupt  # where a Ctrl-C's handler raises when the signal lands in a callback
+        raise KeyboardInterrupt
+
+    thing = Thing()
+    ref = weakref.ref(thing, callback)
+    del thing
+    gc.collect()
+    assert ref() is None
+
+
+def test_a_ctrl_c_python_drops_in_a_callback_is_kept_not_printed(capsys: pytest.CaptureFixture[str]) -> None:
+    """Within removed_on_signals a Ctrl-C dropped in a callback is kept for raise_if_interrupted, silently."""
+    from mountcal.atomic import raise_if_interrupted, removed_on_signals
 
     with removed_on_signals():
-        thing = Thing()
-        ref = weakref.ref(thing, callback)
-        del thing
-        gc.collect()
-        assert ref() is None
+        _drop_a_ctrl_c_in_a_callback()
         with pytest.raises(KeyboardInterrupt):
             raise_if_interrupted()
     assert "KeyboardInterrupt" not in capsys.readouterr().err
@@ -140,23 +145,10 @@ def test_a_ctrl_c_python_drops_in_a_callback_is_kept_not_printed(capsys: pytest.
 
 def test_an_output_is_not_named_after_a_ctrl_c_python_dropped(tmp_path: Path) -> None:
     """The Ctrl-C kept by removed_on_signals stops an atomic write at its commit: nothing is named."""
-    import gc
-    import weakref
-
     from mountcal.atomic import atomic_output, atomic_path, removed_on_signals
 
-    class Thing:
-        pass
-
-    def callback(_: object) -> None:
-        raise KeyboardInterrupt
-
     with removed_on_signals():
-        thing = Thing()
-        ref = weakref.ref(thing, callback)
-        del thing
-        gc.collect()
-        assert ref() is None
+        _drop_a_ctrl_c_in_a_callback()
         for write in (atomic_path, atomic_output):
             target = tmp_path / f"{write.__name__}.json"
             with pytest.raises(KeyboardInterrupt), write(target) as out:
