@@ -158,3 +158,72 @@ def test_an_output_is_not_named_after_a_ctrl_c_python_dropped(tmp_path: Path) ->
                     out.write(b"{}")
             assert not target.exists()
     assert list(tmp_path.iterdir()) == []
+
+
+_BLOCKED_CLEAN_UP = """
+import os, signal, sys, threading, time
+import mountcal.atomic as atomic
+atomic.GRACE_S = 1.0
+held = threading.Lock()
+held.acquire()
+with atomic.removed_on_signals():
+    try:
+        os.kill(os.getpid(), signal.{sig})
+        time.sleep(30)
+    except KeyboardInterrupt:
+        held.acquire()  # a clean-up that waits for good (a lock the interrupted code held)
+print("unreachable")
+"""
+
+
+@pytest.mark.parametrize(("sig", "code"), [("SIGINT", 130), ("SIGTERM", 143)])
+def test_an_interrupted_command_whose_clean_up_blocks_ends_within_the_grace(sig: str, code: int) -> None:
+    import subprocess
+    import sys
+    import time
+
+    started = time.monotonic()
+    done = subprocess.run(
+        [sys.executable, "-c", _BLOCKED_CLEAN_UP.format(sig=sig)],
+        capture_output=True,
+        text=True,
+        timeout=30,
+        preexec_fn=_sigint_default,
+    )
+    assert done.returncode == code and time.monotonic() - started < 10
+    assert "clean-up has not ended" in done.stderr and "Run the same command again" in done.stderr
+    assert "unreachable" not in done.stdout and "Traceback" not in done.stderr
+
+
+def test_an_interrupted_command_s_exit_ends_within_the_grace_and_a_finished_block_is_disarmed() -> None:
+    """The command line arms a deadline for its own exit (a thread that Python would join for good);
+    a removed_on_signals block that ended, interrupted or not, ends nothing later."""
+    import subprocess
+    import sys
+
+    script = (
+        "import os, signal, threading, time, mountcal.atomic as atomic\n"
+        "atomic.GRACE_S = 1.0\n"
+        "with atomic.removed_on_signals():\n"
+        "    pass\n"
+        "try:\n"
+        "    with atomic.removed_on_signals():\n"
+        "        os.kill(os.getpid(), signal.SIGINT)\n"
+        "        time.sleep(30)\n"
+        "except KeyboardInterrupt:\n"
+        "    pass\n"
+        "time.sleep(2.5)\n"  # the two blocks' deadlines are disarmed: nothing ends the process here
+        "print('alive', flush=True)\n"
+        "threading.Thread(target=time.sleep, args=(60,)).start()  # joined at exit, for a minute\n"
+        "atomic.Deadline().arm(130)\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=30, preexec_fn=_sigint_default
+    )
+    assert done.stdout == "alive\n" and done.returncode == 130, (done.stdout, done.stderr)
+
+
+def _sigint_default() -> None:
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_DFL)  # as in a foreground job (a background shell ignores it)

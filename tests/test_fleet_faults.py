@@ -3,6 +3,7 @@ address that names no scheduler — each ends cleanly, and what finished is kept
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -109,7 +110,8 @@ def test_the_workers_end_with_the_command_and_release_its_output_pipe(tmp_path: 
         time.sleep(0.05)
     assert not _alive(workers)
     if sig == signal.SIGTERM:
-        assert proc.returncode == 130 and b"run the same command again to resume" in stderr
+        assert proc.returncode == 128 + signal.SIGTERM and b"run the same command again to resume" in stderr
+        assert b"terminated by SIGTERM" in stderr
         assert b"Traceback" not in stderr
     assert main(["fleet", str(tmp_path / "logs"), "-o", str(output), "-q", "--workers", "2"]) == 0
     assert len(pd.read_parquet(output)) == 40
@@ -137,7 +139,9 @@ def test_ctrl_c_at_any_moment_ends_cleanly_and_the_run_resumes(tmp_path: Path, d
     try:
         _, stderr = proc.communicate(timeout=60)
     finally:
-        proc.kill()
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
     assert b"Traceback" not in stderr and b"KeyboardInterrupt" not in stderr, stderr.decode()
     # 130: interrupted; 0: it finished first; −SIGINT: it had finished and was exiting (Python's own
     # handler is gone by then), with its tables written

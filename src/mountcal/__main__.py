@@ -11,6 +11,8 @@ from __future__ import annotations
 import sys
 from collections.abc import Sequence
 
+INTERRUPTED = (129, 130, 143)  # SIGHUP, Ctrl-C, SIGTERM
+
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the console script."""
@@ -20,6 +22,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     # handled, and CPython then ends itself by SIGINT at exit (status -2, not 130). Running any
     # string clears that mark.
     exec("pass")
+    if argv is None and code in INTERRUPTED:  # this process ends now: its exit too (threads joined) ends in time
+        from mountcal.atomic import Deadline
+
+        Deadline().arm(code)
     return code
 
 

@@ -25,6 +25,7 @@ are cheap to recompute, such as a fleet's per-log part files).
 
 from __future__ import annotations
 
+import _thread
 import contextlib
 import errno
 import os
@@ -33,6 +34,7 @@ import signal
 import sys
 import tempfile
 import threading
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, BinaryIO
@@ -264,6 +266,7 @@ class Terminated(KeyboardInterrupt):
 
 
 CLEAN_UP_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
+GRACE_S = 15.0  # an interrupted command still running this long after the signal is ended without its clean-up
 
 
 _INTERRUPTED = threading.Event()  # a Ctrl-C arrived within removed_on_signals
@@ -281,6 +284,57 @@ def raise_if_interrupted() -> None:
         raise KeyboardInterrupt
 
 
+class Deadline:
+    """Ends the process ``GRACE_S`` after :meth:`arm` unless :meth:`disarm` comes first.
+
+    A Ctrl-C unwinds a command through its clean-up (workers stopped, threads joined); if any of it
+    blocks for good — a thread waiting on a lock the interrupted code held, a worker pool that will
+    not stop — the command would never end. The watcher is a daemon thread started beforehand and
+    armed from the signal handler by releasing a raw lock: arming takes no lock the interrupted
+    code may hold. Outputs are written whole or not at all, so ending without the clean-up leaves
+    no partial file; only hidden temporary files may stay.
+    """
+
+    def __init__(self, code: int = 130, grace_s: float | None = None) -> None:
+        self.code, self.grace_s = code, GRACE_S if grace_s is None else grace_s
+        self._armed = _thread.allocate_lock()
+        self._armed.acquire()
+        self._over = _thread.allocate_lock()
+        self._over.acquire()
+        self._state = "idle"
+        threading.Thread(target=self._watch, name="mountcal-interrupt-deadline", daemon=True).start()
+
+    def arm(self, code: int | None = None) -> None:
+        if self._state == "idle":
+            self.code = self.code if code is None else code
+            self._state = "armed"
+            self._armed.release()
+
+    def disarm(self) -> None:
+        if self._state == "idle":
+            self._state = "disarmed"
+            self._armed.release()
+        elif self._state == "armed":
+            self._state = "disarmed"
+            self._over.release()
+
+    def _watch(self) -> None:
+        self._armed.acquire()
+        if self._state != "armed":
+            return
+        started = time.monotonic()
+        if self._over.acquire(timeout=self.grace_s):
+            return
+        message = (
+            f"mountcal: interrupted {time.monotonic() - started:.0f} s ago and its clean-up has not ended "
+            "(a thread or worker that would not stop); ending now. Outputs are written whole or not "
+            "at all: none is partial. Run the same command again.\n"
+        )
+        with contextlib.suppress(OSError):
+            os.write(2, message.encode())
+        os._exit(self.code)
+
+
 @contextlib.contextmanager
 def removed_on_signals() -> Iterator[None]:
     """Within the block, SIGTERM and SIGHUP raise :class:`Terminated` (as SIGINT raises
@@ -288,19 +342,23 @@ def removed_on_signals() -> Iterator[None]:
     :func:`atomic_path` are removed, an :func:`atomic_output` is never named, a lock is released.
     A second signal ends the process at once. A Ctrl-C that lands in a callback (where Python
     drops the exception with a traceback) is kept, silently, for :func:`raise_if_interrupted`.
+    However the command unwinds, it ends within :data:`GRACE_S` of the first signal (:class:`Deadline`).
     Outside the main thread: no change.
     """
     if threading.current_thread() is not threading.main_thread():
         yield
         return
+    deadline = Deadline()
 
     def terminate(signum: int, _: object) -> None:
         for sig in CLEAN_UP_SIGNALS:
             signal.signal(sig, signal.SIG_DFL)
+        deadline.arm(128 + signum)
         raise Terminated(signum)
 
     def interrupt(signum: int, frame: object) -> None:
         _INTERRUPTED.set()
+        deadline.arm(130)
         signal.default_int_handler(signum, frame)  # type: ignore[arg-type]
 
     def unraisable(info: UnraisableHookArgs) -> None:
@@ -317,10 +375,19 @@ def removed_on_signals() -> Iterator[None]:
     try:
         yield
     finally:
+        deadline.disarm()
         _INTERRUPTED.clear()  # its block is over: what it held has been raised or is moot
         sys.unraisablehook = hook
         for sig, handler in previous.items():
             signal.signal(sig, handler)
 
 
-__all__ = ["GrowingFile", "Terminated", "atomic_output", "atomic_path", "raise_if_interrupted", "removed_on_signals"]
+__all__ = [
+    "Deadline",
+    "GrowingFile",
+    "Terminated",
+    "atomic_output",
+    "atomic_path",
+    "raise_if_interrupted",
+    "removed_on_signals",
+]

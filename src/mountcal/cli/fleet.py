@@ -3,13 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import contextlib
 import logging
-import signal
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+from mountcal.atomic import Terminated
 from mountcal.cli.options import (
     add_command,
     add_fit_options,
@@ -79,21 +77,6 @@ def add_parser(sub: Any) -> None:
     p.set_defaults(run=run, protocol=None)
 
 
-@contextlib.contextmanager
-def terminated_as_interrupt() -> Iterator[None]:
-    """SIGTERM (a scheduler's stop, ``kill``) ends the run as Ctrl-C does: the workers are stopped
-    and what finished is kept (the default would end the process without that)."""
-
-    def interrupt(signum: int, frame: object) -> None:
-        raise KeyboardInterrupt
-
-    previous = signal.signal(signal.SIGTERM, interrupt)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
-
-
 def _writes(value: str, _: argparse.Namespace) -> list[tuple[str, str]]:
     """The per-log table and the per-vehicle table beside it (the part files' folder is checked by its store)."""
     from mountcal.fleet import outputs_of
@@ -141,14 +124,15 @@ def run(args: argparse.Namespace) -> int:
         require_confident=args.require_confident,
     )
     try:
-        with terminated_as_interrupt():
-            result = run_fleet(jobs, args.output, options, set_aside=discarded)
-    except KeyboardInterrupt:
+        result = run_fleet(jobs, args.output, options, set_aside=discarded)
+    except KeyboardInterrupt as err:  # Ctrl-C, or SIGTERM/SIGHUP (Terminated): the workers are stopped
+        how = f"terminated by {err}" if isinstance(err, Terminated) else "interrupted"
         log.error(
-            "interrupted; the logs finished so far are kept in %s: run the same command again to resume",
+            "%s; the logs finished so far are kept in %s: run the same command again to resume",
+            how,
             outputs_of(args.output)[2],
         )
-        return 130
+        return 128 + err.signum if isinstance(err, Terminated) else 130
     if result.not_confident:
         listed = ", ".join(result.not_confident[:5]) + (" …" if len(result.not_confident) > 5 else "")
         log.warning(

@@ -32,6 +32,8 @@ import importlib
 import itertools
 import multiprocessing
 import multiprocessing.forkserver
+import multiprocessing.popen_forkserver  # imported here, not by the thread that starts the workers: a
+import multiprocessing.popen_spawn_posix  # Ctrl-C in the main thread's import could leave it waiting for good
 import os
 import secrets
 import select
@@ -66,6 +68,7 @@ QUEUED_PER_WORKER = 2  # jobs in flight per worker: one running, one waiting (no
 MAX_WORKER_DEATHS = 2  # a log in flight when its worker died this often is recorded as failed
 BATCH_TARGET_S = 0.5  # Dask: work per task (a task costs the scheduler and the network milliseconds)
 MAX_BATCH = 64
+START_WAIT_S = 5.0  # an interrupted run waits this long for the workers being started, to stop them
 WATCH_PERIOD_S = 1.0  # where there is no pidfd, a worker checks this often whether the command lives
 
 
@@ -123,7 +126,7 @@ class LocalEngine:
     def kill(self) -> None:
         """Stop the workers now, logs in flight and all (an interrupted run: they are redone next time)."""
         if self._starting is not None:
-            self._starting.join()
+            self._starting.join(START_WAIT_S)  # workers it has not started yet are not waited for
         processes = getattr(self._pool, "_processes", None) or {}
         for process in list(processes.values()):
             with contextlib.suppress(Exception):
@@ -149,7 +152,7 @@ class LocalEngine:
     def close(self) -> None:
         """Stop the workers and restore the environment."""
         if self._starting is not None:
-            self._starting.join()
+            self._starting.join(START_WAIT_S)
         if self._pool is not None:
             self._pool.shutdown(wait=False, cancel_futures=True)
             _forget_when_done(self._pool)
