@@ -12,7 +12,9 @@ start-up, the calibrations and the consolidation are all inside:
 
 1. ``--workers 1``;
 2. ``--workers 2``;
-3. ``--scheduler`` to a Dask ``LocalCluster(n_workers=1, threads_per_worker=1, processes=True)``;
+3. ``--scheduler`` to a Dask ``LocalCluster(n_workers=1, threads_per_worker=1, processes=True)``, its
+   workers without Dask's statistical profiler (``distributed.worker.profile.enabled: false``, the
+   setting docs/fleet.md gives for a fleet's cluster; ``--dask-profiler`` keeps Dask's default);
 4. the same with ``n_workers=2``.
 
 Each cluster is started just before its run and closed after it (its start-up is reported
@@ -192,12 +194,20 @@ def engine_only(logs: Path, name: str, address: str | None) -> list[float]:
 def dask_cluster(startup_s: list[float], workers: int) -> Iterator[str]:
     """A fresh LocalCluster (single-threaded worker processes) for one configuration's runs only;
     its start-up time is appended to ``startup_s``."""
+    import dask
     from distributed import LocalCluster
 
     started = time.perf_counter()
-    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster:
+    # the nannies hand this configuration to their worker processes
+    with (
+        dask.config.set({"distributed.worker.profile.enabled": DASK_PROFILER[0]}),
+        LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster,
+    ):
         startup_s.append(time.perf_counter() - started)
         yield cluster.scheduler_address
+
+
+DASK_PROFILER = [False]  # --dask-profiler: Dask's statistical profiler on the workers (its default)
 
 
 def cluster_for(name: str, startup_s: list[float]) -> contextlib.AbstractContextManager[str | None]:
@@ -310,7 +320,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--vehicles", type=int, default=20)
     parser.add_argument("--runs", type=int, default=3)
     parser.add_argument("--workdir", type=Path, default=None, help="keep the generated fleet here")
+    parser.add_argument(
+        "--dask-profiler",
+        action="store_true",
+        help="keep Dask's statistical profiler on in the workers (its default; off is the setting for fleets)",
+    )
     args = parser.parse_args(argv)
+    DASK_PROFILER[0] = args.dask_profiler
 
     workdir = args.workdir or Path(tempfile.mkdtemp(prefix="mountcal-fleet-"))
     try:
@@ -354,6 +370,8 @@ def main(argv: list[str] | None = None) -> int:
         reference_logs, reference_vehicles = tables["local, 1 worker"]
         ok = int((reference_logs["status"] == "ok").sum())
         remounted = sorted(reference_vehicles.loc[reference_vehicles["n_remounts"] > 0, "vehicle_id"])
+        profiler = "on (Dask's default)" if args.dask_profiler else "off"
+        print(f"Dask workers' statistical profiler: {profiler}")
         print(f"Dask LocalCluster start-up (not in the runs, median): {statistics.median(cluster_s):.1f} s")
         print(f"{ok}/{len(reference_logs)} logs ok; remounts flagged: {remounted}")
         print(f"tables identical across the configurations of each run: {'yes' if not mismatches else mismatches}")
