@@ -133,15 +133,15 @@ def test_separable_fixed_terms_still_fit() -> None:
 
 
 def test_the_terms_are_listed_one_way_everywhere(capsys: pytest.CaptureFixture[str]) -> None:
-    """The parse error and README come from mountcal.terms; the help (no numerical imports) points there."""
+    """The parse error and docs/commands.md come from mountcal.terms; the help (no numerical imports) points there."""
     with pytest.raises(SystemExit):
         main(["calibrate", "--help"])
     help_text = " ".join(capsys.readouterr().out.split())
-    assert "followed by optional terms (listed in the README and in the message for an unknown one)" in help_text
+    assert "followed by optional terms (listed in docs/commands.md and in the message for an unknown one)" in help_text
     with pytest.raises(InputError) as err:
         calibrate(read_stop_table(REPO / "data" / "zhang2011_stops.csv"), Options(model="rotation,slope,wind"))
     assert terms.help_text() in str(err.value) and "wind" in str(err.value)
-    assert terms.markdown_list() in (REPO / "README.md").read_text(encoding="utf-8")
+    assert terms.markdown_list() in (REPO / "docs" / "commands.md").read_text(encoding="utf-8")
 
 
 def test_write_stop_table_round_trip_keeps_the_minimal_columns(tmp_path: Path) -> None:

@@ -1,4 +1,4 @@
-"""The terms ``--model`` can name: the one list behind the parser, the CLI help, errors and README.
+"""The terms ``--model`` can name: the one list behind the parser, the CLI help, errors and docs/commands.md.
 
 The base terms (rotation, slope) and every registered effect (:mod:`mountcal.estimate.effects`,
 built-in or from another package's ``mountcal.effects`` entry point), each with the stop-table
@@ -51,7 +51,7 @@ def help_text() -> str:
 
 
 def markdown_list() -> str:
-    """The README's list of terms (a test keeps README.md equal to it)."""
+    """The list of terms in docs/commands.md (a test keeps the page equal to it)."""
     lines = []
     for t in terms():
         need = f" (needs the `{'`, `'.join(t.needs)}` column)" if t.needs else ""

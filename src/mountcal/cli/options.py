@@ -39,7 +39,7 @@ EXIT_CODES = {
 STDOUT = "-"
 MODEL_HELP = (
     "auto (default: the data choose the terms), or rotation,slope followed by optional terms "
-    "(listed in the README and in the message for an unknown one)"
+    "(listed in docs/commands.md and in the message for an unknown one)"
 )
 HEADINGS = ("uphill", "relative", "none")
 

@@ -25,7 +25,7 @@ class Effect(Protocol):
     """One effect of the static model (docs/conventions.md §6)."""
 
     name: str  # the term ``--model`` names
-    meaning: str  # one line for the CLI help and the README
+    meaning: str  # one line for the CLI help and docs/commands.md
     needs: tuple[str, ...]  # stop-table columns it needs
     order: int  # its place in the prediction chain (gravity 0, scale 10, additive 20)
     requires: tuple[str, ...]  # terms added with it (a bias drift has an offset too)
