@@ -49,7 +49,9 @@ import pytest
 from mountcal.cli import build_parser, main
 
 REPO = Path(__file__).resolve().parents[1]
-REAL_DATA = Path(os.environ.get("MOUNTCAL_REAL_DATA", REPO / ".." / "shared" / "data" / "real")).resolve()  # as conftest
+REAL_DATA = Path(
+    os.environ.get("MOUNTCAL_REAL_DATA", REPO / ".." / "shared" / "data" / "real")
+).resolve()  # as conftest
 PAGES = [REPO / "README.md", *sorted((REPO / "docs").glob("*.md"))]
 SHELLS = {"console", "sh", "bash", "shell"}
 FENCE = re.compile(r"^(?P<indent>[ \t]*)```(?P<lang>[\w-]*)[ \t]*\n(?P<body>.*?)^(?P=indent)```[ \t]*$", re.M | re.S)
@@ -58,7 +60,7 @@ EXIT = re.compile(r"#.*\bexits? (\d+)\b")
 NUMBER = re.compile(r"[-+]?\d+(?:\.\d+)?(?:[eE][-+]?\d+)?")
 ELLIPSIS = re.compile(r"…|\.\.\.")
 REAL_FOLDERS = ("canedge", "comma2k19", "dbc", "imu_tk-xsens", "imucal-ferraris", "robot_localization")
-OWNED = {  # pages whose commands need inputs their own test builds: page -> (test, collector of its commands)
+OWNED = {  # pages whose commands need inputs their own test builds: page -> that test
     "exporters.md": "tests/test_exporters_docs.py",
     "inputs.md": "tests/io/test_inputs_doc.py",
     "field-logs.md": "tests/io/test_field_logs.py",
@@ -275,6 +277,7 @@ class Runner:
     def __init__(self, root: Path) -> None:
         self.root = root
         self.done: dict[str, list[Outcome]] = {}
+        self.unmade: dict[str, set[str]] = {}  # per page: files that skipped commands would have written
 
     def outcome(self, command: Command) -> Outcome:
         page = next(p for p in COLLECTED if p.path == command.page)
@@ -283,14 +286,18 @@ class Runner:
         if not results:
             self._prepare(page)
         work = self.root / page.path.stem
-        missing: set[str] = set()
+        missing = self.unmade.setdefault(page.path.name, set())
         while len(results) <= runnable.index(command):
             c = runnable[len(results)]
             words = _expand(_mountcal_words(c.text) or [], page.variables, work)
             real = [w for w in words if w.split("/")[0] in REAL_FOLDERS or str(REAL_DATA) in w]
             unmade = sorted(set(words) & missing)
             if (real and not REAL_DATA.is_dir()) or unmade:
-                why = f"needs the real recordings ({REAL_DATA})" if real else f"reads {unmade}, written by a skipped command"
+                why = (
+                    f"needs the real recordings ({REAL_DATA})"
+                    if real
+                    else f"reads {unmade}, written by a skipped command"
+                )
                 missing.update(_outputs(words))
                 results.append(Outcome(reason=why))
                 continue
@@ -322,7 +329,9 @@ def test_the_documented_command_runs_and_prints_what_the_page_shows(runner: Runn
     outcome = runner.outcome(command)
     if outcome.code is None:
         pytest.skip(f"{command.where}: {outcome.reason}")
-    assert outcome.code == command.exit_code, f"{command.where}: `{command.text}` exited {outcome.code}:\n{outcome.printed[-3000:]}"
+    assert outcome.code == command.exit_code, (
+        f"{command.where}: `{command.text}` exited {outcome.code}:\n{outcome.printed[-3000:]}"
+    )
     missing = missing_lines(command.output, outcome.printed)
     assert not missing, f"{command.where}: `{command.text}` no longer prints {missing}; it printed:\n{outcome.printed}"
 
@@ -348,7 +357,9 @@ def test_the_synopses_and_the_commands_not_run_name_real_commands_and_options() 
     """A synopsis (or a command not run here) names commands and options the parser has."""
     parser = build_parser()
     commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices
-    options = {name: set(sub._option_string_actions) | set(parser._option_string_actions) for name, sub in commands.items()}
+    options = {
+        name: set(sub._option_string_actions) | set(parser._option_string_actions) for name, sub in commands.items()
+    }
     checked = 0
     for command in (c for p in COLLECTED for c in p.commands if c.kind in ("usage", "not run")):
         words = _mountcal_words(command.text) or []
@@ -374,13 +385,19 @@ def test_pages_run_by_their_own_tests_are_collected_the_same_way(name: str) -> N
 
         theirs = documented_commands(page.path.read_text(encoding="utf-8"))
     else:
-        theirs = ["mountcal " + line.removeprefix("$ mountcal ") for line in page.path.read_text(encoding="utf-8").splitlines() if line.startswith("$ mountcal ")]
+        theirs = [
+            "mountcal " + line.removeprefix("$ mountcal ")
+            for line in page.path.read_text(encoding="utf-8").splitlines()
+            if line.startswith("$ mountcal ")
+        ]
     assert [shlex.split(c, comments=True) for c in theirs] == [shlex.split(c, comments=True) for c in ours]
     assert len(ours) >= 5
 
 
 def test_the_output_comparison_can_fail() -> None:
-    printed = "mountcal — full method\n  roll   5.001° ± 0.599°\n  pitch  6.001° ± 0.594°\nmountcal: wrote result.json\n"
+    printed = (
+        "mountcal — full method\n  roll   5.001° ± 0.599°\n  pitch  6.001° ± 0.594°\nmountcal: wrote result.json\n"
+    )
     assert missing_lines(["  roll   5.001° ± 0.599°", "  pitch  6.001° ± 0.594°"], printed) == []
     assert missing_lines(["  roll 5.0° ± 0.6°"], printed) == []  # to the digits shown
     assert missing_lines(["  roll 5.01° ± 0.599°"], printed) == ["  roll 5.01° ± 0.599°"]

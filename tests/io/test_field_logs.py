@@ -16,6 +16,7 @@ import numpy as np
 import pandas as pd
 import pytest
 from cantools import j1939
+from tests.test_doc_commands import collect, missing_lines
 
 from mountcal.cli import main
 from mountcal.errors import InputError
@@ -277,9 +278,14 @@ def test_field_logs_doc_commands(
     commands = _doc_commands()
     assert [c[0] for c in commands] == ["inspect", "inspect", "stops", "inspect", "inspect", "inspect", "stops"]
     outputs = []
-    for argv in commands:
+    shown = [c.output for c in collect(DOC).commands]  # the lines the page shows under each command
+    assert len(shown) == len(commands) and sum(map(len, shown)) >= 20
+    for argv, lines in zip(commands, shown, strict=True):
         assert main(argv) == 0, argv
-        outputs.append(capsys.readouterr().out)
+        printed = capsys.readouterr()
+        gone = missing_lines(lines, printed.out + printed.err)
+        assert not gone, (argv, gone)
+        outputs.append(printed.out)
     assert "0x0CF00400" in outputs[1] and "DLC 8" in outputs[1]
     assert "parked periods: 1 stops, 1 near misses" in outputs[3]  # the 11.6 s stop under a 15 s minimum
     assert "under the --min-stop-s of 15 s; --min-stop-s 11.6 would keep it" in outputs[3]
