@@ -16,11 +16,11 @@ from dataclasses import replace
 
 import numpy as np
 
-from mountcal.calibrate import BASE, WITH_BIAS, Options, calibrate
-from mountcal.conventions import G_N
+from mountcal.calibration.fit import BASE, WITH_BIAS, Options, calibrate
+from mountcal.core.conventions import G_N
+from mountcal.core.result import Calibration
 from mountcal.estimate import bound
 from mountcal.estimate.bound import true_state
-from mountcal.result import Calibration
 from mountcal.simulate.stops import ZHANG2011, random_bias, simulate_preset
 
 QUANTITIES = ("roll", "pitch", "yaw", "slope")

@@ -12,11 +12,11 @@ import numpy as np
 from scipy import optimize
 from scipy.spatial.transform import Rotation
 
-from mountcal import effects
-from mountcal.conventions import G_N, angles_from_rot_vs, skew
-from mountcal.errors import FitFailed
+from mountcal.core.conventions import G_N, angles_from_rot_vs, skew
+from mountcal.core.errors import FitFailed
 from mountcal.estimate import full
-from mountcal.stoptable import StopTable
+from mountcal.loop import model_choice as effects
+from mountcal.stops.table import StopTable
 
 MG = 1e3 / G_N  # m/s² → mg
 

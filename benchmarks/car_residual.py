@@ -18,20 +18,21 @@ import numpy as np
 import pandas as pd
 from car_bias import bias_separability, surface_covariance_check, surface_sigma
 
-from mountcal import effects
-from mountcal.calibrate import Options, calibrate
-from mountcal.conventions import G_N, angles_from_rot_vs, normal_gravity
-from mountcal.diagnose import _per_axis, _projection, _span, analyse
+from mountcal.calibration.fit import Options, calibrate
+from mountcal.calibration.pipeline import LogJob, stops_of_log
+from mountcal.core.conventions import G_N, angles_from_rot_vs, normal_gravity
+from mountcal.core.findings import Finding
+from mountcal.core.pvalues import chi2_sf
 from mountcal.estimate import full
 from mountcal.estimate.driving import estimate_driving
 from mountcal.io.can.dbc import decode, load_dbc, select_frames
-from mountcal.io.can.frames import read_frames
-from mountcal.io.logs import LogOptions, read_log
-from mountcal.pipeline import LogJob, stops_of_log
-from mountcal.pvalues import chi2_sf
-from mountcal.result import Finding
-from mountcal.samples import Samples
-from mountcal.stoptable import StopTable, stop_table_from_frame
+from mountcal.io.can.files import read_frames
+from mountcal.io.logs import read_log
+from mountcal.io.reader import LogOptions
+from mountcal.io.samples import Samples
+from mountcal.loop import model_choice as effects
+from mountcal.loop.diagnose import _per_axis, _projection, _span, analyse
+from mountcal.stops.table import StopTable, stop_table_from_frame
 
 REAL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real"
 CAR = "canedge/3BA199E2_car_DK_2021-07-26"

@@ -20,10 +20,10 @@ from dataclasses import replace
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from mountcal.calibrate import calibrate
-from mountcal.conventions import G_N
+from mountcal.calibration.fit import calibrate
+from mountcal.core.conventions import G_N
 from mountcal.simulate.stops import random_bias, simulate_stops
-from mountcal.stoptable import StopTable
+from mountcal.stops.table import StopTable
 
 MG = 1e-3 * G_N
 

@@ -45,7 +45,7 @@ from scipy.spatial.transform import Rotation
 
 from mountcal.apply.rotate_log import to_frame
 from mountcal.cli import main
-from mountcal.samples import Channel, Samples
+from mountcal.io.samples import Channel, Samples
 from mountcal.simulate.drive import simulate_drive
 from mountcal.simulate.stops import simulate_parking_log, simulate_stops
 

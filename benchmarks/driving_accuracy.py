@@ -36,7 +36,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from mountcal.estimate.driving import estimate_driving
-from mountcal.samples import Channel, Samples
+from mountcal.io.samples import Channel, Samples
 from mountcal.simulate.drive import simulate_drive
 
 
@@ -205,9 +205,9 @@ def speed_interp(speed: Channel, grid: np.ndarray) -> np.ndarray:
 def real_canedge(root: Path) -> None:
     import glob
 
-    from mountcal.errors import NotEnoughInformation
-    from mountcal.io.logs import LogOptions
-    from mountcal.pipeline import calibrate_log
+    from mountcal.calibration.pipeline import calibrate_log
+    from mountcal.core.errors import NotEnoughInformation
+    from mountcal.io.reader import LogOptions
 
     base = root / "canedge" / "3BA199E2_car_DK_2021-07-26"
     opts = LogOptions(dbc=str(root / "canedge" / "dbc" / "gnss.dbc"), channel=2)

@@ -32,9 +32,9 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from mountcal.driving_document import Comparison, Estimate
+from mountcal.core.driving_document import Comparison, Estimate
 from mountcal.estimate.driving import DrivingFit, estimate_driving
-from mountcal.samples import Channel, Samples
+from mountcal.io.samples import Channel, Samples
 from mountcal.simulate.drive import PITCH_PER_ACC_RAD, ROLL_PER_ACC_RAD, simulate_drive
 
 G = 9.80665
@@ -197,7 +197,8 @@ def real(root: Path) -> None:
     import glob
 
     from mountcal.io.comma2k19 import read_comma2k19
-    from mountcal.io.logs import LogOptions, read_log
+    from mountcal.io.logs import read_log
+    from mountcal.io.reader import LogOptions
     from mountcal.io.timestamps import increasing_times
 
     drives: list[tuple[str, Samples]] = [

@@ -21,11 +21,11 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from mountcal.calibrate import calibrate
-from mountcal.conventions import G_N
+from mountcal.calibration.fit import calibrate
+from mountcal.core.conventions import G_N
 from mountcal.estimate import bound
 from mountcal.simulate.stops import ZHANG2011, Truth, random_bias, simulate_stops
-from mountcal.stoptable import StopTable
+from mountcal.stops.table import StopTable
 
 MG = 1e-3 * G_N
 ANGLES = ("roll", "pitch", "yaw")

@@ -93,7 +93,7 @@ def write_log(path: str, kind: str, angles: tuple[float, float, float], seed: in
         else:
             frame.to_parquet(path)
         return
-    from mountcal.simulate import logs as export
+    from mountcal.io import writers as export
 
     start_s = T0_UNIX_S + day * 86_400
     export.write_mcap(path, log, with_temperature=False, with_odometry=False, start_time_s=start_s)

@@ -38,10 +38,10 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from mountcal.cli import main as cli_main
-from mountcal.conventions import G_N, normal_gravity
-from mountcal.result import Calibration
+from mountcal.core.conventions import G_N, normal_gravity
+from mountcal.core.result import Calibration
 from mountcal.simulate.stops import simulate_stops
-from mountcal.stoptable import ALT, BETA, COUNT, LAT, LON, OPTIONAL, SITE, STD, TEMPERATURE
+from mountcal.stops.table import ALT, BETA, COUNT, LAT, LON, OPTIONAL, SITE, STD, TEMPERATURE
 
 FAILURES = ("traceback", "nonfinite", "invalid", "wrong_confident", "crash", "hang", "over_memory")
 MAX_TILT_ERROR_DEG = 10.0

@@ -6,7 +6,7 @@ then try ``temperature``, ``scale``, ``gravity`` and the outlier test against it
 down. With ``three sites`` the stops also carry a site column (a, b, c in turn, all on the one
 slope), which adds the ``site_slope`` and ``surface`` (random road tilt) candidates. The fixed
 model is the true one (``rotation,slope,bias``). Times are the best of ``--repeat`` runs of
-:func:`mountcal.calibrate.calibrate` on one core.
+:func:`mountcal.calibration.fit.calibrate` on one core.
 
     OMP_NUM_THREADS=1 python benchmarks/model_choice.py --markdown docs/model-choice-results.md
 """
@@ -19,10 +19,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from mountcal.calibrate import Options, calibrate
-from mountcal.conventions import G_N
+from mountcal.calibration.fit import Options, calibrate
+from mountcal.core.conventions import G_N
 from mountcal.simulate.stops import ZHANG2011, simulate_stops
-from mountcal.stoptable import StopTable
+from mountcal.stops.table import StopTable
 
 FIXED = "rotation,slope,bias"
 

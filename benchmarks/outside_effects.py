@@ -33,12 +33,12 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from mountcal.calibrate import Options, calibrate
-from mountcal.conventions import G_N, FloatArray, specific_force_v
-from mountcal.result import Calibration
+from mountcal.calibration.fit import Options, calibrate
+from mountcal.core.conventions import G_N, FloatArray, specific_force_v
+from mountcal.core.result import Calibration
+from mountcal.loop.slope_reference import SlopeReference
 from mountcal.simulate.stops import Truth, simulate_stops
-from mountcal.slope_reference import SlopeReference
-from mountcal.stoptable import StopTable
+from mountcal.stops.table import StopTable
 
 MG = 1e-3 * G_N
 ESTIMATES = ("roll", "pitch", "yaw", "slope")

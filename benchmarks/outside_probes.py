@@ -19,7 +19,7 @@ import numpy as np
 from outside_effects import Effect, Session, _add, _from_vehicle, _later, _sign3, main
 from scipy.spatial.transform import Rotation
 
-from mountcal.stoptable import StopTable
+from mountcal.stops.table import StopTable
 
 
 def _body_turned(s: Session, rotvec: np.ndarray) -> StopTable:

@@ -21,8 +21,8 @@ import numpy as np
 from outside_effects import MG, Effect, Session, _add, _from_vehicle, main
 from scipy.spatial.transform import Rotation
 
-from mountcal.conventions import specific_force_v
-from mountcal.stoptable import StopTable
+from mountcal.core.conventions import specific_force_v
+from mountcal.stops.table import StopTable
 
 
 def compass_rose(s: Session, q: float, rng: np.random.Generator) -> StopTable:

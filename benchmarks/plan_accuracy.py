@@ -21,10 +21,10 @@ import time
 
 import numpy as np
 
-from mountcal.conventions import G_N
-from mountcal.plan import MIN_STOPS, Noise, Request, bound_of_headings, headings, make_plan, monte_carlo_rms
-from mountcal.sensor_spec import SensorSpec
-from mountcal.systematic import from_spec
+from mountcal.core.conventions import G_N
+from mountcal.estimate.sensor_errors import from_spec
+from mountcal.io.sensor_spec import SensorSpec
+from mountcal.sessions.plan import MIN_STOPS, Noise, Request, bound_of_headings, headings, make_plan, monte_carlo_rms
 
 # the Monte Carlo draws no sensor errors: plan for a sensor without limits, so the prediction is the statistical part
 NO_LIMITS = from_spec(SensorSpec(0.0, 0.0, 0.0, 0.0, "none (benchmark of the statistical part)", heading_deg=0.0))

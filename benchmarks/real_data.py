@@ -14,13 +14,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from mountcal.conventions import G_N, normal_gravity
+from mountcal.calibration.pipeline import LogJob, calibrate_job
+from mountcal.core.conventions import G_N, normal_gravity
 from mountcal.estimate import sphere
-from mountcal.io.can.frames import read_frames
-from mountcal.io.logs import LogOptions, read_log
-from mountcal.pipeline import LogJob, calibrate_job
-from mountcal.samples import Samples
-from mountcal.stops import StopDetection, detect_stops
+from mountcal.io.can.files import read_frames
+from mountcal.io.logs import read_log
+from mountcal.io.reader import LogOptions
+from mountcal.io.samples import Samples
+from mountcal.stops.detect import StopDetection, detect_stops
 
 REAL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real"
 

@@ -28,11 +28,11 @@ from collections.abc import Callable
 
 import numpy as np
 
+from mountcal.io.samples import Channel, Samples
 from mountcal.outputs.report import figures
 from mountcal.outputs.report.embed import figure_html
 from mountcal.outputs.report.timeline import timeline
-from mountcal.samples import Channel, Samples
-from mountcal.stoptable import StopTable
+from mountcal.stops.table import StopTable
 
 SPIKE_MPS2 = 40.0
 

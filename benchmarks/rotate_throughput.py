@@ -137,7 +137,7 @@ def write_blf(path: Path, dbc: Path, hours: float, bus_hz: float = 0.0) -> None:
 
 def prepare(workdir: Path, hours: list[float], bus_hz: float) -> tuple[dict[tuple[str, float], Path], Path, Path]:
     from mountcal import calibrate, simulate_preset
-    from mountcal.calibrate import Options
+    from mountcal.calibration.fit import Options
 
     workdir.mkdir(parents=True, exist_ok=True)
     cal = workdir / "result.json"
@@ -167,8 +167,8 @@ def prepare(workdir: Path, hours: list[float], bus_hz: float) -> tuple[dict[tupl
 
 def run_mountcal(src: Path, out: Path, cal_path: Path, dbc: Path) -> int:
     from mountcal.apply.rotate_log import rotate_log
-    from mountcal.io.logs import LogOptions
-    from mountcal.result import Calibration
+    from mountcal.core.result import Calibration
+    from mountcal.io.reader import LogOptions
 
     opts = LogOptions(dbc=str(dbc)) if src.suffix == ".blf" else LogOptions()
     return rotate_log(src, Calibration.load(cal_path), out, options=opts).samples_out
@@ -177,7 +177,7 @@ def run_mountcal(src: Path, out: Path, cal_path: Path, dbc: Path) -> int:
 def run_conventional(src: Path, out: Path, cal_path: Path, dbc: Path) -> int:
     import pandas as pd
 
-    from mountcal.result import Calibration
+    from mountcal.core.result import Calibration
 
     cal = Calibration.load(cal_path)
     t: list[float] = []

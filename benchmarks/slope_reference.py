@@ -34,9 +34,9 @@ from outside_effects import (
     write,
 )
 
-from mountcal.calibrate import Options, calibrate
-from mountcal.slope_reference import SlopeReference
-from mountcal.stoptable import StopTable
+from mountcal.calibration.fit import Options, calibrate
+from mountcal.loop.slope_reference import SlopeReference
+from mountcal.stops.table import StopTable
 
 REFERENCE_SIGMAS = (0.02, 0.05)
 

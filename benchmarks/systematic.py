@@ -20,9 +20,9 @@ from dataclasses import replace
 import numpy as np
 from accuracy import publish
 
-from mountcal.calibrate import Options, calibrate
-from mountcal.conventions import G_N
-from mountcal.sensor_spec import SensorSpec
+from mountcal.calibration.fit import Options, calibrate
+from mountcal.core.conventions import G_N
+from mountcal.io.sensor_spec import SensorSpec
 from mountcal.simulate.stops import simulate_preset
 
 KEYS = ("roll_deg", "pitch_deg", "yaw_deg", "slope_deg")

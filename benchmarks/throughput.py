@@ -1,6 +1,6 @@
 """End to end: read, decode, find the stops and calibrate one hour of a parking session.
 
-mountcal (`mountcal.pipeline.calibrate_log`, what `mountcal calibrate LOG --protocol …` runs)
+mountcal (`mountcal.calibration.pipeline.calibrate_log`, what `mountcal calibrate LOG --protocol …` runs)
 against the conventional path: the per-message library decoders (mcap_ros2 `iter_decoded_messages`;
 python-can `BLFReader` + cantools `decode_message`) collecting the same signals into arrays, then
 the same stop detection and estimator. The hour is a simulated parking session (12 stops of 240 s
@@ -23,15 +23,15 @@ import numpy as np
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from mountcal.calibrate import calibrate
-from mountcal.conventions import normal_gravity
-from mountcal.io.logs import LogOptions
-from mountcal.pipeline import LogJob, calibrate_job
-from mountcal.result import Calibration
-from mountcal.samples import Channel, Samples
-from mountcal.simulate import logs as export
+from mountcal.calibration.fit import calibrate
+from mountcal.calibration.pipeline import LogJob, calibrate_job
+from mountcal.core.conventions import normal_gravity
+from mountcal.core.result import Calibration
+from mountcal.io import writers as export
+from mountcal.io.reader import LogOptions
+from mountcal.io.samples import Channel, Samples
 from mountcal.simulate.stops import simulate_parking_log
-from mountcal.stops import read_protocol, tabulate
+from mountcal.stops.detect import read_protocol, tabulate
 
 REPO = Path(__file__).resolve().parents[1]
 DBC = REPO / "data" / "imu_mm5_10.dbc"

@@ -7,7 +7,7 @@ not see (the couplings of the six faces) uniform within the spec's limits — an
 session (docs/conventions.md §3) is simulated with it. ``mountcal calibrate --triad`` corrects the
 stops and reports σ. Compared: the RMS error over the runs, the RMS of the reported σ, and the
 bound — the Cramér–Rao bound of the slope session with the triad's covariance propagated through
-the same gain (mountcal.systematic), at the truth.
+the same gain (mountcal.loop.systematic), at the truth.
 
     python benchmarks/triad_accuracy.py --runs 1000 --markdown docs/triad-results.md
 """
@@ -24,14 +24,14 @@ import numpy as np
 import real_sessions
 from accuracy import publish
 
-from mountcal.calibrate import Options, calibrate
+from mountcal.calibration.fit import Options, calibrate
 from mountcal.cli import main as cli
-from mountcal.conventions import G_N
+from mountcal.core.conventions import G_N
 from mountcal.estimate import bound, full
-from mountcal.sensor_spec import SensorSpec
+from mountcal.estimate.triad import NAMES, Triad, load
+from mountcal.io.sensor_spec import SensorSpec
+from mountcal.loop.systematic import angle_sigmas, propagate
 from mountcal.simulate.stops import simulate_preset
-from mountcal.systematic import angle_sigmas, propagate
-from mountcal.triad import NAMES, Triad, load
 
 KEYS = ("roll_deg", "pitch_deg", "yaw_deg", "slope_deg")
 MODEL = ("rotation", "slope")

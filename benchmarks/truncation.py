@@ -3,7 +3,7 @@ whole with an end that cannot be verified — counted over many cut points of re
 
 For each file, ``--cuts`` cut points evenly spread over 30–99.9 % of its bytes (plus a random
 jitter of up to one record's size, seeded) are copied to a temporary file and read twice through
-:func:`mountcal.io.can.frames.iter_frames` / :func:`mountcal.io.logs.read_log`: by default and with
+:func:`mountcal.io.can.files.iter_frames` / :func:`mountcal.io.logs.read_log`: by default and with
 ``allow_truncated``. Outcomes:
 
 - ``refused``: the default read raised ``TruncatedInput`` naming the byte where the file ends;
@@ -28,9 +28,10 @@ import tempfile
 from collections import Counter
 from pathlib import Path
 
-from mountcal.errors import InputError
-from mountcal.io.can.frames import iter_frames
-from mountcal.io.logs import LogOptions, read_log
+from mountcal.core.errors import InputError
+from mountcal.io.can.files import iter_frames
+from mountcal.io.logs import read_log
+from mountcal.io.reader import LogOptions
 from mountcal.io.whole import TruncatedInput, reading
 
 REPO = Path(__file__).resolve().parents[1]

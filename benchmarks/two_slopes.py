@@ -19,12 +19,12 @@ from dataclasses import replace
 
 import numpy as np
 
-from mountcal.calibrate import Options, calibrate
-from mountcal.conventions import G_N
+from mountcal.calibration.fit import Options, calibrate
+from mountcal.core.conventions import G_N
 from mountcal.estimate import bound, full
-from mountcal.sensor_spec import SensorSpec
+from mountcal.io.sensor_spec import SensorSpec
 from mountcal.simulate.stops import ZHANG2011, Truth, simulate_stops
-from mountcal.stoptable import StopTable
+from mountcal.stops.table import StopTable
 
 ANGLES = ("roll", "pitch", "yaw")
 TRUE_TERMS = ("rotation", "slope", "site_slope", "scale")

@@ -41,7 +41,7 @@ def schema_problems(paths: Iterable[Path]) -> list[str]:
     calibration result not valid against the published schema, each with the first error."""
     import jsonschema
 
-    from mountcal.result_file import schema
+    from mountcal.core.result_file import schema
 
     validator = jsonschema.Draft202012Validator(schema())
     problems: list[str] = []

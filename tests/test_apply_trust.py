@@ -25,12 +25,12 @@ from mountcal import calibrate
 from mountcal.apply.rotate import acc_to_vehicle, check_applicable, frame_to_vehicle
 from mountcal.apply.rotate_log import rotate_log, to_frame
 from mountcal.cli import main
-from mountcal.conventions import angles_from_rot_vs
-from mountcal.errors import InputError
-from mountcal.result import Calibration
+from mountcal.core.conventions import angles_from_rot_vs
+from mountcal.core.errors import InputError
+from mountcal.core.result import Calibration
 from mountcal.simulate.drive import simulate_drive
 from mountcal.simulate.stops import simulate_stops
-from mountcal.stoptable import write_stop_table as write_table
+from mountcal.stops.table import write_stop_table as write_table
 
 REPO = Path(__file__).resolve().parents[1]
 PARKING = REPO / "data" / "parking.mcap"
@@ -164,8 +164,8 @@ def test_the_python_api_refuses_an_undetermined_yaw_unless_level_only(noyaw: Cal
 
 
 def test_a_drive_that_does_not_determine_yaw_stores_no_yaw_and_is_refused(drive_csv: Path, tmp_path: Path) -> None:
-    from mountcal.estimate.driving import DrivingOptions
-    from mountcal.pipeline import calibrate_log
+    from mountcal.calibration.pipeline import calibrate_log
+    from mountcal.estimate.driving_options import DrivingOptions
 
     done = calibrate_log(drive_csv, use="driving", driving=DrivingOptions(max_yaw_sigma_deg=1e-6))
     cal = done.calibration
@@ -379,12 +379,12 @@ def mirror_of(cal: Calibration) -> Calibration:
 def test_issue_repro_stops_and_driving_that_disagree_in_tilt_are_a_finding_not_combined(
     drive_and_stops, capsys: pytest.CaptureFixture[str]
 ) -> None:  # type: ignore[no-untyped-def]
+    from mountcal.calibration.pipeline import LogJob, stops_with_drive
+    from mountcal.calibration.summary import summary
+    from mountcal.calibration.with_driving import combine
     from mountcal.estimate.driving import estimate_driving
-    from mountcal.estimate.driving_combine import combine
     from mountcal.io.logs import read_log
     from mountcal.outputs.report import render
-    from mountcal.pipeline import LogJob, stops_with_drive
-    from mountcal.summary import summary
 
     path, table, static = drive_and_stops
     samples = read_log([path])
@@ -413,8 +413,8 @@ def test_issue_repro_stops_and_driving_that_disagree_in_tilt_are_a_finding_not_c
 
 
 def test_stops_and_driving_that_disagree_in_yaw_are_not_combined(drive_and_stops) -> None:  # type: ignore[no-untyped-def]
+    from mountcal.calibration.with_driving import combine
     from mountcal.estimate.driving import estimate_driving
-    from mountcal.estimate.driving_combine import combine
     from mountcal.io.logs import read_log
 
     path, _, _ = drive_and_stops
@@ -431,8 +431,8 @@ def test_stops_and_driving_that_disagree_in_yaw_are_not_combined(drive_and_stops
 
 @pytest.mark.real_data
 def test_a_real_drive_with_stops_is_combined_only_when_they_agree_and_rotates_to_plus_g_up(real_data: Path) -> None:
-    from mountcal.io.logs import LogOptions
-    from mountcal.pipeline import calibrate_log
+    from mountcal.calibration.pipeline import calibrate_log
+    from mountcal.io.reader import LogOptions
 
     car = real_data / "canedge" / "3BA199E2_car_DK_2021-07-26" / "00000165"
     opts = LogOptions(dbc=str(real_data / "canedge" / "dbc" / "gnss.dbc"), channel=2)

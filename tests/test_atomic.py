@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from mountcal import atomic
-from mountcal.atomic import atomic_output, atomic_path
+from mountcal.core import atomic
+from mountcal.core.atomic import atomic_output, atomic_path
 
 
 class Boom(Exception):
@@ -80,8 +80,8 @@ def test_a_growing_file_is_cut_back_to_its_last_whole_record(tmp_path: Path) -> 
 
     code = (
         "import resource, signal, sys\n"
-        "from mountcal.atomic import GrowingFile\n"
-        "from mountcal.paths import SystemFailure\n"
+        "from mountcal.core.atomic import GrowingFile\n"
+        "from mountcal.core.paths import SystemFailure\n"
         "signal.signal(signal.SIGXFSZ, signal.SIG_IGN)\n"
         "resource.setrlimit(resource.RLIMIT_FSIZE, (10000, 10000))\n"
         "f = GrowingFile(sys.argv[1], 'the records', hidden=4)\n"
@@ -133,7 +133,7 @@ def _drop_a_ctrl_c_in_a_callback() -> None:
 
 def test_a_ctrl_c_python_drops_in_a_callback_is_kept_not_printed(capsys: pytest.CaptureFixture[str]) -> None:
     """Within removed_on_signals a Ctrl-C dropped in a callback is kept for raise_if_interrupted, silently."""
-    from mountcal.atomic import raise_if_interrupted, removed_on_signals
+    from mountcal.core.atomic import raise_if_interrupted, removed_on_signals
 
     with removed_on_signals():
         _drop_a_ctrl_c_in_a_callback()
@@ -145,7 +145,7 @@ def test_a_ctrl_c_python_drops_in_a_callback_is_kept_not_printed(capsys: pytest.
 
 def test_an_output_is_not_named_after_a_ctrl_c_python_dropped(tmp_path: Path) -> None:
     """The Ctrl-C kept by removed_on_signals stops an atomic write at its commit: nothing is named."""
-    from mountcal.atomic import atomic_output, atomic_path, removed_on_signals
+    from mountcal.core.atomic import atomic_output, atomic_path, removed_on_signals
 
     with removed_on_signals():
         _drop_a_ctrl_c_in_a_callback()
@@ -162,7 +162,7 @@ def test_an_output_is_not_named_after_a_ctrl_c_python_dropped(tmp_path: Path) ->
 
 _BLOCKED_CLEAN_UP = """
 import os, signal, sys, threading, time
-import mountcal.atomic as atomic
+import mountcal.core.atomic as atomic
 atomic.GRACE_S = 1.0
 held = threading.Lock()
 held.acquire()
@@ -202,7 +202,7 @@ def test_an_interrupted_command_s_exit_ends_within_the_grace_and_a_finished_bloc
     import sys
 
     script = (
-        "import os, signal, threading, time, mountcal.atomic as atomic\n"
+        "import os, signal, threading, time, mountcal.core.atomic as atomic\n"
         "atomic.GRACE_S = 1.0\n"
         "with atomic.removed_on_signals():\n"
         "    pass\n"

@@ -26,8 +26,8 @@ import pytest
 import zstandard
 from mcap.writer import CompressionType, Writer
 
-from mountcal import budget
-from mountcal.errors import InputError
+from mountcal.core import budget
+from mountcal.core.errors import InputError
 from mountcal.io.ros2.definitions import ros2_definition
 from mountcal.io.ros2.imu import ImuMessages, encode_imu_messages
 
@@ -73,7 +73,7 @@ def refused(result: tuple[int, str, float, float], *words: str, peak_mb: float =
 
 def test_the_limits_in_the_docs_are_the_code_s() -> None:
     docs = (REPO / "docs" / "reliability.md").read_text(encoding="utf-8")
-    assert budget.markdown() in docs, "regenerate: python -m mountcal.budget\n" + budget.markdown()
+    assert budget.markdown() in docs, "regenerate: python -m mountcal.core.budget\n" + budget.markdown()
 
 
 def test_totals_are_per_scope_and_refusals_name_the_variable(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from mountcal.cli import main
-from mountcal.result import Calibration
+from mountcal.core.result import Calibration
 
 REPO = Path(__file__).resolve().parents[1]
 STOPS = REPO / "data" / "zhang2011_stops.csv"
@@ -105,7 +105,7 @@ def test_an_empty_csv_is_refused_alike_by_calibrate_and_by_fleet(
 def test_a_library_refusal_names_no_option_and_the_cli_names_its_own(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from mountcal.errors import NotEnoughInformation
+    from mountcal.core.errors import NotEnoughInformation
     from mountcal.outputs.exporters import export
 
     result = tmp_path / "level.json"

@@ -8,7 +8,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from mountcal.conventions import (
+from mountcal.core.conventions import (
     G_N,
     angles_from_rot_vs,
     normal_gravity,

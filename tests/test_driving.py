@@ -13,13 +13,14 @@ from scipy.spatial.transform import Rotation
 
 from mountcal import calibrate, simulate_preset
 from mountcal.apply.rotate_log import to_frame
+from mountcal.calibration.with_driving import combine
 from mountcal.cli import main
-from mountcal.conventions import G_N, angles_from_rot_vs, rot_vs_from_angles
-from mountcal.errors import NotEnoughInformation
-from mountcal.estimate.driving import DrivingOptions, estimate_driving
-from mountcal.estimate.driving_combine import combine
-from mountcal.result import Calibration
-from mountcal.samples import Channel, Samples
+from mountcal.core.conventions import G_N, angles_from_rot_vs, rot_vs_from_angles
+from mountcal.core.errors import NotEnoughInformation
+from mountcal.core.result import Calibration
+from mountcal.estimate.driving import estimate_driving
+from mountcal.estimate.driving_options import DrivingOptions
+from mountcal.io.samples import Channel, Samples
 from mountcal.simulate.drive import simulate_drive
 
 
@@ -291,7 +292,8 @@ def _rms_vs_car(acc_v: np.ndarray, t_s: np.ndarray, kin: dict[str, Channel]) -> 
 
 @pytest.mark.real_data
 def test_canedge_car_two_drives_give_the_same_yaw_from_driving_within_sigma(real_data: Path) -> None:
-    from mountcal.io.logs import LogOptions, read_log
+    from mountcal.io.logs import read_log
+    from mountcal.io.reader import LogOptions
 
     car = real_data / "canedge" / "3BA199E2_car_DK_2021-07-26"
     opts = LogOptions(dbc=str(real_data / "canedge" / "dbc" / "gnss.dbc"), channel=2)

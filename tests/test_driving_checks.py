@@ -14,12 +14,12 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from mountcal.apply.rotate_log import to_frame
+from mountcal.calibration.with_driving import driving_calibration
 from mountcal.cli import main
-from mountcal.conventions import G_N
+from mountcal.core.conventions import G_N
+from mountcal.core.result import Calibration, Provenance
 from mountcal.estimate.driving import estimate_driving
-from mountcal.estimate.driving_combine import driving_calibration
-from mountcal.result import Calibration, Provenance
-from mountcal.samples import Channel, Samples
+from mountcal.io.samples import Channel, Samples
 from mountcal.simulate.drive import PITCH_PER_ACC_RAD, ROLL_PER_ACC_RAD, simulate_drive
 
 
@@ -212,7 +212,8 @@ def test_a_short_drive_still_gets_its_halves_tested() -> None:
 
 
 def _canedge(real_data: Path, drive: str) -> Samples:
-    from mountcal.io.logs import LogOptions, read_log
+    from mountcal.io.logs import read_log
+    from mountcal.io.reader import LogOptions
     from mountcal.io.timestamps import increasing_times
 
     car = real_data / "canedge" / "3BA199E2_car_DK_2021-07-26"

@@ -10,15 +10,15 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from mountcal.calibrate import Options, calibrate
+from mountcal.calibration.fit import Options, calibrate
 from mountcal.cli import main
-from mountcal.conventions import G_N
-from mountcal.diagnose import leave_one_out, leave_one_out_refit
-from mountcal.effects import BASE, PROGRESS_STOPS, close_the_loop, with_surface
+from mountcal.core.conventions import G_N
+from mountcal.core.result import Calibration
 from mountcal.estimate import full
-from mountcal.result import Calibration
+from mountcal.loop.diagnose import leave_one_out, leave_one_out_refit
+from mountcal.loop.model_choice import BASE, PROGRESS_STOPS, close_the_loop, with_surface
 from mountcal.simulate.stops import random_bias, simulate_preset, simulate_stops
-from mountcal.stoptable import StopTable, write_stop_table
+from mountcal.stops.table import StopTable, write_stop_table
 
 MG = 1e-3 * G_N
 RUNS = 12
@@ -381,7 +381,7 @@ def test_an_effect_added_by_one_file_is_fitted_chosen_applied_and_used_by_the_fl
 ) -> None:
     import pandas as pd
 
-    from mountcal.result import Calibration
+    from mountcal.core.result import Calibration
 
     table, truth = simulate_stops(slope_deg=10.0, beta_deg=np.arange(0.0, 360.0, 15.0), seed=3)
     table = replace(table, acc_s=_quadratic(table.acc_s, Q_TRUE))

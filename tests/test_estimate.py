@@ -9,10 +9,10 @@ from hypothesis import strategies as st
 from scipy import stats
 from scipy.spatial.transform import Rotation
 
-from mountcal.calibrate import Options, calibrate
-from mountcal.conventions import G_N, rot_vs_from_angles
+from mountcal.calibration.fit import Options, calibrate
+from mountcal.core.conventions import G_N, rot_vs_from_angles
+from mountcal.core.result import Calibration
 from mountcal.estimate.paper import opposite_pairs
-from mountcal.result import Calibration
 from mountcal.simulate.stops import Truth, random_bias, simulate_preset, simulate_stops
 
 CHI2_3_99_99 = stats.chi2.ppf(0.9999, 3)

@@ -21,11 +21,11 @@ import yaml
 from pyubx2 import GET, SET, UBXReader, calc_checksum
 from scipy.spatial.transform import Rotation
 
-from mountcal.calibrate import calibrate
+from mountcal.calibration.fit import calibrate
 from mountcal.cli import main
-from mountcal.errors import InputError, NotEnoughInformation
+from mountcal.core.errors import InputError, NotEnoughInformation
+from mountcal.core.result import Calibration
 from mountcal.outputs.exporters import FORMATS, Frames, export, read_parent_pose
-from mountcal.result import Calibration
 from mountcal.simulate.stops import simulate_stops
 
 G = 9.80665

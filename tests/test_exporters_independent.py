@@ -23,9 +23,9 @@ import yaml
 from pyubx2 import GET, SET, UBXReader, calc_checksum
 from scipy.spatial.transform import Rotation
 
-from mountcal.calibrate import calibrate
+from mountcal.calibration.fit import calibrate
+from mountcal.core.result import Calibration
 from mountcal.outputs.exporters import FORMATS, Frames, export, read_parent_pose
-from mountcal.result import Calibration
 from mountcal.simulate.stops import simulate_stops
 
 C200, S200 = np.cos(np.radians(200)), np.sin(np.radians(200))

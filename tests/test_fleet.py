@@ -22,14 +22,14 @@ import pandas as pd
 import pytest
 
 from mountcal.cli import main
+from mountcal.core.result import Calibration
 from mountcal.fleet import FleetOptions, JobDefaults, LocalEngine, collect_jobs, outputs_of, run_fleet
 from mountcal.fleet.progress import Progress
 from mountcal.fleet.store import PartStore, job_hash
 from mountcal.fleet.worker import run_job
-from mountcal.result import Calibration
-from mountcal.simulate import logs as export
+from mountcal.io import writers as export
 from mountcal.simulate.stops import ParkingLog, simulate_parking_log, simulate_stops
-from mountcal.stoptable import write_stop_table
+from mountcal.stops.table import write_stop_table
 
 TRUTH = (5.0, 6.0, 7.0)
 UPHILL_AZIMUTH_DEG = 30.0
@@ -324,7 +324,7 @@ def test_bad_inputs_stop_with_a_clear_message_and_write_nothing(
         assert main(["fleet", *inputs, "-o", output, "-q"]) == 2, phrase
         err = capsys.readouterr().err
         assert phrase in err and "Traceback" not in err, err
-    with pytest.raises(SystemExit) as stop:  # the parser refuses it: the option's range (mountcal.ranges)
+    with pytest.raises(SystemExit) as stop:  # the parser refuses it: the option's range (mountcal.core.ranges)
         main(["fleet", str(tmp_path / "v"), "--workers", "0", "-o", str(tmp_path / "o.parquet"), "-q"])
     assert stop.value.code == 2 and "worker processes: a whole number in [1, 1024]" in capsys.readouterr().err
     assert log.read_bytes() == before

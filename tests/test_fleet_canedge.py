@@ -26,9 +26,9 @@ import pandas as pd
 import pytest
 
 from mountcal.cli import main
+from mountcal.core.result import Calibration
 from mountcal.fleet import outputs_of
 from mountcal.fleet.store import PartStore
-from mountcal.result import Calibration
 
 REPO = Path(__file__).resolve().parents[1]
 DBC = REPO / "data" / "imu_mm5_10.dbc"
@@ -52,7 +52,7 @@ def write_session(folder: Path, angles: tuple[float, float, float], seed: int, l
     600 − lead_s s into the recording: inside a stop (lead 0: stop 9 spans 585–625 s) or a drive
     (lead 40: the boundary at 560 s is in the drive 560–585 s).
     """
-    from mountcal.simulate.logs import write_can_log
+    from mountcal.io.writers import write_can_log
     from mountcal.simulate.stops import simulate_parking_log
 
     log = simulate_parking_log(
@@ -262,8 +262,10 @@ def test_the_fleet_from_the_s3_server_gives_the_local_table(
         _comparable(logs, "s3://fleet/LOG"), _comparable(local_run["logs"], str(canedge)), check_exact=True
     )
     vehicles = pd.read_parquet(outputs_of(output)[1])
-    assert vehicles.drop(columns=["remounts", "mountings"]).pipe(_comparable, "s3://fleet/LOG").equals(
-        local_run["vehicles"].drop(columns=["remounts", "mountings"]).pipe(_comparable, str(canedge))
+    assert (
+        vehicles.drop(columns=["remounts", "mountings"])
+        .pipe(_comparable, "s3://fleet/LOG")
+        .equals(local_run["vehicles"].drop(columns=["remounts", "mountings"]).pipe(_comparable, str(canedge)))
     )
 
 

@@ -17,7 +17,7 @@ import pytest
 from mountcal.cli import main
 from mountcal.fleet import outputs_of
 from mountcal.simulate.stops import simulate_stops
-from mountcal.stoptable import write_stop_table
+from mountcal.stops.table import write_stop_table
 
 REPO = Path(__file__).resolve().parents[1]
 

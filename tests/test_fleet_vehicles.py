@@ -9,8 +9,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from mountcal.calibrate import calibrate
-from mountcal.conventions import rot_vs_from_angles
+from mountcal.calibration.fit import calibrate
+from mountcal.core.conventions import rot_vs_from_angles
 from mountcal.fleet.vehicles import (
     analyse_fleet,
     angles_with_sigma,

@@ -24,7 +24,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from mountcal.cli import main
-from mountcal.paths import output_lock
+from mountcal.core.paths import output_lock
 
 REPO = Path(__file__).resolve().parents[1]
 DBC = REPO / "data" / "imu_mm5_10.dbc"
@@ -238,7 +238,7 @@ def test_an_input_over_the_size_limit_names_the_limit_and_how_to_raise_it(
 def test_rotate_chunk_zero_is_a_message(files: dict[str, Path], capsys: pytest.CaptureFixture[str]) -> None:
     out = files["dir"] / "chunk0.parquet"
     args = ["rotate", str(files["stops"]), "--calibration", str(files["result"]), "-o", str(out), "--chunk", "0"]
-    with pytest.raises(SystemExit) as stop:  # refused by the parser: the option's range (mountcal.ranges)
+    with pytest.raises(SystemExit) as stop:  # refused by the parser: the option's range (mountcal.core.ranges)
         main(args)
     err = capsys.readouterr().err
     assert stop.value.code == 2 and "--chunk" in err and not out.exists()

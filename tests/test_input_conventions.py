@@ -19,16 +19,17 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from mountcal.apply.rotate_log import to_frame
-from mountcal.calibrate import Options, calibrate
+from mountcal.calibration.fit import Options, calibrate
 from mountcal.cli import main
-from mountcal.errors import InputError
-from mountcal.input_conventions import GRAVITY, NOISE, parse_axes, parse_quantity
-from mountcal.io.logs import LogOptions, iter_log, read_log
-from mountcal.result import Calibration
-from mountcal.samples import Channel, Samples
+from mountcal.core.errors import InputError
+from mountcal.core.result import Calibration
+from mountcal.io.input_conventions import GRAVITY, NOISE, parse_axes, parse_quantity
+from mountcal.io.logs import iter_log, read_log
+from mountcal.io.reader import LogOptions
+from mountcal.io.samples import Channel, Samples
 from mountcal.simulate.drive import simulate_drive
 from mountcal.simulate.stops import simulate_parking_log, simulate_stops
-from mountcal.stoptable import read_stop_table, write_stop_table
+from mountcal.stops.table import read_stop_table, write_stop_table
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = REPO / "data"
@@ -474,7 +475,7 @@ def test_old_result_files_without_checks_or_conventions_still_load(tmp_path: Pat
 
 
 def test_every_refusal_of_a_convention_names_its_option() -> None:
-    """The library spells the Python parameter, the CLI the flag (one table, mountcal.option_names)."""
+    """The library spells the Python parameter, the CLI the flag (one table, mountcal.core.option_names)."""
     for bad in ("1", "0.5", "12"):
         with pytest.raises(InputError, match=re.escape("Options.gravity_mps2=")):
             parse_quantity(bad, GRAVITY)
@@ -548,7 +549,7 @@ def test_a_stop_table_s_axis_map_turns_its_means_and_covariances() -> None:
 
 
 def read_stop_table_frame(df: pd.DataFrame, axes: str):  # type: ignore[no-untyped-def]
-    from mountcal.stoptable import stop_table_from_frame
+    from mountcal.stops.table import stop_table_from_frame
 
     return stop_table_from_frame(df, axes=parse_axes(axes))
 
@@ -574,8 +575,8 @@ def test_a_stop_table_written_with_an_axis_map_says_so_and_rotate_asks_for_the_s
 
 def test_samples_read_outside_read_log_get_the_log_conventions_in_the_pipeline(tmp_path: Path) -> None:
     """The fleet reads a log's splits itself: the pipeline applies --axes to them all the same (once)."""
+    from mountcal.calibration.pipeline import LogJob, calibrate_job
     from mountcal.io.registry import reader_for
-    from mountcal.pipeline import LogJob, calibrate_job
 
     path = DATA / "parking.mcap"
     job = LogJob(paths=(str(path),), log=LogOptions(axes="-y,x,z"), protocol=str(DATA / "parking_protocol.csv"))

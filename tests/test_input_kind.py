@@ -12,15 +12,15 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from mountcal.calibration.pipeline import LogJob
 from mountcal.cli import main
-from mountcal.errors import InputError
+from mountcal.core.errors import InputError
+from mountcal.estimate.triad import session_stops
 from mountcal.fleet.inputs import FleetJob
 from mountcal.fleet.worker import run_job
 from mountcal.io.kind import input_kind
-from mountcal.pipeline import LogJob
 from mountcal.simulate.stops import simulate_parking_log
-from mountcal.stoptable import read_stop_table
-from mountcal.triad import session_stops
+from mountcal.stops.table import read_stop_table
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = REPO / "data"
@@ -132,7 +132,7 @@ def test_calibrate_reads_a_comma2k19_folder_as_the_other_commands_do(
 
 
 def test_a_fleet_worker_flags_a_cut_stop_table_read_in_part(timed_stops: Path, tmp_path: Path) -> None:
-    from mountcal.io.logs import LogOptions
+    from mountcal.io.reader import LogOptions
 
     cut = tmp_path / "cut.csv"
     cut.write_bytes(timed_stops.read_bytes()[:-4])  # the last row loses its last digits and line break

@@ -1,24 +1,47 @@
-"""The package's layout: module-level imports form no cycle, and nothing below the CLI imports it."""
+"""The package's layout: stage folders in pipeline order, every import (module level, in a function
+or under ``TYPE_CHECKING``) going to the same stage or one below, no import circle among modules or
+among stages, no module over 600 lines, and a top level of packages and at most five modules."""
 
 from __future__ import annotations
 
 import ast
 from pathlib import Path
 
+import mountcal
+
 SRC = Path(__file__).resolve().parents[1] / "src"
+PACKAGE = SRC / "mountcal"
+
+# The stages, lowest first; a stage imports only from itself and the stages before it. The three
+# of one rank (fleet, sessions, simulate) stand side by side: each may use the others, in no circle.
+STAGES: tuple[tuple[str, ...], ...] = (
+    ("core",),
+    ("io",),
+    ("stops",),
+    ("estimate",),
+    ("loop",),
+    ("calibration",),
+    ("apply",),
+    ("outputs",),
+    ("fleet", "sessions", "simulate"),
+    ("cli",),
+)
+RANK = {stage: rank for rank, names in enumerate(STAGES) for stage in names}
+TOP_MODULES = {"__init__", "__main__"}  # the top level's own modules besides the stage folders
+MAX_LINES = 600
 
 
 def _modules() -> dict[str, Path]:
     out = {}
-    for path in (SRC / "mountcal").rglob("*.py"):
+    for path in PACKAGE.rglob("*.py"):
         name = ".".join(path.relative_to(SRC).with_suffix("").parts)
         out[name.removesuffix(".__init__")] = path
     return out
 
 
 def _graph() -> dict[str, set[str]]:
-    """Module → the mountcal modules it imports at module level (TYPE_CHECKING and function bodies
-    are left out: they do not run on import)."""
+    """Module → the mountcal modules it imports anywhere in its text: at module level, inside
+    functions and under ``TYPE_CHECKING`` (relative imports resolved)."""
     modules = _modules()
 
     def resolve(name: str) -> str | None:
@@ -28,22 +51,27 @@ def _graph() -> dict[str, set[str]]:
 
     graph: dict[str, set[str]] = {m: set() for m in modules}
     for module, path in modules.items():
-        for node in ast.parse(path.read_text(encoding="utf-8")).body:
+        package = module if path.name == "__init__.py" else module.rsplit(".", 1)[0]
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
             names: list[str] = []
             if isinstance(node, ast.Import):
                 names = [a.name for a in node.names]
-            elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    parts = package.split(".")
+                    base = ".".join(parts[: len(parts) - node.level + 1] + ([node.module] if node.module else []))
                 # `from pkg import sub` needs the submodule when there is one, else the package
-                names = [resolve(f"{node.module}.{a.name}") or node.module for a in node.names]
+                names = [resolve(f"{base}.{a.name}") or base for a in node.names]
             for name in names:
-                target = resolve(name) if name.startswith("mountcal") else None
+                target = resolve(name) if name.split(".")[0] == "mountcal" else None
                 if target is not None and target != module:
                     graph[module].add(target)
     return graph
 
 
 def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
-    """Strongly connected components of more than one module (Tarjan)."""
+    """Strongly connected components of more than one node (Tarjan)."""
     index: dict[str, int] = {}
     low: dict[str, int] = {}
     stack: list[str] = []
@@ -74,17 +102,64 @@ def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
     return found
 
 
-def test_module_imports_form_no_cycle() -> None:
+def _stage(module: str) -> str | None:
+    """The stage folder of a module (``mountcal.loop.terms`` → ``loop``); None for the top level."""
+    parts = module.split(".")
+    return parts[1] if len(parts) > 2 or (len(parts) == 2 and parts[1] in RANK) else None
+
+
+def test_the_walk_reads_imports_in_functions_and_under_type_checking() -> None:
     graph = _graph()
-    assert len(graph) > 50  # the walk found the package
-    assert _cycles(graph) == []
+    assert len(graph) > 150  # the walk found the package
+    # a function-level import (the worker's calibration) and a TYPE_CHECKING one (the effects' Calibration)
+    assert "mountcal.calibration.pipeline" in graph["mountcal.fleet.worker"]
+    assert "mountcal.core.result" in graph["mountcal.estimate.effects"]
+
+
+def test_module_imports_form_no_cycle() -> None:
+    assert _cycles(_graph()) == []
+
+
+def test_stages_form_no_cycle() -> None:
+    stages: dict[str, set[str]] = {s: set() for s in RANK}
+    for module, deps in _graph().items():
+        a = _stage(module)
+        for d in deps:
+            b = _stage(d)
+            if a is not None and b is not None and a != b:
+                stages[a].add(b)
+    assert _cycles(stages) == []
+
+
+def test_every_import_goes_to_the_same_stage_or_below() -> None:
+    upward = []
+    for module, deps in sorted(_graph().items()):
+        a = _stage(module)
+        if a is None:
+            continue  # the package's own __init__ and __main__ sit above every stage
+        assert a in RANK, f"{module}: {a!r} is not a stage folder"
+        upward += [f"{module} → {d}" for d in sorted(deps) if (b := _stage(d)) is None or RANK[b] > RANK[a]]
+    assert upward == []
 
 
 def test_a_cycle_is_found_when_there_is_one() -> None:
     assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
 
 
+def test_the_top_level_holds_the_stage_folders_and_few_modules() -> None:
+    modules = {p.stem for p in PACKAGE.glob("*.py")}
+    folders = {p.name for p in PACKAGE.iterdir() if p.is_dir() and (p / "__init__.py").exists()}
+    assert modules == TOP_MODULES and len(modules) <= 5
+    assert folders == set(RANK)
+    # an export named like a submodule would be replaced by it on import
+    assert not set(mountcal.__all__) & folders
+
+
+def test_no_module_is_over_600_lines() -> None:
+    long = {m: n for m, p in _modules().items() if (n := len(p.read_text(encoding="utf-8").splitlines())) > MAX_LINES}
+    assert long == {}
+
+
 def test_only_the_command_line_imports_the_command_line() -> None:
-    graph = _graph()
-    users = {m for m, deps in graph.items() if any(d.startswith("mountcal.cli") for d in deps)}
+    users = {m for m, deps in _graph().items() if any(d.startswith("mountcal.cli") for d in deps)}
     assert {m for m in users if not m.startswith("mountcal.cli") and m != "mountcal.__main__"} == set()

@@ -26,7 +26,7 @@ DBC = DATA / "imu_mm5_10.dbc"
 
 # A reader plugin that makes noise the three ways a library can: print(), a write to file
 # descriptor 1 (C code, a child process) and a Python warning; then it reads the log as a table.
-NOISY = '''
+NOISY = """
 import os
 import warnings
 from pathlib import Path
@@ -49,7 +49,7 @@ class NoisyReader(LogReader):
         copy = path.with_suffix(".parquet")
         copy.write_bytes(path.read_bytes())
         return read_table(copy)
-'''
+"""
 
 
 def run(*args: str | Path, env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:

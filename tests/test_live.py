@@ -17,18 +17,18 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from mountcal.calibrate import Calibration, Options, calibrate
+from mountcal.calibration.fit import Calibration, Options, calibrate
+from mountcal.calibration.pipeline import LogJob, calibrate_job
 from mountcal.cli import main
-from mountcal.errors import InputError, NotEnoughInformation
+from mountcal.core.errors import InputError, NotEnoughInformation
 from mountcal.estimate.bound import crb_deg, true_state
-from mountcal.io.logs import LogOptions
-from mountcal.live import CANDIDATES_DEG, Live, LiveOptions, Session, fail_if_empty, next_heading
-from mountcal.pipeline import LogJob, calibrate_job
-from mountcal.sensor_spec import SensorSpec
-from mountcal.simulate import logs as export
+from mountcal.io import writers as export
+from mountcal.io.reader import LogOptions
+from mountcal.io.sensor_spec import SensorSpec
+from mountcal.sessions.live import CANDIDATES_DEG, Live, LiveOptions, Session, fail_if_empty, next_heading
 from mountcal.simulate.stops import simulate_parking_log, simulate_stops
-from mountcal.stops import StopDetection
-from mountcal.stoptable import StopTable
+from mountcal.stops.detect import StopDetection
+from mountcal.stops.table import StopTable
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 DBC, MAPPING = str(DATA / "imu_mm5_10.dbc"), str(DATA / "imu_mm5_10.toml")
@@ -295,7 +295,7 @@ def test_a_timeout_that_is_not_a_positive_number_is_a_message(
     try:
         code = main(["live", "--interface", "virtual", "--channel", "t", "--dbc", DBC, "--timeout", timeout,
                      "-o", str(tmp_path / "s")])  # fmt: skip
-    except SystemExit as refused:  # by the parser: --timeout is a duration of mountcal.ranges
+    except SystemExit as refused:  # by the parser: --timeout is a duration of mountcal.core.ranges
         code = refused.code
     err = capsys.readouterr().err
     assert code == 2 and "--timeout" in err and "Traceback" not in err
@@ -330,14 +330,14 @@ def live_process(blf: Path, channel: str, *args: str) -> subprocess.Popen[str]:
 
 def frames_read(recording: Path) -> int:
     """The frames mountcal's own reader gives (it refuses a file cut inside a block)."""
-    from mountcal.io.can.frames import read_frames
+    from mountcal.io.can.files import read_frames
 
     return len(read_frames(recording).t_s)
 
 
 def on_the_bus_clock(recording: Path, sent: Path) -> bool:
     """Whether the recording's first frame has the stamp of a frame sent (its header's start is the bus's)."""
-    from mountcal.io.can.frames import read_frames
+    from mountcal.io.can.files import read_frames
 
     first = read_frames(recording).t_s[0]
     return bool(np.min(np.abs(read_frames(sent).t_s - first)) < 1e-4)
@@ -382,7 +382,7 @@ def test_the_recording_reads_whole_at_every_moment_it_can_be_cut(tmp_path: Path)
     """Each state the file passes through on disk (after each container and header) is a BLF both readers
     read to the same frames, every frame whole: what a kill at that moment leaves."""
     from mountcal.io.can.bus import Recording
-    from mountcal.io.can.frames import read_frames
+    from mountcal.io.can.files import read_frames
 
     rng = np.random.default_rng(4)
     path = tmp_path / "rec.blf"

@@ -42,11 +42,12 @@ def test_python_dash_m_mountcal_runs_the_cli() -> None:
     assert done.returncode == 0 and "calibrate" in done.stdout and "fleet" in done.stdout
 
 
-def test_an_export_named_like_its_submodule_stays_the_export() -> None:
-    """`mountcal.calibrate` is the function even after the submodule mountcal.calibrate is imported."""
+def test_an_export_stays_the_export_when_its_home_is_imported() -> None:
+    """`mountcal.calibrate` is the function after its module mountcal.calibration.fit is imported."""
     code = (
-        "import mountcal.calibrate, mountcal; from mountcal import calibrate; "
-        "import types; print(callable(mountcal.calibrate) and not isinstance(calibrate, types.ModuleType))"
+        "import mountcal.calibration.fit, mountcal; from mountcal import calibrate; import types; "
+        "print(callable(mountcal.calibrate) and calibrate is mountcal.calibration.fit.calibrate "
+        "and not isinstance(calibrate, types.ModuleType))"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "True"

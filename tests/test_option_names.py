@@ -11,17 +11,17 @@ import pytest
 
 from mountcal import cli
 from mountcal.apply.rotate_log import output_format, rotate_log
-from mountcal.calibrate import Options, parse_model
-from mountcal.errors import InputError
-from mountcal.io.logs import LogOptions
-from mountcal.option_names import OPTIONS, as_flags, option
+from mountcal.calibration.fit import Options, parse_model
+from mountcal.calibration.pipeline import calibrate_log
+from mountcal.core.errors import InputError
+from mountcal.core.option_names import OPTIONS, as_flags, option
+from mountcal.io.reader import LogOptions
 from mountcal.outputs.exporters import Frames, export
 from mountcal.outputs.report.html import render
-from mountcal.pipeline import calibrate_log
-from mountcal.plan import Noise
+from mountcal.sessions.plan import Noise
 from mountcal.simulate.stops import simulate_preset
-from mountcal.stops import StopDetection, relax
-from mountcal.stoptable import read_stop_table, write_stop_table
+from mountcal.stops.detect import StopDetection, relax
+from mountcal.stops.table import read_stop_table, write_stop_table
 
 
 def _flags_of_every_command() -> set[str]:

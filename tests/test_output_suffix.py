@@ -3,7 +3,7 @@
 
 Each output option declares the suffixes of what it writes where its parser is built, in its path
 declaration (``add_path(..., formats=...)``, :mod:`mountcal.cli.path_options`); the one check
-(:func:`mountcal.output_suffix.check_output_suffix`) runs from that declaration before every
+(:func:`mountcal.core.output_suffix.check_output_suffix`) runs from that declaration before every
 command, and the library's writers that choose a format by name apply it too.
 """
 
@@ -17,10 +17,10 @@ import pytest
 from mountcal.apply.rotate_log import rotate_log
 from mountcal.cli import COMMANDS, build_parser, main
 from mountcal.cli.path_options import declared, label
-from mountcal.errors import InputError
-from mountcal.output_suffix import check_output_suffix
-from mountcal.result import Calibration
-from mountcal.stoptable import read_stop_table, write_stop_table
+from mountcal.core.errors import InputError
+from mountcal.core.output_suffix import check_output_suffix
+from mountcal.core.result import Calibration
+from mountcal.stops.table import read_stop_table, write_stop_table
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 
@@ -115,4 +115,3 @@ def test_export_takes_the_suffixes_of_its_format(
     assert "a name ending in .blf" in capsys.readouterr().err and not (tmp_path / "m.blf").exists()
     assert main(["export", str(result), "--to", "json", "-o", str(tmp_path / "m.sh")]) == 2
     assert main(["export", str(result), "--to", "yaml", "-o", str(tmp_path / "m.yml")]) == 0
-

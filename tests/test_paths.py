@@ -19,9 +19,10 @@ from pathlib import Path
 
 import pytest
 
-from mountcal import cli, ranges
+from mountcal import cli
 from mountcal.cli.path_options import PathOption, command_parser, declared, label
-from mountcal.paths import output_lock
+from mountcal.core import ranges
+from mountcal.core.paths import output_lock
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -53,7 +54,7 @@ def parsers() -> dict[str, argparse.ArgumentParser]:
 
 def takes_text(action: argparse.Action) -> bool:
     """An option whose value is free text (could be a path): not a flag, a number (of a quantity of
-    mountcal.ranges, perhaps with its unit) or a choice."""
+    mountcal.core.ranges, perhaps with its unit) or a choice."""
     if action.nargs == 0 or action.choices is not None or isinstance(action, argparse._HelpAction):
         return False
     return action.type not in (int, float) and ranges.option_quantities(action) is None
@@ -177,7 +178,7 @@ def real_inputs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 
     import numpy as np
 
-    from mountcal.triad import Triad
+    from mountcal.estimate.triad import Triad
 
     d = tmp_path_factory.mktemp("real_inputs")
     assert cli.main(["simulate", "-o", str(d / "s.csv"), "--seed", "3"]) == 0
@@ -375,7 +376,7 @@ def test_a_file_planted_as_the_lock_file_is_refused_and_its_target_kept(tmp_path
         os.link(victim, lock)
     else:
         os.mkfifo(lock)
-    from mountcal.errors import InputError
+    from mountcal.core.errors import InputError
 
     with pytest.raises(InputError, match=r"lock file.*(a symlink|a hard link|a FIFO)"), output_lock(out):
         pass

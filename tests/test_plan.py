@@ -7,16 +7,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mountcal.calibrate import Options, calibrate
+from mountcal.calibration.fit import Options, calibrate
 from mountcal.cli import main
-from mountcal.conventions import G_N
-from mountcal.io.logs import LogOptions
-from mountcal.plan import Noise, Request, bound_of_headings, make_plan, monte_carlo_rms, noise_from_log
-from mountcal.samples import Samples
-from mountcal.sensor_spec import DEFAULT, read_spec
+from mountcal.core.conventions import G_N
+from mountcal.estimate.sensor_errors import SensorErrors, from_spec
+from mountcal.io.reader import LogOptions
+from mountcal.io.samples import Samples
+from mountcal.io.sensor_spec import DEFAULT, read_spec
+from mountcal.sessions.plan import Noise, Request, bound_of_headings, make_plan, monte_carlo_rms, noise_from_log
 from mountcal.simulate.stops import simulate_parking_log, simulate_stops
-from mountcal.stops import read_protocol, tabulate
-from mountcal.systematic import SensorErrors, from_spec
+from mountcal.stops.detect import read_protocol, tabulate
 
 TARGET = {"roll": 0.1, "pitch": 0.1, "yaw": 0.5}
 # a calibrated sensor: limits far below what the stops resolve, so the plan is the bound alone
@@ -104,7 +104,7 @@ def test_calibrate_reads_the_sheet_and_finds_every_planned_stop(tmp_path: Path) 
 
 
 def test_noise_from_a_log_is_the_simulated_white_noise(tmp_path: Path) -> None:
-    from mountcal.simulate import logs as export
+    from mountcal.io import writers as export
 
     log = simulate_parking_log(noise_mps2=0.04, rate_hz=100.0, seed=5)
     path = tmp_path / "parked.mcap"

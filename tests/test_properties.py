@@ -23,12 +23,12 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from mountcal.calibrate import Options, calibrate
+from mountcal.calibration.fit import Options, calibrate
 from mountcal.cli import main
-from mountcal.conventions import G_N
-from mountcal.result import Calibration
+from mountcal.core.conventions import G_N
+from mountcal.core.result import Calibration
 from mountcal.simulate.stops import simulate_stops
-from mountcal.stoptable import OPTIONAL, StopTable
+from mountcal.stops.table import OPTIONAL, StopTable
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 import fuzz

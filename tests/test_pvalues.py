@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import special, stats
 
-from mountcal import pvalues
+from mountcal.core import pvalues
 
 X = np.array([-1.0, 0.0, 1e-9, 0.5, 1.0, 3.0, 10.0, 50.0, 200.0, 800.0, 2000.0])
 

@@ -1,7 +1,7 @@
 """Numbers checked at the edge (issue 27, reproduction 5 and item 7's CAN stamps and ids).
 
 Every float read from a file or an option is finite and inside the physical range of its
-quantity (:mod:`mountcal.ranges`, one table stated in docs/reliability.md), or refused naming
+quantity (:mod:`mountcal.core.ranges`, one table stated in docs/reliability.md), or refused naming
 it; nothing downstream writes ``inf`` or ``NaN``. The option ranges are a mechanism: a test walks
 every parser, so a new numeric option cannot skip them.
 """
@@ -20,11 +20,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from mountcal import ranges
-from mountcal.calibrate import calibrate
+from mountcal.calibration.fit import calibrate
 from mountcal.cli import build_parser, main
-from mountcal.errors import NotEnoughInformation
-from mountcal.stoptable import read_stop_table
+from mountcal.core import ranges
+from mountcal.core.errors import NotEnoughInformation
+from mountcal.stops.table import read_stop_table
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = REPO / "data"
@@ -45,7 +45,7 @@ def test_every_numeric_option_is_declared_with_its_range() -> None:
     for command, parser in _commands():
         for action in parser._actions:
             flag = "/".join(action.option_strings) or action.dest
-            assert action.type not in (float, int), f"{command} {flag}: declare it with mountcal.ranges.Number"
+            assert action.type not in (float, int), f"{command} {flag}: declare it with mountcal.core.ranges.Number"
             quantities = ranges.option_quantities(action)
             if quantities is None:
                 continue
@@ -57,10 +57,10 @@ def test_every_numeric_option_is_declared_with_its_range() -> None:
 
 
 def test_the_table_in_the_docs_is_the_code_s() -> None:
-    """docs/reliability.md states the ranges; this regenerates its table from mountcal.ranges."""
+    """docs/reliability.md states the ranges; this regenerates its table from mountcal.core.ranges."""
     docs = (REPO / "docs" / "reliability.md").read_text(encoding="utf-8")
     table = ranges.markdown(build_parser())
-    assert table in docs, "regenerate the table: python -m mountcal.ranges (then paste it)\n" + table
+    assert table in docs, "regenerate the table: python -m mountcal.cli.ranges_table (then paste it)\n" + table
 
 
 def test_every_quantity_is_used() -> None:
@@ -137,7 +137,7 @@ def test_an_option_with_a_unit_outside_its_range_is_refused(
 
 
 def test_the_options_with_a_unit_are_declared_with_the_range_they_are_checked_against() -> None:
-    from mountcal.input_conventions import GRAVITY, NOISE
+    from mountcal.io.input_conventions import GRAVITY, NOISE
 
     declared = {
         (command, action.option_strings[-1]): ranges.option_quantities(action)

@@ -20,13 +20,14 @@ from matplotlib.figure import Figure
 
 from mountcal import Options, calibrate, simulate_stops
 from mountcal.cli import main
-from mountcal.errors import InputError
+from mountcal.core.errors import InputError
+from mountcal.core.findings import Finding
+from mountcal.core.result import Calibration
 from mountcal.outputs.report import figures, render
 from mountcal.outputs.report.document import angle_estimates, format_pm, step_label
 from mountcal.outputs.report.embed import embed_svg
 from mountcal.outputs.report.html import short_source
-from mountcal.result import Calibration, Finding
-from mountcal.stoptable import StopTable, write_stop_table
+from mountcal.stops.table import StopTable, write_stop_table
 
 BIAS_20MG = np.array([20.0, -10.0, 15.0]) * 1e-3 * 9.80665
 
@@ -381,9 +382,9 @@ def test_report_renders_in_headless_chromium(
 
 
 def test_a_report_of_a_log_renders_in_headless_chromium_with_its_stops_over_time(tmp_path: Path) -> None:
-    from mountcal.io.logs import LogOptions
+    from mountcal.calibration.pipeline import calibrate_log
+    from mountcal.io.reader import LogOptions
     from mountcal.outputs.report import timeline_of
-    from mountcal.pipeline import calibrate_log
 
     data = Path(__file__).resolve().parents[1] / "data"
     done = calibrate_log(

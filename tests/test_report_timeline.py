@@ -17,16 +17,16 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 
 from mountcal.apply.rotate_log import to_frame
+from mountcal.calibration.pipeline import LogResult, calibrate_log
 from mountcal.cli import main
-from mountcal.io.logs import LogOptions
+from mountcal.io.reader import LogOptions
+from mountcal.io.samples import Channel, Samples
 from mountcal.outputs.report import figures, render
 from mountcal.outputs.report.embed import figure_html
 from mountcal.outputs.report.timeline import COLUMNS, Timeline, envelope, timeline, timeline_of
-from mountcal.pipeline import LogResult, calibrate_log
-from mountcal.samples import Channel, Samples
 from mountcal.simulate.drive import simulate_drive
-from mountcal.stops import StopDetection, find_stops
-from mountcal.stoptable import StopTable
+from mountcal.stops.detect import StopDetection, find_stops
+from mountcal.stops.table import StopTable
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 DBC = str(DATA / "imu_mm5_10.dbc")
@@ -217,7 +217,7 @@ def test_calibrate_a_log_with_a_report_draws_it_and_report_from_the_json_says_it
 
 
 def test_live_with_a_report_draws_the_session_over_time(tmp_path: Path) -> None:
-    from mountcal.simulate import logs as export
+    from mountcal.io import writers as export
     from mountcal.simulate.stops import simulate_parking_log
 
     beta = (0.0, 60.0, 120.0, 180.0, 240.0, 300.0)

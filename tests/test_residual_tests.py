@@ -8,14 +8,15 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from mountcal.calibrate import calibrate
-from mountcal.conventions import G_N, FloatArray
-from mountcal.diagnose import FAMILY_ALPHA, analyse, unexplained
-from mountcal.effects import BASE
+from mountcal.calibration.fit import calibrate
+from mountcal.core.conventions import G_N, FloatArray
+from mountcal.core.findings import Finding
+from mountcal.core.pvalues import FAMILY_ALPHA, unexplained
 from mountcal.estimate import full
-from mountcal.result import Finding
+from mountcal.loop.diagnose import analyse
+from mountcal.loop.model_choice import BASE
 from mountcal.simulate.stops import simulate_stops
-from mountcal.stoptable import StopTable
+from mountcal.stops.table import StopTable
 
 MG = 1e-3 * G_N
 
@@ -149,7 +150,7 @@ def test_the_worst_stop_is_judged_against_all_the_stops() -> None:
 @pytest.mark.parametrize("terms", [BASE, (*BASE, "bias"), (*BASE, "bias", "gravity")])
 def test_the_per_stop_tests_equal_the_dense_projection(terms: tuple[str, ...]) -> None:
     # The O(n p²) form against the plain one: project the n one-stop directions off the Jacobian.
-    from mountcal.diagnose import _outside, _span
+    from mountcal.loop.diagnose import _outside, _span
 
     rng = np.random.default_rng(14)
     table = clean(rng, 18)
@@ -216,8 +217,8 @@ def test_the_step_tests_follow_time_not_rows() -> None:
 @pytest.mark.parametrize("terms", [BASE, (*BASE, "bias")])
 def test_the_step_statistic_equals_the_dense_projection_at_its_split(terms: tuple[str, ...]) -> None:
     # The suffix sums against the plain form: project the split's 3 columns off the Jacobian.
-    from mountcal.change_point import _attitude_directions
-    from mountcal.diagnose import _outside, _span
+    from mountcal.loop.change_points import _attitude_directions
+    from mountcal.loop.diagnose import _outside, _span
 
     rng = np.random.default_rng(18)
     table = _stepped(clean(rng, 15), 6, bias_mps2=np.array([1.0, 1.0, -2.0]) * MG)

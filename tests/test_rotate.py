@@ -18,9 +18,9 @@ from mountcal.apply.rotate import (
     rate_to_sensor,
     rate_to_vehicle,
 )
-from mountcal.calibrate import Options, calibrate
-from mountcal.conventions import G_N, specific_force_v
-from mountcal.errors import InputError
+from mountcal.calibration.fit import Options, calibrate
+from mountcal.core.conventions import G_N, specific_force_v
+from mountcal.core.errors import InputError
 from mountcal.simulate.stops import simulate_preset
 
 

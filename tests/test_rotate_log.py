@@ -24,15 +24,16 @@ from mcap_ros2.decoder import DecoderFactory
 from mcap_ros2.writer import Writer as Ros2Writer
 
 import mountcal.apply.rotate_log
-import mountcal.errors
+import mountcal.core.errors
 from mountcal import calibrate, simulate_preset
 from mountcal.apply.rotate import acc_to_sensor, rate_to_sensor
 from mountcal.apply.rotate_log import rotate_log, to_frame
-from mountcal.calibrate import Options
+from mountcal.calibration.fit import Options
 from mountcal.cli import main
-from mountcal.io.logs import LogOptions, read_log
+from mountcal.core.result import Calibration
+from mountcal.io.logs import read_log
 from mountcal.io.mcap.write import IMU_DEFINITION
-from mountcal.result import Calibration
+from mountcal.io.reader import LogOptions
 from mountcal.simulate.drive import simulate_drive
 
 T0_NS = 1_714_557_600_000_000_000
@@ -391,7 +392,7 @@ def test_bad_input_is_refused_clearly_without_output(
 
 def test_an_mcap_output_from_several_mcap_files_is_refused(logs, cal: Calibration, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
     src, _ = logs["mcap"]
-    with pytest.raises(mountcal.errors.InputError, match="one MCAP file"):
+    with pytest.raises(mountcal.core.errors.InputError, match="one MCAP file"):
         rotate_log([src, src], cal, tmp_path / "v.mcap")
 
 

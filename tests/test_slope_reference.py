@@ -1,4 +1,4 @@
-"""A slope measured apart from the stops, checked against theirs (mountcal.slope_reference)."""
+"""A slope measured apart from the stops, checked against theirs (mountcal.loop.slope_reference)."""
 
 from __future__ import annotations
 
@@ -9,13 +9,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mountcal.calibrate import Options, calibrate
+from mountcal.calibration.fit import Options, calibrate
 from mountcal.cli import main
-from mountcal.conventions import specific_force_v
-from mountcal.errors import InputError
+from mountcal.core.conventions import specific_force_v
+from mountcal.core.errors import InputError
+from mountcal.loop.slope_reference import TEST, SlopeReference, check
 from mountcal.simulate.stops import simulate_stops
-from mountcal.slope_reference import TEST, SlopeReference, check
-from mountcal.stoptable import StopTable
+from mountcal.stops.table import StopTable
 
 
 def _finding(cal):  # type: ignore[no-untyped-def]
@@ -103,7 +103,7 @@ def test_the_command_line_checks_the_reference_and_refuses_a_bad_one(
     tests = [d["test"] for d in json.loads(out.read_text())["diagnostics"]]
     assert TEST in tests
     bad = tmp_path / "bad.json"
-    with pytest.raises(SystemExit) as stop:  # the parser refuses it: the option's range (mountcal.ranges)
+    with pytest.raises(SystemExit) as stop:  # the parser refuses it: the option's range (mountcal.core.ranges)
         main(["calibrate", str(stops), "--slope-reference", "5", "0", "-o", str(bad)])
     err = capsys.readouterr().err
     assert stop.value.code == 2 and "--slope-reference" in err and "Traceback" not in err and not bad.exists()

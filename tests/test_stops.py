@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mountcal.calibrate import calibrate
-from mountcal.samples import Channel, Samples
+from mountcal.calibration.fit import calibrate
+from mountcal.io.samples import Channel, Samples
 from mountcal.simulate.stops import ParkingLog, simulate_parking_log
-from mountcal.stops import StopDetection, beta_from_heading, detect_stops, find_stops, still_mask, stop_table
+from mountcal.stops.detect import StopDetection, beta_from_heading, detect_stops, find_stops, still_mask, stop_table
 
 
 @pytest.fixture(scope="module")

@@ -12,14 +12,14 @@ import pytest
 
 from mountcal import cli
 from mountcal.apply.rotate_log import to_frame
-from mountcal.calibrate import calibrate
+from mountcal.calibration.fit import calibrate
 from mountcal.cli.options import detection
-from mountcal.errors import NotEnoughInformation
+from mountcal.core.errors import NotEnoughInformation
+from mountcal.core.option_names import as_flags
+from mountcal.io.samples import Channel, Samples
 from mountcal.io.timestamps import MERGED, increasing_times
-from mountcal.option_names import as_flags
-from mountcal.samples import Channel, Samples
 from mountcal.simulate.stops import ParkingLog, simulate_parking_log
-from mountcal.stops import (
+from mountcal.stops.detect import (
     StopDetection,
     Thresholds,
     _cov_of_mean,
@@ -31,7 +31,7 @@ from mountcal.stops import (
     stop_table,
     tabulate,
 )
-from mountcal.stoptable import stop_table_from_frame
+from mountcal.stops.table import stop_table_from_frame
 
 LSB = 0.125  # m/s², the CANedge GNSS/IMU accelerometer
 GYRO_LSB = np.radians(0.25)
@@ -238,7 +238,8 @@ CANEDGE = Path("canedge")
 @pytest.mark.real_data
 def test_the_desk_canedge_log_at_rest_gives_a_stop_with_default_thresholds(real_data: Path) -> None:
     """The desk unit's gyro reads (0.47, −0.51, −1.0) °/s at rest: |rate| ≈ 1.2 °/s, above the old fixed 0.02 rad/s."""
-    from mountcal.io.logs import LogOptions, read_log
+    from mountcal.io.logs import read_log
+    from mountcal.io.reader import LogOptions
 
     path = real_data / CANEDGE / "2F6913DB_desk_static_2022-01-06" / "00000001.MF4"
     samples = read_log([str(path)], LogOptions(dbc=str(real_data / CANEDGE / "dbc" / "gnss.dbc"), channel=2))
@@ -253,8 +254,8 @@ def test_the_desk_canedge_log_at_rest_gives_a_stop_with_default_thresholds(real_
 
 @pytest.mark.real_data
 def test_the_canedge_car_stop_table_is_honest_and_its_tilt_physical(real_data: Path) -> None:
-    from mountcal.io.logs import LogOptions
-    from mountcal.pipeline import LogJob, calibrate_job
+    from mountcal.calibration.pipeline import LogJob, calibrate_job
+    from mountcal.io.reader import LogOptions
 
     files = sorted((real_data / CANEDGE / "3BA199E2_car_DK_2021-07-26" / "00000165").glob("*.MF4"))
     job = LogJob(tuple(map(str, files)), LogOptions(dbc=str(real_data / CANEDGE / "dbc" / "gnss.dbc"), channel=2))

@@ -9,15 +9,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mountcal import systematic
-from mountcal.calibrate import Options, calibrate
+from mountcal.calibration.fit import Options, calibrate
 from mountcal.cli import main
-from mountcal.conventions import G_N
+from mountcal.core.conventions import G_N
+from mountcal.core.result import Calibration
 from mountcal.estimate import full
-from mountcal.result import Calibration
-from mountcal.sensor_spec import DEFAULT, SensorSpec, read_spec
+from mountcal.io.sensor_spec import DEFAULT, SensorSpec, read_spec
+from mountcal.loop import systematic
 from mountcal.simulate.stops import simulate_stops
-from mountcal.stoptable import StopTable, write_stop_table
+from mountcal.stops.table import StopTable, write_stop_table
 
 BIAS_ONLY = SensorSpec(
     scale=0.0, cross_axis=0.0, bias_mps2=0.5, bias_tempco_mps2_per_c=0.0, heading_deg=0.0, source="test: bias only"

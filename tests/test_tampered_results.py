@@ -18,12 +18,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from mountcal.budget import setting
 from mountcal.cli import main
-from mountcal.errors import InputError
-from mountcal.result import FORMAT_VERSION, Calibration, schema_defs
-from mountcal.result_file import check_document, read_json, schema
-from mountcal.terminal import safe
+from mountcal.core.budget import setting
+from mountcal.core.errors import InputError
+from mountcal.core.result import FORMAT_VERSION, Calibration, schema_defs
+from mountcal.core.result_file import check_document, read_json, schema
+from mountcal.core.terminal import safe
 
 Doc = dict[str, Any]
 
@@ -147,7 +147,7 @@ def test_a_field_the_report_formats_is_checked_too(made: dict[str, Path]) -> Non
 
 def test_the_published_schema_follows_the_result_types() -> None:
     """The typed parts of the schema are generated from the dataclasses: a field added, removed or
-    retyped without regenerating (``python -m mountcal.result``) fails here."""
+    retyped without regenerating (``python -m mountcal.core.result``) fails here."""
     published, derived = schema(), schema_defs()
     assert published["$defs"] == derived["$defs"]
     for name, part in derived["properties"].items():

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from mountcal.cli import main
-from mountcal.terminal import decodable, safe
+from mountcal.core.terminal import decodable, safe
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = REPO / "data"

@@ -6,7 +6,7 @@ import os
 
 import pytest
 
-from mountcal.threads import helpers_allowed
+from mountcal.core.threads import helpers_allowed
 
 
 def test_no_helpers_in_a_one_thread_process(monkeypatch: pytest.MonkeyPatch) -> None:

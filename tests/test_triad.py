@@ -9,11 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mountcal.calibrate import Options, calibrate
+from mountcal.calibration.fit import Options, calibrate
 from mountcal.cli import main
-from mountcal.conventions import G_N
+from mountcal.core.conventions import G_N
+from mountcal.estimate.triad import NAMES, Triad, load
 from mountcal.simulate.stops import simulate_stops
-from mountcal.triad import NAMES, Triad, load
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 import real_sessions
@@ -43,7 +43,7 @@ def test_the_hand_held_session_gives_every_term_and_a_calibrated_sensor_reads_g(
     sigma = np.sqrt(np.diag(triad.cov))
     assert np.all(sigma[:3] < 0.01) and np.all(sigma[3:] < 1e-3)
     # the stops read as the calibrated sensor reads them: |a| = g far better than raw
-    from mountcal.triad import session_stops
+    from mountcal.estimate.triad import session_stops
 
     acc, _ = session_stops([str(session)], "mps2")
     raw = np.abs(np.linalg.norm(acc, axis=1) - G_N)
@@ -102,7 +102,7 @@ def test_calibrate_with_the_triad_finds_the_uncorrected_sensor_s_mounting_and_ca
 
 def test_a_file_that_is_not_a_triad_is_refused_naming_it(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     table, _ = simulate_stops(seed=1)
-    from mountcal.stoptable import write_stop_table
+    from mountcal.stops.table import write_stop_table
 
     stops = tmp_path / "stops.csv"
     write_stop_table(table, stops)
@@ -119,7 +119,7 @@ def test_a_file_that_is_not_a_triad_is_refused_naming_it(tmp_path: Path, capsys:
 
 def test_triad_refuses_a_session_in_one_orientation(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     table, _ = simulate_stops(slope_deg=2.0, seed=4)  # a vehicle's stops: gravity near one sensor axis
-    from mountcal.stoptable import write_stop_table
+    from mountcal.stops.table import write_stop_table
 
     stops = tmp_path / "stops.csv"
     write_stop_table(table, stops)
@@ -129,7 +129,7 @@ def test_triad_refuses_a_session_in_one_orientation(tmp_path: Path, capsys: pyte
 
 
 def test_cli_calibrate_with_triad_writes_both_parts(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    from mountcal.stoptable import write_stop_table
+    from mountcal.stops.table import write_stop_table
 
     triad = _triad((0.02, -0.01, 0.015, 0.01, -0.005, 0.008), 2e-4)
     table, truth = simulate_stops(seed=5, bias_mps2=triad.bias_mps2, scale_matrix=triad.matrix)

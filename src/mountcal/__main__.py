@@ -23,7 +23,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     # string clears that mark.
     exec("pass")
     if argv is None and code in INTERRUPTED:  # this process ends now: its exit too (threads joined) ends in time
-        from mountcal.atomic import Deadline
+        from mountcal.core.atomic import Deadline
 
         Deadline().arm(code)
     return code

@@ -19,9 +19,10 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from mountcal import calibrate_log, read_log
 from mountcal.cli import main
-from mountcal.errors import InputError
-from mountcal.io.logs import LogOptions, inspect_log
-from mountcal.samples import Samples
+from mountcal.core.errors import InputError
+from mountcal.io.logs import inspect_log
+from mountcal.io.reader import LogOptions
+from mountcal.io.samples import Samples
 
 REPO = Path(__file__).resolve().parents[2]
 PARKING = REPO / "data" / "parking.mcap"

@@ -11,9 +11,10 @@ import cantools
 import numpy as np
 import pytest
 
-from mountcal.errors import InputError
+from mountcal.core.errors import InputError
 from mountcal.io.can.dbc import decode, load_dbc, payload_bytes
-from mountcal.io.can.frames import CanFrames, read_frames
+from mountcal.io.can.files import read_frames
+from mountcal.io.can.frames import CanFrames
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 OWN_DBC = DATA / "mm5_imu.dbc"

@@ -14,8 +14,9 @@ import numpy as np
 import pytest
 from can.io import blf
 
-from mountcal.errors import InputError
-from mountcal.io.can.frames import CanFrames, iter_frames, read_frames
+from mountcal.core.errors import InputError
+from mountcal.io.can.files import iter_frames, read_frames
+from mountcal.io.can.frames import CanFrames
 
 FORMATS = ["blf", "asc", "log", "trc", "csv", "mf4"]
 T0 = 1_600_000_000.0

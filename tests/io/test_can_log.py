@@ -12,9 +12,9 @@ import cantools
 import numpy as np
 import pytest
 
-from mountcal.errors import InputError
+from mountcal.core.errors import InputError
 from mountcal.io.can.read import inspect_can, iter_can, read_can
-from mountcal.samples import Samples
+from mountcal.io.samples import Samples
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 OWN_DBC = DATA / "mm5_imu.dbc"

@@ -27,16 +27,16 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
 from mountcal.cli import main
-from mountcal.conventions import G_N, normal_gravity
-from mountcal.errors import InputError
+from mountcal.core.conventions import G_N, normal_gravity
+from mountcal.core.errors import InputError
+from mountcal.core.result import Calibration
+from mountcal.io import writers as export
 from mountcal.io.can.read import read_can
 from mountcal.io.mcap.read import read_mcap
 from mountcal.io.ros2.definitions import ros2_definition
-from mountcal.result import Calibration
-from mountcal.samples import Channel, Samples
-from mountcal.simulate import logs as export
+from mountcal.io.samples import Channel, Samples
 from mountcal.simulate.stops import ParkingLog, simulate_parking_log
-from mountcal.stops import StopDetection, read_protocol, tabulate
+from mountcal.stops.detect import StopDetection, read_protocol, tabulate
 
 REPO = Path(__file__).resolve().parents[2]
 DATA = REPO / "data"

@@ -19,11 +19,12 @@ from cantools import j1939
 from tests.test_doc_commands import collect, missing_lines
 
 from mountcal.cli import main
-from mountcal.errors import InputError
+from mountcal.core.errors import InputError
 from mountcal.io.can.dbc import decode, load_dbcs, select_frames
-from mountcal.io.can.frames import read_frames
+from mountcal.io.can.files import read_frames
 from mountcal.io.can.read import inspect_can, read_can
-from mountcal.io.logs import LogOptions, iter_log, read_log
+from mountcal.io.logs import iter_log, read_log
+from mountcal.io.reader import LogOptions
 
 REPO = Path(__file__).resolve().parents[2]
 IMU_DBC = REPO / "tests" / "data" / "mm5_imu.dbc"

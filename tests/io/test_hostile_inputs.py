@@ -24,8 +24,8 @@ import pytest
 import zstandard
 from mcap.writer import CompressionType, Writer
 
-from mountcal.errors import InputError
-from mountcal.io.can.frames import read_frames
+from mountcal.core.errors import InputError
+from mountcal.io.can.files import read_frames
 from mountcal.io.inputs import check_regular_file
 from mountcal.io.mcap.inspect import inspect_mcap
 from mountcal.io.mcap.read import read_mcap

@@ -23,7 +23,7 @@ from mcap.writer import Writer as McapWriter
 from mcap_ros2.decoder import DecoderFactory
 from mcap_ros2.writer import Writer as Ros2Writer
 
-from mountcal.errors import InputError
+from mountcal.core.errors import InputError
 from mountcal.io.mcap.inspect import inspect_mcap
 from mountcal.io.mcap.read import iter_mcap, read_mcap
 

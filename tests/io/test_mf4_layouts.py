@@ -3,7 +3,7 @@
 CANedge firmware 01.07 and later writes one channel group per bus and id kind, with
 ``CAN_DataFrame.BusChannel`` and ``.IDE`` as 0-bit channels whose value is the constant of a linear
 conversion (virtual data channels). :func:`_zero_bit_layout` turns a file written by python-can's MF4Writer (through the
-simulator's writer, ``mountcal.simulate.logs.write_can_log``) into that layout: it points those two
+simulator's writer, ``mountcal.io.writers.write_can_log``) into that layout: it points those two
 channel blocks at new linear conversion blocks and makes them 0-bit virtual data channels (the bytes the records
 still hold there are then meaningless, which is the point: a reader of raw values gets them wrong).
 """
@@ -17,8 +17,9 @@ import can
 import numpy as np
 import pytest
 
-from mountcal.io.can.frames import CanFrames, read_frames
-from mountcal.simulate.logs import write_can_log
+from mountcal.io.can.files import read_frames
+from mountcal.io.can.frames import CanFrames
+from mountcal.io.writers import write_can_log
 from mountcal.simulate.stops import simulate_parking_log
 
 REPO = Path(__file__).resolve().parents[2]

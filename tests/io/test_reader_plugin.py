@@ -15,8 +15,8 @@ import pandas as pd
 import pytest
 
 from mountcal.apply.rotate import acc_to_vehicle
-from mountcal.result import Calibration
-from mountcal.simulate.logs import write_protocol
+from mountcal.core.result import Calibration
+from mountcal.io.writers import write_protocol
 from mountcal.simulate.stops import ParkingLog, simulate_parking_log
 
 SRC = Path(__file__).resolve().parents[2] / "src"
@@ -30,9 +30,9 @@ from pathlib import Path
 
 import numpy as np
 
-from mountcal.errors import InputError
+from mountcal.core.errors import InputError
 from mountcal.io.reader import LogReader
-from mountcal.samples import Samples
+from mountcal.io.samples import Samples
 
 
 class ImuTxtReader(LogReader):
@@ -141,8 +141,8 @@ def test_a_broken_plugin_is_named_not_a_traceback(
 
 
 def test_the_registry_picks_readers_by_path_and_options(tmp_path: Path) -> None:
-    from mountcal.errors import InputError
-    from mountcal.io.logs import LogOptions
+    from mountcal.core.errors import InputError
+    from mountcal.io.reader import LogOptions
     from mountcal.io.registry import reader_for
 
     plain, with_dbc = LogOptions(), LogOptions(dbc="x.dbc")
@@ -158,7 +158,7 @@ def test_the_registry_picks_readers_by_path_and_options(tmp_path: Path) -> None:
 
 
 def test_the_can_readers_gravity_is_the_conventions() -> None:
-    from mountcal.conventions import G_N
+    from mountcal.core.conventions import G_N
     from mountcal.io.can import signals
 
     assert signals.G_N == G_N and signals.si_scale("ax", "g") == (G_N, 0.0)

@@ -16,10 +16,10 @@ import pytest
 
 from mountcal import calibrate_log, read_log
 from mountcal.cli import main
-from mountcal.errors import InputError
-from mountcal.io.logs import LogOptions
+from mountcal.core.errors import InputError
+from mountcal.io.reader import LogOptions
+from mountcal.io.samples import Samples
 from mountcal.io.table.layout import parse_columns
-from mountcal.samples import Samples
 
 REPO = Path(__file__).resolve().parents[2]
 G_N = 9.80665

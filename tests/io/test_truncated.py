@@ -22,11 +22,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from mountcal.cli import main
-from mountcal.errors import InputError
-from mountcal.io.can.frames import CanFrames, iter_frames
-from mountcal.io.logs import LogOptions, inspect_log, iter_log, read_log
+from mountcal.core.errors import InputError
+from mountcal.io.can.files import iter_frames
+from mountcal.io.can.frames import CanFrames
+from mountcal.io.logs import inspect_log, iter_log, read_log
+from mountcal.io.reader import LogOptions
 from mountcal.io.whole import TruncatedInput, reading
-from mountcal.stoptable import read_stop_table
+from mountcal.stops.table import read_stop_table
 
 REPO = Path(__file__).resolve().parents[2]
 DATA = REPO / "data"

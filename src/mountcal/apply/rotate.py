@@ -18,11 +18,11 @@ from collections.abc import Sequence
 import numpy as np
 import pandas as pd
 
-from mountcal.conventions import G_N, FloatArray
-from mountcal.errors import InputError
+from mountcal.core.conventions import G_N, FloatArray
+from mountcal.core.errors import InputError
+from mountcal.core.option_names import option
+from mountcal.core.result import Calibration
 from mountcal.estimate.effects import apply_corrections
-from mountcal.option_names import option
-from mountcal.result import Calibration
 
 ACC_COLUMNS = ("ax", "ay", "az")
 

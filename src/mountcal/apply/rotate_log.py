@@ -53,24 +53,25 @@ import pandas as pd
 from scipy.spatial.transform import Rotation
 
 from mountcal.apply.rotate import acc_to_vehicle, check_applicable, rate_to_vehicle
-from mountcal.atomic import atomic_output
-from mountcal.conventions import CONVENTIONS, FloatArray
-from mountcal.errors import InputError
-from mountcal.input_conventions import AxisMap, check_same_axes, parse_axes
-from mountcal.io.logs import CHUNK_SAMPLES, LogOptions, iter_log
+from mountcal.core.atomic import atomic_output
+from mountcal.core.conventions import CONVENTIONS, FloatArray
+from mountcal.core.errors import InputError
+from mountcal.core.option_names import option
+from mountcal.core.output_suffix import check_output_suffix
+from mountcal.core.result import VEHICLE_FRAME, Calibration
+from mountcal.core.threads import helpers_allowed
+from mountcal.core.version import software_version
+from mountcal.io.input_conventions import AxisMap, check_same_axes, parse_axes
+from mountcal.io.logs import CHUNK_SAMPLES, iter_log
 from mountcal.io.mcap.chunks import open_log
 from mountcal.io.mcap.copy import copy_mcap_with_imu
 from mountcal.io.mcap.write import McapImuSamples
+from mountcal.io.reader import LogOptions
 from mountcal.io.registry import reader_for
 from mountcal.io.ros2.imu import ImuMessages
+from mountcal.io.samples import Samples
 from mountcal.io.table.write import CsvSamples, ParquetSamples
 from mountcal.io.whole import Cut, reading
-from mountcal.option_names import option
-from mountcal.output_suffix import check_output_suffix
-from mountcal.result import VEHICLE_FRAME, Calibration
-from mountcal.samples import Samples
-from mountcal.threads import helpers_allowed
-from mountcal.version import software_version
 
 FORMATS = {".parquet": "parquet", ".pq": "parquet", ".csv": "csv", ".mcap": "mcap"}
 VEHICLE_FRAME_ID = "base_link"  # REP 103's body frame: x forward, y left, z up = ISO 8855
@@ -131,7 +132,7 @@ def output_format(path: str | os.PathLike[str], fmt: str | None = None) -> str:
     """``parquet``, ``csv`` or ``mcap``: the one asked for, else from the suffix, else Parquet.
 
     A name whose suffix says another format (``out.blf``, or ``out.csv`` with ``fmt="parquet"``)
-    is refused (:func:`~mountcal.output_suffix.check_output_suffix`).
+    is refused (:func:`~mountcal.core.output_suffix.check_output_suffix`).
     """
     by_name = FORMATS[check_output_suffix(option("output"), path, tuple(FORMATS))]
     if fmt is None:
@@ -255,7 +256,7 @@ def _metadata(cal: Calibration, files: Sequence[Path], incomplete: Sequence[str]
         "mountcal.yaw": "vehicle" if cal.yaw_determined else "sensor's own (not determined)",
         "mountcal.confident": json.dumps(cal.confident),
         "mountcal.warnings": json.dumps(check_applicable(cal, level_only=True)),
-        "mountcal.conventions": json.dumps(CONVENTIONS),
+        "mountcal.core.conventions": json.dumps(CONVENTIONS),
         "mountcal.calibration": json.dumps(
             {
                 "quaternion_vs_xyzw": cal.rot_vs.as_quat().tolist(),

@@ -20,16 +20,16 @@ import re
 import sys
 from collections.abc import Sequence
 
-from mountcal import budget
-from mountcal.atomic import Terminated, raise_if_interrupted, removed_on_signals
 from mountcal.cli.options import EXIT_CODES, configure_logging
 from mountcal.cli.path_options import check_paths, command_parser
 from mountcal.cli.results import results_only
-from mountcal.errors import InputError, MountcalError
+from mountcal.core import budget
+from mountcal.core.atomic import Terminated, raise_if_interrupted, removed_on_signals
+from mountcal.core.errors import InputError, MountcalError
+from mountcal.core.option_names import as_flags
+from mountcal.core.paths import SystemFailure
+from mountcal.core.terminal import safe
 from mountcal.io.whole import reading
-from mountcal.option_names import as_flags
-from mountcal.paths import SystemFailure
-from mountcal.terminal import safe
 
 COMMANDS = ("calibrate", "stops", "inspect", "rotate", "report", "fleet", "simulate", "plan", "live", "export", "triad")
 
@@ -139,7 +139,7 @@ class _Version(argparse.Action):
     """``--version``: the installed distribution's version, looked up only when asked (the lookup is slow)."""
 
     def __call__(self, parser: argparse.ArgumentParser, *_: object) -> None:
-        from mountcal.version import software_version
+        from mountcal.core.version import software_version
 
         print(f"mountcal {software_version()}")  # on stdout, as argparse's own version action
         parser.exit()

@@ -20,8 +20,8 @@ from mountcal.cli.options import (
 )
 from mountcal.cli.path_options import add_path
 from mountcal.cli.results import result_stream
-from mountcal.ranges import add_quantity
-from mountcal.terminal import safe
+from mountcal.core.ranges import add_quantity
+from mountcal.core.terminal import safe
 
 log = logging.getLogger("mountcal")
 
@@ -64,10 +64,10 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from mountcal.atomic import atomic_path
-    from mountcal.errors import InputError
-    from mountcal.pipeline import calibrate_input, describe
-    from mountcal.summary import summary
+    from mountcal.calibration.pipeline import calibrate_input, describe
+    from mountcal.calibration.summary import summary
+    from mountcal.core.atomic import atomic_path
+    from mountcal.core.errors import InputError
 
     to_stdout = args.json or args.output == STDOUT
     if args.input == [STDOUT] and sys.stdin.isatty():

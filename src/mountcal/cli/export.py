@@ -10,8 +10,8 @@ from typing import Any
 from mountcal.cli.options import STDOUT, add_command
 from mountcal.cli.path_options import add_path
 from mountcal.cli.results import result_stream
-from mountcal.ranges import Number
-from mountcal.terminal import safe
+from mountcal.core.ranges import Number
+from mountcal.core.terminal import safe
 
 # the keys of mountcal.outputs.exporters.FORMATS (a test keeps them equal), here so that `--help` stays light
 FORMAT_NAMES = (
@@ -85,10 +85,10 @@ def _suffixes(args: argparse.Namespace) -> tuple[str, ...]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from mountcal.atomic import atomic_path
-    from mountcal.errors import InputError
+    from mountcal.core.atomic import atomic_path
+    from mountcal.core.errors import InputError
+    from mountcal.core.result import Calibration
     from mountcal.outputs.exporters import DEFAULT_FRAMES, Frames, export, read_parent_pose
-    from mountcal.result import Calibration
 
     result = Path(args.input)
     to_stdout = args.output in (None, STDOUT)

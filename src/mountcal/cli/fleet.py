@@ -7,7 +7,6 @@ import logging
 from pathlib import Path
 from typing import Any
 
-from mountcal.atomic import Terminated
 from mountcal.cli.options import (
     add_command,
     add_fit_options,
@@ -20,8 +19,9 @@ from mountcal.cli.options import (
     require,
 )
 from mountcal.cli.results import result_stream
-from mountcal.ranges import Number
-from mountcal.terminal import safe
+from mountcal.core.atomic import Terminated
+from mountcal.core.ranges import Number
+from mountcal.core.terminal import safe
 
 log = logging.getLogger("mountcal")
 

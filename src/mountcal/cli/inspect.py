@@ -10,8 +10,8 @@ from typing import Any
 from mountcal.cli.options import add_command, add_detection_options, detection, log_options, print_json, working
 from mountcal.cli.path_options import add_path
 from mountcal.cli.results import result_stream
-from mountcal.ranges import Number
-from mountcal.terminal import safe
+from mountcal.core.ranges import Number
+from mountcal.core.terminal import safe
 
 
 def add_parser(sub: Any) -> None:
@@ -76,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
 def _parked(args: argparse.Namespace, opts: Any) -> dict[str, Any]:
     """The stops of the log and its near misses, with the thresholds used (lines for the reader)."""
     from mountcal.io.logs import read_log
-    from mountcal.stops import find_stops
+    from mountcal.stops.detect import find_stops
 
     with working(args, "reading the IMU and finding its parked periods"):
         search = find_stops(read_log([args.input], opts), detection(args))

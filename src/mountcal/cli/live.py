@@ -11,8 +11,8 @@ from typing import Any
 from mountcal.cli.options import STDOUT, add_axes_option, add_command
 from mountcal.cli.path_options import add_path
 from mountcal.cli.results import result_stream
-from mountcal.ranges import Number
-from mountcal.terminal import safe
+from mountcal.core.ranges import Number
+from mountcal.core.terminal import safe
 
 log = logging.getLogger("mountcal")
 
@@ -65,7 +65,7 @@ def add_parser(sub: Any) -> None:
 
 
 def _writes(prefix: str, _: argparse.Namespace) -> list[tuple[str, str]]:
-    from mountcal.live import session_files
+    from mountcal.sessions.live import session_files
 
     return [(str(path), f"{prefix}, writing") for path in session_files(Path(prefix)).values()]
 
@@ -81,11 +81,12 @@ def _file_sink(file: Any, line: Callable[[dict[str, Any]], str]) -> Callable[[di
 
 
 def run(args: argparse.Namespace) -> int:
-    from mountcal.atomic import GrowingFile, atomic_path
-    from mountcal.calibrate import Options
-    from mountcal.errors import InputError
+    from mountcal.calibration.fit import Options
+    from mountcal.calibration.summary import summary
+    from mountcal.core.atomic import GrowingFile, atomic_path
+    from mountcal.core.errors import InputError
     from mountcal.io.can.bus import BUS_ERRORS, open_bus
-    from mountcal.live import (
+    from mountcal.sessions.live import (
         Live,
         LiveOptions,
         event_line,
@@ -95,9 +96,8 @@ def run(args: argparse.Namespace) -> int:
         session_files,
         write_outputs,
     )
-    from mountcal.plan import parse_target
-    from mountcal.stops import StopDetection, read_protocol
-    from mountcal.summary import summary
+    from mountcal.sessions.plan import parse_target
+    from mountcal.stops.detect import StopDetection, read_protocol
 
     prefix = Path(args.output)
     recording = session_files(prefix)["recording"]

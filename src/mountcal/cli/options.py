@@ -16,16 +16,16 @@ from contextlib import contextmanager
 from typing import TYPE_CHECKING, Any
 
 from mountcal.cli.path_options import add_path
-from mountcal.errors import InputError
-from mountcal.ranges import Number, numbers
+from mountcal.core.errors import InputError
+from mountcal.core.ranges import Number, numbers
 
 if TYPE_CHECKING:
     from tqdm import tqdm
 
-    from mountcal.calibrate import Options
-    from mountcal.io.logs import LogOptions
-    from mountcal.pipeline import LogJob
-    from mountcal.stops import StopDetection
+    from mountcal.calibration.fit import Options
+    from mountcal.calibration.pipeline import LogJob
+    from mountcal.io.reader import LogOptions
+    from mountcal.stops.detect import StopDetection
 
 EXIT_CODES = {
     0: "success",
@@ -205,7 +205,7 @@ def add_log_options(
 
 def add_detection_options(p: argparse.ArgumentParser) -> None:
     """The thresholds of stop detection (unset: the library's defaults, some set from the log)."""
-    d = p.add_argument_group("stop detection (default: mountcal.stops.StopDetection, some from the log)")
+    d = p.add_argument_group("stop detection (default: mountcal.stops.detect.StopDetection, some from the log)")
     for flag, text, quantity in _DETECTION.values():
         d.add_argument(flag, type=Number(quantity), default=None, help=text)
 
@@ -221,7 +221,7 @@ def add_axes_option(g: argparse.ArgumentParser | argparse._ArgumentGroup) -> Non
     )
 
 
-# StopDetection field → (flag, help, quantity of mountcal.ranges); unset flags keep the library's defaults
+# StopDetection field → (flag, help, quantity of mountcal.core.ranges); unset flags keep the library's defaults
 _DETECTION = {
     "max_acc_std_mps2": ("--max-acc-std", "stillness: moving std of each axis below this (m/s²)", "acc_limit_mps2"),
     "max_gyro_std_rad_s": (
@@ -291,7 +291,7 @@ def add_fit_options(g: argparse.ArgumentParser | argparse._ArgumentGroup, *, hea
 
 
 def log_options(args: argparse.Namespace) -> LogOptions:
-    from mountcal.io.logs import LogOptions
+    from mountcal.io.reader import LogOptions
 
     dbc = args.dbc
     if isinstance(dbc, list):  # --dbc given once (a path) or repeated (their messages together)
@@ -315,16 +315,15 @@ def log_options(args: argparse.Namespace) -> LogOptions:
 
 
 def detection(args: argparse.Namespace) -> StopDetection:
-    from mountcal.stops import StopDetection
+    from mountcal.stops.detect import StopDetection
 
     given = {field: getattr(args, flag[2:].replace("-", "_")) for field, (flag, _, _) in _DETECTION.items()}
     return StopDetection(**{k: v for k, v in given.items() if v is not None})
 
 
 def fit_options(args: argparse.Namespace) -> Options:
-    from mountcal.calibrate import Options
-    from mountcal.cli.triad import sensor_options
-    from mountcal.slope_reference import SlopeReference
+    from mountcal.calibration.fit import Options
+    from mountcal.loop.slope_reference import SlopeReference
 
     reference = args.slope_reference
     options = Options(
@@ -337,18 +336,32 @@ def fit_options(args: argparse.Namespace) -> Options:
     return sensor_options(options, getattr(args, "sensor_spec", None), getattr(args, "triad", None))
 
 
+def sensor_options(options: Options, spec: str | None, triad: str | None) -> Options:
+    """``options`` with the sensor's limits (``--sensor-spec``) and triad calibration (``--triad``) read in."""
+    from dataclasses import replace
+
+    from mountcal.estimate.triad import load
+    from mountcal.io.sensor_spec import read_spec
+
+    if spec is not None:
+        options = replace(options, spec=read_spec(spec))
+    if triad is not None:
+        options = replace(options, triad=load(triad))
+    return options
+
+
 def gravity(args: argparse.Namespace) -> float | None:
     """``--gravity`` in m/s²: a bare number in m/s² (checked to be Earth's), or a value with its unit (``1g``)."""
     text = getattr(args, "gravity", None)
     if text is None:
         return None
-    from mountcal.input_conventions import GRAVITY, parse_quantity
+    from mountcal.io.input_conventions import GRAVITY, parse_quantity
 
     return parse_quantity(text, GRAVITY)[0]
 
 
 def log_job(args: argparse.Namespace, options: Options | None = None) -> LogJob:
-    from mountcal.pipeline import LogJob
+    from mountcal.calibration.pipeline import LogJob
 
     return LogJob(
         paths=tuple(args.input),

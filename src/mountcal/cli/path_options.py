@@ -8,11 +8,11 @@ declarations alone:
 
 - every input is a regular file (or a folder, where the option takes folders); the small ones (a
   DBC, a mapping, a protocol sheet, a result JSON, ...) are at most the small-input limit
-  (:func:`mountcal.paths.input_file`);
+  (:func:`mountcal.core.paths.input_file`);
 - no output equals, aliases or replaces an input of the same command, another output, a
-  directory, a device, a FIFO or a socket (:func:`mountcal.paths.check_outputs`);
+  directory, a device, a FIFO or a socket (:func:`mountcal.core.paths.check_outputs`);
 - no output is named for another format than it writes (``rotate -o out.blf``; its declared
-  ``formats``, :func:`mountcal.output_suffix.check_output_suffix`).
+  ``formats``, :func:`mountcal.core.output_suffix.check_output_suffix`).
 
 So an option added later is checked without a line in its command; ``tests/test_paths.py`` fails
 for a path option added with plain ``add_argument``.
@@ -43,7 +43,7 @@ class PathOption:
     folders : bool
         An input may be a folder (a comma2k19 segment, a fleet's folder of logs).
     small : bool
-        An input held whole in memory: at most :func:`mountcal.paths.small_input_limit` bytes.
+        An input held whole in memory: at most :func:`mountcal.core.paths.small_input_limit` bytes.
     globs : bool
         An input may be a glob pattern (expanded by the command).
     stdio : bool
@@ -51,7 +51,7 @@ class PathOption:
     formats : tuple of str, or a function of the parsed arguments giving them
         For an output, the suffixes of the formats it writes (lower case, with the dot; the default
         first): a name ending in another data format's suffix is refused
-        (:func:`mountcal.output_suffix.check_output_suffix`). Empty: the command decides (live's
+        (:func:`mountcal.core.output_suffix.check_output_suffix`). Empty: the command decides (live's
         prefix, fleet's ``.parquet``).
     formats_by : str, optional
         The option whose value chooses the format (``export``'s ``--to``), named in the refusal.
@@ -150,8 +150,8 @@ def check_paths(parser: argparse.ArgumentParser, args: argparse.Namespace) -> No
     InputError
         Naming the option, the path, what was found and what to do.
     """
-    from mountcal.output_suffix import check_output_suffix
-    from mountcal.paths import check_outputs, input_file
+    from mountcal.core.output_suffix import check_output_suffix
+    from mountcal.core.paths import check_outputs, input_file
 
     inputs: dict[str, list[str]] = {}
     written: list[tuple[str, str]] = []

@@ -16,12 +16,13 @@ from mountcal.cli.options import (
     add_log_options,
     add_sensor_options,
     log_options,
+    sensor_options,
     working,
 )
 from mountcal.cli.path_options import add_path
 from mountcal.cli.results import result_stream
-from mountcal.ranges import Number, add_quantity
-from mountcal.terminal import safe
+from mountcal.core.ranges import Number, add_quantity
+from mountcal.core.terminal import safe
 
 log = logging.getLogger("mountcal")
 
@@ -63,11 +64,10 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from mountcal.calibrate import Options, sensor_errors
-    from mountcal.cli.triad import sensor_options
-    from mountcal.conventions import G_N
-    from mountcal.errors import InputError, NotEnoughInformation
-    from mountcal.plan import Noise, Request, make_plan, noise_from_log, parse_target, plan_terms
+    from mountcal.calibration.fit import Options, sensor_errors
+    from mountcal.core.conventions import G_N
+    from mountcal.core.errors import InputError, NotEnoughInformation
+    from mountcal.sessions.plan import Noise, Request, make_plan, noise_from_log, parse_target, plan_terms
 
     if (args.noise is None) == (args.from_log is None):
         raise InputError(
@@ -77,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
             "Give the sensor's per-sample noise in mg, or a log with parked periods to measure it on.",
         )
     if args.noise is not None:
-        from mountcal.input_conventions import NOISE, parse_quantity
+        from mountcal.io.input_conventions import NOISE, parse_quantity
 
         noise_mg, _ = parse_quantity(args.noise, NOISE)
         if not (math.isfinite(args.rate_hz) and args.rate_hz > 0):

@@ -10,7 +10,7 @@ from typing import Any
 from mountcal.cli.options import STDOUT, add_command, print_json, require, working
 from mountcal.cli.path_options import add_path
 from mountcal.cli.results import result_stream
-from mountcal.terminal import safe
+from mountcal.core.terminal import safe
 
 log = logging.getLogger("mountcal")
 
@@ -56,7 +56,7 @@ def _reading(stops: Path, cal: Any, unit: str | None) -> dict[str, Any]:
     SHA-256 in the provenance), else as the table states itself (a table `mountcal stops` wrote from a log)."""
     import hashlib
 
-    from mountcal.input_conventions import stop_table_reading
+    from mountcal.io.input_conventions import stop_table_reading
 
     options: dict[str, Any] = {}
     if stops.is_file() and hashlib.sha256(stops.read_bytes()).hexdigest() in cal.provenance.input_sha256:
@@ -68,12 +68,12 @@ def _reading(stops: Path, cal: Any, unit: str | None) -> dict[str, Any]:
 
 def run(args: argparse.Namespace) -> int:
     require("matplotlib", "report", "mountcal report")
-    from mountcal.atomic import atomic_path
-    from mountcal.errors import InputError
+    from mountcal.core.atomic import atomic_path
+    from mountcal.core.errors import InputError
+    from mountcal.core.result import Calibration
+    from mountcal.core.result_file import read_json
     from mountcal.outputs.report import render  # matplotlib is needed by this command only
-    from mountcal.result import Calibration
-    from mountcal.result_file import read_json
-    from mountcal.stoptable import read_stop_table, same_stops
+    from mountcal.stops.table import read_stop_table, same_stops
 
     result = Path(args.input)
     output = _output(args.output, args.input)

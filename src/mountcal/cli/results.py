@@ -19,7 +19,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import TextIO
 
-from mountcal.paths import SystemFailure
+from mountcal.core.paths import SystemFailure
 
 _results: list[TextIO | None] = []  # the result handles of the commands running (innermost last)
 

@@ -15,8 +15,8 @@ from mountcal.cli.options import (
     working,
 )
 from mountcal.cli.path_options import add_path
-from mountcal.ranges import Number
-from mountcal.terminal import safe
+from mountcal.core.ranges import Number
+from mountcal.core.terminal import safe
 
 log = logging.getLogger("mountcal")
 
@@ -58,8 +58,8 @@ def add_parser(sub: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     from mountcal.apply.rotate import check_applicable
     from mountcal.apply.rotate_log import rotate_log
-    from mountcal.errors import InputError
-    from mountcal.result import Calibration
+    from mountcal.core.errors import InputError
+    from mountcal.core.result import Calibration
 
     if args.chunk < 1:
         raise InputError("--chunk", "a number of samples ≥ 1", str(args.chunk), "Pass --chunk 100000 (the default).")

@@ -8,9 +8,9 @@ from typing import Any
 
 from mountcal.cli.options import HEADINGS, add_command, bar
 from mountcal.cli.path_options import add_path
-from mountcal.errors import InputError
-from mountcal.ranges import Number, numbers
-from mountcal.terminal import safe
+from mountcal.core.errors import InputError
+from mountcal.core.ranges import Number, numbers
+from mountcal.core.terminal import safe
 
 log = logging.getLogger("mountcal")
 

@@ -15,7 +15,7 @@ from mountcal.cli.options import (
     working,
 )
 from mountcal.cli.results import result_stream
-from mountcal.terminal import safe
+from mountcal.core.terminal import safe
 
 log = logging.getLogger("mountcal")
 
@@ -36,9 +36,9 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from mountcal.calibrate import Options
-    from mountcal.pipeline import describe, stops_of_log
-    from mountcal.stoptable import write_stop_table
+    from mountcal.calibration.fit import Options
+    from mountcal.calibration.pipeline import describe, stops_of_log
+    from mountcal.stops.table import write_stop_table
 
     to_stdout = args.output == STDOUT
     with working(args, "reading the log and finding its stops"):

@@ -22,11 +22,11 @@ from mountcal.cli.options import (
     print_json,
 )
 from mountcal.cli.path_options import add_path
-from mountcal.ranges import Number, add_quantity
-from mountcal.terminal import safe
+from mountcal.core.ranges import Number, add_quantity
+from mountcal.core.terminal import safe
 
 if TYPE_CHECKING:
-    from mountcal.calibrate import Options
+    pass
 
 log = logging.getLogger("mountcal")
 
@@ -77,11 +77,11 @@ def add_parser(subparsers: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from mountcal.conventions import G_N
+    from mountcal.core.conventions import G_N
     from mountcal.estimate import sphere
-    from mountcal.io.logs import LogOptions
+    from mountcal.estimate.triad import describe, fit_all, from_sphere, session_stops, with_imucal_values
+    from mountcal.io.reader import LogOptions
     from mountcal.io.table.layout import parse_columns
-    from mountcal.triad import describe, fit_all, from_sphere, session_stops, with_imucal_values
 
     columns = None if args.columns is None else parse_columns(args.columns)
     acc, cov = session_stops(
@@ -108,17 +108,3 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print_json(json.loads(Path(args.output).read_text(encoding="utf-8")))
     return 0
-
-
-def sensor_options(options: Options, spec: str | None, triad: str | None) -> Options:
-    """``options`` with the sensor's limits (``--sensor-spec``) and triad calibration (``--triad``) read in."""
-    from dataclasses import replace
-
-    from mountcal.sensor_spec import read_spec
-    from mountcal.triad import load
-
-    if spec is not None:
-        options = replace(options, spec=read_spec(spec))
-    if triad is not None:
-        options = replace(options, triad=load(triad))
-    return options

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from mountcal.conventions import FloatArray, angles_from_rot_vs
+from mountcal.core.conventions import FloatArray, angles_from_rot_vs
 from mountcal.estimate import full
-from mountcal.stoptable import StopTable
+from mountcal.stops.table import StopTable
 
 
 def euler_gradients(rot: Rotation, k: int, h: float = 1e-7) -> FloatArray:

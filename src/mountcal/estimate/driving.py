@@ -44,9 +44,13 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from mountcal.conventions import FloatArray, angles_from_rot_vs
-from mountcal.driving_document import DrivingConsistency
-from mountcal.errors import NotEnoughInformation
+from mountcal.core.conventions import FloatArray, angles_from_rot_vs
+from mountcal.core.driving_document import DrivingConsistency
+from mountcal.core.errors import NotEnoughInformation
+from mountcal.core.findings import Finding
+from mountcal.core.option_names import option
+from mountcal.core.result import Calibration
+from mountcal.core.typed_json import to_plain
 from mountcal.estimate import driving_checks as checks
 from mountcal.estimate.driving_intervals import (
     MIN_INTERVALS,
@@ -62,50 +66,11 @@ from mountcal.estimate.driving_intervals import (
     unit_vector,
     yaw_from_sums,
 )
-from mountcal.option_names import option
-from mountcal.result import Calibration, Finding
-from mountcal.samples import Samples
-from mountcal.typed_json import to_plain
+from mountcal.estimate.driving_options import DrivingOptions
+from mountcal.io.samples import Samples
 
 AGREE_Z = 2.0  # |z| above this: the two estimates disagree beyond their uncertainties (≈ 95 %)
 DISAGREE_Z = 3.0  # |z| above this (tilt or yaw): a finding; the stops and the drive are not combined
-
-
-def horizontal_axes_sigma_deg(scale: float, cross_axis: float) -> float:
-    """The 1σ turn of the longitudinal cue by the horizontal axes' scale and cross-axis errors within ± limits.
-
-    A symmetric distortion of the horizontal axes turns a direction ψ by ``(s_y − s_x)/2·sin 2ψ + c·cos 2ψ``
-    (and the perpendicular one by the opposite); with the limits read as rectangular distributions and ψ
-    anywhere, its variance is ``(scale²/6 + cross_axis²/3)/2``.
-    """
-    return float(np.degrees(np.sqrt((scale**2 / 6.0 + cross_axis**2 / 3.0) / 2.0)))
-
-
-HORIZONTAL_AXES_SIGMA_DEG = horizontal_axes_sigma_deg(0.03, 0.02)  # the default sensor class (mountcal.sensor_spec)
-
-
-@dataclass(frozen=True)
-class DrivingOptions:
-    """Gates and settings of the driving estimator (defaults suit cars; units in the names)."""
-
-    min_speed_mps: float = 3.0
-    max_yaw_rate_deg_s: float = 3.0
-    max_tilt_rate_deg_s: float = 3.0
-    max_acc_mps2: float = 4.0
-    max_lateral_mps2: float = 0.5  # straightness from the lateral acceleration (no gyro, no heading)
-    interval_s: float = 1.0
-    segment_s: float = 30.0
-    max_segment_turn_deg: float = 5.0
-    min_segment_intervals: int = 5
-    max_time_offset_s: float = 2.0
-    time_offset_step_s: float = 0.01
-    time_offset_s: float | None = None  # a known offset (added to the speed times): no search
-    road_grade_sigma_deg: float = 0.5
-    road_cross_slope_sigma_deg: float = 1.5
-    max_yaw_sigma_deg: float = 5.0
-    # How far the accelerometer's horizontal scale and cross-axis errors may turn the longitudinal cue (1σ, before the
-    # cues narrow it): the default sensor class's ±3 % and ±2 % (mountcal.sensor_spec), see horizontal_axes_sigma_deg.
-    horizontal_axes_sigma_deg: float = HORIZONTAL_AXES_SIGMA_DEG
 
 
 @dataclass(frozen=True)
@@ -479,7 +444,7 @@ def _result(
     rot_vs = Rotation.from_euler("z", yaw_rad) * rot_tilt
     # The longitudinal cue's yaw wherever its noise alone determines it: a finding's model-error term (the cues half
     # a turn apart: a mirrored sensor) may leave yaw undetermined, yet the vehicle's axes are known well enough for the
-    # sign of its turns (:func:`mountcal.crosscheck.turn_handedness`).
+    # sign of its turns (:func:`mountcal.loop.crosscheck.turn_handedness`).
     longitudinal = Rotation.from_euler("z", fit.yaw_rad) * rot_tilt if sigma_stat <= opts.max_yaw_sigma_deg else None
     # Tilt σ about the vehicle x (cross slope) and y (grade) axes: the unknown mean road attitude
     # dominates the scatter of the mean; tilt from a static calibration keeps that one's σ.

@@ -57,9 +57,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from mountcal.conventions import FloatArray
-from mountcal.diagnose import unexplained
-from mountcal.driving_document import (
+from mountcal.core.conventions import FloatArray
+from mountcal.core.driving_document import (
     Comparison,
     Cues,
     DrivingConsistency,
@@ -70,6 +69,9 @@ from mountcal.driving_document import (
     Parts,
     SpeedScale,
 )
+from mountcal.core.findings import Finding
+from mountcal.core.option_names import option
+from mountcal.core.pvalues import chi2_sf, unexplained
 from mountcal.estimate.driving_intervals import (
     IntArray,
     Intervals,
@@ -80,13 +82,10 @@ from mountcal.estimate.driving_intervals import (
     turned_tilt_removed,
     yaw_from_sums,
 )
-from mountcal.option_names import option
-from mountcal.pvalues import chi2_sf
-from mountcal.result import Finding
-from mountcal.samples import Channel
+from mountcal.io.samples import Channel
 
 if TYPE_CHECKING:
-    from mountcal.estimate.driving import DrivingOptions
+    from mountcal.estimate.driving_options import DrivingOptions
 
 FAMILY_ALPHA = 0.01  # all tests together flag a drive the model explains with at most this probability
 MIN_BLOCKS = 5  # blocks of units per side of a comparison: fewer give no σ worth a test

@@ -12,12 +12,12 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
-from mountcal.conventions import FloatArray, rot_vs_from_angles, tilt_from_normal
-from mountcal.errors import InputError, NotEnoughInformation
-from mountcal.samples import Channel, Samples
+from mountcal.core.conventions import FloatArray, rot_vs_from_angles, tilt_from_normal
+from mountcal.core.errors import InputError, NotEnoughInformation
+from mountcal.io.samples import Channel, Samples
 
 if TYPE_CHECKING:
-    from mountcal.estimate.driving import DrivingOptions
+    from mountcal.estimate.driving_options import DrivingOptions
 
 IntArray = NDArray[np.int64]
 GAP_FACTOR = 3.0  # an IMU step longer than this × the median step is a gap

@@ -24,12 +24,12 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from mountcal.conventions import FloatArray, skew
-from mountcal.errors import FitFailed, NotEnoughInformation
+from mountcal.core.conventions import FloatArray, skew
+from mountcal.core.errors import FitFailed, NotEnoughInformation
 from mountcal.estimate import effects as registry
 from mountcal.estimate.effects.scale import scale_matrix
 from mountcal.estimate.geometry import in_plane_azimuth, level_rotation, phase_yaw, plane_normal, with_yaw
-from mountcal.stoptable import StopTable
+from mountcal.stops.table import StopTable
 
 BASE: tuple[str, ...] = ("rotation", "slope")
 NULL_TOL = 1e-10  # relative eigenvalue of the normalised Fisher information counted as zero

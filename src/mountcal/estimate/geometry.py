@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from mountcal.conventions import FloatArray, rot_vs_from_angles, tilt_from_normal
+from mountcal.core.conventions import FloatArray, rot_vs_from_angles, tilt_from_normal
 
 
 def plane_normal(acc_s: FloatArray) -> FloatArray:

@@ -16,7 +16,7 @@ import numpy as np
 
 from mountcal.estimate import effects as registry
 from mountcal.estimate import full
-from mountcal.stoptable import StopTable
+from mountcal.stops.table import StopTable
 
 HEADINGS_DEG = np.arange(0.0, 360.0, 30.0)
 EXTRA_SLOPE_DEG = 5.0  # each further slope of a design is this much steeper

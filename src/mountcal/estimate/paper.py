@@ -15,11 +15,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from mountcal.conventions import FloatArray, angles_from_rot_vs, specific_force_v
-from mountcal.errors import NotEnoughInformation
+from mountcal.core.conventions import FloatArray, angles_from_rot_vs, specific_force_v
+from mountcal.core.errors import NotEnoughInformation
+from mountcal.core.option_names import option
 from mountcal.estimate.geometry import level_rotation, phase_yaw, plane_normal, with_yaw
-from mountcal.option_names import option
-from mountcal.stoptable import StopTable
+from mountcal.stops.table import StopTable
 
 OPPOSITE_TOL_DEG = 1.0  # two headings are "opposite" within this
 

@@ -19,8 +19,8 @@ from typing import Any
 import numpy as np
 from scipy import optimize
 
-from mountcal.conventions import FloatArray
-from mountcal.pvalues import chi2_sf, f_sf
+from mountcal.core.conventions import FloatArray
+from mountcal.core.pvalues import chi2_sf, f_sf
 
 TERMS = ("bias", "scale", "cross_axis")
 PLAUSIBLE = {"bias": 1.0, "scale": 0.05, "cross_axis": 0.05}  # a 1σ beyond these means "not determined"

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from mountcal import lazy
+from mountcal.core import lazy
 
 if TYPE_CHECKING:
     from mountcal.fleet.engines import DaskEngine, LocalEngine

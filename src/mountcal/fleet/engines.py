@@ -3,7 +3,7 @@
 - :class:`LocalEngine` (default): a :class:`concurrent.futures.ProcessPoolExecutor` on the local
   cores, started by a ``forkserver`` that has mountcal imported (``spawn`` where there is none),
   with one BLAS/OpenMP thread per worker (so N workers use N cores, not N²; mountcal's readers
-  then use no helper threads either, :func:`mountcal.threads.helpers_allowed`). Chosen over a Dask
+  then use no helper threads either, :func:`mountcal.core.threads.helpers_allowed`). Chosen over a Dask
   ``LocalCluster`` because it needs no set-up, no ports and no optional dependency, starts in about
   a second, and its workers die with the parent. At most two jobs per worker are in flight, so
   when a worker process dies (out of memory, a crash in a native library) the suspects are known:
@@ -46,9 +46,9 @@ from concurrent.futures import FIRST_COMPLETED, CancelledError, Future, ProcessP
 from concurrent.futures.process import BrokenProcessPool
 from typing import TYPE_CHECKING, Any, Protocol
 
-from mountcal.atomic import raise_if_interrupted
-from mountcal.errors import InputError, MountcalError
-from mountcal.option_names import option
+from mountcal.core.atomic import raise_if_interrupted
+from mountcal.core.errors import InputError, MountcalError
+from mountcal.core.option_names import option
 
 if TYPE_CHECKING:
     from mountcal.fleet.inputs import FleetJob

@@ -34,19 +34,19 @@ from typing import Any, Literal
 
 import pandas as pd
 
-from mountcal.calibrate import Options
-from mountcal.errors import InputError
+from mountcal.calibration.fit import Options
+from mountcal.calibration.pipeline import LogJob, Use
+from mountcal.core.errors import InputError
+from mountcal.core.option_names import flags_on
+from mountcal.core.paths import input_file, special_kind
 from mountcal.fleet.layout import Found, Grouped, Layout, group, infer_layout, unreadable_split
 from mountcal.fleet.storage import is_url, list_objects
 from mountcal.io.inputs import csv_columns
-from mountcal.io.logs import LogOptions
 from mountcal.io.mcap.write import written_by_mountcal
+from mountcal.io.reader import LogOptions
 from mountcal.io.registry import is_log, log_suffixes
-from mountcal.option_names import flags_on
-from mountcal.paths import input_file, special_kind
-from mountcal.pipeline import LogJob, Use
-from mountcal.stops import StopDetection
-from mountcal.stoptable import Headings
+from mountcal.stops.detect import StopDetection
+from mountcal.stops.table import Headings
 
 PROTOCOL_SUFFIX = ".protocol.csv"
 MANIFEST_REQUIRED = ("vehicle_id", "log")
@@ -85,7 +85,7 @@ class FleetJob:
     log : str
         The log as the results name it: its path as found (split files joined with ``" + "``).
     job : LogJob
-        What :func:`mountcal.pipeline.calibrate_job` needs, with absolute paths, so that a worker
+        What :func:`mountcal.calibration.pipeline.calibrate_job` needs, with absolute paths, so that a worker
         on another machine of a shared file system finds the files.
     headings : {"uphill", "relative", "none"} or None
         What ``beta_deg`` of a stop table is measured from (None: as its ``heading_ref`` column states, else

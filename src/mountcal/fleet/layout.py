@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import PurePath
 from typing import Literal
 
-from mountcal.errors import InputError
+from mountcal.core.errors import InputError
 
 Layout = Literal["auto", "canedge", "folders", "manifest"]
 LAYOUTS = ("auto", "canedge", "folders", "manifest")

@@ -20,8 +20,8 @@ from typing import Any
 
 import pandas as pd
 
-from mountcal.atomic import atomic_path
-from mountcal.errors import InputError
+from mountcal.core.atomic import atomic_path
+from mountcal.core.errors import InputError
 
 MAX_PLOTS = 200
 MARK = '<meta name="generator" content="mountcal fleet overview">'

@@ -18,7 +18,9 @@ from typing import Any
 
 import pandas as pd
 
-from mountcal.errors import InputError, MountcalError
+from mountcal.core.errors import InputError, MountcalError
+from mountcal.core.paths import check_outputs, output_lock
+from mountcal.core.version import software_version
 from mountcal.fleet.engines import make_engine
 from mountcal.fleet.inputs import FleetJob
 from mountcal.fleet.overview import check_overview_overwritable, overview_path, write_overview
@@ -35,8 +37,6 @@ from mountcal.fleet.store import (
     write_table,
 )
 from mountcal.fleet.vehicles import ALPHA, analyse_fleet, vehicle_table
-from mountcal.paths import check_outputs, output_lock
-from mountcal.version import software_version
 
 HASH_THREADS = 4
 

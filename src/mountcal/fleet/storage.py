@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 from typing import Any
 
-from mountcal.errors import InputError
+from mountcal.core.errors import InputError
 
 BLOCK_BYTES = 8 << 20  # one ranged read of a fetch: the memory a worker's fetch holds
 SCRATCH_PREFIX = "mountcal-fetch-"  # + the worker's pid; a killed worker's folder is removed by the next fetch

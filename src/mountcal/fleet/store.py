@@ -22,11 +22,11 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 from blake3 import blake3
 
-from mountcal.atomic import atomic_path
-from mountcal.errors import InputError
+from mountcal.core.atomic import atomic_path
+from mountcal.core.errors import InputError
+from mountcal.core.paths import special_kind
+from mountcal.core.version import software_version  # part of every key: another version may answer differently
 from mountcal.fleet.inputs import FleetJob
-from mountcal.paths import special_kind
-from mountcal.version import software_version  # part of every key: another version may answer differently
 
 PART_FORMAT = "mountcal.fleet.part"
 PART_VERSION = 2  # 2: a log without yaw stores the levelling rotation (1 stored an invented yaw)

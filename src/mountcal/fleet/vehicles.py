@@ -31,9 +31,9 @@ import numpy as np
 import pandas as pd
 from scipy.spatial.transform import Rotation
 
-from mountcal.conventions import FloatArray, angles_from_rot_vs, levelled
+from mountcal.core.conventions import FloatArray, angles_from_rot_vs, levelled
+from mountcal.core.pvalues import chi2_logsf, chi2_sf
 from mountcal.fleet.inputs import natural_key
-from mountcal.pvalues import chi2_logsf, chi2_sf
 
 ALPHA = 1e-3  # significance of disagreement and of a remount
 MAX_ITERATIONS = 100

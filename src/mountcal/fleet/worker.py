@@ -1,7 +1,7 @@
 """What a worker does with one log: calibrate it and return a plain record, never raise.
 
 The record holds only plain types (it travels between processes and into JSON). A log that fails
-is a record too, with the message of the :class:`~mountcal.errors.MountcalError` (file, expected,
+is a record too, with the message of the :class:`~mountcal.core.errors.MountcalError` (file, expected,
 found, what to do) or, for anything unexpected, the exception's type and text — in the user's
 terms: the files as they named them (not the absolute paths or scratch copies the worker read) and,
 for a command-line run, the options as flags. Workers need nothing but the installed package;
@@ -27,17 +27,18 @@ from typing import Any
 
 import numpy as np
 
-from mountcal import budget
-from mountcal.conventions import GIMBAL_LOCK_PITCH_DEG
-from mountcal.errors import MountcalError
+from mountcal.calibration.pipeline import calibrate_input
+from mountcal.core import budget
+from mountcal.core.conventions import GIMBAL_LOCK_PITCH_DEG
+from mountcal.core.errors import MountcalError
+from mountcal.core.findings import STRUCTURE_P
+from mountcal.core.option_names import as_flags
+from mountcal.core.result import Calibration
 from mountcal.fleet.inputs import FleetJob
 from mountcal.fleet.storage import is_url, local_copies
 from mountcal.io.logs import join, read_file
+from mountcal.io.samples import Samples
 from mountcal.io.whole import is_cut
-from mountcal.option_names import as_flags
-from mountcal.pipeline import calibrate_input
-from mountcal.result import STRUCTURE_P, Calibration
-from mountcal.samples import Samples
 
 UNIX_TIME_S = (1.0e9, 4.1e9)  # a log clock in this range is Unix time (2001 … 2099)
 GAP_S = 1.0  # more than this without a sample between two splits is a gap

@@ -31,15 +31,15 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from mountcal.errors import InputError
+from mountcal.core.errors import InputError
 from mountcal.io.can.dbc import decode, load_dbc
 from mountcal.io.can.frames import DATA_WIDTH, CanFrames
 from mountcal.io.reader import LogReader
+from mountcal.io.samples import Channel, FloatArray, Samples
 from mountcal.io.whole import found_cut, unreadable_part
-from mountcal.samples import Channel, FloatArray, Samples
 
 if TYPE_CHECKING:
-    from mountcal.io.logs import LogOptions
+    from mountcal.io.reader import LogOptions
 
 AXIS_MAP = "x,-y,-z"  # sensor [forward, left, up] from device [forward, right, down]
 _DEVICE_TO_SENSOR = np.array([1.0, -1.0, -1.0])  # the diagonal of the 180° turn about x

@@ -2,12 +2,12 @@
 
 Every reader calls :func:`check_regular_file` before opening its input: a FIFO would block the
 read forever, ``/dev/zero`` or ``/dev/urandom`` never end, and a directory is not a log. Each one is
-refused with an :class:`~mountcal.errors.InputError` instead.
+refused with an :class:`~mountcal.core.errors.InputError` instead.
 
 Readers also bound their memory and time by what they will actually inflate, walk and hold,
-whatever a file declares: each charges :mod:`mountcal.budget` per block or batch (the largest
+whatever a file declares: each charges :mod:`mountcal.core.budget` per block or batch (the largest
 block, the decompression ratio, rows, records, columns), and a limit hit is an
-:class:`~mountcal.errors.InputError` naming the file, the limit and the variable that raises it.
+:class:`~mountcal.core.errors.InputError` naming the file, the limit and the variable that raises it.
 See ``docs/reliability.md`` for the memory bound these give.
 """
 
@@ -19,9 +19,9 @@ from collections.abc import Iterable, Sized
 from pathlib import Path
 from typing import TypeVar
 
-from mountcal import budget
-from mountcal.errors import InputError
-from mountcal.paths import input_file
+from mountcal.core import budget
+from mountcal.core.errors import InputError
+from mountcal.core.paths import input_file
 
 _Sized = TypeVar("_Sized", bound=Sized)
 
@@ -30,7 +30,7 @@ def check_regular_file(path: str | os.PathLike[str], role: str) -> Path:
     """``path`` as a Path once it is known to be an existing regular file (symlinks followed).
 
     ``role`` says what the file is for (``"MCAP log"``, ``"DBC"``): the message's expectation. The
-    check is :func:`mountcal.paths.input_file`'s without its size limit (logs are large; their
+    check is :func:`mountcal.core.paths.input_file`'s without its size limit (logs are large; their
     readers bound what they hold instead).
 
     Raises
@@ -47,7 +47,7 @@ def max_block_bytes() -> int:
 
 
 def max_rows() -> int:
-    """The most samples, frames or rows a reader materialises (a total of the run: :mod:`mountcal.budget`)."""
+    """The most samples, frames or rows a reader materialises (a total of the run: :mod:`mountcal.core.budget`)."""
     return budget.setting("rows")
 
 

@@ -24,7 +24,7 @@ from typing import Literal
 
 import numpy as np
 
-from mountcal.errors import InputError
+from mountcal.core.errors import InputError
 
 Declared = Literal["auto", "stop-table", "log"]
 KIND_OPTION = "--input-kind"
@@ -113,7 +113,7 @@ def input_kind(
 
 
 def _kind_of(path: Path, dbc: bool, columns: bool, declared: Declared) -> InputKind:
-    from mountcal.paths import special_kind
+    from mountcal.core.paths import special_kind
 
     suffix = path.suffix.lower()
     table = suffix in TABLE_SUFFIXES and not (dbc and suffix == ".csv" and not _stop_columns_given_dbc(path))
@@ -136,7 +136,7 @@ def _kind_of(path: Path, dbc: bool, columns: bool, declared: Declared) -> InputK
         return InputKind(False, f"a sample table ({form})", "read with a column map")
     if table:
         return _table_kind(path, form)
-    from mountcal.io.logs import LogOptions
+    from mountcal.io.reader import LogOptions
     from mountcal.io.registry import reader_for
 
     reader = reader_for(path, LogOptions(dbc="given" if dbc else None))  # raises for a file no reader takes

@@ -10,7 +10,7 @@ in time order. Files whose clocks overlap are not splits of one log (two loggers
 given twice): joining them would interleave two recordings, so they are refused.
 
 The conventions every reader shares are applied here, once, whatever the format
-(:mod:`mountcal.input_conventions`): the axis map ``axes`` (after a reader's own map: a CAN mapping's
+(:mod:`mountcal.io.input_conventions`): the axis map ``axes`` (after a reader's own map: a CAN mapping's
 ``axes``, a format's documented frame) to the accelerometer and the gyro, and the unit of the heading
 channel (stated by ``heading_unit``, or checked: radians are refused). ``Samples.conventions`` says
 how each was known.
@@ -25,41 +25,23 @@ from __future__ import annotations
 import os
 from collections import Counter
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from itertools import pairwise
 from pathlib import Path
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING
 
-from mountcal.budget import scoped, scoped_iter
-from mountcal.errors import InputError
+from mountcal.core.budget import scoped, scoped_iter
+from mountcal.core.errors import InputError
+from mountcal.io.reader import LogOptions
 from mountcal.io.registry import reader_for
 from mountcal.io.whole import Cut, read_under, reading
 
 if TYPE_CHECKING:  # numpy and the readers load when a log is read: `mountcal --help` needs neither
-    from mountcal.input_conventions import AxisMap
+    from mountcal.io.input_conventions import AxisMap
     from mountcal.io.reader import LogReader
-    from mountcal.samples import LogSummary, Samples
+    from mountcal.io.samples import LogSummary, Samples
 
 CHUNK_SAMPLES = 100_000  # samples per chunk of iter_log: its memory bound
-
-
-@dataclass(frozen=True)
-class LogOptions:
-    """How to read a log: the DBC and mapping for CAN, the topic (and field) for MCAP and ROS bags, the
-    column map and acceleration unit for tables (:mod:`mountcal.io.table.layout`); for every format, the
-    axis map (``"x,-y,z"``: a signed permutation of the device's axes, applied after the reader's own)
-    and the unit of the heading channel (``"deg"`` or ``"rad"``; unstated, degrees are checked)."""
-
-    dbc: str | tuple[str, ...] | None = None  # several DBCs: their messages together (no clash allowed)
-    mapping: str | None = None
-    channel: int | None = None
-    topic: str | None = None
-    field: str | None = None  # the Imu or Vector3 inside the topic's message ("imu", "imu.linear_acceleration")
-    columns: tuple[tuple[str, str], ...] | None = None  # a table's column map: (role, "COLUMN[:UNIT]") pairs
-    unit: str | None = None  # a table's acceleration unit where neither the table nor the map gives it ("g")
-    allow_truncated: bool = False  # read the whole part of a file cut short, and say so (mountcal.io.whole)
-    axes: str | None = None  # every format: the device's axes onto the sensor frame
-    heading_unit: Literal["deg", "rad"] | None = None  # every format: the heading channel's unit
 
 
 # options only some formats read: given for another, they would be silently ignored
@@ -68,7 +50,7 @@ _READ_BY = {"field": ("mcap", "bag"), "columns": ("table",), "unit": ("table",)}
 
 def _reader(path: Path, opts: LogOptions) -> LogReader:
     """The reader of ``path``, refusing an option that its format does not read."""
-    from mountcal.option_names import option
+    from mountcal.core.option_names import option
 
     reader = reader_for(path, opts)
     for name, formats in _READ_BY.items():
@@ -95,8 +77,8 @@ def read_log(paths: str | Path | Sequence[str | Path], options: LogOptions | Non
 
 
 def _axes(opts: LogOptions) -> AxisMap | None:
-    from mountcal.input_conventions import parse_axes
-    from mountcal.option_names import option
+    from mountcal.core.option_names import option
+    from mountcal.io.input_conventions import parse_axes
 
     return None if opts.axes is None else parse_axes(opts.axes, option("axes"))
 
@@ -111,8 +93,8 @@ def stated(samples: Samples, opts: LogOptions, axes: AxisMap | None = None, chec
 
     import numpy as np
 
-    from mountcal.input_conventions import axes_convention, heading_channel_unit
-    from mountcal.samples import Channel
+    from mountcal.io.input_conventions import axes_convention, heading_channel_unit
+    from mountcal.io.samples import Channel
 
     if any(c.name == "axes" for c in samples.conventions):
         return samples
@@ -207,7 +189,7 @@ def iter_log(
 def _empty(source: str) -> Samples:
     import numpy as np
 
-    from mountcal.samples import Samples
+    from mountcal.io.samples import Samples
 
     return Samples(np.empty(0), np.empty((0, 3)), source=source)
 
@@ -243,7 +225,7 @@ def join(parts: Sequence[Samples]) -> Samples:
     """
     import numpy as np
 
-    from mountcal.samples import Channel, Samples
+    from mountcal.io.samples import Channel, Samples
 
     parts = sorted(parts, key=lambda s: float(s.t_s[0]) if len(s) else np.inf)
     _check_consecutive([p for p in parts if len(p)])

@@ -1,7 +1,7 @@
 """The one interface of a log format: :class:`LogReader`.
 
 A format is a subclass naming its suffixes and reading a file into
-:class:`~mountcal.samples.Samples`; :mod:`mountcal.io.registry` picks the reader of a path, for
+:class:`~mountcal.io.samples.Samples`; :mod:`mountcal.io.registry` picks the reader of a path, for
 reading whole (``read_log``), streaming in chunks (``rotate``), listing (``inspect``) and finding
 logs in folders (``fleet``). A third-party format is one module with one such class, declared in
 the entry-point group ``mountcal.readers`` (see :mod:`mountcal.io.registry`).
@@ -13,12 +13,31 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, ClassVar
+from typing import TYPE_CHECKING, ClassVar, Literal
 
 if TYPE_CHECKING:
-    from mountcal.io.logs import LogOptions
-    from mountcal.samples import LogSummary, Samples
+    from mountcal.io.samples import LogSummary, Samples
+
+
+@dataclass(frozen=True)
+class LogOptions:
+    """How to read a log: the DBC and mapping for CAN, the topic (and field) for MCAP and ROS bags, the
+    column map and acceleration unit for tables (:mod:`mountcal.io.table.layout`); for every format, the
+    axis map (``"x,-y,z"``: a signed permutation of the device's axes, applied after the reader's own)
+    and the unit of the heading channel (``"deg"`` or ``"rad"``; unstated, degrees are checked)."""
+
+    dbc: str | tuple[str, ...] | None = None  # several DBCs: their messages together (no clash allowed)
+    mapping: str | None = None
+    channel: int | None = None
+    topic: str | None = None
+    field: str | None = None  # the Imu or Vector3 inside the topic's message ("imu", "imu.linear_acceleration")
+    columns: tuple[tuple[str, str], ...] | None = None  # a table's column map: (role, "COLUMN[:UNIT]") pairs
+    unit: str | None = None  # a table's acceleration unit where neither the table nor the map gives it ("g")
+    allow_truncated: bool = False  # read the whole part of a file cut short, and say so (mountcal.io.whole)
+    axes: str | None = None  # every format: the device's axes onto the sensor frame
+    heading_unit: Literal["deg", "rad"] | None = None  # every format: the heading channel's unit
 
 
 class LogReader(ABC):
@@ -59,15 +78,15 @@ class LogReader(ABC):
         The default reads the whole log and hands it out in slices: correct, but its memory is the
         log's. A format that can stream overrides it to bound memory by ``max_samples``.
         """
-        from mountcal.samples import slices
+        from mountcal.io.samples import slices
 
         yield from slices(self.read(path, options), max_samples)
 
     def inspect(self, path: Path, options: LogOptions) -> LogSummary:
         """What the log holds (``mountcal inspect``). The default reads it and lists one stream."""
-        from mountcal.samples import summary
+        from mountcal.io.samples import summary
 
         return summary(self.read(path, options), self.name, self.name)
 
 
-__all__ = ["LogReader"]
+__all__ = ["LogOptions", "LogReader"]

@@ -30,13 +30,13 @@ from functools import cache
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from mountcal.errors import InputError, MountcalError
+from mountcal.core.errors import InputError, MountcalError
+from mountcal.core.plugins import Plugin, entry_points_of, output_to_stderr
 from mountcal.io.reader import LogReader
-from mountcal.plugins import Plugin, entry_points_of, output_to_stderr
 
 if TYPE_CHECKING:
-    from mountcal.io.logs import LogOptions
-    from mountcal.samples import LogSummary, Samples
+    from mountcal.io.reader import LogOptions
+    from mountcal.io.samples import LogSummary, Samples
 
 GROUP = "mountcal.readers"
 BUILTIN = (

@@ -12,7 +12,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from mountcal.samples import Channel, FloatArray, Samples
+from mountcal.io.samples import Channel, FloatArray, Samples
 
 MERGED = "samples merged (duplicate timestamp)"
 REORDERED = "samples out of time order (put in order)"

@@ -30,8 +30,8 @@ from contextvars import ContextVar
 from dataclasses import dataclass, field
 from typing import Any, BinaryIO, TypeVar
 
-from mountcal.errors import InputError
-from mountcal.option_names import option
+from mountcal.core.errors import InputError
+from mountcal.core.option_names import option
 
 _T = TypeVar("_T")
 _READ_IN_PART = ": read in part"

@@ -21,8 +21,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from mountcal.conventions import G_N, FloatArray, angles_from_rot_vs, rot_vs_from_angles
-from mountcal.samples import Channel, Samples
+from mountcal.core.conventions import G_N, FloatArray, angles_from_rot_vs, rot_vs_from_angles
+from mountcal.io.samples import Channel, Samples
 
 PITCH_PER_ACC_RAD = 0.0025  # body pitch (nose up) per m/s² of longitudinal acceleration (≈ 1.4°/g)
 ROLL_PER_ACC_RAD = 0.008  # body roll (outward) per m/s² of lateral acceleration (≈ 4.5°/g)

@@ -16,12 +16,12 @@ from typing import Any
 
 import numpy as np
 
-from mountcal import ranges
-from mountcal.atomic import atomic_path
-from mountcal.conventions import G_N, normal_gravity
-from mountcal.errors import InputError
+from mountcal.core import ranges
+from mountcal.core.atomic import atomic_path
+from mountcal.core.conventions import G_N, normal_gravity
+from mountcal.core.errors import InputError
 from mountcal.simulate.stops import PRESETS, ParkingLog, simulate_parking_log, simulate_stops
-from mountcal.stoptable import Headings, write_stop_table
+from mountcal.stops.table import Headings, write_stop_table
 
 PathLike = str | os.PathLike[str]
 
@@ -103,7 +103,7 @@ def write_log_session(
     ``session`` may set ``stop_s``, ``drive_s``, ``rate_hz``; ``each_log`` is called with every
     log's path once it is written (a progress bar). Returns lines for the user.
     """
-    from mountcal.simulate import logs as export
+    from mountcal.io import writers as export
 
     formats = [export.check_log_path(p, dbc) for p in logs]
     if protocol is not None and "asc" in formats and len(formats) > 1:

@@ -15,8 +15,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from mountcal.conventions import G_N, FloatArray, angles_from_rot_vs, rot_vs_from_angles, specific_force_v
-from mountcal.stoptable import Headings, StopTable
+from mountcal.core.conventions import G_N, FloatArray, angles_from_rot_vs, rot_vs_from_angles, specific_force_v
+from mountcal.stops.table import Headings, StopTable
 
 ZHANG2011 = {  # the paper's simulation (its Table 1), docs/conventions.md §3
     "roll_deg": 5.0,

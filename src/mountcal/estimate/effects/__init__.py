@@ -20,9 +20,9 @@ from typing import TYPE_CHECKING
 from mountcal.estimate.effects.base import Effect
 
 if TYPE_CHECKING:
-    from mountcal.conventions import FloatArray
-    from mountcal.plugins import Plugin
-    from mountcal.result import Calibration
+    from mountcal.core.conventions import FloatArray
+    from mountcal.core.plugins import Plugin
+    from mountcal.core.result import Calibration
 
 GROUP = "mountcal.effects"
 # Built-in effects, in the order --model lists them: module mountcal.estimate.effects.<name>, class EFFECT.
@@ -31,7 +31,7 @@ BUILTIN = ("bias", "temperature", "gravity", "site_slope", "scale")
 
 def names() -> tuple[str, ...]:
     """Every registered effect's name, without importing any of them."""
-    from mountcal.plugins import entry_points_of  # importlib.metadata: more than the CLI's help may take
+    from mountcal.core.plugins import entry_points_of  # importlib.metadata: more than the CLI's help may take
 
     extra = tuple(p.name for p in entry_points_of(GROUP) if p.name not in BUILTIN)
     return BUILTIN + extra
@@ -45,7 +45,7 @@ def _builtin() -> dict[str, Effect]:
 @cache
 def registered() -> dict[str, Effect]:
     """Every effect by name: the built-in ones, then those of the ``mountcal.effects`` entry points."""
-    from mountcal.plugins import entry_points_of
+    from mountcal.core.plugins import entry_points_of
 
     out = dict(_builtin())
     for plugin in entry_points_of(GROUP):
@@ -56,7 +56,7 @@ def registered() -> dict[str, Effect]:
 
 def _effect(plugin: Plugin) -> Effect:
     """The effect a plugin names; a package whose effect cannot be used is refused by name."""
-    from mountcal.errors import InputError
+    from mountcal.core.errors import InputError
 
     obj = plugin.load()  # an import failure is refused by name there
     try:
@@ -108,7 +108,7 @@ def apply_corrections(acc_s: FloatArray, calibration: Calibration, *, inverse: b
     """
     import numpy as np
 
-    from mountcal.errors import InputError
+    from mountcal.core.errors import InputError
 
     reported = {e.name: e for e in calibration.effects}
     bias = get("bias")

@@ -11,11 +11,11 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
-from mountcal.result import EffectValue
+from mountcal.core.result import EffectValue
 
 if TYPE_CHECKING:
-    from mountcal.conventions import FloatArray
-    from mountcal.stoptable import StopTable
+    from mountcal.core.conventions import FloatArray
+    from mountcal.stops.table import StopTable
 
     Applied = tuple[FloatArray, FloatArray, FloatArray | None]
 

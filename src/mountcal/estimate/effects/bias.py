@@ -6,10 +6,10 @@ from typing import Any
 
 import numpy as np
 
-from mountcal.conventions import FloatArray
+from mountcal.core.conventions import FloatArray
+from mountcal.core.result import EffectValue
 from mountcal.estimate.effects.base import BaseEffect, reported_vector
-from mountcal.result import EffectValue
-from mountcal.stoptable import StopTable
+from mountcal.stops.table import StopTable
 
 MAX_BIAS_G = 0.5  # an offset this large is not an accelerometer bias (consumer MEMS: < 0.1 g) but a sign or unit error
 

@@ -9,9 +9,9 @@ from typing import Any
 
 import numpy as np
 
-from mountcal.conventions import FloatArray
+from mountcal.core.conventions import FloatArray
 from mountcal.estimate.effects.base import BaseEffect
-from mountcal.stoptable import StopTable
+from mountcal.stops.table import StopTable
 
 EARTH_GRAVITY_MPS2 = (9.77, 9.835)  # normal gravity: 9.780 (equator) to 9.832 (poles) at sea level, less with height
 

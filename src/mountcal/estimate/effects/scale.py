@@ -11,10 +11,10 @@ from typing import Any
 
 import numpy as np
 
-from mountcal.conventions import FloatArray
+from mountcal.core.conventions import FloatArray
+from mountcal.core.result import EffectValue
 from mountcal.estimate.effects.base import BaseEffect
-from mountcal.result import EffectValue
-from mountcal.stoptable import StopTable
+from mountcal.stops.table import StopTable
 
 SCALE_NAMES = ("scale_xx", "scale_yy", "scale_zz", "cross_xy", "cross_xz", "cross_yz")
 

@@ -10,10 +10,10 @@ from typing import Any
 
 import numpy as np
 
-from mountcal.conventions import FloatArray
+from mountcal.core.conventions import FloatArray
+from mountcal.core.result import EffectValue
 from mountcal.estimate.effects.base import BaseEffect
-from mountcal.result import EffectValue
-from mountcal.stoptable import SITE, StopTable
+from mountcal.stops.table import SITE, StopTable
 
 
 class SiteSlope(BaseEffect):

@@ -9,9 +9,9 @@ from typing import Any
 
 import numpy as np
 
-from mountcal.conventions import FloatArray
+from mountcal.core.conventions import FloatArray
 from mountcal.estimate.effects.base import BaseEffect
-from mountcal.stoptable import TEMPERATURE, StopTable
+from mountcal.stops.table import TEMPERATURE, StopTable
 
 MIN_TEMPERATURE_SPAN_C = 2.0
 

@@ -9,7 +9,7 @@ import numpy as np
 
 from mountcal.io.bag import ros1
 from mountcal.io.bag.read import ros1_topics
-from mountcal.samples import LogSummary, Stream
+from mountcal.io.samples import LogSummary, Stream
 
 
 def inspect_ros1(path: str | Path) -> LogSummary:

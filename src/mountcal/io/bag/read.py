@@ -22,16 +22,16 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from mountcal.errors import InputError
+from mountcal.core.errors import InputError
 from mountcal.io.bag import ros1
-from mountcal.io.bag.topics import Selection, Topic, choose_aux, choose_imu
+from mountcal.io.bag.topics import Selection, Topic, choose_aux, choose_imu, mcap_topics
 from mountcal.io.inputs import block_too_large, max_block_bytes, max_rows, too_many_rows
 from mountcal.io.mcap.read import _concat, _gyro, _keep, _Piece, _pieces  # the MCAP reader's sample rules
 from mountcal.io.mcap.records import Log
 from mountcal.io.ros import kinds
-from mountcal.io.ros.types import DefinitionError, Types, from_definition, standard
+from mountcal.io.ros.types import DefinitionError, Types, from_definition
 from mountcal.io.ros2.cdr import CdrError, Decoded, Rows, cdr_rows
-from mountcal.samples import Channel, FloatArray, Samples
+from mountcal.io.samples import Channel, FloatArray, Samples
 
 I64Array = NDArray[np.int64]
 SQLITE_BATCH = 65_536  # rows fetched at once from a .db3
@@ -274,30 +274,6 @@ def _sqlite_batch(
 # --------------------------------------------------------------------------- MCAP (ROS 2 storage, or --field)
 
 
-def mcap_topics(log: Log) -> dict[str, Topic]:
-    """An MCAP log's topics with the definitions of their schemas (``ros2msg`` or ``ros2idl``)."""
-    out = {}
-    for name, channels in log.topics().items():
-        schema = log.schemas.get(channels[0].schema_id)
-        type_name = log.type_name(channels[0])
-        types: Types | None = None
-        problem = "no schema"
-        if schema is not None:
-            try:
-                if schema.encoding in ("ros2msg", "ros2idl") and schema.data:
-                    types = from_definition(schema.data.decode(errors="replace"), schema.name, schema.encoding[4:])
-                else:
-                    types = standard(schema.name)
-            except DefinitionError as err:
-                problem = str(err)
-        if any(c.message_encoding != "cdr" for c in channels):
-            types, problem = None, f"messages encoded as {channels[0].message_encoding!r}, not CDR"
-        counts = log.statistics.channel_counts if log.statistics is not None else None
-        count = None if counts is None else sum(counts.get(c.id, 0) for c in channels)
-        out[name] = Topic(name, type_name, tuple(c.id for c in channels), types, problem, count)
-    return out
-
-
 def read_mcap_topics(path: str | Path, *, topic: str | None, field: str | None) -> Samples:
     """An MCAP log read through message definitions (for ``--field``)."""
     from mountcal.io.mcap.chunks import open_log
@@ -346,4 +322,4 @@ def mcap_batches(
             del unit
 
 
-__all__ = ["mcap_topics", "read_mcap_topics", "read_ros1", "ros1_topics", "samples_of", "sqlite_batches"]
+__all__ = ["read_mcap_topics", "read_ros1", "ros1_topics", "samples_of", "sqlite_batches"]

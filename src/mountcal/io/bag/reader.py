@@ -9,8 +9,8 @@ from typing import TYPE_CHECKING
 from mountcal.io.reader import LogReader
 
 if TYPE_CHECKING:
-    from mountcal.io.logs import LogOptions
-    from mountcal.samples import LogSummary, Samples
+    from mountcal.io.reader import LogOptions
+    from mountcal.io.samples import LogSummary, Samples
 
 
 class BagReader(LogReader):

@@ -24,7 +24,7 @@ from typing import BinaryIO
 import numpy as np
 from numpy.typing import NDArray
 
-from mountcal.errors import InputError
+from mountcal.core.errors import InputError
 from mountcal.io.inputs import block_too_large, check_regular_file, max_block_bytes
 from mountcal.io.mcap.chunks import unlz4
 from mountcal.io.ros.types import normalize

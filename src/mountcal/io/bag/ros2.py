@@ -12,11 +12,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from mountcal.errors import InputError
-from mountcal.io.bag.read import Batch, mcap_batches, mcap_topics, samples_of, sqlite_batches
-from mountcal.io.bag.topics import Selection, Topic
+from mountcal.core.errors import InputError
+from mountcal.io.bag.read import Batch, mcap_batches, samples_of, sqlite_batches
+from mountcal.io.bag.topics import Selection, Topic, mcap_topics
 from mountcal.io.ros.types import DefinitionError, Types, from_definition, standard
-from mountcal.samples import LogSummary, Samples, Stream
+from mountcal.io.samples import LogSummary, Samples, Stream
 
 STORAGES = {".db3": "sqlite3", ".mcap": "mcap"}
 

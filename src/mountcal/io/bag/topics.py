@@ -19,10 +19,20 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from mountcal.errors import InputError
+from mountcal.core.errors import InputError
+from mountcal.core.option_names import option
+from mountcal.io.mcap.records import Log
 from mountcal.io.ros.kinds import TYPES, Target, target
-from mountcal.io.ros.types import IMU, VECTOR3, VECTOR3_STAMPED, DefinitionError, Types, carriers
-from mountcal.option_names import option
+from mountcal.io.ros.types import (
+    IMU,
+    VECTOR3,
+    VECTOR3_STAMPED,
+    DefinitionError,
+    Types,
+    carriers,
+    from_definition,
+    standard,
+)
 
 AUX = ("temperature", "fix", "odom", "velocity", "nmea")
 SPEED = ("odom", "velocity", "nmea")  # speed sources, in order of preference: one is read
@@ -198,4 +208,37 @@ def choose_aux(topics: dict[str, Topic], where: str, notes: list[str]) -> list[S
     return out
 
 
-__all__ = ["AUX", "Selection", "Topic", "carried_hint", "choose_aux", "choose_imu", "listing"]
+def mcap_topics(log: Log) -> dict[str, Topic]:
+    """An MCAP log's topics with the definitions of their schemas (``ros2msg`` or ``ros2idl``)."""
+    out = {}
+    for name, channels in log.topics().items():
+        schema = log.schemas.get(channels[0].schema_id)
+        type_name = log.type_name(channels[0])
+        types: Types | None = None
+        problem = "no schema"
+        if schema is not None:
+            try:
+                if schema.encoding in ("ros2msg", "ros2idl") and schema.data:
+                    types = from_definition(schema.data.decode(errors="replace"), schema.name, schema.encoding[4:])
+                else:
+                    types = standard(schema.name)
+            except DefinitionError as err:
+                problem = str(err)
+        if any(c.message_encoding != "cdr" for c in channels):
+            types, problem = None, f"messages encoded as {channels[0].message_encoding!r}, not CDR"
+        counts = log.statistics.channel_counts if log.statistics is not None else None
+        count = None if counts is None else sum(counts.get(c.id, 0) for c in channels)
+        out[name] = Topic(name, type_name, tuple(c.id for c in channels), types, problem, count)
+    return out
+
+
+__all__ = [
+    "AUX",
+    "Selection",
+    "Topic",
+    "carried_hint",
+    "choose_aux",
+    "choose_imu",
+    "listing",
+    "mcap_topics",
+]

@@ -21,12 +21,12 @@ import numpy as np
 from isal import isal_zlib  # zlib-compatible inflate, 1.7× faster than zlib's on BLF containers
 from numpy.typing import NDArray
 
-from mountcal import budget
-from mountcal.errors import InputError
+from mountcal.core import budget
+from mountcal.core.errors import InputError
+from mountcal.core.threads import helpers_allowed
 from mountcal.io.can.frames import CLASSIC_WIDTH, DATA_WIDTH, CanFrames, Filter, FloatArray, IntArray, pad_payload
 from mountcal.io.inputs import block_too_large, max_block_bytes
 from mountcal.io.whole import found_cut, was_cut
-from mountcal.threads import helpers_allowed
 
 # ---------------------------------------------------------------------------------------------
 # BLF (Vector binary logging format), parsed directly
@@ -173,7 +173,7 @@ def _jobs(containers: Iterator[tuple[int, int, bytes]]) -> Iterator[tuple[list[t
 
 def _blf_inflated(f: BinaryIO, path: Path) -> Iterator[bytes]:
     """Container payloads, inflated in two threads (ISA-L releases the GIL), or here where
-    :func:`~mountcal.threads.helpers_allowed` says no.
+    :func:`~mountcal.core.threads.helpers_allowed` says no.
 
     Up to a scan batch and a half of inflated bytes (and at most a few jobs) is kept in flight, so
     the threads inflate the next batch while the caller scans this one (a shallow queue left them

@@ -13,7 +13,7 @@ import can
 import numpy as np
 from can.util import channel2int
 
-from mountcal.atomic import GrowingFile
+from mountcal.core.atomic import GrowingFile
 from mountcal.io.can.frames import CanFrames
 
 # What a BLF file can stamp: SYSTEMTIME's years (to 9999) for the start and the last frame, and
@@ -38,9 +38,9 @@ class Recording:
 
     The writer's log containers reach the file whole, each holding whole frames (flushed before
     python-can would cut a frame between two containers) and followed by the file header rewritten
-    to cover it (:class:`~mountcal.atomic.GrowingFile`): a session killed at any point leaves a BLF
+    to cover it (:class:`~mountcal.core.atomic.GrowingFile`): a session killed at any point leaves a BLF
     of every frame up to the last container written (≈ 2 700 classic frames each), and a full disk
-    cuts the file back to that and raises :class:`~mountcal.paths.SystemFailure` saying so.
+    cuts the file back to that and raises :class:`~mountcal.core.paths.SystemFailure` saying so.
     :meth:`add` refuses (and counts) a frame the format cannot hold, rather than losing the session
     to the writer's exception.
     """

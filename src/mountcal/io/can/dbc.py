@@ -20,10 +20,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from mountcal.errors import InputError
+from mountcal.core.errors import InputError
+from mountcal.core.option_names import option
+from mountcal.core.paths import input_file
 from mountcal.io.can.frames import DATA_WIDTH, CanFrames
-from mountcal.option_names import option
-from mountcal.paths import input_file
 
 FloatArray = NDArray[np.float64]
 U64Array = NDArray[np.uint64]

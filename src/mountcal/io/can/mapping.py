@@ -14,13 +14,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from mountcal import budget
-from mountcal.errors import InputError
-from mountcal.input_conventions import parse_axes
+from mountcal.core import paths
+from mountcal.core.errors import InputError
 from mountcal.io.can.dbc import frame_id_text, id_match, load_dbcs
-from mountcal.io.can.frames import iter_frames, log_format
+from mountcal.io.can.files import iter_frames, log_format
 from mountcal.io.can.mismatch import SHOWN, Want, log_mismatch
 from mountcal.io.can.signals import UNIT_HINT, UNIT_KIND, message_refs, si_scale
+from mountcal.io.input_conventions import parse_axes
 from mountcal.io.inputs import check_regular_file
 
 ACCEL_ROLES = ("ax", "ay", "az")
@@ -181,7 +181,7 @@ def _mapping_dict(mapping: str | Path | Mapping[str, Any] | None) -> dict[str, A
     if isinstance(mapping, str | Path):
         where = str(mapping)
         # a regular file of bounded size (not a FIFO or a device: reading ends), parsed within the budget
-        spec = budget.read_document(mapping, "a mapping TOML file", toml=True)
+        spec = paths.read_document(mapping, "a mapping TOML file", toml=True)
     else:
         spec = dict(mapping)
     _check_keys(spec, _MAPPING_KEYS, where, "")
@@ -505,7 +505,7 @@ def _assign_validity(sources: list[Source], valid: Any, db: Any, where: str, pre
 
 
 def _axes(text: Any, allow: Any) -> tuple[NDArray[np.float64], str]:
-    """The mapping's ``axes`` (a signed permutation, :func:`mountcal.input_conventions.parse_axes`) as a
+    """The mapping's ``axes`` (a signed permutation, :func:`mountcal.io.input_conventions.parse_axes`) as a
     matrix (row i: device components of sensor axis i) and its description.
 
     A reflection states that the device's own triad is left-handed (the map makes it right-handed), as

@@ -27,8 +27,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from mountcal import budget
-from mountcal.errors import InputError
+from mountcal.core import budget
+from mountcal.core.errors import InputError
 from mountcal.io.can.blf import DLC2LEN, le_field
 from mountcal.io.can.frames import DATA_WIDTH, CanFrames, Filter, FloatArray, pad_payload
 from mountcal.io.inputs import block_too_large, max_block_bytes

@@ -12,10 +12,10 @@ from typing import Any
 
 import numpy as np
 
-from mountcal import budget
-from mountcal.errors import InputError
+from mountcal.core import budget
+from mountcal.core.errors import InputError
 from mountcal.io.can.dbc import frame_id_text, id_match
-from mountcal.io.can.frames import iter_frames
+from mountcal.io.can.files import iter_frames
 
 
 @dataclass(frozen=True)

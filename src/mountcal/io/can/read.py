@@ -44,7 +44,7 @@ the clock of the message carrying ``ax``: each of its frames takes, from every o
 frame nearest in time (the earlier one on a tie) if it lies within one period of that message (the
 median interval of its first 1000 frames); rows without such a partner are dropped and counted.
 
-Output is float64 SI in the sensor frame, as :class:`~mountcal.samples.Samples` states; the
+Output is float64 SI in the sensor frame, as :class:`~mountcal.io.samples.Samples` states; the
 auxiliary channels are ``temperature_c``, ``speed_mps``, ``heading_deg`` (compass, as the DBC
 gives it), ``lat_deg``, ``lon_deg``, ``alt_m``, each on its own message's clock. ``dropped`` counts
 frames of the selected messages that were unusable: too short, flagged invalid, non-finite, or
@@ -61,9 +61,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from mountcal.errors import InputError
+from mountcal.core.errors import InputError
 from mountcal.io.can.dbc import decode, frame_id_text, payload_bytes, raw_values
-from mountcal.io.can.frames import CanFrames, iter_frames, log_format
+from mountcal.io.can.files import iter_frames, log_format
+from mountcal.io.can.frames import CanFrames
 from mountcal.io.can.mapping import (
     AUX_KEYS,
     Plan,
@@ -79,7 +80,7 @@ from mountcal.io.can.mapping import (
 )
 from mountcal.io.can.mismatch import SHOWN, Want, id_stats, log_mismatch
 from mountcal.io.inputs import hold
-from mountcal.samples import Channel, FloatArray, LogSummary, Samples, Stream
+from mountcal.io.samples import Channel, FloatArray, LogSummary, Samples, Stream
 
 _PERIOD_FRAMES = 1000  # frames used to measure a message's period
 _FRAMES_PER_CHUNK = 100_000  # frames decoded at a time by read_can (≈ 9 MB)

@@ -6,13 +6,13 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from mountcal.errors import InputError
+from mountcal.core.errors import InputError
+from mountcal.core.option_names import option
 from mountcal.io.reader import LogReader
-from mountcal.option_names import option
 
 if TYPE_CHECKING:
-    from mountcal.io.logs import LogOptions
-    from mountcal.samples import LogSummary, Samples
+    from mountcal.io.reader import LogOptions
+    from mountcal.io.samples import LogSummary, Samples
 
 CAN_SUFFIXES = (".blf", ".asc", ".log", ".trc", ".mf4", ".mdf")  # always CAN; a .csv is CAN with a DBC
 

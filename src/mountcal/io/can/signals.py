@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-# standard gravity, m/s², for signals in g: the value of mountcal.conventions.G_N (a test checks it),
+# standard gravity, m/s², for signals in g: the value of mountcal.core.conventions.G_N (a test checks it),
 # not imported from there, which would load scipy into every CAN read
 G_N = 9.80665
 

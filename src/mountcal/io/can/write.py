@@ -17,9 +17,9 @@ from typing import Any
 
 import numpy as np
 
-from mountcal.errors import InputError
+from mountcal.core.errors import InputError
 from mountcal.io.can.signals import UNIT_HINT, UNIT_KIND, message_refs, si_scale
-from mountcal.samples import FloatArray
+from mountcal.io.samples import FloatArray
 
 
 @dataclass

@@ -22,8 +22,9 @@ import numpy as np
 import zstandard
 from numpy.typing import NDArray
 
-from mountcal import budget
-from mountcal.errors import InputError
+from mountcal.core import budget
+from mountcal.core.errors import InputError
+from mountcal.core.threads import helpers_allowed
 from mountcal.io.inputs import block_too_large, check_regular_file, max_block_bytes
 from mountcal.io.mcap.records import (
     LOOSE_BATCH_BYTES,
@@ -52,7 +53,6 @@ from mountcal.io.mcap.records import (
     walk_file,
     walk_records,
 )
-from mountcal.threads import helpers_allowed
 
 # --------------------------------------------------------------------------- chunks → record tables
 
@@ -301,7 +301,7 @@ def _prefetch(jobs: Iterator[_Job]) -> Generator[tuple[_Job, U8Array], None, Non
     """Each job with its records, decompressed on a background thread a few chunks ahead.
 
     zstd, lz4 and CRC-32 release the GIL, so on two or more cores decompression overlaps the numpy
-    decoding done by the caller (inline where :func:`~mountcal.threads.helpers_allowed` says no).
+    decoding done by the caller (inline where :func:`~mountcal.core.threads.helpers_allowed` says no).
     A job the worker has not started when its turn comes is done by the caller instead of waited
     for, which balances the two threads and keeps a descheduled worker (a busy machine) from
     stalling the read. The read-ahead is bounded (``READ_AHEAD`` chunks), so memory does not grow

@@ -27,15 +27,15 @@ from mcap.records import (
 )
 from numpy.typing import NDArray
 
-from mountcal import budget
-from mountcal.errors import InputError
+from mountcal.core import budget
+from mountcal.core.errors import InputError
+from mountcal.core.option_names import option
 from mountcal.io.inputs import block_too_large, max_block_bytes
 from mountcal.io.mcap.chunks import messages_by_walk, unlz4, unzstd
 from mountcal.io.mcap.records import MAGIC, MESSAGE_HEAD, RECORD_HEAD, Corrupt, U8Array, damaged, record_field
 from mountcal.io.mcap.write import IMU_SCHEMA_NAME, McapOut
 from mountcal.io.ros2 import cdr
 from mountcal.io.ros2.imu import decode_imu_messages, encode_imu_messages
-from mountcal.option_names import option
 
 
 def chunk_counts(raw: bytes, index: ChunkIndex) -> dict[int, int] | None:

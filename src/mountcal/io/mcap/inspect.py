@@ -9,7 +9,7 @@ from contextlib import closing
 import numpy as np
 from numpy.typing import NDArray
 
-from mountcal import budget
+from mountcal.core import budget
 from mountcal.io.mcap.chunks import chunk_units, open_log, read_message_index
 from mountcal.io.mcap.read import schema_fields
 from mountcal.io.mcap.records import (
@@ -24,7 +24,7 @@ from mountcal.io.mcap.records import (
     record_field,
     walk_file,
 )
-from mountcal.samples import LogSummary, Stream
+from mountcal.io.samples import LogSummary, Stream
 
 
 @budget.scoped
@@ -38,7 +38,7 @@ def inspect_mcap(path: str | os.PathLike[str]) -> LogSummary:
     Returns
     -------
     LogSummary
-        One :class:`~mountcal.samples.Stream` per topic: ``kind`` is the schema name,
+        One :class:`~mountcal.io.samples.Stream` per topic: ``kind`` is the schema name,
         ``rate_hz`` = (count − 1) / (last − first log time), ``fields`` the top-level fields of a
         ``ros2msg`` schema. ``duration_s`` spans the first to the last message's log time.
     """

@@ -15,7 +15,7 @@ Conventions of every function here:
   rule is applied per message and identically on every topic, so all channels share one clock when
   the senders stamp their messages. Times are float64 seconds (sub-microsecond resolution at
   Unix-epoch magnitudes).
-- **Units**: SI as in :class:`~mountcal.samples.Samples`; vectors in the IMU message's
+- **Units**: SI as in :class:`~mountcal.io.samples.Samples`; vectors in the IMU message's
   ``frame_id`` frame, taken as the sensor frame ``s`` (``axis_map`` ``"x,y,z"``).
 - **Drops**: samples with a NaN or infinite value are dropped and counted in ``Samples.dropped``;
   so are GNSS fixes with ``status < 0`` (no fix) and odometry orientations that are not a rotation.
@@ -23,7 +23,7 @@ Conventions of every function here:
   or chunk means no gyro (``gyro_s`` None), counted as ``imu_gyro_marked_unknown``; its zeros
   would otherwise read as a vehicle that never turns.
 - **Errors**: anything wrong with the file or the request raises
-  :class:`~mountcal.errors.InputError` naming the file, what was expected, what was found and what to
+  :class:`~mountcal.core.errors.InputError` naming the file, what was expected, what was found and what to
   do. The input file is only read.
 """
 
@@ -39,8 +39,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from mountcal import budget
-from mountcal.errors import InputError
+from mountcal.core import budget
+from mountcal.core.errors import InputError
 from mountcal.io.mcap.chunks import Unit, chunk_units, open_log
 from mountcal.io.mcap.records import (
     ARGUMENT,
@@ -57,7 +57,7 @@ from mountcal.io.mcap.records import (
     record_field,
 )
 from mountcal.io.ros2 import cdr
-from mountcal.samples import Channel, FloatArray, Samples
+from mountcal.io.samples import Channel, FloatArray, Samples
 
 # --------------------------------------------------------------------------- choosing topics
 
@@ -127,8 +127,7 @@ def _field_hint(log: Log, kind: str) -> str:
     """How to read an Imu or Vector3 that a topic's message carries (``--topic … --field …``), or ""."""
     if kind != "imu":
         return ""
-    from mountcal.io.bag.read import mcap_topics
-    from mountcal.io.bag.topics import carried_hint
+    from mountcal.io.bag.topics import carried_hint, mcap_topics
 
     return carried_hint(mcap_topics(log))
 

@@ -1,6 +1,6 @@
 """The MCAP file, record by record: magic, footer, summary (schemas, channels, statistics) and the
 top-level walk of the data section, each checked against the file's bounds. Damage is an
-:class:`~mountcal.errors.InputError` naming the byte.
+:class:`~mountcal.core.errors.InputError` naming the byte.
 
 A file without its footer and closing magic was cut short (:mod:`mountcal.io.whole`): refused,
 or with ``--allow-truncated`` read without a summary, its data section walked up to the last
@@ -19,7 +19,7 @@ from typing import Any, BinaryIO
 import numpy as np
 from numpy.typing import NDArray
 
-from mountcal.errors import InputError
+from mountcal.core.errors import InputError
 from mountcal.io.ros2 import cdr
 from mountcal.io.whole import found_cut
 

@@ -7,7 +7,7 @@ copied through (tables: :mod:`mountcal.io.table.write`).
   vehicle-frame IMU channel beside the original one; or it holds that IMU channel alone. The new
   messages are ``sensor_msgs/msg/Imu`` in CDR, built for a whole chunk at once with numpy.
 
-Every output is written through :func:`mountcal.atomic.atomic_output`: a process killed mid-write
+Every output is written through :func:`mountcal.core.atomic.atomic_output`: a process killed mid-write
 leaves nothing behind.
 """
 
@@ -41,10 +41,10 @@ from mcap.records import (
 )
 from numpy.typing import NDArray
 
+from mountcal.core.paths import special_kind
 from mountcal.io.mcap.records import MAGIC, MESSAGE_HEAD, RECORD_HEAD, U8Array
 from mountcal.io.ros2.definitions import ros2_definition
 from mountcal.io.ros2.imu import ImuMessages, encode_imu_messages
-from mountcal.paths import special_kind
 
 FloatArray = NDArray[np.float64]
 

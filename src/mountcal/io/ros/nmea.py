@@ -13,7 +13,7 @@ from functools import reduce
 
 import numpy as np
 
-from mountcal.samples import FloatArray
+from mountcal.io.samples import FloatArray
 
 KNOT = 1852.0 / 3600.0
 

@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mountcal.io.ros2 import cdr
-from mountcal.samples import FloatArray
+from mountcal.io.samples import FloatArray
 
 U8Array = NDArray[np.uint8]
 I64Array = NDArray[np.int64]

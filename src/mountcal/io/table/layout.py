@@ -29,9 +29,9 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from mountcal.errors import InputError
+from mountcal.core.errors import InputError
+from mountcal.core.option_names import option
 from mountcal.io.can.signals import G_N, UNIT_HINT, UNIT_KIND, UNITS, normalise_unit
-from mountcal.option_names import option
 
 ACC = ("ax", "ay", "az")
 GYRO = ("gx", "gy", "gz")
@@ -169,7 +169,7 @@ def _check_roles(roles: list[str], where: str) -> None:
 
 def mapping_columns(path: str) -> tuple[tuple[str, str], ...]:
     """The ``[columns]`` table of a mapping TOML (the only key a table's mapping holds)."""
-    from mountcal.paths import input_file
+    from mountcal.core.paths import input_file
 
     where = str(path)
     text = input_file(path, "a mapping TOML").read_text(encoding="utf-8", errors="replace")

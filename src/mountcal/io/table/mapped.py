@@ -18,12 +18,12 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from mountcal.errors import InputError
+from mountcal.core.errors import InputError
+from mountcal.core.option_names import option
 from mountcal.io.inputs import check_parquet_rows, check_regular_file, max_rows, too_many_rows
+from mountcal.io.samples import Channel, FloatArray, Samples
 from mountcal.io.table.layout import ACC, CHANNELS, G_N, GYRO, TIME_UNITS, Layout
 from mountcal.io.whole import parquet_end, text_end, text_source
-from mountcal.option_names import option
-from mountcal.samples import Channel, FloatArray, Samples
 
 PARQUET = (".parquet", ".pq")
 _COMMA_DECIMAL = re.compile(r"[-+]?\d+,\d+(?:[eE][-+]?\d+)?")

@@ -19,13 +19,13 @@ import pyarrow.csv as pa_csv
 import pyarrow.parquet as pq
 from numpy.typing import NDArray
 
-from mountcal import budget
-from mountcal.errors import InputError
+from mountcal.core import budget
+from mountcal.core.errors import InputError
+from mountcal.core.option_names import option
+from mountcal.core.ranges import in_range
 from mountcal.io.inputs import check_parquet_rows, check_regular_file, csv_columns
+from mountcal.io.samples import Channel, FloatArray, Samples
 from mountcal.io.whole import parquet_end, text_end, text_source
-from mountcal.option_names import option
-from mountcal.ranges import in_range
-from mountcal.samples import Channel, FloatArray, Samples
 
 TABLE_CHANNELS = ("speed_mps", "heading_deg", "temperature_c", "lat_deg", "lon_deg", "alt_m")
 
@@ -102,7 +102,7 @@ _OUT_OF_RANGE = "rows with a time, acceleration or rate outside its physical ran
 
 
 def _channel(name: str, t: FloatArray, v: FloatArray, dropped: dict[str, int]) -> Channel:
-    """A channel's finite values inside its range (mountcal.ranges); those outside it are counted."""
+    """A channel's finite values inside its range (mountcal.core.ranges); those outside it are counted."""
     finite = np.isfinite(v) & np.isfinite(t)
     good = finite & in_range(name, v) & in_range("time_s", t)  # each channel is named as its quantity
     if (finite & ~good).any():
@@ -111,11 +111,9 @@ def _channel(name: str, t: FloatArray, v: FloatArray, dropped: dict[str, int]) -
 
 
 def _in_range(t: FloatArray, acc: FloatArray, gyro: FloatArray | None) -> NDArray[np.bool_]:
-    """Rows whose time, acceleration and rate are finite and inside their ranges (mountcal.ranges)."""
+    """Rows whose time, acceleration and rate are finite and inside their ranges (mountcal.core.ranges)."""
     ok = in_range("time_s", t) & in_range("acc_mps2", acc).all(axis=1)
     return ok if gyro is None else ok & in_range("gyro_rad_s", gyro).all(axis=1)
-
-
 
 
 def iter_table(path: Path, max_samples: int) -> Iterator[Samples]:

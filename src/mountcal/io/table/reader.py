@@ -10,9 +10,9 @@ from typing import TYPE_CHECKING
 from mountcal.io.reader import LogReader
 
 if TYPE_CHECKING:
-    from mountcal.io.logs import LogOptions
+    from mountcal.io.reader import LogOptions
+    from mountcal.io.samples import LogSummary, Samples
     from mountcal.io.table.layout import Layout
-    from mountcal.samples import LogSummary, Samples
 
 
 class TableReader(LogReader):
@@ -45,7 +45,7 @@ class TableReader(LogReader):
         return _checked(chunks, layout, str(path))
 
     def inspect(self, path: Path, options: LogOptions) -> LogSummary:
-        from mountcal.samples import summary
+        from mountcal.io.samples import summary
 
         return summary(self.read(path, options), path.suffix.lstrip(".").lower(), "table")
 
@@ -77,10 +77,10 @@ def table_layout(path: Path, options: LogOptions) -> tuple[Layout, dict[str, str
     """
     from dataclasses import replace
 
-    from mountcal.errors import InputError
+    from mountcal.core.errors import InputError
+    from mountcal.core.option_names import option
     from mountcal.io.table.layout import mapping_columns, refuse_unknown, resolve
     from mountcal.io.table.mapped import header
-    from mountcal.option_names import option
 
     names, read_as = header(path)
     columns = options.columns

@@ -17,7 +17,7 @@ import pyarrow as pa
 import pyarrow.csv as pa_csv
 import pyarrow.parquet as pq
 
-from mountcal.samples import FloatArray
+from mountcal.io.samples import FloatArray
 
 ACC_COLUMNS = ("ax", "ay", "az")
 
@@ -47,7 +47,7 @@ class ParquetSamples:
     Parameters
     ----------
     file : binary file
-        Where to write (from :func:`mountcal.atomic.atomic_output`).
+        Where to write (from :func:`mountcal.core.atomic.atomic_output`).
     gyro : bool
         Whether the rows carry ``gx, gy, gz``.
     metadata : mapping of str to str

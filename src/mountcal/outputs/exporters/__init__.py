@@ -9,8 +9,9 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from mountcal.errors import InputError
-from mountcal.option_names import option
+from mountcal.core.errors import InputError
+from mountcal.core.option_names import option
+from mountcal.core.result import Calibration
 from mountcal.outputs.exporters.autoware import DEFAULT_FRAMES as AUTOWARE_FRAMES
 from mountcal.outputs.exporters.autoware import autoware_yaml, read_parent_pose
 from mountcal.outputs.exporters.common import Mounting, YawPolicy, mounting
@@ -25,7 +26,6 @@ from mountcal.outputs.exporters.ros import (
 )
 from mountcal.outputs.exporters.rotation import rotation_json, rotation_yaml
 from mountcal.outputs.exporters.ublox import ublox_mount, ublox_text, ucenter_config, valsets
-from mountcal.result import Calibration
 
 Writer = Callable[[Mounting, Frames], str | bytes]
 

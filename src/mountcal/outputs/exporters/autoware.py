@@ -22,9 +22,9 @@ import math
 from pathlib import Path
 from typing import Any
 
-from mountcal.conventions import angles_from_rot_vs, rot_vs_from_angles
-from mountcal.errors import InputError
-from mountcal.option_names import option
+from mountcal.core.conventions import angles_from_rot_vs, rot_vs_from_angles
+from mountcal.core.errors import InputError
+from mountcal.core.option_names import option
 from mountcal.outputs.exporters.common import Mounting, number
 from mountcal.outputs.exporters.ros import BODY_FRAME, Frames, ParentPose, frame_lines
 

@@ -15,10 +15,10 @@ from typing import Literal
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from mountcal.conventions import FloatArray, rot_vs_from_angles
-from mountcal.errors import NotEnoughInformation
-from mountcal.option_names import option
-from mountcal.result import Calibration
+from mountcal.core.conventions import FloatArray, rot_vs_from_angles
+from mountcal.core.errors import NotEnoughInformation
+from mountcal.core.option_names import option
+from mountcal.core.result import Calibration
 
 YawPolicy = Literal["refuse", "zero"]
 JACOBIAN_STEP_RAD = 1e-7  # central differences: error ~ step² (1e-14), rounding ~ 1e-16/step (1e-9)

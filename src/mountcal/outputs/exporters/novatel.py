@@ -19,8 +19,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from mountcal.conventions import euler_angles
-from mountcal.errors import NotEnoughInformation
+from mountcal.core.conventions import euler_angles
+from mountcal.core.errors import NotEnoughInformation
 from mountcal.outputs.exporters.common import Mounting, number, propagate_sigma
 
 ISO_FROM_NOVATEL = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # (right, fwd, up) → (fwd, left, up)
@@ -86,8 +86,8 @@ def novatel_text(r: NovatelRotation) -> str:
     lines = [f"# {h}" for h in r.mount.header]
     lines.append("# NovAtel SPAN (OEM7): rotation from the IMU body frame (the axes marked on the IMU) to the vehicle")
     lines.append("# frame (x right, y forward, z up), about Z, then the new X, then the new Y, right-handed; degrees;")
-    lines.append("# standard deviations 1σ. Calibrate on the body axes: RAWIMU/RAWIMUS/RAWIMUSX log -y (\"-(Y Accel")
-    lines.append("# Output)\"), so negate that field first. Send only the SETINSROTATION line.")
+    lines.append('# standard deviations 1σ. Calibrate on the body axes: RAWIMU/RAWIMUS/RAWIMUSX log -y ("-(Y Accel')
+    lines.append('# Output)"), so negate that field first. Send only the SETINSROTATION line.')
     lines += [f"# {n}" for n in r.notes]
     angles = " ".join(number(v) for v in r.xyz_deg)
     sds = " ".join(number(v, 4) for v in r.sd_deg)

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from mountcal.conventions import angles_from_rot_vs
+from mountcal.core.conventions import angles_from_rot_vs
 from mountcal.outputs.exporters.common import Mounting, number, propagate_sigma
 
 BODY_FRAME = "base_link"  # REP 105's name for the REP 103 body frame, and Autoware's
@@ -74,9 +74,7 @@ def frame_lines(mount: Mounting, frames: Frames, prefix: str) -> list[str]:
             f"{prefix} {frames.parent} is turned in {BODY_FRAME} by rpy {rpy} rad (from {pose.source}), "
             f"composed here; its own uncertainty is not in the σ below"
         )
-    sig = propagate_sigma(
-        lambda r: np.array(angles_from_rot_vs(frames.in_parent(r))), mount, np.array([2 * np.pi] * 3)
-    )
+    sig = propagate_sigma(lambda r: np.array(angles_from_rot_vs(frames.in_parent(r))), mount, np.array([2 * np.pi] * 3))
     text = ", ".join(
         f"{name} {'not determined' if s is None else f'{s:.3g}'}"
         for name, s in zip(("roll", "pitch", "yaw"), sig, strict=True)

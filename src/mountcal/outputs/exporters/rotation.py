@@ -14,8 +14,8 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from mountcal.conventions import CONVENTIONS, FloatArray, angles_from_rot_vs
-from mountcal.errors import FitFailed
+from mountcal.core.conventions import CONVENTIONS, FloatArray, angles_from_rot_vs
+from mountcal.core.errors import FitFailed
 from mountcal.outputs.exporters.common import Mounting, propagate_sigma
 
 AXIS_UNDEFINED_RAD = 1e-6  # below this angle the rotation axis (and its σ) is not meaningful

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from mountcal.conventions import GIMBAL_LOCK_PITCH_DEG, euler_angles
+from mountcal.core.conventions import GIMBAL_LOCK_PITCH_DEG, euler_angles
 from mountcal.outputs.exporters.common import Mounting, number, propagate_sigma
 
 KEYS = {  # name: (key ID, struct format of the value), from the interface description (HPS 1.40)
@@ -147,9 +147,7 @@ def _frame(msg_class: int, msg_id: int, payload: bytes) -> bytes:
     return b"\xb5\x62" + body + bytes((ck_a, ck_b))
 
 
-def ucenter_config(
-    messages: tuple[dict[str, int], ...], layers: tuple[str, ...] = ("ram", "bbr", "flash")
-) -> str:
+def ucenter_config(messages: tuple[dict[str, int], ...], layers: tuple[str, ...] = ("ram", "bbr", "flash")) -> str:
     """A u-center (generation 9) configuration file: one ``CFG-VALGET - 06 8B …`` line per message and layer.
 
     The format u-center's Receiver Configuration tool saves and loads: the hex of class, id, length

@@ -1,6 +1,6 @@
 """Reading a calibration result for display: angles ± σ, model steps, effects, in words.
 
-The typed result (:mod:`mountcal.result`) is the source of truth; these helpers only format it.
+The typed result (:mod:`mountcal.core.result`) is the source of truth; these helpers only format it.
 """
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from mountcal.result import Calibration, EffectValue, ModelStep
+from mountcal.core.result import Calibration, EffectValue, ModelStep
 
 ANGLES = ("roll", "pitch", "yaw", "slope")
 

@@ -10,7 +10,7 @@ from typing import Literal
 import matplotlib as mpl
 from matplotlib.figure import Figure
 
-from mountcal.terminal import html_text as escape
+from mountcal.core.terminal import html_text as escape
 
 ImageFormat = Literal["svg", "png"]
 

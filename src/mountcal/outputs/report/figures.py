@@ -18,11 +18,11 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 from mpl_toolkits.mplot3d import Axes3D
 
-from mountcal.conventions import G_N, FloatArray, specific_force_v
+from mountcal.core.conventions import G_N, FloatArray, specific_force_v
+from mountcal.core.result import Calibration, ModelStep
 from mountcal.outputs.report.document import ANGLES, Estimate, angle_estimates
 from mountcal.outputs.report.timeline import Timeline
-from mountcal.result import Calibration, ModelStep
-from mountcal.stoptable import StopTable
+from mountcal.stops.table import StopTable
 
 AXIS_COLOURS = ("tab:red", "tab:green", "tab:blue")  # x, y, z, the usual convention
 MM = 1e3  # m/s² → mm/s²

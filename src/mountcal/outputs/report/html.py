@@ -20,17 +20,18 @@ from typing import Any
 from matplotlib.figure import Figure
 
 import mountcal.outputs.report.figures as figures
-from mountcal.conventions import CONVENTIONS, G_N
-from mountcal.errors import InputError
-from mountcal.option_names import option
+from mountcal.core.conventions import CONVENTIONS, G_N
+from mountcal.core.errors import InputError
+from mountcal.core.findings import STRUCTURE_P
+from mountcal.core.option_names import option
+from mountcal.core.result import FORMAT, FORMAT_VERSION, Calibration, FitQuality, ModelStep
+from mountcal.core.terminal import html_text as escape
+from mountcal.core.typed_json import to_plain
 from mountcal.outputs.report.document import ANGLES, angle_estimates, format_pm, step_label
 from mountcal.outputs.report.embed import ImageFormat, figure_html
 from mountcal.outputs.report.loop import steps_section
 from mountcal.outputs.report.timeline import Timeline
-from mountcal.result import FORMAT, FORMAT_VERSION, STRUCTURE_P, Calibration, FitQuality, ModelStep
-from mountcal.stoptable import StopTable
-from mountcal.terminal import html_text as escape
-from mountcal.typed_json import to_plain
+from mountcal.stops.table import StopTable
 
 _CSS = """
 body{font:15px/1.45 system-ui,-apple-system,"Segoe UI",Roboto,"DejaVu Sans",sans-serif;color:#1d2329;
@@ -203,7 +204,7 @@ def _parts(cal: Calibration) -> str:
     part = cal.systematic
     if part is None:
         return ""
-    from mountcal.systematic import summary_line
+    from mountcal.loop.systematic import summary_line
 
     dominated = (
         " <b>The error is dominated by sensor errors these stops cannot see</b>: a triad calibration or stops on "

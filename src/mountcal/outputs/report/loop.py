@@ -5,9 +5,10 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+from mountcal.core.findings import STRUCTURE_P, Finding
+from mountcal.core.result import Calibration, ModelStep
+from mountcal.core.terminal import html_text as escape
 from mountcal.outputs.report.document import ANGLES, angle_estimates, format_effect, format_pm, moved_deg, step_label
-from mountcal.result import STRUCTURE_P, Calibration, Finding, ModelStep
-from mountcal.terminal import html_text as escape
 
 
 def steps_section(cal: Calibration) -> str:

@@ -4,7 +4,7 @@ A :class:`Timeline` holds the accelerometer (and speed) as a min/max envelope pe
 a spike of one sample stays visible, and a log of hours costs no more to draw than one of
 minutes — the stops with their number in the stop table and whether the fit used them, the still
 periods detection did not keep, and the intervals the driving fit used. :func:`timeline_of`
-builds it from :func:`mountcal.pipeline.calibrate_log`'s result; :func:`timeline` from the parts.
+builds it from :func:`mountcal.calibration.pipeline.calibrate_log`'s result; :func:`timeline` from the parts.
 """
 
 from __future__ import annotations
@@ -15,14 +15,14 @@ from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
-from mountcal.conventions import FloatArray
-from mountcal.samples import Samples
-from mountcal.stoptable import StopTable
+from mountcal.core.conventions import FloatArray
+from mountcal.io.samples import Samples
+from mountcal.stops.table import StopTable
 
 if TYPE_CHECKING:
+    from mountcal.calibration.pipeline import LogResult
     from mountcal.estimate.driving import DrivingFit
-    from mountcal.pipeline import LogResult
-    from mountcal.stops import StillPeriod
+    from mountcal.stops.detect import StillPeriod
 
 COLUMNS = 800  # pixel columns of the drawn log: finer detail cannot be seen
 StopStatus = Literal["used", "left out", "not used", "dropped"]
@@ -168,7 +168,8 @@ def timeline(
 
 
 def timeline_of(result: LogResult, columns: int = COLUMNS) -> Timeline:
-    """The timeline of :func:`mountcal.pipeline.calibrate_log`'s result: its stops, dropped still periods and drive."""
+    """The timeline of :func:`mountcal.calibration.pipeline.calibrate_log`'s result: its stops, dropped still
+    periods and drive."""
     found = result.stops
     table = result.table if result.table is not None else (None if found is None else found.table)
     fitted = result.table is not None

@@ -1,0 +1,1 @@
+"""Small things every stage uses: conventions, errors, paths, atomic output, budget, the result record."""

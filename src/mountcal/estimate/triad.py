@@ -1,0 +1,276 @@
+"""A triad calibration (bias, scale, cross-axis with their covariance), applied to stops before the mounting fit.
+
+It comes from a multi-position session fitted by :mod:`mountcal.estimate.sphere` (``mountcal
+triad``), saved as a ``mountcal.estimate.triad`` JSON. The correction is the sphere model's
+``a ← (I + E)⁻¹ (a − b)``; what remains uncertain of b and E (their covariance) is a systematic
+error common to every stop, which :mod:`mountcal.loop.systematic` carries into the angles in place of
+the datasheet's scale, cross-axis and bias limits.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from mountcal.core.atomic import atomic_path
+from mountcal.core.conventions import FloatArray
+from mountcal.core.errors import InputError
+from mountcal.core.option_names import option
+from mountcal.core.output_suffix import check_output_suffix
+from mountcal.core.ranges import check_values
+from mountcal.core.result_file import read_json
+from mountcal.estimate import sphere
+from mountcal.estimate.effects.scale import SCALE_NAMES
+from mountcal.estimate.sensor_errors import BIAS_NAMES, TEMP_NAMES, SensorErrors, from_spec, heading_u
+from mountcal.io.kind import Declared
+from mountcal.io.sensor_spec import SensorSpec
+from mountcal.stops.table import StopTable, Unit, read_stop_table
+
+if TYPE_CHECKING:
+    from mountcal.io.reader import LogOptions
+
+FORMAT = "mountcal.estimate.triad"
+FORMAT_VERSION = 1
+# The sphere fit's parameter order (bias, scale, cross-axis), in the static model's names.
+NAMES = BIAS_NAMES + SCALE_NAMES
+
+
+@dataclass(frozen=True)
+class Triad:
+    """b (m/s², sensor frame), E (xx, yy, zz, xy, xz, yz) and their 9×9 covariance in the order of ``NAMES``."""
+
+    bias_mps2: FloatArray
+    scale_e: FloatArray
+    cov: FloatArray  # rows and columns of names not in ``fitted`` are zero
+    source: str
+    fitted: tuple[str, ...] = NAMES  # what the session determined; the others keep the sensor spec's limits
+
+    @property
+    def matrix(self) -> FloatArray:
+        """I + E."""
+        e = self.scale_e
+        return np.eye(3) + np.array([[e[0], e[3], e[4]], [e[3], e[1], e[5]], [e[4], e[5], e[2]]])
+
+    def correct(self, table: StopTable) -> StopTable:
+        """The stops as the calibrated sensor reads them, ``(I + E)⁻¹ (a − b)``, their covariance mapped alike."""
+        inv = np.linalg.inv(self.matrix)
+        cov = None if table.cov_s is None else np.einsum("ij,njk,lk->nil", inv, table.cov_s, inv)
+        return replace(table, acc_s=(table.acc_s - self.bias_mps2) @ inv.T, cov_s=cov)
+
+    def errors(self, spec: SensorSpec) -> SensorErrors:
+        """What remains uncertain after the correction: the triad's covariance, and the spec's bias drift per °C."""
+        cov = np.zeros((12, 12))
+        cov[:9, :9] = self.cov
+        spec_u2 = from_spec(spec)  # names BIAS, TEMP, SCALE: the datasheet's rectangular variances
+        for i, name in enumerate(NAMES):
+            if name not in self.fitted:
+                j = spec_u2.names.index(name)
+                cov[i, i] = spec_u2.cov[j, j]
+        cov[9:, 9:] = np.eye(3) * spec.bias_tempco_mps2_per_c**2 / 3.0
+        sigma = np.sqrt(np.diag(self.cov))
+        limits = {
+            "source": f"triad calibration {self.source}",
+            "triad_sigma": {n: float(s) for n, s in zip(NAMES, sigma, strict=True) if n in self.fitted},
+            "from_spec": {n: float(np.sqrt(cov[i, i])) for i, n in enumerate(NAMES) if n not in self.fitted},
+            "bias_tempco_mps2_per_c": spec.bias_tempco_mps2_per_c,
+            "heading_deg": spec.heading_deg,
+        }
+        return SensorErrors(
+            NAMES + TEMP_NAMES, cov, f"triad calibration {self.source}", limits, heading_u(spec.heading_deg)
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "format": FORMAT,
+            "format_version": FORMAT_VERSION,
+            "source": self.source,
+            "model": "a_calibrated = (I + E)^-1 (a_raw - b), E symmetric",
+            "names": list(NAMES),
+            "fitted": list(self.fitted),
+            "values": [*map(float, self.bias_mps2), *map(float, self.scale_e)],
+            "covariance": self.cov.tolist(),
+        }
+
+    def save(self, path: str | Path) -> None:
+        check_output_suffix(option("output"), path, (".json",))
+        with atomic_path(path) as tmp:
+            tmp.write_text(json.dumps(self.to_dict(), indent=2, allow_nan=False) + "\n", encoding="utf-8")
+
+
+def from_sphere(fit: sphere.SphereFit, source: str) -> Triad:
+    """A triad from a sphere fit (of bias and scale, or of all three terms)."""
+    values, cov = np.zeros(9), np.zeros((9, 9))
+    idx = [_SPHERE_TO_MODEL[n] for n in fit.names]
+    values[idx] = fit.values
+    cov[np.ix_(idx, idx)] = fit.cov
+    return Triad(values[:3], values[3:], cov, source, tuple(NAMES[i] for i in idx))
+
+
+# sphere.py names → positions in NAMES (bias_x…, scale_xx…, cross_xy…)
+_SPHERE_TO_MODEL = {
+    **{f"bias_{a}": i for i, a in enumerate("xyz")},
+    **{f"scale_{a}": 3 + i for i, a in enumerate("xyz")},
+    **{f"cross_{p}": 6 + i for i, p in enumerate(("xy", "xz", "yz"))},
+}
+
+
+def load(path: str | Path) -> Triad:
+    """Read a ``mountcal.estimate.triad`` JSON; anything else, or an unusable value, is refused naming the file."""
+    doc = read_json(Path(path))
+    todo = "Pass a file written by `mountcal triad -o` (an imucal JSON first goes through `mountcal triad`)."
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT or doc.get("format_version") != FORMAT_VERSION:
+        found = doc.get("cal_type", doc.get("format")) if isinstance(doc, dict) else type(doc).__name__
+        raise InputError(str(path), f"a {FORMAT} JSON, version {FORMAT_VERSION}", repr(found), todo)
+    try:
+        values = np.asarray(doc["values"], dtype=float)
+        cov = np.asarray(doc["covariance"], dtype=float)
+        fitted = tuple(str(n) for n in doc.get("fitted", NAMES))
+        ok = set(fitted) <= set(NAMES) and values.shape == (9,) and cov.shape == (9, 9)
+    except (KeyError, TypeError, ValueError):
+        ok = False
+    if ok:  # each number in its range (mountcal.core.ranges) before any arithmetic on them
+        check_values("triad_bias_mps2", values[:3], str(path), "values (the bias)")
+        check_values("triad_covariance", cov, str(path), "covariance")
+        ok = bool(np.allclose(cov, cov.T)) and bool(np.all(np.linalg.eigvalsh(cov) > -1e-12 * cov.max()))
+        ok = ok and bool(np.all(np.abs(values[3:]) < 0.5))
+    if not ok:
+        raise InputError(str(path), "9 finite values (|E| < 0.5) and a symmetric 9×9 covariance", "other values", todo)
+    return Triad(values[:3], values[3:], cov, str(doc.get("source", path)), fitted)
+
+
+MIN_STOPS = 6  # six parameters (bias, scale): the six faces, with each stop's noise given
+AGREE_SIGMA = 5.0  # imucal's values within this many σ of mountcal's fit of the same session
+
+
+def fit_all(acc: FloatArray, g: float, cov: FloatArray | None, where: str) -> Any:
+    """The sphere fit of bias, scale and cross-axis together, or of bias and scale when the stops see no
+    cross-axis (the six faces alone: the couplings then keep the sensor spec's limits); refused below that."""
+    for terms in (sphere_terms(), sphere_terms()[:2]):
+        fit, loose = _fit(acc, g, cov, terms)
+        if not loose:  # a χ² beyond its dof (stops less still, or a model short of the sensor) widens the σ
+            return replace(fit, cov=fit.cov * max(1.0, fit.chi2 / fit.dof)) if fit.dof > 0 else fit
+    raise InputError(
+        where,
+        f"stops that separate bias and scale (at least {MIN_STOPS} in different orientations)",
+        f"{acc.shape[0]} stops leaving {', '.join(loose)} undetermined",
+        _TODO_POSITIONS,
+    )
+
+
+def sphere_terms() -> tuple[str, ...]:
+    return sphere.TERMS
+
+
+def _fit(acc: FloatArray, g: float, cov: FloatArray | None, terms: tuple[str, ...]) -> tuple[Any, list[str]]:
+    n_par = 3 * len(terms)
+    if acc.shape[0] < n_par + (0 if cov is not None else 3):  # an estimated noise needs residual dof
+        return None, [f"{n_par} parameters from {acc.shape[0]} stops"]
+    fit = sphere.fit(acc, g, terms, cov)
+    sig = fit.sigma()
+    kinds = np.repeat(terms, 3)
+    loose = [n for n, s, t in zip(fit.names, sig, kinds, strict=True) if not s <= sphere.PLAUSIBLE[t]]
+    return fit, loose
+
+
+_TODO_POSITIONS = (
+    "Hold the sensor still in many orientations (at least the six faces and some in between), e.g. "
+    "the six-position test of imucal or IMU-TK's hand-held session."
+)
+
+
+def session_stops(
+    paths: list[str],
+    unit: Unit,
+    min_stop_s: float = 3.0,
+    trim_s: float = 0.5,
+    log: LogOptions | None = None,
+    *,
+    declared: Declared = "auto",
+) -> tuple[FloatArray, FloatArray | None]:
+    """Stop means (n, 3) in m/s² and their covariances, from a stop table or from logs (read as ``log``
+    says, its ``axes`` too for a stop table; ``unit`` is a stop table's, and a sample table's where ``log``
+    gives none). :func:`mountcal.io.kind.input_kind` decides which; ``declared`` is ``--input-kind``."""
+    from mountcal.io.input_conventions import parse_axes
+    from mountcal.io.kind import input_kind
+    from mountcal.io.logs import read_log
+    from mountcal.io.reader import LogOptions
+    from mountcal.io.samples import with_gravity
+    from mountcal.io.whole import reading
+    from mountcal.stops.detect import StopDetection, detect_stops
+
+    log = log or LogOptions()
+    mapped = log.columns is not None or log.mapping is not None
+    if input_kind(paths, columns=mapped, declared=declared).stop_table:
+        axes = None if log.axes is None else parse_axes(log.axes, option("axes"))
+        with reading(log.allow_truncated):  # a cut CSV: refused, or its whole rows read
+            table = read_stop_table(paths[0], unit=unit, headings="none", axes=axes)
+        return table.acc_s, table.cov_s
+    if log.unit is None and unit != "mps2":
+        log = replace(log, unit=unit)
+    samples = with_gravity(read_log(paths, log))
+    stops = detect_stops(samples, StopDetection(min_duration_s=min_stop_s, trim_s=trim_s))
+    if not stops:
+        raise InputError(" + ".join(paths), "a session with still periods", "no stop", _TODO_POSITIONS)
+    return np.array([s.acc_mean_s for s in stops]), np.array([s.acc_cov_mean_s for s in stops])
+
+
+def with_imucal_values(triad: Any, path: str) -> Any:
+    """imucal's bias and (symmetric part of the) scale/cross-axis matrix, with mountcal's covariance of the session.
+
+    imucal corrects ``a = R_a⁻¹ K_a⁻¹ (raw − b_a)``: raw = K_a R_a a + b_a. The left polar
+    decomposition K_a R_a = P U leaves P = I + E (symmetric) and a rotation U that the mounting
+    rotation absorbs.
+    """
+    from scipy.linalg import polar
+
+    doc = read_json(Path(path))
+    todo = "Pass the JSON imucal's FerrarisCalibrationInfo.to_json_file wrote (acc in m/s², acc_unit 'm/s^2')."
+    try:
+        ok = isinstance(doc, dict) and doc.get("cal_type") == "Ferraris" and doc.get("acc_unit") == "m/s^2"
+        k_a, r_a, b_a = (np.asarray(doc[k], dtype=float) for k in ("K_a", "R_a", "b_a"))
+        ok = ok and k_a.shape == (3, 3) and r_a.shape == (3, 3) and b_a.shape == (3,)
+        ok = ok and bool(np.all(np.isfinite(k_a)) and np.all(np.isfinite(r_a)) and np.all(np.isfinite(b_a)))
+    except (KeyError, TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise InputError(path, "an imucal Ferraris calibration JSON with K_a, R_a, b_a", "other content", todo)
+    check_values("imucal_matrix", np.concatenate([k_a, r_a]), path, "K_a, R_a (rows 1–3: K_a, 4–6: R_a)")
+    check_values("triad_bias_mps2", b_a, path, "b_a")
+    _, p = polar(k_a @ r_a, side="left")
+    e = p - np.eye(3)
+    values = np.concatenate([b_a, np.diag(e), [e[0, 1], e[0, 2], e[1, 2]]])
+    ours = np.concatenate([triad.bias_mps2, triad.scale_e])
+    fitted = [NAMES.index(n) for n in triad.fitted]  # the couplings, when the session cannot see them, keep the spec
+    z = np.abs(values - ours)[fitted] / np.sqrt(np.diag(triad.cov)[fitted])
+    if np.max(z) > AGREE_SIGMA:
+        raise InputError(
+            path,
+            f"values within {AGREE_SIGMA:g}σ of this session's fit",
+            f"a difference of {np.max(z):.1f}σ",
+            "Pass the session the imucal calibration was made from (its covariance comes from that session), with "
+            "the gravity imucal used (9.81 m/s² is its default).",
+        )
+    return Triad(values[:3], values[3:], triad.cov, f"imucal {path} (covariance from {triad.source})", triad.fitted)
+
+
+def describe(triad: Any, fit: Any) -> list[str]:
+    sig = np.sqrt(np.diag(triad.cov))
+    values = np.concatenate([triad.bias_mps2, triad.scale_e])
+    rms = float(np.sqrt(np.mean(fit.residual_mps2**2)))
+    birge = np.sqrt(max(1.0, fit.chi2 / fit.dof)) if fit.dof > 0 else 1.0
+    lines = [
+        f"mountcal triad — {len(fit.residual_mps2)} stops, |a| residual RMS {rms:.4g} m/s², "
+        f"χ² = {fit.chi2:.1f} on {fit.dof} dof (σ widened ×{birge:.2f})"
+    ]
+    lines += [
+        f"  {n:<9} {v:+.5f} ± {s:.5f}" if n in triad.fitted else f"  {n:<9} not seen by these stops: the spec's limit"
+        for n, v, s in zip(NAMES, values, sig, strict=True)
+    ]
+    if fit.dof == 0:
+        lines.append("  note: as many stops as parameters: the values fit exactly and nothing checks the model")
+    lines.append("  (bias in m/s², scale and cross-axis as fractions; 1σ)")
+    return lines

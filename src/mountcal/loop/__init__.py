@@ -1,0 +1,1 @@
+"""Closing the loop: model choice, residual tests, change points, slope reference, systematic σ."""

@@ -1,0 +1,673 @@
+"""Closing the loop: from a residual to the effect the model lacks, and back (docs/conventions.md §6).
+
+Starting from the base model (rotation, slope), each round tries every registered effect
+(:mod:`mountcal.estimate.effects`) the table can support — each says when it is a candidate — and the
+exclusion of the one stop the others predict worst (``outlier``). An effect is a candidate only
+when the data can separate it: its Fisher information must be full rank with the terms already in
+the model, and the tilt must stay determined; otherwise it is reported as confounded. The most
+significant candidate (likelihood ratio, or F-test when the noise is estimated; Bonferroni over
+the candidates) is added when it passes at ``alpha`` *and* improves the held-out (leave-one-stop-
+out) prediction. What the final model still leaves in the residual is reported as unexplained.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from scipy import optimize
+from scipy.spatial.transform import Rotation
+
+from mountcal.core.conventions import FloatArray
+from mountcal.core.errors import FitFailed, NotEnoughInformation
+from mountcal.core.findings import Finding
+from mountcal.core.option_names import option
+from mountcal.core.pvalues import chi2_logsf, nested_test, unexplained
+from mountcal.core.result import EffectValue
+from mountcal.estimate import effects as registry
+from mountcal.estimate import full
+from mountcal.loop.diagnose import (
+    analyse,
+    competing_explanations,
+    heading_harmonics,
+    leave_one_out,
+    projection_test,
+    step_alternative,
+)
+from mountcal.stops.table import StopTable
+
+log = logging.getLogger(__name__)
+BASE = full.BASE
+MAX_TILT_SIGMA_DEG = 5.0  # an effect that would leave the tilt this uncertain is not separable
+MAX_ROUNDS = 6
+MAX_SURFACE_TILT_DEG = 3.0  # roads and car parks: cross slopes and grades of a few degrees at most
+SAME_PLACE_M = 30.0  # stops farther apart than this may stand on different surfaces
+# The heading harmonics a covariate term must explain more than (docs/effects.md, "Unexplained structure"): the
+# patterns of the effects tied to the vehicle's heading (a lean, a cross slope, compass errors) are 1β and 2β.
+ALIAS_HARMONICS = (1, 2)
+# The level of that check: it confirms one candidate the loop has already chosen (no search over many, so no
+# Bonferroni). Passing it wrongly is a confident wrong answer, failing it wrongly only a flag: 1 %.
+ALIAS_ALPHA = 0.01
+# A covariate whose variance the heading harmonics explain at least this share of is taken to follow the headings:
+# only then can a term driven by it take a heading pattern up whole, and only then does the guard act (a tent of
+# temperatures once around the circle: 0.99; a ramp over one circle: 0.76).
+ALIAS_SHARE = 0.9
+PLACE_COLUMNS = ("site", "lat_deg", "lon_deg", "alt_m")  # where a stop is: the geometry, not a logged covariate
+PROGRESS_STOPS = 2000  # from this many stops a model choice takes seconds: its rounds are logged at INFO
+
+
+@dataclass(frozen=True)
+class Step:
+    """One model of the loop: its terms, the stops it leaves out, its fit and why it was taken."""
+
+    added: str
+    reason: str
+    terms: tuple[str, ...]
+    excluded: tuple[int, ...]
+    table: StopTable
+    fit: full.Fit
+    loo_rms_mps2: float | None = None
+
+
+@dataclass(frozen=True)
+class Loop:
+    """The sequence of models, the candidates turned down, and the final residual analysis."""
+
+    steps: list[Step]
+    declined: list[dict[str, Any]]
+    findings: list[Finding]
+    doubts: list[str] = field(default_factory=list)  # why the chosen model may be the wrong explanation
+
+    @property
+    def final(self) -> Step:
+        return self.steps[-1]
+
+    @property
+    def unexplained(self) -> list[Finding]:
+        """The findings the family's test rejects (Holm at :data:`mountcal.core.pvalues.FAMILY_ALPHA`)."""
+        return unexplained(self.findings)
+
+
+def candidates(table: StopTable, terms: tuple[str, ...], gravity_known: bool) -> list[str]:
+    """Effects the table's columns allow that are not yet in the model."""
+    out = [e.name for e in registry.registered().values() if e.candidate(table, gravity_known)]
+    if table.cov_s is not None and _moved(table):
+        out.append("surface")
+    return [c for c in out if c not in terms]
+
+
+def _moved(table: StopTable) -> bool:
+    """Were the stops made at different places (so possibly on different surfaces)?"""
+    if table.site is not None and np.unique(table.site).size > 1:
+        return True
+    if table.lat_deg is None:
+        return False
+    north = np.radians(table.lat_deg) * 6.371e6
+    east = (
+        np.radians(table.lon_deg) * 6.371e6 * np.cos(np.radians(np.mean(table.lat_deg)))
+        if table.lon_deg is not None
+        else np.zeros(len(table))
+    )
+    return bool(max(np.ptp(north), np.ptp(east)) > SAME_PLACE_M)
+
+
+def close_the_loop(
+    table: StopTable,
+    g_mps2: float,
+    gravity_known: bool,
+    alpha: float = 0.01,
+    fixed: tuple[str, ...] | None = None,
+    g_prior: float | None = None,
+) -> Loop:
+    """Run the loop (or, with ``fixed`` terms, just the base and the fixed model).
+
+    ``g_prior``: the gravity assumed before the stops' position gave ``g_mps2`` (a first step
+    then shows what local gravity changes).
+    """
+    steps = []
+    if g_prior is not None:
+        naive = full.fit(table, BASE, g_prior)
+        steps.append(
+            Step("start", f"the paper's model with standard gravity {g_prior:.5f} m/s²", BASE, (), table, naive)
+        )
+        base = full.fit(table, BASE, g_mps2, naive.state)
+        steps.append(
+            Step(
+                "gravity",
+                f"local gravity {g_mps2:.5f} m/s² (WGS 84 normal gravity at the stops' position)",
+                BASE,
+                (),
+                table,
+                base,
+            )
+        )
+    else:
+        base = full.fit(table, BASE, g_mps2)
+        steps.append(Step("start", "the paper's model: rotation and slope", BASE, (), table, base))
+    declined: list[dict[str, Any]] = []
+    if fixed is not None:
+        if fixed != BASE:
+            _refuse_inseparable(steps[-1], fixed, g_mps2)
+            f = full.fit(table, fixed, g_mps2, base.state)
+            steps.append(Step("fixed", "terms fixed by the model asked for", fixed, (), table, f))
+        return _finish(steps, declined)
+    level = logging.INFO if len(table) >= PROGRESS_STOPS else logging.DEBUG
+    for round_ in range(1, MAX_ROUNDS + 1):
+        t0 = time.perf_counter()
+        log.log(
+            level,
+            "model choice on %d stops, round %d (at most %d): testing effects against %s",
+            len(table),
+            round_,
+            MAX_ROUNDS,
+            ", ".join(steps[-1].terms),
+        )
+        step = _next_step(steps[-1], table, g_mps2, gravity_known, alpha, declined)
+        if step is None:
+            step, analysed = _named_by_residual(steps[-1], len(table), g_mps2, gravity_known, alpha, declined)
+        took = time.perf_counter() - t0
+        log.log(
+            level,
+            "model choice, round %d: %s (%.1f s)",
+            round_,
+            "nothing more to add" if step is None else f"{step.added} added",
+            took,
+        )
+        if step is None:
+            return _finish(steps, declined, analysed)
+        steps.append(step)
+    return _finish(steps, declined)
+
+
+def _finish(steps: list[Step], declined: list[dict[str, Any]], findings: list[Finding] | None = None) -> Loop:
+    """The loop's result; ``findings``: the final model's residual analysis, when already made."""
+    last, n_rows = steps[-1], len(steps[0].table)
+    findings = findings if findings is not None else analyse(last.table, last.fit, _rows(last, n_rows))
+    doubts = [d for i in range(1, len(steps)) if (d := _step_or_covariate(steps[i - 1], steps[i], n_rows))]
+    return Loop(steps, declined, findings, doubts)
+
+
+def _rows(step: Step, n_rows: int) -> np.ndarray:
+    """The rows of the user's table (0-based) that ``step``'s stops are: findings name those."""
+    return np.delete(np.arange(n_rows), list(step.excluded))
+
+
+def _step_or_covariate(before: Step, step: Step, n_rows: int) -> str | None:
+    """Why a term driven by a logged covariate that changes with time (temperature) may be the wrong
+    explanation: a bias step at one stop (a restart, a knock) explains the stops it was chosen on as well.
+
+    Both follow time, the stops cannot tell them apart, and they move the angles differently; the loop
+    keeps the covariate (its effect is the one the model has), the result is not confident. None when the
+    term is no covariate or explains more than any step.
+    """
+    effect = registry.registered().get(step.added)  # None for the loop's own steps (outlier, surface)
+    if effect is None or not any(c not in PLACE_COLUMNS for c in effect.needs) or step.excluded != before.excluded:
+        return None
+    model = full.StaticModel(before.table, before.terms, before.fit.state.g_mps2)
+    r = model.residual(before.fit.state)
+    explained, at = step_alternative(before.table, r, model.whiten, model.jacobian(before.fit.state))
+    gain = before.fit.chi2 - step.fit.chi2
+    if at < 0 or explained < gain:
+        return None
+    return (
+        f"a bias step from stop {int(_rows(before, n_rows)[at]) + 1} on (a restart, a knock) explains the stops "
+        f"as well as the {step.added} term does (Δχ² {explained:.1f} against {gain:.1f}): both follow time, "
+        "these stops cannot tell them apart and they move the angles differently — the result keeps "
+        f"{step.added}; note restarts, or let the {', '.join(effect.needs)} rise and fall more than once over "
+        "the session, to separate them"
+    )
+
+
+def _next_step(
+    cur: Step, table: StopTable, g: float, gravity_known: bool, alpha: float, declined: list[dict[str, Any]]
+) -> Step | None:
+    options: list[tuple[float, Step]] = []
+    names = candidates(cur.table, cur.terms, gravity_known)
+    k = len(names) + 1  # the outlier test is one more candidate
+    for name in names:
+        if name == "surface":
+            try:
+                option = _surface(cur, g, k)
+            except FitFailed as err:  # a random road tilt that leaves the fit adrift is not taken
+                _decline(declined, name, f"its fit failed ({err}): {_why_adrift(cur)}", len(cur.excluded))
+                continue
+            if option is not None:
+                options.append(option)
+            continue
+        effect = registry.get(name)
+        terms = (*cur.terms, *(r for r in effect.requires if r not in cur.terms), name)
+        covered = effect.covered_by()
+        if covered is not None and _covers(cur, covered[0], names, g):
+            _decline(declined, name, covered[1], len(cur.excluded))
+            continue
+        problem = _inseparable(cur, terms, g)
+        if problem:
+            _decline(declined, name, problem, len(cur.excluded))
+            continue
+        if cur.fit.dof - effect.extra(cur.table) < 1:
+            _decline(declined, name, "not enough stops to test it", len(cur.excluded))
+            continue
+        try:
+            f = full.fit(cur.table, terms, g, cur.fit.state)
+        except FitFailed as err:  # a candidate that does not converge is not taken
+            _decline(declined, name, f"its fit failed ({err})", len(cur.excluded))
+            continue
+        odd = next((w for e in registry.chain(terms) if (w := e.implausible(f.state.values[e.name], g))), None)
+        if odd:
+            _decline(declined, name, odd, len(cur.excluded))
+            continue
+        alias = _heading_alias(cur, f, name)
+        if alias:
+            _decline(declined, name, alias, len(cur.excluded))
+            continue
+        logp, test = nested_test(cur.fit.chi2, f.chi2, len(f.names) - len(cur.fit.names), f.noise_known, f.dof)
+        options.append(
+            (logp + np.log(k), Step(name, f"{test}, p = {np.exp(logp):.3g}", terms, cur.excluded, cur.table, f))
+        )
+    outlier = _outlier(cur, table, g, k)
+    if outlier is not None:
+        options.append(outlier)
+    if not options:
+        return None
+    options.sort(key=lambda o: o[0])
+    logp_adj, best = options[0]
+    if logp_adj >= np.log(alpha):
+        for lp, s in options:
+            _decline(
+                declined,
+                s.added,
+                f"not significant: {s.reason} (Bonferroni-adjusted p = {min(np.exp(lp), 1.0):.3g} ≥ {alpha:g})",
+                len(cur.excluded),
+            )
+        return None
+    if best.added == "outlier":
+        best = _covariate_or_outlier(best, [o for lp, o in options[1:] if lp < np.log(alpha)], cur, declined)
+    if best.added not in NOISE_MODEL_STEPS:  # those change the noise model, not the prediction
+        best = _among_exclusive(best, [o for lp, o in options[1:] if lp < np.log(alpha)], g, declined)
+        cur_loo, new_loo = _loo_rms(cur), _loo_rms(best)
+        if not (new_loo < cur_loo):
+            _decline(
+                declined,
+                best.added,
+                f"significant ({best.reason}) but it does not improve the held-out "
+                f"prediction ({new_loo * 1e3:.3g} vs {cur_loo * 1e3:.3g} mm/s²)",
+                len(cur.excluded),
+            )
+            return None
+        return Step(best.added, best.reason, best.terms, best.excluded, best.table, best.fit, new_loo)
+    return best
+
+
+def _named_by_residual(
+    cur: Step, n_rows: int, g: float, gravity_known: bool, alpha: float, declined: list[dict[str, Any]]
+) -> tuple[Step | None, list[Finding] | None]:
+    """The term the final residual names, when the loop declined it: tried against what it competes with.
+
+    A residual test that carries an effect's name (``temperature``) and that the family's test rejects says
+    the model lacks that effect — yet the loop may have declined it, because the candidates' Bonferroni cost hid
+    it, or because it excluded a stop the covariate explains. The term is then fitted and compared, by Akaike's
+    criterion on the same residual, with the structures that follow time as it does — a bias step at one stop, a
+    slow drift (:func:`mountcal.loop.diagnose.competing_explanations`). It is taken when it explains the stops better
+    for its number of parameters than each of them and its likelihood ratio passes at ``alpha``; otherwise the
+    finding stays, with the better explanation in the reason. A covariate that itself follows the headings
+    (:func:`heading_share`) is left to the guard of :func:`_heading_alias`: no stop data can tell it from a
+    heading pattern.
+    """
+    covariates = sorted(
+        name
+        for name, effect in registry.registered().items()
+        if name not in cur.terms and _covariate(name) and effect.candidate(cur.table, gravity_known)
+    )
+    if not covariates:  # no logged covariate a residual test could name: nothing to analyse for
+        return None, None
+    findings = analyse(cur.table, cur.fit, _rows(cur, n_rows))
+    named = {f.test for f in unexplained(findings)}
+    for name in (c for c in covariates if c in named):
+        effect = registry.get(name)
+        terms = (*cur.terms, *(r for r in effect.requires if r not in cur.terms), name)
+        added = sum(registry.get(t).extra(cur.table) for t in terms if t not in cur.terms)
+        if _inseparable(cur, terms, g) is not None or cur.fit.dof - added < 1:
+            continue
+        try:
+            f = full.fit(cur.table, terms, g, cur.fit.state)
+        except FitFailed:
+            continue
+        if any(e.implausible(f.state.values[e.name], g) for e in registry.chain(terms)):
+            continue
+        beta = cur.table.beta_rad if cur.table.beta_rad is not None else cur.fit.state.beta_rad
+        if beta is not None and beta.size == len(cur.table) and heading_share(cur.table, effect, beta) >= ALIAS_SHARE:
+            continue  # it follows the headings: the stops cannot tell it from a heading pattern (the guard said so)
+        k = len(f.names) - len(cur.fit.names)
+        scale = 1.0 if cur.fit.noise_known else max(cur.fit.noise_scale, 1e-300) ** 2
+        gain = (cur.fit.chi2 - f.chi2) / scale
+        rivals = competing_explanations(cur.table, cur.fit)
+        aic = {rival: 2 * dof - explained for rival, (explained, dof) in rivals.items()}
+        best = min(aic, key=lambda x: aic[x], default=None)
+        logp, test = nested_test(cur.fit.chi2, f.chi2, k, f.noise_known, f.dof)
+        if best is not None and aic[best] <= 2 * k - gain:
+            _decline(
+                declined,
+                name,
+                f"the residual names it, but {best} explains these stops better for its size (Akaike: "
+                f"{aic[best]:.1f} against {2 * k - gain:.1f})",
+                len(cur.excluded),
+            )
+            continue
+        if logp >= np.log(alpha):
+            continue
+        versus = ", ".join(f"{rival} {aic[rival]:.1f}" for rival in aic)
+        reason = (
+            f"named by the residual test; {test}, p = {np.exp(logp):.3g}; it explains the stops better for its size "
+            f"than what it competes with (Akaike {2 * k - gain:.1f} against {versus or 'nothing testable'})"
+        )
+        return Step(name, reason, terms, cur.excluded, cur.table, f, _loo_rms(cur)), None
+    return None, findings
+
+
+def _why_adrift(cur: Step) -> str:
+    """Why a fit of these stops may wander without converging: the parameters the values leave nearly free."""
+    n, p = len(cur.table), len(cur.fit.names)
+    free = " (each stop's heading is a free parameter: the table gives none)" if cur.fit.state.beta_rad.size else ""
+    return (
+        f"{n} stops give {3 * n} values for the model's {p} parameters{free}, and with a random road tilt per stop "
+        "their horizontal readings weigh almost nothing, so some parameters are left nearly undetermined"
+    )
+
+
+def _covariate_or_outlier(outlier: Step, rivals: list[Step], cur: Step, declined: list[dict[str, Any]]) -> Step:
+    """The outlier, or a significant term driven by a logged covariate that explains the stops better.
+
+    A sensor drifting with temperature over a session makes its first or last stop the one the others
+    predict worst: excluding it is then significant too, and more so than the term with its extra parameters,
+    and once it is gone the rest of the covariate may follow the headings (which the guard declines). The two
+    are compared by Akaike's criterion, the excluded stop counted as three free parameters (its own mean).
+    """
+    terms = [s for s in rivals if s.added not in NOISE_MODEL_STEPS and _covariate(s.added)]
+    if not terms:
+        return outlier
+    scale = 1.0 if cur.fit.noise_known else max(cur.fit.noise_scale, 1e-300) ** 2
+    aic_out = (outlier.fit.chi2 / scale) + 2 * (len(outlier.fit.names) + 3)
+    best = min(terms, key=lambda s: s.fit.chi2 / scale + 2 * len(s.fit.names))
+    aic_term = best.fit.chi2 / scale + 2 * len(best.fit.names)
+    if aic_term >= aic_out:
+        return outlier
+    _decline(
+        declined,
+        "outlier",
+        f"{outlier.reason}; but the {best.added} term explains the stops better for its size (Akaike {aic_term:.1f} "
+        f"against {aic_out:.1f} with the stop left out)",
+        len(cur.excluded),
+    )
+    return best
+
+
+def _covariate(name: str) -> bool:
+    """Is the effect driven by a logged covariate (a column other than the place)?"""
+    effect = registry.registered().get(name)
+    return effect is not None and any(c not in PLACE_COLUMNS for c in effect.needs)
+
+
+def _outlier(cur: Step, table: StopTable, g: float, k: int) -> tuple[float, Step] | None:
+    n = len(cur.table)
+    if n - 1 < 4 or cur.fit.dof - 3 < 1:
+        return None
+    if len(cur.excluded) >= max(1, len(table) // 10):
+        return None  # more misfits than that is structure, not a few bad stops: leave it to the diagnostics
+    d2, press = leave_one_out(cur.table, cur.fit)
+    if not np.any(np.isfinite(d2)):
+        return None
+    i = int(np.nanargmax(d2))
+    logp = float(chi2_logsf(d2[i], 3)) + np.log(n)  # the worst of n stops
+    original = int(np.delete(np.arange(len(table)), list(cur.excluded))[i])
+    keep = np.ones(n, dtype=bool)
+    keep[i] = False
+    sub = cur.table.subset(keep)
+    start = cur.fit.state if cur.fit.state.beta_rad.size == 0 else _without_beta(cur.fit.state, i)
+    try:
+        f = full.fit(sub, cur.terms, g, start)
+    except FitFailed:  # the others alone cannot be fitted: they cannot judge it either
+        return None
+    beta = "" if table.beta_rad is None else f", β = {np.degrees(table.beta_rad[original]) % 360:.0f}°"
+    reason = (
+        f"stop {original + 1}{beta} is not predicted by the others: held-out miss {press[i] * 1e3:.3g} mm/s², "
+        f"χ²(3) = {d2[i]:.1f}, p = {min(np.exp(logp), 1.0):.3g} (worst of {n})"
+    )
+    step = Step("outlier", reason, cur.terms, (*cur.excluded, original), sub, f)
+    return logp + np.log(k), step
+
+
+def with_surface(table: StopTable, rot_vs: Rotation, sigma_rad: float, g: float) -> StopTable:
+    """The table with each stop's covariance widened by a random road tilt of ``sigma_rad`` (1σ per axis).
+
+    A tilt δ of the surface about the vehicle's x and y axes moves f_v by g·(δ × e_z): horizontal in
+    the vehicle frame, so the extra covariance is ``(g σ)² Rᵀ diag(1, 1, 0) R`` in the sensor frame.
+    """
+    rm = rot_vs.as_matrix()
+    extra = (g * sigma_rad) ** 2 * rm.T @ np.diag([1.0, 1.0, 0.0]) @ rm
+    return replace(table, cov_s=table.cov_s + extra)
+
+
+def _neg2loglik(table: StopTable, fit: full.Fit) -> float:
+    return fit.chi2 + float(np.sum(np.linalg.slogdet(table.cov_s)[1]))  # type: ignore[arg-type]
+
+
+def _surface(cur: Step, g: float, k: int) -> tuple[float, Step] | None:
+    """A random road tilt per stop (stops on different surfaces): its σ by maximum likelihood.
+
+    The search runs with the mean model held at the current fit (O(n) per trial, no refit); three
+    refits around its optimum then give the profile likelihood's curvature and, as their parabola's
+    vertex, its own optimum; one more at the largest road tilt checks that the profile does not fall
+    to the bound — three to five fits instead of one per trial of a search. Where the vertex is not
+    close to the held optimum the profile is searched directly.
+    """
+    if cur.table.cov_s is None or cur.fit.dof < 2:
+        return None
+    base = cur.table
+    rot = cur.fit.state.rot_vs
+    resid = cur.fit.residual_s
+
+    def held(log_sigma: float) -> float:
+        cov = with_surface(base, rot, float(np.exp(log_sigma)), g).cov_s
+        chi2 = np.einsum("ni,ni->", resid, np.linalg.solve(cov, resid[..., None])[..., 0])  # type: ignore[arg-type]
+        return float(chi2 + np.sum(np.linalg.slogdet(cov)[1]))  # type: ignore[arg-type]
+
+    def cost(log_sigma: float, start: full.State) -> tuple[float, StopTable, full.Fit]:
+        table = with_surface(base, rot, float(np.exp(log_sigma)), g)
+        f = full.fit(table, cur.terms, g, start)
+        return _neg2loglik(table, f), table, f
+
+    lower, upper = float(np.log(1e-5)), float(np.log(np.radians(MAX_SURFACE_TILT_DEG)))
+    x = float(optimize.minimize_scalar(held, bounds=(lower, upper), method="bounded", options={"xatol": 0.01}).x)
+    h = 0.05
+    value, table, f = cost(x, cur.fit.state)
+    if x < lower + 2 * h:  # no tilt with the model held; refitting finds none either where a search would look first
+        curvature = (held(x + h) - 2 * held(x) + held(x - h)) / h**2
+        near = all(cost(t, f.state)[0] >= value for t in lower + np.array([0.382, 0.618]) * (upper - lower))
+    else:
+        below, above = cost(x - h, f.state)[0], cost(x + h, f.state)[0]
+        if cost(upper, f.state)[0] < min(value, below, above):
+            return None  # the profile falls all the way to the bound: more tilt than roads have, not this effect
+        curvature = (above - 2 * value + below) / h**2
+        shift = -(above - below) / (2 * h * curvature) if curvature > 0 else np.inf
+        near = abs(shift) <= 2 * h and lower <= x + shift <= upper  # the profile's optimum is next to the held one
+        if near:  # ... at the vertex of its parabola
+            x += shift
+            value, table, f = cost(x, f.state)
+    if not near:  # refitting moves the optimum far (a stop with a large pull): search the profile itself
+        res = optimize.minimize_scalar(
+            lambda t: cost(t, cur.fit.state)[0], bounds=(lower, upper), method="bounded", options={"xatol": 0.01}
+        )
+        x = float(res.x)
+        value, table, f = cost(x, cur.fit.state)
+        curvature = (cost(x + h, cur.fit.state)[0] - 2 * value + cost(x - h, cur.fit.state)[0]) / h**2
+    stat = max(_neg2loglik(base, cur.fit) - value, 0.0)
+    logp = float(chi2_logsf(stat, 1))
+    sigma = float(np.exp(x))
+    if x > upper - 0.05:
+        return None  # the scatter needs more tilt than roads have: not this effect
+    rel = float(np.sqrt(2.0 / curvature)) if curvature > 0 else float("nan")
+    reason = (
+        f"stops on different surfaces: a random road tilt of {np.degrees(sigma):.3g}° (1σ, ±{rel:.0%}) per stop; "
+        f"likelihood ratio χ²(1) = {stat:.1f}, p = {np.exp(logp):.3g}"
+    )
+    terms = (*cur.terms, "surface")
+    step = Step("surface", reason, terms, cur.excluded, table, replace(f, terms=terms))
+    return logp + np.log(k), step
+
+
+def _without_beta(state: full.State, i: int) -> full.State:
+    from dataclasses import replace
+
+    return replace(state, beta_rad=np.delete(state.beta_rad, i))
+
+
+NOISE_MODEL_STEPS = ("outlier", "surface")
+
+
+def _among_exclusive(best: Step, rivals: list[Step], g: float, declined: list[dict[str, Any]]) -> Step:
+    """The best of the significant candidates that cannot be fitted together, by Akaike's criterion.
+
+    Nested tests cannot choose between two effects the stops cannot separate from each other (on two
+    slopes a bias and a scale error: E·g·e_z is a constant); greedily taking the more significant one
+    would then shut the other out for good, so the one whose model fits better for its size is taken.
+    """
+    exclusive = [  # only a rival that fits better for its size could be taken instead: the others need no check
+        r
+        for r in rivals
+        if r.added not in NOISE_MODEL_STEPS
+        and _aic(r.fit) < _aic(best.fit)
+        and _inseparable(best, (*best.terms, *(t for t in r.terms if t not in best.terms)), g) is not None
+    ]
+    if not exclusive:
+        return best
+    chosen = min([best, *exclusive], key=lambda s: _aic(s.fit))
+    for other in (s for s in [best, *exclusive] if s is not chosen):
+        _decline(
+            declined,
+            other.added,
+            f"it and {chosen.added} cannot both be fitted to these stops; {chosen.added} fits them better for its "
+            f"number of parameters (Akaike: {_aic(chosen.fit):.1f} vs {_aic(other.fit):.1f})",
+            len(best.excluded),
+        )
+    return chosen
+
+
+def _aic(fit: full.Fit) -> float:
+    """Akaike's criterion, −2 log L + 2p up to a constant shared by models of the same stops."""
+    n = fit.residual_s.size
+    fit_term = fit.chi2 if fit.noise_known else n * np.log(fit.chi2 / n)
+    return float(fit_term + 2 * len(fit.names))
+
+
+def _covers(cur: Step, term: str, names: list[str], g: float) -> bool:
+    """Is ``term`` in the model, or a candidate the stops separate?"""
+    return term in cur.terms or (term in names and _inseparable(cur, (*cur.terms, term), g) is None)
+
+
+def _inseparable(cur: Step, terms: tuple[str, ...], g: float) -> str | None:
+    """Why the data cannot separate the new term from the model, or None when they can."""
+    info, names = full.information(cur.table, cur.fit.state, terms, g)
+    null = full.null_space(info, normalised=True)
+    if null.size:
+        params = {e.name: e.parameters(cur.table) for e in registry.chain(terms)}
+        groups = sorted({registry.owner(names[j], params) for j in np.flatnonzero(np.abs(null).max(axis=1) > 0.1)})
+        return f"confounded with {', '.join(g for g in groups if g != terms[-1]) or 'itself'} in these stops"
+    cov = np.linalg.inv(info) * cur.fit.noise_scale**2
+    tilt = float(np.degrees(np.sqrt(max(cov[0, 0], cov[1, 1]))))
+    if tilt > MAX_TILT_SIGMA_DEG:
+        return f"not separable from the tilt: with it the tilt 1σ would be {tilt:.3g}°"
+    return None
+
+
+def _heading_alias(cur: Step, f: full.Fit, name: str) -> str | None:
+    """Why a term driven by a logged covariate (temperature, …) is no explanation: what it explains is a heading
+    pattern; or None.
+
+    Its columns are tested beyond the current model, the terms it brings and the low heading harmonics
+    (:data:`ALIAS_HARMONICS`, per axis): when the stops visited the headings in an order that the covariate
+    follows (the sensor warming up around the circle and cooling on the way back), the term would take any
+    heading-dependent effect as its own and leave nothing for the residual tests. It must then explain
+    something at :data:`ALIAS_ALPHA` that no heading pattern does. Terms of the geometry (scale, slopes) predict their
+    heading pattern from the rotation; the Fisher rank tests those.
+    """
+    effect = registry.get(name)
+    beta = cur.table.beta_rad if cur.table.beta_rad is not None else cur.fit.state.beta_rad
+    if not any(c not in PLACE_COLUMNS for c in effect.needs) or beta is None or beta.size != len(cur.table):
+        return None
+    if heading_share(cur.table, effect, beta) < ALIAS_SHARE:
+        return None  # the covariate is no heading pattern itself: it cannot take one up whole
+    model = full.StaticModel(cur.table, f.terms, f.state.g_mps2)
+    jac = model.jacobian(f.state)
+    own = list(f.owned[name])
+    rest = [i for i in range(jac.shape[1]) if i not in own]
+    harmonics = heading_harmonics(model.whiten, beta, ALIAS_HARMONICS)
+    if harmonics is None:
+        return None
+    r = full.StaticModel(cur.table, cur.terms, f.state.g_mps2).residual(cur.fit.state)
+    finding = projection_test(r, jac[:, own], np.hstack([jac[:, rest], harmonics]), name, cur.fit)
+    if finding.p_value is None or finding.p_value < ALIAS_ALPHA:
+        return None
+    return (
+        f"what it would explain is a heading pattern: beyond the 1β and 2β harmonics of heading it explains "
+        f"Δχ² = {finding.statistic:.3g} on {finding.dof} (p = {finding.p_value:.3g} ≥ {ALIAS_ALPHA:g}); its "
+        f"{', '.join(effect.needs)} follows the "
+        "order the headings were visited in — visit them in another order (or the circle twice) to separate it"
+    )
+
+
+def heading_share(table: StopTable, effect: registry.Effect, beta: FloatArray) -> float:
+    """The share of the variance of the effect's logged covariates (temperature) that the heading harmonics
+    (:data:`ALIAS_HARMONICS`) explain: 1 when the covariate follows the order the headings were visited in
+    (it rises and falls once around the circle), about 0.76 for a ramp over one circle, near 0 when the
+    headings were visited in another order."""
+    h = np.column_stack(
+        [np.ones(beta.size)] + [f(k * beta) for k in ALIAS_HARMONICS if 2 * k < beta.size for f in (np.cos, np.sin)]
+    )
+    share = 0.0
+    for column in (c for c in effect.needs if c not in PLACE_COLUMNS):
+        x = getattr(table, column, None)
+        if x is None or np.ptp(x) == 0:
+            continue
+        x = np.asarray(x, dtype=float) - np.mean(x)
+        fitted = h @ np.linalg.lstsq(h, x, rcond=None)[0]
+        share = max(share, float(fitted @ fitted / (x @ x)))
+    return share
+
+
+def _refuse_inseparable(base: Step, fixed: tuple[str, ...], g: float) -> None:
+    """A fixed model whose terms these stops cannot separate is refused, naming the first such term."""
+    for i in range(len(BASE), len(fixed)):
+        problem = _inseparable(base, fixed[: i + 1], g)
+        if problem:
+            raise NotEnoughInformation(
+                f"{base.table.source}: the term {fixed[i]} of {option('model', ','.join(fixed))} cannot be fitted: "
+                f"it is {problem}. Leave it out of {option('model')} (or use {option('model', 'auto')}, which adds "
+                "only what the stops separate)."
+            )
+
+
+def _loo_rms(step: Step) -> float:
+    """RMS of the held-out misses; NaN when no stop can be held out (each alone sets a parameter),
+    so a candidate is then declined: nothing shows it predicts better."""
+    _, press = leave_one_out(step.table, step.fit)
+    finite = press[np.isfinite(press)]
+    return float(np.sqrt(np.mean(finite**2))) if finite.size else float("nan")
+
+
+def _decline(declined: list[dict[str, Any]], effect: str, why: str, round_: int) -> None:
+    declined.append({"effect": effect, "why": why})
+
+
+def effect_values(fit: full.Fit) -> tuple[EffectValue, ...]:
+    """The fitted values ± 1σ of every effect term of a fit, each as its effect reports it."""
+    out = []
+    flat = full.parameter_values(fit.state, fit.names)
+    sigma = np.sqrt(np.clip(np.diag(fit.cov), 0.0, None))
+    for effect in registry.chain(fit.terms):
+        idx = list(fit.owned[effect.name])
+        names = tuple(fit.names[i] for i in idx)
+        out.append(effect.report(flat[idx], sigma[idx], names))
+    return tuple(out)

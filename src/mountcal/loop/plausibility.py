@@ -1,0 +1,128 @@
+"""Plausibility checks of an answer and of the conventions it rests on, named in the result.
+
+Each check is a :class:`~mountcal.core.result.Check` in ``Calibration.checks``: passed, failed (the
+result is then not confident, with the reason in its notes), or not tested (with the reason). The
+conventions' own checks (a heading's unit, the acceleration unit against |g|, the sensor's
+handedness) run where the input is read or cross-checked (:mod:`mountcal.io.input_conventions`,
+:mod:`mountcal.loop.crosscheck`) and refuse there; what they found is listed here too. These check the answer:
+
+- ``slope_range``: a vehicle parks on slopes up to :data:`MAX_PARKED_SLOPE_DEG` (the steepest streets
+  are 20°); a steeper fitted slope is a unit, an axis map, or a session that is no parking session
+  (a multi-position test belongs to ``mountcal triad``).
+- ``exact_fit``: real stops carry noise; a fit with no residual (χ² = 0) means copied or simulated data.
+- ``noise_scale``: stops that scatter far less than their stated noise (χ²/dof under
+  :data:`MIN_CHI2_RATIO`): ``sx, sy, sz`` in another unit than ``ax, ay, az``, or an overstated noise.
+- ``gravity``: the gravity used, stated or fitted, within :data:`GRAVITY_TOLERANCE` of gₙ.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import replace
+
+from mountcal.core.conventions import G_N
+from mountcal.core.pvalues import chi2_sf
+from mountcal.core.result import Calibration, Check, Convention
+
+MAX_PARKED_SLOPE_DEG = 30.0
+EXACT_RMS_MPS2 = 1e-9 * G_N  # below this residual the stop means sit on the model to rounding
+MIN_CHI2_RATIO = 0.05  # χ²/dof under this: the stated noise is over 4.5× the scatter (a unit is 9.8× or 1000×)
+LOW_TAIL_P = 1e-3
+GRAVITY_TOLERANCE = 0.05  # a gravity beyond ±5 % of gₙ is no gravity on Earth: a unit or a scale error
+
+
+def answer_checks(cal: Calibration) -> tuple[Check, ...]:
+    """The checks of a calibration's answer (see the module's docstring)."""
+    out = []
+    if cal.slope_deg is None:
+        out.append(Check("slope_range", None, "no slope (no stops, or not determined)"))
+    else:
+        sigma = cal.slope_sigma_deg or 0.0
+        steep = cal.slope_deg - 3.0 * sigma > MAX_PARKED_SLOPE_DEG
+        out.append(
+            Check(
+                "slope_range",
+                not steep,
+                f"slope {cal.slope_deg:.3g}° ± {sigma:.2g}° "
+                + (
+                    f"is steeper than any vehicle parks on (up to {MAX_PARKED_SLOPE_DEG:g}°): check the units, the "
+                    "axis map, and that the stops are a parking session (a multi-position test is `mountcal triad`'s)"
+                    if steep
+                    else f"is one a vehicle parks on (up to {MAX_PARKED_SLOPE_DEG:g}°)"
+                ),
+            )
+        )
+    fit = cal.fit
+    stops = cal.residual_s.shape[0]
+    if stops == 0:
+        out.append(Check("exact_fit", None, "no stops"))
+    elif cal.residual_rms_mps2 <= EXACT_RMS_MPS2 or (fit.chi2 is not None and fit.dof and fit.chi2 <= 1e-12 * fit.dof):
+        out.append(
+            Check(
+                "exact_fit",
+                False,
+                f"the stops fit exactly (residual RMS {cal.residual_rms_mps2:.2g} m/s²): real stops carry noise, so "
+                "these were copied, edited or simulated without noise; their σ say nothing about a real sensor",
+            )
+        )
+    else:
+        out.append(Check("exact_fit", True, f"residual RMS {cal.residual_rms_mps2:.3g} m/s²: the stops carry noise"))
+        if fit.p_value is not None and fit.chi2 is not None and fit.dof:
+            ratio = fit.chi2 / fit.dof
+            low = 1.0 - float(chi2_sf(fit.chi2, fit.dof))
+            too_quiet = ratio < MIN_CHI2_RATIO and low < LOW_TAIL_P
+            out.append(
+                Check(
+                    "noise_scale",
+                    not too_quiet,
+                    f"χ²/dof = {ratio:.3g}"
+                    + (
+                        ": the stops scatter far less than their stated noise — sx, sy, sz (or the _mean ones) in "
+                        "another unit than ax, ay, az, or an overstated noise; the σ are too large"
+                        if too_quiet
+                        else ": the stated noise matches the scatter's scale"
+                    ),
+                )
+            )
+    g = cal.gravity_mps2
+    bad_g = abs(g / G_N - 1.0) > GRAVITY_TOLERANCE
+    out.append(
+        Check(
+            "gravity",
+            not bad_g,
+            f"gravity {g:.5g} m/s² ({cal.gravity_source})"
+            + (
+                f" is no gravity on Earth (beyond ±{GRAVITY_TOLERANCE:.0%} of 9.80665): a unit or scale error"
+                if bad_g
+                else " lies near 9.81 m/s²"
+            ),
+        )
+    )
+    return tuple(out)
+
+
+def convention_checks(conventions: Sequence[Convention]) -> tuple[Check, ...]:
+    """The conventions checked where the input was read (a refusal there), listed as passed checks;
+    and a heading reference that nothing stated (``heading_reference``), a failed one: stops alone
+    cannot tell β from uphill, from downhill or with a common offset (each turns the answer about the
+    vertical), so a yaw resting on an assumed reference is not a confident one."""
+    checked = {"heading_unit", "acceleration_unit"}  # refused where read when they fail
+    out = [Check(c.name, True, f"{c.value}: {c.by}") for c in conventions if c.name in checked]
+    for c in conventions:
+        if c.name == "heading_reference" and c.how == "default" and c.value == "uphill":
+            out.append(Check(c.name, False, f"assumed, not stated: {c.by}"))
+    return tuple(out)
+
+
+def with_checks(cal: Calibration, checks: Sequence[Check]) -> Calibration:
+    """The calibration with its checks; a failed one makes it not confident and says why in the notes."""
+    merged = {c.name: c for c in (*cal.checks, *checks)}
+    failed = [c for c in merged.values() if c.passed is False]
+    notes = tuple(f"plausibility check {c.name} failed: {c.reason}; the result is not confident" for c in failed)
+    known = set(cal.notes)
+    return replace(
+        cal,
+        checks=tuple(merged.values()),
+        notes=(*cal.notes, *(n for n in notes if n not in known)),
+        confident=cal.confident and not failed,
+    )

@@ -1,0 +1,1 @@
+"""Sessions at the vehicle: plan one, run one live."""

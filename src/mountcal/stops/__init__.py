@@ -1,0 +1,1 @@
+"""Stops: detection in a log, their headings, near misses, and the stop table."""
