@@ -31,7 +31,7 @@ from mountcal.io import writers as export
 from mountcal.io.reader import LogOptions
 from mountcal.io.samples import Channel, Samples
 from mountcal.simulate.stops import simulate_parking_log
-from mountcal.stops.detect import read_protocol, tabulate
+from mountcal.stops.headings import read_protocol, tabulate
 
 REPO = Path(__file__).resolve().parents[1]
 DBC = REPO / "data" / "imu_mm5_10.dbc"

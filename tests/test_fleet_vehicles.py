@@ -11,14 +11,8 @@ from scipy.spatial.transform import Rotation
 
 from mountcal.calibration.fit import calibrate
 from mountcal.core.conventions import rot_vs_from_angles
-from mountcal.fleet.vehicles import (
-    analyse_fleet,
-    angles_with_sigma,
-    consensus,
-    find_change_points,
-    information,
-    tangent_residuals,
-)
+from mountcal.fleet.agreement import angles_with_sigma, consensus, find_change_points, information, tangent_residuals
+from mountcal.fleet.vehicles import analyse_fleet
 from mountcal.fleet.worker import calibration_record
 from mountcal.simulate.stops import simulate_stops
 

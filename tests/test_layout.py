@@ -163,3 +163,12 @@ def test_no_module_is_over_600_lines() -> None:
 def test_only_the_command_line_imports_the_command_line() -> None:
     users = {m for m, deps in _graph().items() if any(d.startswith("mountcal.cli") for d in deps)}
     assert {m for m in users if not m.startswith("mountcal.cli") and m != "mountcal.__main__"} == set()
+
+
+def test_format_libraries_are_banned_outside_io() -> None:
+    import tomllib
+
+    config = tomllib.loads((SRC.parent / "pyproject.toml").read_text(encoding="utf-8"))["tool"]["ruff"]["lint"]
+    banned = set(config["flake8-tidy-imports"]["banned-api"])
+    assert {"can", "cantools", "mcap", "mcap_ros2", "asammdf", "rosbags"} <= banned
+    assert config["per-file-ignores"]["src/mountcal/io/**"] == ["TID251"]

@@ -20,7 +20,8 @@ from mountcal.outputs.exporters import Frames, export
 from mountcal.outputs.report.html import render
 from mountcal.sessions.plan import Noise
 from mountcal.simulate.stops import simulate_preset
-from mountcal.stops.detect import StopDetection, relax
+from mountcal.stops.detect import StopDetection
+from mountcal.stops.headings import relax
 from mountcal.stops.table import read_stop_table, write_stop_table
 
 

@@ -16,7 +16,7 @@ from mountcal.io.samples import Samples
 from mountcal.io.sensor_spec import DEFAULT, read_spec
 from mountcal.sessions.plan import Noise, Request, bound_of_headings, make_plan, monte_carlo_rms, noise_from_log
 from mountcal.simulate.stops import simulate_parking_log, simulate_stops
-from mountcal.stops.detect import read_protocol, tabulate
+from mountcal.stops.headings import read_protocol, tabulate
 
 TARGET = {"roll": 0.1, "pitch": 0.1, "yaw": 0.5}
 # a calibrated sensor: limits far below what the stops resolve, so the plan is the bound alone

@@ -8,7 +8,8 @@ import pytest
 from mountcal.calibration.fit import calibrate
 from mountcal.io.samples import Channel, Samples
 from mountcal.simulate.stops import ParkingLog, simulate_parking_log
-from mountcal.stops.detect import StopDetection, beta_from_heading, detect_stops, find_stops, still_mask, stop_table
+from mountcal.stops.detect import StopDetection, detect_stops, find_stops, still_mask
+from mountcal.stops.headings import beta_from_heading, stop_table
 
 
 @pytest.fixture(scope="module")

@@ -19,18 +19,8 @@ from mountcal.core.option_names import as_flags
 from mountcal.io.samples import Channel, Samples
 from mountcal.io.timestamps import MERGED, increasing_times
 from mountcal.simulate.stops import ParkingLog, simulate_parking_log
-from mountcal.stops.detect import (
-    StopDetection,
-    Thresholds,
-    _cov_of_mean,
-    beta_from_heading,
-    detect_stops,
-    find_stops,
-    relax,
-    still_mask,
-    stop_table,
-    tabulate,
-)
+from mountcal.stops.detect import StopDetection, Thresholds, _cov_of_mean, detect_stops, find_stops, still_mask
+from mountcal.stops.headings import beta_from_heading, relax, stop_table, tabulate
 from mountcal.stops.table import stop_table_from_frame
 
 LSB = 0.125  # m/s², the CANedge GNSS/IMU accelerometer

@@ -36,7 +36,8 @@ from mountcal.io.mcap.read import read_mcap
 from mountcal.io.ros2.definitions import ros2_definition
 from mountcal.io.samples import Channel, Samples
 from mountcal.simulate.stops import ParkingLog, simulate_parking_log
-from mountcal.stops.detect import StopDetection, read_protocol, tabulate
+from mountcal.stops.detect import StopDetection
+from mountcal.stops.headings import read_protocol, tabulate
 
 REPO = Path(__file__).resolve().parents[2]
 DATA = REPO / "data"

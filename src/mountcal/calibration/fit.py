@@ -13,17 +13,23 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from datetime import UTC, datetime
 from typing import Literal
 
 import numpy as np
 
+from mountcal.calibration.record import (
+    GIVEN,
+    MAX_CONFIDENT_TILT_SIGMA_DEG,
+    fit_doubts,
+    fit_provenance,
+    gravity_convention,
+    local_gravity,
+)
 from mountcal.core.conventions import (
     G_N,
     GIMBAL_LOCK_PITCH_DEG,
     FloatArray,
     angles_from_rot_vs,
-    normal_gravity,
 )
 from mountcal.core.errors import FitFailed, InputError, NotEnoughInformation
 from mountcal.core.option_names import option
@@ -32,16 +38,13 @@ from mountcal.core.result import (
     Angles,
     AngleValues,
     Calibration,
-    Convention,
     Declined,
     FitQuality,
     ModelSelection,
     ModelStep,
     Observability,
-    Provenance,
     Separability,
 )
-from mountcal.core.version import software_version
 from mountcal.estimate import full, paper
 from mountcal.estimate.bound import crb_deg, euler_gradients
 from mountcal.estimate.effects.temperature import MIN_TEMPERATURE_SPAN_C
@@ -49,23 +52,20 @@ from mountcal.estimate.geometry import span_ratio
 from mountcal.estimate.observability import separability
 from mountcal.estimate.sensor_errors import SensorErrors, from_spec
 from mountcal.estimate.triad import Triad
-from mountcal.io.input_conventions import check_gravity_value, merged
+from mountcal.io.input_conventions import merged
 from mountcal.io.sensor_spec import DEFAULT as DEFAULT_SPEC
 from mountcal.io.sensor_spec import SensorSpec
 from mountcal.loop import crosscheck, plausibility, slope_reference
 from mountcal.loop import terms as model_terms
-from mountcal.loop.model_choice import Loop, Step, close_the_loop, effect_values
+from mountcal.loop.model_choice import close_the_loop, effect_values
+from mountcal.loop.steps import Loop, Step
 from mountcal.loop.systematic import assess
-from mountcal.stops.table import StopTable, check_count, fingerprint
+from mountcal.stops.table import StopTable, check_count
 
 Method = Literal["full", "paper"]
 BASE: tuple[str, ...] = ("rotation", "slope")
 WITH_BIAS: tuple[str, ...] = ("rotation", "slope", "bias")
 MIN_DISTINCT_HEADINGS = 3
-GIVEN = "given by the user"
-# "Confident" promises the answer is usable: tilt within 10° at 5σ, so its 1σ must stay under 2°.
-MAX_CONFIDENT_TILT_SIGMA_DEG = 2.0
-MIN_NOISE_DOF = 10  # a noise estimated from fewer residual values is itself too uncertain to vouch for the σ
 
 
 @dataclass(frozen=True)
@@ -103,7 +103,7 @@ def calibrate(table: StopTable, options: Options | None = None) -> Calibration:
         cal = _full(table, g, g_source, opts)
     else:
         raise InputError(option("method"), "paper or full", repr(opts.method), "Choose one of them.")
-    stated = merged(table.conventions, (_gravity_convention(g_source),))
+    stated = merged(table.conventions, (gravity_convention(g_source),))
     cal = replace(cal, provenance=replace(cal.provenance, conventions=stated))
     checks = (
         *plausibility.convention_checks(stated),
@@ -112,14 +112,6 @@ def calibrate(table: StopTable, options: Options | None = None) -> Calibration:
         *plausibility.answer_checks(cal),
     )
     return plausibility.with_checks(cal, checks)
-
-
-def _gravity_convention(g_source: str) -> Convention:
-    if g_source == GIVEN:
-        return Convention("gravity", "given", "stated", f"{option('gravity')} (in m/s², checked to be Earth's)")
-    if g_source.startswith("WGS 84"):
-        return Convention("gravity", g_source, "inferred", "the stops' lat_deg (and alt_m)")
-    return Convention("gravity", "9.80665 m/s²", "default", "no position in the input: standard gravity gₙ")
 
 
 def parse_model(spec: str) -> tuple[str, ...] | None:
@@ -235,7 +227,7 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
             )
         )
     tilt_sigma = max(angles.roll_sigma_deg, angles.pitch_sigma_deg) * birge
-    doubts = [*loop.doubts, *_doubts(f.branch, tilt_sigma, None if f.noise_known else f.dof)]
+    doubts = [*loop.doubts, *fit_doubts(f.branch, tilt_sigma, None if f.noise_known else f.dof)]
     notes += [d + "; the result is not confident" for d in doubts]
     pitch = angles.pitch_deg
     if abs(pitch) > GIMBAL_LOCK_PITCH_DEG:
@@ -307,7 +299,7 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
         fit=fit_info,
         observability=_observability(final.table, f, g),
         model_selection=selection,
-        provenance=_provenance(table, "full", tuple(model)),
+        provenance=fit_provenance(table, "full", tuple(model)),
         notes=tuple(notes),
         model_steps=_steps(loop, opts),
         unexplained=tuple(flagged),
@@ -325,7 +317,7 @@ def _with_systematic(cal: Calibration, table: StopTable, f: full.Fit, opts: Opti
     # the tilt's own σ (about the vehicle's x and y axes): roll's σ grows as 1/cos(pitch) near ±90° without the
     # tilt being any less known
     tilt = max(s for s in out.rotation_sigma_deg[:2] if s is not None)
-    doubts = _doubts(None, tilt, None)
+    doubts = fit_doubts(None, tilt, None)
     if doubts and max(cal.roll_sigma_deg, cal.pitch_sigma_deg) <= MAX_CONFIDENT_TILT_SIGMA_DEG:
         out = replace(out, confident=False, notes=(*out.notes, *(d + "; the result is not confident" for d in doubts)))
     return out
@@ -353,25 +345,6 @@ def _check_slope_reference(table: StopTable, opts: Options) -> None:
 def sensor_errors(opts: Options) -> SensorErrors:
     """The sensor errors left for the systematic part: the triad's covariance when one is applied, else the spec."""
     return opts.triad.errors(opts.spec) if opts.triad is not None else from_spec(opts.spec)
-
-
-def _doubts(branch: str | None, tilt_sigma_deg: float, noise_dof: int | None) -> list[str]:
-    """Reasons, besides unexplained structure, why an answer is not to be trusted as it stands.
-
-    ``noise_dof``: the degrees of freedom the stop noise was estimated from (None: the table gave it).
-    """
-    out = [branch] if branch else []
-    if tilt_sigma_deg > MAX_CONFIDENT_TILT_SIGMA_DEG:
-        out.append(
-            f"the tilt is uncertain by {tilt_sigma_deg:.3g}° (1σ; over {MAX_CONFIDENT_TILT_SIGMA_DEG:g}°): more stops, "
-            "a steeper slope or a quieter sensor would pin it down"
-        )
-    if noise_dof is not None and noise_dof < MIN_NOISE_DOF:
-        out.append(
-            f"the stop noise is estimated from only {noise_dof} residual degrees of freedom, so the σ themselves are "
-            "uncertain: add stops, or give each stop's noise (sx, sy, sz, n)"
-        )
-    return out
 
 
 def _angles(table: StopTable, f: full.Fit, opts: Options) -> Angles:
@@ -517,7 +490,7 @@ def _paper(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrat
     elif sig[2] > opts.max_yaw_sigma_deg:
         yaw_reason = f"yaw 1σ {sig[2]:.3g}° exceeds the limit {opts.max_yaw_sigma_deg:g}°: slope too small"
     slope = None if est.slope_rad is None else float(np.degrees(est.slope_rad))
-    doubts = _doubts(None, float(max(sig[0], sig[1])), None if table.cov_s is not None else 3 * len(table) - 4)
+    doubts = fit_doubts(None, float(max(sig[0], sig[1])), None if table.cov_s is not None else 3 * len(table) - 4)
     notes += [d + "; the result is not confident" for d in doubts]
     notes.append(
         "the paper's method reports the statistical σ only: the sensor's systematic part (scale, cross-axis, bias the "
@@ -558,7 +531,7 @@ def _paper(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrat
         ),
         observability=None,
         model_selection=ModelSelection(mode="fixed", chosen=BASE),
-        provenance=_provenance(table, "paper", BASE),
+        provenance=fit_provenance(table, "paper", BASE),
         notes=tuple(notes),
         confident=not doubts,
     )
@@ -602,31 +575,3 @@ def _not_converged(table: StopTable, fixed: tuple[str, ...] | None, err: str) ->
         fixes.insert(0, f"give the stops' headings (a beta_deg column read with {given} or 'relative')")
     fixes.append("add stops at other headings")
     return f"{table.source}: the fit did not converge ({err}): {why}. To fix it: {'; or '.join(fixes)}."
-
-
-def local_gravity(lat_deg: FloatArray | None, alt_m: FloatArray | None, given: float | None) -> tuple[float, str]:
-    """Gravity and its source: ``given``, else WGS 84 normal gravity at the mean position, else standard."""
-    if given is not None:
-        check_gravity_value(float(given), option("gravity"))
-        return float(given), GIVEN
-    if lat_deg is not None and lat_deg.size and np.all(np.isfinite(lat_deg)):
-        lat = float(np.mean(lat_deg))
-        alt = float(np.mean(alt_m)) if alt_m is not None and alt_m.size else 0.0
-        return normal_gravity(lat, alt), f"WGS 84 normal gravity at latitude {lat:.4f}°, height {alt:.0f} m"
-    return (
-        G_N,
-        "assumed standard gravity 9.80665 m/s² (no position known); local gravity differs by up to ±0.27 %",
-    )
-
-
-def _provenance(table: StopTable, method: str, terms: tuple[str, ...]) -> Provenance:
-    return Provenance(
-        input=table.source,
-        software=f"mountcal {software_version()}",
-        method=method,
-        model=terms,
-        created_utc=datetime.now(UTC).isoformat(timespec="seconds"),
-        input_sha256=(table.sha256,) if table.sha256 else (),
-        stops_fingerprint=fingerprint(table),  # lets `report --stops` check it has the right table
-        incomplete_inputs=table.incomplete,
-    )

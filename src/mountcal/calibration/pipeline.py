@@ -19,7 +19,8 @@ from typing import Literal
 
 import numpy as np
 
-from mountcal.calibration.fit import Options, calibrate, local_gravity
+from mountcal.calibration.fit import Options, calibrate
+from mountcal.calibration.record import local_gravity
 from mountcal.calibration.with_driving import combine, driving_calibration, not_combined
 from mountcal.core.driving_document import Comparison, DrivingConsistency
 from mountcal.core.errors import NotEnoughInformation
@@ -37,7 +38,8 @@ from mountcal.io.samples import Samples, with_gravity
 from mountcal.io.timestamps import increasing_times
 from mountcal.io.whole import reading
 from mountcal.loop import crosscheck, plausibility
-from mountcal.stops.detect import StopDetection, StopTableFromLog, near_miss_advice, read_protocol, tabulate
+from mountcal.stops.detect import StopDetection
+from mountcal.stops.headings import StopTableFromLog, near_miss_advice, read_protocol, tabulate
 from mountcal.stops.table import Headings, StopTable, Unit, read_stop_table
 
 Use = Literal["auto", "stops", "driving"]

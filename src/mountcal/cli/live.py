@@ -97,7 +97,8 @@ def run(args: argparse.Namespace) -> int:
         write_outputs,
     )
     from mountcal.sessions.plan import parse_target
-    from mountcal.stops.detect import StopDetection, read_protocol
+    from mountcal.stops.detect import StopDetection
+    from mountcal.stops.headings import read_protocol
 
     prefix = Path(args.output)
     recording = session_files(prefix)["recording"]

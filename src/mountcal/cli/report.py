@@ -73,7 +73,8 @@ def run(args: argparse.Namespace) -> int:
     from mountcal.core.result import Calibration
     from mountcal.core.result_file import read_json
     from mountcal.outputs.report import render  # matplotlib is needed by this command only
-    from mountcal.stops.table import read_stop_table, same_stops
+    from mountcal.stops.identity import same_stops
+    from mountcal.stops.table import read_stop_table
 
     result = Path(args.input)
     output = _output(args.output, args.input)

@@ -161,7 +161,7 @@ class Observability:
 
 @dataclass(frozen=True)
 class StopsFingerprint:
-    """Sums that identify the stop table a result was fitted to (:func:`mountcal.stops.table.fingerprint`)."""
+    """Sums that identify the stop table a result was fitted to (:func:`mountcal.stops.identity.fingerprint`)."""
 
     n: int
     acc_sum_mps2: tuple[float, float, float]

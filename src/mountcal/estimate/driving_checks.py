@@ -50,7 +50,6 @@ so the lateral cue measures it when the drive turns enough (:func:`_axes`).
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
@@ -71,7 +70,25 @@ from mountcal.core.driving_document import (
 )
 from mountcal.core.findings import Finding
 from mountcal.core.option_names import option
-from mountcal.core.pvalues import chi2_sf, unexplained
+from mountcal.core.pvalues import unexplained
+from mountcal.estimate.driving_blocks import (
+    MIN_BLOCKS,
+    Sums,
+    compare,
+    comparison_finding,
+    estimate,
+    half_mask,
+    jackknife,
+    lateral,
+    longitudinal,
+    mean_times,
+    part_yaws,
+    parts_finding,
+    sum_units,
+    time_blocks,
+    units,
+    widened,
+)
 from mountcal.estimate.driving_intervals import (
     IntArray,
     Intervals,
@@ -80,7 +97,6 @@ from mountcal.estimate.driving_intervals import (
     SegmentLines,
     turned_share,
     turned_tilt_removed,
-    yaw_from_sums,
 )
 from mountcal.io.samples import Channel
 
@@ -88,10 +104,6 @@ if TYPE_CHECKING:
     from mountcal.estimate.driving_options import DrivingOptions
 
 FAMILY_ALPHA = 0.01  # all tests together flag a drive the model explains with at most this probability
-MIN_BLOCKS = 5  # blocks of units per side of a comparison: fewer give no σ worth a test
-MAX_BLOCKS = 20
-MIN_UNIT = 3  # intervals
-PARTS = 4
 SCALE_Z = 3.0  # the speed-scale note beyond this many σ from 1
 LAMBDA_FACTOR = 3.0  # the ratio of the IMU's to the speed's noise is known to within this factor
 EFFECT_Z = 3.0  # an effect of the body or road is taken beyond this many σ
@@ -159,144 +171,6 @@ class Checks:
 # --------------------------------------------------------------------------- units, sums and their σ
 
 
-def _sum(unit: IntArray, values: FloatArray, n: int) -> FloatArray:
-    """Σ ``values`` per unit (n units)."""
-    return np.bincount(unit, values, n).astype(np.float64)
-
-
-def units(iv: Intervals) -> IntArray:
-    """The units the σ are built from: the segments, cut into pieces of at most so many consecutive intervals that a
-    drive holds about ``4 × MAX_BLOCKS`` of them (never fewer than ``MIN_UNIT`` intervals), so that a short drive
-    (a minute on a highway: three segments) still gives each half its blocks."""
-    seg = iv.segment
-    if seg.size == 0:
-        return seg
-    length = max(MIN_UNIT, int(np.ceil(seg.size / (4 * MAX_BLOCKS))))
-    start = np.concatenate([[0], np.flatnonzero(np.diff(seg)) + 1])
-    first = np.repeat(start, np.diff(np.concatenate([start, [seg.size]])))
-    piece = (np.arange(seg.size) - first) // length
-    new = np.concatenate([[True], (np.diff(seg) != 0) | (np.diff(piece) != 0)])
-    return np.asarray(np.cumsum(new) - 1, dtype=np.int64)
-
-
-def _mean_times(unit: IntArray, t: FloatArray, n: int) -> FloatArray:
-    return _sum(unit, t, n) / np.maximum(np.bincount(unit, minlength=n), 1)
-
-
-@dataclass(frozen=True)
-class Sums:
-    """Per-unit sums ``Σ w·x, Σ w·y, Σ w·c`` of an estimating equation, each unit's mean time and count."""
-
-    a: FloatArray
-    b: FloatArray
-    c: FloatArray
-    t_s: FloatArray
-    count: FloatArray
-
-    @classmethod
-    def of(cls, unit: IntArray, t: FloatArray, w: FloatArray, x: FloatArray, y: FloatArray, c: FloatArray) -> Sums:
-        n = int(unit.max()) + 1 if unit.size else 0
-        return cls(
-            _sum(unit, w * x, n),
-            _sum(unit, w * y, n),
-            _sum(unit, w * c, n),
-            _mean_times(unit, t, n),
-            np.bincount(unit, minlength=n).astype(float),
-        )
-
-    def every(self) -> np.ndarray:
-        return np.ones(self.count.size, dtype=bool)
-
-
-def longitudinal(a_x: float, a_y: float, c: float) -> float:
-    """Yaw of the longitudinal equation ``Σ a·((Rz(yaw)·u)_y − v·ω) = 0`` from its sums."""
-    return yaw_from_sums(a_x, a_y, c)[0]
-
-
-def lateral(a_x: float, a_y: float, c: float) -> float:
-    """Yaw of the lateral equation ``Σ v·ω·((Rz(yaw)·u)_x − s·a) = 0`` from its sums: ``r·cos(yaw + β) = C`` on the
-    branch where the IMU follows ``v·ω`` (``r·sin(yaw + β) > 0``)."""
-    r = float(np.hypot(a_x, a_y))
-    phase = float(np.arccos(np.clip(c / r, -1.0, 1.0))) if r > 0 else 0.0
-    return float(np.angle(np.exp(1j * (phase - np.arctan2(a_y, a_x)))))
-
-
-Solve = Callable[[float, float, float], float]
-
-
-def _blocks(idx: np.ndarray, t_s: FloatArray) -> list[np.ndarray]:
-    """``idx`` in time order, split into at most MAX_BLOCKS runs of consecutive units."""
-    idx = idx[np.argsort(t_s[idx], kind="stable")]
-    return [b for b in np.array_split(idx, min(idx.size, MAX_BLOCKS)) if b.size]
-
-
-def estimate(sums: Sums, mask: np.ndarray, solve: Solve, inflate: float = 1.0) -> Estimate | None:
-    """The yaw (deg) of the units in ``mask`` and its jackknife σ over blocks of consecutive units (× ``inflate``)."""
-    idx = np.flatnonzero(mask & (sums.count > 0))
-    if idx.size == 0:
-        return None
-    total = [float(x[idx].sum()) for x in (sums.a, sums.b, sums.c)]
-    if np.hypot(total[0], total[1]) == 0:
-        return None
-    value = solve(*total)
-    blocks = _blocks(idx, sums.t_s)
-    if len(blocks) < MIN_BLOCKS:
-        return Estimate(float(np.degrees(value)), None, len(blocks))
-    parts = [(sums.a, total[0]), (sums.b, total[1]), (sums.c, total[2])]
-    loo = np.array([solve(*(tot - float(x[b].sum()) for x, tot in parts)) for b in blocks])
-    d = np.angle(np.exp(1j * (loo - value)))
-    k = len(blocks)
-    sigma = float(np.sqrt((k - 1) / k * np.sum((d - d.mean()) ** 2))) * inflate
-    return Estimate(float(np.degrees(value)), float(np.degrees(sigma)), k)
-
-
-def jackknife(values: FloatArray, weights: FloatArray, t_s: FloatArray, mask: np.ndarray) -> Estimate | None:
-    """The weighted mean of per-unit ``values`` over ``mask`` and its jackknife σ over blocks of units."""
-    idx = np.flatnonzero(mask & (weights > 0))
-    if idx.size == 0:
-        return None
-    value = float(weights[idx] @ values[idx] / weights[idx].sum())
-    blocks = _blocks(idx, t_s)
-    if len(blocks) < MIN_BLOCKS:
-        return Estimate(value, None, len(blocks))
-    loo = []
-    for b in blocks:
-        rest = np.setdiff1d(idx, b)
-        loo.append(float(weights[rest] @ values[rest] / weights[rest].sum()))
-    arr = np.asarray(loo)
-    k = len(blocks)
-    return Estimate(value, float(np.sqrt((k - 1) / k * np.sum((arr - arr.mean()) ** 2))), k)
-
-
-def compare(test: str, what: str, one: Estimate | None, two: Estimate | None, unit: str = "deg") -> Comparison:
-    """The z-test of two estimates of one quantity, or the reason there is none."""
-    if one is None or two is None or one.sigma is None or two.sigma is None:
-        blocks = [e.blocks for e in (one, two) if e is not None]
-        why = f"no test: each side needs {MIN_BLOCKS} blocks of consecutive straight driving (has {blocks or 'none'})"
-        return Comparison(test, what, unit, one, two, None, None, None, why)
-    diff = one.value - two.value
-    diff = _wrap(diff) if unit == "deg" else diff
-    sigma = float(np.hypot(one.sigma, two.sigma))
-    z = diff / sigma if sigma > 0 else float("inf")
-    return Comparison(test, what, unit, one, two, diff, float(z), float(chi2_sf(z * z, 1)))
-
-
-def _finding(c: Comparison) -> Finding:
-    """The comparison as a test of the family (a z-score: no dof)."""
-    if c.z is None or c.p_value is None or c.one is None or c.two is None:
-        return Finding(c.test, c.what, c.reason or "no test", None, None, None, None, c.reason)
-    u = "°" if c.unit == "deg" else f" {c.unit}"
-    size = (
-        f"{c.one.value:.4g}{u} ± {c.one.sigma:.2g}{u} against {c.two.value:.4g}{u} ± {c.two.sigma:.2g}{u}: "
-        f"{c.difference:+.3g}{u}"
-    )
-    return Finding(c.test, c.what, size, c.z, None, c.p_value, float(np.log10(max(c.p_value, 1e-300))))
-
-
-def _wrap(d: float) -> float:
-    return float((d + 180.0) % 360.0 - 180.0)
-
-
 # --------------------------------------------------------------------------- the checks
 
 
@@ -314,7 +188,7 @@ def run(inp: Inputs) -> Checks:
         inflate = max(1.0, float(np.degrees(inp.sigma_rad)) / whole.sigma)
     whole = estimate(s_long, s_long.every(), longitudinal, inflate)
 
-    first = _halves(s_long)
+    first = half_mask(s_long)
     tilt = _tilt_halves(inp, unit, first)
     halves = Halves(
         compare(
@@ -326,7 +200,7 @@ def run(inp: Inputs) -> Checks:
         *tilt,
         _clock_halves(inp),
     )
-    parts = _parts(s_long, inflate)
+    parts = part_yaws(s_long, inflate)
     acc = Sums.of(unit, iv.t_mid_s, np.where(iv.a_ref > SPEEDING_MPS2, inp.a, 0.0), inp.u[:, 0], inp.u[:, 1], c)
     brk = Sums.of(unit, iv.t_mid_s, np.where(iv.a_ref < -SPEEDING_MPS2, inp.a, 0.0), inp.u[:, 0], inp.u[:, 1], c)
     accelerating_braking = compare(
@@ -340,7 +214,11 @@ def run(inp: Inputs) -> Checks:
     scale = _speed_scale(inp, unit)
     comparisons = [halves.yaw, halves.roll_about_vehicle_x, halves.pitch_about_vehicle_y, halves.clock_offset]
     comparisons += [accelerating_braking, cues.comparison, left_right]
-    tests = [_finding(x) for x in comparisons[:4]] + [_parts_finding(parts)] + [_finding(x) for x in comparisons[4:]]
+    tests = (
+        [comparison_finding(x) for x in comparisons[:4]]
+        + [parts_finding(parts)]
+        + [comparison_finding(x) for x in comparisons[4:]]
+    )
     findings = tuple(unexplained(tests, FAMILY_ALPHA))
     model_error = _model_error(findings, comparisons, parts, cues, inp.opts.horizontal_axes_sigma_deg)
     notes = [_note(f, cues.comparison) for f in findings]
@@ -432,43 +310,6 @@ def _axes(cue: Comparison, prior_deg: float) -> float:
     return float(np.sqrt(m * m + p * s / (p + s)))
 
 
-def _halves(sums: Sums) -> np.ndarray:
-    """Units of the first half in time (the split where half the intervals lie on each side)."""
-    order = np.argsort(sums.t_s, kind="stable")
-    cum = np.cumsum(sums.count[order])
-    first = np.zeros(sums.count.size, dtype=bool)
-    first[order[cum <= 0.5 * cum[-1]]] = True
-    return first
-
-
-def _parts(sums: Sums, inflate: float) -> Parts:
-    """Yaw of PARTS consecutive parts (equal numbers of intervals) against their weighted mean."""
-    order = np.argsort(sums.t_s, kind="stable")
-    cum = np.cumsum(sums.count[order]) / max(float(sums.count.sum()), 1.0)
-    label = np.empty(order.size, dtype=int)
-    label[order] = np.minimum((cum * PARTS - 1e-9).astype(int), PARTS - 1)
-    found = tuple(estimate(sums, label == k, longitudinal, inflate) for k in range(PARTS))
-    ok = [e for e in found if e is not None and e.sigma]
-    if len(ok) < 2:
-        return Parts(found, None, None, None, None, f"no test: fewer than two parts with {MIN_BLOCKS} blocks")
-    v = np.array([e.value for e in ok])
-    v = v[0] + (v - v[0] + 180.0) % 360.0 - 180.0
-    w = 1.0 / np.array([e.sigma for e in ok], dtype=float) ** 2
-    mean = float(w @ v / w.sum())
-    chi2 = float(np.sum(w * (v - mean) ** 2))
-    return Parts(found, chi2, len(ok) - 1, float(chi2_sf(chi2, len(ok) - 1)), float(np.ptp(v)))
-
-
-def _parts_finding(parts: Parts) -> Finding:
-    what = f"yaw of {PARTS} consecutive parts of the drive"
-    if parts.chi2 is None or parts.p_value is None or parts.dof is None:
-        return Finding("driving_parts", what, parts.reason or "no test", None, None, None, None, parts.reason)
-    size = f"spread {parts.spread_deg:.3g}° over {parts.dof + 1} parts, χ²({parts.dof}) = {parts.chi2:.3g}"
-    return Finding(
-        "driving_parts", what, size, parts.chi2, parts.dof, parts.p_value, np.log10(max(parts.p_value, 1e-300))
-    )
-
-
 def _clock_halves(inp: Inputs) -> Comparison:
     what = "the speed's clock offset, first half against second"
     search = inp.offset_search
@@ -484,7 +325,7 @@ def _offset(search: OffsetSearch, mask: np.ndarray) -> Estimate | None:
     if idx.size == 0:
         return None
     value = search.offset(idx)
-    blocks = _blocks(idx, search.segment_t_s)
+    blocks = time_blocks(idx, search.segment_t_s)
     if len(blocks) < MIN_BLOCKS:
         return Estimate(value, None, len(blocks))
     loo = np.array([search.offset(np.setdiff1d(idx, b)) for b in blocks])
@@ -504,25 +345,19 @@ def _tilt_halves(inp: Inputs, unit: IntArray, first: np.ndarray) -> tuple[Compar
     rot = Rotation.from_euler("z", inp.yaw_rad) * inp.rot_tilt  # sensor → vehicle
     f_v = rot.apply(iv.acc_s) - scale * iv.a_ref[:, None] * np.array([1.0, 0.0, 0.0])
     about = {"x": np.degrees(np.arctan2(-f_v[:, 1], f_v[:, 2])), "y": np.degrees(np.arctan2(f_v[:, 0], f_v[:, 2]))}
-    w = _sum(unit, iv.width_s, n)
-    t = _mean_times(unit, iv.t_mid_s, n)
+    w = sum_units(unit, iv.width_s, n)
+    t = mean_times(unit, iv.t_mid_s, n)
     grades = _grades(inp, unit)
     out = []
     for axis, name in (("x", "roll"), ("y", "pitch")):
-        per = _sum(unit, iv.width_s * about[axis], n) / np.maximum(w, 1e-300)
+        per = sum_units(unit, iv.width_s * about[axis], n) / np.maximum(w, 1e-300)
         prior = inp.opts.road_grade_sigma_deg if axis == "y" else 0.0
         if axis == "y" and grades is not None:
             per, prior = per - grades, 0.0
-        one, two = (_widened(jackknife(per, w, t, m), prior) for m in (first, ~first))
+        one, two = (widened(jackknife(per, w, t, m), prior) for m in (first, ~first))
         what = f"the tilt about the vehicle {axis} axis ({name}) from the mean gravity, first half against second"
         out.append(compare(f"driving_halves_{name}", what, one, two))
     return out[0], out[1]
-
-
-def _widened(e: Estimate | None, sigma: float) -> Estimate | None:
-    if e is None or e.sigma is None or sigma == 0:
-        return e
-    return Estimate(e.value, float(np.hypot(e.sigma, sigma)), e.blocks)
 
 
 @dataclass(frozen=True)
@@ -557,7 +392,7 @@ def _wide(inp: Inputs) -> WideCue | None:
     right = Sums.of(unit, t, np.where(wide.a_lat < -TURNING_MPS2, lat, 0.0), u[:, 0], u[:, 1], s * a)
     across = np.sin(inp.yaw_rad) * u[:, 0] + np.cos(inp.yaw_rad) * u[:, 1]
     n = sums.count.size
-    ll, ly = _sum(unit, lat * lat, n), _sum(unit, lat * across, n)
+    ll, ly = sum_units(unit, lat * lat, n), sum_units(unit, lat * across, n)
     ratio = jackknife(ly / np.maximum(ll, 1e-300), ll, sums.t_s, ll > 0)
     return WideCue(wide, lat, sums, left, right, ratio, float(np.sqrt(np.mean(lat**2))))
 
@@ -613,10 +448,10 @@ def _speed_scale(inp: Inputs, unit: IntArray) -> SpeedScale:
         return (d + float(np.sqrt(d * d + 4.0 * lam * sxy * sxy))) / (2.0 * sxy)
 
     n = int(unit.max()) + 1
-    sxx, syy, sxy = (_sum(unit, p, n) for p in (inp.a * inp.a, along * along, inp.a * along))
+    sxx, syy, sxy = (sum_units(unit, p, n) for p in (inp.a * inp.a, along * along, inp.a * along))
     total = (float(sxx.sum()), float(syy.sum()), float(sxy.sum()))
     value = deming(*total)
-    blocks = _blocks(np.arange(n), _mean_times(unit, iv.t_mid_s, n))
+    blocks = time_blocks(np.arange(n), mean_times(unit, iv.t_mid_s, n))
     sigma = None
     if len(blocks) >= MIN_BLOCKS and np.isfinite(value):
         loo = np.array([deming(*(float(x.sum() - x[b].sum()) for x in (sxx, syy, sxy))) for b in blocks])
@@ -658,7 +493,7 @@ def _grades(inp: Inputs, unit: IntArray) -> FloatArray | None:
     np.maximum.at(end, unit, iv.t_mid_s + 0.5 * iv.width_s)
     dh = np.interp(end, alt.t_s, alt.value) - np.interp(start, alt.t_s, alt.value)
     v = np.interp(iv.t_mid_s, inp.speed.t_s + inp.offset_s, inp.speed.value)
-    distance = np.maximum(_sum(unit, v * iv.width_s, n), 1e-3)
+    distance = np.maximum(sum_units(unit, v * iv.width_s, n), 1e-3)
     return np.asarray(np.degrees(np.arcsin(np.clip(dh / distance, -1.0, 1.0))), dtype=float)
 
 
@@ -667,8 +502,8 @@ def _grade(inp: Inputs, unit: IntArray) -> Estimate | None:
     per = _grades(inp, unit)
     if per is None:
         return None
-    w = _sum(unit, inp.iv.width_s, per.size)
-    return jackknife(per, w, _mean_times(unit, inp.iv.t_mid_s, per.size), w > 0)
+    w = sum_units(unit, inp.iv.width_s, per.size)
+    return jackknife(per, w, mean_times(unit, inp.iv.t_mid_s, per.size), w > 0)
 
 
 # --------------------------------------------------------------------------- effects of the body and the road
@@ -746,8 +581,8 @@ def _body(inp: Inputs, wide: WideCue | None) -> tuple[DrivingEffect, DrivingEffe
         attitude = SegmentLines(iv.segment, iv.t_mid_s).residual(-leak[:, column])  # nose up −δ_y, right down +δ_x
         unit = units(iv)
         n = int(unit.max()) + 1
-        xx, xy = _sum(unit, load * load, n), _sum(unit, load * attitude, n)
-        k = jackknife(np.degrees(xy / np.maximum(xx, 1e-300)) * G, xx, _mean_times(unit, iv.t_mid_s, n), xx > 0)
+        xx, xy = sum_units(unit, load * load, n), sum_units(unit, load * attitude, n)
+        k = jackknife(np.degrees(xy / np.maximum(xx, 1e-300)) * G, xx, mean_times(unit, iv.t_mid_s, n), xx > 0)
         if k is None or not k.sigma:
             out.append(DrivingEffect(name, meaning, "deg/g", None, None, False, "no test: too little load to judge it"))
             continue

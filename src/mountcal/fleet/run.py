@@ -21,6 +21,7 @@ import pandas as pd
 from mountcal.core.errors import InputError, MountcalError
 from mountcal.core.paths import check_outputs, output_lock
 from mountcal.core.version import software_version
+from mountcal.fleet.agreement import ALPHA
 from mountcal.fleet.engines import make_engine
 from mountcal.fleet.inputs import FleetJob
 from mountcal.fleet.overview import check_overview_overwritable, overview_path, write_overview
@@ -36,7 +37,7 @@ from mountcal.fleet.store import (
     schema,
     write_table,
 )
-from mountcal.fleet.vehicles import ALPHA, analyse_fleet, vehicle_table
+from mountcal.fleet.vehicles import analyse_fleet, vehicle_table
 
 HASH_THREADS = 4
 

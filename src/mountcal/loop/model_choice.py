@@ -14,17 +14,15 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 from scipy import optimize
 from scipy.spatial.transform import Rotation
 
-from mountcal.core.conventions import FloatArray
-from mountcal.core.errors import FitFailed, NotEnoughInformation
+from mountcal.core.errors import FitFailed
 from mountcal.core.findings import Finding
-from mountcal.core.option_names import option
 from mountcal.core.pvalues import chi2_logsf, nested_test, unexplained
 from mountcal.core.result import EffectValue
 from mountcal.estimate import effects as registry
@@ -32,63 +30,27 @@ from mountcal.estimate import full
 from mountcal.loop.diagnose import (
     analyse,
     competing_explanations,
-    heading_harmonics,
     leave_one_out,
-    projection_test,
     step_alternative,
 )
+from mountcal.loop.separability import (
+    ALIAS_SHARE,
+    PLACE_COLUMNS,
+    covers,
+    heading_alias,
+    heading_share,
+    inseparable,
+    refuse_inseparable,
+)
+from mountcal.loop.steps import Loop, Step
 from mountcal.stops.table import StopTable
 
 log = logging.getLogger(__name__)
 BASE = full.BASE
-MAX_TILT_SIGMA_DEG = 5.0  # an effect that would leave the tilt this uncertain is not separable
 MAX_ROUNDS = 6
 MAX_SURFACE_TILT_DEG = 3.0  # roads and car parks: cross slopes and grades of a few degrees at most
 SAME_PLACE_M = 30.0  # stops farther apart than this may stand on different surfaces
-# The heading harmonics a covariate term must explain more than (docs/effects.md, "Unexplained structure"): the
-# patterns of the effects tied to the vehicle's heading (a lean, a cross slope, compass errors) are 1β and 2β.
-ALIAS_HARMONICS = (1, 2)
-# The level of that check: it confirms one candidate the loop has already chosen (no search over many, so no
-# Bonferroni). Passing it wrongly is a confident wrong answer, failing it wrongly only a flag: 1 %.
-ALIAS_ALPHA = 0.01
-# A covariate whose variance the heading harmonics explain at least this share of is taken to follow the headings:
-# only then can a term driven by it take a heading pattern up whole, and only then does the guard act (a tent of
-# temperatures once around the circle: 0.99; a ramp over one circle: 0.76).
-ALIAS_SHARE = 0.9
-PLACE_COLUMNS = ("site", "lat_deg", "lon_deg", "alt_m")  # where a stop is: the geometry, not a logged covariate
 PROGRESS_STOPS = 2000  # from this many stops a model choice takes seconds: its rounds are logged at INFO
-
-
-@dataclass(frozen=True)
-class Step:
-    """One model of the loop: its terms, the stops it leaves out, its fit and why it was taken."""
-
-    added: str
-    reason: str
-    terms: tuple[str, ...]
-    excluded: tuple[int, ...]
-    table: StopTable
-    fit: full.Fit
-    loo_rms_mps2: float | None = None
-
-
-@dataclass(frozen=True)
-class Loop:
-    """The sequence of models, the candidates turned down, and the final residual analysis."""
-
-    steps: list[Step]
-    declined: list[dict[str, Any]]
-    findings: list[Finding]
-    doubts: list[str] = field(default_factory=list)  # why the chosen model may be the wrong explanation
-
-    @property
-    def final(self) -> Step:
-        return self.steps[-1]
-
-    @property
-    def unexplained(self) -> list[Finding]:
-        """The findings the family's test rejects (Holm at :data:`mountcal.core.pvalues.FAMILY_ALPHA`)."""
-        return unexplained(self.findings)
 
 
 def candidates(table: StopTable, terms: tuple[str, ...], gravity_known: bool) -> list[str]:
@@ -150,7 +112,7 @@ def close_the_loop(
     declined: list[dict[str, Any]] = []
     if fixed is not None:
         if fixed != BASE:
-            _refuse_inseparable(steps[-1], fixed, g_mps2)
+            refuse_inseparable(steps[-1], fixed, g_mps2)
             f = full.fit(table, fixed, g_mps2, base.state)
             steps.append(Step("fixed", "terms fixed by the model asked for", fixed, (), table, f))
         return _finish(steps, declined)
@@ -240,10 +202,10 @@ def _next_step(
         effect = registry.get(name)
         terms = (*cur.terms, *(r for r in effect.requires if r not in cur.terms), name)
         covered = effect.covered_by()
-        if covered is not None and _covers(cur, covered[0], names, g):
+        if covered is not None and covers(cur, covered[0], names, g):
             _decline(declined, name, covered[1], len(cur.excluded))
             continue
-        problem = _inseparable(cur, terms, g)
+        problem = inseparable(cur, terms, g)
         if problem:
             _decline(declined, name, problem, len(cur.excluded))
             continue
@@ -259,7 +221,7 @@ def _next_step(
         if odd:
             _decline(declined, name, odd, len(cur.excluded))
             continue
-        alias = _heading_alias(cur, f, name)
+        alias = heading_alias(cur, f, name)
         if alias:
             _decline(declined, name, alias, len(cur.excluded))
             continue
@@ -313,7 +275,7 @@ def _named_by_residual(
     slow drift (:func:`mountcal.loop.diagnose.competing_explanations`). It is taken when it explains the stops better
     for its number of parameters than each of them and its likelihood ratio passes at ``alpha``; otherwise the
     finding stays, with the better explanation in the reason. A covariate that itself follows the headings
-    (:func:`heading_share`) is left to the guard of :func:`_heading_alias`: no stop data can tell it from a
+    (:func:`heading_share`) is left to the guard of :func:`heading_alias`: no stop data can tell it from a
     heading pattern.
     """
     covariates = sorted(
@@ -329,7 +291,7 @@ def _named_by_residual(
         effect = registry.get(name)
         terms = (*cur.terms, *(r for r in effect.requires if r not in cur.terms), name)
         added = sum(registry.get(t).extra(cur.table) for t in terms if t not in cur.terms)
-        if _inseparable(cur, terms, g) is not None or cur.fit.dof - added < 1:
+        if inseparable(cur, terms, g) is not None or cur.fit.dof - added < 1:
             continue
         try:
             f = full.fit(cur.table, terms, g, cur.fit.state)
@@ -539,7 +501,7 @@ def _among_exclusive(best: Step, rivals: list[Step], g: float, declined: list[di
         for r in rivals
         if r.added not in NOISE_MODEL_STEPS
         and _aic(r.fit) < _aic(best.fit)
-        and _inseparable(best, (*best.terms, *(t for t in r.terms if t not in best.terms)), g) is not None
+        and inseparable(best, (*best.terms, *(t for t in r.terms if t not in best.terms)), g) is not None
     ]
     if not exclusive:
         return best
@@ -560,93 +522,6 @@ def _aic(fit: full.Fit) -> float:
     n = fit.residual_s.size
     fit_term = fit.chi2 if fit.noise_known else n * np.log(fit.chi2 / n)
     return float(fit_term + 2 * len(fit.names))
-
-
-def _covers(cur: Step, term: str, names: list[str], g: float) -> bool:
-    """Is ``term`` in the model, or a candidate the stops separate?"""
-    return term in cur.terms or (term in names and _inseparable(cur, (*cur.terms, term), g) is None)
-
-
-def _inseparable(cur: Step, terms: tuple[str, ...], g: float) -> str | None:
-    """Why the data cannot separate the new term from the model, or None when they can."""
-    info, names = full.information(cur.table, cur.fit.state, terms, g)
-    null = full.null_space(info, normalised=True)
-    if null.size:
-        params = {e.name: e.parameters(cur.table) for e in registry.chain(terms)}
-        groups = sorted({registry.owner(names[j], params) for j in np.flatnonzero(np.abs(null).max(axis=1) > 0.1)})
-        return f"confounded with {', '.join(g for g in groups if g != terms[-1]) or 'itself'} in these stops"
-    cov = np.linalg.inv(info) * cur.fit.noise_scale**2
-    tilt = float(np.degrees(np.sqrt(max(cov[0, 0], cov[1, 1]))))
-    if tilt > MAX_TILT_SIGMA_DEG:
-        return f"not separable from the tilt: with it the tilt 1σ would be {tilt:.3g}°"
-    return None
-
-
-def _heading_alias(cur: Step, f: full.Fit, name: str) -> str | None:
-    """Why a term driven by a logged covariate (temperature, …) is no explanation: what it explains is a heading
-    pattern; or None.
-
-    Its columns are tested beyond the current model, the terms it brings and the low heading harmonics
-    (:data:`ALIAS_HARMONICS`, per axis): when the stops visited the headings in an order that the covariate
-    follows (the sensor warming up around the circle and cooling on the way back), the term would take any
-    heading-dependent effect as its own and leave nothing for the residual tests. It must then explain
-    something at :data:`ALIAS_ALPHA` that no heading pattern does. Terms of the geometry (scale, slopes) predict their
-    heading pattern from the rotation; the Fisher rank tests those.
-    """
-    effect = registry.get(name)
-    beta = cur.table.beta_rad if cur.table.beta_rad is not None else cur.fit.state.beta_rad
-    if not any(c not in PLACE_COLUMNS for c in effect.needs) or beta is None or beta.size != len(cur.table):
-        return None
-    if heading_share(cur.table, effect, beta) < ALIAS_SHARE:
-        return None  # the covariate is no heading pattern itself: it cannot take one up whole
-    model = full.StaticModel(cur.table, f.terms, f.state.g_mps2)
-    jac = model.jacobian(f.state)
-    own = list(f.owned[name])
-    rest = [i for i in range(jac.shape[1]) if i not in own]
-    harmonics = heading_harmonics(model.whiten, beta, ALIAS_HARMONICS)
-    if harmonics is None:
-        return None
-    r = full.StaticModel(cur.table, cur.terms, f.state.g_mps2).residual(cur.fit.state)
-    finding = projection_test(r, jac[:, own], np.hstack([jac[:, rest], harmonics]), name, cur.fit)
-    if finding.p_value is None or finding.p_value < ALIAS_ALPHA:
-        return None
-    return (
-        f"what it would explain is a heading pattern: beyond the 1β and 2β harmonics of heading it explains "
-        f"Δχ² = {finding.statistic:.3g} on {finding.dof} (p = {finding.p_value:.3g} ≥ {ALIAS_ALPHA:g}); its "
-        f"{', '.join(effect.needs)} follows the "
-        "order the headings were visited in — visit them in another order (or the circle twice) to separate it"
-    )
-
-
-def heading_share(table: StopTable, effect: registry.Effect, beta: FloatArray) -> float:
-    """The share of the variance of the effect's logged covariates (temperature) that the heading harmonics
-    (:data:`ALIAS_HARMONICS`) explain: 1 when the covariate follows the order the headings were visited in
-    (it rises and falls once around the circle), about 0.76 for a ramp over one circle, near 0 when the
-    headings were visited in another order."""
-    h = np.column_stack(
-        [np.ones(beta.size)] + [f(k * beta) for k in ALIAS_HARMONICS if 2 * k < beta.size for f in (np.cos, np.sin)]
-    )
-    share = 0.0
-    for column in (c for c in effect.needs if c not in PLACE_COLUMNS):
-        x = getattr(table, column, None)
-        if x is None or np.ptp(x) == 0:
-            continue
-        x = np.asarray(x, dtype=float) - np.mean(x)
-        fitted = h @ np.linalg.lstsq(h, x, rcond=None)[0]
-        share = max(share, float(fitted @ fitted / (x @ x)))
-    return share
-
-
-def _refuse_inseparable(base: Step, fixed: tuple[str, ...], g: float) -> None:
-    """A fixed model whose terms these stops cannot separate is refused, naming the first such term."""
-    for i in range(len(BASE), len(fixed)):
-        problem = _inseparable(base, fixed[: i + 1], g)
-        if problem:
-            raise NotEnoughInformation(
-                f"{base.table.source}: the term {fixed[i]} of {option('model', ','.join(fixed))} cannot be fitted: "
-                f"it is {problem}. Leave it out of {option('model')} (or use {option('model', 'auto')}, which adds "
-                "only what the stops separate)."
-            )
 
 
 def _loo_rms(step: Step) -> float:

@@ -42,7 +42,8 @@ from mountcal.io.input_conventions import parse_axes
 from mountcal.io.logs import stated
 from mountcal.io.reader import LogOptions
 from mountcal.io.samples import Samples
-from mountcal.stops.detect import StillPeriod, StopDetection, detect_stops, tabulate
+from mountcal.stops.detect import StillPeriod, StopDetection, detect_stops
+from mountcal.stops.headings import tabulate
 from mountcal.stops.table import StopTable, write_stop_table
 
 CANDIDATES_DEG = tuple(float(b) for b in range(0, 360, 5))

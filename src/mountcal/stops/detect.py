@@ -17,17 +17,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-import pandas as pd
 
 from mountcal.core.conventions import FloatArray
-from mountcal.core.errors import NotEnoughInformation
 from mountcal.core.option_names import option
-from mountcal.core.result import Convention
-from mountcal.io.input_conventions import HeadingUnit, compass_to_beta, headings_in_degrees, uphill_azimuth
 from mountcal.io.samples import Channel, Samples
 from mountcal.io.timestamps import increasing_times, time_ordered
 from mountcal.stops.near_misses import Criterion, NearMiss, near_misses
-from mountcal.stops.table import Headings, StopTable, check_degrees, checked
 
 BATCHES = 10  # batch means for the variance of a stop mean
 BLOCKS_PER_WINDOW = 40
@@ -176,13 +171,13 @@ def _stillness(
     starts = np.arange(0, n, block)
     count = np.diff(np.append(starts, n)).astype(float)[:, None]
     w = min(max(round(cfg.window_s * rate / block), 1), starts.size)  # a log shorter than the window: one window
-    mc = _moving_mean(count, w)
+    mc = moving_mean(count, w)
     judged = _judged_blocks(t, starts, count[:, 0], w, cfg.window_s)
 
     def moving(x: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Moving mean and std of each column over the window, per block."""
-        m1 = _moving_mean(np.add.reduceat(x, starts, axis=0), w) / mc
-        m2 = _moving_mean(np.add.reduceat(x * x, starts, axis=0), w) / mc
+        m1 = moving_mean(np.add.reduceat(x, starts, axis=0), w) / mc
+        m2 = moving_mean(np.add.reduceat(x * x, starts, axis=0), w) / mc
         var = m2 - m1**2
         return m1, np.sqrt(np.where(var > 1e-12 * (1.0 + m1**2), var, 0.0))  # below: rounding of m2 − m1²
 
@@ -228,7 +223,7 @@ def _stillness(
 
 
 def _judged_blocks(t: FloatArray, starts: np.ndarray, count: FloatArray, w: int, window_s: float) -> np.ndarray:
-    """Blocks whose moving window (the ``w`` blocks :func:`_moving_mean` averages for it) holds at
+    """Blocks whose moving window (the ``w`` blocks :func:`moving_mean` averages for it) holds at
     least MIN_WINDOW_SAMPLES samples within MAX_WINDOW_SPAN window lengths of time.
 
     A window of one or two samples has no spread, and one across a gap in the log (a dropout, or
@@ -361,7 +356,7 @@ def _steady_heading(
         return [span]
     ht = heading.t_s[inside]
     k = max(1, min(round(window_s / float(np.median(np.diff(ht)))), ht.size))
-    h = _moving_mean(np.degrees(np.unwrap(np.radians(heading.value[inside]))), k)
+    h = moving_mean(np.degrees(np.unwrap(np.radians(heading.value[inside]))), k)
     if np.ptp(h) <= limit_deg:
         return [span]
     pieces = []
@@ -373,51 +368,6 @@ def _steady_heading(
         pieces.append((lo if a == 0 else float(ht[a]), hi if b == h.size else float(ht[b - 1])))
         a = b
     return pieces
-
-
-def stop_table(
-    stops: list[Stop],
-    beta_deg: FloatArray | None = None,
-    headings: Headings = "uphill",
-    source: str = "log",
-    conventions: tuple[Convention, ...] = (),
-) -> StopTable:
-    """The stop table of detected stops (checked like a table read from a file).
-
-    ``std_s`` holds the standard deviations of the samples of each stop (what a user sees in the
-    data); ``cov_s`` the full covariance of each stop mean the fit uses: correlated vibration and
-    the quantisation floor make it larger than ``s²/n``, and vibration correlates the axes.
-    """
-    if not stops:
-        raise NotEnoughInformation(f"{source}: no stops to tabulate")
-
-    def channel(key: str) -> FloatArray | None:
-        values = np.array([s.channels.get(key, np.nan) for s in stops], dtype=float)
-        return values if np.any(np.isfinite(values)) else None
-
-    return checked(
-        StopTable(
-            acc_s=np.array([s.acc_mean_s for s in stops], dtype=float),
-            beta_rad=None if beta_deg is None else np.radians(np.asarray(beta_deg, dtype=float) % 360.0),
-            headings=headings if beta_deg is not None else "none",
-            cov_s=np.array([s.acc_cov_mean_s for s in stops], dtype=float),
-            temperature_c=channel("temperature_c"),
-            t_s=np.array([s.t_start_s for s in stops], dtype=float),
-            lat_deg=channel("lat_deg"),
-            alt_m=channel("alt_m"),
-            lon_deg=channel("lon_deg"),
-            std_s=np.array([s.acc_std_s for s in stops], dtype=float),
-            count=np.array([s.n for s in stops], dtype=float),
-            duration_s=np.array([s.duration_s for s in stops], dtype=float),
-            heading_deg=channel("heading_deg"),
-            source=source,
-            conventions=conventions,
-        ),
-        min_stops=1,  # a log may hold fewer stops than a fit needs: calibrate says so
-    )
-
-
-beta_from_heading = compass_to_beta  # β (counter-clockwise from uphill) from compass headings (clockwise from north)
 
 
 def _stop_stats(samples: Samples, sel: slice, lsb: FloatArray) -> Stop:
@@ -494,7 +444,7 @@ def _cov_of_mean(acc: FloatArray, lsb: FloatArray) -> FloatArray:
     return cov
 
 
-def _moving_mean(x: FloatArray, w: int) -> FloatArray:
+def moving_mean(x: FloatArray, w: int) -> FloatArray:
     """Centred moving mean over ``w`` rows, the edges held; ``w`` is at most the number of rows."""
     w = max(min(w, x.shape[0]), 1)
     c = np.cumsum(np.concatenate([np.zeros((1, *x.shape[1:])), x]), axis=0)
@@ -514,155 +464,3 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     """[start, stop) index pairs of the true runs of a boolean mask."""
     d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
     return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist(), strict=True))
-
-
-@dataclass(frozen=True)
-class StopTableFromLog:
-    """The stop table of a log and how its headings were found."""
-
-    table: StopTable
-    heading_source: str
-    unmatched_protocol_rows: int = 0
-    notes: tuple[str, ...] = ()  # the thresholds used and what detection changed or dropped
-    dropped: tuple[StillPeriod, ...] = ()  # still periods not kept as a stop
-    near_misses: tuple[NearMiss, ...] = ()  # parked periods that nearly became stops
-
-
-def near_miss_advice(missed: tuple[NearMiss, ...] | list[NearMiss]) -> str:
-    """A sentence for a refusal: the parked periods that nearly became stops, and the option that keeps each."""
-    if not missed:
-        return ""
-    many = len(missed) > 1
-    return (
-        f" The log holds {len(missed)} parked period{'s' if many else ''} that nearly became "
-        f"{'stops' if many else 'a stop'}: " + "; ".join(m.line() for m in missed) + "."
-    )
-
-
-def read_protocol(path: str, heading_unit: HeadingUnit | None = None) -> pd.DataFrame:
-    """A protocol sheet: CSV ``t_start_s, t_end_s, beta_deg`` (times on the log's clock; β in degrees
-    unless ``heading_unit`` says radians, checked). ``attrs["conventions"]`` says how β's unit is known."""
-    from mountcal.core.errors import InputError
-    from mountcal.core.paths import input_file
-    from mountcal.core.ranges import check_values
-    from mountcal.io.inputs import csv_columns
-
-    checked = input_file(path, "a protocol sheet CSV")  # not a FIFO or a device: reading ends
-    csv_columns(checked, path)  # a header of a million columns is refused before pandas parses it
-    try:
-        df = pd.read_csv(path, comment="#", skipinitialspace=True)
-    except (OSError, ValueError) as err:
-        raise InputError(
-            path,
-            "a protocol sheet CSV (t_start_s, t_end_s, beta_deg)",
-            f"an unreadable file ({err})",
-            "Check the path and the format.",
-        ) from err
-    missing = [c for c in ("t_start_s", "t_end_s", "beta_deg") if c not in df.columns]
-    values = None if missing else df[["t_start_s", "t_end_s", "beta_deg"]].apply(pd.to_numeric, errors="coerce")
-    if missing or values is None or not np.all(np.isfinite(values.to_numpy())):
-        raise InputError(
-            path,
-            "columns t_start_s, t_end_s, beta_deg with numbers in every row",
-            f"missing columns {missing}" if missing else "empty or non-numeric cells",
-            "Write one row per stop.",
-        )
-    check_values("time_s", values[["t_start_s", "t_end_s"]].to_numpy(), path, "t_start_s, t_end_s")
-    values["beta_deg"], unit = headings_in_degrees(values["beta_deg"].to_numpy(dtype=float), heading_unit, path)
-    check_degrees(values["beta_deg"].to_numpy(), unit, path, "beta_deg")
-    values.attrs["conventions"] = (
-        Convention("heading_reference", "uphill", "stated", f"the protocol sheet ({option('protocol')})"),
-        unit,
-    )
-    return values
-
-
-def tabulate(
-    samples: Samples,
-    cfg: StopDetection | None = None,
-    protocol: pd.DataFrame | None = None,
-    uphill_azimuth_deg: float | None = None,
-) -> StopTableFromLog:
-    """Detect the stops of a log and attach their headings β.
-
-    β comes from the protocol sheet when given; else from the log's heading channel and the
-    slope's uphill azimuth; a heading channel alone gives relative headings; nothing gives none.
-    """
-    where = samples.source or "log"
-    if protocol is not None:
-        windows = list(zip(protocol["t_start_s"], protocol["t_end_s"], strict=True))
-        search = find_stops(samples, cfg, windows=windows)
-        stops = search.stops
-        kept = [i for i, (lo, hi) in enumerate(windows) if any(lo <= s.t_start_s and s.t_end_s <= hi for s in stops)]
-        if not stops:
-            raise NotEnoughInformation(
-                f"{where}: no parked period found inside any protocol interval. Check that "
-                f"the sheet's times are on the log's clock, or {relax()}. Used: {'; '.join(search.lines())}."
-            )
-        beta = protocol["beta_deg"].to_numpy()[kept]
-        stated = (*samples.conventions, *protocol.attrs.get("conventions", ()))
-        return StopTableFromLog(
-            stop_table(stops, beta, "uphill", where, stated),
-            "protocol sheet",
-            len(windows) - len(kept),
-            tuple(search.lines()),
-            search.dropped,
-        )
-    search = find_stops(samples, cfg)
-    stops = search.stops
-    notes = tuple(search.lines())
-    if not stops:
-        raise NotEnoughInformation(
-            f"{where}: no parked period found (no still run ≥ {(cfg or StopDetection()).min_duration_s:g} s)."
-            + (near_miss_advice(search.near_misses) or f" Check that the log holds parked periods, or {relax()}.")
-            + f" Used: {'; '.join(search.thresholds.lines() + [f'{k}: {v}' for k, v in search.counts.items()])}."
-        )
-    heading = np.array([s.channels.get("heading_deg", np.nan) for s in stops])
-    if np.all(np.isfinite(heading)):
-        if uphill_azimuth_deg is not None:
-            stated = uphill_azimuth(uphill_azimuth_deg, "the log's heading channel")
-            return StopTableFromLog(
-                stop_table(
-                    stops,
-                    beta_from_heading(heading, uphill_azimuth_deg),
-                    "uphill",
-                    where,
-                    (*samples.conventions, *stated),
-                ),
-                f"heading channel with uphill azimuth {uphill_azimuth_deg:g}°",
-                notes=notes,
-                dropped=search.dropped,
-                near_misses=search.near_misses,
-            )
-        inferred = Convention(
-            "heading_reference",
-            "relative",
-            "inferred",
-            f"the log's heading channel without the slope's uphill azimuth ({option('uphill_azimuth')} or "
-            f"{option('protocol')} would make the headings uphill)",
-        )
-        return StopTableFromLog(
-            stop_table(stops, beta_from_heading(heading, 0.0), "relative", where, (*samples.conventions, inferred)),
-            "heading channel without the uphill azimuth (relative)",
-            notes=notes,
-            dropped=search.dropped,
-            near_misses=search.near_misses,
-        )
-    none = Convention("heading_reference", "none", "inferred", "no protocol sheet and no heading channel in the log")
-    return StopTableFromLog(
-        stop_table(stops, None, "none", where, (*samples.conventions, none)),
-        "none",
-        notes=notes,
-        dropped=search.dropped,
-        near_misses=search.near_misses,
-    )
-
-
-def relax() -> str:
-    """Advice naming the options that change stop detection."""
-    o = option
-    return (
-        f"relax the stillness thresholds: {o('max_acc_std')} (m/s²), {o('max_gyro_std')} and {o('max_gyro_rate')} "
-        f"(rad/s), {o('max_speed')} (m/s), {o('min_stop')}, {o('trim')}, {o('still_window')}, "
-        f"{o('max_heading_wander')} (deg)"
-    )

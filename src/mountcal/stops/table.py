@@ -3,7 +3,7 @@
 In memory it is a :class:`StopTable` of SI arrays with the full 3×3 covariance of each stop mean;
 on disk (only there) CSV or Parquet with the columns named in :data:`COLUMNS`. Reading validates
 everything a fit needs and says what is wrong; :func:`checked` applies the same checks to a table
-built in memory (:func:`mountcal.stops.detect.tabulate`).
+built in memory (:func:`mountcal.stops.headings.tabulate`).
 
 The noise columns: ``sx, sy, sz`` are the standard deviations of each stop's samples and ``n`` their
 count, so ``s²/n`` is the variance of the mean for independent, unquantised samples.
@@ -31,7 +31,7 @@ from mountcal.core.option_names import option
 from mountcal.core.output_suffix import check_output_suffix
 from mountcal.core.paths import read_input_bytes
 from mountcal.core.ranges import check_values
-from mountcal.core.result import Convention, StopsFingerprint
+from mountcal.core.result import Convention
 from mountcal.io.input_conventions import (
     HEADING_REF,
     AxisMap,
@@ -502,41 +502,6 @@ def _with_correlations(cov: FloatArray | None, corr: FloatArray, df: pd.DataFram
             "Fix those rows, or drop the rxy, rxz, ryz columns.",
         )
     return out
-
-
-def fingerprint(table: StopTable) -> StopsFingerprint:
-    """Order-sensitive sums of the stop means and headings: they identify the table a result was
-    fitted to. Not a file hash: a log's stop table never was a file, and CSV, Parquet or a
-    rewrite of the same stops must match; :func:`same_stops` compares them to 1e-9 relative."""
-    n = len(table)
-    rank = np.arange(1, n + 1, dtype=float)[:, None] / max(n, 1)
-    acc, ranked = table.acc_s.sum(axis=0), (rank * table.acc_s).sum(axis=0)
-    return StopsFingerprint(
-        n=n,
-        acc_sum_mps2=(float(acc[0]), float(acc[1]), float(acc[2])),
-        acc_ranked_sum_mps2=(float(ranked[0]), float(ranked[1]), float(ranked[2])),
-        beta_ranked_sum_deg=None if table.beta_rad is None else float((rank[:, 0] * np.degrees(table.beta_rad)).sum()),
-    )
-
-
-def same_stops(stored: StopsFingerprint, table: StopTable) -> bool:
-    """Whether ``table`` is the table of the :func:`fingerprint` ``stored`` (1e-9 relative)."""
-    now = fingerprint(table)
-    if stored.n != now.n or (stored.beta_ranked_sum_deg is None) != (now.beta_ranked_sum_deg is None):
-        return False
-    atol = 1e-9 * max(now.n, 1)
-    beta_ok = (
-        now.beta_ranked_sum_deg is None
-        or stored.beta_ranked_sum_deg is None
-        or abs(now.beta_ranked_sum_deg - stored.beta_ranked_sum_deg) <= 360.0 * atol
-    )
-    return beta_ok and all(
-        np.allclose(stored_sum, now_sum, rtol=0, atol=G_N * atol)
-        for stored_sum, now_sum in (
-            (stored.acc_sum_mps2, now.acc_sum_mps2),
-            (stored.acc_ranked_sum_mps2, now.acc_ranked_sum_mps2),
-        )
-    )
 
 
 def write_stop_table(table: StopTable, path: str | Path) -> None:

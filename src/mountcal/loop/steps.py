@@ -1,0 +1,47 @@
+"""A model choice's steps: each model the loop fitted (:class:`Step`) and the whole sequence with the candidates
+turned down and the final residual analysis (:class:`Loop`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from mountcal.core.findings import Finding
+from mountcal.core.pvalues import unexplained
+from mountcal.estimate import full
+from mountcal.stops.table import StopTable
+
+
+@dataclass(frozen=True)
+class Step:
+    """One model of the loop: its terms, the stops it leaves out, its fit and why it was taken."""
+
+    added: str
+    reason: str
+    terms: tuple[str, ...]
+    excluded: tuple[int, ...]
+    table: StopTable
+    fit: full.Fit
+    loo_rms_mps2: float | None = None
+
+
+@dataclass(frozen=True)
+class Loop:
+    """The sequence of models, the candidates turned down, and the final residual analysis."""
+
+    steps: list[Step]
+    declined: list[dict[str, Any]]
+    findings: list[Finding]
+    doubts: list[str] = field(default_factory=list)  # why the chosen model may be the wrong explanation
+
+    @property
+    def final(self) -> Step:
+        return self.steps[-1]
+
+    @property
+    def unexplained(self) -> list[Finding]:
+        """The findings the family's test rejects (Holm at :data:`mountcal.core.pvalues.FAMILY_ALPHA`)."""
+        return unexplained(self.findings)
+
+
+__all__ = ["Loop", "Step"]
