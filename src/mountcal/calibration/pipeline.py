@@ -3,7 +3,7 @@
 :func:`calibrate_log` reads the log once, tries its parked stops (stops → headings → fit,
 :func:`mountcal.calibration.fit.calibrate`) and yaw from driving (:mod:`mountcal.estimate.driving`), and
 returns the stops' result, the driving result, or the stops' result with the driving's yaw folded
-in (:func:`mountcal.estimate.driving.combine`), saying which and why the others were not used.
+in (:func:`mountcal.calibration.with_driving.combine`), saying which and why the others were not used.
 """
 
 from __future__ import annotations
