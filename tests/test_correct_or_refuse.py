@@ -10,10 +10,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from mountcal.loop import terms
 from mountcal.calibration.fit import Options, calibrate
 from mountcal.cli import main
 from mountcal.core.errors import InputError, NotEnoughInformation
+from mountcal.loop import terms
 from mountcal.simulate.stops import simulate_stops
 from mountcal.stops.table import read_stop_table, write_stop_table
 
@@ -133,7 +133,8 @@ def test_separable_fixed_terms_still_fit() -> None:
 
 
 def test_the_terms_are_listed_one_way_everywhere(capsys: pytest.CaptureFixture[str]) -> None:
-    """The parse error and docs/commands.md come from mountcal.loop.terms; the help (no numerical imports) points there."""
+    """The parse error and docs/commands.md come from mountcal.loop.terms; the help (no numerical imports) points
+    there."""
     with pytest.raises(SystemExit):
         main(["calibrate", "--help"])
     help_text = " ".join(capsys.readouterr().out.split())
