@@ -1,61 +1,89 @@
-"""A calibration as text for a person: angles ± 1σ, slope, model, residual, what could not be determined."""
+"""A calibration as text for a person: the answer in one line, then what supports it, then the notes.
+
+The answer line (:func:`answer`) holds the four angles, each with its 1σ (an angle the data cannot
+determine is ``undetermined``, never a number without its σ), and ``confident`` or ``NOT CONFIDENT:``
+with the main reason. The supporting lines and the notes follow (:func:`summary_parts`); nothing is
+said twice (the reasons for doubt are in the notes, not repeated after them).
+"""
 
 from __future__ import annotations
 
 from mountcal.core.result import Calibration
 
+ANGLES = ("roll", "pitch", "yaw", "slope")
 
-def summary(cal: Calibration) -> str:
-    """A readable summary: angles ± 1σ, slope, model, residual, what could not be determined."""
 
-    def pm(value: float | None, sigma: float | None, unit: str = "°", fmt: str = ".3f") -> str:
-        if value is None:
-            return "not determined"
-        return f"{value:{fmt}}{unit} ± {sigma:{fmt}}{unit}" if sigma is not None else f"{value:{fmt}}{unit}"
+def angle(name: str, value: float | None, sigma: float | None) -> str:
+    """``roll 5.001 ± 0.599°``, or ``roll undetermined`` when the value or its σ is missing."""
+    if value is None or sigma is None:
+        return f"{name} undetermined"
+    return f"{name} {value:.3f} ± {sigma:.3f}°"
 
+
+def main_reason(cal: Calibration) -> str:
+    """Why a result is not confident, in a few words: the first structure left unexplained or check failed."""
+    for u in cal.unexplained:
+        return f"{u.what} ({u.size})"
+    for c in cal.checks:
+        if c.passed is False:
+            return f"plausibility check {c.name} failed"
+    doubts = [n for n in cal.notes if "not confident" in n]
+    return doubts[0].split(";")[0] if doubts else "see the notes"
+
+
+def answer(cal: Calibration) -> str:
+    """The answer in one line: each angle ± 1σ (or undetermined), and whether it is confident."""
+    angles = "  ".join(angle(a, getattr(cal, f"{a}_deg"), getattr(cal, f"{a}_sigma_deg")) for a in ANGLES)
+    return f"{angles}  {'confident' if cal.confident else 'NOT CONFIDENT: ' + main_reason(cal)}"
+
+
+def summary_parts(cal: Calibration) -> tuple[str, list[str], list[str]]:
+    """The answer line, the lines that support it (method, model, σ split, fit, gravity, inputs, checks), and
+    the notes."""
     sel = cal.model_selection
     how = "fixed, not chosen" if sel.mode == "fixed" else "auto: " + " → ".join(sel.steps)
     how = how if cal.method == "full" else cal.method  # "paper", or "driving" when there were no stops
-    lines = [
-        f"mountcal — {cal.method} method, model: {', '.join(cal.model)} ({how})",
-        f"  roll   {pm(cal.roll_deg, cal.roll_sigma_deg)}",
-        f"  pitch  {pm(cal.pitch_deg, cal.pitch_sigma_deg)}",
-        f"  yaw    {pm(cal.yaw_deg, cal.yaw_sigma_deg)}",
-        f"  slope  {pm(cal.slope_deg, cal.slope_sigma_deg)}",
-    ]
+    lines = [f"{cal.method} method, model: {', '.join(cal.model)} ({how}); uncertainties are 1σ"]
     if cal.systematic is not None:
         from mountcal.loop.systematic import summary_line
 
-        lines.append("  " + summary_line(cal.systematic))
+        lines.append(summary_line(cal.systematic))
     if cal.bias_mps2 is not None and cal.bias_sigma_mps2 is not None:
         b = ", ".join(f"{v:+.4f} ± {s:.4f}" for v, s in zip(cal.bias_mps2, cal.bias_sigma_mps2, strict=True))
-        lines.append(f"  bias   ({b}) m/s² (sensor x, y, z)")
+        lines.append(f"bias   ({b}) m/s² (sensor x, y, z)")
     fit = cal.fit
     chi = f", χ² = {fit.chi2:.1f} on {fit.dof} dof" if fit.chi2 is not None else ""
     if fit.p_value is not None:
         chi += f" (p = {fit.p_value:.2g})"
-    lines.append(f"  residual RMS {cal.residual_rms_mps2:.4g} m/s²{chi}")
-    lines.append(f"  gravity {cal.gravity_mps2:.5f} m/s² ({cal.gravity_source})")
+    lines.append(f"residual RMS {cal.residual_rms_mps2:.4g} m/s²{chi}")
+    lines.append(f"gravity {cal.gravity_mps2:.5f} m/s² ({cal.gravity_source})")
     if cal.yaw_reason:
-        lines.append(f"  yaw not determined: {cal.yaw_reason}")
+        lines.append(f"yaw undetermined: {cal.yaw_reason}")
     if cal.slope_deg is None:
-        lines.append("  slope not determined (see notes)")
+        lines.append("slope undetermined (see the notes)")
     known = {"stated": "stated by", "inferred": "inferred from", "default": "assumed:"}
-    lines += [f"  input {c.name}: {c.value} ({known[c.how]} {c.by})" for c in cal.provenance.conventions]
+    lines += [
+        f"input {c.name}: {c.value} ({known[c.how]} {c.by})"
+        for c in cal.provenance.conventions
+        if c.name != "gravity"  # the gravity line above says it
+    ]
     if cal.checks:
         by = {True: "passed", False: "FAILED", None: "not tested"}
         groups = {v: [c.name for c in cal.checks if c.passed is k] for k, v in by.items()}
-        lines.append("  checks " + "; ".join(f"{k}: {', '.join(v)}" for k, v in groups.items() if v))
-    lines += [f"  note: {n}" for n in cal.notes]
+        lines.append("checks " + "; ".join(f"{k}: {', '.join(v)}" for k, v in groups.items() if v))
     if cal.provenance.input_kind:
-        lines.append(f"  input: {cal.provenance.input_kind}")
-    lines += [f"  input file: {line}" for line in cal.provenance.incomplete_inputs]
+        lines.append(f"input: {cal.provenance.input_kind}")
+    lines += [f"input file: {line}" for line in cal.provenance.incomplete_inputs]
+    notes = list(dict.fromkeys(cal.notes))  # each once
     if not cal.confident:
-        failed = [f"{c.name} ({c.reason})" for c in cal.checks if c.passed is False]
-        found = "; ".join([*(f"{u.what} ({u.size})" for u in cal.unexplained), *failed]) or "see the notes"
-        lines.append(f"  NOT CONFIDENT: {found}; rotating with it warns, requiring a confident result refuses it")
-    lines.append("  (uncertainties are 1σ)")
-    return "\n".join(lines)
+        notes.append("not confident: rotating with it warns, requiring a confident result refuses it")
+    return answer(cal), lines, notes
 
 
-__all__ = ["summary"]
+def summary(cal: Calibration) -> str:
+    """A readable summary: the answer line, what supports it, the notes (:func:`summary_parts`)."""
+    first, lines, notes = summary_parts(cal)
+    return "\n".join([first, *(f"  {line}" for line in lines), *(f"  note: {n}" for n in notes)])
+
+
+__all__ = ["answer", "summary", "summary_parts"]

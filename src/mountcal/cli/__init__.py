@@ -4,10 +4,12 @@ Each command module has ``add_parser(subparsers)`` and ``run(args) -> int``. Bui
 imports no numerical library (``mountcal --help`` and ``mountcal CMD --help`` stay fast); a
 command imports what it needs when it runs.
 
-Conventions: results go to the file named by ``-o`` or to stdout (``-o -``, ``--json``), written
-through :func:`mountcal.cli.results.result_stream`; status lines, warnings, progress bars and
-whatever a library prints go to stderr (:mod:`mountcal.cli.results`); ``-q`` keeps only warnings
-and errors, ``-v`` adds detail.
+Conventions (:data:`mountcal.cli.options.QUIET_RULE`, in every ``--help``): results go to the file
+named by ``-o`` or, only when asked, to stdout (``-o -``, ``--json``: one document), written through
+:func:`mountcal.cli.results.result_stream`; every command accepts ``--json``. Everything else goes to
+stderr: the summary (:func:`mountcal.cli.results.say`: the answer in one line, then what supports it,
+then notes, each once), status lines, warnings, progress bars and whatever a library prints. ``-q``
+keeps the answer line, warnings and errors, ``-qq`` warnings and errors; ``-v`` adds detail.
 """
 
 from __future__ import annotations
@@ -18,9 +20,10 @@ import logging
 import os
 import re
 import sys
+import textwrap
 from collections.abc import Sequence
 
-from mountcal.cli.options import EXIT_CODES, configure_logging
+from mountcal.cli.options import EXIT_CODES, QUIET_RULE, configure_logging
 from mountcal.cli.path_options import check_paths, command_parser
 from mountcal.cli.results import results_only
 from mountcal.core import budget
@@ -125,7 +128,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="mountcal",
         description="How an accelerometer or IMU is mounted in a vehicle (roll, pitch, yaw, each with its 1σ).",
-        epilog=epilog + "\n\nConventions (frames, angles, signs): docs/conventions.md",
+        epilog=epilog
+        + "\n\n"
+        + textwrap.fill(QUIET_RULE, 100)
+        + "\n\nConventions (frames, angles, signs): docs/conventions.md",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--version", action=_Version, nargs=0, help="show the version and exit")

@@ -19,7 +19,7 @@ from mountcal.cli.options import (
     working,
 )
 from mountcal.cli.path_options import add_path
-from mountcal.cli.results import result_stream
+from mountcal.cli.results import result_stream, say
 from mountcal.core.ranges import add_quantity
 from mountcal.core.terminal import safe
 
@@ -31,7 +31,7 @@ def add_parser(sub: Any) -> None:
         sub,
         "calibrate",
         "estimate the mounting from a stop table or a log",
-        json_help="write the result JSON on stdout (the summary goes to stderr)",
+        json_help="write the result JSON on stdout",
         inputs=("STOPS|LOG", "stop table (beta_deg, ax, ay, az, ...; '-': CSV on stdin) or log file(s)"),
         reads={"what": "a stop table or log", "folders": True, "stdio": True},
         output="result JSON to write ('-': stdout)",
@@ -65,7 +65,7 @@ def add_parser(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from mountcal.calibration.pipeline import calibrate_input, describe
-    from mountcal.calibration.summary import summary
+    from mountcal.calibration.summary import summary_parts
     from mountcal.core.atomic import atomic_path
     from mountcal.core.errors import InputError
 
@@ -82,11 +82,9 @@ def run(args: argparse.Namespace) -> int:
             log.info("%s", safe(line))
     cal, table = done.calibration, done.table  # no stop table: calibrated from driving alone
     doc = cal.document()  # checked as a loader checks it, before anything is shown or written
+    say(*summary_parts(cal))
     if to_stdout:
-        log.info("%s", summary(cal))
         print_json(doc)
-    else:
-        print(summary(cal), file=result_stream())
     if args.output not in (None, STDOUT):
         cal.save(args.output)
         log.info("wrote %s", safe(args.output))

@@ -7,9 +7,9 @@ import logging
 from pathlib import Path
 from typing import Any
 
-from mountcal.cli.options import STDOUT, add_command
+from mountcal.cli.options import STDOUT, add_command, print_json
 from mountcal.cli.path_options import add_path
-from mountcal.cli.results import result_stream
+from mountcal.cli.results import result_stream, say
 from mountcal.core.ranges import Number
 from mountcal.core.terminal import safe
 
@@ -35,6 +35,8 @@ def add_parser(sub: Any) -> None:
         sub,
         "export",
         "write the mounting for u-blox, NovAtel, ROS 2, Autoware, or as JSON/YAML",
+        json_help="what was exported where (format, file, the mounting) as JSON on stdout; without -o FILE the "
+        "export itself is in it (content, or content_hex for a binary message)",
         inputs=("RESULT.json", "result written by `mountcal calibrate -o`"),
         reads={"what": "a result JSON", "small": True},
         many=False,
@@ -105,7 +107,11 @@ def run(args: argparse.Namespace) -> int:
             parent_pose=read_parent_pose(args.parent_pose, parent) if read else None,
         )
     out = export(cal, args.to, yaw=args.yaw_undetermined, accept_unconfident=args.accept_unconfident, frames=frames)
-    if to_stdout:
+    from mountcal.calibration.summary import answer
+
+    where = "stdout" if to_stdout and not args.json else "the JSON on stdout" if to_stdout else safe(args.output)
+    say(f"exported to {args.to} ({where}): {answer(cal)}", [f"from {safe(result)}"])
+    if to_stdout and not args.json:
         stdout = result_stream()
         if isinstance(out, bytes):
             if stdout.isatty():
@@ -120,10 +126,22 @@ def run(args: argparse.Namespace) -> int:
         else:
             stdout.write(out)
         return 0
-    with atomic_path(args.output) as tmp:
-        if isinstance(out, bytes):
-            tmp.write_bytes(out)
-        else:
-            tmp.write_text(out, encoding="utf-8")
-    log.info("wrote %s (%s)", safe(args.output), args.to)
+    if not to_stdout:
+        with atomic_path(args.output) as tmp:
+            if isinstance(out, bytes):
+                tmp.write_bytes(out)
+            else:
+                tmp.write_text(out, encoding="utf-8")
+        log.info("wrote %s (%s)", safe(args.output), args.to)
+    if args.json:
+        doc: dict[str, Any] = {
+            "format": args.to,
+            "output": None if to_stdout else str(args.output),
+            "result": str(result),
+            "confident": cal.confident,
+            "yaw_undetermined": cal.yaw_deg is None,
+        }
+        if to_stdout:
+            doc |= {"content_hex": out.hex()} if isinstance(out, bytes) else {"content": out}
+        print_json(doc)
     return 0

@@ -18,7 +18,7 @@ from mountcal.cli.options import (
     progress_wanted,
     require,
 )
-from mountcal.cli.results import result_stream
+from mountcal.cli.results import say
 from mountcal.core.atomic import Terminated
 from mountcal.core.ranges import Number
 from mountcal.core.terminal import safe
@@ -142,10 +142,16 @@ def run(args: argparse.Namespace) -> int:
                 f"in the tables' metadata, mountcal.not_confident_logs): {listed}"
             ),
         )
-    lines = summary_lines(result)
+    first, *rest = summary_lines(result)
+    confident = f"; {len(result.not_confident)} not confident" if result.not_confident else ""
+    details = [
+        line.strip()
+        for line in rest
+        if not line.startswith("wrote ") and not line.startswith("  set aside: ")  # said as "wrote", as a warning
+    ]
+    say(safe(first.replace("mountcal fleet — ", "fleet: ", 1) + confident), [safe(line) for line in details])
+    log.info("%s", safe(rest[-1]))  # what was written
     if args.json:
-        for line in lines:
-            log.info("%s", safe(line))
         status = result.logs["status"].value_counts().to_dict()
         print_json(
             {
@@ -168,6 +174,4 @@ def run(args: argparse.Namespace) -> int:
                 "not_confident": list(result.not_confident),
             }
         )
-    else:
-        print(safe("\n".join(lines), keep="\n"), file=result_stream())
     return 0

@@ -9,7 +9,7 @@ from typing import Any
 
 from mountcal.cli.options import add_command, add_detection_options, detection, log_options, print_json, working
 from mountcal.cli.path_options import add_path
-from mountcal.cli.results import result_stream
+from mountcal.cli.results import say
 from mountcal.core.ranges import Number
 from mountcal.core.terminal import safe
 
@@ -51,25 +51,23 @@ def run(args: argparse.Namespace) -> int:
     with working(args, "reading the log"):
         info = inspect_log(args.input, replace(opts, mapping=None, channel=None, topic=None))  # every stream
     parked = _parked(args, opts) if args.stops else None
-    if args.json:
-        print_json(asdict(info) | ({} if parked is None else {"parked": parked}))
-        return 0
-    out = result_stream()
-    print(safe(f"{info.source}: {info.format}, {info.duration_s:.1f} s"), file=out)
+    lines = []
     for st in info.streams:  # names come from the file: shown escaped (no terminal control, no bidi)
         fields = f"  [{', '.join(map(safe, st.fields))}]" if st.fields else ""
         fields += f"  DLC {','.join(map(str, st.dlcs))}" if st.dlcs else ""
-        print(f"  {safe(st.name):<32} {safe(st.kind):<28} {st.count:>9} msgs {st.rate_hz:>9.2f} Hz{fields}", file=out)
-    for note in info.notes:
-        print(f"  note: {safe(note)}", file=out)
-    for line in info.incomplete:
-        print(safe(f"  input file: {line}"), file=out)
+        lines.append(f"{safe(st.name):<32} {safe(st.kind):<28} {st.count:>9} msgs {st.rate_hz:>9.2f} Hz{fields}")
+    lines += [safe(f"input file: {line}") for line in info.incomplete]
+    found = ""
     if parked is not None:
-        print(f"parked periods: {len(parked['stops'])} stops, {len(parked['near_misses'])} near misses", file=out)
+        found = f"; parked periods: {len(parked['stops'])} stops, {len(parked['near_misses'])} near misses"
         for stop in parked["stops"]:
-            print(f"  stop at {stop['t_start_s']:.1f}–{stop['t_end_s']:.1f} s ({stop['duration_s']:.1f} s)", file=out)
-        for line in parked["lines"]:
-            print(f"  {line}", file=out)
+            lines.append(f"stop at {stop['t_start_s']:.1f}–{stop['t_end_s']:.1f} s ({stop['duration_s']:.1f} s)")
+        lines += parked["lines"]
+    n = len(info.streams)
+    head = safe(f"{info.source}: {info.format}, {info.duration_s:.1f} s, {n} stream{'s' if n != 1 else ''}")
+    say(head + found, lines, [safe(note) for note in info.notes])
+    if args.json:
+        print_json(asdict(info) | ({} if parked is None else {"parked": parked}))
     return 0
 
 

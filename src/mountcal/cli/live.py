@@ -8,9 +8,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from mountcal.cli.options import STDOUT, add_axes_option, add_command
+from mountcal.cli.options import STDOUT, add_axes_option, add_command, print_json
 from mountcal.cli.path_options import add_path
-from mountcal.cli.results import result_stream
+from mountcal.cli.results import result_stream, say
 from mountcal.core.ranges import Number
 from mountcal.core.terminal import safe
 
@@ -18,7 +18,13 @@ log = logging.getLogger("mountcal")
 
 
 def add_parser(sub: Any) -> None:
-    p = add_command(sub, "live", "run a session on a live CAN bus: record, refit at each stop, suggest")
+    p = add_command(
+        sub,
+        "live",
+        "run a session on a live CAN bus: record, refit at each stop, suggest",
+        json_help="the session's result (why it ended, stops, files written, the calibration) as JSON on stdout at "
+        "its end; the events as they come are on stderr (or --json-events)",
+    )
     p.add_argument("--interface", required=True, help="python-can interface: socketcan, virtual, pcan, vector, …")
     p.add_argument("--channel", required=True, help="bus channel, e.g. can0")
     add_path(p, "--dbc", role="input", what="a DBC", small=True, required=True, help="DBC describing the bus")
@@ -82,7 +88,7 @@ def _file_sink(file: Any, line: Callable[[dict[str, Any]], str]) -> Callable[[di
 
 def run(args: argparse.Namespace) -> int:
     from mountcal.calibration.fit import Options
-    from mountcal.calibration.summary import summary
+    from mountcal.calibration.summary import summary_parts
     from mountcal.core.atomic import GrowingFile, atomic_path
     from mountcal.core.errors import InputError
     from mountcal.io.can.bus import BUS_ERRORS, open_bus
@@ -100,6 +106,10 @@ def run(args: argparse.Namespace) -> int:
     from mountcal.stops.detect import StopDetection
     from mountcal.stops.headings import read_protocol
 
+    if args.json and args.json_events == STDOUT:  # stdout holds one document
+        raise InputError(
+            "--json", "the events in a file (--json-events FILE)", "--json-events -", "Name a file for the events."
+        )
     prefix = Path(args.output)
     recording = session_files(prefix)["recording"]
     plan_beta = tuple(float(b) for b in read_protocol(args.plan)["beta_deg"]) if args.plan else None
@@ -125,11 +135,14 @@ def run(args: argparse.Namespace) -> int:
             str(err),
             "Check the interface name, the channel and that the device is up.",
         ) from err
-    stdout = result_stream()
-    sinks: list[Callable[[dict[str, Any]], None]] = [lambda e: print(line_of(e), flush=True, file=stdout)]
+
+    def shown(event: dict[str, Any]) -> None:  # a line for the person in the vehicle, at once (not held)
+        log.info("%s", safe(line_of(event)), extra={"plain": True, "now": True})
+
+    sinks: list[Callable[[dict[str, Any]], None]] = [shown]
     events_file: GrowingFile | None = None
     if args.json_events == STDOUT:
-        sinks = [json_sink(stdout)]
+        sinks = [json_sink(result_stream())]
     elif args.json_events:
         try:
             events_file = GrowingFile(args.json_events, "the events")  # a line at a time, whole
@@ -153,14 +166,14 @@ def run(args: argparse.Namespace) -> int:
         log.info("dropped frames/rows: %s", dropped)
     if session.ignored_frames:
         log.info("error/remote frames recorded but not decoded: %d", session.ignored_frames)
-    for path in write_outputs(session, prefix):
+    written = [str(path) for path in write_outputs(session, prefix)]
+    for path in written:
         log.info("wrote %s", safe(path))
     fail_if_empty(session)
     assert session.calibration is not None
-    if args.json_events == STDOUT:
-        log.info("%s", summary(session.calibration))
-    else:
-        print(summary(session.calibration), file=stdout)
+    first, details, notes = summary_parts(session.calibration)
+    n = 0 if session.table is None else len(session.table)
+    say(f"session ended ({session.reason}), {n} stops: {first}", details, notes)
     if args.report and session.table is not None:
         from mountcal.outputs.report import render
         from mountcal.outputs.report.timeline import timeline
@@ -172,4 +185,17 @@ def run(args: argparse.Namespace) -> int:
         with atomic_path(args.report) as tmp:
             tmp.write_text(render(cal.to_dict(), session.table, timeline=drawn), encoding="utf-8")
         log.info("wrote %s", safe(args.report))
+        written.append(str(args.report))
+    if args.json:
+        print_json(
+            {
+                "reason": session.reason,
+                "recording": str(session.recording),
+                "frames": session.frames,
+                "stops": n,
+                "dropped": dict(session.dropped),
+                "written": written,
+                "calibration": session.calibration.document(),
+            }
+        )
     return 130 if session.reason == "interrupted" else 0

@@ -48,27 +48,51 @@ log = logging.getLogger("mountcal")
 
 class _Stderr(logging.Handler):
     """Status lines of ``mountcal.*`` loggers on the current stderr (never stdout), prefixed ``mountcal:``;
-    another library's records (asammdf, python-can, Python warnings) name that library."""
+    another library's records (asammdf, python-can, Python warnings) name that library. The lines of a
+    command's summary (:func:`mountcal.cli.results.say`) are shown as they are, and status lines wait
+    for the answer (:func:`mountcal.cli.results.held`)."""
 
     def emit(self, record: logging.LogRecord) -> None:
+        from mountcal.cli.results import held
+
+        if not held(self.write, record):
+            self.write(record)
+
+    def write(self, record: logging.LogRecord) -> None:
         from tqdm import tqdm  # writes above a progress bar being drawn, instead of through it
 
-        level = "" if record.levelno in (logging.INFO, logging.ERROR) else f"{record.levelname.lower()}: "
-        origin = "" if record.name.startswith("mountcal") else f"[{record.name}] "
-        tqdm.write(f"mountcal: {level}{origin}{record.getMessage()}", file=sys.stderr)
+        if getattr(record, "plain", False):
+            text = record.getMessage()
+        else:
+            level = "" if record.levelno in (logging.INFO, logging.ERROR) else f"{record.levelname.lower()}: "
+            origin = "" if record.name.startswith("mountcal") else f"[{record.name}] "
+            text = f"mountcal: {level}{origin}{record.getMessage()}"
+        tqdm.write(text, file=sys.stderr)
         sys.stderr.flush()
 
 
+QUIET_RULE = (
+    "output: results go to stdout only when asked (-o -, --json; export: without -o), one document; "
+    "everything else goes to stderr: first the answer in one line, then what supports it, then notes (each once), "
+    "then what was written. -q keeps only the answer line, warnings and errors; -qq only warnings and errors; "
+    "-v adds detail."
+)
+
+
 def configure_logging(verbosity: int) -> None:
-    """One logging set-up for every command: -q (warnings and errors), default (status), -v (detail).
+    """One logging set-up for every command: -qq (warnings and errors), -q (and the answer line), default
+    (the summary and status), -v (detail).
 
     Other libraries' warnings (their loggers, and Python warnings while a command runs) join the
     log on stderr through the root logger."""
+    from mountcal.cli.results import ANSWER
+
     root = logging.getLogger("mountcal")
     if not any(isinstance(h, _Stderr) for h in root.handlers):
         root.addHandler(_Stderr())
     root.propagate = False
-    root.setLevel(logging.WARNING if verbosity < 0 else logging.INFO if verbosity == 0 else logging.DEBUG)
+    levels = {-1: ANSWER, 0: logging.INFO}
+    root.setLevel(levels.get(verbosity, logging.WARNING if verbosity < 0 else logging.DEBUG))
     libraries = logging.getLogger()
     if not any(isinstance(h, _Stderr) for h in libraries.handlers):
         libraries.addHandler(_Stderr(logging.WARNING))
@@ -78,7 +102,13 @@ def common_options() -> argparse.ArgumentParser:
     """-q/-v/--progress: a parent parser of every command."""
     common = argparse.ArgumentParser(add_help=False)
     g = common.add_argument_group("output")
-    g.add_argument("-q", "--quiet", action="count", default=0, help="only warnings and errors on stderr")
+    g.add_argument(
+        "-q",
+        "--quiet",
+        action="count",
+        default=0,
+        help="only the answer line, warnings and errors on stderr (-qq: no answer)",
+    )
     g.add_argument("-v", "--verbose", action="count", default=0, help="more detail on stderr")
     g.add_argument(
         "--progress",
@@ -111,7 +141,7 @@ def add_command(
     name: str,
     help_text: str,
     *,
-    json_help: str | None = None,
+    json_help: str,
     inputs: tuple[str, str] | None = None,
     reads: dict[str, Any] | None = None,
     many: bool = True,
@@ -119,10 +149,17 @@ def add_command(
     output_required: bool = False,
     writes: dict[str, Any] | None = None,
 ) -> argparse.ArgumentParser:
-    """A subcommand with the common options; its inputs (``args.input``: metavar, help), its ``-o`` and,
-    when it has a machine-readable result, ``--json``. ``reads`` and ``writes`` declare the inputs and
-    ``-o`` (:func:`mountcal.cli.path_options.add_path`; default: logs, which may be folders, and a file)."""
-    p: argparse.ArgumentParser = sub.add_parser(name, help=help_text, description=help_text, parents=[common_options()])
+    """A subcommand with the common options; its inputs (``args.input``: metavar, help), its ``-o`` and
+    ``--json`` (every command has one: ``json_help`` says what it writes). ``reads`` and ``writes`` declare the
+    inputs and ``-o`` (:func:`mountcal.cli.path_options.add_path`; default: logs, which may be folders, and a
+    file)."""
+    p: argparse.ArgumentParser = sub.add_parser(
+        name,
+        help=help_text,
+        description=help_text,
+        epilog=QUIET_RULE,
+        parents=[common_options()],
+    )
     if inputs is not None:
         add_path(
             p,
@@ -144,8 +181,7 @@ def add_command(
             default=None,
             help=output,
         )
-    if json_help is not None:
-        p.add_argument("--json", action="store_true", help=json_help)
+    p.add_argument("--json", action="store_true", help=f"{json_help} (the only thing on stdout)")
     return p
 
 

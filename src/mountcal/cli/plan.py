@@ -16,11 +16,12 @@ from mountcal.cli.options import (
     add_log_options,
     add_sensor_options,
     log_options,
+    print_json,
     sensor_options,
     working,
 )
 from mountcal.cli.path_options import add_path
-from mountcal.cli.results import result_stream
+from mountcal.cli.results import say
 from mountcal.core.ranges import Number, add_quantity
 from mountcal.core.terminal import safe
 
@@ -28,7 +29,12 @@ log = logging.getLogger("mountcal")
 
 
 def add_parser(sub: Any) -> None:
-    p = add_command(sub, "plan", "plan a session from the bound: stops, headings, dwell, slope")
+    p = add_command(
+        sub,
+        "plan",
+        "plan a session from the bound: stops, headings, dwell, slope",
+        json_help="the plan (stops, headings, dwell, slope, predicted σ) as JSON on stdout",
+    )
     p.add_argument("--target", required=True, help="1σ targets in degrees, e.g. roll=0.1,pitch=0.1,yaw=0.5")
     add_quantity(
         p,
@@ -98,10 +104,39 @@ def run(args: argparse.Namespace) -> int:
     )
     with working(args, "planning"):
         plan = make_plan(req)
-    print("\n".join(plan.lines()), file=result_stream())
-    if not plan.reachable:
-        return NotEnoughInformation.exit_code
-    if args.output is not None:
+    first, *rest = plan.lines()
+    say(first, [line.strip() for line in rest])
+    written = plan.reachable and args.output is not None
+    if written:
         plan.write_protocol(args.output)
         log.info("wrote %s (protocol sheet for calibrate --protocol; replace the placeholder times)", safe(args.output))
-    return 0
+    if args.json:
+        print_json(_document(plan, args.output if written else None))
+    return 0 if plan.reachable else NotEnoughInformation.exit_code
+
+
+def _document(plan: Any, protocol: str | None) -> dict[str, Any]:
+    """The plan as JSON: reachable (or why not), the session, the σ it predicts, what it assumed."""
+    req = plan.request
+    return {
+        "reachable": plan.reachable,
+        "reason": plan.reason or None,
+        "stops": plan.n_stops,
+        "beta_deg": list(plan.beta_deg),
+        "stop_s": plan.stop_s,
+        "slope_deg": plan.slope_deg,
+        "drive_s": req.drive_s,
+        "session_s": plan.session_s,
+        "target_deg": dict(req.target_deg),
+        "sigma_deg": dict(plan.sigma_deg),
+        "statistical_deg": dict(plan.statistical_deg),
+        "systematic_deg": dict(plan.systematic_deg),
+        "model": list(req.terms),
+        "noise": {
+            "sample_sigma_mps2": req.noise.sample_sigma_mps2,
+            "rate_hz": req.noise.rate_hz,
+            "source": req.noise.source,
+        },
+        "sensor": req.sensor.source,
+        "protocol": protocol,
+    }

@@ -9,7 +9,7 @@ from typing import Any
 
 from mountcal.cli.options import STDOUT, add_command, print_json, require, working
 from mountcal.cli.path_options import add_path
-from mountcal.cli.results import result_stream
+from mountcal.cli.results import result_stream, say
 from mountcal.core.terminal import safe
 
 log = logging.getLogger("mountcal")
@@ -78,6 +78,8 @@ def run(args: argparse.Namespace) -> int:
 
     result = Path(args.input)
     output = _output(args.output, args.input)
+    if output is None and args.json:  # stdout holds one document
+        raise InputError("--json", "the report in a file (-o FILE, or the default)", "-o -", "Name a file with -o.")
     cal = Calibration.load(result)  # validates format and version
     doc = read_json(result)  # the whole document: entries Calibration may not keep
     table = None
@@ -95,13 +97,17 @@ def run(args: argparse.Namespace) -> int:
     with working(args, "drawing the report"):
         html = render(doc, table, image_format=args.figures)
     shown = html.count("<figure>")
+    from mountcal.calibration.summary import answer
+
+    where = "stdout" if output is None else safe(output)
+    hint = [] if table is not None else ["pass --stops for the 3-D stop figure"]
+    say(f"report of {answer(cal)} ({shown} figures): {where}", [safe(f"from {result}"), *hint])
     if output is None:
         print(html, end="", file=result_stream())
         return 0
     with atomic_path(output) as tmp:
         tmp.write_text(html, encoding="utf-8")
-    hint = "" if table is not None else "; pass --stops for the 3-D stop figure"
-    log.info("wrote %s (%d figures%s)", safe(output), shown, hint)
+    log.info("wrote %s", safe(output))
     if args.json:
-        print_json({"output": str(output), "figures": shown})
+        print_json({"output": str(output), "figures": shown, "confident": cal.confident})
     return 0

@@ -1,4 +1,7 @@
-"""stdout carries a command's results and nothing else: what libraries print goes to stderr.
+"""The two streams of a command: results on stdout, only when asked; everything else on stderr.
+
+stdout carries a command's results and nothing else (``-o -``, ``--json``, and ``export`` without
+``-o``): what libraries print goes to stderr.
 
 asammdf prints the tracebacks of errors it recovers from with ``print()``, python-can and cantools
 warn, matplotlib and plugins may print: on stdout any of it would corrupt ``--json``, ``-o -`` or a
@@ -7,6 +10,12 @@ pipe. So while a command runs (:func:`results_only`, entered once in :func:`moun
 copy of 2 (output of C code and of child processes too); Python warnings and the records of
 other libraries' loggers become ``mountcal:`` lines of the log on stderr. A command writes its
 results through :func:`result_stream`, the private handle of the real stdout.
+
+On stderr a command says its summary once, through :func:`say`: the answer in one line first
+(kept by ``-q``), then what supports it, then its notes, each line once. Status lines and
+warnings logged before the answer (what was read, found, used, doubted) are held and follow it,
+so the first line a person reads is the answer; errors, and lines logged with ``extra={"now":
+True}`` (a live session's events), are shown at once.
 """
 
 from __future__ import annotations
@@ -15,13 +24,83 @@ import io
 import logging
 import os
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass, field
 from typing import TextIO
 
 from mountcal.core.paths import SystemFailure
 
 _results: list[TextIO | None] = []  # the result handles of the commands running (innermost last)
+
+ANSWER = logging.INFO + 5  # the level of a command's answer line: shown by default and with -q, not with -qq
+logging.addLevelName(ANSWER, "ANSWER")
+log = logging.getLogger("mountcal")
+
+
+@dataclass
+class _Said:
+    """What one running command has said on stderr: its answer (once), the lines shown, the records held."""
+
+    answered: bool = False
+    lines: set[str] = field(default_factory=set)
+    held: list[tuple[Callable[[logging.LogRecord], None], logging.LogRecord]] = field(default_factory=list)
+
+
+_said: list[_Said] = []  # one per running command (innermost last)
+
+
+def say(answer: str, details: Iterable[str] = (), notes: Iterable[str] = ()) -> None:
+    """The command's summary on stderr: ``answer`` in one line, then ``details`` (what supports it, with the
+    status lines held until now), then ``notes``; a line already shown by this command is not shown again.
+
+    ``-q`` keeps the answer alone; ``-qq`` drops it too.
+    """
+    if "\n" in answer:
+        raise ValueError(f"an answer is one line: {answer!r}")
+    state = _said[-1] if _said else None
+    if state is not None and state.answered:
+        raise RuntimeError(f"a command answers once: {answer!r}")
+    log.log(ANSWER, "%s", answer, extra={"plain": True, "now": True})
+    if state is not None:
+        state.answered = True
+        release()
+    for line in [*(f"  {d}" for d in details), *(f"  note: {n}" for n in notes)]:
+        if state is not None:
+            if line.strip() in state.lines:
+                continue
+            state.lines.add(line.strip())
+        log.info("%s", line, extra={"plain": True})
+
+
+def held(write: Callable[[logging.LogRecord], None], record: logging.LogRecord) -> bool:
+    """Whether ``record`` (a status line) waits for the running command's answer; a record shown counts as said."""
+    if not _said:
+        return False
+    state = _said[-1]
+    if not state.answered and record.levelno < logging.ERROR and not getattr(record, "now", False):
+        state.held.append((write, record))
+        return True
+    state.lines.add(record.getMessage().strip())
+    return False
+
+
+def release() -> None:
+    """Show the status lines held for the answer (after it, or at the command's end when it gave none)."""
+    if not _said:
+        return
+    state = _said[-1]
+    state.answered = True  # from here on, lines are shown as they come
+    waiting, state.held = state.held, []
+    for write, record in waiting:
+        text = record.getMessage().strip()
+        if text in state.lines:
+            continue
+        state.lines.add(text)
+        if record.levelno == logging.INFO and record.name.startswith("mountcal") and not getattr(record, "plain", 0):
+            # a status line logged before the answer: one of the lines that support it, below it
+            record = logging.makeLogRecord(record.__dict__ | {"msg": f"  {text}", "args": (), "plain": True})
+        write(record)
 
 
 def result_stream() -> TextIO:
@@ -45,12 +124,17 @@ def results_only() -> Iterator[TextIO | None]:
     original = sys.stdout
     results, saved_fd = _private_stdout(original)
     _results.append(results)
+    _said.append(_Said())
     sys.stdout = sys.stderr
     logging.captureWarnings(True)
     try:
         yield results
     finally:
         logging.captureWarnings(False)
+        try:
+            release()  # a command that ended without an answer (an error, Ctrl-C) still shows its status
+        finally:
+            _said.pop()
         sys.stdout = original
         _results.pop()
         if saved_fd is not None and results is not None:
@@ -94,4 +178,4 @@ def _private_stdout(stream: TextIO | None) -> tuple[TextIO | None, int | None]:
     return handle, saved
 
 
-__all__ = ["result_stream", "results_only"]
+__all__ = ["ANSWER", "held", "release", "result_stream", "results_only", "say"]

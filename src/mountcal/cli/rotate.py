@@ -15,6 +15,7 @@ from mountcal.cli.options import (
     working,
 )
 from mountcal.cli.path_options import add_path
+from mountcal.cli.results import say
 from mountcal.core.ranges import Number
 from mountcal.core.terminal import safe
 
@@ -80,8 +81,13 @@ def run(args: argparse.Namespace) -> int:
         )
     for text in report.warnings:
         log.warning("%s (recorded in %s's metadata)", text, safe(args.output))
-    for line in report.lines():
-        log.info("%s", safe(line))
+    from mountcal.calibration.summary import answer
+
+    frame = "vehicle" if report.frame.startswith("vehicle") else "levelled"
+    say(
+        f"wrote {report.samples_out} samples in the {frame} frame to {safe(args.output)} with {answer(cal)}",
+        [safe(f"mounting from {args.calibration}"), *(safe(line) for line in report.lines())],
+    )
     if args.json:
         print_json(asdict(report))
     return 0

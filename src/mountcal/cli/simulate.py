@@ -6,8 +6,9 @@ import argparse
 import logging
 from typing import Any
 
-from mountcal.cli.options import HEADINGS, add_command, bar
+from mountcal.cli.options import HEADINGS, add_command, bar, print_json
 from mountcal.cli.path_options import add_path
+from mountcal.cli.results import say
 from mountcal.core.errors import InputError
 from mountcal.core.ranges import Number, numbers
 from mountcal.core.terminal import safe
@@ -16,7 +17,12 @@ log = logging.getLogger("mountcal")
 
 
 def add_parser(sub: Any) -> None:
-    p = add_command(sub, "simulate", "write a simulated stop table, or (--log) a parking session as logs")
+    p = add_command(
+        sub,
+        "simulate",
+        "write a simulated stop table, or (--log) a parking session as logs",
+        json_help="the truth and the files written, as JSON on stdout",
+    )
     p.add_argument("--preset", default="zhang2011", help="parameters to start from (default zhang2011, the paper's)")
     p.add_argument("--roll", dest="roll_deg", type=Number("angle_deg"))
     p.add_argument("--pitch", dest="pitch_deg", type=Number("angle_deg"))
@@ -102,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
             paired_stamps=args.paired_stamps,
         )
         with bar(args, len(args.log), "writing logs", unit="log") as shown:
-            lines = write_log_session(
+            done = write_log_session(
                 args.log,
                 params,
                 seed=args.seed,
@@ -116,7 +122,7 @@ def run(args: argparse.Namespace) -> int:
                 each_log=lambda _: shown.update(),
             )
     elif args.output is not None:
-        lines = write_stop_session(
+        done = write_stop_session(
             args.output,
             params,
             headings=args.headings,
@@ -128,6 +134,8 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(
             "mountcal simulate", "-o STOPS.csv (a stop table) or --log LOG", "neither", "Name what to write."
         )
-    for line in lines:
-        log.info("%s", safe(line))
+    first, *rest = (safe(line) for line in done.lines)
+    say(first, rest)
+    if args.json:
+        print_json({"truth": done.truth, "written": done.written})
     return 0

@@ -22,6 +22,7 @@ from mountcal.cli.options import (
     print_json,
 )
 from mountcal.cli.path_options import add_path
+from mountcal.cli.results import say
 from mountcal.core.ranges import Number, add_quantity
 from mountcal.core.terminal import safe
 
@@ -36,7 +37,7 @@ def add_parser(subparsers: Any) -> None:
         subparsers,
         "triad",
         "fit bias, scale and cross-axis from a multi-position session",
-        json_help="write the triad JSON on stdout as well",
+        json_help="the triad JSON written to -o, on stdout as well",
         inputs=("LOG_OR_STOPTABLE", "the session's log(s), or its stop table"),
         reads={"what": "a log or stop table", "folders": True},
         output="triad JSON to write (for calibrate --triad)",
@@ -101,8 +102,12 @@ def run(args: argparse.Namespace) -> int:
     triad = from_sphere(fit, source)
     if args.imucal is not None:
         triad = with_imucal_values(triad, args.imucal)
-    for line in describe(triad, fit):
-        log.info("%s", line)
+    first, *rest = describe(triad, fit)
+    say(
+        first.replace("mountcal triad — ", "triad calibration from ", 1) + f": {safe(args.output)}",
+        [line.strip() for line in rest if not line.startswith("  note: ")],
+        [line.removeprefix("  note: ") for line in rest if line.startswith("  note: ")],
+    )
     triad.save(args.output)
     log.info("wrote %s", safe(args.output))
     if args.json:

@@ -12,7 +12,7 @@ import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -51,6 +51,14 @@ def session_params(
     return params
 
 
+class Simulated(NamedTuple):
+    """What a simulation wrote: lines for the user (the first says what was simulated), the truth, the files."""
+
+    lines: list[str]
+    truth: dict[str, Any]
+    written: list[str]
+
+
 def write_stop_session(
     output: PathLike,
     params: Mapping[str, Any],
@@ -59,29 +67,28 @@ def write_stop_session(
     heading_offset_deg: float = 0.0,
     seed: int = 0,
     truth: PathLike | None = None,
-) -> list[str]:
-    """Simulate stops and write the stop table (and the truth); return lines for the user."""
+) -> Simulated:
+    """Simulate stops and write the stop table (and the truth): lines for the user, the truth, the files."""
     table, found = simulate_stops(headings=headings, heading_offset_deg=heading_offset_deg, seed=seed, **params)
     write_stop_table(table, Path(output))
     roll, pitch, yaw = found.angles_deg
+    true = {
+        "roll_deg": roll,
+        "pitch_deg": pitch,
+        "yaw_deg": yaw,
+        "slope_deg": found.slope_deg,
+        "bias_mps2": found.bias_mps2.tolist(),
+        "g_mps2": found.g_mps2,
+    }
     if truth is not None:
-        _write_json(
-            truth,
-            {
-                "roll_deg": roll,
-                "pitch_deg": pitch,
-                "yaw_deg": yaw,
-                "slope_deg": found.slope_deg,
-                "bias_mps2": found.bias_mps2.tolist(),
-                "g_mps2": found.g_mps2,
-            },
-        )
-    return [
+        _write_json(truth, true)
+    written = [str(output), *([str(truth)] if truth is not None else [])]
+    lines = [
         f"simulated {len(table)} stops (seed {seed}): roll {roll:g}°, pitch {pitch:g}°, yaw {yaw:g}°, "
         f"slope {found.slope_deg:g}°, bias {np.round(found.bias_mps2, 4).tolist()} m/s²",
-        f"wrote {output}",
-        *([f"wrote {truth}"] if truth is not None else []),
+        *(f"wrote {path}" for path in written),
     ]
+    return Simulated(lines, true | {"seed": seed, "stops": len(table)}, written)
 
 
 def write_log_session(
@@ -97,11 +104,11 @@ def write_log_session(
     protocol: PathLike | None = None,
     truth: PathLike | None = None,
     each_log: Callable[[str], None] | None = None,
-) -> list[str]:
+) -> Simulated:
     """Simulate a parking session and write it as each of ``logs`` (and its protocol sheet, its truth).
 
     ``session`` may set ``stop_s``, ``drive_s``, ``rate_hz``; ``each_log`` is called with every
-    log's path once it is written (a progress bar). Returns lines for the user.
+    log's path once it is written (a progress bar). Returns lines for the user, the truth and the files.
     """
     from mountcal.io import writers as export
 
@@ -159,10 +166,13 @@ def write_log_session(
     if protocol is not None:
         export.write_protocol(protocol, log, start_time_s=done.start_time_s)
         lines.append(f"wrote {protocol} (protocol sheet on the log's clock, start {done.start_time_s:.6f} s)")
+    true = session_truth(log, start_time_s=start, with_fix=fix) | {"seed": seed}
     if truth is not None:
-        _write_json(truth, session_truth(log, start_time_s=start, with_fix=fix) | {"seed": seed})
+        _write_json(truth, true)
         lines.append(f"wrote {truth}")
-    return lines
+    written = [*map(str, logs), *(str(p) for p in (protocol, truth) if p is not None)]
+    return Simulated(lines, true, written)
+
 
 
 def _write_json(path: PathLike, doc: Mapping[str, Any]) -> None:
