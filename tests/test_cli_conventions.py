@@ -35,21 +35,29 @@ def test_json_and_a_file_give_the_same_result(tmp_path: Path, capsys: pytest.Cap
     assert json.loads(out)["mounting"] == json.loads(result.read_text(encoding="utf-8"))["mounting"]
 
 
-def test_a_log_s_status_goes_to_stderr_and_the_summary_to_stdout(
+def test_a_log_s_summary_and_status_go_to_stderr_the_answer_first(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     result = tmp_path / "r.json"
     assert main(["calibrate", str(PARKING), "--protocol", str(PROTOCOL), "-o", str(result)]) == 0
     out, err = capsys.readouterr()
-    assert out.startswith("mountcal — full method") and "read " not in out and "wrote" not in out
-    assert "mountcal: read 39600 samples" in err and f"mountcal: wrote {result}" in err
+    assert out == ""  # nothing asked on stdout: the result is in -o's file
+    first, *rest = err.splitlines()
+    assert first.startswith("roll 5.001 ± ") and first.endswith("  confident")  # the answer, first
+    assert "  read 39600 samples from 1 file(s)" in rest and "  full method, model: rotation, slope, gravity" in err
+    assert rest[-1] == f"mountcal: wrote {result}"
 
 
-def test_quiet_keeps_stderr_free_of_status_and_verbose_keeps_it(
+def test_quiet_keeps_the_answer_alone_and_verbose_keeps_the_status(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     args = ["stops", str(PARKING), "--protocol", str(PROTOCOL), "-o", str(tmp_path / "s.csv")]
     assert main([*args, "-q"]) == 0
+    assert capsys.readouterr() == (
+        "",
+        f"12 stops at 12 headings (protocol sheet), from 39600 samples: {tmp_path / 's.csv'}\n",
+    )
+    assert main([*args, "-qq"]) == 0
     assert capsys.readouterr() == ("", "")
     assert main([*args, "-v"]) == 0
     assert "found 12 stops" in capsys.readouterr().err
@@ -59,11 +67,11 @@ def test_stops_to_stdout_read_back_by_calibrate_from_stdin(tmp_path: Path) -> No
     """`mountcal stops LOG -o - | mountcal calibrate - -o -`: the stop table through a pipe."""
     cmd = [sys.executable, "-m", "mountcal"]
     stops = subprocess.run(
-        [*cmd, "stops", str(PARKING), "--protocol", str(PROTOCOL), "-o", "-", "-q"],
+        [*cmd, "stops", str(PARKING), "--protocol", str(PROTOCOL), "-o", "-", "-qq"],
         capture_output=True,
         check=True,
     )
-    assert stops.stderr == b"" and b"beta_deg" in stops.stdout.split(b"\n")[0]  # -q: nothing but the table
+    assert stops.stderr == b"" and b"beta_deg" in stops.stdout.split(b"\n")[0]  # -qq: nothing but the table
     done = subprocess.run([*cmd, "calibrate", "-", "-o", "-"], input=stops.stdout, capture_output=True, check=True)
     piped = Calibration.from_dict(json.loads(done.stdout))
     direct = tmp_path / "direct.json"

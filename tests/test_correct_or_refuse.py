@@ -79,9 +79,9 @@ def test_the_mirror_repro_through_the_cli(tmp_path: Path, capsys: pytest.Capture
     assert main(["simulate", *args, "--seed", "3", "-o", str(stops)]) == 0
     capsys.readouterr()
     assert main(["calibrate", str(stops)]) == 0
-    out = capsys.readouterr().out
-    roll = float(re.search(r"roll\s+(-?[\d.]+)°", out).group(1))  # type: ignore[union-attr]
-    slope = float(re.search(r"slope\s+(-?[\d.]+)°", out).group(1))  # type: ignore[union-attr]
+    out = capsys.readouterr().err.splitlines()[0]  # the answer line
+    roll = float(re.search(r"roll (-?[\d.]+) ± [\d.]+°", out).group(1))  # type: ignore[union-attr]
+    slope = float(re.search(r"slope (-?[\d.]+) ± [\d.]+°", out).group(1))  # type: ignore[union-attr]
     assert abs(roll + 7.0) < 1.0 and abs(slope - 1.5) < 1.0
 
 

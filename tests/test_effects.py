@@ -274,7 +274,7 @@ def test_a_long_model_choice_reports_its_rounds_on_stderr_not_stdout(
     assert main(["calibrate", str(src), "-o", str(tmp_path / "cal.json")]) == 0
     out, err = capsys.readouterr()
     assert "model choice" not in out
-    rounds = [line for line in err.splitlines() if line.startswith("mountcal: model choice")]
+    rounds = [line for line in err.splitlines() if line.lstrip().startswith("model choice")]
     assert any(f"on {PROGRESS_STOPS} stops, round 1" in line for line in rounds)
     assert any("round 1: bias added" in line for line in rounds)
     assert "nothing more to add" in rounds[-1]

@@ -121,14 +121,15 @@ def fleet(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
     write_mcap(car / "session_c.mcap", parking(3, rate_hz=50.0))
     broken = write_broken(logs / "broken")
     output = root / "out" / "fleet.parquet"
-    stdout = io.StringIO()
-    with contextlib.redirect_stdout(stdout):
-        code = main(["fleet", str(logs), "-o", str(output), "--uphill-azimuth-deg", "30", "-q"])
+    stdout, stderr = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
+        code = main(["fleet", str(logs), "-o", str(output), "--uphill-azimuth-deg", "30"])
+    assert stdout.getvalue() == ""  # the summary is on stderr
     return {
         "logs_dir": logs,
         "output": output,
         "code": code,
-        "stdout": stdout.getvalue(),
+        "stdout": stderr.getvalue(),  # the summary
         "logs": pd.read_parquet(output),
         "vehicles": pd.read_parquet(outputs_of(output)[1]),
         "broken": broken,

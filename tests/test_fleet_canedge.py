@@ -105,16 +105,18 @@ def canedge(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def run_cli(*args: str) -> tuple[int, str]:
-    out = io.StringIO()
-    with contextlib.redirect_stdout(out):
+    """The exit code and the summary (stderr) of a fleet run; stdout stays empty."""
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         code = main(["fleet", *args])
-    return code, out.getvalue()
+    assert out.getvalue() == ""
+    return code, err.getvalue()
 
 
 @pytest.fixture(scope="module")
 def local_run(canedge: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
     output = tmp_path_factory.mktemp("local") / "fleet.parquet"
-    code, stdout = run_cli(str(canedge), "-o", str(output), "--dbc", str(DBC), *AZIMUTH, "-q", "--workers", "2")
+    code, stdout = run_cli(str(canedge), "-o", str(output), "--dbc", str(DBC), *AZIMUTH, "--workers", "2")
     return {
         "code": code,
         "stdout": stdout,

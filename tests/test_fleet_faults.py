@@ -164,11 +164,11 @@ def test_errors_name_the_files_as_given_and_the_options_as_flags(
     moving = moving.assign(az=9.8 + rng.normal(0, 1, t.size), speed_mps=np.where(t < 2.0, 5.0, 0.0))  # 2 s of driving
     moving.to_csv(folder / "drive.csv", index=False)
     monkeypatch.chdir(tmp_path)
-    assert main(["fleet", "fleet", "-o", "out.parquet", "--use", "driving", "--workers", "1", "-q"]) == 0
+    assert main(["fleet", "fleet", "-o", "out.parquet", "--use", "driving", "--workers", "1"]) == 0
     error = pd.read_parquet(tmp_path / "out.parquet")["error"].iloc[0]
     assert "fleet/van/drive.csv" in error and str(tmp_path) not in error, error
     assert "--protocol" in error and "protocol=" not in error, error
-    assert "fleet/van/drive.csv" in capsys.readouterr().out
+    assert "fleet/van/drive.csv" in capsys.readouterr().err
 
 
 def test_with_a_dbc_a_stop_table_in_the_folder_is_still_a_stop_table(tmp_path: Path) -> None:

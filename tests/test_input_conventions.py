@@ -69,7 +69,7 @@ def test_stops_without_a_protocol_write_relative_headings_that_calibrate_reads_a
         "how": "stated",
         "by": "the table's column heading_ref",
     }
-    assert "input heading_reference: relative (stated by the table's column heading_ref)" in capsys.readouterr().out
+    assert "input heading_reference: relative (stated by the table's column heading_ref)" in capsys.readouterr().err
     # the compass column and the slope's uphill azimuth make them uphill: the truth again
     assert main(["calibrate", str(stops), "--uphill-azimuth-deg", "30", "-o", str(out)]) == 0
     doc = _result(out)
@@ -113,7 +113,7 @@ def test_an_old_table_without_the_marker_is_read_as_uphill_and_says_it_was_assum
     assert doc["mounting"]["yaw_deg"] == pytest.approx(7.0, abs=1.0)
     stated = _convention(doc, "heading_reference")
     assert stated["how"] == "default" and "heading_ref" in stated["by"]
-    assert "input heading_reference: uphill (assumed:" in capsys.readouterr().out
+    assert "input heading_reference: uphill (assumed:" in capsys.readouterr().err
 
 
 def _same_answer(a: Calibration, b: Calibration) -> None:

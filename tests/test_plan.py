@@ -69,7 +69,7 @@ def test_yaw_on_a_half_degree_slope_is_refused_with_the_reason(
     spec.write_text(TIGHT_SPEC, encoding="utf-8")  # the statistical part alone falls short, not the spec
     argv = ["plan", "--target", "yaw=0.2", "--noise", "10", "--slope-deg", "0.5", "--max-stops", "8", "--stop-s", "30"]
     code = main([*argv, "--sensor-spec", str(spec), "-o", str(sheet)])
-    out = capsys.readouterr().out
+    out = capsys.readouterr().err
     assert code == 3
     assert "not reachable, because yaw reaches at best" in out and "needs a slope of ≥" in out
     assert not sheet.exists()
@@ -82,7 +82,7 @@ def test_a_yaw_target_below_the_headings_limit_is_refused_naming_them(
     spec.write_text(TIGHT_SPEC.replace("heading_deg = 0.0", "heading_deg = 2.0"), encoding="utf-8")
     argv = ["plan", "--target", "yaw=0.5", "--noise", "1", "--slope-deg", "10", "--sensor-spec", str(spec)]
     code = main([*argv, "-o", str(tmp_path / "plan.csv")])
-    out = capsys.readouterr().out
+    out = capsys.readouterr().err
     assert code == 3 and "headings' ±2.0° against the fall line" in out
     spec.write_text(TIGHT_SPEC.replace("heading_deg = 0.0", "heading_deg = 0.2"), encoding="utf-8")
     assert main([*argv, "-o", str(tmp_path / "plan.csv")]) == 0  # 0.2/√3 ≈ 0.12° leaves room
@@ -122,7 +122,7 @@ def test_a_target_below_the_default_class_systematic_part_is_refused_with_the_re
     # 0.05° is reached in a few stops statistically (above, with a tight spec), never with ±3 % scale, ±2 % cross-axis
     code = main(["plan", "--target", "roll=0.05,pitch=0.05,yaw=0.3", "--noise", "5", "--slope-deg", "4",
                  "--max-stops", "24", "-o", str(sheet)])  # fmt: skip
-    out = capsys.readouterr().out
+    out = capsys.readouterr().err
     assert code == 3 and not sheet.exists()
     assert "systematic part" in out and "cannot be reached by any number of stops or dwell" in out
     assert "default class" in out and "triad" in out and "two slopes" in out

@@ -45,3 +45,31 @@ def test_the_python_tour_runs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -
     assert abs(cal.roll_deg - 5.0) < 0.1 and abs(done.calibration.yaw_deg - 7.0) < 0.2  # type: ignore[attr-defined]
     assert len(namespace["df_v"]) == len(namespace["acc_v"]) > 0  # type: ignore[arg-type]
     assert os.path.getsize(tmp_path / "result.json") > 0
+
+
+def test_the_quick_start_prints_the_answer_first(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The quick start's command, run as written: its first line of output is the answer, as the README shows."""
+    from mountcal.cli import main
+
+    text = (REPO / "README.md").read_text(encoding="utf-8")
+    demo = re.search(r"<!-- quickstart-demo -->\n```sh\n(.*?)\n```", text, re.S)
+    assert demo is not None, "the README has no marked quick-start command"
+    argv = demo.group(1).split("bin/mountcal ", 1)[1].split()
+    blocks = re.finditer(r"(?ms)^```(\w*)\n(.*?)^```", text[demo.end() :])
+    shown = next(b.group(2).splitlines() for b in blocks if b.group(1) in ("", "text"))  # its output, shown
+    assert argv[0] == "calibrate"
+    for name in argv:
+        if name.startswith("data/"):
+            (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+            (tmp_path / name).write_bytes((REPO / name).read_bytes())
+    monkeypatch.chdir(tmp_path)
+    assert main(argv) == 0
+    out, err = capsys.readouterr()
+    assert out == ""  # the result went to -o's file; the summary to stderr
+    first = err.splitlines()[0]
+    assert first == shown[0]
+    assert re.fullmatch(
+        r"roll 5\.\d{3} ± 0\.\d{3}°  pitch 6\.\d{3} ± .*  yaw 6\.9\d{2} ± .*  slope .*  confident", first
+    )

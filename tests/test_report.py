@@ -279,7 +279,8 @@ def test_cli_writes_the_report(result_files: tuple[Path, Path], capsys: pytest.C
     out = result.parent / "report.html"
     assert main(["report", str(result), "--stops", str(stops), "-o", str(out)]) == 0
     html = out.read_text(encoding="utf-8")
-    assert f"wrote {out} ({_figure_count(html)} figures)" in capsys.readouterr().err  # status goes to stderr
+    err = capsys.readouterr().err  # the summary and the status go to stderr
+    assert f"({_figure_count(html)} figures): {out}" in err.splitlines()[0] and f"mountcal: wrote {out}" in err
     assert _figure_count(html) >= 4
     assert (_sha(result), _sha(stops)) == before  # inputs untouched
     assert main(["report", str(result)]) == 0  # default output beside the result

@@ -339,7 +339,7 @@ def test_stops_too_short_for_the_minimum_are_near_misses_and_inspect_lists_them(
     path = tmp_path / "drive.csv"
     to_frame(samples_of(log)).to_csv(path, index=False)
     assert cli.main(["inspect", str(path), "--stops"]) == 0
-    text = capsys.readouterr().out
+    text = capsys.readouterr().err  # the listing is the command's summary, on stderr
     lines = [line for line in text.splitlines() if "near miss at" in line]
     assert "near misses" in text and len(lines) >= 2  # the stops the 8 s minimum dropped (11.5 s, trimmed 7.5 s)
     for line in lines:

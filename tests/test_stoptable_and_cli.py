@@ -40,8 +40,8 @@ def test_calibrate_writes_a_result_with_every_documented_field(
     stops_csv: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "result.json"
-    code, text, _ = run_cli(["calibrate", str(stops_csv), "-o", str(out)], capsys)
-    assert code == 0
+    code, stdout, text = run_cli(["calibrate", str(stops_csv), "-o", str(out)], capsys)
+    assert code == 0 and stdout == ""
     assert "roll" in text and "±" in text and "model: rotation, slope" in text
     doc = json.loads(out.read_text())
     for key in ("roll_deg", "pitch_deg", "yaw_deg"):
@@ -81,8 +81,8 @@ def test_no_headings_writes_null_yaw_with_a_reason(tmp_path: Path, capsys: pytes
     src = tmp_path / "s.csv"
     write_stop_table(table, src)
     out = tmp_path / "r.json"
-    code, text, _ = run_cli(["calibrate", str(src), "-o", str(out)], capsys)
-    assert code == 0 and "yaw    not determined" in text
+    code, _, text = run_cli(["calibrate", str(src), "-o", str(out)], capsys)
+    assert code == 0 and "  yaw undetermined  " in text.splitlines()[0] and "yaw undetermined: no headings" in text
     doc = json.loads(out.read_text())
     assert doc["mounting"]["yaw_deg"] is None and doc["uncertainty"]["yaw_deg"] is None
     assert "no headings" in doc["yaw"]["reason"]

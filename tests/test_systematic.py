@@ -154,7 +154,7 @@ def test_cli_summary_shows_both_parts_and_refuses_a_bad_spec(
     stops = tmp_path / "stops.csv"
     write_stop_table(replace(table, cov_s=None), stops)
     assert main(["calibrate", str(stops)]) == 0
-    out = capsys.readouterr().out
+    out = capsys.readouterr().err
     assert "σ statistical / systematic" in out and "default class" in out
     bad = tmp_path / "bad.toml"
     bad.write_text("scale = 3\n", encoding="utf-8")  # a percentage where a fraction belongs

@@ -359,8 +359,9 @@ def test_inspect_escapes_names_from_the_file(tmp_path: Path, capsys: pytest.Capt
         w.finish()
     code, out, err = run(["inspect", str(path)], capsys)
     assert code == 0, err
-    assert "\x1b" not in out and "\u202e" not in out
-    assert "/imu\\x1b[2J\\u202etxt.exe" in out
+    assert out == ""  # the listing is the command's summary, on stderr
+    assert "\x1b" not in err and "\u202e" not in err
+    assert "/imu\\x1b[2J\\u202etxt.exe" in err
 
 
 def test_huge_stop_values_get_no_unit_advice(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -102,9 +102,9 @@ def run(
     inputs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> Run:
     """Run a command (plain, plus ``extra`` options) in a fresh folder: its exit code, stdout, stderr."""
-    import mountcal.io.can.bus as bus
-
     from tests.test_live import replay
+
+    import mountcal.io.can.bus as bus
 
     monkeypatch.setattr(bus, "open_bus", lambda _i, channel: replay(inputs["blf"], f"{channel}-{tmp_path.name}"))
     counter = iter(range(100))

@@ -139,7 +139,7 @@ def test_cli_calibrate_with_triad_writes_both_parts(tmp_path: Path, capsys: pyte
     assert (
         main(["calibrate", str(tmp_path / "stops.csv"), "--triad", str(tmp_path / "triad.json"), "-o", str(out)]) == 0
     )
-    assert "triad calibration" in capsys.readouterr().out
+    assert "triad calibration" in capsys.readouterr().err
     doc = json.loads(out.read_text(encoding="utf-8"))
     assert "triad" in doc["systematic"]["source"] and doc["systematic"]["default_spec"] is False
     assert abs(doc["mounting"]["roll_deg"] - truth.angles_deg[0]) < 3 * doc["uncertainty"]["roll_deg"]

@@ -131,7 +131,7 @@ def test_a_real_ros1_bag_and_its_mcap_give_the_same_answer(
 @pytest.mark.real_data
 def test_inspect_lists_a_ros1_bags_topics(test1: dict[str, Path], capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["inspect", str(test1["bag"])]) == 0
-    out = capsys.readouterr().out
+    out = capsys.readouterr().err  # the listing is the command's summary, on stderr
     assert "ros1 bag, 395.3 s" in out
     for line in ("/imu/data", "sensor_msgs/msg/Imu", "11865 msgs", "30.01 Hz", "/fix", "sensor_msgs/msg/NavSatFix"):
         assert line in out

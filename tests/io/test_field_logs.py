@@ -168,10 +168,10 @@ def test_inspect_without_a_dbc_lists_ids_per_channel(real_data: Path, capsys: py
     assert eec1.rate_hz == pytest.approx((len(times) - 1) / (times[-1] - times[0]))
     assert {k for k, _ in streams} == {"can1", "can9"} and len(summary.streams) == 61 + 6
     assert main(["inspect", str(real_data / TRUCK)]) == 0
-    out = capsys.readouterr().out
+    out = capsys.readouterr().err  # the listing is the command's summary, on stderr
     assert "0x0CF00400" in out and "DLC 8" in out
     assert main(["inspect", str(real_data / TRUCK), "--dbc", str(real_data / J1939_DBC)]) == 0
-    assert "EEC1" in capsys.readouterr().out
+    assert "EEC1" in capsys.readouterr().err
 
 
 @pytest.mark.real_data
@@ -286,7 +286,7 @@ def test_field_logs_doc_commands(
         printed = capsys.readouterr()
         gone = missing_lines(lines, printed.out + printed.err)
         assert not gone, (argv, gone)
-        outputs.append(printed.out)
+        outputs.append(printed.err)  # each command's summary
     assert "0x0CF00400" in outputs[1] and "DLC 8" in outputs[1]
     assert "parked periods: 1 stops, 1 near misses" in outputs[3]  # the 11.6 s stop under a 15 s minimum
     assert "under the --min-stop-s of 15 s; --min-stop-s 11.6 would keep it" in outputs[3]

@@ -107,7 +107,7 @@ def test_the_inputs_doc_commands_run(
     g = json.loads((tmp_path / "g_result.json").read_text())["mounting"]
     vehicle = [c for c in outputs if c.startswith("stops vehicle.csv")]
     assert vehicle and abs(g["roll_deg"]) < 0.2  # the rotated samples are level in the vehicle frame
-    text = "".join(o.out for o in outputs.values())
+    text = "".join(o.err + o.out for o in outputs.values())  # the summaries (stderr), the exports (stdout)
     assert "ros1 bag" in text and "ros2 bag (mcap)" in text and "/imu/data" in text and "imu_link" in text
     for export in (
         "a phyphox export",

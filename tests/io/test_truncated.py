@@ -261,7 +261,7 @@ def test_a_stop_table_cut_inside_its_last_row_is_refused_or_fitted_without_it(
     assert main(["calibrate", str(cut), "-o", str(tmp_path / "r.json")]) == 2
     assert "ends at byte" in capsys.readouterr().err
     assert main(["calibrate", str(cut), "-o", str(tmp_path / "r.json"), "--allow-truncated"]) == 0
-    out = capsys.readouterr().out
+    out = capsys.readouterr().err
     result = json.loads((tmp_path / "r.json").read_text())
     assert result["provenance"]["incomplete_inputs"] == list(part.incomplete)
     assert "input file: " in out and "stops.csv ends at byte" in out and "read in part" in out

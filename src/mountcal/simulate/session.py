@@ -174,7 +174,6 @@ def write_log_session(
     return Simulated(lines, true, written)
 
 
-
 def _write_json(path: PathLike, doc: Mapping[str, Any]) -> None:
     with atomic_path(Path(path)) as tmp:
         tmp.write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n", encoding="utf-8")
