@@ -49,7 +49,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if stdout_closed:
             raise InputError(
                 "stdout",
-                "an open standard output (mountcal writes results and summaries there)",
+                "an open standard output (mountcal writes results there when asked)",
                 "it closed (`>&-`)",
                 "Redirect it to a file or to /dev/null instead. Nothing was written.",
             )
