@@ -58,7 +58,7 @@ def parser_commands() -> list[str]:
 @pytest.fixture(scope="module")
 def inputs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """A result of the sample log, a triad session's stops, and a short simulated CAN session for live."""
-    from mountcal.simulate import logs as export
+    from mountcal.io import writers as export
     from mountcal.simulate.stops import simulate_parking_log
 
     folder = tmp_path_factory.mktemp("inputs")
@@ -144,7 +144,7 @@ def _summary(command: str, err: str, tmp: Path | None = None) -> list[str]:
     """stderr's lines; a live session's event lines (shown as they come) are taken off the front."""
     lines = err.splitlines()
     if command == "live":
-        from mountcal.live import line_of
+        from mountcal.sessions.live import line_of
 
         assert tmp is not None
         events = [json.loads(line) for line in next(tmp.glob("run*/events.jsonl")).read_text().splitlines()]
@@ -182,9 +182,9 @@ def test_quiet_keeps_the_answer_line_alone(command: str, run: Run) -> None:
 
 def test_a_result_that_is_not_confident_says_its_main_reason_once(tmp_path: Path) -> None:
     """NOT CONFIDENT with the main reason on the answer line; the reasons in full once, in the notes."""
-    from mountcal.calibrate import calibrate
+    from mountcal.calibration.fit import calibrate
+    from mountcal.calibration.summary import summary
     from mountcal.simulate.stops import simulate_stops
-    from mountcal.summary import summary
 
     disturbance = np.random.default_rng(0).normal(0.0, 0.03, (12, 3))
     table, _ = simulate_stops(disturbance_mps2=disturbance, seed=1)
@@ -200,9 +200,9 @@ def test_a_result_that_is_not_confident_says_its_main_reason_once(tmp_path: Path
 
 
 def test_an_undetermined_yaw_is_said_without_a_number() -> None:
-    from mountcal.calibrate import Options, calibrate
-    from mountcal.stoptable import read_stop_table
-    from mountcal.summary import answer
+    from mountcal.calibration.fit import Options, calibrate
+    from mountcal.calibration.summary import answer
+    from mountcal.stops.table import read_stop_table
 
     cal = calibrate(read_stop_table(STOPS, headings="relative"), Options())
     assert cal.yaw_deg is None
