@@ -36,7 +36,7 @@ ANSWER = rf"roll {_ANGLE}  pitch {_ANGLE}  yaw {_ANGLE}  slope {_ANGLE}  (confid
 # the answer line of each command (a command missing here fails test_every_command_is_covered)
 ANSWERS = {
     "calibrate": rf"{ANSWER}",
-    "stops": r"\d+ stops (at \d+ headings \(.+\)|no headings), from \d+ samples: \S+",
+    "stops": r"\d+ stops (at \d+ headings \(.+\)|without headings), from \d+ samples: \S+",
     "inspect": r"\S.*: \w+, \d+\.\d s, \d+ streams?(; parked periods: .+)?",
     "rotate": rf"wrote \d+ samples in the (vehicle|levelled) frame to \S+ with {ANSWER}",
     "report": rf"report of {ANSWER} \(\d+ figures\): \S+",

@@ -49,7 +49,9 @@ def run(args: argparse.Namespace) -> int:
         samples, found = stops_of_log(log_job(args, Options()))
     table = found.table
     where = "stdout" if to_stdout else safe(args.output)
-    headings = "no headings" if table.beta_rad is None else f"at {_distinct(table)} headings ({found.heading_source})"
+    headings = (
+        "without headings" if table.beta_rad is None else f"at {_distinct(table)} headings ({found.heading_source})"
+    )
     say(
         f"{len(table)} stops {headings}, from {len(samples)} samples: {where}",
         describe((samples, found), len(args.input)),
