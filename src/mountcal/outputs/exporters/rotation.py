@@ -165,5 +165,10 @@ def _yaml_document(cal: Calibration, options: ExportOptions) -> str:
 
 EXPORTERS = (
     Exporter("json", (".json", ".txt"), "mountcal's rotation in every common parameterisation with 1σ, as JSON", _json),
-    Exporter("yaml", (".yaml", ".yml", ".txt"), "the same document as YAML", _yaml_document),
+    Exporter(
+        "yaml",
+        (".yaml", ".yml", ".txt"),
+        "mountcal's rotation in every common parameterisation with 1σ, as YAML",
+        _yaml_document,
+    ),
 )
