@@ -96,7 +96,7 @@ def test_a_file_in_the_package_is_a_format_with_no_other_edit(tmp_path: Path, re
     with dropped_into_the_package(tmp_path / "pkg"):
         assert "angles" in _to_choices()
         help_text = command_parser(build_parser(), "export").format_help()
-        assert "roll pitch yaw in radians" in " ".join(help_text.split())
+        assert "\n  angles " in help_text and "roll pitch yaw in radians, one line\n" in help_text
         assert "| `angles` | roll pitch yaw in radians, one line | `.angles`, `.txt` |" in exporters.markdown_table()
         out = tmp_path / "mount.angles"
         code, _, err = _run("export", path, "--to", "angles", "-o", out)

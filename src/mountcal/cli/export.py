@@ -29,12 +29,13 @@ class Formats:
         return iter(exporters.names())
 
 
-def _to_help() -> str:
-    listed = "; ".join(f"{e.name}: {e.description}" for e in exporters.builtin().values())
-    return (
-        f"target format (docs/exporters.md): {listed}; or a format an installed package registers "
-        f"(entry-point group {exporters.GROUP})"
-    )
+def _formats_epilog() -> str:
+    """The formats, one a line with what each writes (the registry's built-in ones; then where others come from)."""
+    own = exporters.builtin().values()
+    width = max(len(e.name) for e in own) + 2
+    lines = [f"  {e.name:<{width}}{e.description}" for e in own]
+    extra = f"  or a format an installed package registers (entry-point group {exporters.GROUP})"
+    return "\n".join(["formats (--to; docs/exporters.md):", *lines, extra])
 
 
 def add_parser(sub: Any) -> None:
@@ -48,7 +49,9 @@ def add_parser(sub: Any) -> None:
         output="file to write; none or '-' writes to stdout",
         writes={"what": "the export", "stdio": True, "formats": _suffixes, "formats_by": "--to"},
     )
-    p.add_argument("--to", required=True, choices=Formats(), metavar="FORMAT", help=_to_help())
+    p.formatter_class = argparse.RawDescriptionHelpFormatter  # the epilog: one format a line
+    p.epilog = _formats_epilog()
+    p.add_argument("--to", required=True, choices=Formats(), metavar="FORMAT", help="target format (listed below)")
     p.add_argument(
         "--yaw-undetermined",
         choices=("refuse", "zero"),
