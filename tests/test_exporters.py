@@ -25,7 +25,7 @@ from mountcal.calibration.fit import calibrate
 from mountcal.cli import main
 from mountcal.core.errors import InputError, NotEnoughInformation
 from mountcal.core.result import Calibration
-from mountcal.outputs.exporters import FORMATS, Frames, export, read_parent_pose
+from mountcal.outputs.exporters import Frames, builtin, export, read_parent_pose
 from mountcal.simulate.stops import simulate_stops
 
 G = 9.80665
@@ -558,7 +558,7 @@ def test_undetermined_yaw_is_refused_by_every_format_unless_told(base: Calibrati
         yaw_reason="level ground",
         rotation_sigma_deg=(base.rotation_sigma_deg[0], base.rotation_sigma_deg[1], None),
     )
-    for fmt in FORMATS:
+    for fmt in builtin():
         with pytest.raises(NotEnoughInformation, match="yaw is not determined"):
             export(cal, fmt)
     doc = json.loads(str(export(cal, "json", yaw="zero")))

@@ -23,6 +23,7 @@ from mountcal.cli import main
 REPO = Path(__file__).resolve().parents[1]
 DOC = REPO / "docs" / "exporters.md"
 OUTPUT_BLOCK = re.compile(r"(<!-- output of: (?P<cmd>.+?) -->\n```text\n)(?P<body>.*?)(```)", re.S)
+FORMATS_BLOCK = re.compile(r"(<!-- formats: generated -->\n)(?P<body>.*?)(\n<!-- end of formats -->)", re.S)
 FILE_BLOCK = re.compile(r"<!-- file: (?P<name>\S+) -->\n```\w*\n(?P<body>.*?)```", re.S)
 NUMBER = re.compile(r"-?\d+(?:\.\d+)?(?:[eE][-+]?\d+)?")
 
@@ -98,3 +99,20 @@ def test_sample_outputs_are_what_the_commands_print(page: tuple[str, dict[str, t
         text = updated
     stale = [m["cmd"] for m in OUTPUT_BLOCK.finditer(text) if not same_text(m["body"], results[m["cmd"]][1])]
     assert not stale, f"docs/exporters.md shows what these no longer print (MOUNTCAL_UPDATE_DOCS=1 rewrites): {stale}"
+
+
+def test_the_table_of_formats_is_the_registry_s() -> None:
+    """The formats, their suffixes and descriptions on the page are made from the exporters' declarations."""
+    from mountcal.outputs.exporters import markdown_table
+
+    text = DOC.read_text(encoding="utf-8")
+    match = FORMATS_BLOCK.search(text)
+    assert match, "docs/exporters.md: no <!-- formats: generated --> block"
+    if os.environ.get("MOUNTCAL_UPDATE_DOCS") == "1":
+        text = FORMATS_BLOCK.sub(lambda m: m.group(1) + markdown_table() + m.group(3), text)
+        DOC.write_text(text, encoding="utf-8")
+        match = FORMATS_BLOCK.search(text)
+        assert match
+    assert match["body"] == markdown_table(), (
+        "docs/exporters.md: the table of formats (MOUNTCAL_UPDATE_DOCS=1 rewrites)"
+    )

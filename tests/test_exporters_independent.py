@@ -25,7 +25,7 @@ from scipy.spatial.transform import Rotation
 
 from mountcal.calibration.fit import calibrate
 from mountcal.core.result import Calibration
-from mountcal.outputs.exporters import FORMATS, Frames, export, read_parent_pose
+from mountcal.outputs.exporters import Frames, builtin, export, read_parent_pose
 from mountcal.simulate.stops import simulate_stops
 
 C200, S200 = np.cos(np.radians(200)), np.sin(np.radians(200))
@@ -193,7 +193,7 @@ DECODERS: dict[str, tuple[Callable[[str | bytes, Path], np.ndarray], float]] = {
 
 
 def test_every_format_has_an_independent_reader() -> None:
-    assert set(DECODERS) == set(FORMATS)
+    assert set(DECODERS) == set(builtin())
 
 
 @pytest.mark.parametrize("fmt", list(DECODERS))

@@ -114,11 +114,13 @@ def test_the_help_documents_the_exit_codes() -> None:
         assert f"\n  {code:<4} " in text
 
 
-def test_the_export_formats_of_the_light_parser_are_the_library_s() -> None:
-    from mountcal.cli.export import FORMAT_NAMES
-    from mountcal.outputs.exporters import FORMATS
+def test_the_export_formats_of_the_parser_are_the_registry_s() -> None:
+    from mountcal.cli import build_parser
+    from mountcal.cli.path_options import command_parser
+    from mountcal.outputs import exporters
 
-    assert FORMAT_NAMES == tuple(FORMATS)
+    to = next(a for a in command_parser(build_parser(), "export")._actions if a.dest == "to")
+    assert to.choices is not None and tuple(to.choices) == exporters.names() and len(exporters.names()) >= 10
 
 
 def _required(command: str) -> list[str]:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -12,22 +13,29 @@ from mountcal.cli.path_options import add_path
 from mountcal.cli.results import result_stream, say
 from mountcal.core.ranges import Number
 from mountcal.core.terminal import safe
-
-# the keys of mountcal.outputs.exporters.FORMATS (a test keeps them equal), here so that `--help` stays light
-FORMAT_NAMES = (
-    "ublox",
-    "ublox-ucenter",
-    "ublox-ubx",
-    "novatel",
-    "ros2-static-tf",
-    "urdf",
-    "tf2",
-    "autoware",
-    "json",
-    "yaml",
-)
+from mountcal.outputs import exporters
 
 log = logging.getLogger("mountcal")
+
+
+class Formats:
+    """``--to``'s choices: the registry's names (:mod:`mountcal.outputs.exporters`). A built-in name is
+    checked without looking for plugins; only another name, or listing them all, reads the entry points."""
+
+    def __contains__(self, name: object) -> bool:
+        return name in exporters.builtin() or name in exporters.names()
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(exporters.names())
+
+
+def _formats_epilog() -> str:
+    """The formats, one a line with what each writes (the registry's built-in ones; then where others come from)."""
+    own = exporters.builtin().values()
+    width = max(len(e.name) for e in own) + 2
+    lines = [f"  {e.name:<{width}}{e.description}" for e in own]
+    extra = f"  or a format an installed package registers (entry-point group {exporters.GROUP})"
+    return "\n".join(["formats (--to; docs/exporters.md):", *lines, extra])
 
 
 def add_parser(sub: Any) -> None:
@@ -43,7 +51,9 @@ def add_parser(sub: Any) -> None:
         output="file to write; none or '-' writes to stdout",
         writes={"what": "the export", "stdio": True, "formats": _suffixes, "formats_by": "--to"},
     )
-    p.add_argument("--to", required=True, choices=FORMAT_NAMES, help="target format (see docs/exporters.md)")
+    p.formatter_class = argparse.RawDescriptionHelpFormatter  # the epilog: one format a line
+    p.epilog = _formats_epilog()
+    p.add_argument("--to", required=True, choices=Formats(), metavar="FORMAT", help="target format (listed below)")
     p.add_argument(
         "--yaw-undetermined",
         choices=("refuse", "zero"),
@@ -81,25 +91,24 @@ def add_parser(sub: Any) -> None:
 
 def _suffixes(args: argparse.Namespace) -> tuple[str, ...]:
     """The suffixes ``-o`` may end in for ``--to`` (the first is the format's own)."""
-    from mountcal.outputs.exporters import SUFFIXES
-
-    return tuple(suffix for suffix, formats in SUFFIXES.items() if args.to in formats)
+    return exporters.get(args.to).suffixes
 
 
 def run(args: argparse.Namespace) -> int:
     from mountcal.core.atomic import atomic_path
     from mountcal.core.errors import InputError
     from mountcal.core.result import Calibration
-    from mountcal.outputs.exporters import DEFAULT_FRAMES, Frames, export, read_parent_pose
+    from mountcal.outputs.exporters import Frames, export, read_parent_pose
 
     result = Path(args.input)
     to_stdout = args.output in (None, STDOUT)
     cal = Calibration.load(result)
     frames = None
+    own = exporters.get(args.to).frames
     if args.parent or args.child or args.translation or args.parent_pose:
-        base = DEFAULT_FRAMES.get(args.to, Frames())
+        base = own or Frames()
         parent = args.parent or base.parent
-        read = args.parent_pose and args.to in DEFAULT_FRAMES  # export() refuses frames for the other formats
+        read = args.parent_pose and own is not None  # export() refuses frames for the other formats
         frames = Frames(
             parent=parent,
             child=args.child or base.child,
@@ -115,11 +124,12 @@ def run(args: argparse.Namespace) -> int:
         stdout = result_stream()
         if isinstance(out, bytes):
             if stdout.isatty():
+                suffix = next(iter(exporters.get(args.to).suffixes), "")
                 raise InputError(
-                    "mountcal export --to ublox-ubx",
-                    "-o FILE or a pipe for the binary message",
+                    f"mountcal export --to {args.to}",
+                    "-o FILE or a pipe for the binary output",
                     "a terminal",
-                    "Pass -o FILE.ubx (the text format `--to ublox` shows the message in hex).",
+                    f"Pass -o FILE{suffix}.",
                 )
             stdout.buffer.write(out)
             stdout.flush()

@@ -20,13 +20,15 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from mountcal.core.conventions import angles_from_rot_vs, rot_vs_from_angles
 from mountcal.core.errors import InputError
 from mountcal.core.option_names import option
-from mountcal.outputs.exporters.common import Mounting, number
-from mountcal.outputs.exporters.ros import BODY_FRAME, Frames, ParentPose, frame_lines
+from mountcal.outputs.exporters.common import BODY_FRAME, Exporter, ExportOptions, Frames, Mounting, ParentPose, number
+from mountcal.outputs.exporters.ros import frame_lines
+
+if TYPE_CHECKING:
+    from mountcal.core.result import Calibration
 
 DEFAULT_FRAMES = Frames(parent="sensor_kit_base_link", child="imu_link")
 POSE_KEYS = ("x", "y", "z", "roll", "pitch", "yaw")
@@ -42,6 +44,8 @@ def autoware_yaml(mount: Mounting, frames: Frames = DEFAULT_FRAMES) -> str:
             f"Give the sensors_calibration.yaml that places {frames.parent} ({option('parent_pose')}), or write "
             f"the entry under {BODY_FRAME} ({option('parent', BODY_FRAME)}).",
         )
+    from mountcal.core.conventions import angles_from_rot_vs
+
     roll, pitch, yaw = angles_from_rot_vs(frames.in_parent(mount.rot_vs))
     x, y, z = frames.translation_m
     lines = frame_lines(mount, frames, "#")
@@ -108,5 +112,22 @@ def read_parent_pose(path: str | Path, parent: str) -> ParentPose:
                 "Fix the entry.",
             )
         values[key] = float(value)
+    from mountcal.core.conventions import rot_vs_from_angles
+
     rotation = rot_vs_from_angles(values["roll"], values["pitch"], values["yaw"])  # URDF rpy = Rz·Ry·Rx
     return ParentPose(rotation, f"{Path(path).name}: {BODY_FRAME}/{parent}")
+
+
+def _write(cal: Calibration, options: ExportOptions) -> str:
+    return autoware_yaml(options.mounting(cal), options.frames or DEFAULT_FRAMES)
+
+
+EXPORTERS = (
+    Exporter(
+        "autoware",
+        (".yaml", ".yml", ".txt"),
+        "Autoware: the IMU's entry of sensor_kit_calibration.yaml (x, y, z, roll, pitch, yaw)",
+        _write,
+        DEFAULT_FRAMES,
+    ),
+)

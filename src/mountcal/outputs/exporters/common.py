@@ -1,4 +1,12 @@
-"""What every exporter shares: the rotation to export, the refusals, σ propagation, number text.
+"""What every exporter shares: its declaration, the rotation to export, the refusals, σ propagation, number text.
+
+An exporter is one module of this package (or of another package, through the entry-point group
+``mountcal.exporters``: :mod:`mountcal.outputs.exporters`) holding ``EXPORTERS``, a tuple of
+:class:`Exporter`: the ``--to`` name, the suffixes ``-o`` may end in, one line saying what it writes,
+and the function writing it from a :class:`~mountcal.core.result.Calibration`. The registry imports
+every module of this package to list the formats (``mountcal export --help``), so a module here
+imports no numerical library at its top: numpy, scipy and the conventions are imported in the
+functions that use them.
 
 The result stores the σ of small rotations about the vehicle x, y, z axes (``rot_vs`` perturbed
 as ``exp([δ]×) · rot_vs``, δ in the vehicle frame), not a full covariance: the exporters take
@@ -8,20 +16,97 @@ a numeric Jacobian.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
-import numpy as np
-from scipy.spatial.transform import Rotation
-
-from mountcal.core.conventions import FloatArray, rot_vs_from_angles
 from mountcal.core.errors import NotEnoughInformation
 from mountcal.core.option_names import option
-from mountcal.core.result import Calibration
+
+if TYPE_CHECKING:
+    from scipy.spatial.transform import Rotation
+
+    from mountcal.core.conventions import FloatArray
+    from mountcal.core.result import Calibration
 
 YawPolicy = Literal["refuse", "zero"]
 JACOBIAN_STEP_RAD = 1e-7  # central differences: error ~ step² (1e-14), rounding ~ 1e-16/step (1e-9)
+BODY_FRAME = "base_link"  # REP 105's name for the REP 103 body frame, and Autoware's
+
+
+@dataclass(frozen=True)
+class ParentPose:
+    """A parent frame's orientation in the body frame (``base_link``), as a URDF joint origin gives it.
+
+    Only its rotation matters: the IMU's position is given in the parent frame itself.
+    """
+
+    rotation: Rotation  # maps parent coordinates to base_link coordinates
+    source: str  # where it was read, for the output's comments
+
+
+@dataclass(frozen=True)
+class Frames:
+    """Frame names, the IMU's position in the parent frame (m), and the parent's pose when it is not the body frame."""
+
+    parent: str = BODY_FRAME
+    child: str = "imu_link"
+    translation_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    parent_pose: ParentPose | None = None  # None: the parent is a REP 103 body frame aligned with the vehicle
+
+    def in_parent(self, rot_vs: Rotation) -> Rotation:
+        """The IMU's orientation in the parent frame (maps IMU coordinates to parent coordinates)."""
+        return rot_vs if self.parent_pose is None else self.parent_pose.rotation.inv() * rot_vs
+
+
+@dataclass(frozen=True)
+class ExportOptions:
+    """How to export: what to do with an undetermined yaw or a result not confident, and the frames.
+
+    ``frames`` is the format's own (:attr:`Exporter.frames`) unless the user named others; it is
+    None for a format that names no frames.
+    """
+
+    yaw: YawPolicy = "refuse"
+    accept_unconfident: bool = False
+    frames: Frames | None = None
+
+    def mounting(self, cal: Calibration) -> Mounting:
+        """The rotation to write, with the refusals every format shares (:func:`mounting`)."""
+        return mounting(cal, self.yaw, self.accept_unconfident)
+
+
+Writer = Callable[["Calibration", ExportOptions], "str | bytes"]
+
+
+@dataclass(frozen=True)
+class Exporter:
+    """One ``--to`` format: what a module of exporters declares (in its ``EXPORTERS`` tuple).
+
+    Attributes
+    ----------
+    name : str
+        The ``--to`` name (``"novatel"``).
+    suffixes : tuple of str
+        The suffixes ``-o`` may end in (lower case, with the dot; its own first, ``.txt`` for any text
+        format). A name ending in another data format's suffix is refused; empty: any name.
+    description : str
+        One line: the system and what it is given (``--help`` and docs/exporters.md).
+    write : callable
+        ``write(calibration, options) -> str | bytes``: the text (bytes for a binary format).
+        ``options.mounting(calibration)`` gives the rotation with the shared refusals.
+    frames : Frames, optional
+        For a format that names frames (ROS, Autoware): its default parent, child and translation,
+        which ``--parent``, ``--child``, ``--translation`` and ``--parent-pose`` change. None: the
+        format names no frames, and giving them is refused.
+    """
+
+    name: str
+    suffixes: tuple[str, ...]
+    description: str
+    write: Writer
+    frames: Frames | None = None
 
 
 @dataclass(frozen=True)
@@ -48,6 +133,10 @@ def mounting(cal: Calibration, yaw: YawPolicy = "refuse", accept_unconfident: bo
     The decision is taken on the result's yaw (None when not determined), never on its rotation
     matrix, which may hold a placeholder yaw.
     """
+    import numpy as np
+
+    from mountcal.core.conventions import rot_vs_from_angles
+
     notes: list[str] = []
     if not cal.confident:
         if not accept_unconfident:
@@ -78,6 +167,9 @@ def propagate_sigma(
     ``periodic`` gives, per output, the period of an angle (its differences are wrapped) or 0.
     An output that depends on a rotation whose σ is unknown (an undetermined yaw) gets None.
     """
+    import numpy as np
+    from scipy.spatial.transform import Rotation
+
     base = np.asarray(fn(mount.rot_vs), dtype=float)
     period = np.zeros(base.size) if periodic is None else np.asarray(periodic, dtype=float)
     jac = np.empty((base.size, 3))
@@ -114,4 +206,4 @@ def number(value: float, decimals: int = 9) -> str:
 
 
 def _radians(deg: float | None) -> float | None:
-    return None if deg is None else float(np.radians(deg))
+    return None if deg is None else math.radians(deg)

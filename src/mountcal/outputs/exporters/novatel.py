@@ -15,15 +15,18 @@ makes the vehicle axes, in body coordinates, the columns of ``C = Rz(Z)·Rx(X)·
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import numpy as np
-from scipy.spatial.transform import Rotation
-
-from mountcal.core.conventions import euler_angles
 from mountcal.core.errors import NotEnoughInformation
-from mountcal.outputs.exporters.common import Mounting, number, propagate_sigma
+from mountcal.outputs.exporters.common import Exporter, ExportOptions, Mounting, number, propagate_sigma
 
-ISO_FROM_NOVATEL = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # (right, fwd, up) → (fwd, left, up)
+if TYPE_CHECKING:
+    import numpy as np
+    from scipy.spatial.transform import Rotation
+
+    from mountcal.core.result import Calibration
+
+ISO_FROM_NOVATEL = ((0.0, 1.0, 0.0), (-1.0, 0.0, 0.0), (0.0, 0.0, 1.0))  # (right, fwd, up) → (fwd, left, up)
 SD_RANGE_DEG = (0.25, 45.0)
 
 
@@ -39,13 +42,20 @@ class NovatelRotation:
 
 
 def _xyz_deg(rot_vs: Rotation) -> np.ndarray:
-    c = Rotation.from_matrix(rot_vs.as_matrix().T @ ISO_FROM_NOVATEL)
+    import numpy as np
+    from scipy.spatial.transform import Rotation
+
+    from mountcal.core.conventions import euler_angles
+
+    c = Rotation.from_matrix(rot_vs.as_matrix().T @ np.array(ISO_FROM_NOVATEL))
     z, x, y = euler_angles(c, "ZXY")
     return np.degrees([x, y, z])
 
 
 def novatel_rotation(mount: Mounting) -> NovatelRotation:
     """The RBV rotation of a mounting, with σ propagated to NovAtel's angles."""
+    import numpy as np
+
     xyz = _xyz_deg(mount.rot_vs)
     sig = propagate_sigma(lambda r: np.radians(_xyz_deg(r)), mount, np.array([2 * np.pi] * 3))
     sigma = [None if s is None else float(np.degrees(s)) for s in sig]
@@ -93,3 +103,14 @@ def novatel_text(r: NovatelRotation) -> str:
     sds = " ".join(number(v, 4) for v in r.sd_deg)
     lines.append(f"SETINSROTATION RBV {angles} {sds}")
     return "\n".join(lines) + "\n"
+
+
+def _write(cal: Calibration, options: ExportOptions) -> str:
+    return novatel_text(novatel_rotation(options.mounting(cal)))
+
+
+EXPORTERS = (
+    Exporter(
+        "novatel", (".txt",), "NovAtel SPAN (OEM7): the `SETINSROTATION RBV` command, with standard deviations", _write
+    ),
+)

@@ -14,43 +14,28 @@ Translation is not estimated by mountcal: it is written as given (default 0).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
-import numpy as np
-from scipy.spatial.transform import Rotation
+from mountcal.outputs.exporters.common import (
+    BODY_FRAME,
+    Exporter,
+    ExportOptions,
+    Frames,
+    Mounting,
+    number,
+    propagate_sigma,
+)
 
-from mountcal.core.conventions import angles_from_rot_vs
-from mountcal.outputs.exporters.common import Mounting, number, propagate_sigma
+if TYPE_CHECKING:
+    import numpy as np
 
-BODY_FRAME = "base_link"  # REP 105's name for the REP 103 body frame, and Autoware's
+    from mountcal.core.result import Calibration
 
-
-@dataclass(frozen=True)
-class ParentPose:
-    """A parent frame's orientation in the body frame (``base_link``), as a URDF joint origin gives it.
-
-    Only its rotation matters: the IMU's position is given in the parent frame itself.
-    """
-
-    rotation: Rotation  # maps parent coordinates to base_link coordinates
-    source: str  # where it was read, for the output's comments
-
-
-@dataclass(frozen=True)
-class Frames:
-    """Frame names, the IMU's position in the parent frame (m), and the parent's pose when it is not the body frame."""
-
-    parent: str = BODY_FRAME
-    child: str = "imu_link"
-    translation_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    parent_pose: ParentPose | None = None  # None: the parent is a REP 103 body frame aligned with the vehicle
-
-    def in_parent(self, rot_vs: Rotation) -> Rotation:
-        """The IMU's orientation in the parent frame (maps IMU coordinates to parent coordinates)."""
-        return rot_vs if self.parent_pose is None else self.parent_pose.rotation.inv() * rot_vs
+DEFAULT_FRAMES = Frames()  # base_link -> imu_link, no translation
 
 
-def quaternion_xyzw(mount: Mounting, frames: Frames = Frames()) -> np.ndarray:
+def quaternion_xyzw(mount: Mounting, frames: Frames = DEFAULT_FRAMES) -> np.ndarray:
     """The tf2 quaternion (x, y, z, w) of the child (IMU) frame in the parent, w ≥ 0."""
     q = frames.in_parent(mount.rot_vs).as_quat()
     return -q if q[3] < 0 else q
@@ -58,6 +43,10 @@ def quaternion_xyzw(mount: Mounting, frames: Frames = Frames()) -> np.ndarray:
 
 def frame_lines(mount: Mounting, frames: Frames, prefix: str) -> list[str]:
     """The comment lines every ROS format starts with: what the transform means, its parent, and its σ."""
+    import numpy as np
+
+    from mountcal.core.conventions import angles_from_rot_vs
+
     lines = [f"{prefix} {h}" for h in mount.header]
     lines.append(
         f"{prefix} transform {frames.parent} -> {frames.child}: the IMU's pose in {frames.parent}, mapping IMU "
@@ -82,7 +71,7 @@ def frame_lines(mount: Mounting, frames: Frames, prefix: str) -> list[str]:
     return [*lines, f"{prefix} 1σ of the fixed-axis roll, pitch, yaw (rad): {text}"]
 
 
-def static_transform_command(mount: Mounting, frames: Frames = Frames()) -> str:
+def static_transform_command(mount: Mounting, frames: Frames = DEFAULT_FRAMES) -> str:
     """``ros2 run tf2_ros static_transform_publisher`` with the Humble+ named arguments."""
     x, y, z = (number(v) for v in frames.translation_m)
     qx, qy, qz, qw = (number(float(v), 12) for v in quaternion_xyzw(mount, frames))
@@ -94,8 +83,10 @@ def static_transform_command(mount: Mounting, frames: Frames = Frames()) -> str:
     return "\n".join(lines) + "\n"
 
 
-def urdf_joint(mount: Mounting, frames: Frames = Frames(), name: str | None = None) -> str:
+def urdf_joint(mount: Mounting, frames: Frames = DEFAULT_FRAMES, name: str | None = None) -> str:
     """A fixed URDF joint placing the IMU's link in the parent link."""
+    from mountcal.core.conventions import angles_from_rot_vs
+
     roll, pitch, yaw = angles_from_rot_vs(frames.in_parent(mount.rot_vs))
     xyz = " ".join(number(v) for v in frames.translation_m)
     rpy = " ".join(number(v, 12) for v in (roll, pitch, yaw))
@@ -117,7 +108,7 @@ def urdf_joint(mount: Mounting, frames: Frames = Frames(), name: str | None = No
     )
 
 
-def tf2_quaternion(mount: Mounting, frames: Frames = Frames()) -> str:
+def tf2_quaternion(mount: Mounting, frames: Frames = DEFAULT_FRAMES) -> str:
     """The quaternion of ``parent → child`` for C++ and Python tf2 code."""
     qx, qy, qz, qw = (number(float(v), 12) for v in quaternion_xyzw(mount, frames))
     lines = frame_lines(mount, frames, "//")
@@ -126,3 +117,35 @@ def tf2_quaternion(mount: Mounting, frames: Frames = Frames()) -> str:
         f"// Python: geometry_msgs.msg.Quaternion(x={qx}, y={qy}, z={qz}, w={qw})",
     ]
     return "\n".join(lines) + "\n"
+
+
+def _writer(fn: Callable[[Mounting, Frames], str]) -> Callable[[Calibration, ExportOptions], str]:
+    def write(cal: Calibration, options: ExportOptions) -> str:
+        return fn(options.mounting(cal), options.frames or DEFAULT_FRAMES)
+
+    return write
+
+
+EXPORTERS = (
+    Exporter(
+        "ros2-static-tf",
+        (".sh", ".txt"),
+        "ROS 2: the `ros2 run tf2_ros static_transform_publisher` command (parent → IMU frame)",
+        _writer(static_transform_command),
+        DEFAULT_FRAMES,
+    ),
+    Exporter(
+        "urdf",
+        (".urdf", ".xacro", ".xml", ".txt"),
+        "URDF: a fixed `<joint>` placing the IMU's link",
+        _writer(urdf_joint),
+        DEFAULT_FRAMES,
+    ),
+    Exporter(
+        "tf2",
+        (".txt",),
+        "tf2: the quaternion of parent → IMU frame, for C++ and Python code",
+        _writer(tf2_quaternion),
+        DEFAULT_FRAMES,
+    ),
+)

@@ -9,14 +9,16 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
-from scipy.spatial.transform import Rotation
-
-from mountcal.core.conventions import CONVENTIONS, FloatArray, angles_from_rot_vs
 from mountcal.core.errors import FitFailed
-from mountcal.outputs.exporters.common import Mounting, propagate_sigma
+from mountcal.outputs.exporters.common import Exporter, ExportOptions, Mounting, propagate_sigma
+
+if TYPE_CHECKING:
+    from scipy.spatial.transform import Rotation
+
+    from mountcal.core.conventions import FloatArray
+    from mountcal.core.result import Calibration
 
 AXIS_UNDEFINED_RAD = 1e-6  # below this angle the rotation axis (and its σ) is not meaningful
 
@@ -35,10 +37,16 @@ def _rotvec(r: Rotation) -> FloatArray:
 
 def _axis(r: Rotation) -> FloatArray:
     v = r.as_rotvec()
+    import numpy as np
+
     return v / np.linalg.norm(v)
 
 
 def _euler(r: Rotation) -> FloatArray:
+    import numpy as np
+
+    from mountcal.core.conventions import angles_from_rot_vs
+
     roll, pitch, yaw = angles_from_rot_vs(r)
     return np.array([yaw, pitch, roll])
 
@@ -53,6 +61,10 @@ def _values(values: FloatArray) -> list[float]:
 
 def parameterisations(mount: Mounting) -> dict[str, Any]:
     """The document: every parameterisation with its 1σ (None where the σ is not known)."""
+    import numpy as np
+
+    from mountcal.core.conventions import CONVENTIONS
+
     rot = mount.rot_vs
     q = rot.as_quat()
     q = -q if q[3] < 0 else q
@@ -103,6 +115,8 @@ def parameterisations(mount: Mounting) -> dict[str, Any]:
 
 
 def _angle_sigma(mount: Mounting) -> float | None:
+    import numpy as np
+
     return propagate_sigma(lambda r: np.array([r.magnitude()]), mount)[0]
 
 
@@ -139,3 +153,22 @@ def _dumps(value: Any, key: str) -> str:
         return json.dumps(value, allow_nan=False)
     except ValueError as err:
         raise FitFailed(f"{key}: a value that is not a finite number ({value!r}); nothing was written") from err
+
+
+def _json(cal: Calibration, options: ExportOptions) -> str:
+    return rotation_json(options.mounting(cal))
+
+
+def _yaml_document(cal: Calibration, options: ExportOptions) -> str:
+    return rotation_yaml(options.mounting(cal))
+
+
+EXPORTERS = (
+    Exporter("json", (".json", ".txt"), "mountcal's rotation in every common parameterisation with 1σ, as JSON", _json),
+    Exporter(
+        "yaml",
+        (".yaml", ".yml", ".txt"),
+        "mountcal's rotation in every common parameterisation with 1σ, as YAML",
+        _yaml_document,
+    ),
+)

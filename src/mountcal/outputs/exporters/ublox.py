@@ -30,12 +30,15 @@ from __future__ import annotations
 
 import struct
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import numpy as np
-from scipy.spatial.transform import Rotation
+from mountcal.outputs.exporters.common import Exporter, ExportOptions, Mounting, number, propagate_sigma
 
-from mountcal.core.conventions import GIMBAL_LOCK_PITCH_DEG, euler_angles
-from mountcal.outputs.exporters.common import Mounting, number, propagate_sigma
+if TYPE_CHECKING:
+    import numpy as np
+    from scipy.spatial.transform import Rotation
+
+    from mountcal.core.result import Calibration
 
 KEYS = {  # name: (key ID, struct format of the value), from the interface description (HPS 1.40)
     "CFG-SFIMU-AUTO_MNTALG_ENA": (0x10060027, "<B"),
@@ -84,10 +87,16 @@ class UbloxMount:
 
 
 def _angles_deg(rot_vs: Rotation) -> np.ndarray:
+    import numpy as np
+
+    from mountcal.core.conventions import euler_angles
+
     return np.degrees(euler_angles(rot_vs, "ZYX"))  # yaw, pitch, roll: installation frame = ISO 8855
 
 
 def _tolerance(mount: Mounting) -> tuple[float | None, bool, int, str]:
+    import numpy as np
+
     if any(s is None for s in mount.sigma_rad):
         return (
             None,
@@ -112,6 +121,8 @@ def _tolerance(mount: Mounting) -> tuple[float | None, bool, int, str]:
 
 def ublox_mount(mount: Mounting) -> UbloxMount:
     """The IMU-mount angles of a mounting, wrapped into u-blox's ranges, with their σ and tolerance."""
+    import numpy as np
+
     yaw, pitch, roll = _angles_deg(mount.rot_vs)
     sig = propagate_sigma(lambda r: np.radians(_angles_deg(r)), mount, np.array([2 * np.pi] * 3))
     sigma = tuple(None if s is None else float(np.degrees(s)) for s in sig)
@@ -201,6 +212,8 @@ def ublox_text(m: UbloxMount) -> str:
         lines.append(
             f"{name} 0x{key:08x} {value * SCALE_DEG:.2f}  # deg (raw {value}); exact {number(exact[axis])}, {sigma}"
         )
+    from mountcal.core.conventions import GIMBAL_LOCK_PITCH_DEG
+
     if abs(m.pitch_deg) > GIMBAL_LOCK_PITCH_DEG:
         lines.append(
             "# pitch near ±90°: yaw and roll are not separately defined; the rotation is exact, but the receiver's "
@@ -212,3 +225,24 @@ def ublox_text(m: UbloxMount) -> str:
     lines.append(f"# UBX-CFG-VALSET (mode and angles), layers RAM BBR Flash: {first}")
     lines.append(f"# UBX-CFG-VALSET (tolerance; firmware before HPS 1.40 rejects this message only): {second}")
     return "\n".join(lines) + "\n"
+
+
+def _text(cal: Calibration, options: ExportOptions) -> str:
+    return ublox_text(ublox_mount(options.mounting(cal)))
+
+
+def _ucenter(cal: Calibration, options: ExportOptions) -> str:
+    return ucenter_config(ublox_mount(options.mounting(cal)).messages)
+
+
+def _ubx(cal: Calibration, options: ExportOptions) -> bytes:
+    return valsets(ublox_mount(options.mounting(cal)))
+
+
+EXPORTERS = (
+    Exporter(
+        "ublox", (".txt",), "u-blox ZED-F9R (HPS): the IMU-mount keys, readable, with the VALSET messages in hex", _text
+    ),
+    Exporter("ublox-ucenter", (".txt",), "u-blox: a u-center configuration file (CFG-VALGET lines)", _ucenter),
+    Exporter("ublox-ubx", (".ubx",), "u-blox: the two UBX-CFG-VALSET messages, binary, for the receiver's port", _ubx),
+)
