@@ -17,12 +17,12 @@ from typing import Any
 import pytest
 
 from mountcal.apply import rotate_log as rotate_log_module
+from mountcal.apply.rotate_log import to_frame
 from mountcal.calibration.options import DEFAULT_USE, Options, default
 from mountcal.calibration.pipeline import LogJob, _driving_alone, calibrate_log
 from mountcal.cli import build_parser, main
 from mountcal.core.errors import InputError
 from mountcal.io.reader import CHUNK_SAMPLES
-from mountcal.apply.rotate_log import to_frame
 from mountcal.simulate.drive import simulate_drive
 
 REPO = Path(__file__).resolve().parents[1]

@@ -81,7 +81,7 @@ def _file_sink(file: Any, line: Callable[[dict[str, Any]], str]) -> Callable[[di
 
 
 def run(args: argparse.Namespace) -> int:
-    from mountcal.calibration.fit import Options
+    from mountcal.calibration.options import Options
     from mountcal.calibration.summary import summary
     from mountcal.core.atomic import GrowingFile, atomic_path
     from mountcal.core.errors import InputError

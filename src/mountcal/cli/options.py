@@ -335,7 +335,6 @@ def detection(args: argparse.Namespace) -> StopDetection:
 
 
 def fit_options(args: argparse.Namespace) -> Options:
-    from mountcal.calibration.fit import Options
     from mountcal.loop.slope_reference import SlopeReference
 
     reference = args.slope_reference

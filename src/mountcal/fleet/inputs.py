@@ -34,8 +34,7 @@ from typing import Any, Literal
 
 import pandas as pd
 
-from mountcal.calibration.fit import Options
-from mountcal.calibration.options import DEFAULT_USE, Use
+from mountcal.calibration.options import DEFAULT_USE, Options, Use
 from mountcal.calibration.pipeline import LogJob
 from mountcal.core.errors import InputError
 from mountcal.core.option_names import flags_on

@@ -29,7 +29,8 @@ from typing import IO, Any
 import numpy as np
 import pandas as pd
 
-from mountcal.calibration.fit import WITH_BIAS, Options, calibrate
+from mountcal.calibration.fit import WITH_BIAS, calibrate
+from mountcal.calibration.options import Options
 from mountcal.core.atomic import atomic_path
 from mountcal.core.conventions import specific_force_v
 from mountcal.core.errors import InputError, MountcalError, NotEnoughInformation

@@ -22,7 +22,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from mountcal.calibration.fit import BASE, WITH_BIAS, parse_model
+from mountcal.calibration.fit import BASE, WITH_BIAS
+from mountcal.calibration.options import parse_model
 from mountcal.core.atomic import atomic_path
 from mountcal.core.conventions import G_N, FloatArray
 from mountcal.core.errors import InputError, NotEnoughInformation
@@ -416,7 +417,8 @@ def monte_carlo_rms(plan: Plan, runs: int, seed: int, bias_mg: float = 20.0) -> 
     Each run draws a mounting (roll, pitch within ±10°, any yaw) and, for a model with a bias, a
     bias of ``bias_mg`` in a random direction; the stop means carry the noise the plan assumes.
     """
-    from mountcal.calibration.fit import Options, calibrate
+    from mountcal.calibration.fit import calibrate
+    from mountcal.calibration.options import Options
     from mountcal.simulate.stops import random_bias
 
     rng = np.random.default_rng(seed)
