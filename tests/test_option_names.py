@@ -11,7 +11,7 @@ import pytest
 
 from mountcal import cli
 from mountcal.apply.rotate_log import output_format, rotate_log
-from mountcal.calibration.fit import Options, parse_model
+from mountcal.calibration.options import Options, parse_model
 from mountcal.calibration.pipeline import calibrate_log
 from mountcal.core.errors import InputError
 from mountcal.core.option_names import OPTIONS, as_flags, option

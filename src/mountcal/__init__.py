@@ -27,7 +27,8 @@ from mountcal.core import lazy
 if TYPE_CHECKING:
     from mountcal.apply.rotate import acc_to_sensor, acc_to_vehicle, frame_to_sensor, frame_to_vehicle
     from mountcal.apply.rotate_log import to_frame
-    from mountcal.calibration.fit import Options, calibrate
+    from mountcal.calibration.fit import calibrate
+    from mountcal.calibration.options import Options
     from mountcal.calibration.pipeline import calibrate_log
     from mountcal.calibration.summary import summary
     from mountcal.core.result import Calibration
@@ -43,7 +44,7 @@ _HOMES = {
     "__version__": "mountcal.core.version",
     "Calibration": "mountcal.core.result",
     "LogOptions": "mountcal.io.reader",
-    "Options": "mountcal.calibration.fit",
+    "Options": "mountcal.calibration.options",
     "StopTable": "mountcal.stops.table",
     "acc_to_sensor": "mountcal.apply.rotate",
     "acc_to_vehicle": "mountcal.apply.rotate",

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Sequence
+from typing import NoReturn
 
 import numpy as np
 import pandas as pd
@@ -60,12 +61,10 @@ def check_applicable(
     if not cal.confident:
         why = "; ".join(u.what for u in cal.unexplained) or "see the result's notes"
         if require_confident:
-            raise InputError(
+            refuse_not_confident(
                 where,
-                f"a confident calibration ({option('require_confident', True)})",
                 f"a result that is not confident ({why})",
-                "Check the result's notes and unexplained structure, re-calibrate, or drop "
-                f"{option('require_confident', True)}.",
+                "Check the result's notes and unexplained structure, re-calibrate",
             )
         found.append(
             f"the calibration is not confident ({why}); its σ are qualified and the rotation may be wrong "
@@ -74,6 +73,17 @@ def check_applicable(
     if level_only and not cal.yaw_determined:
         found.append(f"levelled only: yaw not determined ({cal.yaw_reason}); the heading is the sensor's own")
     return found
+
+
+def refuse_not_confident(where: str, found: str, todo: str) -> NoReturn:
+    """The one refusal of ``require_confident`` (``rotate`` and ``fleet``): ``found`` the results that are not
+    confident, ``todo`` what to do besides accepting them."""
+    raise InputError(
+        where,
+        f"a confident calibration ({option('require_confident', True)})",
+        found,
+        f"{todo}, or drop {option('require_confident', True)} (accept results that are not confident).",
+    )
 
 
 def _matrix(cal: Calibration, level_only: bool) -> FloatArray:

@@ -58,15 +58,16 @@ from mountcal.core.conventions import CONVENTIONS, FloatArray
 from mountcal.core.errors import InputError
 from mountcal.core.option_names import option
 from mountcal.core.output_suffix import check_output_suffix
+from mountcal.core.ranges import check
 from mountcal.core.result import VEHICLE_FRAME, Calibration
 from mountcal.core.threads import helpers_allowed
 from mountcal.core.version import software_version
 from mountcal.io.input_conventions import AxisMap, check_same_axes, parse_axes
-from mountcal.io.logs import CHUNK_SAMPLES, iter_log
+from mountcal.io.logs import iter_log
 from mountcal.io.mcap.chunks import open_log
 from mountcal.io.mcap.copy import copy_mcap_with_imu
 from mountcal.io.mcap.write import McapImuSamples
-from mountcal.io.reader import LogOptions
+from mountcal.io.reader import CHUNK_SAMPLES, LogOptions
 from mountcal.io.registry import reader_for
 from mountcal.io.ros2.imu import ImuMessages
 from mountcal.io.samples import Samples
@@ -161,6 +162,7 @@ def rotate_log(
     frame_id: str = VEHICLE_FRAME_ID,
     level_only: bool = False,
     require_confident: bool = False,
+    where: str | None = None,
 ) -> RotateReport:
     """Write a log's samples in the vehicle frame, streaming with bounded memory.
 
@@ -190,6 +192,8 @@ def rotate_log(
         Accept a calibration without yaw and write the levelled frame.
     require_confident : bool
         Refuse a calibration that is not confident.
+    where : str, optional
+        How a refusal names the calibration (default: the input it was made from; the CLI names its file).
 
     Returns
     -------
@@ -207,7 +211,10 @@ def rotate_log(
     out = Path(output)
     kind = output_format(out, fmt)
     _check_not_an_input(out, files)
-    found = tuple(check_applicable(cal, level_only=level_only, require_confident=require_confident))
+    checked = Checked(
+        level_only,
+        tuple(check_applicable(cal, level_only=level_only, require_confident=require_confident, where=where)),
+    )
     axes = None if opts.axes is None else parse_axes(opts.axes, option("axes"))
     check_same_axes(cal.provenance.conventions, axes, " + ".join(map(str, files)))
     if not cal.yaw_determined:
@@ -219,8 +226,7 @@ def rotate_log(
                 "Write .parquet or .mcap, or determine yaw first.",
             )
         frame_id = LEVELLED_FRAME_ID if frame_id == VEHICLE_FRAME_ID else frame_id
-    if chunk_samples < 1:
-        raise ValueError(f"chunk_samples must be at least 1, got {chunk_samples}")
+    check("chunk_samples", chunk_samples, option("chunk"))
     if kind == "mcap" and any(reader_for(f, opts).name == "mcap" for f in files):  # copied through
         if len(files) != 1:
             raise InputError(
@@ -230,10 +236,19 @@ def rotate_log(
                 "Rotate each MCAP file to its own output, or write Parquet/CSV (which joins splits).",
             )
         with reading(opts.allow_truncated) as cuts:
-            report = _rotate_mcap_copy(files[0], cal, out, opts.topic, frame_id, cuts, axes)
+            report = _rotate_mcap_copy(files[0], cal, out, opts.topic, frame_id, cuts, checked, axes)
     else:
-        report = _rotate_stream(files, cal, out, kind, opts, chunk_samples, frame_id)
-    return replace(report, frame=cal.frame, warnings=found)
+        report = _rotate_stream(files, cal, out, kind, opts, chunk_samples, frame_id, checked)
+    return replace(report, frame=cal.frame, warnings=checked.warnings)
+
+
+@dataclass(frozen=True)
+class Checked:
+    """What :func:`~mountcal.apply.rotate.check_applicable` decided, once per run: ``level_only`` and the
+    warnings, passed as a value to every rotation and into the output's metadata (never decided again)."""
+
+    level_only: bool
+    warnings: tuple[str, ...]
 
 
 def _check_not_an_input(out: Path, files: Sequence[Path]) -> None:
@@ -248,14 +263,16 @@ def _check_not_an_input(out: Path, files: Sequence[Path]) -> None:
             )
 
 
-def _metadata(cal: Calibration, files: Sequence[Path], incomplete: Sequence[str] = ()) -> dict[str, str]:
+def _metadata(
+    cal: Calibration, files: Sequence[Path], checked: Checked, incomplete: Sequence[str] = ()
+) -> dict[str, str]:
     version = software_version()
     return {
         "mountcal.frame": cal.frame,
         "mountcal.units": "t_s s; ax, ay, az m/s^2 (specific force, bias removed); gx, gy, gz rad/s",
         "mountcal.yaw": "vehicle" if cal.yaw_determined else "sensor's own (not determined)",
         "mountcal.confident": json.dumps(cal.confident),
-        "mountcal.warnings": json.dumps(check_applicable(cal, level_only=True)),
+        "mountcal.warnings": json.dumps(list(checked.warnings)),
         "mountcal.core.conventions": json.dumps(CONVENTIONS),
         "mountcal.calibration": json.dumps(
             {
@@ -285,22 +302,23 @@ def _rotate_stream(
     opts: LogOptions,
     chunk_samples: int,
     frame_id: str,
+    checked: Checked,
 ) -> RotateReport:
     chunks = iter_log(files, opts, chunk_samples)
     first = next(chunks, None)
     if first is None:
         raise InputError(" + ".join(map(str, files)), "IMU samples", "none", "Check the log and the topic/DBC.")
-    acc_to_vehicle(first.acc_s, cal, check_units=True, level_only=True)  # g units refused before any output
+    acc_to_vehicle(first.acc_s, cal, check_units=True, level_only=checked.level_only)  # g units refused before output
     tally = _Tally(gyro=first.gyro_s is not None, several=len(files) > 1)
     with atomic_output(out) as f, ThreadPoolExecutor(max_workers=1) as encoder:
-        writer = _writer(f, kind, tally.gyro, cal, files, frame_id, first.incomplete)
+        writer = _writer(f, kind, tally.gyro, cal, files, frame_id, first.incomplete, checked)
         # Encoding and compressing chunk k (pyarrow releases the GIL) overlaps reading chunk k + 1;
         # one chunk in flight keeps memory bounded.
         overlap = helpers_allowed()
         pending: Future[None] | None = None
         try:
             for chunk in _chain(first, chunks):
-                rows = tally.rotate(chunk, cal)
+                rows = tally.rotate(chunk, cal, checked.level_only)
                 if pending is not None:
                     pending.result()
                     pending = None
@@ -341,7 +359,9 @@ class _Tally:
     dropped: Counter[str] = field(default_factory=Counter)
     incomplete: list[str] = field(default_factory=list)
 
-    def rotate(self, chunk: Samples, cal: Calibration) -> tuple[FloatArray, FloatArray, FloatArray | None] | None:
+    def rotate(
+        self, chunk: Samples, cal: Calibration, level_only: bool
+    ) -> tuple[FloatArray, FloatArray, FloatArray | None] | None:
         """The chunk's rows to write, in the vehicle frame (None for an empty chunk), counted."""
         self.dropped.update(chunk.dropped)
         self.incomplete += chunk.incomplete
@@ -355,9 +375,9 @@ class _Tally:
                 "a file without the gyro" if self.gyro else "a gyro in only some files",
                 "Rotate the files separately.",
             )
-        # Units checked on the first chunk; yaw by rotate_log (level_only=True: already decided there).
-        acc_v = acc_to_vehicle(chunk.acc_s, cal, check_units=False, level_only=True)
-        gyro_v = rate_to_vehicle(chunk.gyro_s, cal, level_only=True) if chunk.gyro_s is not None else None
+        # Units checked on the first chunk; yaw by rotate_log (level_only: its decision, passed on).
+        acc_v = acc_to_vehicle(chunk.acc_s, cal, check_units=False, level_only=level_only)
+        gyro_v = rate_to_vehicle(chunk.gyro_s, cal, level_only=level_only) if chunk.gyro_s is not None else None
         self.samples, self.chunks, self.largest = self.samples + n, self.chunks + 1, max(self.largest, n)
         return chunk.t_s, acc_v, gyro_v
 
@@ -377,8 +397,9 @@ def _writer(
     files: Sequence[Path],
     frame_id: str,
     incomplete: Sequence[str],
+    checked: Checked,
 ) -> ParquetSamples | CsvSamples | McapImuSamples:
-    meta = _metadata(cal, files, incomplete)
+    meta = _metadata(cal, files, checked, incomplete)
     if kind == "parquet":
         return ParquetSamples(f, gyro, meta, descriptions=_descriptions(cal))
     if kind == "csv":
@@ -415,17 +436,19 @@ def _rotate_mcap_copy(
     topic: str | None,
     frame_id: str,
     cuts: Sequence[Cut],
+    checked: Checked,
     axes: AxisMap | None = None,
 ) -> RotateReport:
     open_log(src, discover=False).file.close()  # a cut file is refused, or its cut recorded in `cuts`, before writing
     incomplete = tuple(c.sentence for c in cuts)
-    meta = {k.removeprefix("mountcal."): v for k, v in _metadata(cal, [src], incomplete).items()}
-    checked = False
+    meta = {k.removeprefix("mountcal."): v for k, v in _metadata(cal, [src], checked, incomplete).items()}
+    units_checked = False
 
     def transform(msgs: ImuMessages) -> tuple[ImuMessages, int]:
-        nonlocal checked
-        rotated = _to_vehicle(msgs if axes is None or axes.identity else _mapped(msgs, axes), cal, not checked)
-        checked = checked or len(msgs) >= 10
+        nonlocal units_checked
+        mapped = msgs if axes is None or axes.identity else _mapped(msgs, axes)
+        rotated = _to_vehicle(mapped, cal, not units_checked, checked.level_only)
+        units_checked = units_checked or len(msgs) >= 10
         return rotated
 
     with atomic_output(out) as g:
@@ -450,12 +473,12 @@ def _rotate_mcap_copy(
     )
 
 
-def _to_vehicle(msgs: ImuMessages, cal: Calibration, check_units: bool) -> tuple[ImuMessages, int]:
+def _to_vehicle(msgs: ImuMessages, cal: Calibration, check_units: bool, level_only: bool) -> tuple[ImuMessages, int]:
     """The messages in the vehicle frame, and how many hold a non-finite value."""
     acc, gyro = msgs.linear_acceleration, msgs.angular_velocity
     finite = np.isfinite(acc).all(axis=1) & np.isfinite(gyro).all(axis=1)
     if check_units and finite.sum() >= 10:
-        acc_to_vehicle(acc[finite], cal, check_units=True, level_only=True)  # refuses g units; yaw decided earlier
+        acc_to_vehicle(acc[finite], cal, check_units=True, level_only=level_only)  # refuses g units
     rot = cal.rot_vs.as_matrix()
     orientation = msgs.orientation.copy()
     known = (msgs.orientation_covariance[:, 0] != -1.0) & (np.linalg.norm(orientation, axis=1) > 0.5)
@@ -468,9 +491,9 @@ def _to_vehicle(msgs: ImuMessages, cal: Calibration, check_units: bool) -> tuple
             nanosec=msgs.nanosec,
             orientation=orientation,
             orientation_covariance=msgs.orientation_covariance,
-            angular_velocity=rate_to_vehicle(gyro, cal, level_only=True),
+            angular_velocity=rate_to_vehicle(gyro, cal, level_only=level_only),
             angular_velocity_covariance=_rotate_covariance(msgs.angular_velocity_covariance, rot),
-            linear_acceleration=acc_to_vehicle(acc, cal, check_units=False, level_only=True),
+            linear_acceleration=acc_to_vehicle(acc, cal, check_units=False, level_only=level_only),
             linear_acceleration_covariance=_rotate_covariance(msgs.linear_acceleration_covariance, rot),
         ),
         int((~finite).sum()),

@@ -12,11 +12,11 @@ makes it precise enough (docs/conventions.md §4); otherwise it is None with the
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
-from typing import Literal
+from dataclasses import replace
 
 import numpy as np
 
+from mountcal.calibration.options import Options
 from mountcal.calibration.record import (
     GIVEN,
     MAX_CONFIDENT_TILT_SIGMA_DEG,
@@ -51,10 +51,7 @@ from mountcal.estimate.effects.temperature import MIN_TEMPERATURE_SPAN_C
 from mountcal.estimate.geometry import span_ratio
 from mountcal.estimate.observability import separability
 from mountcal.estimate.sensor_errors import SensorErrors, from_spec
-from mountcal.estimate.triad import Triad
 from mountcal.io.input_conventions import merged
-from mountcal.io.sensor_spec import DEFAULT as DEFAULT_SPEC
-from mountcal.io.sensor_spec import SensorSpec
 from mountcal.loop import crosscheck, plausibility, slope_reference
 from mountcal.loop import terms as model_terms
 from mountcal.loop.model_choice import close_the_loop, effect_values
@@ -62,24 +59,9 @@ from mountcal.loop.steps import Loop, Step
 from mountcal.loop.systematic import assess
 from mountcal.stops.table import StopTable, check_count
 
-Method = Literal["full", "paper"]
-BASE: tuple[str, ...] = ("rotation", "slope")
-WITH_BIAS: tuple[str, ...] = ("rotation", "slope", "bias")
+BASE = full.BASE
+WITH_BIAS: tuple[str, ...] = (*BASE, "bias")
 MIN_DISTINCT_HEADINGS = 3
-
-
-@dataclass(frozen=True)
-class Options:
-    """Settings of a calibration run (defaults are the CLI's)."""
-
-    method: Method = "full"
-    model: str = "auto"
-    gravity_mps2: float | None = None
-    max_yaw_sigma_deg: float = 5.0
-    selection_alpha: float = 0.001
-    spec: SensorSpec = DEFAULT_SPEC  # the sensor's limits, for the systematic part of σ
-    triad: Triad | None = None  # a triad calibration: applied to the stops, its covariance replaces the spec's
-    slope_reference: slope_reference.SlopeReference | None = None  # checked against the stops' slope
 
 
 def calibrate(table: StopTable, options: Options | None = None) -> Calibration:
@@ -99,10 +81,8 @@ def calibrate(table: StopTable, options: Options | None = None) -> Calibration:
     g, g_source = local_gravity(table.lat_deg, table.alt_m, opts.gravity_mps2)
     if opts.method == "paper":
         cal = _paper(table, g, g_source, opts)
-    elif opts.method == "full":
-        cal = _full(table, g, g_source, opts)
     else:
-        raise InputError(option("method"), "paper or full", repr(opts.method), "Choose one of them.")
+        cal = _full(table, g, g_source, opts)
     stated = merged(table.conventions, (gravity_convention(g_source),))
     cal = replace(cal, provenance=replace(cal.provenance, conventions=stated))
     checks = (
@@ -112,23 +92,6 @@ def calibrate(table: StopTable, options: Options | None = None) -> Calibration:
         *plausibility.answer_checks(cal),
     )
     return plausibility.with_checks(cal, checks)
-
-
-def parse_model(spec: str) -> tuple[str, ...] | None:
-    """``"auto"`` → None; a comma list of terms (:mod:`mountcal.loop.terms`), starting ``rotation,slope``."""
-    terms = tuple(t.strip() for t in spec.split(",") if t.strip())
-    if terms == ("auto",):
-        return None
-    known = model_terms.by_name()
-    unknown = [t for t in terms if t not in known]
-    if terms[:2] != model_terms.BASE or unknown or len(set(terms)) != len(terms):
-        raise InputError(
-            option("model"),
-            f"{model_terms.help_text()} (installed: {', '.join(model_terms.optional())})",
-            repr(spec) + (f" (unknown: {', '.join(unknown)})" if unknown else ""),
-            f"For example {option('model', 'rotation,slope,bias')}.",
-        )
-    return terms
 
 
 def check_model(table: StopTable, terms: tuple[str, ...]) -> None:
@@ -165,7 +128,7 @@ _FIELD = {"temperature_c": "temperature_c", "site": "site"}
 
 
 def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibration:
-    fixed = parse_model(opts.model)
+    fixed = opts.terms
     if fixed is not None:
         check_model(table, fixed)
     from_position = g_source.startswith("WGS 84")
@@ -473,13 +436,6 @@ def _observability(table: StopTable, f: full.Fit, g: float) -> Observability:
 
 
 def _paper(table: StopTable, g: float, g_source: str, opts: Options) -> Calibration:
-    if opts.model not in ("auto", "rotation,slope"):
-        raise InputError(
-            option("model"),
-            f"auto or rotation,slope with {option('method', 'paper')}",
-            repr(opts.model),
-            f"The paper's method fits no bias; use {option('method', 'full')} for other models.",
-        )
     est, cov, noise_scale, residual = paper.paper_method(table, g)
     roll, pitch, yaw = (float(np.degrees(a)) for a in angles_from_rot_vs(est.rot_vs))
     sig = np.degrees(np.sqrt(np.clip(np.diag(cov), 0, None)))

@@ -15,15 +15,15 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Literal
 
 import numpy as np
 
-from mountcal.calibration.fit import Options, calibrate
+from mountcal.calibration.fit import calibrate
+from mountcal.calibration.options import BASE, DEFAULT_USE, Options, Use, check_use
 from mountcal.calibration.record import local_gravity
 from mountcal.calibration.with_driving import combine, driving_calibration, not_combined
 from mountcal.core.driving_document import Comparison, DrivingConsistency
-from mountcal.core.errors import NotEnoughInformation
+from mountcal.core.errors import InputError, NotEnoughInformation
 from mountcal.core.option_names import option
 from mountcal.core.paths import special_kind
 from mountcal.core.result import Calibration, Provenance
@@ -31,7 +31,7 @@ from mountcal.core.version import software_version
 from mountcal.estimate.driving import DrivingFit, estimate_driving
 from mountcal.estimate.driving_options import DrivingOptions, horizontal_axes_sigma_deg
 from mountcal.io.input_conventions import merged, parse_axes
-from mountcal.io.kind import Declared, InputKind, input_kind
+from mountcal.io.kind import Declared, InputKind, kind_of_input
 from mountcal.io.logs import read_log, stated
 from mountcal.io.reader import LogOptions
 from mountcal.io.samples import Samples, with_gravity
@@ -41,8 +41,6 @@ from mountcal.loop import crosscheck, plausibility
 from mountcal.stops.detect import StopDetection
 from mountcal.stops.headings import StopTableFromLog, near_miss_advice, read_protocol, tabulate
 from mountcal.stops.table import Headings, StopTable, Unit, read_stop_table
-
-Use = Literal["auto", "stops", "driving"]
 
 
 @dataclass(frozen=True)
@@ -60,8 +58,28 @@ class LogJob:
     protocol: str | None = None
     uphill_azimuth_deg: float | None = None
     options: Options = field(default_factory=Options)
-    use: Use = "auto"
+    use: Use = DEFAULT_USE
     driving: DrivingOptions | None = None
+
+    def __post_init__(self) -> None:
+        """``use`` checked once, here, and against the model: driving estimates the rotation only, so a
+        model naming an effect (``bias``, …) is refused with ``use="driving"`` (with ``"auto"``, a
+        result from driving alone says the model was not applied: :func:`_driving_alone`)."""
+        check_use(self.use)
+        beyond = not_from_driving(self.options)
+        if self.use == "driving" and beyond:
+            raise InputError(
+                f"{option('model', self.options.model)} with {option('use', 'driving')}",
+                "a model that driving estimates: auto or rotation,slope (driving measures the rotation only)",
+                f"the term(s) {', '.join(beyond)}, which only parked stops measure",
+                f"Calibrate from parked stops ({option('use', 'stops')} or auto), or drop {', '.join(beyond)} "
+                f"from {option('model')}.",
+            )
+
+
+def not_from_driving(options: Options) -> tuple[str, ...]:
+    """The terms of ``options.model`` beyond the base ones: none of them is estimated from driving."""
+    return () if options.terms is None else tuple(t for t in options.terms if t not in BASE)
 
 
 @dataclass(frozen=True)
@@ -91,7 +109,7 @@ def calibrate_log(
     protocol: str | Path | None = None,
     uphill_azimuth_deg: float | None = None,
     options: Options | None = None,
-    use: Use = "auto",
+    use: Use = DEFAULT_USE,
     driving: DrivingOptions | None = None,
 ) -> LogResult:
     """Calibrate one log (a file, or the splits of one recording) from its parked stops, its driving, or both.
@@ -156,7 +174,7 @@ def calibrate_input(
     table_azimuth: bool = True,
 ) -> InputResult:
     """Calibrate whatever the job's paths are: a stop table fitted as it is, or a log
-    (:func:`calibrate_job`), as :func:`mountcal.io.kind.input_kind` decides; the result's provenance
+    (:func:`calibrate_job`), as :func:`mountcal.io.kind.kind_of_input` decides; the result's provenance
     says which kind it was taken for and why. ``unit`` and ``headings`` are a stop table's (a log
     finds its own; the job's axis map, heading unit and uphill azimuth apply to both); ``declared`` is
     what the user said the input is (``--input-kind``); ``read`` reads
@@ -166,8 +184,7 @@ def calibrate_input(
 
     What ``mountcal calibrate`` and every fleet worker do with an input.
     """
-    mapped = job.log.columns is not None or (job.log.mapping is not None and job.log.dbc is None)  # a column map
-    kind = input_kind(job.paths, dbc=job.log.dbc is not None, columns=mapped, declared=declared)
+    kind = kind_of_input(job.paths, job.log, declared)
     table: StopTable | None
     if kind.stop_table:
         with reading(job.log.allow_truncated):  # a cut CSV: refused, or its whole rows read and said
@@ -385,10 +402,18 @@ def _driving_alone(fit: DrivingFit, samples: Samples, job: LogJob) -> Calibratio
     )
     provenance = replace(_provenance(job.paths), incomplete_inputs=samples.incomplete)
     cal = driving_calibration(fit, gravity_mps2=g, gravity_source=g_source, provenance=provenance)
-    if job.options.slope_reference is None:
-        return cal
-    unused = f"{option('slope_reference')} was not checked: this result is from driving, which measures no slope"
-    return replace(cal, notes=(*cal.notes, unused))
+    unused = []
+    if job.options.slope_reference is not None:
+        unused.append(
+            f"{option('slope_reference')} was not checked: this result is from driving, which measures no slope"
+        )
+    beyond = not_from_driving(job.options)
+    if beyond:
+        unused.append(
+            f"{option('model', job.options.model)} was not applied: this result is from driving, which estimates the "
+            f"rotation only ({', '.join(beyond)} need parked stops)"
+        )
+    return replace(cal, notes=(*cal.notes, *unused)) if unused else cal
 
 
 def _up_is_up(cal: Calibration, table: StopTable | None) -> bool:

@@ -18,7 +18,6 @@ from mountcal.core.result import (
     Provenance,
 )
 from mountcal.core.version import software_version
-from mountcal.io.input_conventions import check_gravity_value
 from mountcal.stops.identity import fingerprint
 from mountcal.stops.table import StopTable
 
@@ -61,8 +60,7 @@ def fit_doubts(branch: str | None, tilt_sigma_deg: float, noise_dof: int | None)
 
 def local_gravity(lat_deg: FloatArray | None, alt_m: FloatArray | None, given: float | None) -> tuple[float, str]:
     """Gravity and its source: ``given``, else WGS 84 normal gravity at the mean position, else standard."""
-    if given is not None:
-        check_gravity_value(float(given), option("gravity"))
+    if given is not None:  # checked where it was given (Options)
         return float(given), GIVEN
     if lat_deg is not None and lat_deg.size and np.all(np.isfinite(lat_deg)):
         lat = float(np.mean(lat_deg))

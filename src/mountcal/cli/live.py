@@ -8,7 +8,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from mountcal.cli.options import STDOUT, add_axes_option, add_command, print_json
+from mountcal.cli.options import STDOUT, add_axes_option, add_command, add_model_option, print_json
 from mountcal.cli.path_options import add_path
 from mountcal.cli.results import result_stream, say
 from mountcal.core.ranges import Number
@@ -37,7 +37,7 @@ def add_parser(sub: Any) -> None:
         "--can-channel", type=Number("can_channel"), default=None, help="channel number of the IMU frames (recorded)"
     )
     p.add_argument("--target", default="roll=0.1,pitch=0.1,yaw=0.5", help="stop when every 1σ is below (deg)")
-    p.add_argument("--model", default="auto", help="auto (default), rotation,slope or rotation,slope,bias")
+    add_model_option(p)
     add_path(
         p, "--plan", role="input", what="a protocol sheet", small=True, default=None,
         help="protocol sheet from `mountcal plan`: stops take its β in order",
@@ -87,7 +87,7 @@ def _file_sink(file: Any, line: Callable[[dict[str, Any]], str]) -> Callable[[di
 
 
 def run(args: argparse.Namespace) -> int:
-    from mountcal.calibration.fit import Options
+    from mountcal.calibration.options import Options
     from mountcal.calibration.summary import summary_parts
     from mountcal.core.atomic import GrowingFile, atomic_path
     from mountcal.core.errors import InputError

@@ -15,6 +15,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import TYPE_CHECKING, Any
 
+from mountcal.calibration.options import DEFAULT_USE, METHODS, USES, Options, default
 from mountcal.cli.path_options import add_path
 from mountcal.core.errors import InputError
 from mountcal.core.ranges import Number, numbers
@@ -22,7 +23,6 @@ from mountcal.core.ranges import Number, numbers
 if TYPE_CHECKING:
     from tqdm import tqdm
 
-    from mountcal.calibration.fit import Options
     from mountcal.calibration.pipeline import LogJob
     from mountcal.io.reader import LogOptions
     from mountcal.stops.detect import StopDetection
@@ -37,10 +37,6 @@ EXIT_CODES = {
     143: "terminated by SIGTERM (129: SIGHUP; nothing partial is written)",
 }
 STDOUT = "-"
-MODEL_HELP = (
-    "auto (default: the data choose the terms), or rotation,slope followed by optional terms "
-    "(listed in docs/commands.md and in the message for an unknown one)"
-)
 HEADINGS = ("uphill", "relative", "none")
 
 log = logging.getLogger("mountcal")
@@ -301,11 +297,19 @@ def add_sensor_options(g: argparse.ArgumentParser | argparse._ArgumentGroup) -> 
 
 
 def add_fit_options(g: argparse.ArgumentParser | argparse._ArgumentGroup, *, headings_help: str) -> None:
-    """Method, model, headings and the yaw threshold of the fit."""
-    g.add_argument("--method", choices=("full", "paper"), default="full")
-    g.add_argument("--model", default="auto", help=MODEL_HELP)
+    """Method, model, headings and the yaw threshold of the fit: the defaults are :class:`Options`'s, checked
+    when :func:`fit_options` builds it (one rule for the CLI and the library)."""
+    g.add_argument(
+        "--method", choices=METHODS, default=default(Options, "method"), help="the estimator (default %(default)s)"
+    )
+    add_model_option(g)
     g.add_argument("--headings", choices=HEADINGS, default=None, help=headings_help)
-    g.add_argument("--max-yaw-sigma", type=Number("sigma_deg"), default=5.0, help="report yaw only below this 1σ (deg)")
+    g.add_argument(
+        "--max-yaw-sigma",
+        type=Number("sigma_deg"),
+        default=default(Options, "max_yaw_sigma_deg"),
+        help="report yaw only below this 1σ (deg; default %(default)s)",
+    )
     add_sensor_options(g)
     g.add_argument(
         "--slope-reference",
@@ -320,10 +324,19 @@ def add_fit_options(g: argparse.ArgumentParser | argparse._ArgumentGroup, *, hea
     )
     g.add_argument(
         "--use",
-        choices=("auto", "stops", "driving"),
-        default="auto",
-        help="for a log: its parked stops, its driving (speed changes), or whatever it supports (default)",
+        choices=USES,
+        default=DEFAULT_USE,
+        help="for a log: its parked stops, its driving (speed changes; it estimates the rotation only, so a --model "
+        "naming an effect is refused), or whatever it supports (default %(default)s)",
     )
+
+
+def add_model_option(g: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
+    """``--model``: its one description (:func:`mountcal.loop.terms.help_text`) and default (:class:`Options`);
+    checked when :class:`Options` is built."""
+    from mountcal.loop.terms import help_text
+
+    g.add_argument("--model", default=default(Options, "model"), help=help_text())
 
 
 def log_options(args: argparse.Namespace) -> LogOptions:
@@ -358,7 +371,6 @@ def detection(args: argparse.Namespace) -> StopDetection:
 
 
 def fit_options(args: argparse.Namespace) -> Options:
-    from mountcal.calibration.fit import Options
     from mountcal.loop.slope_reference import SlopeReference
 
     reference = args.slope_reference
@@ -406,7 +418,7 @@ def log_job(args: argparse.Namespace, options: Options | None = None) -> LogJob:
         protocol=args.protocol,
         uphill_azimuth_deg=args.uphill_azimuth_deg,
         options=options if options is not None else fit_options(args),
-        use=getattr(args, "use", "auto"),
+        use=getattr(args, "use", DEFAULT_USE),
     )
 
 

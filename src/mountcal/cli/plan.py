@@ -70,7 +70,8 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from mountcal.calibration.fit import Options, sensor_errors
+    from mountcal.calibration.fit import sensor_errors
+    from mountcal.calibration.options import Options
     from mountcal.core.conventions import G_N
     from mountcal.core.errors import InputError, NotEnoughInformation
     from mountcal.sessions.plan import Noise, Request, make_plan, noise_from_log, parse_target, plan_terms

@@ -18,6 +18,7 @@ from mountcal.cli.path_options import add_path
 from mountcal.cli.results import say
 from mountcal.core.ranges import Number
 from mountcal.core.terminal import safe
+from mountcal.io.reader import CHUNK_SAMPLES
 
 log = logging.getLogger("mountcal")
 
@@ -43,8 +44,8 @@ def add_parser(sub: Any) -> None:
     p.add_argument(
         "--chunk",
         type=Number("chunk_samples"),
-        default=100_000,
-        help="samples per chunk: bounds the memory (default 100000)",
+        default=CHUNK_SAMPLES,
+        help="samples per chunk: bounds the memory (default %(default)s)",
     )
     p.add_argument(
         "--level-only",
@@ -57,17 +58,10 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from mountcal.apply.rotate import check_applicable
     from mountcal.apply.rotate_log import rotate_log
-    from mountcal.core.errors import InputError
     from mountcal.core.result import Calibration
 
-    if args.chunk < 1:
-        raise InputError("--chunk", "a number of samples ≥ 1", str(args.chunk), "Pass --chunk 100000 (the default).")
     cal = Calibration.load(args.calibration)
-    check_applicable(  # refused before any reading, naming the calibration file
-        cal, level_only=args.level_only, require_confident=args.require_confident, where=str(args.calibration)
-    )
     with working(args, "rotating"):
         report = rotate_log(
             args.input,
@@ -78,6 +72,7 @@ def run(args: argparse.Namespace) -> int:
             chunk_samples=args.chunk,
             level_only=args.level_only,
             require_confident=args.require_confident,
+            where=str(args.calibration),  # refused before any reading (level_only, require_confident), naming the file
         )
     for text in report.warnings:
         log.warning("%s (recorded in %s's metadata)", text, safe(args.output))

@@ -36,7 +36,7 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from mountcal.calibration.fit import Options
+    from mountcal.calibration.options import Options
     from mountcal.calibration.pipeline import describe, stops_of_log
     from mountcal.stops.table import write_stop_table
 

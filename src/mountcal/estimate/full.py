@@ -31,7 +31,7 @@ from mountcal.estimate.effects.scale import scale_matrix
 from mountcal.estimate.geometry import in_plane_azimuth, level_rotation, phase_yaw, plane_normal, with_yaw
 from mountcal.stops.table import StopTable
 
-BASE: tuple[str, ...] = ("rotation", "slope")
+BASE = registry.BASE
 NULL_TOL = 1e-10  # relative eigenvalue of the normalised Fisher information counted as zero
 
 

@@ -193,9 +193,9 @@ def session_stops(
 ) -> tuple[FloatArray, FloatArray | None]:
     """Stop means (n, 3) in m/s² and their covariances, from a stop table or from logs (read as ``log``
     says, its ``axes`` too for a stop table; ``unit`` is a stop table's, and a sample table's where ``log``
-    gives none). :func:`mountcal.io.kind.input_kind` decides which; ``declared`` is ``--input-kind``."""
+    gives none). :func:`mountcal.io.kind.kind_of_input` decides which; ``declared`` is ``--input-kind``."""
     from mountcal.io.input_conventions import parse_axes
-    from mountcal.io.kind import input_kind
+    from mountcal.io.kind import kind_of_input
     from mountcal.io.logs import read_log
     from mountcal.io.reader import LogOptions
     from mountcal.io.samples import with_gravity
@@ -203,8 +203,7 @@ def session_stops(
     from mountcal.stops.detect import StopDetection, detect_stops
 
     log = log or LogOptions()
-    mapped = log.columns is not None or log.mapping is not None
-    if input_kind(paths, columns=mapped, declared=declared).stop_table:
+    if kind_of_input(paths, log, declared).stop_table:
         axes = None if log.axes is None else parse_axes(log.axes, option("axes"))
         with reading(log.allow_truncated):  # a cut CSV: refused, or its whole rows read
             table = read_stop_table(paths[0], unit=unit, headings="none", axes=axes)

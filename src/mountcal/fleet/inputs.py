@@ -34,8 +34,8 @@ from typing import Any, Literal
 
 import pandas as pd
 
-from mountcal.calibration.fit import Options
-from mountcal.calibration.pipeline import LogJob, Use
+from mountcal.calibration.options import DEFAULT_USE, Options, Use
+from mountcal.calibration.pipeline import LogJob
 from mountcal.core.errors import InputError
 from mountcal.core.option_names import flags_on
 from mountcal.core.paths import input_file, special_kind
@@ -72,7 +72,7 @@ class JobDefaults:
     uphill_azimuth_deg: float | None = None
     options: Options = field(default_factory=Options)
     headings: Headings | None = None  # what a stop table's beta_deg is from (None: its heading_ref, else uphill)
-    use: Use = "auto"  # a log's parked stops, its driving, or whatever it supports (as `mountcal calibrate`)
+    use: Use = DEFAULT_USE  # a log's parked stops, its driving, or whatever it supports (as `mountcal calibrate`)
 
 
 @dataclass(frozen=True)

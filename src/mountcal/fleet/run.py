@@ -18,6 +18,7 @@ from typing import Any
 
 import pandas as pd
 
+from mountcal.apply.rotate import refuse_not_confident
 from mountcal.core.errors import InputError, MountcalError
 from mountcal.core.paths import check_outputs, output_lock
 from mountcal.core.version import software_version
@@ -206,11 +207,10 @@ def _run_locked(
     vehicles = _complete(vehicle_table(mountings, logs), VEHICLE_COLUMNS)
     doubtful = tuple(str(log) for log, flag in zip(logs["log"], logs["flags"], strict=True) if "not_confident" in flag)
     if doubtful and options.require_confident:
-        raise InputError(
+        refuse_not_confident(
             str(output),
-            "a confident calibration of every log (require_confident)",
-            f"{len(doubtful)} not confident: {', '.join(doubtful[:5])}" + (" …" if len(doubtful) > 5 else ""),
-            "Check those logs (their results are kept for the next run), or accept results that are not confident.",
+            f"{len(doubtful)} log(s) not confident: {', '.join(doubtful[:5])}" + (" …" if len(doubtful) > 5 else ""),
+            "Check those logs (their results are kept for the next run)",
         )
     said = {"mountcal.confident": json.dumps(not doubtful), "mountcal.not_confident_logs": json.dumps(doubtful)}
     write_table(vehicles, schema(VEHICLE_COLUMNS, "vehicles"), vehicles_path, said)

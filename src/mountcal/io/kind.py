@@ -20,11 +20,14 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
 from mountcal.core.errors import InputError
+
+if TYPE_CHECKING:
+    from mountcal.io.reader import LogOptions
 
 Declared = Literal["auto", "stop-table", "log"]
 KIND_OPTION = "--input-kind"
@@ -110,6 +113,15 @@ def input_kind(
             "Give the stop table alone, or only the log files.",
         )
     return InputKind(False, f"{len(names)} files of one log ({kinds[0].what[2:]})", kinds[0].why)
+
+
+def kind_of_input(paths: Sequence[str | Path], log: LogOptions, declared: Declared = "auto") -> InputKind:
+    """:func:`input_kind` of ``paths`` read as ``log`` says: the one place that tells, for every command
+    (``calibrate``, ``triad``, every fleet worker), whether its input is a stop table or a log. A DBC makes a
+    CSV a CAN log; a column map (``columns``, or a ``mapping`` without a DBC: its ``[columns]``) makes a
+    table a sample table."""
+    mapped = log.columns is not None or (log.mapping is not None and log.dbc is None)
+    return input_kind(paths, dbc=log.dbc is not None, columns=mapped, declared=declared)
 
 
 def _kind_of(path: Path, dbc: bool, columns: bool, declared: Declared) -> InputKind:

@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING
 
 from mountcal.core.budget import scoped, scoped_iter
 from mountcal.core.errors import InputError
-from mountcal.io.reader import LogOptions
+from mountcal.io.reader import CHUNK_SAMPLES, LogOptions
 from mountcal.io.registry import reader_for
 from mountcal.io.whole import Cut, read_under, reading
 
@@ -40,8 +40,6 @@ if TYPE_CHECKING:  # numpy and the readers load when a log is read: `mountcal --
     from mountcal.io.input_conventions import AxisMap
     from mountcal.io.reader import LogReader
     from mountcal.io.samples import LogSummary, Samples
-
-CHUNK_SAMPLES = 100_000  # samples per chunk of iter_log: its memory bound
 
 
 # options only some formats read: given for another, they would be silently ignored

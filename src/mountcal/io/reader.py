@@ -20,6 +20,10 @@ from typing import TYPE_CHECKING, ClassVar, Literal
 if TYPE_CHECKING:
     from mountcal.io.samples import LogSummary, Samples
 
+CHUNK_SAMPLES = (
+    100_000  # samples per chunk of a streamed log (rotate --chunk, every reader's iter_chunks): the memory bound
+)
+
 
 @dataclass(frozen=True)
 class LogOptions:

@@ -42,7 +42,7 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from mountcal.core.atomic import atomic_path
+from mountcal.core.atomic import atomic_output, atomic_path
 from mountcal.core.errors import InputError
 from mountcal.core.option_names import option
 from mountcal.io.can.dbc import load_dbc
@@ -246,7 +246,7 @@ def write_mcap(
     ]
     counts: Counter[str] = Counter()
     schemas: dict[str, Any] = {}
-    with atomic_path(path, keep_name=True) as tmp, open(tmp, "wb") as f:
+    with atomic_output(path) as f:
         writer: Any = Writer(f)
         for t_ns, topic, type_name, message in heapq.merge(*streams, key=lambda m: m[0]):
             if topic not in schemas:
@@ -547,7 +547,7 @@ def write_protocol(path: str | os.PathLike[str], log: SimulatedLog, *, start_tim
     rows = np.asarray(log.protocol, dtype=np.float64).reshape(-1, 3)
     lines = ["t_start_s,t_end_s,beta_deg"]
     lines += [f"{t0 + start_time_s:.6f},{t1 + start_time_s:.6f},{beta:.10g}" for t0, t1, beta in rows.tolist()]
-    with atomic_path(path, keep_name=True) as tmp:
+    with atomic_path(path) as tmp:
         tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
 
 

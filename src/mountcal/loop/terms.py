@@ -22,11 +22,9 @@ class Term:
     needs: tuple[str, ...] = ()  # stop-table columns it needs
 
 
-BASE_TERMS = (
-    Term("rotation", "the mounting rotation (always)"),
-    Term("slope", "the slope of the ground (always)"),
-)
-BASE = tuple(t.name for t in BASE_TERMS)
+BASE = registry.BASE
+_BASE_MEANINGS = ("the mounting rotation (always)", "the slope of the ground (always)")
+BASE_TERMS = tuple(Term(name, meaning) for name, meaning in zip(BASE, _BASE_MEANINGS, strict=True))
 
 
 def terms() -> tuple[Term, ...]:

@@ -29,7 +29,8 @@ from typing import IO, Any
 import numpy as np
 import pandas as pd
 
-from mountcal.calibration.fit import Options, calibrate
+from mountcal.calibration.fit import WITH_BIAS, calibrate
+from mountcal.calibration.options import Options
 from mountcal.core.atomic import atomic_path
 from mountcal.core.conventions import specific_force_v
 from mountcal.core.errors import InputError, MountcalError, NotEnoughInformation
@@ -47,7 +48,7 @@ from mountcal.stops.headings import tabulate
 from mountcal.stops.table import StopTable, write_stop_table
 
 CANDIDATES_DEG = tuple(float(b) for b in range(0, 360, 5))
-BASE_TERMS = ("rotation", "slope", "bias")  # the terms a bound for a suggestion may use
+BASE_TERMS = WITH_BIAS  # the terms a bound for a suggestion may use
 
 
 @dataclass(frozen=True)

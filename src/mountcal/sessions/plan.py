@@ -22,7 +22,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from mountcal.calibration.fit import parse_model
+from mountcal.calibration.fit import BASE, WITH_BIAS
+from mountcal.calibration.options import parse_model
 from mountcal.core.atomic import atomic_path
 from mountcal.core.conventions import G_N, FloatArray
 from mountcal.core.errors import InputError, NotEnoughInformation
@@ -65,7 +66,7 @@ class Request:
 
     target_deg: dict[str, float]
     noise: Noise
-    terms: tuple[str, ...] = ("rotation", "slope", "bias")
+    terms: tuple[str, ...] = WITH_BIAS
     slope_deg: float | None = None  # None: find the smallest slope that reaches the target
     max_stops: int = 24
     stop_s: float | None = None  # None: choose the dwell
@@ -177,7 +178,7 @@ def parse_target(spec: str) -> dict[str, float]:
 def plan_terms(model: str) -> tuple[str, ...]:
     """The fixed model a plan is made for: rotation,slope or rotation,slope,bias."""
     terms = parse_model(model)
-    if terms not in (("rotation", "slope"), ("rotation", "slope", "bias")):
+    if terms not in (BASE, WITH_BIAS):
         raise InputError(
             "the model of the plan",
             "rotation,slope (no bias) or rotation,slope,bias (an unknown constant bias)",
@@ -416,7 +417,8 @@ def monte_carlo_rms(plan: Plan, runs: int, seed: int, bias_mg: float = 20.0) -> 
     Each run draws a mounting (roll, pitch within ±10°, any yaw) and, for a model with a bias, a
     bias of ``bias_mg`` in a random direction; the stop means carry the noise the plan assumes.
     """
-    from mountcal.calibration.fit import Options, calibrate
+    from mountcal.calibration.fit import calibrate
+    from mountcal.calibration.options import Options
     from mountcal.simulate.stops import random_bias
 
     rng = np.random.default_rng(seed)

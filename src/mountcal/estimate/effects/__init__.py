@@ -15,16 +15,16 @@ from __future__ import annotations
 
 import importlib
 from functools import cache
-from typing import TYPE_CHECKING
-
-from mountcal.estimate.effects.base import Effect
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from mountcal.core.conventions import FloatArray
     from mountcal.core.plugins import Plugin
     from mountcal.core.result import Calibration
+    from mountcal.estimate.effects.base import Effect
 
 GROUP = "mountcal.effects"
+BASE: tuple[str, ...] = ("rotation", "slope")  # the terms of every model, before its effects (the paper's model)
 # Built-in effects, in the order --model lists them: module mountcal.estimate.effects.<name>, class EFFECT.
 BUILTIN = ("bias", "temperature", "gravity", "site_slope", "scale")
 
@@ -63,6 +63,8 @@ def _effect(plugin: Plugin) -> Effect:
         effect = obj() if isinstance(obj, type) else obj
     except TypeError as err:
         effect = err
+    from mountcal.estimate.effects.base import Effect
+
     if not isinstance(effect, Effect) or effect.name != plugin.name:
         raise InputError(
             f"plugin {plugin.name!r} ({plugin.value}) of the package {plugin.package or '?'}",
@@ -132,4 +134,13 @@ def apply_corrections(acc_s: FloatArray, calibration: Calibration, *, inverse: b
     return acc_s
 
 
-__all__ = ["BUILTIN", "GROUP", "Effect", "apply_corrections", "chain", "get", "names", "registered"]
+def __getattr__(name: str) -> Any:
+    """``Effect`` on first use (it imports the result types, and with them numpy)."""
+    if name == "Effect":
+        from mountcal.estimate.effects.base import Effect
+
+        return Effect
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+__all__ = ["BASE", "BUILTIN", "GROUP", "Effect", "apply_corrections", "chain", "get", "names", "registered"]

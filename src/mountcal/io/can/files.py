@@ -17,6 +17,7 @@ from mountcal.core import budget, ranges
 from mountcal.core.errors import InputError
 from mountcal.io.can.frames import CLASSIC_WIDTH, DATA_WIDTH, CanFrames, Filter
 from mountcal.io.inputs import check_regular_file, hold
+from mountcal.io.reader import CHUNK_SAMPLES
 from mountcal.io.whole import open_prefix, text_end
 
 FloatArray = NDArray[np.float64]
@@ -72,7 +73,7 @@ def read_frames(path: str | Path, *, ids: Collection[int] | None = None, channel
 def iter_frames(
     path: str | Path,
     *,
-    max_frames: int = 100_000,
+    max_frames: int = CHUNK_SAMPLES,
     ids: Collection[int] | None = None,
     channel: int | None = None,
 ) -> Iterator[CanFrames]:

@@ -80,10 +80,11 @@ from mountcal.io.can.mapping import (
 )
 from mountcal.io.can.mismatch import SHOWN, Want, id_stats, log_mismatch
 from mountcal.io.inputs import hold
+from mountcal.io.reader import CHUNK_SAMPLES
 from mountcal.io.samples import Channel, FloatArray, LogSummary, Samples, Stream
 
 _PERIOD_FRAMES = 1000  # frames used to measure a message's period
-_FRAMES_PER_CHUNK = 100_000  # frames decoded at a time by read_can (≈ 9 MB)
+_FRAMES_PER_CHUNK = CHUNK_SAMPLES  # frames decoded at a time by read_can (≈ 9 MB)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -133,7 +134,7 @@ def iter_can(
     *,
     mapping: str | Path | Mapping[str, Any] | None = None,
     channel: int | None = None,
-    max_samples: int = 100_000,
+    max_samples: int = CHUNK_SAMPLES,
 ) -> Iterator[Samples]:
     """Stream the samples of a CAN log in chunks of at most ``max_samples`` rows.
 

@@ -56,6 +56,7 @@ from mountcal.io.mcap.records import (
     damaged,
     record_field,
 )
+from mountcal.io.reader import CHUNK_SAMPLES
 from mountcal.io.ros2 import cdr
 from mountcal.io.samples import Channel, FloatArray, Samples
 
@@ -483,7 +484,7 @@ def read_mcap(
 
 
 def iter_mcap(
-    path: str | os.PathLike[str], *, topic: str | None = None, max_samples: int = 100_000
+    path: str | os.PathLike[str], *, topic: str | None = None, max_samples: int = CHUNK_SAMPLES
 ) -> Iterator[Samples]:
     """Stream the IMU samples of an MCAP log in batches of at most ``max_samples``, bounded memory.
 
