@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import textwrap
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -52,7 +53,7 @@ def add_parser(sub: Any) -> None:
         writes={"what": "the export", "stdio": True, "formats": _suffixes, "formats_by": "--to"},
     )
     p.formatter_class = argparse.RawDescriptionHelpFormatter  # the epilog: one format a line
-    p.epilog = _formats_epilog()
+    p.epilog = _formats_epilog() + "\n\n" + textwrap.fill(p.epilog or "", width=100)  # and the output rule
     p.add_argument("--to", required=True, choices=Formats(), metavar="FORMAT", help="target format (listed below)")
     p.add_argument(
         "--yaw-undetermined",
