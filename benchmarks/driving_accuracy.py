@@ -241,13 +241,16 @@ def real_canedge(root: Path) -> None:
                 f"headings {st.fit.headings}): roll {st.roll_deg:.2f}° ± {st.roll_sigma_deg:.2f}°, pitch "
                 f"{st.pitch_deg:.2f}° ± {st.pitch_sigma_deg:.2f}°, yaw {st.yaw_deg} ({st.yaw_reason})"
             )
-            check = (both.calibration.fit.combination or {}).get("tilt_check", {})
+            combination = both.calibration.fit.combination
+            check = None if combination is None else combination.tilt_check
+            zx = zy = float("nan")
+            if check is not None:
+                zx, zy = (float("inf") if z is None else z for z in (check.z_about_vehicle_x, check.z_about_vehicle_y))
             up_s = st.rot_vs.inv().apply([0.0, 0.0, 1.0])
             print(
                 f"- {drive}: up axis, stops against mean gravity while driving: "
                 f"{np.degrees(np.arccos(up_s @ d.up_driving_s)):.2f}° "
-                f"apart (z = {check.get('z_about_vehicle_x', float('nan')):+.2f} about x, "
-                f"{check.get('z_about_vehicle_y', float('nan')):+.2f} about y)"
+                f"apart (z = {zx:+.2f} about x, {zy:+.2f} about y)"
             )
             b = both.calibration
             print(

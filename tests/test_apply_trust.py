@@ -392,17 +392,17 @@ def test_issue_repro_stops_and_driving_that_disagree_in_tilt_are_a_finding_not_c
     assert agree.confident and agree.yaw_deg is not None and agree.fit.calibrated_from == "stops + driving"
     mirror = mirror_of(static)
     fit = estimate_driving(samples, tilt_from=mirror)
-    assert fit.tilt_check is not None and fit.tilt_check["angle_deg"] > 170.0
+    assert fit.tilt_check is not None and fit.tilt_check.angle_deg > 170.0
     cal = stops_with_drive(mirror, table, fit, samples, LogJob(paths=(str(path),)))
     assert not cal.confident
     assert [u.test for u in cal.unexplained if u.test == "stops_vs_driving"] == ["stops_vs_driving"]
     assert cal.fit.calibrated_from is not None and "disagree" in cal.fit.calibrated_from
     assert cal.fit.driving is not None and cal.fit.driving_levelled_with_stops is not None
-    assert not str(cal.fit.driving["tilt_source"]).startswith("static")  # levelled by the drive itself
-    assert str(cal.fit.driving_levelled_with_stops["tilt_source"]).startswith("static")
+    assert not cal.fit.driving.tilt_source.startswith("static")  # levelled by the drive itself
+    assert cal.fit.driving_levelled_with_stops.tilt_source.startswith("static")
     text = summary(cal)
     assert "DISAGREE" in text and "NOT CONFIDENT" in text and "tilt by 1" in text
-    assert "stops_vs_driving" in render(cal.to_dict(), None)
+    assert "stops_vs_driving" in render(cal, None)
     # the physical branch: the rotated drive has +g up (the mirror would give −g)
     acc_v = cal.rot_vs.apply(samples.acc_s)
     assert float(np.median(acc_v[:, 2])) > 9.0
@@ -438,13 +438,13 @@ def test_a_real_drive_with_stops_is_combined_only_when_they_agree_and_rotates_to
     opts = LogOptions(dbc=str(real_data / "canedge" / "dbc" / "gnss.dbc"), channel=2)
     done = calibrate_log(sorted(car.glob("*.MF4")), log=opts)
     cal = done.calibration
-    combination = cal.fit.combination or {}
-    if "disagreement" in combination:  # a finding: not combined, not confident, said everywhere
+    combination = cal.fit.combination
+    assert combination is not None
+    if combination.disagreement is not None:  # a finding: not combined, not confident, said everywhere
         assert not cal.confident and any(u.test == "stops_vs_driving" for u in cal.unexplained)
     else:
-        tilt = combination["tilt_check"]  # combined: within 3σ about both horizontal axes (may be outside 2σ)
-        z = max(abs(tilt["z_about_vehicle_x"]), abs(tilt["z_about_vehicle_y"]))
-        assert done.used == "stops + driving" and z <= 3
+        tilt = combination.tilt_check  # combined: within 3σ about both horizontal axes (may be outside 2σ)
+        assert tilt is not None and done.used == "stops + driving" and tilt.z_max <= 3
     acc_v = cal.rot_vs.apply(done.samples.acc_s)
     assert float(np.nanmedian(acc_v[:, 2])) > 9.0  # the physical branch: +g up
 

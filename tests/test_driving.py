@@ -173,7 +173,7 @@ def test_driving_and_stops_agreeing_are_combined_by_inverse_variance(drive) -> N
     fit = estimate_driving(drive.to_samples(), tilt_from=static)
     cal = combine(static, fit)
     c = cal.fit.combination
-    assert c is not None and c["agree"] and abs(c["z"]) <= 2.0
+    assert c is not None and c.agree and c.z is not None and abs(c.z) <= 2.0
     s_d = fit.rotation_sigma_deg[2]
     assert s_d is not None and cal.rotation_sigma_deg[2] is not None
     assert cal.rotation_sigma_deg[2] < min(0.2, s_d)
@@ -188,7 +188,8 @@ def test_a_disagreement_beyond_the_uncertainties_is_reported(drive) -> None:  # 
     static = static_like(drive.truth.rot_vs, 9.0, 0.2)  # 2° off
     cal = combine(static, estimate_driving(drive.to_samples(), tilt_from=static))
     c = cal.fit.combination
-    assert c is not None and not c["agree"] and c["disagreement"]["statistic"] > 5  # beyond 3σ: a finding, not combined
+    assert c is not None and not c.agree and c.disagreement is not None  # beyond 3σ: a finding, not combined
+    assert c.disagreement.statistic is not None and c.disagreement.statistic > 5
     assert any("DISAGREE" in n for n in cal.notes) and not cal.confident
     assert cal.yaw_deg == static.yaw_deg and cal.rot_vs.approx_equal(static.rot_vs)
 
@@ -221,7 +222,7 @@ def test_calibrate_a_drive_log_uses_what_it_supports_and_says_so(
     assert captured.out == ""  # the result went to -o
     cal = Calibration.load(out)
     assert cal.method == "driving" and cal.yaw_deg == pytest.approx(7.0, abs=0.3)
-    assert cal.fit.driving is not None and cal.fit.driving["segments"] > 10 and cal.slope_deg is None
+    assert cal.fit.driving is not None and cal.fit.driving.segments > 10 and cal.slope_deg is None
 
 
 def test_a_slope_reference_with_a_result_from_driving_says_it_was_not_checked(

@@ -89,7 +89,7 @@ def test_report_from_the_json_alone_draws_the_residuals_and_says_what_is_missing
 ) -> None:
     _, cal = paper_scenario
     doc = json.loads(json.dumps(cal.to_dict()))
-    html = render(doc)
+    html = render(Calibration.from_dict(doc))
     assert "pass the stop table (<code>table=</code>)" in html  # says why the 3-D figure is absent, in Python terms
     assert _figure_count(html) >= 2  # residual per stop, uncertainty against the bound
     with_table = render(paper_scenario[1], paper_scenario[0])
@@ -119,7 +119,7 @@ def test_missing_loop_entries_degrade_to_a_sentence(paper_scenario: tuple[StopTa
     doc = cal.to_dict()
     for key in ("model_steps", "unexplained", "effects", "diagnostics", "confident"):
         doc.pop(key, None)
-    html = render(doc)
+    html = render(Calibration.from_dict(doc))
     assert "carries no model steps" in html
     assert "No analysis of unexplained residual structure" in html
 
@@ -130,8 +130,8 @@ def test_model_steps_and_unexplained_structure_are_rendered() -> None:
     assert doc["model_steps"], "the loop records at least its first step"
     found = Finding("harmonic2", "residual varying as 2β with heading", "3.1 mg RMS", 30.0, 2, 1e-6, -6.0)
     doc["unexplained"] = [found.to_dict()]
-    html = render(doc, table)
     steps = Calibration.from_dict(doc).model_steps
+    html = render(Calibration.from_dict(doc), table)
     assert len(steps) == len(doc["model_steps"])
     for i, step in enumerate(steps):
         assert step_label(i, step) in html
@@ -147,7 +147,7 @@ def test_a_model_step_of_another_shape_is_refused_naming_it() -> None:
     doc = calibrate(table).to_dict()
     doc["model_steps"][0] = {"terms": ["rotation", "slope"], "roll_deg": 1.0, "roll_sigma_deg": 0.1}
     with pytest.raises(InputError, match=r"model_steps\.0"):
-        render(doc)
+        Calibration.from_dict(doc)
 
 
 def test_a_stop_table_of_another_result_is_refused(paper_scenario: tuple[StopTable, Calibration]) -> None:
@@ -159,7 +159,9 @@ def test_a_stop_table_of_another_result_is_refused(paper_scenario: tuple[StopTab
 
 def test_a_document_that_is_not_a_result_is_refused() -> None:
     with pytest.raises(InputError, match="format"):
-        render({"format": "something else"})
+        Calibration.from_dict({"format": "something else"})
+    with pytest.raises(TypeError, match="takes a Calibration"):  # the report takes the typed result, never a dict
+        render({"format": "mountcal.calibration"})  # type: ignore[arg-type]
 
 
 def test_png_figures_are_embedded_as_decodable_images(paper_scenario: tuple[StopTable, Calibration]) -> None:

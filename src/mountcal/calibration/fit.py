@@ -38,7 +38,6 @@ from mountcal.core.result import (
     Angles,
     AngleValues,
     Calibration,
-    Declined,
     FitQuality,
     ModelSelection,
     ModelStep,
@@ -153,7 +152,7 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
             f"told from a tilt: park on a slope, or fit without a bias ({option('model', 'rotation,slope')})."
         )
     notes: list[str] = []
-    declined = tuple(Declined(str(d["effect"]), str(d["why"])) for d in loop.declined)
+    declined = tuple(loop.declined)
     if any(d.effect == "bias" and ("separable" in d.why or "confounded" in d.why) for d in declined):
         notes.append(
             "a constant accelerometer bias cannot be told from a tilt with these stops: if the sensor has a "

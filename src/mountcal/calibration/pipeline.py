@@ -254,7 +254,7 @@ def _calibrate_job(job: LogJob, samples: Samples | None) -> LogResult:
             skipped["driving"] = str(err)
     if static is not None and fit is not None:
         cal = stops_with_drive(static, table, fit, samples, job)
-        if (cal.fit.combination or {}).get("disagreement") is not None:
+        if cal.fit.combination is not None and cal.fit.combination.disagreement is not None:
             skipped["combination"] = "the stops and the drive disagree beyond 3σ (see the notes)"
         return LogResult(cal, samples, str(cal.fit.calibrated_from), static, fit, found, table, skipped)
     if static is not None:
@@ -325,8 +325,8 @@ def stops_with_drive(
         fit=replace(
             cal.fit,
             calibrated_from="driving (the stops disagree and put −g up)",
-            driving=alone.to_dict(),  # the fit used; the one levelled with the stops shows the disagreement
-            driving_levelled_with_stops=fit.to_dict(),
+            driving=alone.document(),  # the fit used; the one levelled with the stops shows the disagreement
+            driving_levelled_with_stops=fit.document(),
         ),
     )
 

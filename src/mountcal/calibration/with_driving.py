@@ -9,12 +9,12 @@ reason (:func:`not_combined`).
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import Any
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from mountcal.core.conventions import angles_from_rot_vs
+from mountcal.core.driving_document import Combination
 from mountcal.core.findings import Finding
 from mountcal.core.result import Calibration, FitQuality, ModelSelection, Provenance
 from mountcal.estimate.driving import AGREE_Z, DISAGREE_Z, DrivingFit, euler_sigma
@@ -31,7 +31,7 @@ def driving_calibration(
 
     Roll and pitch come from the mean gravity while driving (σ include the unknown mean road grade
     and cross slope), yaw from the speed changes; slope and bias are not applicable (no stops) and
-    the result says so. The full driving fit is in ``fit["driving"]``.
+    the result says so. The full driving fit is in ``fit.driving``.
     """
     grade = None if fit.consistency is None else fit.consistency.effect("grade")
     road = (
@@ -69,7 +69,7 @@ def driving_calibration(
         gravity_source=gravity_source,
         residual_rms_mps2=fit.longitudinal_rms_mps2,
         residual_s=np.zeros((0, 3)),
-        fit=FitQuality(calibrated_from="driving", driving=fit.to_dict()),
+        fit=FitQuality(calibrated_from="driving", driving=fit.document()),
         observability=None,
         model_selection=ModelSelection(mode="driving", chosen=("rotation",)),
         provenance=provenance,
@@ -89,12 +89,10 @@ def disagreement(static: Calibration, fit: DrivingFit) -> Finding | None:
     z_max = 0.0
     check = fit.tilt_check
     if check is not None:
-        z_tilt = max(abs(check["z_about_vehicle_x"]), abs(check["z_about_vehicle_y"]))
+        z_tilt = check.z_max
         if z_tilt > DISAGREE_Z or not np.isfinite(z_tilt):
-            parts.append(
-                f"tilt by {check['angle_deg']:.1f}° (z = {check['z_about_vehicle_x']:+.1f} about x, "
-                f"{check['z_about_vehicle_y']:+.1f} about y)"
-            )
+            zx, zy = (f"{z:+.1f}" if z is not None else "∞" for z in (check.z_about_vehicle_x, check.z_about_vehicle_y))
+            parts.append(f"tilt by {check.angle_deg:.1f}° (z = {zx} about x, {zy} about y)")
             z_max = max(z_max, z_tilt)
     s_drive, s_static = fit.rotation_sigma_deg[2], static.rotation_sigma_deg[2] or static.yaw_sigma_deg
     if fit.yaw_deg is not None and static.yaw_deg is not None and s_drive is not None and s_static is not None:
@@ -133,13 +131,10 @@ def not_combined(static: Calibration, fit: DrivingFit, found: Finding) -> Calibr
         fit=replace(
             static.fit,
             calibrated_from="stops (driving disagrees: not combined)",
-            driving=fit.to_dict(),
-            combination={
-                "used": "none: disagreement",
-                "agree": False,
-                "disagreement": found.to_dict(),
-                "tilt_check": fit.tilt_check,
-            },
+            driving=fit.document(),
+            combination=Combination(
+                used="none: disagreement", agree=False, disagreement=found, tilt_check=fit.tilt_check
+            ),
         ),
         notes=(*static.notes, words),
         unexplained=(*static.unexplained, found),
@@ -165,15 +160,14 @@ def combine(static: Calibration, fit: DrivingFit) -> Calibration:
     if found is not None:
         return not_combined(static, fit, found)
     notes = list(static.notes)
-    combination: dict[str, Any] = {"static_yaw_deg": static.yaw_deg, "driving_yaw_deg": fit.yaw_deg}
+    combination = Combination(used="static", static_yaw_deg=static.yaw_deg, driving_yaw_deg=fit.yaw_deg)
     s_drive = fit.rotation_sigma_deg[2]
     if fit.yaw_deg is None or s_drive is None:
         notes.append(f"yaw from driving not determined: {fit.yaw_reason}")
-        combination["used"] = "static"
         return replace(
             static,
             fit=replace(
-                static.fit, calibrated_from="stops (driving checked)", driving=fit.to_dict(), combination=combination
+                static.fit, calibrated_from="stops (driving checked)", driving=fit.document(), combination=combination
             ),
             notes=tuple(notes),
         )
@@ -181,7 +175,9 @@ def combine(static: Calibration, fit: DrivingFit) -> Calibration:
     sy = static.rotation_sigma_deg[1] or static.pitch_sigma_deg
     if static.yaw_deg is None or static.yaw_sigma_deg is None:
         yaw, s_z = fit.yaw_deg, s_drive
-        combination.update(used="driving (the stops do not determine yaw)", static_yaw_reason=static.yaw_reason)
+        combination = replace(
+            combination, used="driving (the stops do not determine yaw)", static_yaw_reason=static.yaw_reason
+        )
         notes.append(f"yaw from driving; the stops alone could not give it ({static.yaw_reason})")
     else:
         s_static = static.rotation_sigma_deg[2] or static.yaw_sigma_deg
@@ -200,16 +196,16 @@ def combine(static: Calibration, fit: DrivingFit) -> Calibration:
             "uphill azimuth or protocol heading, a speed channel that is not along the vehicle x axis), so the "
             "combined yaw is not trustworthy"
         )
-        combination.update(used="inverse-variance combination", difference_deg=diff, z=z, agree=agree, words=words)
+        combination = replace(
+            combination, used="inverse-variance combination", difference_deg=diff, z=z, agree=agree, words=words
+        )
         notes.append(words)
     rot_vs = Rotation.from_euler("z", np.radians(yaw)) * tilt_rotation(
         np.asarray(static.rot_vs.inv().apply([0.0, 0.0, 1.0]), dtype=float)
     )
     roll, pitch, yaw_e = (float(np.degrees(a)) for a in angles_from_rot_vs(rot_vs))
     yaw_sigma = euler_sigma(rot_vs, (sx, sy, s_z))[2]
-    combination.update(yaw_deg=yaw_e, yaw_sigma_about_vehicle_z_deg=s_z)
-    if fit.tilt_check is not None:
-        combination["tilt_check"] = fit.tilt_check
+    combination = replace(combination, yaw_deg=yaw_e, yaw_sigma_about_vehicle_z_deg=s_z, tilt_check=fit.tilt_check)
     doubts = tuple(f for f in fit.findings if f.test in YAW_TESTS)  # what the drive's own tests say of its yaw
     return replace(
         static,
@@ -220,7 +216,7 @@ def combine(static: Calibration, fit: DrivingFit) -> Calibration:
         yaw_sigma_deg=yaw_sigma,
         yaw_reason=None,
         rotation_sigma_deg=(static.rotation_sigma_deg[0], static.rotation_sigma_deg[1], s_z),
-        fit=replace(static.fit, calibrated_from="stops + driving", driving=fit.to_dict(), combination=combination),
+        fit=replace(static.fit, calibrated_from="stops + driving", driving=fit.document(), combination=combination),
         notes=tuple(notes),
         unexplained=(*static.unexplained, *doubts),
         confident=static.confident and not doubts,

@@ -92,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
         from mountcal.outputs.report import render, timeline_of  # matplotlib is needed for reports only
 
         with working(args, "writing the report"):
-            html = render(doc, table, timeline=None if done.log is None else timeline_of(done.log))
+            html = render(cal, table, timeline=None if done.log is None else timeline_of(done.log))
         with atomic_path(args.report) as tmp:
             tmp.write_text(html, encoding="utf-8")
         log.info("wrote %s", safe(args.report))

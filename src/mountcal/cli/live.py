@@ -183,7 +183,7 @@ def run(args: argparse.Namespace) -> int:
         if samples is not None:  # the session over time, its stops numbered as in its stop table
             drawn = timeline(samples, session.table, left_out=cal.fit.excluded_stops, dropped=session.still_not_kept)
         with atomic_path(args.report) as tmp:
-            tmp.write_text(render(cal.to_dict(), session.table, timeline=drawn), encoding="utf-8")
+            tmp.write_text(render(cal, session.table, timeline=drawn), encoding="utf-8")
         log.info("wrote %s", safe(args.report))
         written.append(str(args.report))
     if args.json:

@@ -71,7 +71,6 @@ def run(args: argparse.Namespace) -> int:
     from mountcal.core.atomic import atomic_path
     from mountcal.core.errors import InputError
     from mountcal.core.result import Calibration
-    from mountcal.core.result_file import read_json
     from mountcal.outputs.report import render  # matplotlib is needed by this command only
     from mountcal.stops.identity import same_stops
     from mountcal.stops.table import read_stop_table
@@ -80,8 +79,7 @@ def run(args: argparse.Namespace) -> int:
     output = _output(args.output, args.input)
     if output is None and args.json:  # stdout holds one document
         raise InputError("--json", "the report in a file (-o FILE, or the default)", "-o -", "Name a file with -o.")
-    cal = Calibration.load(result)  # validates format and version
-    doc = read_json(result)  # the whole document: entries Calibration may not keep
+    cal = Calibration.load(result)  # validates format and version; every entry of the file is typed
     table = None
     if args.stops:
         table = read_stop_table(args.stops, **_reading(Path(args.stops), cal, args.unit))
@@ -95,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
                 "or re-run calibrate on this one; omit --stops to report without it.",
             )
     with working(args, "drawing the report"):
-        html = render(doc, table, image_format=args.figures)
+        html = render(cal, table, image_format=args.figures)
     shown = html.count("<figure>")
     from mountcal.calibration.summary import answer
 

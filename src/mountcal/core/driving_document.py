@@ -1,4 +1,5 @@
-"""The residual tests of yaw from driving as the result file keeps them (``fit.driving.consistency``).
+"""The fit of yaw from driving as the result file keeps it (``fit.driving``, its residual tests ``.consistency``)
+and how it was combined with the stops (``fit.combination``).
 
 Typed records, so that the published JSON Schema describes them (:func:`mountcal.core.result.schema_defs`) and a
 reader can rely on their keys; :mod:`mountcal.estimate.driving_checks` fills them. Angles in degrees, clock
@@ -134,3 +135,116 @@ class DrivingConsistency:
 
     def effect(self, name: str) -> DrivingEffect | None:
         return next((e for e in self.effects if e.name == name), None)
+
+
+@dataclass(frozen=True)
+class TiltCheck:
+    """The drive's up axis (its mean gravity) against a given calibration's, as small rotations about the vehicle x and
+    y axes (deg), each as a z-score against both σ; a z is None where it is not finite (a σ of 0)."""
+
+    angle_deg: float
+    about_vehicle_x_deg: float
+    about_vehicle_y_deg: float
+    z_about_vehicle_x: float | None
+    z_about_vehicle_y: float | None
+    agree: bool
+
+    @property
+    def z_max(self) -> float:
+        """The larger |z| of the two axes (infinite where a z is not finite)."""
+        zs = (self.z_about_vehicle_x, self.z_about_vehicle_y)
+        return max(float("inf") if z is None else abs(z) for z in zs)
+
+
+@dataclass(frozen=True)
+class DrivingSigma:
+    """The 1σ of the drive's angles (deg): the Euler angles', the parts of yaw's, and about the vehicle x, y, z axes.
+    ``yaw_model_error_deg`` is None in files written before the drive's residual tests."""
+
+    roll_deg: float
+    pitch_deg: float
+    yaw_deg: float | None
+    yaw_newey_west_deg: float | None
+    yaw_jackknife_deg: float | None
+    rotation_about_vehicle_xyz_deg: tuple[float, float, float | None]
+    level: str = "1 sigma"
+    yaw_model_error_deg: float | None = None
+
+
+@dataclass(frozen=True)
+class DrivingGates:
+    """The driving estimator's gates and settings of the fit (:class:`mountcal.estimate.driving_options.DrivingOptions`,
+    field for field); None where a file written by an earlier version does not record one."""
+
+    min_speed_mps: float | None = None
+    max_yaw_rate_deg_s: float | None = None
+    max_tilt_rate_deg_s: float | None = None
+    max_acc_mps2: float | None = None
+    max_lateral_mps2: float | None = None
+    interval_s: float | None = None
+    segment_s: float | None = None
+    max_segment_turn_deg: float | None = None
+    min_segment_intervals: int | None = None
+    max_time_offset_s: float | None = None
+    time_offset_step_s: float | None = None
+    time_offset_s: float | None = None
+    road_grade_sigma_deg: float | None = None
+    road_cross_slope_sigma_deg: float | None = None
+    max_yaw_sigma_deg: float | None = None
+    horizontal_axes_sigma_deg: float | None = None
+
+
+@dataclass(frozen=True)
+class DrivingDocument:
+    """The fit of the mounting from a drive as the result file keeps it (``fit.driving``): angles ± σ, the tilt it
+    rests on, the speed clock's offset, how much of the drive passed the gates, and its residual tests.
+
+    ``speed_scale`` is None where it is not finite (the speed never changed); ``consistency`` is None in files written
+    before the residual tests existed."""
+
+    roll_deg: float
+    pitch_deg: float
+    yaw_deg: float | None
+    sigma: DrivingSigma
+    yaw_reason: str | None
+    tilt_source: str
+    up_driving_s: tuple[float, float, float]
+    tilt_check: TiltCheck | None
+    quaternion_xyzw: tuple[float, float, float, float]
+    time_offset_s: float
+    time_offset_sigma_s: float | None
+    time_offset_meaning: str
+    time_offset_searched: bool
+    intervals: int
+    segments: int
+    usable_s: float
+    moving_s: float
+    speed_scale: float | None
+    correlation: float
+    longitudinal_residual_rms_mps2: float
+    lateral_rms_mps2: float
+    straightness_from: str
+    gates: DrivingGates
+    notes: tuple[str, ...] = ()
+    consistency: DrivingConsistency | None = None
+
+
+@dataclass(frozen=True)
+class Combination:
+    """How the stops and the drive were combined (``fit.combination``): ``used`` says which yaw the result holds —
+    ``"inverse-variance combination"``, ``"driving (the stops do not determine yaw)"``, ``"static"`` (the drive did not
+    determine yaw) or ``"none: disagreement"`` (beyond 3σ: not combined, ``disagreement`` the finding); the other
+    fields are None where that way of combining has none."""
+
+    used: str
+    static_yaw_deg: float | None = None
+    driving_yaw_deg: float | None = None
+    static_yaw_reason: str | None = None
+    difference_deg: float | None = None  # driving − stops, wrapped to ±180°
+    z: float | None = None
+    agree: bool | None = None
+    words: str | None = None
+    yaw_deg: float | None = None  # the combined Euler yaw
+    yaw_sigma_about_vehicle_z_deg: float | None = None
+    tilt_check: TiltCheck | None = None
+    disagreement: Finding | None = None

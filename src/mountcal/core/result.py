@@ -16,7 +16,7 @@ from scipy.spatial.transform import Rotation
 
 from mountcal.core.atomic import atomic_path
 from mountcal.core.conventions import CONVENTIONS, FloatArray, levelled
-from mountcal.core.driving_document import DrivingConsistency
+from mountcal.core.driving_document import Combination, DrivingDocument
 from mountcal.core.errors import InputError, NotEnoughInformation
 from mountcal.core.findings import Finding
 from mountcal.core.option_names import option
@@ -59,14 +59,19 @@ class FitQuality:
     cos_slope: float | None = None
     uncertainty: str | None = None  # how the σ were computed when not from the Fisher information
     calibrated_from: str | None = None
-    driving: dict[str, Any] | None = None
-    combination: dict[str, Any] | None = None
-    driving_levelled_with_stops: dict[str, Any] | None = None  # when the drive alone is used (they disagreed)
+    driving: DrivingDocument | None = None
+    combination: Combination | None = None
+    driving_levelled_with_stops: DrivingDocument | None = None  # when the drive alone is used (they disagreed)
 
 
 @dataclass(frozen=True)
 class Angles:
-    """Roll, pitch, yaw and slope in degrees with 1σ; None where the data do not determine them."""
+    """Roll, pitch, yaw and slope in degrees with 1σ; None where the data do not determine them.
+
+    The one value type of "the four angles ± σ" (a calibration's :attr:`Calibration.angles`, a model step's, the
+    drive's :attr:`mountcal.estimate.driving.DrivingFit.angles`). A yaw the data cannot determine is None with
+    its σ and the reason; a yaw is never a number without its σ, nor a slope.
+    """
 
     roll_deg: float
     roll_sigma_deg: float | None
@@ -77,6 +82,18 @@ class Angles:
     yaw_reason: str | None
     slope_deg: float | None
     slope_sigma_deg: float | None
+
+    def __post_init__(self) -> None:
+        if self.yaw_deg is None and self.yaw_sigma_deg is not None:
+            raise ValueError(f"yaw undetermined with a σ of {self.yaw_sigma_deg!r} (expected none)")
+        if self.yaw_deg is not None and self.yaw_sigma_deg is None:
+            raise ValueError(f"yaw {self.yaw_deg!r} without its σ (an undetermined yaw is None, with the reason)")
+        if self.slope_deg is not None and self.slope_sigma_deg is None:
+            raise ValueError(f"slope {self.slope_deg!r} without its σ")
+
+    @property
+    def yaw_determined(self) -> bool:
+        return self.yaw_deg is not None
 
 
 @dataclass(frozen=True)
@@ -267,6 +284,7 @@ class Calibration:
     checks: tuple[Check, ...] = ()  # plausibility checks (mountcal.loop.plausibility); a failed one: not confident
 
     def __post_init__(self) -> None:
+        self.angles  # noqa: B018  (refuses a yaw or slope without its σ, whoever built the value)
         if self.yaw_deg is None:  # a yaw nobody determined is never kept, whoever built the value
             object.__setattr__(self, "rot_vs", levelled(self.rot_vs))
 
@@ -464,10 +482,6 @@ def schema_defs() -> dict[str, Any]:
     """
     defs: dict[str, Any] = {}
     properties = {name: schema_of(tp, defs) for name, tp in _TYPED.items()}
-    # ``fit.driving`` is the driving fit's own document, open to new keys; its residual tests are typed.
-    consistency = {"anyOf": [schema_of(DrivingConsistency, defs), {"type": "null"}]}
-    driving = {"type": "object", "properties": {"consistency": consistency}, "additionalProperties": {}}
-    defs["FitQuality"]["properties"]["driving"] = {"anyOf": [driving, {"type": "null"}]}
     return {"$defs": dict(sorted(defs.items())), "properties": properties}
 
 

@@ -39,18 +39,16 @@ ends; no per-sample Python.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field, replace
-from typing import Any
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from mountcal.core.conventions import FloatArray, angles_from_rot_vs
-from mountcal.core.driving_document import DrivingConsistency
+from mountcal.core.driving_document import DrivingConsistency, DrivingDocument, DrivingGates, DrivingSigma, TiltCheck
 from mountcal.core.errors import NotEnoughInformation
 from mountcal.core.findings import Finding
 from mountcal.core.option_names import option
-from mountcal.core.result import Calibration
-from mountcal.core.typed_json import to_plain
+from mountcal.core.result import Angles, Calibration
 from mountcal.estimate import driving_checks as checks
 from mountcal.estimate.driving_intervals import (
     MIN_INTERVALS,
@@ -103,7 +101,7 @@ class DrivingFit:
     tilt_source: str
     rotation_sigma_deg: tuple[float, float, float | None]
     up_driving_s: FloatArray  # shape (3,), the up axis from the mean gravity while driving
-    tilt_check: dict[str, Any] | None  # driving's up axis against the given tilt's, when one was given
+    tilt_check: TiltCheck | None  # driving's up axis against the given tilt's, when one was given
     time_offset_s: float
     time_offset_sigma_s: float | None
     time_offset_searched: bool
@@ -132,44 +130,59 @@ class DrivingFit:
         """The model-error term in the σ about the vehicle z axis (0 when the tests found nothing)."""
         return 0.0 if self.consistency is None else self.consistency.model_error.yaw_about_vehicle_z_deg
 
-    def to_dict(self) -> dict[str, Any]:
-        """Plain types, for the result JSON (``fit["driving"]``)."""
-        return {
-            "roll_deg": self.roll_deg,
-            "pitch_deg": self.pitch_deg,
-            "yaw_deg": self.yaw_deg,
-            "sigma": {
-                "roll_deg": self.roll_sigma_deg,
-                "pitch_deg": self.pitch_sigma_deg,
-                "yaw_deg": self.yaw_sigma_deg,
-                "yaw_newey_west_deg": self.yaw_sigma_hac_deg,
-                "yaw_jackknife_deg": self.yaw_sigma_jackknife_deg,
-                "yaw_model_error_deg": self.yaw_model_error_deg,
-                "rotation_about_vehicle_xyz_deg": list(self.rotation_sigma_deg),
-                "level": "1 sigma",
-            },
-            "yaw_reason": self.yaw_reason,
-            "tilt_source": self.tilt_source,
-            "up_driving_s": self.up_driving_s.tolist(),
-            "tilt_check": self.tilt_check,
-            "quaternion_xyzw": self.rot_vs.as_quat().tolist(),
-            "time_offset_s": self.time_offset_s,
-            "time_offset_sigma_s": self.time_offset_sigma_s,
-            "time_offset_meaning": "added to the speed channel's times to put them on the IMU clock",
-            "time_offset_searched": self.time_offset_searched,
-            "intervals": self.n_intervals,
-            "segments": self.n_segments,
-            "usable_s": self.usable_s,
-            "moving_s": self.moving_s,
-            "speed_scale": self.speed_scale,
-            "correlation": self.correlation,
-            "longitudinal_residual_rms_mps2": self.longitudinal_rms_mps2,
-            "lateral_rms_mps2": self.lateral_rms_mps2,
-            "straightness_from": self.straightness_source,
-            "gates": asdict(self.options),
-            "notes": list(self.notes),
-            "consistency": None if self.consistency is None else to_plain(self.consistency),
-        }
+    @property
+    def angles(self) -> Angles:
+        """Roll, pitch and yaw with their σ (no slope: a drive has none)."""
+        return Angles(
+            self.roll_deg,
+            self.roll_sigma_deg,
+            self.pitch_deg,
+            self.pitch_sigma_deg,
+            self.yaw_deg,
+            self.yaw_sigma_deg,
+            self.yaw_reason,
+            None,
+            None,
+        )
+
+    def document(self) -> DrivingDocument:
+        """The fit as the result file keeps it (``fit.driving``)."""
+        finite = bool(np.isfinite(self.speed_scale))
+        return DrivingDocument(
+            roll_deg=self.roll_deg,
+            pitch_deg=self.pitch_deg,
+            yaw_deg=self.yaw_deg,
+            sigma=DrivingSigma(
+                roll_deg=self.roll_sigma_deg,
+                pitch_deg=self.pitch_sigma_deg,
+                yaw_deg=self.yaw_sigma_deg,
+                yaw_newey_west_deg=self.yaw_sigma_hac_deg,
+                yaw_jackknife_deg=self.yaw_sigma_jackknife_deg,
+                yaw_model_error_deg=self.yaw_model_error_deg,
+                rotation_about_vehicle_xyz_deg=self.rotation_sigma_deg,
+            ),
+            yaw_reason=self.yaw_reason,
+            tilt_source=self.tilt_source,
+            up_driving_s=(float(self.up_driving_s[0]), float(self.up_driving_s[1]), float(self.up_driving_s[2])),
+            tilt_check=self.tilt_check,
+            quaternion_xyzw=tuple(float(q) for q in self.rot_vs.as_quat()),  # type: ignore[arg-type]
+            time_offset_s=self.time_offset_s,
+            time_offset_sigma_s=self.time_offset_sigma_s,
+            time_offset_meaning="added to the speed channel's times to put them on the IMU clock",
+            time_offset_searched=self.time_offset_searched,
+            intervals=self.n_intervals,
+            segments=self.n_segments,
+            usable_s=self.usable_s,
+            moving_s=self.moving_s,
+            speed_scale=float(self.speed_scale) if finite else None,
+            correlation=self.correlation,
+            longitudinal_residual_rms_mps2=self.longitudinal_rms_mps2,
+            lateral_rms_mps2=self.lateral_rms_mps2,
+            straightness_from=self.straightness_source,
+            gates=DrivingGates(**asdict(self.options)),
+            notes=self.notes,
+            consistency=self.consistency,
+        )
 
 
 # --------------------------------------------------------------------------- the estimator
@@ -475,11 +488,11 @@ def _result(
     tilt_check = None
     if up_given is not None:
         tilt_check = _tilt_check(rot_vs, up_given, up_driving, road, tilt_from)
-        if not tilt_check["agree"]:
+        if not tilt_check.agree:
             notes.append(
                 "the mean gravity while driving tilts from the given calibration's up axis by "
-                f"{tilt_check['angle_deg']:.2f}° (z = {tilt_check['z_about_vehicle_x']:+.1f} about x, "
-                f"{tilt_check['z_about_vehicle_y']:+.1f} about y): more than the road's grade and cross slope explain"
+                f"{tilt_check.angle_deg:.2f}° (z = {_z(tilt_check.z_about_vehicle_x)} about x, "
+                f"{_z(tilt_check.z_about_vehicle_y)} about y): more than the road's grade and cross slope explain"
             )
     if abs(pitch) > 60.0:
         notes.append(
@@ -560,19 +573,24 @@ def _tilt_check(
     up_driving_s: FloatArray,
     sigma_driving: tuple[float, float],
     given: Calibration | None,
-) -> dict[str, Any]:
+) -> TiltCheck:
     """Driving's up axis against the given one, as small rotations about the vehicle x and y axes."""
     d_v = np.asarray(rot_vs.apply(up_driving_s), dtype=float)  # the given up is exactly +z here
     about_x, about_y = float(np.degrees(np.arctan2(-d_v[1], d_v[2]))), float(np.degrees(np.arctan2(d_v[0], d_v[2])))
     gx = given.rotation_sigma_deg[0] if given is not None and given.rotation_sigma_deg[0] is not None else 0.0
     gy = given.rotation_sigma_deg[1] if given is not None and given.rotation_sigma_deg[1] is not None else 0.0
-    zx = about_x / float(np.hypot(sigma_driving[0], gx))
-    zy = about_y / float(np.hypot(sigma_driving[1], gy))
-    return {
-        "angle_deg": float(np.degrees(np.arccos(np.clip(up_given_s @ up_driving_s, -1.0, 1.0)))),
-        "about_vehicle_x_deg": about_x,
-        "about_vehicle_y_deg": about_y,
-        "z_about_vehicle_x": zx,
-        "z_about_vehicle_y": zy,
-        "agree": bool(abs(zx) <= AGREE_Z and abs(zy) <= AGREE_Z),
-    }
+    with np.errstate(divide="ignore", invalid="ignore"):
+        zx = float(np.float64(about_x) / np.hypot(sigma_driving[0], gx))
+        zy = float(np.float64(about_y) / np.hypot(sigma_driving[1], gy))
+    return TiltCheck(
+        angle_deg=float(np.degrees(np.arccos(np.clip(up_given_s @ up_driving_s, -1.0, 1.0)))),
+        about_vehicle_x_deg=about_x,
+        about_vehicle_y_deg=about_y,
+        z_about_vehicle_x=zx if np.isfinite(zx) else None,
+        z_about_vehicle_y=zy if np.isfinite(zy) else None,
+        agree=bool(abs(zx) <= AGREE_Z and abs(zy) <= AGREE_Z),
+    )
+
+
+def _z(z: float | None) -> str:
+    return "∞" if z is None else f"{z:+.1f}"

@@ -205,7 +205,7 @@ def _run_locked(
     logs, mountings = analyse_fleet(logs, options.alpha, options.floor_deg)
     mountings = _complete(mountings, MOUNTING_COLUMNS)
     vehicles = _complete(vehicle_table(mountings, logs), VEHICLE_COLUMNS)
-    doubtful = tuple(str(log) for log, flag in zip(logs["log"], logs["flags"], strict=True) if "not_confident" in flag)
+    doubtful = tuple(str(log) for log, sure in zip(logs["log"], logs["confident"], strict=True) if _not_confident(sure))
     if doubtful and options.require_confident:
         refuse_not_confident(
             str(output),
@@ -315,6 +315,11 @@ def _log_table(
     frame = _complete(pd.DataFrame(rows), LOG_COLUMNS)
     frame["start_time"] = pd.to_datetime(frame["start_time"], utc=True, format="ISO8601")
     return frame
+
+
+def _not_confident(confident: Any) -> bool:
+    """A log whose ``confident`` column is false (null — a failed log — is neither)."""
+    return not pd.isna(confident) and not bool(confident)
 
 
 def _complete(frame: pd.DataFrame, columns: Sequence[tuple[str, Any, str]]) -> pd.DataFrame:

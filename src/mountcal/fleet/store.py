@@ -248,6 +248,7 @@ LOG_COLUMNS: tuple[tuple[str, pa.DataType, str], ...] = (
     ("heading_source", _S, "where the headings came from (logs)"),
     ("n_samples", _I, "samples read (logs)"),
     ("dropped", _S, "samples or frames the reader discarded, by reason"),
+    ("confident", _B, "whether the calibration is confident (false: flag not_confident); null for a failed log"),
     ("flags", _L, "see docs/fleet.md"),
     ("notes", _S, "the calibration's notes, joined with ' | '"),
     ("error", _S, "why the log failed: the message (file, expected, found, what to do)"),

@@ -282,7 +282,8 @@ def _confidence(latest: pd.Series, period_logs: pd.DataFrame) -> tuple[bool, str
     """Whether the current mounting can be trusted as stated, and if not why (for fleet people)."""
     reasons = []
     used = period_logs[period_logs["in_consensus"].fillna(False).astype(bool)]
-    doubtful = int(used["flags"].map(lambda f: "not_confident" in list(f)).sum())
+    sure = used["confident"] if "confident" in used.columns else pd.Series(True, index=used.index)
+    doubtful = int(sure.map(lambda c: not pd.isna(c) and not bool(c)).sum())
     if len(used) and doubtful == len(used):
         reasons.append(f"its {doubtful} log(s) are not confident (flag not_confident)")
     scale = latest.get("sigma_scale")

@@ -223,8 +223,8 @@ def calibration_record(cal: Calibration) -> dict[str, Any]:
     p_fit = cal.fit.p_value  # None when the stop noise was estimated from the residuals
     if p_fit is not None and p_fit < STRUCTURE_P:
         flags.append("model_misfit")
-    if not getattr(cal, "confident", True):
-        flags.append("not_confident")
+    if not cal.confident:
+        flags.append("not_confident")  # the flag users filter on; the bool column ``confident`` is what mountcal reads
     if abs(cal.pitch_deg) > GIMBAL_LOCK_PITCH_DEG:
         flags.append("near_gimbal_lock")
     bias = [None] * 3 if cal.bias_mps2 is None else [float(v) for v in cal.bias_mps2]
@@ -261,6 +261,7 @@ def calibration_record(cal: Calibration) -> dict[str, Any]:
         "chi2": None if chi2 is None else float(chi2),
         "dof": None if dof is None else int(dof),
         "fit_p_value": p_fit,
+        "confident": bool(cal.confident),
         "flags": flags,
         "notes": " | ".join(cal.notes) or None,
     }

@@ -15,7 +15,6 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import replace
-from typing import Any
 
 import numpy as np
 from scipy import optimize
@@ -24,7 +23,7 @@ from scipy.spatial.transform import Rotation
 from mountcal.core.errors import FitFailed
 from mountcal.core.findings import Finding
 from mountcal.core.pvalues import chi2_logsf, nested_test, unexplained
-from mountcal.core.result import EffectValue
+from mountcal.core.result import Declined, EffectValue
 from mountcal.estimate import effects as registry
 from mountcal.estimate import full
 from mountcal.loop.diagnose import (
@@ -109,7 +108,7 @@ def close_the_loop(
     else:
         base = full.fit(table, BASE, g_mps2)
         steps.append(Step("start", "the paper's model: rotation and slope", BASE, (), table, base))
-    declined: list[dict[str, Any]] = []
+    declined: list[Declined] = []
     if fixed is not None:
         if fixed != BASE:
             refuse_inseparable(steps[-1], fixed, g_mps2)
@@ -144,7 +143,7 @@ def close_the_loop(
     return _finish(steps, declined)
 
 
-def _finish(steps: list[Step], declined: list[dict[str, Any]], findings: list[Finding] | None = None) -> Loop:
+def _finish(steps: list[Step], declined: list[Declined], findings: list[Finding] | None = None) -> Loop:
     """The loop's result; ``findings``: the final model's residual analysis, when already made."""
     last, n_rows = steps[-1], len(steps[0].table)
     findings = findings if findings is not None else analyse(last.table, last.fit, _rows(last, n_rows))
@@ -184,7 +183,7 @@ def _step_or_covariate(before: Step, step: Step, n_rows: int) -> str | None:
 
 
 def _next_step(
-    cur: Step, table: StopTable, g: float, gravity_known: bool, alpha: float, declined: list[dict[str, Any]]
+    cur: Step, table: StopTable, g: float, gravity_known: bool, alpha: float, declined: list[Declined]
 ) -> Step | None:
     options: list[tuple[float, Step]] = []
     names = candidates(cur.table, cur.terms, gravity_known)
@@ -264,7 +263,7 @@ def _next_step(
 
 
 def _named_by_residual(
-    cur: Step, n_rows: int, g: float, gravity_known: bool, alpha: float, declined: list[dict[str, Any]]
+    cur: Step, n_rows: int, g: float, gravity_known: bool, alpha: float, declined: list[Declined]
 ) -> tuple[Step | None, list[Finding] | None]:
     """The term the final residual names, when the loop declined it: tried against what it competes with.
 
@@ -339,7 +338,7 @@ def _why_adrift(cur: Step) -> str:
     )
 
 
-def _covariate_or_outlier(outlier: Step, rivals: list[Step], cur: Step, declined: list[dict[str, Any]]) -> Step:
+def _covariate_or_outlier(outlier: Step, rivals: list[Step], cur: Step, declined: list[Declined]) -> Step:
     """The outlier, or a significant term driven by a logged covariate that explains the stops better.
 
     A sensor drifting with temperature over a session makes its first or last stop the one the others
@@ -489,7 +488,7 @@ def _without_beta(state: full.State, i: int) -> full.State:
 NOISE_MODEL_STEPS = ("outlier", "surface")
 
 
-def _among_exclusive(best: Step, rivals: list[Step], g: float, declined: list[dict[str, Any]]) -> Step:
+def _among_exclusive(best: Step, rivals: list[Step], g: float, declined: list[Declined]) -> Step:
     """The best of the significant candidates that cannot be fitted together, by Akaike's criterion.
 
     Nested tests cannot choose between two effects the stops cannot separate from each other (on two
@@ -532,8 +531,8 @@ def _loo_rms(step: Step) -> float:
     return float(np.sqrt(np.mean(finite**2))) if finite.size else float("nan")
 
 
-def _decline(declined: list[dict[str, Any]], effect: str, why: str, round_: int) -> None:
-    declined.append({"effect": effect, "why": why})
+def _decline(declined: list[Declined], effect: str, why: str, round_: int) -> None:
+    declined.append(Declined(effect, why))
 
 
 def effect_values(fit: full.Fit) -> tuple[EffectValue, ...]:

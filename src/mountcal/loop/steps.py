@@ -4,10 +4,10 @@ turned down and the final residual analysis (:class:`Loop`)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
 from mountcal.core.findings import Finding
 from mountcal.core.pvalues import unexplained
+from mountcal.core.result import Declined
 from mountcal.estimate import full
 from mountcal.stops.table import StopTable
 
@@ -30,7 +30,7 @@ class Loop:
     """The sequence of models, the candidates turned down, and the final residual analysis."""
 
     steps: list[Step]
-    declined: list[dict[str, Any]]
+    declined: list[Declined]
     findings: list[Finding]
     doubts: list[str] = field(default_factory=list)  # why the chosen model may be the wrong explanation
 

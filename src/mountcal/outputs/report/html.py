@@ -12,7 +12,6 @@ from __future__ import annotations
 import json
 import math
 import os
-from collections.abc import Mapping
 from datetime import UTC, datetime
 from pathlib import PurePath
 from typing import Any
@@ -51,7 +50,7 @@ ul{margin:4px 0 8px;padding-left:22px}.wide{overflow-x:auto}.small{font-size:13p
 
 
 def render(
-    calibration: Calibration | Mapping[str, Any],
+    calibration: Calibration,
     table: StopTable | None = None,
     *,
     title: str | None = None,
@@ -62,9 +61,8 @@ def render(
 
     Parameters
     ----------
-    calibration : Calibration or mapping
-        The result, or its JSON document (which may carry later entries such as ``model_steps``
-        and ``unexplained``; a :class:`Calibration` contributes what its ``to_dict`` holds).
+    calibration : Calibration
+        The result (a result file: :meth:`Calibration.load`; its JSON document: :meth:`Calibration.from_dict`).
     table : StopTable, optional
         The stop table the result was fitted to, in the same order. It adds the 3-D figure of the
         stops on the fitted plane and circle, headings, per-stop σ and the temperature/time
@@ -85,9 +83,14 @@ def render(
     Raises
     ------
     InputError
-        When the document is not a calibration result, or the table's stop count differs from it.
+        When the table's stop count differs from the result's.
     """
-    cal = calibration if isinstance(calibration, Calibration) else Calibration.from_dict(dict(calibration))
+    if not isinstance(calibration, Calibration):
+        raise TypeError(
+            f"render() takes a Calibration, not {type(calibration).__name__} (Calibration.load for a result file, "
+            "Calibration.from_dict for its JSON document)"
+        )
+    cal = calibration
     if table is not None and len(table) != cal.residual_s.shape[0]:
         raise InputError(
             table.source,
