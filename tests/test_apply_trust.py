@@ -264,6 +264,11 @@ def test_fleet_warns_about_logs_that_are_not_confident_and_records_them(
         meta = pq.read_schema(table).metadata or {}
         assert json.loads(meta[b"mountcal.confident"]) is False
         assert [Path(p).name for p in json.loads(meta[b"mountcal.not_confident_logs"])] == ["doubtful.csv"]
+    logs = pq.read_table(out).to_pandas()  # a bool column (the flag not_confident stays for those who filter on it)
+    assert pq.read_schema(out).field("confident").type == "bool"
+    by_name = {Path(str(log)).name: row for log, row in zip(logs["log"], logs.itertuples(), strict=True)}
+    assert by_name["good.csv"].confident is True and by_name["doubtful.csv"].confident is False
+    assert "not_confident" in list(by_name["doubtful.csv"].flags)
     refused = tmp_path / "refused.parquet"
     assert main(["fleet", str(van), "-o", str(refused), "--workers", "1", "-q", "--require-confident"]) == 2
     assert "not confident" in capsys.readouterr().err

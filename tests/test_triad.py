@@ -143,3 +143,19 @@ def test_cli_calibrate_with_triad_writes_both_parts(tmp_path: Path, capsys: pyte
     doc = json.loads(out.read_text(encoding="utf-8"))
     assert "triad" in doc["systematic"]["source"] and doc["systematic"]["default_spec"] is False
     assert abs(doc["mounting"]["roll_deg"] - truth.angles_deg[0]) < 3 * doc["uncertainty"]["roll_deg"]
+
+
+def test_a_triad_file_naming_an_unknown_parameter_is_refused_naming_it(tmp_path: Path) -> None:
+    from mountcal.core.errors import InputError
+
+    doc = _triad((0.0,) * 6, 1e-3).to_dict()
+    doc["fitted"] = ["bias_x", "bias_y", "scale_q"]  # not a parameter of the triad model
+    path = tmp_path / "odd.json"
+    path.write_text(json.dumps(doc), encoding="utf-8")
+    with pytest.raises(InputError) as err:
+        load(path)
+    text = str(err.value)
+    assert "odd.json" in text and "'scale_q'" in text and all(n in text for n in NAMES)
+    doc["fitted"] = list(NAMES[:6])  # a known subset still loads
+    path.write_text(json.dumps(doc), encoding="utf-8")
+    assert load(path).fitted == NAMES[:6]

@@ -125,11 +125,19 @@ def load(path: str | Path) -> Triad:
     if not isinstance(doc, dict) or doc.get("format") != FORMAT or doc.get("format_version") != FORMAT_VERSION:
         found = doc.get("cal_type", doc.get("format")) if isinstance(doc, dict) else type(doc).__name__
         raise InputError(str(path), f"a {FORMAT} JSON, version {FORMAT_VERSION}", repr(found), todo)
+    fitted = doc.get("fitted", list(NAMES))
+    unknown = [n for n in fitted if n not in NAMES] if isinstance(fitted, list) else [fitted]
+    if unknown:  # a parameter the triad model does not have: refused, never dropped or guessed at
+        raise InputError(
+            str(path),
+            f"fitted parameters among {', '.join(NAMES)}",
+            f"the unknown parameter{'s' if len(unknown) > 1 else ''} {', '.join(map(repr, unknown))}",
+            todo,
+        )
     try:
         values = np.asarray(doc["values"], dtype=float)
         cov = np.asarray(doc["covariance"], dtype=float)
-        fitted = tuple(str(n) for n in doc.get("fitted", NAMES))
-        ok = set(fitted) <= set(NAMES) and values.shape == (9,) and cov.shape == (9, 9)
+        ok = values.shape == (9,) and cov.shape == (9, 9)
     except (KeyError, TypeError, ValueError):
         ok = False
     if ok:  # each number in its range (mountcal.core.ranges) before any arithmetic on them
@@ -139,7 +147,7 @@ def load(path: str | Path) -> Triad:
         ok = ok and bool(np.all(np.abs(values[3:]) < 0.5))
     if not ok:
         raise InputError(str(path), "9 finite values (|E| < 0.5) and a symmetric 9×9 covariance", "other values", todo)
-    return Triad(values[:3], values[3:], cov, str(doc.get("source", path)), fitted)
+    return Triad(values[:3], values[3:], cov, str(doc.get("source", path)), tuple(str(n) for n in fitted))
 
 
 MIN_STOPS = 6  # six parameters (bias, scale): the six faces, with each stop's noise given
