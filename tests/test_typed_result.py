@@ -147,3 +147,10 @@ def test_the_report_takes_the_calibration_never_a_dict() -> None:
     assert "stops + driving" in render(cal)
     with pytest.raises(TypeError, match="takes a Calibration"):
         render(cal.to_dict())  # type: ignore[arg-type]
+
+
+def test_the_driving_gates_record_every_driving_option() -> None:
+    from mountcal.core.driving_document import DrivingGates
+    from mountcal.estimate.driving_options import DrivingOptions
+
+    assert [f.name for f in dataclasses.fields(DrivingGates)] == [f.name for f in dataclasses.fields(DrivingOptions)]
