@@ -12,9 +12,9 @@ start-up, the calibrations and the consolidation are all inside:
 
 1. ``--workers 1``;
 2. ``--workers 2``;
-3. ``--scheduler`` to a Dask ``LocalCluster(n_workers=1, threads_per_worker=1, processes=True)``, its
-   workers without Dask's statistical profiler (``distributed.worker.profile.enabled: false``, the
-   setting docs/fleet.md gives for a fleet's cluster; ``--dask-profiler`` keeps Dask's default);
+3. ``--scheduler`` to a Dask ``LocalCluster(n_workers=1, threads_per_worker=1, processes=True)``
+   with Dask's default configuration (``--no-dask-profiler`` turns the workers' statistical
+   profiler off, ``distributed.worker.profile.enabled: false``, to measure what it costs);
 4. the same with ``n_workers=2``.
 
 Each cluster is started just before its run and closed after it (its start-up is reported
@@ -207,7 +207,7 @@ def dask_cluster(startup_s: list[float], workers: int) -> Iterator[str]:
         yield cluster.scheduler_address
 
 
-DASK_PROFILER = [False]  # --dask-profiler: Dask's statistical profiler on the workers (its default)
+DASK_PROFILER = [True]  # Dask's statistical profiler on the workers (its default; --no-dask-profiler: off)
 
 
 def cluster_for(name: str, startup_s: list[float]) -> contextlib.AbstractContextManager[str | None]:
@@ -321,12 +321,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--runs", type=int, default=3)
     parser.add_argument("--workdir", type=Path, default=None, help="keep the generated fleet here")
     parser.add_argument(
-        "--dask-profiler",
+        "--no-dask-profiler",
         action="store_true",
-        help="keep Dask's statistical profiler on in the workers (its default; off is the setting for fleets)",
+        help="turn Dask's statistical profiler off in the workers (to measure what it costs a fleet)",
     )
     args = parser.parse_args(argv)
-    DASK_PROFILER[0] = args.dask_profiler
+    DASK_PROFILER[0] = not args.no_dask_profiler
 
     workdir = args.workdir or Path(tempfile.mkdtemp(prefix="mountcal-fleet-"))
     try:
@@ -370,7 +370,7 @@ def main(argv: list[str] | None = None) -> int:
         reference_logs, reference_vehicles = tables["local, 1 worker"]
         ok = int((reference_logs["status"] == "ok").sum())
         remounted = sorted(reference_vehicles.loc[reference_vehicles["n_remounts"] > 0, "vehicle_id"])
-        profiler = "on (Dask's default)" if args.dask_profiler else "off"
+        profiler = "off (--no-dask-profiler)" if args.no_dask_profiler else "on (Dask's default)"
         print(f"Dask workers' statistical profiler: {profiler}")
         print(f"Dask LocalCluster start-up (not in the runs, median): {statistics.median(cluster_s):.1f} s")
         print(f"{ok}/{len(reference_logs)} logs ok; remounts flagged: {remounted}")
