@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 
 from mountcal.core.errors import InputError
+from mountcal.io.magic import check_named_for_content
 
 if TYPE_CHECKING:
     from mountcal.io.reader import LogOptions
@@ -133,6 +134,7 @@ def _kind_of(path: Path, dbc: bool, columns: bool, declared: Declared) -> InputK
     special = None if path.is_dir() else special_kind(path)  # a folder may be a log (a comma2k19 segment)
     if special is not None:  # refused by the reader, without opening it
         return InputKind(declared != "log", special, "not a regular file")
+    check_named_for_content(path)  # a Parquet file named .csv, an MCAP named .csv: said, not misread
     if declared == "stop-table":
         if not table:
             raise InputError(

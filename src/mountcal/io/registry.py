@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING
 
 from mountcal.core.errors import InputError, MountcalError
 from mountcal.core.plugins import Plugin, entry_points_of, output_to_stderr
+from mountcal.io.magic import check_named_for_content
 from mountcal.io.reader import LogReader
 
 if TYPE_CHECKING:
@@ -160,6 +161,7 @@ def reader_for(path: Path, options: LogOptions) -> LogReader:
     """
     reader = _claimant(path, options)
     if reader is not None:
+        check_named_for_content(path)  # an MF4 named .blf, a Parquet file named .csv: not read as its name says
         return reader
     formats = "; ".join(f"{r.description} ({' '.join(r.suffixes)})" for r in readers() if r.suffixes)
     broken = _registry()[1]

@@ -1,0 +1,72 @@
+"""What a file's first bytes say it is, against what its name says (a file named for another format).
+
+Readers are chosen by a file's name (:func:`mountcal.io.registry.reader_for`); a file whose content
+is another known format — an MF4 saved as ``.blf``, a Parquet file named ``.csv``, a gzip archive
+named ``.mcap`` — would otherwise reach the wrong reader and be refused as corrupt, or misread.
+Only formats with a fixed signature are recognised; a text format has none, so any of these
+signatures in a text-named file is a mismatch.
+"""
+
+from __future__ import annotations
+
+import stat
+from pathlib import Path
+
+from mountcal.core.errors import InputError
+
+# signature → (what the content is, the suffix that names it)
+SIGNATURES: tuple[tuple[bytes, str, str], ...] = (
+    (b"LOGG", "a BLF log", ".blf"),
+    (b"MDF     ", "an MF4 log", ".mf4"),
+    (b"UnFinMF ", "an MF4 log (unfinalised)", ".mf4"),
+    (b"\x89MCAP", "an MCAP log", ".mcap"),
+    (b"#ROSBAG", "a ROS 1 bag", ".bag"),
+    (b"PAR1", "a Parquet table", ".parquet"),
+    (b"SQLite format 3\x00", "an SQLite database (a ROS 2 bag's .db3)", ".db3"),
+    (b"\x1f\x8b", "a gzip archive", ".gz"),
+    (b"PK\x03\x04", "a ZIP archive", ".zip"),
+    (b"\xfd7zXZ\x00", "an XZ archive", ".xz"),
+    (b"BZh", "a bzip2 archive", ".bz2"),
+    (b"\x28\xb5\x2f\xfd", "a Zstandard archive", ".zst"),
+)
+# the suffixes whose content starts with a signature above (the others name text formats)
+SIGNED_SUFFIXES = {".blf": ".blf", ".mf4": ".mf4", ".mdf": ".mf4", ".mcap": ".mcap", ".bag": ".bag"}
+SIGNED_SUFFIXES |= {".parquet": ".parquet", ".pq": ".parquet", ".db3": ".db3"}
+_LONGEST = max(len(s) for s, _, _ in SIGNATURES)
+
+
+def content_format(path: Path) -> tuple[str, str, bytes] | None:
+    """(what, suffix, the bytes) of the signature ``path`` starts with; None for none, or a path that is
+    not a regular file (a FIFO is never read here: it would block)."""
+    try:
+        if not stat.S_ISREG(path.stat().st_mode):
+            return None
+        with path.open("rb") as f:
+            head = f.read(_LONGEST)
+    except OSError:
+        return None  # the reader reports what keeps it from the file
+    for signature, what, suffix in SIGNATURES:
+        if head.startswith(signature):
+            return what, suffix, signature
+    return None
+
+
+def check_named_for_content(path: Path) -> None:
+    """Refuse a file whose content is a known format other than the one its suffix names."""
+    found = content_format(path)
+    if found is None:
+        return
+    what, suffix, signature = found
+    named = path.suffix.lower()
+    if SIGNED_SUFFIXES.get(named) == suffix:
+        return
+    raise InputError(
+        str(path),
+        f"the format its name says ({named or 'no suffix'})",
+        f"{what}: it starts with {signature!r}",
+        f"Rename it with the suffix of its content ({path.with_suffix(suffix).name}) — mountcal reads a file as "
+        "its name says — or export it again in the format you meant.",
+    )
+
+
+__all__ = ["SIGNATURES", "check_named_for_content", "content_format"]

@@ -1,0 +1,80 @@
+"""A file named for another format: its content is said, whatever command reads it (the reader
+dispatch and the input-kind decision both look), and the file is not read as its name says."""
+
+from __future__ import annotations
+
+import gzip
+import hashlib
+import shutil
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from mountcal.cli import main
+from mountcal.io.magic import SIGNATURES, content_format
+
+DATA = Path(__file__).resolve().parents[2] / "data"
+DBC = ["--dbc", str(DATA / "imu_mm5_10.dbc"), "--mapping", str(DATA / "imu_mm5_10.toml")]
+
+
+def _contents(tmp: Path) -> dict[str, Path]:
+    """Real files of each signed format (the sample logs, a Parquet table, a gzip of a CSV)."""
+    parquet = tmp / "real.parquet"
+    pd.read_csv(DATA / "zhang2011_stops.csv").to_parquet(parquet)
+    gz = tmp / "real.csv.gz"
+    gz.write_bytes(gzip.compress((DATA / "zhang2011_stops.csv").read_bytes()))
+    return {".blf": DATA / "parking.blf", ".mf4": DATA / "parking.mf4", ".mcap": DATA / "parking.mcap"} | {
+        ".parquet": parquet,
+        ".gz": gz,
+    }
+
+
+@pytest.mark.parametrize("named", [".blf", ".mf4", ".mcap", ".csv", ".parquet", ".asc", ".log", ".trc", ".bag"])
+@pytest.mark.parametrize("command", ["calibrate", "inspect", "stops"])
+def test_a_file_named_for_another_format_is_refused_naming_its_content(
+    tmp_path: Path, named: str, command: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    for content, source in _contents(tmp_path).items():
+        if content == named:
+            continue
+        path = tmp_path / f"log{named}"
+        shutil.copyfile(source, path)
+        before = hashlib.sha256(path.read_bytes()).hexdigest()
+        args = [command, str(path), *DBC]
+        if command == "stops":
+            args += ["-o", str(tmp_path / "s.csv")]
+        assert main(args) == 2, (named, content)
+        err = capsys.readouterr().err
+        what = content_format(path)
+        assert what is not None and what[1] == content
+        assert f"log{named}" in err and what[0] in err and f"log{content}" in err, err
+        assert "Traceback" not in err
+        assert hashlib.sha256(path.read_bytes()).hexdigest() == before
+        assert not (tmp_path / "s.csv").exists()
+
+
+def test_a_file_named_for_its_own_format_reads(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    for name in ("parking.blf", "parking.mf4", "parking.mcap"):
+        assert main(["inspect", str(DATA / name), *DBC]) == 0, capsys.readouterr().err
+    path = tmp_path / "stops.pq"
+    pd.read_csv(DATA / "zhang2011_stops.csv").to_parquet(path)  # .pq is a Parquet name too
+    assert main(["calibrate", str(path), "-q"]) == 0, capsys.readouterr().err
+
+
+def test_the_signatures_are_those_the_real_writers_write(tmp_path: Path) -> None:
+    """Each signature is checked against a file of that format written by its real writer (not our own
+    table of bytes read back): the sample logs, pandas' Parquet, gzip."""
+    files = _contents(tmp_path)
+    for suffix, path in files.items():
+        found = content_format(path)
+        assert found is not None and found[1] == suffix, (suffix, found)
+    assert {suffix for _, _, suffix in SIGNATURES} >= set(files)
+
+
+def test_a_fifo_is_not_opened_to_look(tmp_path: Path) -> None:
+    import os
+
+    fifo = tmp_path / "pipe.blf"
+    os.mkfifo(fifo)
+    assert content_format(fifo) is None  # returns at once: a FIFO would block a read
