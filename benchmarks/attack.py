@@ -18,7 +18,7 @@ Counted per category, for each command:
 - **hang**: killed at the time bound;
 - **input changed**: an input's bytes (SHA-256), or its kind (a FIFO, a device), differ afterwards;
 - **unclear exit**: killed by a signal, an exit code outside 0, 2, 3, 4, 5, 129, 130, 143, or a non-zero exit
-  without an ``error:`` line (or a report on stdout: ``plan``'s "not reachable");
+  without an ``error:`` line (or, for exit 3, the answer line saying not confident or not reachable);
 - **over bound**: peak RSS above ``A · (input bytes) + B`` (the bound of docs/reliability.md);
 - **other**: what the case checks beyond these (stdout that no longer parses, a NaN in a written
   file, an output written over an input, a temporary file left behind, ...).
@@ -185,8 +185,11 @@ def execute(case: Case, workdir: Path, src: Path, cap_bytes: int, timeout_s: flo
 
 def _said(run: Run) -> bool:
     """A non-zero exit came with a message: a ``mountcal: …`` or ``mountcal CMD: error: …`` line on
-    stderr (or, for ``plan``'s "not reachable", its report on stdout)."""
-    return _message(run.stderr) or bool(run.stdout.strip() and run.stderr.strip() == "")
+    stderr, or, for exit 3 (an answer that is not confident, a plan not reachable), the answer on the
+    first line of stderr saying so."""
+    first = run.stderr.lstrip().split("\n", 1)[0]
+    answered = run.code == 3 and bool(re.search(r"not reachable|NOT CONFIDENT", first))
+    return _message(run.stderr) or answered
 
 
 def _message(stderr: str) -> bool:
