@@ -12,6 +12,7 @@ import pandas as pd
 import pytest
 
 from mountcal.cli import main
+from mountcal.core.errors import InputError
 from mountcal.io.magic import SIGNATURES, content_format
 
 DATA = Path(__file__).resolve().parents[2] / "data"
@@ -78,3 +79,14 @@ def test_a_fifo_is_not_opened_to_look(tmp_path: Path) -> None:
     fifo = tmp_path / "pipe.blf"
     os.mkfifo(fifo)
     assert content_format(fifo) is None  # returns at once: a FIFO would block a read
+
+
+def test_a_suffix_mountcal_does_not_own_is_not_judged(tmp_path: Path) -> None:
+    """A reader plugin's format may be a Parquet table or a ZIP inside: its name is not checked."""
+    from mountcal.io.magic import check_named_for_content
+
+    path = tmp_path / "drive.noisy"
+    pd.read_csv(DATA / "zhang2011_stops.csv").to_parquet(path)
+    check_named_for_content(path)  # no refusal
+    with pytest.raises(InputError, match=r"drive\.parquet"):
+        check_named_for_content(path.rename(tmp_path / "drive.csv"))

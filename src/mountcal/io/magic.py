@@ -4,7 +4,8 @@ Readers are chosen by a file's name (:func:`mountcal.io.registry.reader_for`); a
 is another known format — an MF4 saved as ``.blf``, a Parquet file named ``.csv``, a gzip archive
 named ``.mcap`` — would otherwise reach the wrong reader and be refused as corrupt, or misread.
 Only formats with a fixed signature are recognised; a text format has none, so any of these
-signatures in a text-named file is a mismatch.
+signatures in a text-named file is a mismatch. Only mountcal's own suffixes are judged: a reader
+plugin's format may hold a Parquet table or a ZIP archive by design.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ SIGNATURES: tuple[tuple[bytes, str, str], ...] = (
 # the suffixes whose content starts with a signature above (the others name text formats)
 SIGNED_SUFFIXES = {".blf": ".blf", ".mf4": ".mf4", ".mdf": ".mf4", ".mcap": ".mcap", ".bag": ".bag"}
 SIGNED_SUFFIXES |= {".parquet": ".parquet", ".pq": ".parquet", ".db3": ".db3"}
+TEXT_SUFFIXES = (".csv", ".asc", ".log", ".trc")  # the built-in text formats: no signature at all
 _LONGEST = max(len(s) for s, _, _ in SIGNATURES)
 
 
@@ -52,12 +54,16 @@ def content_format(path: Path) -> tuple[str, str, bytes] | None:
 
 
 def check_named_for_content(path: Path) -> None:
-    """Refuse a file whose content is a known format other than the one its suffix names."""
+    """Refuse a file whose content is a known format other than the one its suffix names. Only the
+    suffixes of mountcal's own formats are judged: a plugin's format may well be a Parquet or a ZIP
+    inside (its reader knows)."""
+    named = path.suffix.lower()
+    if named not in SIGNED_SUFFIXES and named not in TEXT_SUFFIXES:
+        return
     found = content_format(path)
     if found is None:
         return
     what, suffix, signature = found
-    named = path.suffix.lower()
     if SIGNED_SUFFIXES.get(named) == suffix:
         return
     raise InputError(
