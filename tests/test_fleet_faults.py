@@ -186,3 +186,23 @@ def test_with_a_dbc_a_stop_table_in_the_folder_is_still_a_stop_table(tmp_path: P
     assert logs.loc["stops.csv", "status"] == "ok", logs.loc["stops.csv", "error"]
     assert logs.loc["stops.csv", "input_kind"] == "stop table" and logs.loc["stops.csv", "n_stops"] == 12
     assert logs.loc["parking.blf", "status"] == "ok" and logs.loc["parking.blf", "input_kind"] == "log"
+
+
+def test_an_interrupted_engine_waits_for_its_workers_once_not_per_step(monkeypatch: pytest.MonkeyPatch) -> None:
+    # kill() and close() share one clean-up budget: a start that hangs costs it once, not once per
+    # step (three 5 s waits in a row once summed to the whole 15 s grace of an interrupted command)
+    import threading
+
+    from mountcal.fleet import engines
+
+    monkeypatch.setattr(engines, "CLEANUP_WAIT_S", 0.6)
+    engine = engines.LocalEngine(1)
+    hung = threading.Event()
+    engine._starting = threading.Thread(target=hung.wait, args=(30,), daemon=True)
+    engine._starting.start()
+    started = time.monotonic()
+    engine.kill()
+    engine.close()
+    took = time.monotonic() - started
+    hung.set()
+    assert 0.5 < took < 1.0, f"kill + close waited {took:.2f} s for a budget of 0.6 s"

@@ -68,7 +68,7 @@ QUEUED_PER_WORKER = 2  # jobs in flight per worker: one running, one waiting (no
 MAX_WORKER_DEATHS = 2  # a log in flight when its worker died this often is recorded as failed
 BATCH_TARGET_S = 0.5  # Dask: work per task (a task costs the scheduler and the network milliseconds)
 MAX_BATCH = 64
-START_WAIT_S = 5.0  # an interrupted run waits this long for the workers being started, to stop them
+CLEANUP_WAIT_S = 5.0  # the longest kill() and close() together wait for the workers (well inside atomic.GRACE_S)
 WATCH_PERIOD_S = 1.0  # where there is no pidfd, a worker checks this often whether the command lives
 
 
@@ -114,6 +114,7 @@ class LocalEngine:
         self._starting: threading.Thread | None = None
         self._start_error: BaseException | None = None
         self._saved_env: dict[str, str | None] | None = None
+        self._cleanup_until: float | None = None  # one budget for every wait of kill() and close()
 
     def __enter__(self) -> LocalEngine:
         return self
@@ -126,7 +127,7 @@ class LocalEngine:
     def kill(self) -> None:
         """Stop the workers now, logs in flight and all (an interrupted run: they are redone next time)."""
         if self._starting is not None:
-            self._starting.join(START_WAIT_S)  # workers it has not started yet are not waited for
+            self._starting.join(self._cleanup_left())  # workers it has not started yet are not waited for
         processes = getattr(self._pool, "_processes", None) or {}
         for process in list(processes.values()):
             with contextlib.suppress(Exception):
@@ -152,10 +153,10 @@ class LocalEngine:
     def close(self) -> None:
         """Stop the workers and restore the environment."""
         if self._starting is not None:
-            self._starting.join(START_WAIT_S)
+            self._starting.join(self._cleanup_left())
         if self._pool is not None:
             self._pool.shutdown(wait=False, cancel_futures=True)
-            _forget_when_done(self._pool)
+            _forget_when_done(self._pool, self._cleanup_left())
             self._pool = None
         if self._saved_env is not None:
             for k, v in self._saved_env.items():
@@ -165,6 +166,13 @@ class LocalEngine:
                     os.environ[k] = v
             self._saved_env = None
         self._starting = None
+        self._cleanup_until = None
+
+    def _cleanup_left(self) -> float:
+        """Seconds left of the clean-up's one budget (started by the first wait of kill() or close())."""
+        if self._cleanup_until is None:
+            self._cleanup_until = time.monotonic() + CLEANUP_WAIT_S
+        return max(0.0, self._cleanup_until - time.monotonic())
 
     def results(self, jobs: Iterable[tuple[str, FleetJob]]) -> Iterator[tuple[str, dict[str, Any]]]:
         source = iter(jobs)
@@ -299,7 +307,7 @@ def start_worker_server() -> None:
             multiprocessing.forkserver.ensure_running()
 
 
-def _forget_when_done(pool: ProcessPoolExecutor, timeout_s: float = 5.0) -> None:
+def _forget_when_done(pool: ProcessPoolExecutor, timeout_s: float) -> None:
     """Wait a little for the pool's manager thread and, once it has ended, drop it from the exit hook's
     list: CPython 3.11's hook writes to the thread's wake-up pipe even after the thread closed it
     (an "Exception ignored … Bad file descriptor" traceback after a Ctrl-C)."""
