@@ -16,7 +16,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from mountcal.calibration.fit import BASE, WITH_BIAS, Options, calibrate
+from mountcal.calibration.fit import BASE, WITH_OFFSET, Options, calibrate
 from mountcal.core.conventions import G_N
 from mountcal.core.result import Calibration
 from mountcal.estimate import bound
@@ -109,7 +109,7 @@ def main() -> None:
     parts = []
     for with_bias, crb_terms, title in (
         (False, BASE, "No bias; CRB of rotation,slope"),
-        (True, WITH_BIAS, "Unknown 20 mg bias; CRB of rotation,slope,bias"),
+        (True, WITH_OFFSET, "Unknown 20 mg bias; CRB of rotation,slope,bias"),
     ):
         res = run(args.runs, with_bias, args.seed + with_bias)
         parts.append(table_md(title, res, crb_deg(crb_terms), args.runs))

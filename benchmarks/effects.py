@@ -115,11 +115,13 @@ def true_bound(s: Scenario, table: StopTable, truth: Truth, params: dict[str, ob
         truth.rot_vs,
         truth.slope_deg,
         truth.g_mps2,
-        truth.bias_mps2
-        + truth.temp_coeff_mps2_per_c
-        * (np.mean(table.temperature_c) - truth.temp_ref_c if table.temperature_c is not None else 0.0),
-        truth.temp_coeff_mps2_per_c,
-        np.array([e[0, 0], e[1, 1], e[2, 2], e[0, 1], e[0, 2], e[1, 2]]),
+        {
+            "bias": truth.bias_mps2
+            + truth.temp_coeff_mps2_per_c
+            * (np.mean(table.temperature_c) - truth.temp_ref_c if table.temperature_c is not None else 0.0),
+            "temperature": truth.temp_coeff_mps2_per_c,
+            "scale": np.array([e[0, 0], e[1, 1], e[2, 2], e[0, 1], e[0, 2], e[1, 2]]),
+        },
     )
     crb = bound.crb_deg(exact, state, s.true_terms, truth.g_mps2)
     return crb or {f"{a}_deg": None for a in (*ANGLES, "slope")}

@@ -62,6 +62,7 @@ from mountcal.core.ranges import check
 from mountcal.core.result import VEHICLE_FRAME, Calibration
 from mountcal.core.threads import helpers_allowed
 from mountcal.core.version import software_version
+from mountcal.estimate import effects
 from mountcal.io.input_conventions import AxisMap, check_same_axes, parse_axes
 from mountcal.io.logs import iter_log
 from mountcal.io.mcap.chunks import open_log
@@ -280,7 +281,7 @@ def _metadata(
                 "roll_deg": cal.roll_deg,
                 "pitch_deg": cal.pitch_deg,
                 "yaw_deg": cal.yaw_deg,
-                "bias_mps2": None if cal.bias_mps2 is None else cal.bias_mps2.tolist(),
+                "bias_mps2": _offset(cal),
                 "method": cal.method,
                 "input": cal.provenance.input,
             }
@@ -566,3 +567,9 @@ def to_frame(samples: Samples) -> pd.DataFrame:
         df[name] = column
     df.attrs.update(frame="sensor", source=samples.source, axis_map=samples.axis_map, dropped=dict(samples.dropped))
     return df
+
+
+def _offset(cal: Calibration) -> list[float] | None:
+    """The metadata's copy of the result's ``bias_mps2`` (the offset effect's values)."""
+    off = effects.offset_of(cal)
+    return None if off is None else list(off.value)

@@ -1,8 +1,8 @@
 """From a stop table to a :class:`~mountcal.core.result.Calibration`: method, model choice, honesty.
 
 - ``method="full"`` (default): maximum likelihood on SO(3) (:mod:`mountcal.estimate.full`);
-  ``model="auto"`` adds a constant bias only when a likelihood-ratio test (F-test when the stop
-  noise is unknown) says the data call for it.
+  ``model="auto"`` adds an effect (:mod:`mountcal.estimate.effects`) only when a likelihood-ratio test
+  (F-test when the stop noise is unknown) says the data call for it.
 - ``method="paper"``: the paper's closed form (:mod:`mountcal.estimate.paper`), for comparison.
 
 Yaw is reported only when the headings are measured from the uphill direction and the slope
@@ -44,9 +44,9 @@ from mountcal.core.result import (
     Observability,
     Separability,
 )
+from mountcal.estimate import effects as registry
 from mountcal.estimate import full, paper
 from mountcal.estimate.bound import crb_deg, euler_gradients
-from mountcal.estimate.effects.temperature import MIN_TEMPERATURE_SPAN_C
 from mountcal.estimate.geometry import span_ratio
 from mountcal.estimate.observability import separability
 from mountcal.estimate.sensor_errors import SensorErrors, from_spec
@@ -59,7 +59,7 @@ from mountcal.loop.systematic import assess
 from mountcal.stops.table import StopTable, check_count
 
 BASE = full.BASE
-WITH_BIAS: tuple[str, ...] = (*BASE, "bias")
+WITH_OFFSET: tuple[str, ...] = (*BASE, registry.offset().name)  # the paper's model with a constant offset
 MIN_DISTINCT_HEADINGS = 3
 
 
@@ -94,7 +94,8 @@ def calibrate(table: StopTable, options: Options | None = None) -> Calibration:
 
 
 def check_model(table: StopTable, terms: tuple[str, ...]) -> None:
-    """Refuse a fixed model whose terms need a column the table lacks, or values it does not vary."""
+    """Refuse a fixed model whose terms need a column the table lacks, or values it does not vary (the effect
+    says why, :meth:`~mountcal.estimate.effects.base.Effect.unusable`)."""
     known = model_terms.by_name()
     for name in terms:
         missing = [c for c in known[name].needs if getattr(table, _FIELD.get(c, c), None) is None]
@@ -105,19 +106,11 @@ def check_model(table: StopTable, terms: tuple[str, ...]) -> None:
                 "no such column",
                 f"Add the column, or leave {name} out of {option('model')} (or use {option('model', 'auto')}).",
             )
-    if "temperature" in terms and table.temperature_c is not None:
-        span = float(np.ptp(table.temperature_c))
-        if span < MIN_TEMPERATURE_SPAN_C:
-            raise NotEnoughInformation(
-                f"{table.source}: the term temperature needs stops at different temperatures (a span of at least "
-                f"{MIN_TEMPERATURE_SPAN_C:g} °C), found a span of {span:.3g} °C: a drift per °C cannot be measured. "
-                f"Leave temperature out of {option('model')}."
-            )
-    if "site_slope" in terms and table.site is not None and np.unique(table.site).size < 2:
-        raise NotEnoughInformation(
-            f"{table.source}: the term site_slope needs stops at two or more sites, found one. "
-            f"Leave site_slope out of {option('model')}."
-        )
+    effects = registry.registered()
+    for name in terms:
+        why = effects[name].unusable(table) if name in effects else None
+        if why is not None:
+            raise NotEnoughInformation(f"{table.source}: the term {name} {why}. Leave {name} out of {option('model')}.")
 
 
 _FIELD = {"temperature_c": "temperature_c", "site": "site"}
@@ -153,11 +146,11 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
         )
     notes: list[str] = []
     declined = tuple(loop.declined)
-    if any(d.effect == "bias" and ("separable" in d.why or "confounded" in d.why) for d in declined):
-        notes.append(
-            "a constant accelerometer bias cannot be told from a tilt with these stops: if the sensor has a "
-            "bias b, roll and pitch are off by up to b/g (20 mg → 1.1°) beyond their σ (docs/conventions.md §4)"
-        )
+    inseparable = [d.effect for d in declined if "separable" in d.why or "confounded" in d.why]
+    for name in dict.fromkeys(inseparable):
+        note = registry.get(name).inseparable_note if name in registry.registered() else None
+        if note is not None:
+            notes.append(note)
     findings = list(loop.findings)
     if opts.slope_reference is not None:
         noise_dof = None if f.noise_known else f.dof
@@ -198,8 +191,9 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
             "meaningful there; use the rotation (quaternion) and the uncertainty about the vehicle axes."
         )
     model = list(f.terms)
-    if from_position and "gravity" not in model:
-        model.append("gravity")
+    gravity = registry.gravity_term()
+    if from_position and gravity not in model:
+        model.append(gravity)
     if final.excluded:
         model.append("outlier")
 
@@ -208,11 +202,8 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
 
     k = 3 if "rot_z" in f.names else 2
     rot_sigma = np.degrees(np.sqrt(np.clip(np.diag(f.cov[:k, :k]), 0, None))) * birge
-    bias = bias_sigma = None
-    if "bias" in f.terms:
-        i_b = f.names.index("bias_x")
-        bias = f.state.bias_s.copy()
-        bias_sigma = np.sqrt(np.diag(f.cov)[i_b : i_b + 3]) * birge
+    effects = effect_values(f)
+    bias, bias_sigma = registry.offset_fields(effects, birge)
     tested = f.noise_known and f.dof > 0
     fit_info = FitQuality(
         noise="per-stop covariance from the table" if f.noise_known else "common σ estimated from the residuals",
@@ -255,7 +246,7 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
         bias_mps2=bias,
         bias_sigma_mps2=bias_sigma,
         gravity_mps2=f.state.g_mps2,
-        gravity_source="fitted to the stops" if "gravity" in f.terms else g_source,
+        gravity_source="fitted to the stops" if gravity in f.terms else g_source,
         residual_rms_mps2=float(np.sqrt(np.mean(f.residual_s**2))),
         residual_s=_all_residuals(table, final),
         fit=fit_info,
@@ -266,7 +257,7 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
         model_steps=_steps(loop, opts),
         unexplained=tuple(flagged),
         diagnostics=tuple(findings),
-        effects=effect_values(f),
+        effects=effects,
         confident=not flagged and not doubts,
     )
     return _with_systematic(cal, final.table, f, opts)
@@ -417,7 +408,7 @@ def _observability(table: StopTable, f: full.Fit, g: float) -> Observability:
     eig = np.linalg.eigvalsh(f.fisher / np.outer(scale, scale))
     rank = full.fisher_rank(f.fisher)
     crb = {}
-    for terms in dict.fromkeys((BASE, WITH_BIAS, f.terms)):
+    for terms in dict.fromkeys((BASE, WITH_OFFSET, f.terms)):
         bound = crb_deg(table, f.state, terms, g, f.noise_scale)
         crb[",".join(terms)] = None if bound is None else AngleValues(**bound)
     return Observability(

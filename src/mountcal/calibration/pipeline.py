@@ -28,6 +28,7 @@ from mountcal.core.option_names import option
 from mountcal.core.paths import special_kind
 from mountcal.core.result import Calibration, Provenance
 from mountcal.core.version import software_version
+from mountcal.estimate import effects
 from mountcal.estimate.driving import DrivingFit, estimate_driving
 from mountcal.estimate.driving_options import DrivingOptions, horizontal_axes_sigma_deg
 from mountcal.io.input_conventions import merged, parse_axes
@@ -420,7 +421,8 @@ def _up_is_up(cal: Calibration, table: StopTable | None) -> bool:
     """Whether the calibration rotates the parked stops' specific force to +g up (the physical branch)."""
     if table is None:
         return cal.slope_deg is None or cal.slope_deg < 90.0
-    acc = table.acc_s - (cal.bias_mps2 if cal.bias_mps2 is not None else 0.0)
+    offset = effects.offset_of(cal)
+    acc = table.acc_s - (np.array(offset.value) if offset is not None else 0.0)
     return bool(np.median(cal.rot_vs.apply(acc)[:, 2]) > 0.0)
 
 

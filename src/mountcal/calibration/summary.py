@@ -9,6 +9,7 @@ said twice (the reasons for doubt are in the notes, not repeated after them).
 from __future__ import annotations
 
 from mountcal.core.result import Calibration
+from mountcal.estimate import effects
 
 ANGLES = ("roll", "pitch", "yaw", "slope")
 
@@ -48,9 +49,7 @@ def summary_parts(cal: Calibration) -> tuple[str, list[str], list[str]]:
         from mountcal.loop.systematic import summary_line
 
         lines.append(summary_line(cal.systematic))
-    if cal.bias_mps2 is not None and cal.bias_sigma_mps2 is not None:
-        b = ", ".join(f"{v:+.4f} ± {s:.4f}" for v, s in zip(cal.bias_mps2, cal.bias_sigma_mps2, strict=True))
-        lines.append(f"bias   ({b}) m/s² (sensor x, y, z)")
+    lines += effects.summary_lines(cal)  # each fitted effect's own line, as it says
     fit = cal.fit
     chi = f", χ² = {fit.chi2:.1f} on {fit.dof} dof" if fit.chi2 is not None else ""
     if fit.p_value is not None:

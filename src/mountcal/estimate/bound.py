@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
 from mountcal.core.conventions import FloatArray, angles_from_rot_vs
-from mountcal.estimate import full
+from mountcal.estimate import effects, full
 from mountcal.stops.table import StopTable
 
 
@@ -49,11 +52,18 @@ def true_state(
     rot_vs: Rotation,
     slope_deg: float,
     g_mps2: float,
-    bias_mps2: FloatArray | None = None,
-    temp_coeff: FloatArray | None = None,
-    scale_e: FloatArray | None = None,
+    values: Mapping[str, ArrayLike | None] | None = None,
+    **reported: ArrayLike | None,
 ) -> full.State:
-    """A parameter-space point from true values (for bounds at the truth)."""
-    values = {"bias": bias_mps2, "temperature": temp_coeff, "scale": scale_e}
-    given = {k: np.asarray(v, dtype=float) for k, v in values.items() if v is not None}
-    return full.State(rot_vs, np.array([np.radians(slope_deg)]), np.zeros(0), g_mps2, given)
+    """A parameter-space point from true values (for bounds at the truth).
+
+    Each effect's values in its parameters' order, by effect name in ``values`` or by its ``report_key``
+    as a keyword (``bias_mps2=``, as a result file names it); None or absent: no such effect.
+    """
+    by_key = {e.report_key: name for name, e in effects.registered().items()}
+    unknown = set(reported) - by_key.keys()
+    if unknown:
+        raise TypeError(f"true_state() got unexpected keyword arguments {sorted(unknown)}")
+    given = {**(values or {}), **{by_key[k]: v for k, v in reported.items()}}
+    state = {k: np.asarray(v, dtype=float) for k, v in given.items() if v is not None}
+    return full.State(rot_vs, np.array([np.radians(slope_deg)]), np.zeros(0), g_mps2, state)

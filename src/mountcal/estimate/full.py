@@ -7,7 +7,8 @@ Model, with the optional effects of docs/conventions.md §6 (each a *term*)::
 terms: ``rotation`` and ``slope`` (always), then the registered effects
 (:mod:`mountcal.estimate.effects`: ``bias``, ``temperature``, ``gravity``, ``site_slope``, ``scale``
 and any a package adds), applied in their ``order``; the model iterates over them and knows none by
-name except ``site_slope``, which gives each site its own α.
+name: an effect with ``slope_per_site`` (``site_slope``) gives each site its own α, one with a
+``gravity_index`` sets the gravity in force.
 
 The rotation is updated by a left perturbation in the vehicle frame, ``R ← exp([δ]×) R``, so
 δ = (δx, δy, δz) are small rotations about the vehicle's x, y and z axes; δz is a pure change of
@@ -27,7 +28,7 @@ from scipy.spatial.transform import Rotation
 from mountcal.core.conventions import FloatArray, skew
 from mountcal.core.errors import FitFailed, NotEnoughInformation
 from mountcal.estimate import effects as registry
-from mountcal.estimate.effects.scale import scale_matrix
+from mountcal.estimate.effects import bias, scale, temperature
 from mountcal.estimate.geometry import in_plane_azimuth, level_rotation, phase_yaw, plane_normal, with_yaw
 from mountcal.stops.table import StopTable
 
@@ -58,25 +59,30 @@ class State:
 
     @property
     def g_mps2(self) -> float:
-        """Gravity in force: fitted when the model has ``gravity``, else the base one."""
-        return float(self.values["gravity"][0]) if "gravity" in self.values else self.g0_mps2
+        """Gravity in force: fitted when the model has an effect that fits it, else the base one."""
+        for effect in registry.chain(tuple(self.values)):
+            if effect.gravity_index is not None:
+                return float(self.values[effect.name][effect.gravity_index])
+        return self.g0_mps2
 
+    # Accessors of three built-in effects for callers that know them (tests, benchmarks); the model and the
+    # rest of mountcal use ``values`` through the registry.
     @property
     def bias_s(self) -> FloatArray:
-        return self.effect("bias", 3)
+        return self.effect(bias.EFFECT.name, 3)
 
     @property
     def temp_coeff_s(self) -> FloatArray:
-        return self.effect("temperature", 3)
+        return self.effect(temperature.EFFECT.name, 3)
 
     @property
     def scale_e(self) -> FloatArray:
-        return self.effect("scale", 6)
+        return self.effect(scale.EFFECT.name, 6)
 
     @property
     def scale_matrix(self) -> FloatArray:
         """I + E, shape (3, 3)."""
-        return scale_matrix(self.scale_e)
+        return scale.scale_matrix(self.scale_e)
 
     def with_values(self, **values: FloatArray) -> State:
         return replace(self, values={**self.values, **values})
@@ -127,12 +133,13 @@ class StaticModel:
         n = len(table)
         self.fit_yaw = table.headings != "none"
         self.fit_beta = table.headings == "none"
-        self.site_index, self.sites = site_index(table) if "site_slope" in terms else (np.zeros(n, int), ["all"])
+        self.chain = registry.chain(terms)
+        per_site = any(e.slope_per_site for e in self.chain)
+        self.site_index, self.sites = site_index(table) if per_site else (np.zeros(n, int), ["all"])
         if table.cov_s is not None:
             self.whiten = np.linalg.inv(np.linalg.cholesky(table.cov_s))  # e' = C⁻¹ e has unit covariance
         else:
             self.whiten = np.broadcast_to(np.eye(3), (n, 3, 3))
-        self.chain = registry.chain(terms)
         names = ["rot_x", "rot_y"] + (["rot_z"] if self.fit_yaw else [])
         names += ["slope"] if len(self.sites) == 1 else [f"slope_{s}" for s in self.sites]
         self.params = {e.name: e.parameters(table) for e in self.chain}
@@ -141,10 +148,15 @@ class StaticModel:
         if self.fit_beta:
             names += [f"beta_{i}" for i in range(n)]
         self.names = tuple(names)
-        # the parameters each effect reports: its own, and for site_slope the per-site slopes
-        self.owned = {e.name: tuple(self.names.index(p) for p in self.params[e.name]) for e in self.chain}
-        if "site_slope" in self.owned:
-            self.owned["site_slope"] = tuple(i for i, p in enumerate(self.names) if p.startswith("slope_"))
+        # the parameters each effect reports: its own, and for the slope per site the per-site slopes
+        self.owned = {
+            e.name: (
+                tuple(i for i, p in enumerate(self.names) if p.startswith("slope_"))
+                if e.slope_per_site
+                else tuple(self.names.index(p) for p in self.params[e.name])
+            )
+            for e in self.chain
+        }
 
     def beta(self, state: State) -> FloatArray:
         return state.beta_rad if self.fit_beta else self.table.beta_rad  # type: ignore[return-value]
@@ -163,6 +175,16 @@ class StaticModel:
         for effect, values in zip(self.chain, self._values(state), strict=True):
             p = effect.apply(self.table, values, p, state.g0_mps2)[0]
         return p
+
+    def carry(self, state: State, d_base: FloatArray) -> FloatArray:
+        """Changes ``d_base`` (n, 3) of the base force ``p`` as the prediction sees them: through every effect's
+        derivative by ``p`` (a scale matrix turns and stretches them)."""
+        _, _, p = self._base(state)
+        for effect, values in zip(self.chain, self._values(state), strict=True):
+            p, _, d_p = effect.apply(self.table, values, p, state.g0_mps2)
+            if d_p is not None:
+                d_base = d_base @ d_p.T if d_p.ndim == 2 else np.einsum("nij,nj->ni", d_p, d_base)
+        return d_base
 
     def residual(self, state: State) -> FloatArray:
         """Whitened residual, shape (3n,)."""
@@ -253,11 +275,12 @@ def initial_state(table: StopTable, g_mps2: float) -> State:
 
 def adapt(state: State, table: StopTable, terms: tuple[str, ...], g_mps2: float) -> State:
     """A start for ``terms`` from a fit of other terms: effects not in ``terms`` dropped, slopes per site."""
-    n_sites = len(site_index(table)[1]) if "site_slope" in terms else 1
+    chain = registry.chain(terms)
+    n_sites = len(site_index(table)[1]) if any(e.slope_per_site for e in chain) else 1
     slope = state.slope_rad
     if slope.size != n_sites:
         slope = np.full(n_sites, float(np.mean(slope)))
-    values = {e.name: state.values.get(e.name, e.initial(table, g_mps2)) for e in registry.chain(terms)}
+    values = {e.name: state.values.get(e.name, e.initial(table, g_mps2)) for e in chain}
     return replace(state, slope_rad=slope, g0_mps2=g_mps2, values=values)
 
 

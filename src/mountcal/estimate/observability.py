@@ -27,10 +27,12 @@ PROTOCOLS = (
 
 
 def separability(table: StopTable, fit: full.Fit, g_mps2: float) -> list[dict[str, Any]]:
-    """Per effect not in the model (alone, and with a bias when the model has none): whether these stops
-    separate it and, if not, the first protocol that would."""
+    """Per effect not in the model (alone, and with the offset when the model has none): whether these stops
+    separate it and, if not, the first protocol that would. The slope per site is no such effect: the
+    protocols are made of sites."""
     out = []
-    tried = [e for e in registry.registered().values() if e.name not in fit.terms and e.name != "site_slope"]
+    offset = registry.offset().name
+    tried = [e for e in registry.registered().values() if e.name not in fit.terms and not e.slope_per_site]
     usable = [e for e in tried if all(getattr(table, c, None) is not None for c in e.needs)]
     # One information matrix for the model with every usable effect: at their start (no effect) they leave
     # the other columns as they are, so each smaller model's information is a block of it.
@@ -44,8 +46,8 @@ def separability(table: StopTable, fit: full.Fit, g_mps2: float) -> list[dict[st
             out.append({"effect": effect.name, "separable": False, "why": f"needs the {', '.join(missing)} column"})
             continue
         sets: list[tuple[str, ...]] = [(effect.name,)]
-        if "bias" not in fit.terms and effect.name != "bias" and not effect.needs:
-            sets.append(("bias", effect.name))
+        if offset not in fit.terms and effect.name != offset and not effect.needs:
+            sets.append((offset, effect.name))
         for added in sets:
             terms = (*fit.terms, *(r for r in effect.requires if r not in fit.terms), *added)
             keep = [i for i, o in enumerate(owner) if o not in params or o in terms]
@@ -61,7 +63,7 @@ def _verdict(here: bool, fit: full.Fit, terms: tuple[str, ...], g: float) -> dic
         return {"separable": False, "why": "not separable with these stops"}
     for sites, name in PROTOCOLS:
         design, state = _design(fit.state, sites)
-        if _full_rank(design, state, (*terms, "site_slope"), g):
+        if _full_rank(design, state, (*terms, registry.site_term()), g):
             return {"separable": False, "why": f"not separable with these stops; {name} would separate it"}
     return {"separable": False, "why": "not separable with these stops, nor on up to three slopes"}
 

@@ -9,11 +9,10 @@ from typing import Any
 import numpy as np
 
 from mountcal.core.conventions import FloatArray
-from mountcal.estimate.effects.scale import SCALE_NAMES
+from mountcal.estimate import effects as registry
+from mountcal.estimate.effects.bias import NAMES as BIAS_NAMES  # a triad calibration's own terms (estimate.triad)
+from mountcal.estimate.effects.temperature import NAMES as TEMP_NAMES
 from mountcal.io.sensor_spec import SensorSpec
-
-BIAS_NAMES = ("bias_x", "bias_y", "bias_z")
-TEMP_NAMES = ("temp_x", "temp_y", "temp_z")
 
 
 @dataclass(frozen=True)
@@ -28,9 +27,11 @@ class SensorErrors:
 
 
 def from_spec(spec: SensorSpec) -> SensorErrors:
-    """A datasheet's ± limits as independent rectangular distributions (u = a/√3)."""
-    limits = [spec.bias_mps2] * 3 + [spec.bias_tempco_mps2_per_c] * 3 + [spec.scale] * 3 + [spec.cross_axis] * 3
-    names = BIAS_NAMES + TEMP_NAMES + SCALE_NAMES
+    """A datasheet's ± limits as independent rectangular distributions (u = a/√3): of every effect's parameters
+    the datasheet bounds (:meth:`~mountcal.estimate.effects.base.Effect.spec_limits`), the built-in effects in
+    their ``--model`` order."""
+    by_name = {k: v for e in registry.registered().values() for k, v in e.spec_limits(spec).items()}
+    names, limits = tuple(by_name), list(by_name.values())
     return SensorErrors(
         names, np.diag(np.square(limits) / 3.0), spec.source, spec.to_dict(), heading_u(spec.heading_deg)
     )

@@ -34,6 +34,7 @@ from mountcal.core.errors import MountcalError
 from mountcal.core.findings import STRUCTURE_P
 from mountcal.core.option_names import as_flags
 from mountcal.core.result import Calibration
+from mountcal.estimate import effects as registry
 from mountcal.fleet.inputs import FleetJob
 from mountcal.fleet.storage import is_url, local_copies
 from mountcal.io.logs import join, read_file
@@ -217,8 +218,9 @@ def calibration_record(cal: Calibration) -> dict[str, Any]:
         rot_sigma[2] = sys_sigma[2] = None
     if cal.slope_deg is None:
         flags.append("slope_not_determined")
-    if "bias" in cal.model:
-        flags.append("bias_fitted")
+    offset = registry.offset()
+    if offset.name in cal.model:
+        flags.append(f"{offset.name}_fitted")
     chi2, dof = cal.fit.chi2, cal.fit.dof
     p_fit = cal.fit.p_value  # None when the stop noise was estimated from the residuals
     if p_fit is not None and p_fit < STRUCTURE_P:
@@ -227,8 +229,9 @@ def calibration_record(cal: Calibration) -> dict[str, Any]:
         flags.append("not_confident")  # the flag users filter on; the bool column ``confident`` is what mountcal reads
     if abs(cal.pitch_deg) > GIMBAL_LOCK_PITCH_DEG:
         flags.append("near_gimbal_lock")
-    bias = [None] * 3 if cal.bias_mps2 is None else [float(v) for v in cal.bias_mps2]
-    bias_sigma = [None] * 3 if cal.bias_sigma_mps2 is None else [float(v) for v in cal.bias_sigma_mps2]
+    fitted = registry.offset_of(cal)  # the fleet table's bias columns are the offset's (a published format)
+    bias = [None] * 3 if fitted is None else list(fitted.value)
+    bias_sigma = [None] * 3 if fitted is None else list(fitted.sigma)
     return {
         "roll_deg": cal.roll_deg,
         "roll_sigma_deg": cal.roll_sigma_deg,

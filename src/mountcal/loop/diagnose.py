@@ -17,6 +17,7 @@ from mountcal.core.conventions import G_N, FloatArray
 from mountcal.core.errors import FitFailed, NotEnoughInformation
 from mountcal.core.findings import Finding
 from mountcal.core.pvalues import chi2_logsf, f_logsf
+from mountcal.estimate import effects as registry
 from mountcal.estimate import full
 from mountcal.loop.change_points import change_points, largest_bias_step
 from mountcal.stops.table import StopTable
@@ -76,13 +77,14 @@ def analyse(table: StopTable, fit: full.Fit, rows: np.ndarray | None = None) -> 
                 _per_axis(model.whiten, x),
             )
         )
+    for effect in registry.registered().values():  # the test against a covariate carries its effect's name
+        covariate = effect.covariate(table)
+        if covariate is not None:
+            tests.append((effect.name, covariate[0], _per_axis(model.whiten, covariate[1])))
     if table.temperature_c is not None and np.ptp(table.temperature_c) > 0:
-        t = table.temperature_c - table.temperature_c.mean()
         rising = np.sign(np.gradient(table.temperature_c[order]))
         hyst = np.empty(n)
         hyst[order] = rising
-        x = np.column_stack([t, t**2 - np.mean(t**2)])
-        tests.append(("temperature", "residual against temperature (drift, curvature)", _per_axis(model.whiten, x)))
         if np.ptp(hyst) > 0:  # the sensor both warmed and cooled: a bias that depends on which is hysteresis
             what = "residual offset between warming and cooling stops (thermal hysteresis)"
             tests.append(("hysteresis", what, _per_axis(model.whiten, hyst[:, None])))
@@ -99,7 +101,7 @@ def analyse(table: StopTable, fit: full.Fit, rows: np.ndarray | None = None) -> 
     per_stop = [("stop_norm", "|a| of single stops off the model's g (vibration rectification, shocks)", along)]
     if beta is not None and beta.size == n:
         tangent_v = np.column_stack([-np.sin(beta), -np.cos(beta), np.zeros(n)])
-        tangent = fit.state.rot_vs.inv().apply(tangent_v) @ fit.state.scale_matrix.T
+        tangent = model.carry(fit.state, fit.state.rot_vs.inv().apply(tangent_v))
         what = "single stops turned about the vertical (errors in the headings)"
         per_stop.append(("stop_heading", what, np.einsum("nij,nj->ni", model.whiten, tangent).reshape(-1, 1)))
     for name, what, v in per_stop:
@@ -423,10 +425,8 @@ def leave_one_out_refit(table: StopTable, fit: full.Fit) -> tuple[FloatArray, Fl
             d2[i], press[i] = np.nan, np.nan
             continue
         state = f.state if fit.state.beta_rad.size == 0 else _put_beta(f.state, i, fit.state.beta_rad[i])
-        if "temperature" in fit.terms and table.temperature_c is not None:
-            # The refit's bias holds at the others' mean temperature; the prediction uses all stops' mean.
-            shift = float(np.mean(table.temperature_c) - np.mean(sub.temperature_c))  # type: ignore[arg-type]
-            state = state.with_values(bias=state.bias_s + state.temp_coeff_s * shift)
+        for effect in registry.chain(fit.terms):  # values relative to the stops fitted (a mean temperature)
+            state = state.with_values(**effect.transfer(state.values, sub, table))
         pred = full.StaticModel(table, fit.terms, fit.state.g_mps2).predict(state)[i]
         e = table.acc_s[i] - pred
         cov = (table.cov_s[i] if table.cov_s is not None else np.eye(3)) * (

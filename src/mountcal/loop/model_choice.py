@@ -97,7 +97,7 @@ def close_the_loop(
         base = full.fit(table, BASE, g_mps2, naive.state)
         steps.append(
             Step(
-                "gravity",
+                registry.gravity_term(),
                 f"local gravity {g_mps2:.5f} m/s² (WGS 84 normal gravity at the stops' position)",
                 BASE,
                 (),

@@ -26,6 +26,7 @@ from scipy.linalg import block_diag
 from mountcal.core.conventions import FloatArray
 from mountcal.core.option_names import option
 from mountcal.core.result import Systematic
+from mountcal.estimate import effects as registry
 from mountcal.estimate import full
 from mountcal.estimate.bound import euler_gradients
 from mountcal.estimate.sensor_errors import SensorErrors
@@ -37,7 +38,11 @@ if TYPE_CHECKING:
 
 KEYS = ("roll_deg", "pitch_deg", "yaw_deg", "slope_deg", "rotation_x_deg", "rotation_y_deg", "rotation_z_deg")
 HEADING = "heading"  # the name the headings' error is reported under in ``propagated``
-_TERM_OF = {"bias": "bias", "temp": "temperature", "scale": "scale", "cross": "scale"}
+
+
+def _effect_of(table: StopTable) -> dict[str, registry.Effect]:
+    """The effect each sensor error (a parameter of the static model) belongs to."""
+    return {p: e for e in registry.registered().values() for p in e.parameters(table)}
 
 
 def _headings_seen(table: StopTable, model: full.StaticModel, errors: SensorErrors) -> bool:
@@ -67,14 +72,15 @@ def propagate(
     update of the Type B prior), and δ's mean given the residual enters as μμᵀ (it is not
     corrected, so it is an error). Directions of δ the stops cannot see keep the full limit.
     """
+    effect = _effect_of(table)
     keep = [
         i
         for i, name in enumerate(errors.names)
-        if _TERM_OF[name.split("_")[0]] not in terms
-        and not (name.startswith("temp_") and table.temperature_c is None)  # no temperatures: no drift to map
+        if effect[name].name not in terms
+        and all(getattr(table, c, None) is not None for c in effect[name].needs)  # no temperatures: no drift to map
     ]
     used = tuple(errors.names[i] for i in keep)
-    extra = tuple(dict.fromkeys(_TERM_OF[n.split("_")[0]] for n in used))
+    extra = tuple(dict.fromkeys(effect[n].name for n in used))
     model = full.StaticModel(table, tuple(dict.fromkeys((*terms, *extra))), g_mps2)
     headings = _headings_seen(table, model, errors)
     none = np.zeros((len(fitted), len(fitted)))
@@ -249,8 +255,9 @@ def _rescaled(cal: Calibration, factor: float, birge: float) -> Calibration:
 
 
 def _short(names: tuple[str, ...]) -> list[str]:
-    label = {"bias": "bias", "temp": "bias drift per °C", "scale": "scale", "cross": "cross-axis"}
-    return list(dict.fromkeys(label[n.split("_")[0]] for n in names))
+    """What a person calls each error (as its effect says), each once."""
+    effects = {p: e for e in registry.registered().values() for p in e.spec_limits(SensorSpec())}
+    return list(dict.fromkeys(effects[n].label(n) if n in effects else n for n in names))
 
 
 def summary_line(part: Systematic) -> str:

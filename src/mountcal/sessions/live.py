@@ -29,13 +29,14 @@ from typing import IO, Any
 import numpy as np
 import pandas as pd
 
-from mountcal.calibration.fit import WITH_BIAS, calibrate
+from mountcal.calibration.fit import WITH_OFFSET, calibrate
 from mountcal.calibration.options import Options
 from mountcal.core.atomic import atomic_path
 from mountcal.core.conventions import specific_force_v
 from mountcal.core.errors import InputError, MountcalError, NotEnoughInformation
 from mountcal.core.option_names import option
 from mountcal.core.result import Calibration
+from mountcal.estimate import effects as registry
 from mountcal.estimate.bound import crb_deg, true_state
 from mountcal.io.can.bus import BusFrames, Recording
 from mountcal.io.can.read import samples_from_frames
@@ -48,7 +49,7 @@ from mountcal.stops.headings import tabulate
 from mountcal.stops.table import StopTable, write_stop_table
 
 CANDIDATES_DEG = tuple(float(b) for b in range(0, 360, 5))
-BASE_TERMS = WITH_BIAS  # the terms a bound for a suggestion may use
+BASE_TERMS = WITH_OFFSET  # the terms a bound for a suggestion may use
 
 
 @dataclass(frozen=True)
@@ -96,8 +97,9 @@ def next_heading(
     if cal.slope_deg is None or table.beta_rad is None or table.cov_s is None:
         return None
     terms = tuple(t for t in cal.model if t in BASE_TERMS)
-    bias = cal.bias_mps2 if cal.bias_mps2 is not None else np.zeros(3)
-    state = true_state(cal.rot_vs, cal.slope_deg, cal.gravity_mps2, bias_mps2=bias)
+    off = registry.offset_of(cal)
+    bias = np.zeros(3) if off is None else np.array(off.value)
+    state = true_state(cal.rot_vs, cal.slope_deg, cal.gravity_mps2, {registry.offset().name: bias})
     cov = table.cov_s.mean(axis=0)
     best: tuple[float, float] | None = None
     for beta in candidates:

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from mountcal.calibration.fit import BASE, WITH_BIAS
+from mountcal.calibration.fit import BASE, WITH_OFFSET
 from mountcal.calibration.options import parse_model
 from mountcal.core.atomic import atomic_path
 from mountcal.core.conventions import G_N, FloatArray
@@ -30,6 +30,7 @@ from mountcal.core.errors import InputError, NotEnoughInformation
 from mountcal.core.option_names import option
 from mountcal.core.output_suffix import check_output_suffix
 from mountcal.core.ranges import QUANTITIES, check
+from mountcal.estimate import effects as registry
 from mountcal.estimate.bound import crb_deg, true_state
 from mountcal.estimate.sensor_errors import SensorErrors, from_spec
 from mountcal.io.logs import read_log
@@ -66,7 +67,7 @@ class Request:
 
     target_deg: dict[str, float]
     noise: Noise
-    terms: tuple[str, ...] = WITH_BIAS
+    terms: tuple[str, ...] = WITH_OFFSET
     slope_deg: float | None = None  # None: find the smallest slope that reaches the target
     max_stops: int = 24
     stop_s: float | None = None  # None: choose the dwell
@@ -176,12 +177,13 @@ def parse_target(spec: str) -> dict[str, float]:
 
 
 def plan_terms(model: str) -> tuple[str, ...]:
-    """The fixed model a plan is made for: rotation,slope or rotation,slope,bias."""
+    """The fixed model a plan is made for: rotation,slope or rotation,slope,bias (the offset)."""
     terms = parse_model(model)
-    if terms not in (BASE, WITH_BIAS):
+    if terms not in (BASE, WITH_OFFSET):
+        off = registry.offset().name
         raise InputError(
             "the model of the plan",
-            "rotation,slope (no bias) or rotation,slope,bias (an unknown constant bias)",
+            f"{','.join(BASE)} (no {off}) or {','.join(WITH_OFFSET)} (an unknown constant {off})",
             repr(model),
             "A plan needs a fixed model; choose the one you will calibrate with.",
         )
@@ -374,7 +376,7 @@ def _why_not(req: Request, plan: Plan, dwells: tuple[float, ...]) -> str:
     rest = [a for a in over if a not in below]
     if "yaw" in rest:
         why += " (yaw precision grows as 1/sin(slope): on level ground yaw is unobservable)"
-    if "bias" in req.terms and any(a in rest for a in ("roll", "pitch")):
+    if registry.offset().name in req.terms and any(a in rest for a in ("roll", "pitch")):
         why += " (with an unknown bias, roll and pitch come from the circle's radius g·sin(slope) only)"
     return why + (". Allow more or longer stops, a steeper slope, or a quieter sensor." if rest else ".")
 
@@ -430,7 +432,7 @@ def monte_carlo_rms(plan: Plan, runs: int, seed: int, bias_mg: float = 20.0) -> 
     for _ in range(runs):
         roll, pitch = rng.uniform(-10.0, 10.0, size=2)
         yaw = rng.uniform(-180.0, 180.0)
-        bias = random_bias(bias_mg * 1e-3 * G_N, rng) if "bias" in req.terms else None
+        bias = random_bias(bias_mg * 1e-3 * G_N, rng) if registry.offset().name in req.terms else None
         table, truth = simulate_stops(
             roll,
             pitch,

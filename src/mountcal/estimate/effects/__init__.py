@@ -18,9 +18,11 @@ from functools import cache
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
+    from collections.abc import Iterable
+
     from mountcal.core.conventions import FloatArray
     from mountcal.core.plugins import Plugin
-    from mountcal.core.result import Calibration
+    from mountcal.core.result import Calibration, EffectValue
     from mountcal.estimate.effects.base import Effect
 
 GROUP = "mountcal.effects"
@@ -87,6 +89,86 @@ def chain(terms: tuple[str, ...]) -> list[Effect]:
     return sorted(chosen, key=lambda e: e.order)
 
 
+def _one(flag: str) -> Effect:
+    """The built-in effect with ``flag`` set: a role one effect plays (another package's cannot take it)."""
+    return next(e for e in _builtin().values() if getattr(e, flag))
+
+
+def offset() -> Effect:
+    """The constant offset every sensor has: the model a plan is made for, the one every other effect's
+    separability is also judged with, and the one the v2 result's ``bias_mps2`` field holds."""
+    return _one("offset")
+
+
+def site_term() -> str:
+    """The term that gives each site its own slope (a design on several slopes is fitted with it)."""
+    return _one("slope_per_site").name
+
+
+def gravity_term() -> str:
+    """The term that fits local gravity (a result lists it too when gravity was known from the position)."""
+    return next(e.name for e in _builtin().values() if e.gravity_index is not None)
+
+
+def offset_fields(effects: Iterable[EffectValue], widen: float = 1.0) -> tuple[FloatArray | None, FloatArray | None]:
+    """The v2 result's ``bias_mps2`` and ``uncertainty.bias_mps2`` (σ times ``widen``) from a fit's effect values:
+    the one place that fills those fields (None, None: no offset fitted)."""
+    import numpy as np
+
+    found = next((e for e in effects if e.name == offset().report_key), None)
+    if found is None:
+        return None, None
+    return np.array(found.value, dtype=float), np.array(found.sigma, dtype=float) * widen
+
+
+def offset_of(calibration: Calibration) -> EffectValue | None:
+    """The offset of a calibration as an ``effects`` entry: the one place that reads the v2 fields ``bias_mps2`` and
+    ``uncertainty.bias_mps2`` (the σ there is the total one, widened by the Birge ratio; a file or a value built by
+    hand may also hold the fields without the entry)."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    off = offset()
+    if calibration.bias_mps2 is None:
+        return calibration.effect(off.report_key)
+    sigma = calibration.bias_sigma_mps2
+    entry = off.report(calibration.bias_mps2, np.zeros(3) if sigma is None else sigma, ("x", "y", "z"))
+    return replace(entry, sigma=(None, None, None)) if sigma is None else entry
+
+
+def fitted(calibration: Calibration) -> dict[str, EffectValue]:
+    """Every fitted effect of a calibration by its ``report_key``, the offset from the v2 fields when ``effects``
+    lacks it."""
+    out = {e.name: e for e in calibration.effects}
+    off = offset_of(calibration)
+    if off is not None:
+        out.setdefault(off.name, off)
+    return out
+
+
+def reporting(keys: Iterable[str]) -> dict[str, Effect]:
+    """The effects by their ``report_key``, every one of ``keys`` included when registered (the entry points are
+    only scanned when a key is none of the built-in effects')."""
+    effects = {e.report_key: e for e in _builtin().values()}
+    if not set(keys) <= effects.keys():
+        effects = {e.report_key: e for e in registered().values()}
+    return effects
+
+
+def summary_lines(calibration: Calibration) -> list[str]:
+    """The text summary's line of every fitted effect that has one, in the order of the prediction."""
+    off = offset_of(calibration)  # its σ as the result states it (the total)
+    reported = {**fitted(calibration), **({off.name: off} if off is not None else {})}
+    effects = reporting(reported)
+    lines = []
+    for effect in sorted((effects[k] for k in reported if k in effects), key=lambda e: e.order):
+        line = effect.summary(reported[effect.report_key])
+        if line is not None:
+            lines.append(line)
+    return lines
+
+
 def owner(param: str, table_parameters: dict[str, tuple[str, ...]]) -> str:
     """The group a parameter belongs to (an effect's name, or rotation, slope, headings)."""
     for prefix, group in (("rot_", "rotation"), ("slope", "slope"), ("beta_", "headings")):
@@ -108,19 +190,12 @@ def apply_corrections(acc_s: FloatArray, calibration: Calibration, *, inverse: b
     InputError
         The calibration's ``effects`` cannot be applied (edited or damaged values).
     """
-    import numpy as np
-
     from mountcal.core.errors import InputError
 
-    reported = {e.name: e for e in calibration.effects}
-    bias = get("bias")
-    if calibration.bias_mps2 is not None and bias.report_key not in reported:
-        reported[bias.report_key] = bias.report(calibration.bias_mps2, np.zeros(3), ("x", "y", "z"))
-    effects = _builtin()
-    if not reported.keys() <= {e.report_key for e in effects.values()}:
-        effects = registered()  # an effect of another package: scanning the entry points is only paid then
+    reported = fitted(calibration)
+    effects = reporting(reported)
     for effect in sorted(effects.values(), key=lambda e: e.order, reverse=not inverse):
-        if effect.report_key in reported:
+        if effect.report_key in reported and effect.kind == "sensor":  # a property of the site is in no sample
             undo = effect.restore if inverse else effect.correct
             try:
                 acc_s = undo(acc_s, reported[effect.report_key])
@@ -143,4 +218,22 @@ def __getattr__(name: str) -> Any:
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-__all__ = ["BASE", "BUILTIN", "GROUP", "Effect", "apply_corrections", "chain", "get", "names", "registered"]
+__all__ = [
+    "BASE",
+    "BUILTIN",
+    "GROUP",
+    "Effect",
+    "apply_corrections",
+    "chain",
+    "fitted",
+    "get",
+    "gravity_term",
+    "names",
+    "offset",
+    "offset_fields",
+    "offset_of",
+    "registered",
+    "reporting",
+    "site_term",
+    "summary_lines",
+]

@@ -3,18 +3,22 @@
 The static model predicts each stop's specific force as a chain: the base force ``p = R_vsᵀ f_v(α, β; g)``
 goes through every effect of the model in ``order`` (lower first), each one mapping ``p`` to its
 output. An effect says how (``apply``), with the derivatives the fit needs; everything else about it —
-its stop-table columns, when the model-selection loop may try it, how it is reported and how ``rotate``
-undoes it on samples — lives in the same class, in one file under :mod:`mountcal.estimate.effects`.
+its stop-table columns, when the model-selection loop may try it, how it is reported, summarised and how
+``rotate`` undoes it on samples, its datasheet limits for the systematic σ, the residual test that names it —
+lives in the same class, in one file under :mod:`mountcal.estimate.effects`. Code outside that folder asks
+these members and never tests an effect's name (tests/test_effect_registry.py scans for it).
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 from mountcal.core.result import EffectValue
 
 if TYPE_CHECKING:
     from mountcal.core.conventions import FloatArray
+    from mountcal.io.sensor_spec import SensorSpec
     from mountcal.stops.table import StopTable
 
     Applied = tuple[FloatArray, FloatArray, FloatArray | None]
@@ -31,6 +35,11 @@ class Effect(Protocol):
     requires: tuple[str, ...]  # terms added with it (a bias drift has an offset too)
     report_key: str  # its name in the result's ``effects``
     unit: str  # the unit of its reported values
+    kind: str  # "sensor": an error of the accelerometer; "site": a property of the place the stops were made at
+    offset: bool  # the constant offset every sensor has: the planner's model, and every effect is also judged with it
+    slope_per_site: bool  # it gives each site its own slope (the designs of the observability check need it)
+    gravity_index: int | None  # where its values hold local gravity (m/s²), if it fits gravity
+    inseparable_note: str | None  # the note of the result when the loop declined it as not separable
 
     def parameters(self, table: StopTable) -> tuple[str, ...]:
         """Names of its parameters (unique across effects)."""
@@ -73,6 +82,34 @@ class Effect(Protocol):
         """The inverse of :meth:`correct`: corrected samples as the sensor reads them."""
         ...
 
+    def unusable(self, table: StopTable) -> str | None:
+        """Why a fixed model cannot fit it on a table that has its columns (``needs stops at …``), or None."""
+        ...
+
+    def spec_limits(self, spec: SensorSpec) -> dict[str, float]:
+        """Its parameters' ± limits on a datasheet (the systematic σ's prior), by parameter name; empty: none."""
+        ...
+
+    def label(self, parameter: str) -> str:
+        """What a person calls the error one of its parameters is (the systematic note lists them)."""
+        ...
+
+    def covariate(self, table: StopTable) -> tuple[str, FloatArray] | None:
+        """(what, x): the residual test against a logged covariate that names it (its test carries the effect's
+        name; x has one column per direction, one row per stop), or None."""
+        ...
+
+    def transfer(
+        self, values: Mapping[str, FloatArray], fitted_on: StopTable, predict_on: StopTable
+    ) -> dict[str, FloatArray]:
+        """Values of the model (by effect) that predict ``predict_on`` as the fit did ``fitted_on`` (a subset of
+        it), when its values are relative to the table they were fitted on; only those it changes."""
+        ...
+
+    def summary(self, reported: EffectValue) -> str | None:
+        """Its line in the text summary of a calibration, or None (not shown)."""
+        ...
+
 
 class BaseEffect:
     """Defaults for an effect: no columns, always a candidate, plausible, and nothing to undo on samples."""
@@ -84,6 +121,11 @@ class BaseEffect:
     requires: tuple[str, ...] = ()
     report_key = ""
     unit = ""
+    kind = "sensor"
+    offset = False
+    slope_per_site = False
+    gravity_index: int | None = None
+    inseparable_note: str | None = None
 
     def parameters(self, table: StopTable) -> tuple[str, ...]:
         raise NotImplementedError
@@ -118,6 +160,30 @@ class BaseEffect:
 
     def restore(self, acc_s: FloatArray, reported: EffectValue) -> FloatArray:
         return acc_s
+
+    def unusable(self, table: StopTable) -> str | None:
+        return None
+
+    def spec_limits(self, spec: SensorSpec) -> dict[str, float]:
+        return {}
+
+    def label(self, parameter: str) -> str:
+        return self.name
+
+    def covariate(self, table: StopTable) -> tuple[str, FloatArray] | None:
+        return None
+
+    def transfer(
+        self, values: Mapping[str, FloatArray], fitted_on: StopTable, predict_on: StopTable
+    ) -> dict[str, FloatArray]:
+        return {}
+
+    def summary(self, reported: EffectValue) -> str | None:
+        """``name (v ± σ, …) unit (components)``: every value with its 1σ."""
+        if any(s is None for s in reported.sigma):
+            return None
+        shown = ", ".join(f"{v:+.4g} ± {s:.2g}" for v, s in zip(reported.value, reported.sigma, strict=True))
+        return f"{self.name} ({shown}) {self.unit or '1'} ({', '.join(reported.components)})"
 
 
 def reported_vector(reported: EffectValue, size: int) -> FloatArray:

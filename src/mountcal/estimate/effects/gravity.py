@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from mountcal.core.conventions import FloatArray
+from mountcal.core.result import EffectValue
 from mountcal.estimate.effects.base import BaseEffect
 from mountcal.stops.table import StopTable
 
@@ -22,6 +23,8 @@ class Gravity(BaseEffect):
     order = 0
     report_key = "gravity_mps2"
     unit = "m/s²"
+    kind = "site"
+    gravity_index = 0
 
     def parameters(self, table: StopTable) -> tuple[str, ...]:
         return ("gravity",)
@@ -54,6 +57,9 @@ class Gravity(BaseEffect):
 
     def components(self, names: tuple[str, ...]) -> tuple[str, ...]:
         return ("",)
+
+    def summary(self, reported: EffectValue) -> str | None:
+        return None  # the summary's gravity line says it, with its source
 
 
 EFFECT = Gravity()

@@ -7,7 +7,7 @@ inclination make it full rank (docs/effects.md).
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -15,6 +15,9 @@ from mountcal.core.conventions import FloatArray
 from mountcal.core.result import EffectValue
 from mountcal.estimate.effects.base import BaseEffect
 from mountcal.stops.table import StopTable
+
+if TYPE_CHECKING:
+    from mountcal.io.sensor_spec import SensorSpec
 
 SCALE_NAMES = ("scale_xx", "scale_yy", "scale_zz", "cross_xy", "cross_xz", "cross_yz")
 
@@ -46,6 +49,15 @@ class Scale(BaseEffect):
 
     def components(self, names: tuple[str, ...]) -> tuple[str, ...]:
         return names
+
+    def spec_limits(self, spec: SensorSpec) -> dict[str, float]:
+        return {n: spec.scale if n.startswith("scale_") else spec.cross_axis for n in SCALE_NAMES}
+
+    def label(self, parameter: str) -> str:
+        return "scale" if parameter.startswith("scale_") else "cross-axis"
+
+    def summary(self, reported: EffectValue) -> str | None:
+        return None  # not in the text summary (never was): the result's effects hold it
 
     def correct(self, acc_s: FloatArray, reported: EffectValue) -> FloatArray:
         return np.asarray(np.linalg.solve(self._matrix(reported), acc_s.T).T)

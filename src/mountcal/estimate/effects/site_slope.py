@@ -23,6 +23,8 @@ class SiteSlope(BaseEffect):
     order = 0
     report_key = "site_slope_deg"
     unit = "°"
+    kind = "site"
+    slope_per_site = True
 
     def parameters(self, table: StopTable) -> tuple[str, ...]:
         return ()
@@ -35,6 +37,14 @@ class SiteSlope(BaseEffect):
 
     def candidate(self, table: StopTable, gravity_known: bool) -> bool:
         return table.site is not None and np.unique(table.site).size > 1
+
+    def unusable(self, table: StopTable) -> str | None:
+        if table.site is None or np.unique(table.site).size >= 2:
+            return None
+        return "needs stops at two or more sites, found one"
+
+    def summary(self, reported: EffectValue) -> str | None:
+        return None  # not in the text summary (never was): the result's effects hold it
 
     def extra(self, table: StopTable) -> int:
         return len(np.unique(table.site)) - 1 if table.site is not None else 0

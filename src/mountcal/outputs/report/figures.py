@@ -20,6 +20,7 @@ from mpl_toolkits.mplot3d import Axes3D
 
 from mountcal.core.conventions import G_N, FloatArray, specific_force_v
 from mountcal.core.result import Calibration, ModelStep
+from mountcal.estimate import effects
 from mountcal.outputs.report.document import ANGLES, Estimate, angle_estimates
 from mountcal.outputs.report.timeline import Timeline
 from mountcal.stops.table import StopTable
@@ -136,7 +137,8 @@ def fitted_circle_s(cal: Calibration, beta_rad: FloatArray) -> FloatArray:
     if cal.slope_deg is None:
         raise ValueError("the slope is not determined, so there is no fitted circle")
     acc_s = cal.rot_vs.inv().apply(specific_force_v(np.radians(cal.slope_deg), beta_rad, cal.gravity_mps2))
-    return acc_s + (cal.bias_mps2 if cal.bias_mps2 is not None else 0.0)
+    offset = effects.offset_of(cal)
+    return acc_s + (np.array(offset.value) if offset is not None else 0.0)
 
 
 def stops_3d(cal: Calibration, table: StopTable) -> Figure:

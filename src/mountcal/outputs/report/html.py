@@ -26,6 +26,7 @@ from mountcal.core.option_names import option
 from mountcal.core.result import FORMAT, FORMAT_VERSION, Calibration, FitQuality, ModelStep
 from mountcal.core.terminal import html_text as escape
 from mountcal.core.typed_json import to_plain
+from mountcal.estimate import effects
 from mountcal.outputs.report.document import ANGLES, angle_estimates, format_pm, step_label
 from mountcal.outputs.report.embed import ImageFormat, figure_html
 from mountcal.outputs.report.loop import steps_section
@@ -180,10 +181,11 @@ def _angles_section(cal: Calibration) -> str:
         cls = "num" if e.determined else "nd"
         note = f"<td>{escape(e.reason) if not e.determined and e.reason else ''}</td>" if reasons else ""
         rows.append(f'<tr><th>{name}</th><td class="{cls}">{value}</td><td>{meaning[name]}</td>{note}</tr>')
-    if cal.bias_mps2 is not None:
+    offset = effects.offset_of(cal)
+    if offset is not None:
         for k, axis in enumerate("xyz"):
-            s = None if cal.bias_sigma_mps2 is None else float(cal.bias_sigma_mps2[k])
-            b = float(cal.bias_mps2[k])
+            s = offset.sigma[k]
+            b = offset.value[k]
             mg = format_pm(b / G_N * 1e3, None if s is None else s / G_N * 1e3, " mg")
             rows.append(
                 f'<tr><th>bias {axis}</th><td class="num">{escape(format_pm(b, s, " m/s²"))}</td>'
