@@ -13,8 +13,8 @@ start-up, the calibrations and the consolidation are all inside:
 1. ``--workers 1``;
 2. ``--workers 2``;
 3. ``--scheduler`` to a Dask ``LocalCluster(n_workers=1, threads_per_worker=1, processes=True)``
-   with Dask's default configuration (``--no-dask-profiler`` turns the workers' statistical
-   profiler off, ``distributed.worker.profile.enabled: false``, to measure what it costs);
+   with the settings docs/fleet.md gives for fleets (``FLEET_DASK_CONFIG``: the workers' profiler
+   off, the monitors polled less often; ``--dask-defaults`` runs it on Dask's defaults instead);
 4. the same with ``n_workers=2``.
 
 Each cluster is started just before its run and closed after it (its start-up is reported
@@ -199,15 +199,17 @@ def dask_cluster(startup_s: list[float], workers: int) -> Iterator[str]:
 
     started = time.perf_counter()
     # the nannies hand this configuration to their worker processes
+    from mountcal.fleet.engines import FLEET_DASK_CONFIG
+
     with (
-        dask.config.set({"distributed.worker.profile.enabled": DASK_PROFILER[0]}),
+        dask.config.set({} if DASK_DEFAULTS[0] else FLEET_DASK_CONFIG),
         LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster,
     ):
         startup_s.append(time.perf_counter() - started)
         yield cluster.scheduler_address
 
 
-DASK_PROFILER = [True]  # Dask's statistical profiler on the workers (its default; --no-dask-profiler: off)
+DASK_DEFAULTS = [False]  # --dask-defaults: the clusters on Dask's default settings, not docs/fleet.md's
 
 
 def cluster_for(name: str, startup_s: list[float]) -> contextlib.AbstractContextManager[str | None]:
@@ -321,12 +323,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--runs", type=int, default=3)
     parser.add_argument("--workdir", type=Path, default=None, help="keep the generated fleet here")
     parser.add_argument(
-        "--no-dask-profiler",
+        "--dask-defaults",
         action="store_true",
-        help="turn Dask's statistical profiler off in the workers (to measure what it costs a fleet)",
+        help="run the Dask clusters on Dask's default settings, not those docs/fleet.md gives for fleets",
     )
     args = parser.parse_args(argv)
-    DASK_PROFILER[0] = not args.no_dask_profiler
+    DASK_DEFAULTS[0] = args.dask_defaults
 
     workdir = args.workdir or Path(tempfile.mkdtemp(prefix="mountcal-fleet-"))
     try:
@@ -370,8 +372,8 @@ def main(argv: list[str] | None = None) -> int:
         reference_logs, reference_vehicles = tables["local, 1 worker"]
         ok = int((reference_logs["status"] == "ok").sum())
         remounted = sorted(reference_vehicles.loc[reference_vehicles["n_remounts"] > 0, "vehicle_id"])
-        profiler = "off (--no-dask-profiler)" if args.no_dask_profiler else "on (Dask's default)"
-        print(f"Dask workers' statistical profiler: {profiler}")
+        settings = "Dask's defaults (--dask-defaults)" if args.dask_defaults else "docs/fleet.md's for fleets"
+        print(f"Dask clusters' settings: {settings}")
         print(f"Dask LocalCluster start-up (not in the runs, median): {statistics.median(cluster_s):.1f} s")
         print(f"{ok}/{len(reference_logs)} logs ok; remounts flagged: {remounted}")
         print(f"tables identical across the configurations of each run: {'yes' if not mismatches else mismatches}")

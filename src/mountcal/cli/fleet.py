@@ -169,6 +169,7 @@ def run(args: argparse.Namespace) -> int:
                 "computed": result.computed,
                 "reused": result.reused,
                 "engine": result.engine,
+                "engine_notes": list(result.engine_notes),
                 "elapsed_s": result.elapsed_s,
                 "discarded": result.discarded,
                 "not_confident": list(result.not_confident),

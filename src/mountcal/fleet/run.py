@@ -94,6 +94,8 @@ class FleetResult:
     discarded : dict of str to int
         What the run set aside, by reason (duplicate inputs, a killed run's temporary files,
         unreadable part files).
+    engine_notes : tuple of str
+        What the engine found worth saying (a Dask cluster whose settings slow a fleet down).
     """
 
     logs: pd.DataFrame
@@ -107,6 +109,7 @@ class FleetResult:
     engine: str
     elapsed_s: float
     discarded: dict[str, int] = field(default_factory=dict)
+    engine_notes: tuple[str, ...] = ()
     not_confident: tuple[str, ...] = ()  # logs whose calibration is not confident (flag not_confident)
     layout: dict[str, int] = field(default_factory=dict)  # logs by layout: folders, canedge, manifest
     sessions: int = 0  # CANedge sessions
@@ -226,6 +229,7 @@ def _run_locked(
         computed=computed,
         reused=len({k for k in keys if k is not None}) - computed,
         engine=engine.name,
+        engine_notes=engine.notes,
         elapsed_s=time.monotonic() - started,
         discarded={
             **set_aside,

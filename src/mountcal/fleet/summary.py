@@ -39,6 +39,7 @@ def summary_lines(result: FleetResult) -> list[str]:
     ok = result.vehicles[result.vehicles["status"] == "ok"]
     for row in ok[~ok["latest_confident"].astype(bool)].head(MAX_LISTED).itertuples():
         lines.append(f"  not confident: the current mounting of {row.vehicle_id}: {row.confidence_note}")
+    lines += [f"  note: {note}" for note in result.engine_notes]
     set_aside = [f"{n} {reason}" for reason, n in result.discarded.items() if n]
     if set_aside:
         lines.append("  set aside: " + "; ".join(set_aside))

@@ -1,0 +1,102 @@
+"""The Dask settings docs/fleet.md gives for fleets: the engine's own, read by Dask as written, and
+a cluster started without them is told so (a real scheduler and worker, started by Dask's CLI)."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from mountcal.fleet.engines import FLEET_DASK_CONFIG, DaskEngine
+
+pytest.importorskip("distributed")
+REPO = Path(__file__).resolve().parents[1]
+DASK = Path(sys.executable).with_name("dask")
+
+
+def documented_environment() -> dict[str, str]:
+    page = (REPO / "docs" / "fleet.md").read_text()
+    section = page.split("### Dask settings for fleets", 1)[1]
+    block = re.search(r"```sh\n(.*?)```", section, re.S)
+    assert block, "docs/fleet.md: no ```sh block under 'Dask settings for fleets'"
+    return dict(re.findall(r"^export (DASK_\w+)=(\S+)$", block.group(1), re.M))
+
+
+def test_the_documented_settings_are_the_engines_and_dask_reads_them_as_written() -> None:
+    env = documented_environment()
+    assert len(env) == len(FLEET_DASK_CONFIG)
+    read = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            f"import dask, json; print(json.dumps({{k: dask.config.get(k) for k in {list(FLEET_DASK_CONFIG)!r}}}))",
+        ],
+        env={**os.environ, **env},
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    assert json.loads(read.stdout) == FLEET_DASK_CONFIG
+
+
+@pytest.fixture
+def documented_cluster(tmp_path: Path) -> Iterator[str]:
+    """`dask scheduler` and `dask worker` started as docs/fleet.md starts them (with a scheduler file for the port)."""
+    env = {**os.environ, **documented_environment()}
+    scheduler_file = tmp_path / "scheduler.json"
+    started = [
+        subprocess.Popen(
+            [str(DASK), "scheduler", "--port", "0", "--no-dashboard", "--scheduler-file", str(scheduler_file)],
+            env=env,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            start_new_session=True,
+        )
+    ]
+    try:
+        deadline = time.monotonic() + 60
+        while not scheduler_file.exists() and time.monotonic() < deadline:
+            time.sleep(0.1)
+        address = json.loads(scheduler_file.read_text())["address"]
+        started.append(
+            subprocess.Popen(
+                [str(DASK), "worker", address, "--nthreads", "1", "--no-dashboard"],
+                env=env,
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
+                start_new_session=True,
+            )
+        )
+        from distributed import Client
+
+        with Client(address, timeout=60) as client:
+            client.wait_for_workers(1, timeout=60)
+        yield address
+    finally:
+        for proc in reversed(started):
+            os.killpg(proc.pid, signal.SIGTERM)
+            proc.wait(30)
+
+
+def test_a_cluster_started_as_documented_draws_no_note(documented_cluster: str) -> None:
+    with DaskEngine(documented_cluster) as engine:
+        engine.start()
+        assert engine.notes == ()
+
+
+def test_a_cluster_on_dask_defaults_is_told_which_settings_slow_a_fleet() -> None:
+    from distributed import LocalCluster
+
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster:
+        with DaskEngine(cluster.scheduler_address) as engine:
+            engine.start()
+            (note,) = engine.notes
+    assert "worker.profile.enabled (True)" in note and "docs/fleet.md" in note, note
