@@ -165,6 +165,31 @@ def report(title: str, times: dict[str, list[float]], n_logs: int, busy: dict[st
         print(line, "  " + ", ".join(f"{v:.1f}" for v in values))
 
 
+def cluster_cpu() -> tuple[float, float]:
+    """CPU seconds so far of this process (a LocalCluster's scheduler and nannies run in it) and of
+    its child processes (the cluster's workers; the timed command has ended when this is read)."""
+    import psutil
+
+    me = psutil.Process()
+    workers = 0.0
+    for child in me.children(recursive=True):
+        with contextlib.suppress(psutil.Error):
+            workers += sum(child.cpu_times()[:2])
+    return sum(me.cpu_times()[:2]), workers
+
+
+def cluster_monitoring(
+    times: dict[str, list[float]], busy: dict[str, list[float]], cpu: dict[str, list[tuple[float, float]]]
+) -> tuple[float, float]:
+    """The Dask cluster's own CPU per second of a run, from the one-worker runs (whose worker has a core
+    of its own, so its logs' wall time is their CPU time): (each worker beyond its logs, the
+    scheduler and nannies)."""
+    name = "Dask LocalCluster, 1 worker"
+    worker = [(c[1] - b) / t for c, b, t in zip(cpu[name], busy[name], times[name], strict=True)]
+    scheduler = [c[0] / t for c, t in zip(cpu[name], times[name], strict=True)]
+    return max(0.0, statistics.median(worker)), statistics.median(scheduler)
+
+
 def workers_of(name: str) -> int:
     return 2 if "2 workers" in name else 1
 
@@ -252,7 +277,13 @@ def resumed_run(inputs: list[Path], output: Path, engine: tuple[str, ...] = ("--
     return time.perf_counter() - started
 
 
-def cost_model(logs: Path, output: Path, times: dict[str, list[float]], overhead: dict[str, float]) -> None:
+def cost_model(
+    logs: Path,
+    output: Path,
+    times: dict[str, list[float]],
+    overhead: dict[str, float],
+    monitoring: tuple[float, float],
+) -> None:
     """Fit the model's constants, print its predictions beside the measured medians, and extrapolate."""
     from mountcal.fleet.engines import BATCH_TARGET_S
 
@@ -277,7 +308,12 @@ def cost_model(logs: Path, output: Path, times: dict[str, list[float]], overhead
     work = float(np.sum(c_log + c_byte * sizes))
     per_log = work / n_all
     batch = max(1.0, BATCH_TARGET_S / per_log)
-    print("cost model: T(W) = a + s·N + (Σ (c_log + c_byte·bytes) + n_tasks·c_task) / W")
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    m_worker, m_scheduler = monitoring
+    print("cost model: T(W) = a + max(s·N + R/W, (s·N + R) / (C − m·W − m_s))")
+    print("  R = Σ (c_log + c_byte·bytes) + n_tasks·c_task: the workers' work")
+    print("  (the first term: each worker has a core; the second: W workers, the cluster's monitoring and the")
+    print(f"  command share the machine's C = {cores} cores)")
     resumed = f"resumed: {t_all:.2f} s for {n_all}, {t_half:.2f} s for {n_half}"
     print(f"  a = {a:.2f} s local, {a_dask:.2f} s Dask; s = {1e3 * s:.2f} ms per log ({resumed})")
     print(
@@ -286,11 +322,17 @@ def cost_model(logs: Path, output: Path, times: dict[str, list[float]], overhead
     )
     local, dask = 1e3 * overhead["local"], 1e3 * overhead["dask"]
     print(f"  c_task = {local:.2f} ms local, {dask:.2f} ms Dask ({batch:.0f} logs a task)")
+    print(
+        f"  m = {m_worker:.3f} CPU s per s per Dask worker beyond its logs, m_s = {m_scheduler:.3f} for the "
+        "scheduler and nannies (measured in the one-worker Dask runs; 0 for the local engine)"
+    )
     print(f"  {'configuration':<30} {'predicted':>10} {'measured':>9} {'error':>7}")
     for name, values in times.items():
         dask = name.startswith("Dask")
         tasks, c_task = (n_all / batch, overhead["dask"]) if dask else (n_all, overhead["local"])
-        predicted = (a_dask if dask else a) + s * n_all + (work + tasks * c_task) / workers_of(name)
+        w = workers_of(name)
+        rest = (work + tasks * c_task, cores - (m_worker * w + m_scheduler if dask else 0.0))
+        predicted = (a_dask if dask else a) + max(s * n_all + rest[0] / w, (s * n_all + rest[0]) / rest[1])
         measured = statistics.median(values)
         print(f"  {name:<30} {predicted:>9.1f}s {measured:>8.1f}s {100 * (predicted / measured - 1):>+6.0f}%")
     n, w = 10_000 * 100, 32
@@ -347,6 +389,7 @@ def main(argv: list[str] | None = None) -> int:
         }
         times: dict[str, list[float]] = {name: [] for name in configs}
         busy: dict[str, list[float]] = {name: [] for name in configs}
+        cluster_cpu_s: dict[str, list[tuple[float, float]]] = {name: [] for name in configs}
         loads: list[float] = []
         cluster_s: list[float] = []
         mismatches: list[str] = []
@@ -356,7 +399,10 @@ def main(argv: list[str] | None = None) -> int:
                 output = workdir / f"out{k}" / "fleet.parquet"
                 with cluster_for(name, cluster_s) as address:
                     loads.append(os.getloadavg()[0])
+                    before = cluster_cpu()
                     times[name].append(run_cli(logs, output, extra + ([address] if address else [])))
+                    after = cluster_cpu()
+                cluster_cpu_s[name].append(tuple(b - a for a, b in zip(before, after, strict=True)))
                 tables[name] = (
                     pd.read_parquet(output).drop(columns="elapsed_s"),
                     pd.read_parquet(output.with_name("fleet_vehicles.parquet")),
@@ -383,7 +429,8 @@ def main(argv: list[str] | None = None) -> int:
         print("busy s: the logs' calibration times summed (median); it grows when the workers do not get a")
         print("core each (another load on the machine), and the speed-up falls with it.")
         report("engines alone (warm workers, hashed logs)", engine_s, args.logs)
-        cost_model(logs, workdir / "out0" / "fleet.parquet", times, task_overhead())
+        monitoring = cluster_monitoring(times, busy, cluster_cpu_s)
+        cost_model(logs, workdir / "out0" / "fleet.parquet", times, task_overhead(), monitoring)
         return 0 if remounted == [REMOUNTED] and ok == args.logs and not mismatches else 1
     finally:
         if args.workdir is None:
