@@ -53,7 +53,7 @@ class Triad:
     def matrix(self) -> FloatArray:
         """I + E."""
         e = self.scale_e
-        return np.eye(3) + np.array([[e[0], e[3], e[4]], [e[3], e[1], e[5]], [e[4], e[5], e[2]]])
+        return np.eye(3) + np.array([[e[0], e[3], e[4]], [e[3], e[1], e[5]], [e[4], e[5], e[2]]], dtype=np.float64)
 
     def correct(self, table: StopTable) -> StopTable:
         """The stops as the calibrated sensor reads them, ``(I + E)⁻¹ (a − b)``, their covariance mapped alike."""

@@ -297,7 +297,7 @@ def _heading_deg(quat: FloatArray) -> FloatArray:
     x, y, z, w = quat.T
     yaw = np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))  # counter-clockwise from east
     heading = np.mod(90.0 - np.degrees(yaw), 360.0)
-    return np.where(heading >= 360.0, heading - 360.0, heading)
+    return np.asarray(np.where(heading >= 360.0, heading - 360.0, heading), dtype=np.float64)
 
 
 def _pieces(decoded: cdr.Decoded, kind: str, dropped: Counter[str]) -> dict[str, _Piece]:
