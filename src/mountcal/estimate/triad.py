@@ -26,6 +26,7 @@ from mountcal.core.result_file import read_json
 from mountcal.estimate import sphere
 from mountcal.estimate.effects.scale import SCALE_NAMES
 from mountcal.estimate.sensor_errors import BIAS_NAMES, TEMP_NAMES, SensorErrors, from_spec, heading_u
+from mountcal.estimate.triad_session import MIN_STOP_S, TRIM_S
 from mountcal.io.kind import Declared
 from mountcal.io.sensor_spec import SensorSpec
 from mountcal.stops.table import StopTable, Unit, read_stop_table
@@ -193,8 +194,8 @@ _TODO_POSITIONS = (
 def session_stops(
     paths: list[str],
     unit: Unit,
-    min_stop_s: float = 3.0,
-    trim_s: float = 0.5,
+    min_stop_s: float = MIN_STOP_S,
+    trim_s: float = TRIM_S,
     log: LogOptions | None = None,
     *,
     declared: Declared = "auto",
