@@ -598,7 +598,10 @@ def build(root: Path, src: Path, quick: bool, only: set[str]) -> list[Case]:
         doc = json.loads(result.read_text())
         doc["notes"] = doc["notes"] + ["x" * 1000] * (25_000 if quick else 250_000)
         huge.write_text(json.dumps(doc))
-        for cmd in (["export", huge, "--to", "json"], ["report", huge, "-o", fresh("memory report") / "r.html"]):
+        for cmd in (
+            ["export", huge, "--to", "json", "-o", "-"],
+            ["report", huge, "-o", fresh("memory report") / "r.html"],
+        ):
             case("memory", f"{cmd[0]} result JSON of {_mb(huge)}", cmd, [huge])
         case(
             "memory",
@@ -617,7 +620,7 @@ def build(root: Path, src: Path, quick: bool, only: set[str]) -> list[Case]:
         imucal_quotes.write_bytes(quotes.read_bytes())
         out = fresh("time")
         for name, cmd in (
-            ("export", ["export", quotes, "--to", "json"]),
+            ("export", ["export", quotes, "--to", "json", "-o", "-"]),
             ("rotate", ["rotate", mcap, "--calibration", quotes, "-o", out / "v.parquet"]),
             ("report", ["report", quotes, "-o", out / "r.html"]),
             ("calibrate --triad", ["calibrate", stops, "--triad", quotes]),
@@ -974,7 +977,7 @@ def build(root: Path, src: Path, quick: bool, only: set[str]) -> list[Case]:
                 ["calibrate", bad, "--dbc", dbc],
             ):
                 case("other", f"{cmd[0]} {path.suffix[1:]} log with {what}", cmd, [bad])
-        case("other", "export >&-", ["export", result, "--to", "json"], [result], close_stdout=True)
+        case("other", "export >&-", ["export", result, "--to", "json", "-o", "-"], [result], close_stdout=True)
         sim = fresh("other simulate sigterm")
         case(
             "other",

@@ -248,7 +248,10 @@ def test_a_big_result_json_is_refused_before_it_is_parsed(tmp_path: Path) -> Non
     doc["notes"] += ["x" * 1000] * 3000
     result.write_text(json.dumps(doc))
     env = {"MOUNTCAL_MAX_DOCUMENT_MB": "1"}
-    for args in (["export", str(result), "--to", "json"], ["report", str(result), "-o", str(tmp_path / "r.html")]):
+    for args in (
+        ["export", str(result), "--to", "json", "-o", "-"],
+        ["report", str(result), "-o", str(tmp_path / "r.html")],
+    ):
         refused(cli(*args, env=env), "MOUNTCAL_MAX_DOCUMENT_MB", str(result))
     assert not (tmp_path / "r.html").exists()
 
@@ -286,7 +289,7 @@ def test_nested_quotes_are_refused_in_linear_time(tmp_path: Path) -> None:
     bad = _nested_quotes(tmp_path / "q.json")
     stops = str(DATA / "zhang2011_stops.csv")
     commands = [
-        ["export", str(bad), "--to", "json"],
+        ["export", str(bad), "--to", "json", "-o", "-"],
         ["rotate", stops, "--calibration", str(bad), "-o", str(tmp_path / "o.parquet")],
         ["report", str(bad), "-o", str(tmp_path / "o.html")],
         ["calibrate", stops, "--triad", str(bad)],

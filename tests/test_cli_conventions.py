@@ -122,5 +122,5 @@ def test_a_library_refusal_names_no_option_and_the_cli_names_its_own(
         export(Calibration.load(result), "json")
     assert "--" not in str(err.value) and "yaw='zero'" in str(err.value)
     capsys.readouterr()
-    assert main(["export", str(result), "--to", "json"]) == 3
+    assert main(["export", str(result), "--to", "json", "-o", "-"]) == 3
     assert "--yaw-undetermined zero" in capsys.readouterr().err

@@ -176,19 +176,19 @@ def test_a_plugin_s_format_is_chosen_accepted_and_written(tmp_path: Path, result
     done = mountcal(env, "export", path, "--to", "angles", "-o", out)
     assert done.returncode == 0, done.stderr
     assert _angles(out.read_text()) == pytest.approx(angles_from_rot_vs(cal.rot_vs), abs=1e-11)
-    done = mountcal(env, "export", path, "--to", "angles")  # to stdout
+    done = mountcal(env, "export", path, "--to", "angles", "-o", "-")  # to stdout
     assert done.returncode == 0 and _angles(done.stdout) == pytest.approx(_angles(out.read_text()), abs=0)
 
     done = mountcal(env, "export", path, "--to", "angles", "-o", tmp_path / "mount.yaml")  # another format's name
     assert done.returncode == 2 and "mount.angles" in done.stderr and not (tmp_path / "mount.yaml").exists()
 
-    done = mountcal(env, "export", path, "--to", "json")  # the built-in, not the plugin claiming its name
+    done = mountcal(env, "export", path, "--to", "json", "-o", "-")  # the built-in, not the plugin claiming its name
     assert done.returncode == 0 and '"format": "mountcal.rotation"' in done.stdout
 
-    done = mountcal(env, "export", path, "--to", "crashing")  # its bug and its print: named, stdout kept clean
+    done = mountcal(env, "export", path, "--to", "crashing", "-o", "-")  # its bug and print: named, stdout clean
     assert done.returncode == 2 and done.stdout == ""
     assert "plugin 'crashing'" in done.stderr and "the plugin's own bug" in done.stderr
     assert "a plugin printing" in done.stderr
 
-    done = mountcal(env, "export", path, "--to", "missing")  # fails to load: refused by name
+    done = mountcal(env, "export", path, "--to", "missing", "-o", "-")  # fails to load: refused by name
     assert done.returncode == 2 and "plugin 'missing'" in done.stderr and "mc_nowhere" in done.stderr

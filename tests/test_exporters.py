@@ -577,10 +577,24 @@ def test_unconfident_result_is_refused_unless_accepted(base: Calibration) -> Non
     assert "NOT confident" in str(export(cal, "ublox", accept_unconfident=True))
 
 
+def test_cli_without_o_is_refused_naming_o_and_stdout(
+    base: Calibration, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Results go to stdout only when asked (docs/commands.md): no -o is a usage error naming -o FILE and -o -."""
+    result = tmp_path / "r.json"
+    base.save(result)
+    with pytest.raises(SystemExit) as usage:
+        main(["export", str(result), "--to", "novatel"])
+    out, err = capsys.readouterr()
+    assert usage.value.code == 2 and out == ""
+    assert "required: -o/--output" in err and "-o - writes to stdout" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.json"]  # nothing written beside it
+
+
 def test_cli_writes_files_and_stdout(base: Calibration, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     result = tmp_path / "r.json"
     base.save(result)
-    assert main(["export", str(result), "--to", "novatel"]) == 0
+    assert main(["export", str(result), "--to", "novatel", "-o", "-"]) == 0
     assert "SETINSROTATION RBV" in capsys.readouterr().out
     assert main(["export", str(result), "--to", "urdf", "-o", "-", "--parent", "chassis", "--child", "imu"]) == 0
     assert '<parent link="chassis"/>' in capsys.readouterr().out
@@ -635,12 +649,12 @@ def test_cli_parent_pose_and_its_refusals(
     pose.write_text(SAMPLE_SENSORS_CALIBRATION, encoding="utf-8")
     assert main(["export", str(result), "--to", "autoware", "--parent-pose", str(pose), "-o", str(out)]) == 0
     assert "sensor_kit_base_link" in yaml.safe_load(out.read_text(encoding="utf-8"))
-    assert main(["export", str(result), "--to", "ublox", "--parent-pose", str(pose)]) == 2
+    assert main(["export", str(result), "--to", "ublox", "--parent-pose", str(pose), "-o", "-"]) == 2
     assert "Leave them out" in capsys.readouterr().err
     missing = str(tmp_path / "no.yaml")
-    assert main(["export", str(result), "--to", "urdf", "--parent", "kit", "--parent-pose", missing]) == 2
+    assert main(["export", str(result), "--to", "urdf", "--parent", "kit", "--parent-pose", missing, "-o", "-"]) == 2
     assert "no.yaml" in capsys.readouterr().err
-    assert main(["export", str(result), "--to", "urdf", "--parent-pose", str(pose)]) == 2  # base_link has no pose
+    assert main(["export", str(result), "--to", "urdf", "--parent-pose", str(pose), "-o", "-"]) == 2  # base_link: none
     assert "--parent sensor_kit_base_link" in capsys.readouterr().err
 
 

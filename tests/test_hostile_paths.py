@@ -402,7 +402,7 @@ def _close(fd: int) -> Any:
 def test_a_closed_stdout_is_a_message_not_a_traceback(files: dict[str, Path]) -> None:
     out = files["dir"] / "closed.json"
     for args in (
-        ["export", str(files["result"]), "--to", "json"],
+        ["export", str(files["result"]), "--to", "json", "-o", "-"],
         ["calibrate", str(files["stops"]), "-o", str(out)],
     ):
         done = run_process(args, preexec_fn=_close(1))

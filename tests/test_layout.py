@@ -1,6 +1,7 @@
 """The package's layout: stage folders in pipeline order, every import (module level, in a function
-or under ``TYPE_CHECKING``) going to the same stage or one below, no import circle among modules or
-among stages, no module over 600 lines, and a top level of packages and at most five modules."""
+or under ``TYPE_CHECKING``) going to the same stage or one below, no import circle among modules, among
+stages or among the subpackages of any package, no module over 600 lines, and a top level of packages
+and at most five modules."""
 
 from __future__ import annotations
 
@@ -129,6 +130,40 @@ def test_stages_form_no_cycle() -> None:
             if a is not None and b is not None and a != b:
                 stages[a].add(b)
     assert _cycles(stages) == []
+
+
+def _children(graph: dict[str, set[str]], package: str) -> dict[str, set[str]]:
+    """The imports among ``package``'s children: its modules, and each subpackage taken whole as one node."""
+
+    def child(module: str) -> str | None:
+        rest = module.removeprefix(f"{package}.")
+        return None if rest == module else f"{package}.{rest.split('.')[0]}"
+
+    children: dict[str, set[str]] = {}
+    for module, deps in graph.items():
+        if (a := child(module)) is not None:
+            children.setdefault(a, set())
+            for d in deps:
+                if (b := child(d)) is not None and b != a:
+                    children[a].add(b)
+                    children.setdefault(b, set())
+    return children
+
+
+def test_subpackages_form_no_cycle() -> None:
+    """Inside every package the subpackages (and modules) import one another in no circle, though no two
+    modules do: io/bag sits above io/mcap (a bag may store MCAP), and MCAP reaches no bag module (#24)."""
+    graph = _graph()
+    packages = sorted(m for m, p in _modules().items() if p.name == "__init__.py")
+    assert "mountcal.io" in packages and "mountcal.io.bag" in packages
+    found = {p: c for p in packages if (c := _cycles(_children(graph, p)))}
+    assert found == {}
+
+
+def test_a_subpackage_cycle_is_found_without_a_module_cycle() -> None:
+    graph = {"p.a.x": {"p.b.y"}, "p.b.y": {"p.a.z"}, "p.a.z": set(), "p.c": {"p.a.x"}}
+    assert _cycles(graph) == []
+    assert _cycles(_children(graph, "p")) == [["p.a", "p.b"]]
 
 
 def test_every_import_goes_to_the_same_stage_or_below() -> None:

@@ -133,6 +133,6 @@ def _required(command: str) -> list[str]:
         "fleet": ["logs", "-o", "f.parquet"],
         "plan": ["--target", "roll=0.1"],
         "live": ["--interface", "virtual", "--channel", "0", "--dbc", "b.dbc"],
-        "export": ["r.json", "--to", "json"],
+        "export": ["r.json", "--to", "json", "-o", "-"],
         "triad": ["s.csv", "-o", "t.json"],
     }.get(command, [])

@@ -9,6 +9,7 @@ were written in several places are written once in ``src/``.
 from __future__ import annotations
 
 import argparse
+import ast
 import inspect
 import re
 from pathlib import Path
@@ -22,6 +23,8 @@ from mountcal.calibration.options import DEFAULT_USE, Options, default
 from mountcal.calibration.pipeline import LogJob, _driving_alone, calibrate_log
 from mountcal.cli import build_parser, main
 from mountcal.core.errors import InputError
+from mountcal.estimate.triad import session_stops
+from mountcal.estimate.triad_session import MIN_STOP_S, TRIM_S
 from mountcal.io.reader import CHUNK_SAMPLES
 from mountcal.simulate.drive import simulate_drive
 
@@ -49,6 +52,8 @@ DEFAULTS = [
     *[(c, "--max-yaw-sigma", default(Options, "max_yaw_sigma_deg")) for c in ("calibrate", "fleet")],
     *[(c, "--use", default(LogJob, "use")) for c in ("calibrate", "fleet")],
     ("rotate", "--chunk", CHUNK_SAMPLES),
+    ("triad", "--min-stop-s", MIN_STOP_S),
+    ("triad", "--trim-s", TRIM_S),
 ]
 
 
@@ -65,6 +70,8 @@ def test_the_library_s_defaults_are_the_same_homes() -> None:
     assert default(LogJob, "use") == DEFAULT_USE == inspect.signature(calibrate_log).parameters["use"].default
     chunk = inspect.signature(rotate_log_module.rotate_log).parameters["chunk_samples"].default
     assert chunk == CHUNK_SAMPLES
+    stops = inspect.signature(session_stops).parameters
+    assert (stops["min_stop_s"].default, stops["trim_s"].default) == (MIN_STOP_S, TRIM_S)
     assert Options().terms is None and Options(model="rotation,slope,bias").terms == ("rotation", "slope", "bias")
 
 
@@ -180,6 +187,38 @@ def test_the_chunk_default_is_written_once() -> None:
     """``100_000`` samples per chunk: io/reader.py's CHUNK_SAMPLES (core's other 100_000 are other quantities)."""
     found = [c for c in _count(r"(?<![\d_])100_?000(?![\d_])") if not c.startswith("core/")]
     assert found == ["io/reader.py:24"], found
+
+
+def _numeric_defaults(tree: ast.AST, params: tuple[str, ...], flags: tuple[str, ...]) -> list[tuple[int, str]]:
+    """(line, name) of each parameter in ``params`` or parser flag in ``flags`` whose default is a number literal."""
+    found = []
+    for node in ast.walk(tree):
+        pairs: list[tuple[str, ast.expr | None]] = []
+        line = getattr(node, "lineno", 0)
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+            a = node.args
+            padded = [None] * (len(a.args) - len(a.defaults)) + list(a.defaults)
+            given = [*zip(a.args, padded, strict=True), *zip(a.kwonlyargs, a.kw_defaults, strict=True)]
+            pairs = [(p.arg, d) for p, d in given if p.arg in params]
+        elif isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "add_argument":
+            named = [a.value for a in node.args if isinstance(a, ast.Constant) and a.value in flags]
+            pairs = [(f, k.value) for f in named for k in node.keywords if k.arg == "default"]
+        found += [(line, n) for n, d in pairs if isinstance(d, ast.Constant) and type(d.value) in (int, float)]
+    return found
+
+
+def test_the_triad_session_defaults_are_written_once() -> None:
+    """A hand-held session's --min-stop-s and --trim-s: estimate/triad_session.py; the parser and
+    session_stops name them, no parameter or flag of these names has a number of its own."""
+    params, flags = ("min_stop_s", "trim_s"), ("--min-stop-s", "--trim-s")
+    found = [
+        f"{p.relative_to(SRC)}:{line} {name}"
+        for p, s in _sources().items()
+        for line, name in _numeric_defaults(ast.parse(s), params, flags)
+    ]
+    assert found == [], found
+    written_twice = ast.parse("def f(min_stop_s=3.0): ...\np.add_argument('--trim-s', default=0.5)")
+    assert _numeric_defaults(written_twice, params, flags) == [(1, "min_stop_s"), (2, "--trim-s")]  # it finds them
 
 
 def test_the_base_terms_are_written_once() -> None:

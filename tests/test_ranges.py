@@ -93,7 +93,7 @@ OPTIONS_OUT_OF_RANGE = [
     ["simulate", "--log", "x.mcap", "--acc-lsb", "inf"],
     ["rotate", str(STOPS), "--calibration", "r.json", "-o", "o.parquet", "--chunk", "0"],
     ["fleet", str(DATA), "-o", "f.csv", "--workers", "0"],
-    ["export", "r.json", "--to", "urdf", "--translation", "0", "0", "1e308"],
+    ["export", "r.json", "--to", "urdf", "--translation", "0", "0", "1e308", "-o", "-"],
     ["stops", str(STOPS), "-o", "s.csv", "--trim-s", "-1"],
 ]
 
@@ -237,9 +237,9 @@ def test_a_result_with_a_huge_sigma_is_refused_by_every_reader(
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps(doc))
     for args in (
-        ["export", str(bad), "--to", "json"],
+        ["export", str(bad), "--to", "json", "-o", "-"],
         ["export", str(bad), "--to", "yaml", "-o", str(tmp_path / "m.yaml")],
-        ["export", str(bad), "--to", "novatel"],
+        ["export", str(bad), "--to", "novatel", "-o", "-"],
         ["report", str(bad), "-o", str(tmp_path / "r.html")],
         ["rotate", str(DATA / "parking.mcap"), "--calibration", str(bad), "-o", str(tmp_path / "o.parquet")],
     ):

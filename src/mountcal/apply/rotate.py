@@ -203,7 +203,7 @@ def _columns(df: pd.DataFrame, cols: Sequence[str]) -> FloatArray:
             f"no {', '.join(missing)}",
             "Name the columns with acc_columns= / gyro_columns=.",
         )
-    return df[list(cols)].to_numpy(dtype=float, copy=True)
+    return np.asarray(df[list(cols)].to_numpy(dtype=float, copy=True), dtype=np.float64)
 
 
 def _check_mps2(acc: FloatArray) -> None:

@@ -24,7 +24,7 @@ import textwrap
 from collections.abc import Sequence
 
 from mountcal.cli.options import EXIT_CODES, QUIET_RULE, configure_logging
-from mountcal.cli.path_options import check_paths, command_parser
+from mountcal.cli.path_options import CommandParser, check_paths, command_parser
 from mountcal.cli.results import results_only
 from mountcal.core import budget
 from mountcal.core.atomic import Terminated, raise_if_interrupted, removed_on_signals
@@ -135,7 +135,7 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--version", action=_Version, nargs=0, help="show the version and exit")
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=CommandParser)
     for name in COMMANDS:
         importlib.import_module(f"mountcal.cli.{name}").add_parser(sub)
     return parser

@@ -1,4 +1,5 @@
-"""``mountcal export RESULT.json --to FORMAT [-o FILE]``: the mounting in a vendor's format (default: stdout)."""
+"""``mountcal export RESULT.json --to FORMAT -o FILE|-``: the mounting in a vendor's format, written to FILE
+(``-``: stdout; results go to stdout only when asked, as for every command)."""
 
 from __future__ import annotations
 
@@ -44,12 +45,13 @@ def add_parser(sub: Any) -> None:
         sub,
         "export",
         "write the mounting for u-blox, NovAtel, ROS 2, Autoware, or as JSON/YAML",
-        json_help="what was exported where (format, file, the mounting) as JSON on stdout; without -o FILE the "
+        json_help="what was exported where (format, file, the mounting) as JSON on stdout; with -o - the "
         "export itself is in it (content, or content_hex for a binary message)",
         inputs=("RESULT.json", "result written by `mountcal calibrate -o`"),
         reads={"what": "a result JSON", "small": True},
         many=False,
-        output="file to write; none or '-' writes to stdout",
+        output="file to write ('-': stdout)",
+        output_required=True,
         writes={"what": "the export", "stdio": True, "formats": _suffixes, "formats_by": "--to"},
     )
     p.formatter_class = argparse.RawDescriptionHelpFormatter  # the epilog: one format a line
@@ -102,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
     from mountcal.outputs.exporters import Frames, export, read_parent_pose
 
     result = Path(args.input)
-    to_stdout = args.output in (None, STDOUT)
+    to_stdout = args.output == STDOUT
     cal = Calibration.load(result)
     frames = None
     own = exporters.get(args.to).frames

@@ -68,7 +68,7 @@ class _Stderr(logging.Handler):
 
 
 QUIET_RULE = (
-    "output: results go to stdout only when asked (-o -, --json; export: without -o), one document; "
+    "output: results go to stdout only when asked (-o -, --json), one document; "
     "everything else goes to stderr: first the answer in one line, then what supports it, then notes (each once), "
     "then what was written. -q keeps only the answer line, warnings and errors; -qq only warnings and errors; "
     "-v adds detail."

@@ -24,7 +24,7 @@ import argparse
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, NoReturn
 
 STDIO = "-"
 Formats = tuple[str, ...] | Callable[[argparse.Namespace], tuple[str, ...]]
@@ -99,6 +99,18 @@ def declared(action: argparse.Action) -> PathOption | None:
     """The declaration of an option (None: not a path)."""
     found = getattr(action, _ATTRIBUTE, None)
     return found if isinstance(found, PathOption) else None
+
+
+class CommandParser(argparse.ArgumentParser):
+    """A command's parser: a missing ``-o`` that may be ``-`` says so (results go to stdout only when asked)."""
+
+    def error(self, message: str) -> NoReturn:
+        output = next((a for a in self._actions if "--output" in a.option_strings), None)
+        spec = None if output is None else declared(output)
+        if message.startswith("the following arguments are required") and "-o/--output" in message:
+            if spec is not None and spec.stdio:
+                message += " (-o FILE writes a file, -o - writes to stdout)"
+        super().error(message)
 
 
 def command_parser(parser: argparse.ArgumentParser, command: str) -> argparse.ArgumentParser:
@@ -180,4 +192,4 @@ def check_paths(parser: argparse.ArgumentParser, args: argparse.Namespace) -> No
             check_output_suffix(option, path, suffixes)
 
 
-__all__ = ["PathOption", "add_path", "check_paths", "command_parser", "declared", "label", "paths_of"]
+__all__ = ["CommandParser", "PathOption", "add_path", "check_paths", "command_parser", "declared", "label", "paths_of"]

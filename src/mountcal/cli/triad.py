@@ -25,6 +25,7 @@ from mountcal.cli.path_options import add_path
 from mountcal.cli.results import say
 from mountcal.core.ranges import Number, add_quantity
 from mountcal.core.terminal import safe
+from mountcal.estimate.triad_session import MIN_STOP_S, TRIM_S
 
 if TYPE_CHECKING:
     pass
@@ -60,11 +61,14 @@ def add_parser(subparsers: Any) -> None:
     p.add_argument(
         "--min-stop-s",
         type=Number("duration_s"),
-        default=3.0,
-        help="shortest still period in a log (s; hand-held: short)",
+        default=MIN_STOP_S,
+        help="shortest still period in a log (s; hand-held: short; default %(default)s)",
     )
     p.add_argument(
-        "--trim-s", type=Number("trim_s"), default=0.5, help="cut from each end of a still period in a log (s)"
+        "--trim-s",
+        type=Number("trim_s"),
+        default=TRIM_S,
+        help="cut from each end of a still period in a log (s; default %(default)s)",
     )
     p.add_argument(
         "--columns", default=None, help="a sample table's columns as ROLE=COLUMN[:UNIT] pairs (see calibrate --help)"

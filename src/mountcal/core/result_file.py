@@ -43,7 +43,8 @@ SCHEMA = "schema/calibration.schema.json"
 
 def schema() -> dict[str, Any]:
     """The published JSON Schema of a result file."""
-    return json.loads(resources.files("mountcal").joinpath(SCHEMA).read_text(encoding="utf-8"))
+    text = resources.files("mountcal").joinpath(SCHEMA).read_text(encoding="utf-8")
+    return dict(json.loads(text))  # the packaged schema is a JSON object
 
 
 def write_schema(typed: dict[str, Any]) -> None:

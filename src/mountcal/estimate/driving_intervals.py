@@ -237,7 +237,7 @@ def segments_of(index: IntArray, width: FloatArray, turn_rad: FloatArray | None,
     size = np.bincount(label)
     usable = size >= opts.min_segment_intervals
     remap = np.where(usable, np.cumsum(usable) - 1, -1)
-    return remap[label]
+    return np.asarray(remap[label], dtype=np.int64)
 
 
 @dataclass(frozen=True)

@@ -189,7 +189,7 @@ class StaticModel:
     def residual(self, state: State) -> FloatArray:
         """Whitened residual, shape (3n,)."""
         e = self.table.acc_s - self.predict(state)
-        return np.einsum("nij,nj->ni", self.whiten, e).ravel()
+        return np.asarray(np.einsum("nij,nj->ni", self.whiten, e), dtype=np.float64).ravel()
 
     def jacobian(self, state: State) -> FloatArray:
         """Jacobian of the whitened residual, shape (3n, p), at δ = 0: the base force's columns carried
@@ -485,4 +485,5 @@ def inverse_information(fisher: FloatArray) -> FloatArray:
     """Inverse of the information matrix; the pseudo-inverse where it is singular."""
     scale = np.sqrt(np.clip(np.diag(fisher), 1e-300, None))
     normed = fisher / np.outer(scale, scale)
-    return np.linalg.pinv(normed, rcond=1e-12, hermitian=True) / np.outer(scale, scale)
+    inverse = np.linalg.pinv(normed, rcond=1e-12, hermitian=True) / np.outer(scale, scale)
+    return np.asarray(inverse, dtype=np.float64)

@@ -28,7 +28,7 @@ def level_rotation(normal_s: FloatArray) -> Rotation:
 
 def in_plane_azimuth(acc_s: FloatArray, rot_level: Rotation) -> FloatArray:
     """Azimuth ψ_i in radians of each stop's horizontal part after removing roll and pitch."""
-    h = rot_level.apply(acc_s)
+    h = np.asarray(rot_level.apply(acc_s), dtype=np.float64)  # scipy ships no types
     return np.arctan2(h[:, 1], h[:, 0])
 
 

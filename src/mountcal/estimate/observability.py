@@ -75,7 +75,7 @@ def effects_need_columns(terms: tuple[str, ...]) -> bool:
 
 def _full_rank(table: StopTable, state: full.State, terms: tuple[str, ...], g: float) -> bool:
     info, _ = full.information(table, state, terms, g)
-    return full.fisher_rank(info) == info.shape[0]
+    return full.fisher_rank(info) == int(info.shape[0])
 
 
 def _design(state: full.State, sites: int) -> tuple[StopTable, full.State]:

@@ -98,7 +98,7 @@ def fit(
     def residual(x: FloatArray) -> FloatArray:
         b, m = _unpack(x, terms)
         corrected = np.linalg.solve(m, (acc_s - b).T).T
-        return (np.linalg.norm(corrected, axis=1) - g_mps2) / sigma
+        return np.asarray((np.linalg.norm(corrected, axis=1) - g_mps2) / sigma, dtype=np.float64)
 
     x0 = np.zeros(len(names)) if start is None else start
     if names:

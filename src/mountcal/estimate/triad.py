@@ -26,6 +26,7 @@ from mountcal.core.result_file import read_json
 from mountcal.estimate import sphere
 from mountcal.estimate.effects.scale import SCALE_NAMES
 from mountcal.estimate.sensor_errors import BIAS_NAMES, TEMP_NAMES, SensorErrors, from_spec, heading_u
+from mountcal.estimate.triad_session import MIN_STOP_S, TRIM_S
 from mountcal.io.kind import Declared
 from mountcal.io.sensor_spec import SensorSpec
 from mountcal.stops.table import StopTable, Unit, read_stop_table
@@ -53,7 +54,7 @@ class Triad:
     def matrix(self) -> FloatArray:
         """I + E."""
         e = self.scale_e
-        return np.eye(3) + np.array([[e[0], e[3], e[4]], [e[3], e[1], e[5]], [e[4], e[5], e[2]]])
+        return np.eye(3) + np.array([[e[0], e[3], e[4]], [e[3], e[1], e[5]], [e[4], e[5], e[2]]], dtype=np.float64)
 
     def correct(self, table: StopTable) -> StopTable:
         """The stops as the calibrated sensor reads them, ``(I + E)⁻¹ (a − b)``, their covariance mapped alike."""
@@ -193,8 +194,8 @@ _TODO_POSITIONS = (
 def session_stops(
     paths: list[str],
     unit: Unit,
-    min_stop_s: float = 3.0,
-    trim_s: float = 0.5,
+    min_stop_s: float = MIN_STOP_S,
+    trim_s: float = TRIM_S,
     log: LogOptions | None = None,
     *,
     declared: Declared = "auto",

@@ -94,7 +94,8 @@ def filesystem(url: str, options: Mapping[str, Any]) -> tuple[Any, str]:
     import fsspec
 
     try:
-        return fsspec.core.url_to_fs(url, **dict(options))
+        fs, path = fsspec.core.url_to_fs(url, **dict(options))  # fsspec is untyped: the filesystem stays Any
+        return fs, str(path)
     except ImportError as err:
         raise InputError(
             url,

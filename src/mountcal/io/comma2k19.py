@@ -27,9 +27,10 @@ import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from mountcal.core.errors import InputError
 from mountcal.io.can.dbc import decode, load_dbc
@@ -67,10 +68,11 @@ class Comma2k19Segment:
     kinematics: dict[str, Channel]
 
 
-def _array(folder: Path, *parts: str) -> FloatArray:
+def _array(folder: Path, *parts: str) -> NDArray[Any]:
+    """The file's array in its own dtype (times and values are float, CAN fields integers)."""
     path = folder.joinpath(*parts)
     try:
-        return np.load(path, allow_pickle=False)
+        return np.asarray(np.load(path, allow_pickle=False))  # a .npy file without pickles: always an array
     except FileNotFoundError as err:
         raise InputError(
             str(path),

@@ -62,7 +62,7 @@ class AxisMap:
 
     def apply_cov(self, cov: FloatArray) -> FloatArray:
         """Covariances (n, 3, 3) in device axes → sensor axes."""
-        return np.einsum("ij,njk,lk->nil", self.matrix, cov, self.matrix)
+        return np.asarray(np.einsum("ij,njk,lk->nil", self.matrix, cov, self.matrix), dtype=np.float64)
 
     def after(self, first: AxisMap) -> AxisMap:
         """This map applied to what ``first`` produced (``first`` then this)."""

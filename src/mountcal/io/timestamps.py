@@ -34,7 +34,7 @@ def increasing_times(samples: Samples) -> Samples:
     size = np.diff(np.append(starts, t.size)).astype(float)[:, None]
 
     def merge(x: FloatArray) -> FloatArray:
-        return np.add.reduceat(x, starts, axis=0) / size
+        return np.asarray(np.add.reduceat(x, starts, axis=0) / size, dtype=np.float64)
 
     dropped = dict(samples.dropped)
     _count(dropped, MERGED, t.size - starts.size)

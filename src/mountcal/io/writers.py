@@ -260,7 +260,8 @@ def write_mcap(
 
 
 def _stamps(start_ns: int, t_s: FloatArray) -> list[int]:
-    return (start_ns + np.round(t_s * 1e9).astype(np.int64)).tolist()
+    stamps: list[int] = (start_ns + np.round(t_s * 1e9).astype(np.int64)).tolist()  # int64 → Python ints
+    return stamps
 
 
 def _header(t_ns: int, frame_id: str) -> dict[str, Any]:

@@ -209,7 +209,7 @@ def _turn_cues(samples: Samples, rot_vs: Rotation, yaw_known: bool) -> dict[str,
     centre = edges + 0.5 * TURN_BIN_S
 
     def means(x: FloatArray) -> FloatArray:
-        return np.add.reduceat(x, idx, axis=0) / counts[:, None]
+        return np.asarray(np.add.reduceat(x, idx, axis=0) / counts[:, None], dtype=np.float64)
 
     cues: dict[str, FloatArray] = {}
     speed = samples.channels.get("speed_mps")

@@ -168,7 +168,7 @@ def projection_test(r: FloatArray, d: FloatArray, basis: FloatArray, test: str, 
 def _per_axis(whiten: FloatArray, x: FloatArray) -> FloatArray:
     """Whitened directions of an effect ``x[:, c]`` along each sensor axis, shape (3n, 3·k)."""
     n, k = x.shape
-    return np.einsum("nij,nc->nicj", whiten, x).reshape(3 * n, 3 * k)
+    return np.asarray(np.einsum("nij,nc->nicj", whiten, x), dtype=np.float64).reshape(3 * n, 3 * k)
 
 
 def _span(a: FloatArray, tol: float = 1e-6) -> FloatArray:

@@ -16,6 +16,7 @@ by stops on one slope: their part is a floor no number of stops or dwell lowers.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -58,7 +59,7 @@ class Noise:
 
     def stop_sigma_mps2(self, averaged_s: float) -> float:
         """1σ of a stop mean over ``averaged_s`` seconds (white noise)."""
-        return self.sample_sigma_mps2 / np.sqrt(self.rate_hz * averaged_s)
+        return self.sample_sigma_mps2 / math.sqrt(self.rate_hz * averaged_s)
 
 
 @dataclass(frozen=True)

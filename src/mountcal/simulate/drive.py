@@ -254,7 +254,7 @@ def simulate_drive(
 def _pulse(n: int, area: float) -> FloatArray:
     """A smooth (jerk-limited) pulse of n samples, sin² shaped, whose samples sum to ``area``."""
     shape = np.sin(np.pi * (np.arange(n) + 0.5) / n) ** 2
-    return area * shape / shape.sum()
+    return area * shape / float(shape.sum())
 
 
 def _manoeuvres(n: int, dt: float, rng: np.random.Generator) -> tuple[FloatArray, FloatArray]:

@@ -236,7 +236,7 @@ def _judged_blocks(t: FloatArray, starts: np.ndarray, count: FloatArray, w: int,
     span = t[last_sample[last_block]] - t[starts[first]]
     total = np.concatenate([[0.0], np.cumsum(count)])
     held = total[last_block + 1] - total[first]
-    return (held >= MIN_WINDOW_SAMPLES) & (span <= MAX_WINDOW_SPAN * window_s)
+    return np.asarray((held >= MIN_WINDOW_SAMPLES) & (span <= MAX_WINDOW_SPAN * window_s), dtype=np.bool_)
 
 
 def _gyro_bias(rates: FloatArray, radius: float) -> FloatArray:
@@ -250,7 +250,7 @@ def _gyro_bias(rates: FloatArray, radius: float) -> FloatArray:
     densest = rates[inverse.ravel() == int(np.argmax(counts))]
     centre = np.median(densest, axis=0)
     near = rates[np.linalg.norm(rates - centre, axis=1) < radius]
-    return np.median(near, axis=0) if near.size else centre
+    return np.asarray(np.median(near, axis=0) if near.size else centre, dtype=np.float64)
 
 
 def detect_stops(

@@ -524,7 +524,7 @@ def _numeric(
     """The columns as finite floats times ``scale`` (to SI), each within ``quantity``'s physical range
     (:mod:`mountcal.core.ranges`); anything else is refused naming the rows."""
     with np.errstate(over="ignore"):
-        values = df[cols].apply(pd.to_numeric, errors="coerce").to_numpy(dtype=float) * scale
+        values = np.asarray(df[cols].apply(pd.to_numeric, errors="coerce").to_numpy(dtype=float) * scale, np.float64)
     bad = ~np.isfinite(values)
     if bad.any():
         rows, cs = np.nonzero(bad)

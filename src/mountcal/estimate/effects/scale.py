@@ -24,7 +24,7 @@ SCALE_NAMES = ("scale_xx", "scale_yy", "scale_zz", "cross_xy", "cross_xz", "cros
 
 def scale_matrix(e: FloatArray) -> FloatArray:
     """I + E from E_xx, E_yy, E_zz, E_xy, E_xz, E_yz."""
-    return np.eye(3) + np.array([[e[0], e[3], e[4]], [e[3], e[1], e[5]], [e[4], e[5], e[2]]])
+    return np.eye(3) + np.array([[e[0], e[3], e[4]], [e[3], e[1], e[5]], [e[4], e[5], e[2]]], dtype=np.float64)
 
 
 class Scale(BaseEffect):

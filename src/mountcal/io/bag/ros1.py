@@ -94,7 +94,7 @@ class Block:
 
 def _time_ns(raw: bytes) -> int:
     sec, nsec = struct.unpack("<II", raw)
-    return sec * 1_000_000_000 + nsec
+    return int(sec) * 1_000_000_000 + int(nsec)
 
 
 def parse_header(raw: bytes | memoryview, where: str) -> dict[str, bytes]:

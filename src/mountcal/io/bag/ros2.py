@@ -1,7 +1,7 @@
 """ROS 2 bags: a folder with ``metadata.yaml`` and its storage files (SQLite ``.db3`` or ``.mcap``), or a
 lone ``.db3``. ``rosbags`` reads the metadata (every rosbag2 version), the topics and the message
 definitions the storage holds (and decompresses a file-compressed bag into a temporary folder);
-the messages are read by :mod:`mountcal.io.bag.read` a block at a time.
+the messages are read a block at a time (:mod:`mountcal.io.ros.batches`).
 """
 
 from __future__ import annotations
@@ -13,8 +13,10 @@ from pathlib import Path
 from typing import Any
 
 from mountcal.core.errors import InputError
-from mountcal.io.bag.read import Batch, mcap_batches, samples_of, sqlite_batches
-from mountcal.io.bag.topics import Selection, Topic, mcap_topics
+from mountcal.io.bag.read import sqlite_batches
+from mountcal.io.mcap.topics import mcap_batches, mcap_topics
+from mountcal.io.ros.batches import Batch, samples_of
+from mountcal.io.ros.topics import Selection, Topic
 from mountcal.io.ros.types import DefinitionError, Types, from_definition, standard
 from mountcal.io.samples import LogSummary, Samples, Stream
 

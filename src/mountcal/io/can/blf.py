@@ -227,7 +227,7 @@ def _gather(arr: NDArray[np.uint8], pos: IntArray, width: int) -> NDArray[np.uin
     """Bytes ``arr[pos + k]`` for k < width, shape (len(pos), width); reads past the end give 0."""
     index = pos[:, None] + np.arange(width)[None, :]
     if index.size and index[:, -1].max() < arr.shape[0]:
-        return arr[index]
+        return np.asarray(arr[index], dtype=np.uint8)
     inside = index < arr.shape[0]
     return np.where(inside, arr[np.minimum(index, arr.shape[0] - 1)], 0).astype(np.uint8)
 

@@ -159,7 +159,7 @@ class Filter:
         if self.ids is None:
             return None
         if self._table is not None:
-            return self._table[np.minimum(arbitration_id, 2048)]
+            return np.asarray(self._table[np.minimum(arbitration_id, 2048)], dtype=np.bool_)
         return np.isin(arbitration_id, self.ids)
 
     def mask(self, arbitration_id: NDArray[Any], channel: IntArray) -> NDArray[np.bool_] | None:

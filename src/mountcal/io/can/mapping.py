@@ -181,7 +181,7 @@ def _mapping_dict(mapping: str | Path | Mapping[str, Any] | None) -> dict[str, A
     if isinstance(mapping, str | Path):
         where = str(mapping)
         # a regular file of bounded size (not a FIFO or a device: reading ends), parsed within the budget
-        spec = paths.read_document(mapping, "a mapping TOML file", toml=True)
+        spec = dict(paths.read_document(mapping, "a mapping TOML file", toml=True))  # TOML: always a table
     else:
         spec = dict(mapping)
     _check_keys(spec, _MAPPING_KEYS, where, "")

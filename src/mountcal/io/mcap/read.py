@@ -57,6 +57,7 @@ from mountcal.io.mcap.records import (
     record_field,
 )
 from mountcal.io.reader import CHUNK_SAMPLES
+from mountcal.io.ros.pieces import Piece, concat, gyro_of, join_unsorted, pieces_of
 from mountcal.io.ros2 import cdr
 from mountcal.io.samples import Channel, FloatArray, Samples
 
@@ -128,7 +129,8 @@ def _field_hint(log: Log, kind: str) -> str:
     """How to read an Imu or Vector3 that a topic's message carries (``--topic … --field …``), or ""."""
     if kind != "imu":
         return ""
-    from mountcal.io.bag.topics import carried_hint, mcap_topics
+    from mountcal.io.mcap.topics import mcap_topics
+    from mountcal.io.ros.topics import carried_hint
 
     return carried_hint(mcap_topics(log))
 
@@ -158,14 +160,6 @@ def _check_encoding(log: Log, kind: str, topic: str, channels: Sequence[McapChan
 
 
 # --------------------------------------------------------------------------- decoding
-
-
-@dataclass
-class _Piece:
-    """Decoded, finite, time-sorted values of one kind from one unit."""
-
-    t_s: FloatArray
-    columns: dict[str, FloatArray]
 
 
 _JSON_PATHS: dict[str, dict[str, list[tuple[str, ...]]]] = {
@@ -267,76 +261,10 @@ def _decode(unit: Unit, mine: NDArray[np.bool_], sel: _Selection) -> cdr.Decoded
     return cdr.Decoded(decoded.sec, decoded.nanosec, {"t": _times(decoded, log_ns), **decoded.columns})
 
 
-def _sorted(t: FloatArray) -> bool:
-    return bool(np.all(t[1:] >= t[:-1]))
-
-
-def _keep(t: FloatArray, columns: dict[str, FloatArray], ok: NDArray[np.bool_]) -> _Piece:
-    """Rows where ``ok``, stably sorted by time (copies skipped when there is nothing to do)."""
-    if not ok.all():
-        t, columns = t[ok], {k: v[ok] for k, v in columns.items()}
-    if not _sorted(t):
-        order = np.argsort(t, kind="stable")
-        t, columns = t[order], {k: v[order] for k, v in columns.items()}
-    return _Piece(t, columns)
-
-
-def _finite(*arrays: FloatArray) -> NDArray[np.bool_]:
-    """Rows where every value is finite (times need no check: they come from integers)."""
-    ok = np.ones(arrays[0].shape[0], dtype=bool)
-    with np.errstate(all="ignore"):  # a finite sum proves every term finite: the usual, cheap case
-        if all(np.isfinite(a.sum()) for a in arrays):
-            return ok
-    for a in arrays:
-        ok &= np.isfinite(a).reshape(a.shape[0], -1).all(axis=1)
-    return ok
-
-
-def _heading_deg(quat: FloatArray) -> FloatArray:
-    """Compass heading (clockwise from north, [0, 360)) from an ENU orientation (x, y, z, w)."""
-    x, y, z, w = quat.T
-    yaw = np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))  # counter-clockwise from east
-    heading = np.mod(90.0 - np.degrees(yaw), 360.0)
-    return np.where(heading >= 360.0, heading - 360.0, heading)
-
-
-def _pieces(decoded: cdr.Decoded, kind: str, dropped: Counter[str]) -> dict[str, _Piece]:
-    """Finite, sorted samples (``"imu"``) or channels (keyed like ``Samples.channels``)."""
-    c = decoded.columns
-    t = c["t"]
-    if kind == "imu":
-        unknown = c["gyro_unknown"] > 0  # the gyro of these messages is not used (see _gyro)
-        ok = _finite(c["acc"]) & (unknown | _finite(c["gyro"]))
-        dropped["imu_nonfinite"] += int((~ok).sum())
-        return {"imu": _keep(t, {"acc": c["acc"], "gyro": c["gyro"], "gyro_unknown": c["gyro_unknown"]}, ok)}
-    if kind == "temperature":
-        ok = _finite(c["temperature"])
-        dropped["temperature_c_nonfinite"] += int((~ok).sum())
-        return {"temperature_c": _keep(t, {"value": c["temperature"]}, ok)}
-    if kind == "fix":
-        fix = c["status"] >= 0
-        ok = fix & _finite(c["lat"], c["lon"], c["alt"])
-        dropped["fix_no_fix"] += int((~fix).sum())
-        dropped["fix_nonfinite"] += int((fix & ~ok).sum())
-        return {
-            key: _keep(t, {"value": c[col]}, ok)
-            for key, col in (("lat_deg", "lat"), ("lon_deg", "lon"), ("alt_m", "alt"))
-        }
-    speed_ok = _finite(c["vx"])
-    norm = np.linalg.norm(c["quat"], axis=1)
-    heading_ok = _finite(c["quat"]) & (np.abs(norm - 1.0) < 0.1)  # else not a rotation
-    dropped["speed_mps_nonfinite"] += int((~speed_ok).sum())
-    dropped["heading_deg_invalid_orientation"] += int((~heading_ok).sum())
-    return {
-        "speed_mps": _keep(t, {"value": c["vx"]}, speed_ok),
-        "heading_deg": _keep(t, {"value": _heading_deg(c["quat"])}, heading_ok),
-    }
-
-
-def _decode_unit(unit: Unit, selections: Sequence[_Selection], where: str) -> tuple[dict[str, _Piece], Counter[str]]:
+def _decode_unit(unit: Unit, selections: Sequence[_Selection], where: str) -> tuple[dict[str, Piece], Counter[str]]:
     """One unit's finite, time-sorted pieces of every selection, and what was dropped."""
     channel = record_field(unit.data, unit.messages, RECORD_HEAD.size, "<u2")
-    pieces: dict[str, _Piece] = {}
+    pieces: dict[str, Piece] = {}
     dropped: Counter[str] = Counter()
     for sel in selections:
         ids = list(sel.channel_ids)
@@ -352,13 +280,13 @@ def _decode_unit(unit: Unit, selections: Sequence[_Selection], where: str) -> tu
                 f"{err}, in the {unit.what}",
                 "The file is damaged or mislabelled; export the topic to CSV instead.",
             ) from err
-        pieces.update(_pieces(decoded, sel.kind, dropped))
+        pieces.update(pieces_of(decoded, sel.kind, dropped))
     return pieces, dropped
 
 
 def _decoded_units(
     log: Log, selections: Sequence[_Selection]
-) -> Generator[tuple[dict[str, _Piece], Counter[str]], None, None]:
+) -> Generator[tuple[dict[str, Piece], Counter[str]], None, None]:
     """Per unit, in file order: the pieces of every selection and what was dropped."""
     wanted = frozenset(i for s in selections for i in s.channel_ids)
     with closing(chunk_units(log, wanted)) as units:
@@ -366,15 +294,6 @@ def _decoded_units(
             decoded = _decode_unit(unit, selections, log.where)
             del unit  # not held while the next chunk is read
             yield decoded
-
-
-def _concat(pieces: list[_Piece]) -> _Piece:
-    """Join pieces and sort by time (stable, so file order breaks ties)."""
-    joined = _join_unsorted(pieces)
-    if _sorted(joined.t_s):
-        return joined
-    order = np.argsort(joined.t_s, kind="stable")
-    return _Piece(joined.t_s[order], {k: v[order] for k, v in joined.columns.items()})
 
 
 # --------------------------------------------------------------------------- public API
@@ -402,7 +321,7 @@ def _read_open(log: Log, topics: dict[str, str | None]) -> Samples:
     assert imu is not None  # the IMU topic is never optional
     aux = [_select(log, kind, topic) for kind, topic in topics.items() if kind != "imu" and topic != ""]
     selections = [imu, *(s for s in aux if s is not None)]
-    collected: dict[str, list[_Piece]] = {}
+    collected: dict[str, list[Piece]] = {}
     dropped: Counter[str] = Counter()
     with closing(_decoded_units(log, selections)) as units:
         for pieces, drops in units:
@@ -413,30 +332,19 @@ def _read_open(log: Log, topics: dict[str, str | None]) -> Samples:
             budget.charge("rows", sum(p.t_s.size for p in pieces.values()), log.where, "samples (all topics read)")
     if not collected.get("imu") or not sum(p.t_s.size for p in collected["imu"]):
         raise _no_samples(log, imu.topic, dropped)
-    samples = _concat(collected.pop("imu"))
+    samples = concat(collected.pop("imu"))
     channels = {}
     for key, parts in collected.items():
-        joined = _concat(parts)
+        joined = concat(parts)
         channels[key] = Channel(joined.t_s, joined.columns["value"])
     return Samples(
         t_s=samples.t_s,
         acc_s=samples.columns["acc"],
-        gyro_s=_gyro(samples, dropped),
+        gyro_s=gyro_of(samples, dropped),
         channels=channels,
         source=log.where,
         dropped={k: v for k, v in dropped.items() if v},
     )
-
-
-def _gyro(piece: _Piece, dropped: Counter[str]) -> FloatArray | None:
-    """The gyro column, or None when messages mark it unknown (``angular_velocity_covariance[0]
-    = −1``, REP 145: an accelerometer without a gyro publishes zeros there). Where only some do,
-    none is used: zeros among real rates would read as standing still; the count is reported."""
-    unknown = int(np.count_nonzero(piece.columns["gyro_unknown"]))
-    if not unknown:
-        return piece.columns["gyro"]
-    dropped["imu_gyro_marked_unknown"] += unknown
-    return None
 
 
 @budget.scoped
@@ -538,7 +446,7 @@ def _iter_batches(path: str | os.PathLike[str], selection: _Selection, max_sampl
 
 
 def _batches(log: Log, selection: _Selection, max_samples: int) -> Iterator[Samples]:
-    pending: list[_Piece] = []
+    pending: list[Piece] = []
     count, total = 0, 0
     dropped: Counter[str] = Counter()
     with closing(_decoded_units(log, [selection])) as units:
@@ -548,33 +456,24 @@ def _batches(log: Log, selection: _Selection, max_samples: int) -> Iterator[Samp
                 pending.append(pieces["imu"])
                 count += pieces["imu"].t_s.size
             while count >= max_samples:
-                joined = _join_unsorted(pending)
+                joined = join_unsorted(pending)
                 yield _batch(log, joined, 0, max_samples, dropped)
                 pending = [_slice(joined, max_samples, count)]
                 count, total, dropped = count - max_samples, total + max_samples, Counter()
     if count:
-        yield _batch(log, _join_unsorted(pending), 0, count, dropped)
+        yield _batch(log, join_unsorted(pending), 0, count, dropped)
     elif not total:
         raise _no_samples(log, selection.topic, dropped)
 
 
-def _join_unsorted(pieces: list[_Piece]) -> _Piece:
-    if len(pieces) == 1:
-        return pieces[0]
-    return _Piece(
-        np.concatenate([p.t_s for p in pieces]),
-        {k: np.concatenate([p.columns[k] for p in pieces]) for k in pieces[0].columns},
-    )
+def _slice(piece: Piece, start: int, stop: int) -> Piece:
+    return Piece(piece.t_s[start:stop], {k: v[start:stop] for k, v in piece.columns.items()})
 
 
-def _slice(piece: _Piece, start: int, stop: int) -> _Piece:
-    return _Piece(piece.t_s[start:stop], {k: v[start:stop] for k, v in piece.columns.items()})
-
-
-def _batch(log: Log, piece: _Piece, start: int, stop: int, dropped: Counter[str]) -> Samples:
+def _batch(log: Log, piece: Piece, start: int, stop: int, dropped: Counter[str]) -> Samples:
     """Rows ``start:stop`` of ``piece`` as Samples of their own (copied, sorted by time)."""
-    part = _concat([_slice(piece, start, stop)])
-    gyro = _gyro(part, dropped)
+    part = concat([_slice(piece, start, stop)])
+    gyro = gyro_of(part, dropped)
     return Samples(
         t_s=part.t_s.copy(),
         acc_s=part.columns["acc"].copy(),

@@ -20,7 +20,7 @@ class McapReader(LogReader):
 
     def read(self, path: Path, options: LogOptions) -> Samples:
         if options.field is not None:  # an Imu or Vector3 inside another message: read by its definition
-            from mountcal.io.bag.read import read_mcap_topics
+            from mountcal.io.mcap.topics import read_mcap_topics
 
             return read_mcap_topics(path, topic=options.topic, field=options.field)
         from mountcal.io.mcap.read import read_mcap

@@ -96,7 +96,7 @@ def gather(buf: U8Array, at: I64Array, nbytes: int) -> U8Array:
     Rows of a sliding-window view are copied whole (several times faster than gathering byte by byte).
     """
     if at.size == 0 or nbytes > buf.size:  # no rows, or none that fits: the plain gather (empty, or IndexError)
-        return buf[at[:, None] + np.arange(nbytes, dtype=np.int64)]
+        return np.asarray(buf[at[:, None] + np.arange(nbytes, dtype=np.int64)], dtype=np.uint8)
     return np.lib.stride_tricks.sliding_window_view(buf, nbytes)[at]
 
 

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from numpy.typing import NDArray
 
 from mountcal.core.errors import InputError
 from mountcal.core.option_names import option
@@ -104,13 +105,13 @@ def _time(values: pd.Series, layout: Layout) -> FloatArray:
     column = layout.time
     if column.unit == "iso":
         stamps = pd.to_datetime(values, utc=True, errors="coerce", format="ISO8601")
-        ns = stamps.to_numpy(dtype="datetime64[ns]").astype(np.int64)
+        ns: NDArray[np.int64] = stamps.to_numpy(dtype="datetime64[ns]").astype(np.int64)  # pandas ships no types
         out = (ns // 1_000_000_000).astype(np.float64) + (ns % 1_000_000_000) * 1e-9
         out[np.isnat(stamps.to_numpy(dtype="datetime64[ns]"))] = np.nan
         return out
     if pd.api.types.is_integer_dtype(values.dtype) and column.scale in TIME_UNITS.values() and column.scale < 1:
         per_second = round(1.0 / column.scale)  # whole ns/us/ms since an epoch: exact seconds, then the fraction
-        ints = values.to_numpy(dtype=np.int64)
+        ints: NDArray[np.int64] = values.to_numpy(dtype=np.int64)
         return (ints // per_second).astype(np.float64) + (ints % per_second) / per_second
     return _numbers(values) * column.scale + column.offset
 

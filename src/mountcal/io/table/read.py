@@ -112,7 +112,7 @@ def _channel(name: str, t: FloatArray, v: FloatArray, dropped: dict[str, int]) -
 
 def _in_range(t: FloatArray, acc: FloatArray, gyro: FloatArray | None) -> NDArray[np.bool_]:
     """Rows whose time, acceleration and rate are finite and inside their ranges (mountcal.core.ranges)."""
-    ok = in_range("time_s", t) & in_range("acc_mps2", acc).all(axis=1)
+    ok = np.asarray(in_range("time_s", t) & in_range("acc_mps2", acc).all(axis=1), dtype=np.bool_)
     return ok if gyro is None else ok & in_range("gyro_rad_s", gyro).all(axis=1)
 
 

@@ -37,7 +37,7 @@ DEFAULT_FRAMES = Frames()  # base_link -> imu_link, no translation
 
 def quaternion_xyzw(mount: Mounting, frames: Frames = DEFAULT_FRAMES) -> np.ndarray:
     """The tf2 quaternion (x, y, z, w) of the child (IMU) frame in the parent, w ≥ 0."""
-    q = frames.in_parent(mount.rot_vs).as_quat()
+    q: np.ndarray = frames.in_parent(mount.rot_vs).as_quat()  # scipy ships no types
     return -q if q[3] < 0 else q
 
 

@@ -25,21 +25,22 @@ AXIS_UNDEFINED_RAD = 1e-6  # below this angle the rotation axis (and its σ) is 
 
 def _quat_xyzw(reference: FloatArray) -> Callable[[Rotation], FloatArray]:
     def fn(r: Rotation) -> FloatArray:
-        q = r.as_quat()
+        q: FloatArray = r.as_quat()  # scipy ships no types; its arrays are float64
         return -q if float(q @ reference) < 0 else q  # the sign of the reference: q and −q are one rotation
 
     return fn
 
 
 def _rotvec(r: Rotation) -> FloatArray:
-    return r.as_rotvec()
+    v: FloatArray = r.as_rotvec()
+    return v
 
 
 def _axis(r: Rotation) -> FloatArray:
-    v = r.as_rotvec()
+    v: FloatArray = r.as_rotvec()
     import numpy as np
 
-    return v / np.linalg.norm(v)
+    return v / float(np.linalg.norm(v))
 
 
 def _euler(r: Rotation) -> FloatArray:
@@ -52,7 +53,8 @@ def _euler(r: Rotation) -> FloatArray:
 
 
 def _matrix(r: Rotation) -> FloatArray:
-    return r.as_matrix().ravel()
+    m: FloatArray = r.as_matrix()
+    return m.ravel()
 
 
 def _values(values: FloatArray) -> list[float]:

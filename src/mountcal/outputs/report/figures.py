@@ -136,7 +136,8 @@ def fitted_circle_s(cal: Calibration, beta_rad: FloatArray) -> FloatArray:
     """
     if cal.slope_deg is None:
         raise ValueError("the slope is not determined, so there is no fitted circle")
-    acc_s = cal.rot_vs.inv().apply(specific_force_v(np.radians(cal.slope_deg), beta_rad, cal.gravity_mps2))
+    force_v = specific_force_v(np.radians(cal.slope_deg), beta_rad, cal.gravity_mps2)
+    acc_s = np.asarray(cal.rot_vs.inv().apply(force_v), dtype=np.float64)  # scipy ships no types
     offset = effects.offset_of(cal)
     return acc_s + (np.array(offset.value) if offset is not None else 0.0)
 
@@ -418,7 +419,7 @@ def excluded_stops(cal: Calibration) -> np.ndarray:
     """Boolean mask, shape (n,), of the stops the final fit left out (``fit.excluded_stops``, 1-based,
     or a residual that is not finite)."""
     n = cal.residual_s.shape[0]
-    mask = ~np.all(np.isfinite(cal.residual_s), axis=1)
+    mask = np.asarray(~np.all(np.isfinite(cal.residual_s), axis=1), dtype=np.bool_)
     idx = np.array([k - 1 for k in cal.fit.excluded_stops if 1 <= k <= n], dtype=int)
     mask[idx] = True
     return mask

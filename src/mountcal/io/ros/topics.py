@@ -1,7 +1,9 @@
 """Which topics of a recording to read: the IMU (named, or the only one), and the optional temperature,
 GNSS fix, odometry and GNSS velocity; refusals name the option that would read the file.
 
-The rules, the same for every ROS container (ROS 1 bag, ROS 2 bag folder, MCAP read with ``--field``):
+The rules, the same for every ROS container (ROS 1 bag, ROS 2 bag folder, MCAP read with ``--field``);
+each container lists its topics as :class:`Topic` (:func:`mountcal.io.bag.read.ros1_topics`,
+:func:`mountcal.io.mcap.topics.mcap_topics`):
 
 - **IMU**: ``--topic`` names it; without it, the only ``sensor_msgs/msg/Imu`` topic. ``--field``
   reads an Imu or a Vector3 carried inside another message (a driver's own message type); without
@@ -21,7 +23,6 @@ from dataclasses import dataclass
 
 from mountcal.core.errors import InputError
 from mountcal.core.option_names import option
-from mountcal.io.mcap.records import Log
 from mountcal.io.ros.kinds import TYPES, Target, target
 from mountcal.io.ros.types import (
     IMU,
@@ -30,8 +31,6 @@ from mountcal.io.ros.types import (
     DefinitionError,
     Types,
     carriers,
-    from_definition,
-    standard,
 )
 
 AUX = ("temperature", "fix", "odom", "velocity", "nmea")
@@ -208,30 +207,6 @@ def choose_aux(topics: dict[str, Topic], where: str, notes: list[str]) -> list[S
     return out
 
 
-def mcap_topics(log: Log) -> dict[str, Topic]:
-    """An MCAP log's topics with the definitions of their schemas (``ros2msg`` or ``ros2idl``)."""
-    out = {}
-    for name, channels in log.topics().items():
-        schema = log.schemas.get(channels[0].schema_id)
-        type_name = log.type_name(channels[0])
-        types: Types | None = None
-        problem = "no schema"
-        if schema is not None:
-            try:
-                if schema.encoding in ("ros2msg", "ros2idl") and schema.data:
-                    types = from_definition(schema.data.decode(errors="replace"), schema.name, schema.encoding[4:])
-                else:
-                    types = standard(schema.name)
-            except DefinitionError as err:
-                problem = str(err)
-        if any(c.message_encoding != "cdr" for c in channels):
-            types, problem = None, f"messages encoded as {channels[0].message_encoding!r}, not CDR"
-        counts = log.statistics.channel_counts if log.statistics is not None else None
-        count = None if counts is None else sum(counts.get(c.id, 0) for c in channels)
-        out[name] = Topic(name, type_name, tuple(c.id for c in channels), types, problem, count)
-    return out
-
-
 __all__ = [
     "AUX",
     "Selection",
@@ -240,5 +215,4 @@ __all__ = [
     "choose_aux",
     "choose_imu",
     "listing",
-    "mcap_topics",
 ]
