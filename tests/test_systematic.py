@@ -169,5 +169,5 @@ def test_cli_summary_shows_both_parts_and_refuses_a_bad_spec(
     good.write_text("heading_deg = 0.1\n", encoding="utf-8")  # surveyed marks: yaw's systematic part shrinks
     assert main(["calibrate", str(stops), "--sensor-spec", str(good), "-o", str(tmp_path / "r.json")]) == 0
     surveyed = Calibration.load(tmp_path / "r.json")
-    assert surveyed.systematic is not None and surveyed.systematic.limits["heading_deg"] == 0.1
+    assert surveyed.systematic is not None and surveyed.systematic.limits.heading_deg == 0.1
     assert _parts(surveyed, "yaw_deg")[1] < _parts(calibrate(table), "yaw_deg")[1] / 2

@@ -21,6 +21,7 @@ from mountcal.core.errors import InputError, NotEnoughInformation
 from mountcal.core.findings import Finding
 from mountcal.core.option_names import option
 from mountcal.core.result_file import check_document, read_json
+from mountcal.core.sensor_limits import SensorLimits
 from mountcal.core.typed_json import from_plain, schema_of, to_plain
 
 FORMAT = "mountcal.calibration"
@@ -237,7 +238,7 @@ class Systematic:
     statistical: dict[str, float | None]
     systematic: dict[str, float | None]
     source: str  # what the sensor limits are: a default class, a spec file, a triad calibration
-    limits: dict[str, Any]
+    limits: SensorLimits
     propagated: tuple[str, ...]  # the sensor errors mapped into the angles (those the final model does not fit)
     default_spec: bool
     dominant: bool  # the systematic part exceeds the statistical one for an angle

@@ -4,11 +4,11 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
 from mountcal.core.conventions import FloatArray
+from mountcal.core.sensor_limits import SensorLimits
 from mountcal.estimate import effects as registry
 from mountcal.estimate.effects.bias import NAMES as BIAS_NAMES  # a triad calibration's own terms (estimate.triad)
 from mountcal.estimate.effects.temperature import NAMES as TEMP_NAMES
@@ -22,7 +22,7 @@ class SensorErrors:
     names: tuple[str, ...]
     cov: FloatArray
     source: str
-    limits: dict[str, Any]
+    limits: SensorLimits
     heading_u_rad: float = 0.0  # the headings' common error against the fall line (1σ)
 
 
@@ -33,7 +33,7 @@ def from_spec(spec: SensorSpec) -> SensorErrors:
     by_name = {k: v for e in registry.registered().values() for k, v in e.spec_limits(spec).items()}
     names, limits = tuple(by_name), list(by_name.values())
     return SensorErrors(
-        names, np.diag(np.square(limits) / 3.0), spec.source, spec.to_dict(), heading_u(spec.heading_deg)
+        names, np.diag(np.square(limits) / 3.0), spec.source, spec.limits(), heading_u(spec.heading_deg)
     )
 
 

@@ -23,6 +23,7 @@ from mountcal.core.option_names import option
 from mountcal.core.output_suffix import check_output_suffix
 from mountcal.core.ranges import check_values
 from mountcal.core.result_file import read_json
+from mountcal.core.sensor_limits import SensorLimits
 from mountcal.estimate import sphere
 from mountcal.estimate.effects.scale import SCALE_NAMES
 from mountcal.estimate.sensor_errors import BIAS_NAMES, TEMP_NAMES, SensorErrors, from_spec, heading_u
@@ -73,13 +74,13 @@ class Triad:
                 cov[i, i] = spec_u2.cov[j, j]
         cov[9:, 9:] = np.eye(3) * spec.bias_tempco_mps2_per_c**2 / 3.0
         sigma = np.sqrt(np.diag(self.cov))
-        limits = {
-            "source": f"triad calibration {self.source}",
-            "triad_sigma": {n: float(s) for n, s in zip(NAMES, sigma, strict=True) if n in self.fitted},
-            "from_spec": {n: float(np.sqrt(cov[i, i])) for i, n in enumerate(NAMES) if n not in self.fitted},
-            "bias_tempco_mps2_per_c": spec.bias_tempco_mps2_per_c,
-            "heading_deg": spec.heading_deg,
-        }
+        limits = SensorLimits(
+            source=f"triad calibration {self.source}",
+            triad_sigma={n: float(s) for n, s in zip(NAMES, sigma, strict=True) if n in self.fitted},
+            from_spec={n: float(np.sqrt(cov[i, i])) for i, n in enumerate(NAMES) if n not in self.fitted},
+            bias_tempco_mps2_per_c=spec.bias_tempco_mps2_per_c,
+            heading_deg=spec.heading_deg,
+        )
         return SensorErrors(
             NAMES + TEMP_NAMES, cov, f"triad calibration {self.source}", limits, heading_u(spec.heading_deg)
         )

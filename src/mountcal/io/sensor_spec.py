@@ -37,6 +37,7 @@ from typing import Any
 from mountcal.core import paths
 from mountcal.core.errors import InputError
 from mountcal.core.ranges import QUANTITIES
+from mountcal.core.sensor_limits import SensorLimits
 
 MG = 9.80665e-3  # m/s² per mg
 
@@ -58,6 +59,10 @@ class SensorSpec:
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
+
+    def limits(self) -> SensorLimits:
+        """These limits as a result states them."""
+        return SensorLimits(**self.to_dict())
 
 
 DEFAULT = SensorSpec()

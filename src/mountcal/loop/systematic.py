@@ -169,7 +169,7 @@ def combine(
         source=errors.source,
         limits=errors.limits,
         propagated=used,
-        default_spec=errors.limits.get("source") == _DEFAULT_SRC,
+        default_spec=errors.limits.source == _DEFAULT_SRC,
         dominant=any(
             (a := sys_sigma.get(k)) is not None and (b := stat.get(k)) is not None and a > b
             for k in ("roll_deg", "pitch_deg", "yaw_deg")
@@ -201,7 +201,7 @@ def combine(
         for k in by_headings:
             notes.append(
                 f"{both(k)}: it is limited by how well the headings are known against the fall line "
-                f"(±{errors.limits.get('heading_deg', '?')}°), which no residual can show. Give heading_deg in "
+                f"(±{errors.limits.heading_deg}°), which no residual can show. Give heading_deg in "
                 f"{option('sensor_spec')} if they are better known (surveyed marks, a dual-antenna GNSS heading), "
                 "or log a drive with vehicle speed (yaw from driving needs no heading)"
             )

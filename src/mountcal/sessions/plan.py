@@ -349,7 +349,7 @@ def _why_not(req: Request, plan: Plan, dwells: tuple[float, ...]) -> str:
             f"{option('triad')}), the sensor's own spec ({option('sensor_spec')}, if tighter), or stops on two slopes "
             "of different inclination would remove it"
             + (
-                f"; yaw's floor is also the headings' ±{req.sensor.limits.get('heading_deg', '?')}° against the fall "
+                f"; yaw's floor is also the headings' ±{req.sensor.limits.heading_deg}° against the fall "
                 f"line (heading_deg in {option('sensor_spec')}, if better known; or yaw from a drive with speed)"
                 if "yaw" in below and req.sensor.heading_u_rad > 0
                 else ""
