@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 from scipy.spatial.transform import Rotation
 
-from mountcal.core.angles import Angles
+from mountcal.core.angles import YAW_REASON, Angles
 from mountcal.core.conventions import levelled
 from mountcal.core.pvalues import chi2_sf
 from mountcal.fleet.agreement import ALPHA, Segment, analyse_vehicle, angles_with_sigma, information, tangent_residuals
@@ -133,7 +133,7 @@ def _segment_row(
     rot_sigma = np.degrees(np.sqrt(np.clip(np.diagonal(cons.cov_rad2), 0.0, None)))
     yaw_reason = None
     if not cons.observed[2]:
-        reasons = part["yaw_reason"].dropna()
+        reasons = part[YAW_REASON].dropna()
         common = reasons.mode().iloc[0] if not reasons.empty else "no log determined yaw"
         yaw_reason = f"no log of this mounting period determined yaw (e.g. {common})"
     yaw = angles[2] if cons.observed[2] else None
