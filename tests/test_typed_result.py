@@ -4,14 +4,18 @@ combination as the typed records; the report takes the Calibration."""
 
 from __future__ import annotations
 
+import ast
 import dataclasses
 import json
+import re
 import types
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, Union, get_args, get_origin, get_type_hints
 
 import pytest
 
+from mountcal.core.angles import ANGLE_NAMES, AngleValues
 from mountcal.core.driving_document import Combination, DrivingDocument, TiltCheck
 from mountcal.core.errors import InputError
 from mountcal.core.result import FORMAT_VERSION, Angles, Calibration, Declined
@@ -151,3 +155,153 @@ def test_the_driving_gates_record_every_driving_option() -> None:
     from mountcal.estimate.driving_options import DrivingOptions
 
     assert [f.name for f in dataclasses.fields(DrivingGates)] == [f.name for f in dataclasses.fields(DrivingOptions)]
+
+
+# --- one spelling of the angles' flat columns (#24) -------------------------------------------------------------
+
+SRC = Path(__file__).parent.parent / "src" / "mountcal"
+# the flat names of the angles ± σ as strings (a dict's keys, a table's columns); "slope_deg" alone is also the
+# site's slope a simulation or a plan is given, so it is not listed: the σ and the others give a new spelling away
+FLAT_NAME = re.compile(
+    r"^((roll|pitch|yaw)_deg|(roll|pitch|yaw|slope)_sigma_deg|sigma_(roll|pitch|yaw|slope)|yaw_reason)$"
+)
+# modules that may spell them, each with the reason: the formats' own converters, and values that are no angles ± σ
+SPELLED: dict[str, str] = {
+    "core/angles.py": "the type itself: Angles.columns / from_columns / column_names, the one spelling",
+    "core/result.py": "the v2 result file (its mounting/uncertainty fields): Calibration.to_dict / from_dict",
+    "core/result_file.py": "the v2 result file's checks (types, ranges) before it is read",
+    "simulate/stops.py": "a simulation's true mounting: no σ (a true value has none)",
+    "simulate/session.py": "a simulated session's true mounting, as its truth file holds it: no σ",
+    "cli/simulate.py": "the options of a simulation's true mounting: no σ",
+}
+# dicts keyed by the angles' names that are not angles ± σ
+NAMED: dict[str, str] = {
+    "core/angles.py": "the type's own accessors",
+    "outputs/report/html.py": "the meaning of each angle (text), for the report's table",
+    "outputs/exporters/ublox.py": "the u-blox keys' own Euler angles (another convention, a device format)",
+    "sessions/live.py": "the default target of `mountcal live` (the option's spelling: roll=σ,pitch=σ,yaw=σ)",
+}
+
+
+def _spellings(tree: ast.AST) -> list[str]:
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Constant) and isinstance(node.value, str) and FLAT_NAME.match(node.value):
+            found.append(f"{node.value!r} (line {node.lineno})")
+        # f"{name}_deg", f"{name}_sigma_deg": the flat names built from the angle's name
+        if isinstance(node, ast.JoinedStr) and len(node.values) >= 2 and isinstance(node.values[0], ast.FormattedValue):
+            rest = node.values[1]
+            if isinstance(rest, ast.Constant) and rest.value in ("_deg", "_sigma_deg"):
+                found.append(f"f'{{…}}{rest.value}' (line {node.lineno})")
+    return found
+
+
+def _named_dicts(tree: ast.AST) -> list[str]:
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Dict):
+            keys = {k.value for k in node.keys if isinstance(k, ast.Constant) and isinstance(k.value, str)}
+            if {"roll", "pitch"} <= {k.lower() for k in keys}:
+                found.append(f"a dict keyed {sorted(keys)} (line {node.lineno})")
+    return found
+
+
+def test_the_angles_flat_names_are_spelled_only_by_the_type_and_the_formats() -> None:
+    """A new dict of the angles ± σ, or a new table or message writing them column by column, fails here: pass an
+    Angles (or AngleValues), and write a format's columns with Angles.columns / from_columns."""
+    spelled, named = {}, {}
+    for path in sorted(SRC.rglob("*.py")):
+        where = path.relative_to(SRC).as_posix()
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        if where not in SPELLED and (found := _spellings(tree)):
+            spelled[where] = found
+        if where not in NAMED and (found := _named_dicts(tree)):
+            named[where] = found
+    assert not spelled, f"the angles' flat names spelled outside the type and the formats: {spelled}"
+    assert not named, f"dicts of the angles by name (use Angles / AngleValues): {named}"
+    stale = [m for m in (*SPELLED, *NAMED) if not (SRC / m).exists()]
+    assert not stale, f"allowed modules that no longer exist: {stale}"
+
+
+def test_the_scan_finds_a_dict_spelling() -> None:
+    """The scan above would see the spellings it forbids."""
+    tree = ast.parse('d = {"roll_sigma_deg": 1.0}\nname = "yaw"\nk = f"{name}_sigma_deg"\ne = {"roll": 1, "pitch": 2}')
+    assert len(_spellings(tree)) == 2 and len(_named_dicts(tree)) == 1
+
+
+def test_the_columns_of_the_angles_round_trip() -> None:
+    full = Angles(1.5, 0.1, -2.0, 0.2, 30.0, 0.5, None, 4.0, 0.05)
+    cols = full.columns()
+    assert tuple(cols) == Angles.column_names()
+    assert cols["roll_sigma_deg"] == 0.1 and cols["yaw_reason"] is None and cols["slope_sigma_deg"] == 0.05
+    assert Angles.from_columns(cols) == full
+    no_yaw = Angles(1.5, 0.1, -2.0, 0.2, None, None, "level ground", None, None)
+    assert Angles.from_columns(no_yaw.columns()) == no_yaw
+    drive = no_yaw.columns(slope=False)  # the fleet's consensus tables and live's events have no slope
+    assert "slope_deg" not in drive and Angles.from_columns(drive) == no_yaw
+    assert tuple(no_yaw.columns(slope=False, reason=False)) == Angles.column_names(slope=False, reason=False)
+    # a table's missing cells are NaN: read as None
+    nan = float("nan")
+    row = {**no_yaw.columns(), "yaw_deg": nan, "yaw_sigma_deg": nan, "slope_deg": nan, "slope_sigma_deg": nan}
+    assert Angles.from_columns(row) == no_yaw
+
+
+def test_columns_the_type_refuses_are_refused_when_read() -> None:
+    good = Angles(1.0, 0.1, 2.0, 0.1, 30.0, 0.5, None, 4.0, 0.2).columns()
+    with pytest.raises(ValueError, match="without its σ"):
+        Angles.from_columns({**good, "yaw_sigma_deg": float("nan")})
+    with pytest.raises(ValueError, match="slope"):
+        Angles.from_columns({**good, "slope_sigma_deg": None})
+    with pytest.raises(ValueError, match="without roll or pitch"):
+        Angles.from_columns({k: v for k, v in good.items() if k != "roll_deg"})
+
+
+def test_a_calibration_takes_its_angles_as_one_value() -> None:
+    cal = Calibration.load(DATA / "result_v2_driving.json")
+    moved = replace(cal.angles, roll_deg=cal.roll_deg + 1.0, roll_sigma_deg=0.25)
+    again = cal.with_angles(moved)
+    assert again.angles == moved and again.roll_deg == cal.roll_deg + 1.0 and again.rot_vs is cal.rot_vs
+    assert again.angles.widened(2.0).roll_sigma_deg == 0.5 and again.angles.widened(2.0).roll_deg == again.roll_deg
+    with pytest.raises(ValueError, match="roll or pitch without its σ"):
+        Calibration.angle_fields(replace(moved, roll_sigma_deg=None))
+
+
+def test_the_formats_read_their_angles_with_the_type() -> None:
+    """The v2 file's driving fit, its systematic parts, and the fleet tables' columns all go through the type."""
+    from mountcal.core.result import Systematic
+    from mountcal.fleet import store
+
+    doc = json.loads((DATA / "result_v2_driving.json").read_text(encoding="utf-8"))
+    cal = Calibration.load(DATA / "result_v2_driving.json")
+    assert cal.fit.driving is not None
+    drive = cal.fit.driving.angles
+    assert drive.roll_deg == doc["fit"]["driving"]["roll_deg"] and drive.slope_deg is None
+    assert drive.roll_sigma_deg == doc["fit"]["driving"]["sigma"]["roll_deg"]
+    part = Systematic.part(AngleValues(0.1, 0.2, None, 0.3), (0.4, 0.5, None))
+    assert part == {
+        "roll_deg": 0.1,
+        "pitch_deg": 0.2,
+        "yaw_deg": None,
+        "slope_deg": 0.3,
+        "rotation_x_deg": 0.4,
+        "rotation_y_deg": 0.5,
+        "rotation_z_deg": None,
+    }
+    assert Systematic.angles_of(part) == AngleValues(0.1, 0.2, None, 0.3)
+    assert Systematic.rotation_of(part) == (0.4, 0.5, None)
+    for columns, slope in ((store.LOG_COLUMNS, True), (store.MOUNTING_COLUMNS, False), (store.VEHICLE_COLUMNS, False)):
+        names = [c[0] for c in columns]
+        first = names.index("roll_deg")
+        assert tuple(names[first : first + len(Angles.column_names(slope=slope))]) == Angles.column_names(slope=slope)
+
+
+def test_one_value_per_angle_by_name() -> None:
+    v = AngleValues(0.1, 0.2, None, 0.4)
+    assert v["roll"] == v["roll_deg"] == 0.1 and v["yaw"] is None and v.get("bias") is None
+    with pytest.raises(KeyError):
+        v["bias_deg"]
+    assert v.named() == {"roll": 0.1, "pitch": 0.2, "yaw": None, "slope": 0.4}
+    assert v.times(2.0) == AngleValues(0.2, 0.4, None, 0.8)
+    a = Angles(1.0, 0.1, 2.0, 0.2, None, None, "why", 3.0, 0.3)
+    assert a.values == AngleValues(1.0, 2.0, None, 3.0) and a.sigmas == AngleValues(0.1, 0.2, None, 0.3)
+    assert [a.value(n) for n in ANGLE_NAMES] == [1.0, 2.0, None, 3.0]

@@ -53,6 +53,7 @@ import pandas as pd
 from scipy.spatial.transform import Rotation
 
 from mountcal.apply.rotate import acc_to_vehicle, check_applicable, rate_to_vehicle
+from mountcal.core.angles import ANGLE_NAMES, Angles
 from mountcal.core.atomic import atomic_output
 from mountcal.core.conventions import CONVENTIONS, FloatArray
 from mountcal.core.errors import InputError
@@ -278,9 +279,7 @@ def _metadata(
         "mountcal.calibration": json.dumps(
             {
                 "quaternion_vs_xyzw": cal.rot_vs.as_quat().tolist(),
-                "roll_deg": cal.roll_deg,
-                "pitch_deg": cal.pitch_deg,
-                "yaw_deg": cal.yaw_deg,
+                **{Angles.value_column(n): cal.angles.value(n) for n in ANGLE_NAMES[:3]},  # without σ: as ever
                 "bias_mps2": _offset(cal),
                 "method": cal.method,
                 "input": cal.provenance.input,

@@ -197,9 +197,6 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
     if final.excluded:
         model.append("outlier")
 
-    def widened(x: float | None) -> float | None:
-        return None if x is None else x * birge
-
     k = 3 if "rot_z" in f.names else 2
     rot_sigma = np.degrees(np.sqrt(np.clip(np.diag(f.cov[:k, :k]), 0, None))) * birge
     effects = effect_values(f)
@@ -229,15 +226,7 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
         method="full",
         model=tuple(model),
         rot_vs=f.state.rot_vs,
-        roll_deg=angles.roll_deg,
-        pitch_deg=pitch,
-        yaw_deg=angles.yaw_deg,
-        roll_sigma_deg=angles.roll_sigma_deg * birge,
-        pitch_sigma_deg=angles.pitch_sigma_deg * birge,
-        yaw_sigma_deg=widened(angles.yaw_sigma_deg),
-        yaw_reason=angles.yaw_reason,
-        slope_deg=angles.slope_deg,
-        slope_sigma_deg=widened(angles.slope_sigma_deg),
+        **Calibration.angle_fields(angles.widened(birge)),
         rotation_sigma_deg=(
             float(rot_sigma[0]),
             float(rot_sigma[1]),
@@ -407,10 +396,9 @@ def _observability(table: StopTable, f: full.Fit, g: float) -> Observability:
     scale = np.sqrt(np.clip(np.diag(f.fisher), 1e-300, None))
     eig = np.linalg.eigvalsh(f.fisher / np.outer(scale, scale))
     rank = full.fisher_rank(f.fisher)
-    crb = {}
+    crb: dict[str, AngleValues | None] = {}
     for terms in dict.fromkeys((BASE, WITH_OFFSET, f.terms)):
-        bound = crb_deg(table, f.state, terms, g, f.noise_scale)
-        crb[",".join(terms)] = None if bound is None else AngleValues(**bound)
+        crb[",".join(terms)] = crb_deg(table, f.state, terms, g, f.noise_scale)
     return Observability(
         parameters=tuple(f.names),
         fisher_rank=rank,
@@ -451,15 +439,19 @@ def _paper(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrat
         method="paper",
         model=BASE,
         rot_vs=est.rot_vs,
-        roll_deg=roll,
-        pitch_deg=pitch,
-        yaw_deg=None if yaw_reason else yaw,
-        roll_sigma_deg=float(sig[0]),
-        pitch_sigma_deg=float(sig[1]),
-        yaw_sigma_deg=None if yaw_reason else float(sig[2]),
-        yaw_reason=yaw_reason,
-        slope_deg=slope,
-        slope_sigma_deg=None if slope is None else float(sig[3]),
+        **Calibration.angle_fields(
+            Angles(
+                roll_deg=roll,
+                roll_sigma_deg=float(sig[0]),
+                pitch_deg=pitch,
+                pitch_sigma_deg=float(sig[1]),
+                yaw_deg=None if yaw_reason else yaw,
+                yaw_sigma_deg=None if yaw_reason else float(sig[2]),
+                yaw_reason=yaw_reason,
+                slope_deg=slope,
+                slope_sigma_deg=None if slope is None else float(sig[3]),
+            )
+        ),
         rotation_sigma_deg=(None, None, None),
         bias_mps2=None,
         bias_sigma_mps2=None,

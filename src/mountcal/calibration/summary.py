@@ -8,10 +8,11 @@ said twice (the reasons for doubt are in the notes, not repeated after them).
 
 from __future__ import annotations
 
+from mountcal.core.angles import ANGLE_NAMES
 from mountcal.core.result import Calibration
 from mountcal.estimate import effects
 
-ANGLES = ("roll", "pitch", "yaw", "slope")
+ANGLES = ANGLE_NAMES
 
 
 def angle(name: str, value: float | None, sigma: float | None) -> str:
@@ -34,7 +35,8 @@ def main_reason(cal: Calibration) -> str:
 
 def answer(cal: Calibration) -> str:
     """The answer in one line: each angle ± 1σ (or undetermined), and whether it is confident."""
-    angles = "  ".join(angle(a, getattr(cal, f"{a}_deg"), getattr(cal, f"{a}_sigma_deg")) for a in ANGLES)
+    a = cal.angles
+    angles = "  ".join(angle(name, a.value(name), a.sigma(name)) for name in ANGLES)
     return f"{angles}  {'confident' if cal.confident else 'NOT CONFIDENT: ' + main_reason(cal)}"
 
 

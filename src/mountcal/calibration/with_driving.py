@@ -53,15 +53,7 @@ def driving_calibration(
         method="driving",
         model=("rotation",),
         rot_vs=fit.rot_vs,
-        roll_deg=fit.roll_deg,
-        pitch_deg=fit.pitch_deg,
-        yaw_deg=fit.yaw_deg,
-        roll_sigma_deg=fit.roll_sigma_deg,
-        pitch_sigma_deg=fit.pitch_sigma_deg,
-        yaw_sigma_deg=fit.yaw_sigma_deg,
-        yaw_reason=fit.yaw_reason,
-        slope_deg=None,
-        slope_sigma_deg=None,
+        **Calibration.angle_fields(fit.angles),  # no slope: a drive has none
         rotation_sigma_deg=fit.rotation_sigma_deg,
         bias_mps2=None,
         bias_sigma_mps2=None,
@@ -205,16 +197,15 @@ def combine(static: Calibration, fit: DrivingFit) -> Calibration:
     )
     roll, pitch, yaw_e = (float(np.degrees(a)) for a in angles_from_rot_vs(rot_vs))
     yaw_sigma = euler_sigma(rot_vs, (sx, sy, s_z))[2]
+    # the stops' tilt σ and slope, the new rotation's angles, the yaw determined (its reason gone)
+    angles = replace(
+        static.angles, roll_deg=roll, pitch_deg=pitch, yaw_deg=yaw_e, yaw_sigma_deg=yaw_sigma, yaw_reason=None
+    )
     combination = replace(combination, yaw_deg=yaw_e, yaw_sigma_about_vehicle_z_deg=s_z, tilt_check=fit.tilt_check)
     doubts = tuple(f for f in fit.findings if f.test in YAW_TESTS)  # what the drive's own tests say of its yaw
     return replace(
-        static,
+        static.with_angles(angles),
         rot_vs=rot_vs,
-        roll_deg=roll,
-        pitch_deg=pitch,
-        yaw_deg=yaw_e,
-        yaw_sigma_deg=yaw_sigma,
-        yaw_reason=None,
         rotation_sigma_deg=(static.rotation_sigma_deg[0], static.rotation_sigma_deg[1], s_z),
         fit=replace(static.fit, calibrated_from="stops + driving", driving=fit.document(), combination=combination),
         notes=tuple(notes),

@@ -129,9 +129,9 @@ def _document(plan: Any, protocol: str | None) -> dict[str, Any]:
         "drive_s": req.drive_s,
         "session_s": plan.session_s,
         "target_deg": dict(req.target_deg),
-        "sigma_deg": dict(plan.sigma_deg),
-        "statistical_deg": dict(plan.statistical_deg),
-        "systematic_deg": dict(plan.systematic_deg),
+        "sigma_deg": plan.sigma_deg.named(),
+        "statistical_deg": plan.statistical_deg.named(),
+        "systematic_deg": plan.systematic_deg.named(),
         "model": list(req.terms),
         "noise": {
             "sample_sigma_mps2": req.noise.sample_sigma_mps2,

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from mountcal.core.angles import Angles
 from mountcal.core.findings import Finding
 
 
@@ -227,6 +228,14 @@ class DrivingDocument:
     gates: DrivingGates
     notes: tuple[str, ...] = ()
     consistency: DrivingConsistency | None = None
+
+    @property
+    def angles(self) -> Angles:
+        """Roll, pitch and yaw with their σ as the file keeps them (no slope: a drive has none)."""
+        s = self.sigma
+        return Angles(
+            self.roll_deg, s.roll_deg, self.pitch_deg, s.pitch_deg, self.yaw_deg, s.yaw_deg, self.yaw_reason, None, None
+        )
 
 
 @dataclass(frozen=True)

@@ -7,13 +7,16 @@ Computing a calibration (:mod:`mountcal.calibration.fit`) is separate from apply
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, is_dataclass
+from dataclasses import dataclass, is_dataclass, replace
 from pathlib import Path
 from typing import Any, Literal, get_args, get_type_hints
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from mountcal.core.angles import ANGLE_NAMES
+from mountcal.core.angles import Angles as Angles  # the result's angle types, imported from here too
+from mountcal.core.angles import AngleValues as AngleValues
 from mountcal.core.atomic import atomic_path
 from mountcal.core.conventions import CONVENTIONS, FloatArray, levelled
 from mountcal.core.driving_document import Combination, DrivingDocument
@@ -63,49 +66,6 @@ class FitQuality:
     driving: DrivingDocument | None = None
     combination: Combination | None = None
     driving_levelled_with_stops: DrivingDocument | None = None  # when the drive alone is used (they disagreed)
-
-
-@dataclass(frozen=True)
-class Angles:
-    """Roll, pitch, yaw and slope in degrees with 1σ; None where the data do not determine them.
-
-    The one value type of "the four angles ± σ" (a calibration's :attr:`Calibration.angles`, a model step's, the
-    drive's :attr:`mountcal.estimate.driving.DrivingFit.angles`). A yaw the data cannot determine is None with
-    its σ and the reason; a yaw is never a number without its σ, nor a slope.
-    """
-
-    roll_deg: float
-    roll_sigma_deg: float | None
-    pitch_deg: float
-    pitch_sigma_deg: float | None
-    yaw_deg: float | None
-    yaw_sigma_deg: float | None
-    yaw_reason: str | None
-    slope_deg: float | None
-    slope_sigma_deg: float | None
-
-    def __post_init__(self) -> None:
-        if self.yaw_deg is None and self.yaw_sigma_deg is not None:
-            raise ValueError(f"yaw undetermined with a σ of {self.yaw_sigma_deg!r} (expected none)")
-        if self.yaw_deg is not None and self.yaw_sigma_deg is None:
-            raise ValueError(f"yaw {self.yaw_deg!r} without its σ (an undetermined yaw is None, with the reason)")
-        if self.slope_deg is not None and self.slope_sigma_deg is None:
-            raise ValueError(f"slope {self.slope_deg!r} without its σ")
-
-    @property
-    def yaw_determined(self) -> bool:
-        return self.yaw_deg is not None
-
-
-@dataclass(frozen=True)
-class AngleValues:
-    """One value per angle, degrees, None where not determined: how far each angle moved from the
-    previous model step, or the Cramér–Rao bound of each."""
-
-    roll_deg: float | None
-    pitch_deg: float | None
-    yaw_deg: float | None
-    slope_deg: float | None
 
 
 @dataclass(frozen=True)
@@ -243,6 +203,32 @@ class Systematic:
     default_spec: bool
     dominant: bool  # the systematic part exceeds the statistical one for an angle
 
+    # The two parts are the v2 file's flat keys (roll_deg … slope_deg, rotation_x_deg …): these convert them.
+    @staticmethod
+    def part(angles: AngleValues, rotation_xyz: tuple[float | None, ...]) -> dict[str, float | None]:
+        """One part (σ of each angle, and of the rotation about each vehicle axis) as the file keeps it."""
+        out = {Angles.value_column(name): value for name, value in angles.items()}
+        return out | {f"rotation_{axis}_deg": s for axis, s in zip("xyz", rotation_xyz, strict=True)}
+
+    @staticmethod
+    def angles_of(part: dict[str, float | None]) -> AngleValues:
+        """The σ of each angle in a part (:meth:`part`)."""
+        return AngleValues(*(part.get(Angles.value_column(name)) for name in ANGLE_NAMES))
+
+    @staticmethod
+    def rotation_of(part: dict[str, float | None]) -> tuple[float | None, float | None, float | None]:
+        """The σ about vehicle x, y, z in a part (:meth:`part`)."""
+        x, y, z = (part.get(f"rotation_{axis}_deg") for axis in "xyz")
+        return x, y, z
+
+    @property
+    def statistical_angles(self) -> AngleValues:
+        return Systematic.angles_of(self.statistical)
+
+    @property
+    def systematic_angles(self) -> AngleValues:
+        return Systematic.angles_of(self.systematic)
+
 
 @dataclass(frozen=True)
 class Calibration:
@@ -307,6 +293,19 @@ class Calibration:
             self.slope_deg,
             self.slope_sigma_deg,
         )
+
+    @staticmethod
+    def angle_fields(angles: Angles) -> dict[str, Any]:
+        """The calibration's fields of ``angles`` (its flat fields are the v2 file's): what the code that computes
+        a calibration passes, ``Calibration(..., **Calibration.angle_fields(angles))``. A calibration always has
+        roll and pitch with their σ: angles without them are refused."""
+        if angles.roll_sigma_deg is None or angles.pitch_sigma_deg is None:
+            raise ValueError(f"roll or pitch without its σ ({angles!r}): no calibration")
+        return {field: getattr(angles, field) for field in Angles.__dataclass_fields__}
+
+    def with_angles(self, angles: Angles) -> Calibration:
+        """This calibration with ``angles`` in place of its own (rotation and the rest unchanged)."""
+        return replace(self, **Calibration.angle_fields(angles))
 
     def effect(self, name: str) -> EffectValue | None:
         """The fitted effect of that name (e.g. ``bias_mps2``), None when the model has no such effect."""

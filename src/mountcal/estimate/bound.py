@@ -8,6 +8,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
+from mountcal.core.angles import AngleValues
 from mountcal.core.conventions import FloatArray, angles_from_rot_vs
 from mountcal.estimate import effects, full
 from mountcal.stops.table import StopTable
@@ -27,7 +28,7 @@ def euler_gradients(rot: Rotation, k: int, h: float = 1e-7) -> FloatArray:
 
 def crb_deg(
     table: StopTable, state: full.State, terms: tuple[str, ...], g_mps2: float, noise_scale: float = 1.0
-) -> dict[str, float | None] | None:
+) -> AngleValues | None:
     """1σ bounds of roll, pitch, yaw and slope (degrees) at ``state``; None when singular.
 
     The table's stop covariances (times ``noise_scale²``) are the noise model.
@@ -40,12 +41,12 @@ def crb_deg(
     grads = euler_gradients(state.rot_vs, k)
     sig = [float(np.degrees(np.sqrt(max(c @ cov[:k, :k] @ c, 0.0)))) for c in grads]
     slopes = [i for i, n in enumerate(names) if n.startswith("slope")]
-    return {
-        "roll_deg": sig[0],
-        "pitch_deg": sig[1],
-        "yaw_deg": sig[2] if k == 3 else None,
-        "slope_deg": float(np.degrees(np.sqrt(cov[slopes[0], slopes[0]]))) if len(slopes) == 1 else None,
-    }
+    return AngleValues(
+        roll_deg=sig[0],
+        pitch_deg=sig[1],
+        yaw_deg=sig[2] if k == 3 else None,
+        slope_deg=float(np.degrees(np.sqrt(cov[slopes[0], slopes[0]]))) if len(slopes) == 1 else None,
+    )
 
 
 def true_state(

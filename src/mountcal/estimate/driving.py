@@ -284,7 +284,9 @@ def estimate_driving(
         found = checks.run(
             replace(inputs, u=u, yaw_rad=fit.yaw_rad, lateral_scale=found.lateral_scale, sigma_rad=sigma)
         )
-        found = checks.changed(found, "lateral_scale", "yaw_deg", np.degrees(before.yaw_rad), np.degrees(fit.yaw_rad))
+        found = checks.changed(
+            found, "lateral_scale", Angles.value_column("yaw"), np.degrees(before.yaw_rad), np.degrees(fit.yaw_rad)
+        )
     if not straight:
         straight = f"lateral acceleration (|a_y| ≤ {opts.max_lateral_mps2:g} m/s² after a first pass)"
     up_driving = fit.up_s(rot_tilt)
@@ -471,7 +473,9 @@ def _result(
         rot_vs = grade * rot_vs
         longitudinal = None if longitudinal is None else grade * longitudinal
         grade_sigma = found.grade.sigma
-        found = checks.changed(found, "grade", "pitch_deg", before, np.degrees(angles_from_rot_vs(rot_vs)[1]))
+        found = checks.changed(
+            found, "grade", Angles.value_column("pitch"), before, np.degrees(angles_from_rot_vs(rot_vs)[1])
+        )
     road = (float(np.hypot(stat, opts.road_cross_slope_sigma_deg)), float(np.hypot(stat, grade_sigma)))
     if tilt_from is not None:
         sx = tilt_from.rotation_sigma_deg[0] or tilt_from.roll_sigma_deg

@@ -56,6 +56,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from mountcal.core.angles import Angles
 from mountcal.core.conventions import FloatArray
 from mountcal.core.driving_document import (
     Comparison,
@@ -539,7 +540,9 @@ def _effects(inp: Inputs, wide: WideCue | None, grade: Estimate | None) -> tuple
             if chosen
             else f"no better known than the {prior:g}° assumed: not used"
         )
-        grade_effect = DrivingEffect("grade", grade_meaning, "deg", grade.value, grade.sigma, chosen, why, "pitch_deg")
+        grade_effect = DrivingEffect(
+            "grade", grade_meaning, "deg", grade.value, grade.sigma, chosen, why, Angles.value_column("pitch")
+        )
     crown = DrivingEffect(
         "crown",
         "the route's mean cross slope (a crowned road), a roll of the body",

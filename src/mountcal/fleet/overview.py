@@ -20,12 +20,13 @@ from typing import Any
 
 import pandas as pd
 
+from mountcal.core.angles import AngleName, Angles
 from mountcal.core.atomic import atomic_path
 from mountcal.core.errors import InputError
 
 MAX_PLOTS = 200
 MARK = '<meta name="generator" content="mountcal fleet overview">'
-ANGLES = (("roll", "#1f77b4"), ("pitch", "#ff7f0e"), ("yaw", "#2ca02c"))
+ANGLES: tuple[tuple[AngleName, str], ...] = (("roll", "#1f77b4"), ("pitch", "#ff7f0e"), ("yaw", "#2ca02c"))
 
 
 def overview_path(output: str | Path) -> Path:
@@ -86,10 +87,19 @@ def _flags(vehicles: pd.DataFrame) -> list[tuple[Any, bool, bool]]:
     ]
 
 
-def _angle(value: Any, sigma: Any) -> str:
-    if value is None or (isinstance(value, float) and math.isnan(value)):
-        return "—"
-    return f"{value:.3f} ± {sigma:.3f}" if sigma is not None and not pd.isna(sigma) else f"{value:.3f}"
+def _angles(row: dict[str, Any]) -> list[str]:
+    """The cells of roll, pitch and yaw ± σ of a vehicle's row ("—" without a calibration)."""
+    if row["status"] != "ok":
+        return ["—"] * 3
+    a = Angles.from_columns(row)
+
+    def cell(name: AngleName) -> str:
+        value, sigma = a.value(name), a.sigma(name)
+        if value is None:
+            return f"— ({html.escape(str(a.yaw_reason))})" if name == "yaw" else "—"
+        return f"{value:.3f} ± {sigma:.3f}" if sigma is not None else f"{value:.3f}"
+
+    return [cell(name) for name, _ in ANGLES]
 
 
 def _table(vehicles: pd.DataFrame) -> str:
@@ -106,10 +116,9 @@ def _table(vehicles: pd.DataFrame) -> str:
         remounts = "; ".join(
             f"{_time(r['time'])} ({r['change_deg']:.2f}° ± {r['change_sigma_deg']:.2f}°)" for r in _list(v.remounts)
         )
-        yaw = _angle(v.yaw_deg, v.yaw_sigma_deg) if not pd.isna(v.yaw_deg) else f"— ({html.escape(str(v.yaw_reason))})"
+        roll, pitch, yaw = _angles(v._asdict())
         rows.append(
-            f"<tr><td>{html.escape(str(v.vehicle_id))}</td><td>{_angle(v.roll_deg, v.roll_sigma_deg)}</td>"
-            f"<td>{_angle(v.pitch_deg, v.pitch_sigma_deg)}</td><td>{yaw if v.status == 'ok' else '—'}</td>"
+            f"<tr><td>{html.escape(str(v.vehicle_id))}</td><td>{roll}</td><td>{pitch}</td><td>{yaw}</td>"
             f"<td>{html.escape(_time(v.since_time) or str(v.since_log or ''))}</td>"
             f"<td>{html.escape(remounts) or 'none'}</td><td>{state}</td></tr>"
         )
@@ -152,7 +161,7 @@ def _svg(v: Any, mine: pd.DataFrame) -> str:
         top = PAD_T + k * (PANEL + GAP)
         points = [
             (x, float(y), float(e))
-            for x, y, e in zip(xs, mine[f"{name}_deg"], mine[f"{name}_sigma_deg"], strict=True)
+            for x, y, e in zip(xs, mine[Angles.value_column(name)], mine[Angles.sigma_column(name)], strict=True)
             if y is not None and math.isfinite(y)
         ]
         box = f"x='{PAD_L}' y='{top}' width='{W - PAD_L - PAD_R}' height='{PANEL}'"
@@ -176,7 +185,7 @@ def _svg(v: Any, mine: pd.DataFrame) -> str:
                 out.append(_line(cx, cx, y_of(y - e), y_of(y + e), color))
             out.append(f"<circle cx='{cx:.1f}' cy='{y_of(y):.1f}' r='2.5' fill='{color}'/>")
         for m in _list(v.mountings):
-            value = m.get(f"{name}_deg")
+            value = m.get(Angles.value_column(name))
             if value is None or not math.isfinite(value):
                 continue
             a, b = _extent(m, names, by_time)

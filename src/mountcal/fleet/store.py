@@ -22,6 +22,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 from blake3 import blake3
 
+from mountcal.core.angles import YAW_REASON, Angles
 from mountcal.core.atomic import atomic_path
 from mountcal.core.errors import InputError
 from mountcal.core.paths import special_kind
@@ -199,6 +200,14 @@ _F, _I, _S, _B = pa.float64(), pa.int64(), pa.string(), pa.bool_()
 _T = pa.timestamp("us", tz="UTC")
 _L = pa.list_(pa.string())
 
+
+def _angle_columns(meanings: tuple[str, ...], slope: bool = True) -> tuple[tuple[str, pa.DataType, str], ...]:
+    """The angle columns (:meth:`Angles.column_names`, the one spelling of them), each with its meaning."""
+    names = Angles.column_names(slope=slope)
+    assert len(meanings) == len(names)
+    return tuple((n, _S if n == YAW_REASON else _F, m) for n, m in zip(names, meanings, strict=True))
+
+
 LOG_COLUMNS: tuple[tuple[str, pa.DataType, str], ...] = (
     ("vehicle_id", _S, "vehicle (manifest, or the log's parent folder name)"),
     ("log", _S, "the log as found: a file, split files joined with ' + ', or a CANedge session folder"),
@@ -212,15 +221,19 @@ LOG_COLUMNS: tuple[tuple[str, pa.DataType, str], ...] = (
     ("start_time_source", _S, "manifest, log clock, or null"),
     ("input_kind", _S, "log or stop table"),
     ("calibrated_from", _S, "stops, driving or stops + driving (logs); null for a stop table"),
-    ("roll_deg", _F, "roll γ (deg)"),
-    ("roll_sigma_deg", _F, "1σ of roll (deg)"),
-    ("pitch_deg", _F, "pitch θ (deg)"),
-    ("pitch_sigma_deg", _F, "1σ of pitch (deg)"),
-    ("yaw_deg", _F, "yaw φ (deg); null when not determined"),
-    ("yaw_sigma_deg", _F, "1σ of yaw (deg); null when not determined"),
-    ("yaw_reason", _S, "why yaw is not determined; null when it is"),
-    ("slope_deg", _F, "slope α of the parking plane (deg)"),
-    ("slope_sigma_deg", _F, "1σ of the slope (deg)"),
+    *_angle_columns(
+        (
+            "roll γ (deg)",
+            "1σ of roll (deg)",
+            "pitch θ (deg)",
+            "1σ of pitch (deg)",
+            "yaw φ (deg); null when not determined",
+            "1σ of yaw (deg); null when not determined",
+            "why yaw is not determined; null when it is",
+            "slope α of the parking plane (deg)",
+            "1σ of the slope (deg)",
+        )
+    ),
     ("rot_sigma_x_deg", _F, "1σ of the rotation about the vehicle x axis (deg; statistical part)"),
     ("rot_sigma_y_deg", _F, "1σ of the rotation about the vehicle y axis (deg; statistical part)"),
     ("rot_sigma_z_deg", _F, "1σ of the rotation about the vehicle z axis (deg; statistical part); null without yaw"),
@@ -280,13 +293,18 @@ MOUNTING_COLUMNS: tuple[tuple[str, pa.DataType, str], ...] = (  # FleetResult.mo
     ("last_log", _S, "last log of the segment"),
     ("first_start_time", _T, ""),
     ("last_start_time", _T, ""),
-    ("roll_deg", _F, "consensus roll (deg)"),
-    ("roll_sigma_deg", _F, "its 1σ (deg)"),
-    ("pitch_deg", _F, "consensus pitch (deg)"),
-    ("pitch_sigma_deg", _F, "its 1σ (deg)"),
-    ("yaw_deg", _F, "consensus yaw (deg); null when no log determined it"),
-    ("yaw_sigma_deg", _F, "its 1σ (deg)"),
-    ("yaw_reason", _S, "why yaw is not determined"),
+    *_angle_columns(
+        (
+            "consensus roll (deg)",
+            "its 1σ (deg)",
+            "consensus pitch (deg)",
+            "its 1σ (deg)",
+            "consensus yaw (deg); null when no log determined it",
+            "its 1σ (deg)",
+            "why yaw is not determined",
+        ),
+        slope=False,
+    ),
     ("rot_sigma_x_deg", _F, "1σ of the consensus rotation about vehicle x (deg)"),
     ("rot_sigma_y_deg", _F, ""),
     ("rot_sigma_z_deg", _F, ""),
@@ -320,12 +338,7 @@ _MOUNTING = pa.struct(
         ("last_start_time", _T),
         ("n_logs", _I),
         ("n_used", _I),
-        ("roll_deg", _F),
-        ("roll_sigma_deg", _F),
-        ("pitch_deg", _F),
-        ("pitch_sigma_deg", _F),
-        ("yaw_deg", _F),
-        ("yaw_sigma_deg", _F),
+        *((name, _F) for name in Angles.column_names(slope=False, reason=False)),
         ("sigma_scale", _F),
     ]
 )
@@ -352,13 +365,18 @@ VEHICLE_COLUMNS: tuple[tuple[str, pa.DataType, str], ...] = (  # fleet_vehicles.
     ("n_mountings", _I, "mounting periods (1 + remounts)"),
     ("first_start_time", _T, "start of the vehicle's first successful log"),
     ("last_start_time", _T, "start of its last"),
-    ("roll_deg", _F, "current mounting: consensus roll (deg)"),
-    ("roll_sigma_deg", _F, "its 1σ (deg)"),
-    ("pitch_deg", _F, "current mounting: consensus pitch (deg)"),
-    ("pitch_sigma_deg", _F, "its 1σ (deg)"),
-    ("yaw_deg", _F, "current mounting: consensus yaw (deg); null when no log of the period determined it"),
-    ("yaw_sigma_deg", _F, "its 1σ (deg)"),
-    ("yaw_reason", _S, "why yaw is not determined"),
+    *_angle_columns(
+        (
+            "current mounting: consensus roll (deg)",
+            "its 1σ (deg)",
+            "current mounting: consensus pitch (deg)",
+            "its 1σ (deg)",
+            "current mounting: consensus yaw (deg); null when no log of the period determined it",
+            "its 1σ (deg)",
+            "why yaw is not determined",
+        ),
+        slope=False,
+    ),
     ("rot_sigma_x_deg", _F, "1σ of the current mounting about vehicle x (deg)"),
     ("rot_sigma_y_deg", _F, ""),
     ("rot_sigma_z_deg", _F, ""),

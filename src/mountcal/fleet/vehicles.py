@@ -11,6 +11,7 @@ import numpy as np
 import pandas as pd
 from scipy.spatial.transform import Rotation
 
+from mountcal.core.angles import YAW_REASON, Angles
 from mountcal.core.conventions import levelled
 from mountcal.core.pvalues import chi2_sf
 from mountcal.fleet.agreement import ALPHA, Segment, analyse_vehicle, angles_with_sigma, information, tangent_residuals
@@ -132,9 +133,11 @@ def _segment_row(
     rot_sigma = np.degrees(np.sqrt(np.clip(np.diagonal(cons.cov_rad2), 0.0, None)))
     yaw_reason = None
     if not cons.observed[2]:
-        reasons = part["yaw_reason"].dropna()
+        reasons = part[YAW_REASON].dropna()
         common = reasons.mode().iloc[0] if not reasons.empty else "no log determined yaw"
         yaw_reason = f"no log of this mounting period determined yaw (e.g. {common})"
+    yaw = angles[2] if cons.observed[2] else None
+    consensus = Angles(angles[0], sigma[0], angles[1], sigma[1], yaw, sigma[2], yaw_reason, None, None)
     return {
         "segment": s,
         "n_segments": n_segments,
@@ -150,13 +153,7 @@ def _segment_row(
         "last_log": str(part["log"].iloc[-1]),
         "first_start_time": part["start_time"].iloc[0],
         "last_start_time": part["start_time"].iloc[-1],
-        "roll_deg": angles[0],
-        "roll_sigma_deg": sigma[0],
-        "pitch_deg": angles[1],
-        "pitch_sigma_deg": sigma[1],
-        "yaw_deg": angles[2] if cons.observed[2] else None,
-        "yaw_sigma_deg": sigma[2],
-        "yaw_reason": yaw_reason,
+        **consensus.columns(slope=False),  # the table's angle columns, spelled by the type
         "rot_sigma_x_deg": float(rot_sigma[0]),
         "rot_sigma_y_deg": float(rot_sigma[1]),
         "rot_sigma_z_deg": float(rot_sigma[2]) if cons.observed[2] else None,
@@ -207,22 +204,11 @@ MOUNTING_KEYS = (
     "last_start_time",
     "n_logs",
     "n_used",
-    "roll_deg",
-    "roll_sigma_deg",
-    "pitch_deg",
-    "pitch_sigma_deg",
-    "yaw_deg",
-    "yaw_sigma_deg",
+    *Angles.column_names(slope=False, reason=False),
     "sigma_scale",
 )
 LATEST_KEYS = (
-    "roll_deg",
-    "roll_sigma_deg",
-    "pitch_deg",
-    "pitch_sigma_deg",
-    "yaw_deg",
-    "yaw_sigma_deg",
-    "yaw_reason",
+    *Angles.column_names(slope=False),
     "rot_sigma_x_deg",
     "rot_sigma_y_deg",
     "rot_sigma_z_deg",

@@ -29,11 +29,12 @@ import numpy as np
 
 from mountcal.calibration.pipeline import calibrate_input
 from mountcal.core import budget
+from mountcal.core.angles import ANGLE_NAMES
 from mountcal.core.conventions import GIMBAL_LOCK_PITCH_DEG
 from mountcal.core.errors import MountcalError
 from mountcal.core.findings import STRUCTURE_P
 from mountcal.core.option_names import as_flags
-from mountcal.core.result import Calibration
+from mountcal.core.result import Calibration, Systematic
 from mountcal.estimate import effects as registry
 from mountcal.fleet.inputs import FleetJob
 from mountcal.fleet.storage import is_url, local_copies
@@ -205,14 +206,14 @@ def calibration_record(cal: Calibration) -> dict[str, Any]:
     flags: list[str] = []
     if rot_sigma[0] is None or rot_sigma[1] is None:
         # the paper's method gives σ of the angles only; near level they are the σ about the axes
-        rot_sigma = [cal.roll_sigma_deg, cal.pitch_sigma_deg, cal.yaw_sigma_deg]
+        rot_sigma = [cal.angles.sigmas[a] for a in ANGLE_NAMES[:3]]
         flags.append("axis_sigma_from_angles")
     sys_sigma: list[float | None] = [None] * 3
     if cal.systematic is not None and rot_sigma[0] is not None:
         # the logs of one sensor share its systematic error: they are compared, and averaged, on the statistical
         # part; the vehicle's consensus adds the systematic part once (fleet.vehicles)
-        rot_sigma = [cal.systematic.statistical[f"rotation_{a}_deg"] for a in "xyz"]
-        sys_sigma = [cal.systematic.systematic[f"rotation_{a}_deg"] for a in "xyz"]
+        rot_sigma = list(Systematic.rotation_of(cal.systematic.statistical))
+        sys_sigma = list(Systematic.rotation_of(cal.systematic.systematic))
     if cal.yaw_deg is None:
         flags.append("yaw_not_determined")
         rot_sigma[2] = sys_sigma[2] = None
@@ -233,15 +234,7 @@ def calibration_record(cal: Calibration) -> dict[str, Any]:
     bias = [None] * 3 if fitted is None else list(fitted.value)
     bias_sigma = [None] * 3 if fitted is None else list(fitted.sigma)
     return {
-        "roll_deg": cal.roll_deg,
-        "roll_sigma_deg": cal.roll_sigma_deg,
-        "pitch_deg": cal.pitch_deg,
-        "pitch_sigma_deg": cal.pitch_sigma_deg,
-        "yaw_deg": cal.yaw_deg,
-        "yaw_sigma_deg": cal.yaw_sigma_deg,
-        "yaw_reason": cal.yaw_reason,
-        "slope_deg": cal.slope_deg,
-        "slope_sigma_deg": cal.slope_sigma_deg,
+        **cal.angles.columns(),  # the table's angle columns, spelled by the type
         "rot_sigma_x_deg": rot_sigma[0],
         "rot_sigma_y_deg": rot_sigma[1],
         "rot_sigma_z_deg": rot_sigma[2],

@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from scipy.linalg import block_diag
 
+from mountcal.core.angles import ANGLE_NAMES, AngleValues
 from mountcal.core.conventions import FloatArray
 from mountcal.core.option_names import option
 from mountcal.core.result import Systematic
@@ -36,7 +37,6 @@ from mountcal.stops.table import StopTable
 if TYPE_CHECKING:
     from mountcal.core.result import Calibration
 
-KEYS = ("roll_deg", "pitch_deg", "yaw_deg", "slope_deg", "rotation_x_deg", "rotation_y_deg", "rotation_z_deg")
 HEADING = "heading"  # the name the headings' error is reported under in ``propagated``
 
 
@@ -127,15 +127,14 @@ def angle_sigmas(
     def deg(var: float) -> float:
         return float(np.degrees(np.sqrt(max(var, 0.0))))
 
-    out: dict[str, float | None] = {
-        "roll_deg": deg(grads[0] @ rot @ grads[0]),
-        "pitch_deg": deg(grads[1] @ rot @ grads[1]),
-        "yaw_deg": deg(grads[2] @ rot @ grads[2]) if yaw and k == 3 else None,
-        "slope_deg": deg(cov[names.index("slope"), names.index("slope")]) if slope and "slope" in names else None,
-    }
-    for i, axis in enumerate("xyz"):
-        out[f"rotation_{axis}_deg"] = deg(rot[i, i]) if i < k and (i < 2 or yaw) else None
-    return out
+    angles = AngleValues(
+        roll_deg=deg(grads[0] @ rot @ grads[0]),
+        pitch_deg=deg(grads[1] @ rot @ grads[1]),
+        yaw_deg=deg(grads[2] @ rot @ grads[2]) if yaw and k == 3 else None,
+        slope_deg=deg(cov[names.index("slope"), names.index("slope")]) if slope and "slope" in names else None,
+    )
+    rotation = tuple(deg(rot[i, i]) if i < k and (i < 2 or yaw) else None for i in range(3))
+    return Systematic.part(angles, rotation)  # as the result file keeps a part
 
 
 def combine(
@@ -147,21 +146,14 @@ def combine(
 ) -> Calibration:
     """``cal`` with total σ in its fields, both parts in ``systematic``, and a note when systematic dominates
     (naming the headings when it is mostly theirs: ``sensor_only`` is the part without them)."""
-    stat: dict[str, float | None] = {
-        "roll_deg": cal.roll_sigma_deg,
-        "pitch_deg": cal.pitch_sigma_deg,
-        "yaw_deg": cal.yaw_sigma_deg,
-        "slope_deg": cal.slope_sigma_deg,
-        **{f"rotation_{a}_deg": s for a, s in zip("xyz", cal.rotation_sigma_deg, strict=True)},
-    }
-    sys_sigma = {k: (sys_sigma.get(k) if stat[k] is not None else None) for k in KEYS}
+    stat = Systematic.part(cal.angles.sigmas, cal.rotation_sigma_deg)
+    sys_sigma = {k: (sys_sigma.get(k) if stat[k] is not None else None) for k in stat}
+    stat_a, sys_a = Systematic.angles_of(stat), Systematic.angles_of(sys_sigma)
 
-    def total(key: str) -> float | None:
-        s, t = stat[key], sys_sigma[key]
+    def total(s: float | None, t: float | None) -> float | None:
         return None if s is None else float(np.hypot(s, t or 0.0))
 
-    def tilt(key: str) -> float:  # roll and pitch always have a σ
-        return float(np.hypot(cal.roll_sigma_deg if key == "roll_deg" else cal.pitch_sigma_deg, sys_sigma[key] or 0.0))
+    tilt_and_yaw = ANGLE_NAMES[:3]
 
     part = Systematic(
         statistical=stat,
@@ -170,10 +162,7 @@ def combine(
         limits=errors.limits,
         propagated=used,
         default_spec=errors.limits.source == _DEFAULT_SRC,
-        dominant=any(
-            (a := sys_sigma.get(k)) is not None and (b := stat.get(k)) is not None and a > b
-            for k in ("roll_deg", "pitch_deg", "yaw_deg")
-        ),
+        dominant=any((a := sys_a[k]) is not None and (b := stat_a[k]) is not None and a > b for k in tilt_and_yaw),
     )
     notes = list(cal.notes)
     if part.default_spec:
@@ -183,15 +172,16 @@ def combine(
             f"give {option('sensor_spec')} or {option('triad')} for your sensor"
         )
     if part.dominant:
-        over = [k for k in ("roll_deg", "pitch_deg", "yaw_deg") if (sys_sigma[k] or 0.0) > (stat[k] or np.inf)]
-        without = sys_sigma if sensor_only is None else sensor_only  # the systematic σ without the headings' part
-        by_headings = [k for k in over if (without.get(k) or 0.0) < (sys_sigma[k] or 0.0) / 2**0.5]
+        over = [k for k in tilt_and_yaw if (sys_a[k] or 0.0) > (stat_a[k] or np.inf)]
+        # the systematic σ without the headings' part
+        without = sys_a if sensor_only is None else Systematic.angles_of(sensor_only)
+        by_headings = [k for k in over if (without[k] or 0.0) < (sys_a[k] or 0.0) / 2**0.5]
 
         def both(k: str) -> str:
-            return f"{k.split('_')[0]} σ {stat[k]:.3g}° statistical, {sys_sigma[k]:.3g}° systematic"
+            return f"{k} σ {stat_a[k]:.3g}° statistical, {sys_a[k]:.3g}° systematic"
 
         if by_sensor := [k for k in over if k not in by_headings]:
-            worst = max(by_sensor, key=lambda k: sys_sigma[k] or 0.0)
+            worst = max(by_sensor, key=lambda k: sys_a[k] or 0.0)
             notes.append(
                 f"the error is dominated by sensor errors these stops cannot see "
                 f"({', '.join(_short(tuple(n for n in used if n != HEADING)))}): {both(worst)}; a triad calibration "
@@ -205,16 +195,12 @@ def combine(
                 f"{option('sensor_spec')} if they are better known (surveyed marks, a dual-antenna GNSS heading), "
                 "or log a drive with vehicle speed (yaw from driving needs no heading)"
             )
-    rot = cal.rotation_sigma_deg
+    sigmas = AngleValues(*(total(s, sys_a[k]) for k, s in stat_a.items()))
+    rot = zip(Systematic.rotation_of(stat), Systematic.rotation_of(sys_sigma), strict=True)
+    x, y, z = (total(s, t) for s, t in rot)
     return replace(
-        cal,
-        roll_sigma_deg=tilt("roll_deg"),
-        pitch_sigma_deg=tilt("pitch_deg"),
-        yaw_sigma_deg=total("yaw_deg"),
-        slope_sigma_deg=total("slope_deg"),
-        rotation_sigma_deg=tuple(
-            total(f"rotation_{a}_deg") if s is not None else None for a, s in zip("xyz", rot, strict=True)
-        ),  # type: ignore[arg-type]
+        cal.with_angles(cal.angles.with_sigmas(sigmas)),
+        rotation_sigma_deg=(x, y, z),
         systematic=part,
         notes=tuple(notes),
     )
@@ -243,13 +229,10 @@ def _rescaled(cal: Calibration, factor: float, birge: float) -> Calibration:
     def times(x: float | None) -> float | None:
         return None if x is None else x * factor
 
+    x, y, z = (times(s) for s in cal.rotation_sigma_deg)
     return replace(
-        cal,
-        roll_sigma_deg=cal.roll_sigma_deg * factor,
-        pitch_sigma_deg=cal.pitch_sigma_deg * factor,
-        yaw_sigma_deg=times(cal.yaw_sigma_deg),
-        slope_sigma_deg=times(cal.slope_sigma_deg),
-        rotation_sigma_deg=tuple(times(x) for x in cal.rotation_sigma_deg),  # type: ignore[arg-type]
+        cal.with_angles(cal.angles.widened(factor)),
+        rotation_sigma_deg=(x, y, z),
         fit=replace(cal.fit, birge_ratio=birge, birge_note="χ² less what the sensor errors' mean explains"),
     )
 
@@ -262,12 +245,8 @@ def _short(names: tuple[str, ...]) -> list[str]:
 
 def summary_line(part: Systematic) -> str:
     """One line for the CLI summary: both parts of the tilt and yaw σ, and where the limits come from."""
-    st, sy = part.statistical, part.systematic
-    both = ", ".join(
-        f"{k.split('_')[0]} {st[k]:.3g}° / {sy[k] or 0.0:.3g}°"
-        for k in ("roll_deg", "pitch_deg", "yaw_deg")
-        if st[k] is not None
-    )
+    st, sy = part.statistical_angles, part.systematic_angles
+    both = ", ".join(f"{k} {s:.3g}° / {sy[k] or 0.0:.3g}°" for k, s in st.items(ANGLE_NAMES[:3]) if s is not None)
     return f"σ statistical / systematic: {both} (sensor: {part.source})"
 
 

@@ -31,6 +31,7 @@ import pandas as pd
 
 from mountcal.calibration.fit import WITH_OFFSET, calibrate
 from mountcal.calibration.options import Options
+from mountcal.core.angles import ANGLE_NAMES, AngleName, Angles
 from mountcal.core.atomic import atomic_path
 from mountcal.core.conventions import specific_force_v
 from mountcal.core.errors import InputError, MountcalError, NotEnoughInformation
@@ -119,17 +120,14 @@ def next_heading(
         crb = crb_deg(grown, state, terms, cal.gravity_mps2)
         if crb is None:
             continue
-        worst = max(
-            (np.inf if crb.get(f"{a}_deg") is None else float(crb[f"{a}_deg"]) / t)  # type: ignore[arg-type]
-            for a, t in target_deg.items()
-        )
+        worst = max((np.inf if (bound := crb[a]) is None else bound / t) for a, t in target_deg.items())
         if best is None or worst < best[0]:
             best = (worst, beta)
     return None if best is None else best[1]
 
 
 def sigma_of(cal: Calibration, angle: str) -> float | None:
-    return {"roll": cal.roll_sigma_deg, "pitch": cal.pitch_sigma_deg, "yaw": cal.yaw_sigma_deg}[angle]
+    return cal.angles.sigmas[angle]
 
 
 def target_met(cal: Calibration, target_deg: dict[str, float]) -> bool:
@@ -141,7 +139,8 @@ def unreachable(cal: Calibration, target_deg: dict[str, float]) -> dict[str, flo
     part = cal.systematic
     if part is None:
         return {}
-    return {a: s for a, t in target_deg.items() if (s := part.systematic.get(f"{a}_deg")) is not None and s > t}
+    sys = part.systematic_angles
+    return {a: s for a, t in target_deg.items() if (s := sys[a]) is not None and s > t}
 
 
 class Live:
@@ -287,10 +286,7 @@ class Live:
             return False
         self.last.table, self.last.calibration, self.last.still_not_kept = table, cal, found.dropped
         event: dict[str, Any] = {"event": "fit", "stops": len(table), "model": list(cal.model)}
-        for a in ("roll", "pitch", "yaw"):
-            event[f"{a}_deg"] = getattr(cal, f"{a}_deg")
-            event[f"{a}_sigma_deg"] = sigma_of(cal, a)
-        event["yaw_reason"] = cal.yaw_reason
+        event |= cal.angles.columns(slope=False)  # the message's flat columns, spelled by the type
         self.emit(event)
         met = target_met(cal, self.opts.target_deg)
         if met:
@@ -332,12 +328,13 @@ def line_of(event: dict[str, Any]) -> str:
         beta = "β unknown" if event["beta_deg"] is None else f"β {event['beta_deg']:g}°"
         return f"STOP {event['index']} ended ({event['t_end_s'] - event['t_start_s']:.0f} s, {beta})"
     if kind == "fit":
+        angles = Angles.from_columns(event)
 
-        def pm(a: str) -> str:
-            v, s = event[f"{a}_deg"], event[f"{a}_sigma_deg"]
+        def pm(a: AngleName) -> str:
+            v, s = angles.value(a), angles.sigma(a)
             return f"{a} not determined" if v is None or s is None else f"{a} {v:+.3f}° ± {s:.3f}°"
 
-        return f"{event['stops']} stops: " + "   ".join(pm(a) for a in ("roll", "pitch", "yaw"))
+        return f"{event['stops']} stops: " + "   ".join(pm(a) for a in ANGLE_NAMES[:3])
     if kind == "next":
         return f">>> DRIVE TO β = {event['beta_deg']:g}° (from uphill) and park"
     if kind == "target_met":

@@ -25,12 +25,14 @@ import pandas as pd
 
 from mountcal.calibration.fit import BASE, WITH_OFFSET
 from mountcal.calibration.options import parse_model
+from mountcal.core.angles import ANGLE_NAMES, AngleName, AngleValues
 from mountcal.core.atomic import atomic_path
 from mountcal.core.conventions import G_N, FloatArray
 from mountcal.core.errors import InputError, NotEnoughInformation
 from mountcal.core.option_names import option
 from mountcal.core.output_suffix import check_output_suffix
 from mountcal.core.ranges import QUANTITIES, check
+from mountcal.core.result import Systematic
 from mountcal.estimate import effects as registry
 from mountcal.estimate.bound import crb_deg, true_state
 from mountcal.estimate.sensor_errors import SensorErrors, from_spec
@@ -42,7 +44,7 @@ from mountcal.simulate.stops import simulate_stops
 from mountcal.stops.detect import StopDetection, detect_stops
 from mountcal.stops.table import StopTable
 
-ANGLES = ("roll", "pitch", "yaw")
+ANGLES: tuple[AngleName, ...] = ANGLE_NAMES[:3]  # the angles a target names
 DWELLS_S = (15.0, 20.0, 30.0, 45.0, 60.0, 90.0, 120.0, 180.0, 300.0)  # candidate dwell times when not given
 SLOPES_DEG = tuple(float(s) for s in np.arange(1.0, 15.01, 0.5))  # candidate slopes when not given
 FLOOR_NOISE_MPS2 = 1e-7  # stop noise standing for "noise-free" in the systematic floor (10 ng)
@@ -86,9 +88,9 @@ class Plan:
     slope_deg: float
     beta_deg: tuple[float, ...]  # in driving order
     stop_s: float
-    sigma_deg: dict[str, float | None]  # predicted total 1σ of roll, pitch, yaw (and slope), as calibrate reports
-    statistical_deg: dict[str, float | None]  # its statistical part (the bound)
-    systematic_deg: dict[str, float | None]  # its systematic part (the sensor's limits)
+    sigma_deg: AngleValues  # predicted total 1σ of roll, pitch, yaw (and slope), as calibrate reports
+    statistical_deg: AngleValues  # its statistical part (the bound)
+    systematic_deg: AngleValues  # its systematic part (the sensor's limits)
     reason: str = ""
 
     @property
@@ -191,7 +193,7 @@ def plan_terms(model: str) -> tuple[str, ...]:
     return terms
 
 
-def unit_bound(n_stops: int, slope_deg: float, terms: tuple[str, ...]) -> dict[str, float | None]:
+def unit_bound(n_stops: int, slope_deg: float, terms: tuple[str, ...]) -> AngleValues:
     """Bound (degrees) of roll, pitch, yaw, slope for ``n_stops`` evenly spaced headings at 1 m/s² stop noise."""
     return bound_of_headings(headings(n_stops), slope_deg, terms, 1.0)
 
@@ -203,7 +205,7 @@ def headings(n_stops: int) -> tuple[float, ...]:
 
 def bound_of_headings(
     beta_deg: tuple[float, ...] | FloatArray, slope_deg: float, terms: tuple[str, ...], stop_sigma_mps2: float
-) -> dict[str, float | None]:
+) -> AngleValues:
     """The bound for given headings and stop-mean noise, at a nominal (aligned) mounting."""
     return table_bound(_design_table(beta_deg, slope_deg, stop_sigma_mps2), slope_deg, terms)
 
@@ -214,14 +216,12 @@ def _design_table(beta_deg: tuple[float, ...] | FloatArray, slope_deg: float, st
     return replace(table, cov_s=np.broadcast_to(np.eye(3) * stop_sigma_mps2**2, (len(table), 3, 3)).copy())
 
 
-def table_bound(table: StopTable, slope_deg: float, terms: tuple[str, ...]) -> dict[str, float | None]:
+def table_bound(table: StopTable, slope_deg: float, terms: tuple[str, ...]) -> AngleValues:
     """The bound of a stop table (its stop covariances) at an aligned mounting on ``slope_deg``."""
     from scipy.spatial.transform import Rotation
 
     crb = crb_deg(table, true_state(Rotation.identity(), slope_deg, G_N), terms, G_N)
-    if crb is None:
-        return {"roll": None, "pitch": None, "yaw": None, "slope": None}
-    return {k: crb[f"{k}_deg"] for k in ("roll", "pitch", "yaw", "slope")}
+    return AngleValues(None, None, None, None) if crb is None else crb
 
 
 def systematic_of_headings(
@@ -230,14 +230,14 @@ def systematic_of_headings(
     terms: tuple[str, ...],
     stop_sigma_mps2: float,
     sensor: SensorErrors,
-) -> dict[str, float]:
+) -> AngleValues:
     """The systematic 1σ (degrees) calibrate would report for this design: ``sensor``'s limits through the gain."""
     return _systematic(_design_table(beta_deg, slope_deg, 1.0), slope_deg, terms, stop_sigma_mps2, sensor)
 
 
 def _systematic(
     unit: StopTable, slope_deg: float, terms: tuple[str, ...], stop_sigma_mps2: float, sensor: SensorErrors
-) -> dict[str, float]:
+) -> AngleValues:
     """As calibrate's (mountcal.loop.systematic.assess) at the design's true state; ``unit``: stops with unit
     covariance.
 
@@ -251,13 +251,13 @@ def _systematic(
     state = true_state(Rotation.identity(), slope_deg, G_N)
     names = tuple(full.StaticModel(unit, terms, G_N).names)
     cov, _, _, _ = propagate(unit, state, names, terms, G_N, sensor, stop_sigma_mps2)
-    sig = angle_sigmas(cov, names, state.rot_vs, yaw=True, slope=True)
-    return {k: float(sig[f"{k}_deg"] or 0.0) for k in ("roll", "pitch", "yaw", "slope")}
+    sig = Systematic.angles_of(angle_sigmas(cov, names, state.rot_vs, yaw=True, slope=True))
+    return AngleValues(*(float(v or 0.0) for _, v in sig.items()))
 
 
-def _total(stat: dict[str, float | None], sys: dict[str, float]) -> dict[str, float | None]:
+def _total(stat: AngleValues, sys: AngleValues) -> AngleValues:
     """Root sum of squares, as calibrate combines them (an undetermined angle stays undetermined)."""
-    return {k: (None if v is None else float(np.hypot(v, sys[k]))) for k, v in stat.items()}
+    return AngleValues(*(None if v is None else float(np.hypot(v, sys[k] or 0.0)) for k, v in stat.items()))
 
 
 def make_plan(req: Request) -> Plan:
@@ -306,35 +306,35 @@ def _best_at_slope(req: Request, slope: float, dwells: tuple[float, ...]) -> Pla
         table = _design_table(headings(n), slope, 1.0)
         for dwell in dwells:
             s = req.noise.stop_sigma_mps2(dwell - trim)
-            stat = {k: (None if v is None else v * s) for k, v in unit.items()}
+            stat = unit.times(s)
             sys = _systematic(table, slope, req.terms, s, req.sensor)
             candidates.append((session_time(n, dwell, req.drive_s), n, dwell, stat, sys))
     reachable = [c for c in candidates if max(_shortfall(_total(c[3], c[4]), req.target_deg).values()) <= 1.0]
     if reachable:
         _, n, dwell, stat, sys = min(reachable, key=lambda c: (c[0], c[1]))
-        return Plan(req, True, slope, headings(n), dwell, _total(stat, sys), stat, dict(sys))
+        return Plan(req, True, slope, headings(n), dwell, _total(stat, sys), stat, sys)
     _, n, dwell, stat, sys = min(
         candidates, key=lambda c: (max(_shortfall(_total(c[3], c[4]), req.target_deg).values()), c[0])
     )
-    return Plan(req, False, slope, headings(n), dwell, _total(stat, sys), stat, dict(sys))
+    return Plan(req, False, slope, headings(n), dwell, _total(stat, sys), stat, sys)
 
 
-def systematic_floor(req: Request, slope: float) -> dict[str, float]:
+def systematic_floor(req: Request, slope: float) -> AngleValues:
     """The systematic σ on one slope with noise-free stops: what no number of stops or dwell lowers."""
     n = req.max_stops
     return _systematic(_design_table(headings(n), slope, 1.0), slope, req.terms, FLOOR_NOISE_MPS2, req.sensor)
 
 
-def _shortfall(sigma: dict[str, float | None], target: dict[str, float]) -> dict[str, float]:
+def _shortfall(sigma: AngleValues, target: dict[str, float]) -> dict[str, float]:
     """σ / target per targeted angle (inf when the angle is not determined)."""
-    return {a: (np.inf if sigma.get(a) is None else float(sigma[a]) / t) for a, t in target.items()}  # type: ignore[arg-type]
+    return {a: (np.inf if (s := sigma[a]) is None else s / t) for a, t in target.items()}
 
 
 def _why_not(req: Request, plan: Plan, dwells: tuple[float, ...]) -> str:
     over = [a for a, r in _shortfall(plan.sigma_deg, req.target_deg).items() if r > 1.0]
     slopes = (req.slope_deg,) if req.slope_deg is not None else SLOPES_DEG
     floors = [systematic_floor(req, slope) for slope in slopes]
-    floor = {a: min(f[a] for f in floors) for a in over}
+    floor = {a: min(f[a] or 0.0 for f in floors) for a in over}
     below = [a for a in over if floor[a] >= req.target_deg[a]]
     parts = []
     if below:
@@ -446,7 +446,8 @@ def monte_carlo_rms(plan: Plan, runs: int, seed: int, bias_mg: float = 20.0) -> 
             seed=rng,
         )
         cal = calibrate(table, options)
-        for a, got, true in zip(ANGLES, (cal.roll_deg, cal.pitch_deg, cal.yaw_deg), truth.angles_deg, strict=True):
+        for a, true in zip(ANGLES, truth.angles_deg, strict=True):
             if a in req.target_deg:
+                got = cal.angles.value(a)
                 errors[a].append(np.nan if got is None else float((got - true + 180.0) % 360.0 - 180.0))
     return {a: float(np.sqrt(np.mean(np.square(e)))) for a, e in errors.items() if e}

@@ -9,9 +9,10 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
+from mountcal.core.angles import ANGLE_NAMES
 from mountcal.core.result import Calibration, EffectValue, ModelStep
 
-ANGLES = ("roll", "pitch", "yaw", "slope")
+ANGLES = ANGLE_NAMES
 
 
 @dataclass(frozen=True)
@@ -36,12 +37,8 @@ def angle_estimates(entry: Calibration | ModelStep | Mapping[str, Estimate]) -> 
     if isinstance(entry, Mapping):
         return {name: entry.get(name, Estimate(None, None, "not given")) for name in ANGLES}
     a = entry.angles
-    return {
-        "roll": Estimate(a.roll_deg, a.roll_sigma_deg),
-        "pitch": Estimate(a.pitch_deg, a.pitch_sigma_deg),
-        "yaw": Estimate(a.yaw_deg, a.yaw_sigma_deg, a.yaw_reason),
-        "slope": Estimate(a.slope_deg, a.slope_sigma_deg, None if a.slope_deg is not None else "not determined"),
-    }
+    why = {"yaw": a.yaw_reason, "slope": None if a.slope_deg is not None else "not determined"}
+    return {name: Estimate(a.value(name), a.sigma(name), why.get(name)) for name in ANGLES}
 
 
 def step_label(index: int, step: ModelStep) -> str:
@@ -53,9 +50,7 @@ def moved_deg(step: ModelStep) -> dict[str, float]:
     """How far each determined angle moved from the previous step, degrees."""
     if step.moved is None:
         return {}
-    moved = {"roll": step.moved.roll_deg, "pitch": step.moved.pitch_deg}
-    moved |= {"yaw": step.moved.yaw_deg, "slope": step.moved.slope_deg}
-    return {name: value for name, value in moved.items() if value is not None}
+    return {name: value for name, value in step.moved.items() if value is not None}
 
 
 def format_effect(effect: EffectValue) -> str:

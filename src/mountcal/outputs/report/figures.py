@@ -441,7 +441,7 @@ def uncertainty_vs_crb(cal: Calibration) -> Figure:
         (f"this fit ({', '.join(cal.model)})", {a: est[a].sigma if est[a].determined else None for a in ANGLES})
     ]
     for model, bounds in crb.items():
-        bound = {a: None if bounds is None else _positive(getattr(bounds, f"{a}_deg")) for a in ANGLES}
+        bound: dict[str, float | None] = {a: None if bounds is None else _positive(bounds[a]) for a in ANGLES}
         series.append((f"CRB {model.replace(',', ', ')}", bound))
     fig = Figure(figsize=(7.5, 3.8), layout="constrained")
     ax = fig.add_subplot()
