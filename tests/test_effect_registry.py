@@ -44,7 +44,8 @@ ALLOWED: dict[str, dict[str, str]] = {
     "io/input_conventions.py": {"gravity": "the input convention", "gravity_mps2": "its column and field"},
     "loop/plausibility.py": {"gravity": "the name of the plausibility check of the gravity in force"},
     # a temperature channel of a log or table: the sensor's reading, not the effect that may use it
-    "io/bag/topics.py": {"temperature": "a ROS topic kind"},
+    "io/ros/topics.py": {"temperature": "a ROS topic kind"},
+    "io/ros/pieces.py": {"temperature": "a ROS message kind and its samples"},
     "io/can/mapping.py": {"temperature": "a CAN signal role"},
     "io/can/signals.py": {"temperature": "a CAN signal role"},
     "io/mcap/read.py": {"temperature": "a ROS message kind and its field"},
