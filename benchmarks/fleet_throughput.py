@@ -14,7 +14,8 @@ start-up, the calibrations and the consolidation are all inside:
 2. ``--workers 2``;
 3. ``--scheduler`` to a Dask ``LocalCluster(n_workers=1, threads_per_worker=1, processes=True)``
    with the settings docs/fleet.md gives for fleets (``FLEET_DASK_CONFIG``: the workers' profiler
-   off, the monitors polled less often; ``--dask-defaults`` runs it on Dask's defaults instead);
+   off, the monitors polled less often; mountcal preloaded in the workers) — ``--dask-defaults``
+   runs it on Dask's defaults instead;
 4. the same with ``n_workers=2``.
 
 Each cluster is started just before its run and closed after it (its start-up is reported
@@ -224,10 +225,11 @@ def dask_cluster(startup_s: list[float], workers: int) -> Iterator[str]:
 
     started = time.perf_counter()
     # the nannies hand this configuration to their worker processes
-    from mountcal.fleet.engines import FLEET_DASK_CONFIG
+    from mountcal.fleet.engines import FLEET_DASK_CONFIG, WORKER_MODULE
 
+    fleet = {**FLEET_DASK_CONFIG, "distributed.worker.preload": [WORKER_MODULE]}  # as docs/fleet.md starts one
     with (
-        dask.config.set({} if DASK_DEFAULTS[0] else FLEET_DASK_CONFIG),
+        dask.config.set({} if DASK_DEFAULTS[0] else fleet),
         LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster,
     ):
         startup_s.append(time.perf_counter() - started)

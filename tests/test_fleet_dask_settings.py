@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import shlex
 import signal
 import subprocess
 import sys
@@ -28,6 +29,15 @@ def documented_environment() -> dict[str, str]:
     block = re.search(r"```sh\n(.*?)```", section, re.S)
     assert block, "docs/fleet.md: no ```sh block under 'Dask settings for fleets'"
     return dict(re.findall(r"^export (DASK_\w+)=(\S+)$", block.group(1), re.M))
+
+
+def documented_worker_arguments(address: str) -> list[str]:
+    """The `dask worker` command docs/fleet.md shows, for this scheduler (its address replaced)."""
+    page = (REPO / "docs" / "fleet.md").read_text()
+    section = page.split("### Dask settings for fleets", 1)[1]
+    (line,) = re.findall(r"^dask worker .*$", section, re.M)
+    words = shlex.split(line)[1:]
+    return [address if w.startswith("tcp://") else w for w in words]
 
 
 def test_the_documented_settings_are_the_engines_and_dask_reads_them_as_written() -> None:
@@ -68,7 +78,7 @@ def documented_cluster(tmp_path: Path) -> Iterator[str]:
         address = json.loads(scheduler_file.read_text())["address"]
         started.append(
             subprocess.Popen(
-                [str(DASK), "worker", address, "--nthreads", "1", "--no-dashboard"],
+                [str(DASK), *documented_worker_arguments(address), "--no-dashboard"],
                 env=env,
                 stdout=subprocess.DEVNULL,
                 stderr=subprocess.DEVNULL,
@@ -100,3 +110,4 @@ def test_a_cluster_on_dask_defaults_is_told_which_settings_slow_a_fleet() -> Non
             engine.start()
             (note,) = engine.notes
     assert "worker.profile.enabled (True)" in note and "docs/fleet.md" in note, note
+    assert "1 of 1 Dask workers have not imported mountcal" in note and "--preload mountcal.fleet.worker" in note

@@ -106,6 +106,22 @@ class Engine(Protocol):
     def __exit__(self, *exc: object) -> None: ...
 
 
+def _run_job(job: FleetJob) -> dict[str, Any]:
+    """:func:`mountcal.fleet.worker.run_job`, submitted under this light module's name: the command sends
+    the function by reference without importing all of mountcal first (≈ 1 s before the first log
+    went out); the worker imports it once (the worker server, or a Dask preload, already has)."""
+    from mountcal.fleet.worker import run_job
+
+    return run_job(job)
+
+
+def _run_batch(jobs: list[FleetJob]) -> list[dict[str, Any]]:
+    """:func:`mountcal.fleet.worker.run_batch`, submitted by reference as :func:`_run_job` is."""
+    from mountcal.fleet.worker import run_batch
+
+    return run_batch(jobs)
+
+
 def engine_failure(err: BaseException, what: str) -> dict[str, Any]:
     """The record of a log the engine could not run (not stored: the next run retries it)."""
     kind = f"{type(err).__module__}.{type(err).__qualname__}"
@@ -193,8 +209,6 @@ class LocalEngine:
         first = next(source, None)
         if first is None:  # nothing to calibrate: no workers needed
             return
-        from mountcal.fleet.worker import run_job  # all of mountcal: imported once there is work
-
         source = itertools.chain([first], source)
         self.start()
         assert self._starting is not None
@@ -212,7 +226,7 @@ class LocalEngine:
             if suspects:  # after a worker died, run each suspect alone to find the culprit
                 if not inflight:
                     key = suspects.popleft()
-                    inflight[pool.submit(run_job, by_key[key])] = key
+                    inflight[pool.submit(_run_job, by_key[key])] = key
             else:
                 while not exhausted and len(inflight) < QUEUED_PER_WORKER * self.workers:
                     pair = next(source, None)  # pulls (and hashes) the next log only when a worker needs it
@@ -220,7 +234,7 @@ class LocalEngine:
                         exhausted = True
                     else:
                         by_key[pair[0]] = pair[1]
-                        inflight[pool.submit(run_job, pair[1])] = pair[0]
+                        inflight[pool.submit(_run_job, pair[1])] = pair[0]
             if not inflight:
                 continue
             done, _ = wait(inflight, timeout=WAKE_S, return_when=FIRST_COMPLETED)
@@ -400,14 +414,29 @@ class DaskEngine:
             seen = self._client.run(_dask_settings, list(FLEET_DASK_CONFIG))
         except Exception:  # no workers yet, or a worker that cannot answer: nothing to say
             return ()
-        differ = sorted({k for settings in seen.values() for k, v in settings.items() if v != FLEET_DASK_CONFIG[k]})
-        if not differ:
-            return ()
-        shown = ", ".join(f"{k.removeprefix('distributed.')} ({_seen_value(seen, k)})" for k in differ)
-        return (
-            f"the Dask workers run with {shown}: Dask's monitoring costs a busy worker about 10 % of its core; "
-            'for fleets start the cluster with the settings in docs/fleet.md ("Dask settings for fleets")',
+        notes = []
+        differ = sorted(
+            {
+                k
+                for settings in seen.values()
+                for k, v in settings.items()
+                if k in FLEET_DASK_CONFIG and v != FLEET_DASK_CONFIG[k]
+            }
         )
+        if differ:
+            shown = ", ".join(f"{k.removeprefix('distributed.')} ({_seen_value(seen, k)})" for k in differ)
+            notes.append(
+                f"the Dask workers run with {shown}: Dask's monitoring costs a busy worker about 10 % of its core"
+            )
+        cold = sum(not settings.get(WORKER_MODULE) for settings in seen.values())
+        if cold:
+            notes.append(
+                f"{cold} of {len(seen)} Dask workers have not imported mountcal: each does at its first log (≈ 1 s of "
+                f"CPU); start them with --preload {WORKER_MODULE}"
+            )
+        if notes:
+            notes.append('for fleets start the cluster as docs/fleet.md shows ("Dask settings for fleets")')
+        return ("; ".join(notes),) if notes else ()
 
     def _check_address(self) -> None:
         """Refuse an address that cannot name a scheduler of another process before a Client exists
@@ -442,8 +471,6 @@ class DaskEngine:
             return max(1, len(self._client.scheduler_info().get("workers", {})))
 
     def results(self, jobs: Iterable[tuple[str, FleetJob]]) -> Iterator[tuple[str, dict[str, Any]]]:
-        from mountcal.fleet.worker import run_batch
-
         self.start()
         client = self._client
         token = secrets.token_hex(4)
@@ -474,7 +501,7 @@ class DaskEngine:
                         size = sizing.size(len(waiting), exhausted, workers)
                         batch = [waiting.popleft() for _ in range(min(size, len(waiting)))]
                     name = f"mountcal-fleet-{token}-{next(serial)}-{batch[0][0][:16]}"
-                    future = client.submit(run_batch, [job for _, job in batch], key=name, pure=False)
+                    future = client.submit(_run_batch, [job for _, job in batch], key=name, pure=False)
                     batches[future] = batch
                     finished.add(future)
                 if not batches:
@@ -521,10 +548,12 @@ class DaskEngine:
 
 
 def _dask_settings(keys: list[str]) -> dict[str, object]:
-    """On a worker: its values of the Dask settings named."""
+    """On a worker: its values of the Dask settings named, and whether mountcal's worker module is imported."""
+    import sys
+
     import dask
 
-    return {k: dask.config.get(k, None) for k in keys}
+    return {**{k: dask.config.get(k, None) for k in keys}, WORKER_MODULE: WORKER_MODULE in sys.modules}
 
 
 def _seen_value(seen: dict[str, dict[str, object]], key: str) -> str:
