@@ -7,8 +7,9 @@ import json
 import math
 import re
 import struct
+import subprocess
+import sys
 import tempfile
-import tracemalloc
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
@@ -476,7 +477,11 @@ def test_single_thread_path_equals_threaded(tmp_path: Path, monkeypatch: pytest.
     np.testing.assert_array_equal(inline.gyro_s, threaded.gyro_s)
 
 
-def _peak_bytes(fn: Any) -> int:
+PEAKS = """
+import json, sys, tracemalloc
+from mountcal.io.mcap.read import iter_mcap, read_mcap
+
+def peak(fn):
     tracemalloc.start()
     try:
         fn()
@@ -484,18 +489,23 @@ def _peak_bytes(fn: Any) -> int:
     finally:
         tracemalloc.stop()
 
+short, long = sys.argv[1:]
+n = lambda path: sum(len(b) for b in iter_mcap(path, max_samples=500))
+peak(lambda: n(short))  # first use: imports and caches are not the stream's memory
+print(json.dumps([peak(lambda: n(short)), peak(lambda: n(long)), peak(lambda: read_mcap(long)), n(short), n(long)]))
+"""
+
 
 def test_iter_memory_does_not_grow_with_log_length(tmp_path: Path) -> None:
     # Chunks large enough that the data in flight, not the per-chunk index entries (which do grow
-    # with the number of chunks, ~2 kB each), set the peak.
+    # with the number of chunks, ~2 kB each), set the peak. Measured in a fresh process: tracemalloc
+    # counts every thread's allocations, and threads other tests leave behind would be counted too.
     short = write_log(tmp_path / "short.mcap", n=6000, aux=False, chunk_size=128_000)
     long = write_log(tmp_path / "long.mcap", n=24_000, aux=False, chunk_size=128_000)
-
-    def stream(path: Path) -> None:
-        assert sum(len(b) for b in iter_mcap(path, max_samples=500)) in (6000, 24_000)
-
-    peak_short, peak_long = _peak_bytes(lambda: stream(short)), _peak_bytes(lambda: stream(long))
-    peak_read = _peak_bytes(lambda: read_mcap(long))
+    done = subprocess.run([sys.executable, "-c", PEAKS, str(short), str(long)], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    peak_short, peak_long, peak_read, n_short, n_long = json.loads(done.stdout)
+    assert (n_short, n_long) == (6000, 24_000)
     assert peak_long < 1.3 * peak_short  # 4x the log, (about) the same memory
     assert peak_long < 0.5 * peak_read  # while reading it whole needs far more
 

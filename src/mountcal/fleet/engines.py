@@ -424,7 +424,8 @@ class DaskEngine:
             }
         )
         if differ:
-            shown = ", ".join(f"{k.removeprefix('distributed.')} ({_seen_value(seen, k)})" for k in differ)
+            values = {k: ", ".join(sorted({str(settings.get(k)) for settings in seen.values()})) for k in differ}
+            shown = ", ".join(f"{k.removeprefix('distributed.')} ({v})" for k, v in values.items())
             notes.append(
                 f"the Dask workers run with {shown}: Dask's monitoring costs a busy worker about 10 % of its core"
             )
@@ -554,11 +555,6 @@ def _dask_settings(keys: list[str]) -> dict[str, object]:
     import dask
 
     return {**{k: dask.config.get(k, None) for k in keys}, WORKER_MODULE: WORKER_MODULE in sys.modules}
-
-
-def _seen_value(seen: dict[str, dict[str, object]], key: str) -> str:
-    """The workers' values of one setting, as said in a note."""
-    return ", ".join(sorted({str(settings.get(key)) for settings in seen.values()}))
 
 
 class _BatchSizing:
