@@ -23,19 +23,20 @@ REPO = Path(__file__).resolve().parents[1]
 DASK = Path(sys.executable).with_name("dask")
 
 
+def documented_section() -> str:
+    """docs/fleet.md from its "Dask settings for fleets" heading on."""
+    return (REPO / "docs" / "fleet.md").read_text().split("### Dask settings for fleets", 1)[1]
+
+
 def documented_environment() -> dict[str, str]:
-    page = (REPO / "docs" / "fleet.md").read_text()
-    section = page.split("### Dask settings for fleets", 1)[1]
-    block = re.search(r"```sh\n(.*?)```", section, re.S)
+    block = re.search(r"```sh\n(.*?)```", documented_section(), re.S)
     assert block, "docs/fleet.md: no ```sh block under 'Dask settings for fleets'"
     return dict(re.findall(r"^export (DASK_\w+)=(\S+)$", block.group(1), re.M))
 
 
 def documented_worker_arguments(address: str) -> list[str]:
     """The `dask worker` command docs/fleet.md shows, for this scheduler (its address replaced)."""
-    page = (REPO / "docs" / "fleet.md").read_text()
-    section = page.split("### Dask settings for fleets", 1)[1]
-    (line,) = re.findall(r"^dask worker .*$", section, re.M)
+    (line,) = re.findall(r"^dask worker .*$", documented_section(), re.M)
     words = shlex.split(line)[1:]
     return [address if w.startswith("tcp://") else w for w in words]
 
