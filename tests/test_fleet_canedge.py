@@ -270,6 +270,12 @@ def test_the_fleet_from_the_s3_server_gives_the_local_table(
         .equals(local_run["vehicles"].drop(columns=["remounts", "mountings"]).pipe(_comparable, str(canedge)))
     )
 
+    # a killed worker's copies (its lock free) go at the end of a run even when it fetches nothing
+    left = Path(tempfile.mkdtemp(prefix=f"mountcal-fetch-{os.getpid()}-"))
+    (left / ".held").touch()
+    code, stdout = run_cli("s3://fleet/LOG", "-o", str(output), "--dbc", str(DBC), *AZIMUTH, "-q", "--workers", "2")
+    assert code == 0 and "0 calibrated now" in stdout and not left.exists()
+
 
 def test_a_bad_endpoint_or_bucket_is_a_message_not_a_traceback(
     s3: dict[str, str], tmp_path: Path, capsys: pytest.CaptureFixture[str]
@@ -317,7 +323,25 @@ def test_a_run_against_the_bucket_killed_mid_run_resumes_losing_and_repeating_no
     table = pd.read_parquet(output)
     assert len(table) == 6 and table["log"].is_unique and (table["status"] == "ok").all()
     scratch = Path(tempfile.gettempdir())
-    assert not [f for pid in workers for f in scratch.glob(f"mountcal-fetch-{pid}-*")]  # the killed ones' copies
+    left = [f for pid in workers for f in scratch.glob(f"mountcal-fetch-{pid}-*")]  # the killed ones' copies
+    assert not left, [(str(f), sorted(p.name for p in f.rglob("*")), _lock_free(f)) for f in left]
+
+
+def _lock_free(folder: Path) -> bool | None:
+    """Whether a scratch folder's lock is free now (None: it has none), for a failure's message."""
+    import fcntl
+
+    try:
+        held = os.open(folder / ".held", os.O_RDONLY)
+    except OSError:
+        return None
+    try:
+        fcntl.flock(held, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        return True
+    except OSError:
+        return False
+    finally:
+        os.close(held)
 
 
 def _children(pid: int) -> list[int]:
@@ -400,7 +424,7 @@ def test_a_fetch_folder_is_removed_once_its_owner_is_gone_even_if_its_pid_lives(
     """A killed worker's scratch folder goes with the next fetch; a pid is no proof (pids are reused), its lock is."""
     import fcntl
 
-    from mountcal.fleet.storage import SCRATCH_LOCK, SCRATCH_PREFIX, _remove_orphans
+    from mountcal.fleet.storage import SCRATCH_LOCK, SCRATCH_PREFIX, remove_orphans
 
     alive = os.getpid()  # a live pid: the folder's owner died and its pid went to another process
     left = Path(tempfile.mkdtemp(prefix=f"{SCRATCH_PREFIX}{alive}-"))
@@ -410,7 +434,7 @@ def test_a_fetch_folder_is_removed_once_its_owner_is_gone_even_if_its_pid_lives(
     starting = Path(tempfile.mkdtemp(prefix=f"{SCRATCH_PREFIX}{alive}-"))  # no lock yet: its pid decides
     with open(held_by_us / SCRATCH_LOCK) as f:
         fcntl.flock(f, fcntl.LOCK_EX)
-        _remove_orphans()
+        assert remove_orphans() == 1
         assert not left.exists() and held_by_us.exists() and starting.exists()
     for folder in (held_by_us, starting):
         shutil.rmtree(folder)

@@ -27,7 +27,7 @@ from mountcal.fleet.engines import make_engine
 from mountcal.fleet.inputs import FleetJob
 from mountcal.fleet.overview import check_overview_overwritable, overview_path, write_overview
 from mountcal.fleet.progress import Progress
-from mountcal.fleet.storage import is_url
+from mountcal.fleet.storage import is_url, remove_orphans
 from mountcal.fleet.store import (
     LOG_COLUMNS,
     MOUNTING_COLUMNS,
@@ -203,6 +203,8 @@ def _run_locked(
                 progress.update(record.get("status") == "ok")
         finally:
             progress.finish()
+    if any(is_url(path) for job in jobs for path in job.job.paths):
+        remove_orphans()  # this machine's copies of killed workers' fetches: the workers are done now
     computed = len(pending)
     logs = _log_table(jobs, keys, setup_failures, results)
     logs, mountings = analyse_fleet(logs, options.alpha, options.floor_deg)

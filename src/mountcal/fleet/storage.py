@@ -30,7 +30,7 @@ from typing import Any
 from mountcal.core.errors import InputError
 
 BLOCK_BYTES = 8 << 20  # one ranged read of a fetch: the memory a worker's fetch holds
-SCRATCH_PREFIX = "mountcal-fetch-"  # + the worker's pid; a killed worker's folder is removed by the next fetch
+SCRATCH_PREFIX = "mountcal-fetch-"  # + the worker's pid; a killed worker's folder is removed by the next sweep
 SCRATCH_LOCK = ".held"  # locked by the fetch that owns the folder: the kernel releases it when the worker dies
 _URL = re.compile(r"^[A-Za-z][A-Za-z0-9+.-]*://")
 STORAGE_OPTION = "--storage-option"
@@ -182,7 +182,7 @@ def local_copies(urls: Sequence[str], options: Mapping[str, Any], stamps: Sequen
     InputError
         An object is missing, unreadable, or changed since it was listed (its stamp differs).
     """
-    _remove_orphans()
+    remove_orphans()
     scratch = tempfile.mkdtemp(prefix=f"{SCRATCH_PREFIX}{os.getpid()}-")
     lock = os.path.join(scratch, SCRATCH_LOCK)
     held = os.open(lock + ".new", os.O_CREAT | os.O_WRONLY, 0o600)
@@ -214,14 +214,20 @@ def local_copies(urls: Sequence[str], options: Mapping[str, Any], stamps: Sequen
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
         os.close(held)
+        remove_orphans()  # again: a worker killed moments ago may still have held its lock at the start
 
 
-def _remove_orphans() -> None:
-    """Delete the scratch folders of workers that were killed while fetching: their lock is free (a
-    pid alone is not proof: on a busy machine a dead worker's pid is soon another process's)."""
+def remove_orphans() -> int:
+    """Delete the scratch folders of workers that were killed while fetching, and say how many: their
+    lock is free (a pid alone is not proof: on a busy machine a dead worker's pid is soon another
+    process's). Each fetch sweeps before and after; the fleet command sweeps once more when its
+    workers are done, since a killed process may release its lock a moment after it looks dead."""
+    removed = 0
     for folder in Path(tempfile.gettempdir()).glob(f"{SCRATCH_PREFIX}*-*"):
         if _orphaned(folder):
             shutil.rmtree(folder, ignore_errors=True)
+            removed += not folder.exists()
+    return removed
 
 
 def _orphaned(folder: Path) -> bool:
@@ -257,5 +263,6 @@ __all__ = [
     "list_objects",
     "local_copies",
     "parse_storage_options",
+    "remove_orphans",
     "stamp_of",
 ]
