@@ -143,6 +143,20 @@ def run_cli(logs: Path, output: Path, extra: list[str]) -> float:
     return time.perf_counter() - started
 
 
+def installed_bytecode() -> str:
+    """Compile mountcal's modules as ``pip install`` does: an editable install run with
+    PYTHONDONTWRITEBYTECODE set (this machine's shell) would otherwise compile every module from
+    source in every process — the command, the worker server, each Dask worker — which no user's
+    installed package does."""
+    import compileall
+
+    import mountcal
+
+    folder = Path(mountcal.__file__).parent
+    ok = compileall.compile_dir(folder, quiet=1, workers=0)
+    return f"mountcal's bytecode: {'compiled' if ok else 'NOT all compiled'} in {folder} (as an install has it)"
+
+
 ENGINE_RUNS = 3
 TASK_PROBES = 200
 
@@ -376,6 +390,7 @@ def main(argv: list[str] | None = None) -> int:
 
     workdir = args.workdir or Path(tempfile.mkdtemp(prefix="mountcal-fleet-"))
     try:
+        print(installed_bytecode())
         started = time.perf_counter()
         generate(workdir, args.logs, args.vehicles)
         logs = workdir / "logs"

@@ -173,6 +173,7 @@ def calibrate_input(
     declared: Declared = "auto",
     read: Callable[[LogJob], Samples] | None = None,
     table_azimuth: bool = True,
+    hash_files: bool = True,
 ) -> InputResult:
     """Calibrate whatever the job's paths are: a stop table fitted as it is, or a log
     (:func:`calibrate_job`), as :func:`mountcal.io.kind.kind_of_input` decides; the result's provenance
@@ -181,7 +182,9 @@ def calibrate_input(
     what the user said the input is (``--input-kind``); ``read`` reads
     a log's files (default :func:`~mountcal.io.logs.read_log`; the fleet reads splits itself);
     ``table_azimuth``: a stop table's β come from its compass column ``heading_deg`` and the job's
-    uphill azimuth (off for a fleet, whose azimuth is for its logs' heading channels).
+    uphill azimuth (off for a fleet, whose azimuth is for its logs' heading channels);
+    ``hash_files``: a log's files' SHA-256 in its provenance (off for a fleet, which keys its
+    results by its own digest of the files and keeps no provenance hashes).
 
     What ``mountcal calibrate`` and every fleet worker do with an input.
     """
@@ -199,20 +202,24 @@ def calibrate_input(
             )
         cal, done = calibrate(table, job.options), None
     else:
-        done = calibrate_job(job, None if read is None else read(job))
+        done = calibrate_job(job, None if read is None else read(job), hash_files=hash_files)
         cal, table = done.calibration, done.table
     cal = replace(cal, provenance=replace(cal.provenance, input_kind=kind.sentence))
     return InputResult(kind, cal, table, done)
 
 
-def calibrate_job(job: LogJob, samples: Samples | None = None) -> LogResult:
+def calibrate_job(job: LogJob, samples: Samples | None = None, *, hash_files: bool = True) -> LogResult:
     """:func:`calibrate_log` of a prepared job (the fleet's and the command line's form); ``samples``
     are the job's files already read (the fleet reads a log's splits itself to count their gaps).
 
-    Besides the fit: each file's SHA-256 (hashed beside the reading), the log's conventions, the
-    cross-checks between its cues (:mod:`mountcal.loop.crosscheck`: turns, the stops' yaw against the
-    drive's) and the answer's plausibility (:mod:`mountcal.loop.plausibility`) go into the result.
+    Besides the fit: each file's SHA-256 (hashed beside the reading; not with ``hash_files=False``),
+    the log's conventions, the cross-checks between its cues (:mod:`mountcal.loop.crosscheck`: turns,
+    the stops' yaw against the drive's) and the answer's plausibility (:mod:`mountcal.loop.plausibility`)
+    go into the result.
     """
+    if not hash_files:
+        done = _calibrate_job(job, samples)
+        return replace(done, calibration=_checked(done, job, ()))
     stop = threading.Event()  # a failed read ends the hashing too
     with ThreadPoolExecutor(max_workers=1) as pool:
         hashes = pool.submit(lambda: tuple(_sha256(Path(p), stop) for p in job.paths))  # overlaps the reading
@@ -265,7 +272,7 @@ def _calibrate_job(job: LogJob, samples: Samples | None) -> LogResult:
     return LogResult(cal, increasing_times(samples), "driving", None, fit, found, None, skipped)  # counts merged stamps
 
 
-def _checked(done: LogResult, job: LogJob, hashes: Future[tuple[str, ...]]) -> Calibration:
+def _checked(done: LogResult, job: LogJob, hashes: Future[tuple[str, ...]] | tuple[str, ...]) -> Calibration:
     """The log's calibration with its files' hashes, its conventions and the cross-checks of its cues.
 
     Raises
@@ -295,7 +302,12 @@ def _checked(done: LogResult, job: LogJob, hashes: Future[tuple[str, ...]]) -> C
     checks.append(crosscheck.turn_handedness(done.samples, rot_vs, yaw_known))
     if cal.method == "driving":
         checks += plausibility.answer_checks(cal)
-    cal = replace(cal, provenance=replace(cal.provenance, input_sha256=hashes.result(), conventions=stated))
+    cal = replace(
+        cal,
+        provenance=replace(
+            cal.provenance, input_sha256=hashes if isinstance(hashes, tuple) else hashes.result(), conventions=stated
+        ),
+    )
     return plausibility.with_checks(cal, checks)
 
 

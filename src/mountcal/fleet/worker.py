@@ -159,7 +159,11 @@ def _calibrate(job: FleetJob, record: dict[str, Any]) -> dict[str, Any]:
     splits = record  # a log's split gaps are counted into the run's record as its files are read
     # what `mountcal calibrate` does with an input: a stop table fitted, or the log's stops, driving or both
     result = calibrate_input(  # the fleet's --uphill-azimuth-deg is for its logs: a stop table keeps its β
-        job.job, headings=job.headings, read=lambda _: _read_splits(job, splits), table_azimuth=False
+        job.job,
+        headings=job.headings,
+        read=lambda _: _read_splits(job, splits),
+        table_azimuth=False,
+        hash_files=False,  # its key is the command's digest of the files; a record keeps no provenance hashes
     )
     record = calibration_record(result.calibration)
     ends = result.calibration.provenance.incomplete_inputs
