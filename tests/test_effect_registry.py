@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from tests.effect_plugin import Q_TRUE, install, quadratic
 
 from mountcal.calibration.fit import calibrate
 from mountcal.calibration.options import Options
@@ -105,49 +106,11 @@ def test_no_module_outside_the_effects_names_a_builtin_effect() -> None:
 
 # --- an effect registered from outside, through the mountcal.effects entry points ---------------------------
 
-PLUGIN = '''
-"""A quadratic nonlinearity of the horizontal axes, a_k = p_k + q_k p_k² (k = x, y): one file, nothing else."""
-import numpy as np
-from mountcal.estimate.effects.base import BaseEffect
-
-
-class Squared(BaseEffect):
-    name = "squared"
-    meaning = "a quadratic nonlinearity of the x and y axes, 2 values (1/(m/s²))"
-    order = 15
-    report_key = "squared_per_mps2"
-    unit = "1/(m/s²)"
-
-    def parameters(self, table):
-        return ("sq_x", "sq_y")
-
-    def initial(self, table, g_mps2):
-        return np.zeros(2)
-
-    def apply(self, table, values, p, g0_mps2):
-        q = np.array([values[0], values[1], 0.0])
-        d_values = np.zeros((len(p), 3, 2))
-        d_values[:, 0, 0], d_values[:, 1, 1] = p[:, 0] ** 2, p[:, 1] ** 2
-        return p + q * p**2, d_values, np.eye(3) + 2 * (q * p)[:, :, None] * np.eye(3)
-
-    def spec_limits(self, spec):
-        return {"sq_x": 0.002, "sq_y": 0.002}  # the datasheet's nonlinearity, as this package reads it
-
-    def label(self, parameter):
-        return "horizontal nonlinearity"
-'''
-Q_TRUE = np.array([0.05, -0.04])  # 1/(m/s²): 2β harmonics of ~7 mg on a 10° slope
-
 
 @pytest.fixture
-def squared(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
+def quadratic_effect(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
     """The plugin's module and distribution metadata on sys.path; the registry asked afresh."""
-    (tmp_path / "mc_squared.py").write_text(PLUGIN, encoding="utf-8")
-    info = tmp_path / "mc_squared-0.1.dist-info"
-    info.mkdir()
-    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: mc-squared\nVersion: 0.1\n", encoding="utf-8")
-    (info / "entry_points.txt").write_text(f"[{registry.GROUP}]\nsquared = mc_squared:Squared\n", encoding="utf-8")
-    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.syspath_prepend(install(tmp_path).path_entry)
     registry.registered.cache_clear()
     yield
     registry.registered.cache_clear()
@@ -155,27 +118,27 @@ def squared(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
 
 def _stops() -> StopTable:
     table, _ = simulate_stops(slope_deg=10.0, beta_deg=np.arange(0.0, 360.0, 15.0), seed=3)
-    return replace(table, acc_s=table.acc_s + np.array([*Q_TRUE, 0.0]) * table.acc_s**2)
+    return replace(table, acc_s=quadratic(table.acc_s))
 
 
-def test_an_effect_of_another_package_is_fitted_reported_and_summarised(squared: None) -> None:
-    assert "squared" in registry.names()
+def test_an_effect_of_another_package_is_fitted_reported_and_summarised(quadratic_effect: None) -> None:
+    assert "quadratic" in registry.names()
     table = _stops()
-    cal = calibrate(table, Options(model="rotation,slope,squared"))
-    assert cal.model[-1] == "squared"
-    fitted = cal.effect("squared_per_mps2")
-    assert fitted is not None and fitted.components == ("sq_x", "sq_y")
+    cal = calibrate(table, Options(model="rotation,slope,quadratic"))
+    assert cal.model[-1] == "quadratic"
+    fitted = cal.effect("quadratic_per_mps2")
+    assert fitted is not None and fitted.components == ("quad_x", "quad_y")
     assert np.all(np.abs(np.array(fitted.value) - Q_TRUE) < 5 * np.array(fitted.sigma, dtype=float))
-    assert any(e["name"] == "squared_per_mps2" for e in cal.to_dict()["effects"])  # in the result file
-    line = next(x for x in summary(cal).splitlines() if x.strip().startswith("squared ("))
-    assert "sq_x, sq_y" in line and "1/(m/s²)" in line  # the default summary of BaseEffect
+    assert any(e["name"] == "quadratic_per_mps2" for e in cal.to_dict()["effects"])  # in the result file
+    line = next(x for x in summary(cal).splitlines() if x.strip().startswith("quadratic ("))
+    assert "quad_x, quad_y" in line and "1/(m/s²)" in line  # the default summary of BaseEffect
     assert cal.bias_mps2 is None and "bias   (" not in summary(cal)  # no offset fitted: no line of it
 
     # not in the model: the observability check judges it, the systematic σ propagates its datasheet limits
     plain = calibrate(table, Options(model="rotation,slope"))
     verdicts = {v.effect: v for v in plain.observability.separability}  # type: ignore[union-attr]
-    assert verdicts["squared"].separable and "squared with bias" in verdicts
-    assert plain.systematic is not None and {"sq_x", "sq_y"} <= set(plain.systematic.propagated)
+    assert verdicts["quadratic"].separable and "quadratic with bias" in verdicts
+    assert plain.systematic is not None and {"quad_x", "quad_y"} <= set(plain.systematic.propagated)
     assert any("horizontal nonlinearity" in n for n in plain.notes if "dominated by sensor errors" in n)  # its label
 
 

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
+from tests.effect_plugin import Q_TRUE, install, quadratic
 
 from mountcal.calibration.fit import Options, calibrate
 from mountcal.cli import main
@@ -313,58 +314,11 @@ def test_no_road_tilt_is_added_when_the_stops_share_one_surface() -> None:
 
 # --- an effect added by one file, from outside the package -----------------------------------------
 
-PLUGIN = '''
-"""An invented effect: a quadratic nonlinearity of the horizontal axes, a_k = p_k + q_k p_k² (k = x, y)."""
-import numpy as np
-from mountcal.estimate.effects.base import BaseEffect
-
-
-class Quadratic(BaseEffect):
-    name = "quadratic"
-    meaning = "a quadratic nonlinearity of the x and y axes, 2 values (1/(m/s²))"
-    order = 15
-    report_key = "quadratic_per_mps2"
-
-    def parameters(self, table):
-        return ("quad_x", "quad_y")
-
-    def initial(self, table, g_mps2):
-        return np.zeros(2)
-
-    def apply(self, table, values, p, g0_mps2):
-        q = np.array([values[0], values[1], 0.0])
-        d_values = np.zeros((len(p), 3, 2))
-        d_values[:, 0, 0], d_values[:, 1, 1] = p[:, 0] ** 2, p[:, 1] ** 2
-        d_p = np.eye(3) + 2 * (q * p)[:, :, None] * np.eye(3)
-        return p + q * p**2, d_values, d_p
-
-    def correct(self, acc_s, reported):
-        q = np.array([*reported.value, 0.0])
-        out = acc_s.copy()
-        k = q != 0
-        out[:, k] = (np.sqrt(1 + 4 * q[k] * acc_s[:, k]) - 1) / (2 * q[k])
-        return out
-'''
-Q_TRUE = np.array([0.05, -0.04])  # 1/(m/s²): 2β harmonics of ~7 mg on a 10° slope
-
-
-def _quadratic(acc: np.ndarray, q: np.ndarray) -> np.ndarray:
-    return acc + np.array([*q, 0.0]) * acc**2
-
 
 @pytest.fixture(scope="module")
 def plugin_env(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
     """A folder with one module and its distribution metadata, put on PYTHONPATH: nothing else edited."""
-    import os
-
-    root = tmp_path_factory.mktemp("plugin")
-    (root / "mc_quadratic.py").write_text(PLUGIN, encoding="utf-8")
-    info = root / "mc_quadratic-0.1.dist-info"
-    info.mkdir()
-    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: mc-quadratic\nVersion: 0.1\n", encoding="utf-8")
-    (info / "entry_points.txt").write_text("[mountcal.effects]\nquadratic = mc_quadratic:Quadratic\n", encoding="utf-8")
-    src = Path(__file__).resolve().parents[1] / "src"
-    return {**os.environ, "PYTHONPATH": os.pathsep.join([str(root), str(src)])}
+    return install(tmp_path_factory.mktemp("plugin")).env
 
 
 def _mountcal(env: dict[str, str], *args: str, code: int = 0) -> str:
@@ -384,7 +338,7 @@ def test_an_effect_added_by_one_file_is_fitted_chosen_applied_and_used_by_the_fl
     from mountcal.core.result import Calibration
 
     table, truth = simulate_stops(slope_deg=10.0, beta_deg=np.arange(0.0, 360.0, 15.0), seed=3)
-    table = replace(table, acc_s=_quadratic(table.acc_s, Q_TRUE))
+    table = replace(table, acc_s=quadratic(table.acc_s))
     stops = tmp_path / "car" / "stops.csv"
     stops.parent.mkdir()
     write_stop_table(table, stops)
@@ -404,7 +358,7 @@ def test_an_effect_added_by_one_file_is_fitted_chosen_applied_and_used_by_the_fl
 
     # rotate undoes the fitted nonlinearity before rotating: samples of known vehicle-frame force come out right
     f_v = np.array([[0.0, 0.0, G_N], [1.5, -1.0, 9.6], [-2.0, 1.8, 9.5]] * 4)
-    acc_s = _quadratic(truth.rot_vs.inv().apply(f_v), Q_TRUE)
+    acc_s = quadratic(truth.rot_vs.inv().apply(f_v))
     log = tmp_path / "drive.csv"
     pd.DataFrame({"t_s": np.arange(len(f_v)) * 0.01, "ax": acc_s[:, 0], "ay": acc_s[:, 1], "az": acc_s[:, 2]}).to_csv(
         log, index=False, float_format="%.15g"
