@@ -44,30 +44,49 @@ def analyse_fleet(
         One row per vehicle and mounting period (:data:`mountcal.fleet.store.VEHICLE_COLUMNS`).
     """
     logs = logs.copy()
-    logs["flags"] = [list(f) if isinstance(f, list | tuple | np.ndarray) else [] for f in logs["flags"]]
-    for col, value in (
-        ("segment", pd.NA),
-        ("in_consensus", pd.NA),
-        ("consensus_chi2", np.nan),
-        ("consensus_dof", pd.NA),
-        ("consensus_p_value", np.nan),
-    ):
-        logs[col] = value
-    logs["segment"] = logs["segment"].astype("Int64")
-    logs["consensus_dof"] = logs["consensus_dof"].astype("Int64")
-    logs["in_consensus"] = logs["in_consensus"].astype("boolean")
+    labels, logs = logs.index, logs.reset_index(drop=True)  # positions from here on; the labels go back at the end
+    out = _PerLog(len(logs), logs["flags"])
     rows: list[dict[str, Any]] = []
-    for vehicle in sorted(logs["vehicle_id"].unique(), key=natural_key):
-        rows += _vehicle_rows(logs, vehicle, alpha, floor_deg)
+    # one grouping, not a scan of the whole table per vehicle: a fleet of 10⁴ vehicles × 10² logs
+    groups = logs.groupby("vehicle_id", sort=False).indices
+    for vehicle in sorted(groups, key=natural_key):
+        rows += _vehicle_rows(logs.iloc[groups[vehicle]], vehicle, out, alpha, floor_deg)
+    out.fill(logs)
+    logs.index = labels
     return logs, pd.DataFrame(rows)
 
 
-def _vehicle_rows(logs: pd.DataFrame, vehicle: str, alpha: float, floor_deg: float) -> list[dict[str, Any]]:
-    mine = logs[logs["vehicle_id"] == vehicle]
+class _PerLog:
+    """The per-log columns analyse_fleet fills, as arrays written by position and set once."""
+
+    def __init__(self, n: int, flags: pd.Series) -> None:
+        self.flags = [list(f) if isinstance(f, list | tuple | np.ndarray) else [] for f in flags]
+        self.segment = np.full(n, -1)
+        self.in_consensus = np.full(n, -1, dtype=np.int8)  # -1: not in any consensus (no usable result)
+        self.chi2 = np.full(n, np.nan)
+        self.dof = np.zeros(n, dtype=int)  # 0: no degrees of freedom (alone in its period)
+        self.p_value = np.full(n, np.nan)
+
+    def fill(self, logs: pd.DataFrame) -> None:
+        logs["flags"] = self.flags
+        logs["segment"] = pd.array(np.where(self.segment >= 0, self.segment, 0), dtype="Int64")
+        logs.loc[self.segment < 0, "segment"] = pd.NA
+        logs["in_consensus"] = pd.array(self.in_consensus == 1, dtype="boolean")
+        logs.loc[self.in_consensus < 0, "in_consensus"] = pd.NA
+        logs["consensus_chi2"] = self.chi2
+        logs["consensus_dof"] = pd.array(self.dof, dtype="Int64")
+        logs.loc[self.dof == 0, "consensus_dof"] = pd.NA
+        logs["consensus_p_value"] = self.p_value
+
+
+def _vehicle_rows(
+    mine: pd.DataFrame, vehicle: str, out: _PerLog, alpha: float, floor_deg: float
+) -> list[dict[str, Any]]:
+    """One vehicle's mounting periods; its logs' columns written into ``out`` (``mine``'s index is positions)."""
     ok = mine[(mine["status"] == "ok")]
     usable = ok[np.isfinite(ok[["quat_w", "rot_sigma_x_deg", "rot_sigma_y_deg"]].to_numpy(dtype=float)).all(axis=1)]
     for idx in ok.index.difference(usable.index):
-        logs.at[idx, "flags"] = [*logs.at[idx, "flags"], "no_uncertainty"]
+        out.flags[idx].append("no_uncertainty")
     n_failed = int((mine["status"] != "ok").sum())
     base = {"vehicle_id": vehicle, "n_failed_vehicle": n_failed}
     if usable.empty:
@@ -100,18 +119,18 @@ def _vehicle_rows(logs: pd.DataFrame, vehicle: str, alpha: float, floor_deg: flo
     rows = []
     for s, seg in enumerate(segments):
         index = usable.index[seg.start : seg.stop]
+        at = index.to_numpy()
         p = np.where(seg.log_dof > 0, chi2_sf(np.nan_to_num(seg.log_chi2), np.maximum(seg.log_dof, 1)), np.nan)
         disagree = (p < alpha) | ~seg.used
-        for j, idx in enumerate(index):
-            logs.at[idx, "segment"] = s
-            logs.at[idx, "in_consensus"] = bool(seg.used[j])
-            logs.at[idx, "consensus_chi2"] = seg.log_chi2[j]
-            logs.at[idx, "consensus_dof"] = int(seg.log_dof[j]) if seg.log_dof[j] else pd.NA
-            logs.at[idx, "consensus_p_value"] = p[j]
-            extra = (["disagrees_with_consensus"] if disagree[j] else []) + (
+        out.segment[at] = s
+        out.in_consensus[at] = seg.used
+        out.chi2[at] = seg.log_chi2
+        out.dof[at] = seg.log_dof
+        out.p_value[at] = p
+        for j, idx in enumerate(at):
+            out.flags[idx] += (["disagrees_with_consensus"] if disagree[j] else []) + (
                 ["remount"] if j == 0 and seg.change is not None else []
             )
-            logs.at[idx, "flags"] = [*logs.at[idx, "flags"], *extra]
         rows.append({**base, **_segment_row(seg, s, len(segments), usable, index, disagree, order)})
         if seg.change is not None:
             rows[-1].update(_change_row(segments[s - 1], seg))
@@ -231,9 +250,10 @@ def vehicle_table(mountings: pd.DataFrame, logs: pd.DataFrame) -> pd.DataFrame:
     is confident (and why not), its remounts (time, log, size ± σ) and every mounting period in time
     order (``mountings``: a list of records, the vehicle's mounting over time)."""
     rows = []
+    by_vehicle = logs.groupby("vehicle_id", sort=False).indices  # one grouping, not a scan per vehicle
     for vehicle, periods in mountings.groupby("vehicle_id", sort=False):
         periods = periods.sort_values("segment")
-        mine = logs[logs["vehicle_id"] == vehicle]
+        mine = logs.iloc[by_vehicle.get(vehicle, [])]
         latest = periods.iloc[-1]
         ok = latest["status"] == "ok"
         confident, note = _confidence(latest, mine[mine["segment"] == latest["segment"]]) if ok else (False, None)
