@@ -584,3 +584,18 @@ def test_samples_read_outside_read_log_get_the_log_conventions_in_the_pipeline(t
     given, read = calibrate_job(job, raw), calibrate_job(job)
     assert given.calibration.provenance.conventions[0].value == "-y,x,z"
     _same_answer(given.calibration, read.calibration)
+
+
+def test_a_fleet_calibration_skips_only_the_provenance_hashes(tmp_path: Path) -> None:
+    """A fleet keys its results by its own digest: its workers leave out the files' SHA-256, and nothing else."""
+    import hashlib
+
+    from mountcal.calibration.pipeline import LogJob, calibrate_job
+
+    path = DATA / "parking.mcap"
+    job = LogJob(paths=(str(path),), protocol=str(DATA / "parking_protocol.csv"))
+    hashed, unhashed = calibrate_job(job), calibrate_job(job, hash_files=False)
+    assert hashed.calibration.provenance.input_sha256 == (hashlib.sha256(path.read_bytes()).hexdigest(),)
+    assert unhashed.calibration.provenance.input_sha256 == ()
+    _same_answer(hashed.calibration, unhashed.calibration)
+    assert unhashed.calibration.provenance.conventions == hashed.calibration.provenance.conventions
