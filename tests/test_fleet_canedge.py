@@ -28,6 +28,7 @@ import pytest
 from mountcal.cli import main
 from mountcal.core.result import Calibration
 from mountcal.fleet import outputs_of
+from mountcal.fleet.storage import _orphaned  # what the sweep judges, for a failure's message
 from mountcal.fleet.store import PartStore
 
 REPO = Path(__file__).resolve().parents[1]
@@ -324,24 +325,7 @@ def test_a_run_against_the_bucket_killed_mid_run_resumes_losing_and_repeating_no
     assert len(table) == 6 and table["log"].is_unique and (table["status"] == "ok").all()
     scratch = Path(tempfile.gettempdir())
     left = [f for pid in workers for f in scratch.glob(f"mountcal-fetch-{pid}-*")]  # the killed ones' copies
-    assert not left, [(str(f), sorted(p.name for p in f.rglob("*")), _lock_free(f)) for f in left]
-
-
-def _lock_free(folder: Path) -> bool | None:
-    """Whether a scratch folder's lock is free now (None: it has none), for a failure's message."""
-    import fcntl
-
-    try:
-        held = os.open(folder / ".held", os.O_RDONLY)
-    except OSError:
-        return None
-    try:
-        fcntl.flock(held, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        return True
-    except OSError:
-        return False
-    finally:
-        os.close(held)
+    assert not left, [(str(f), sorted(p.name for p in f.rglob("*")), f"orphaned now: {_orphaned(f)}") for f in left]
 
 
 def _children(pid: int) -> list[int]:

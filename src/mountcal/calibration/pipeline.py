@@ -217,12 +217,9 @@ def calibrate_job(job: LogJob, samples: Samples | None = None, *, hash_files: bo
     the stops' yaw against the drive's) and the answer's plausibility (:mod:`mountcal.loop.plausibility`)
     go into the result.
     """
-    if not hash_files:
-        done = _calibrate_job(job, samples)
-        return replace(done, calibration=_checked(done, job, ()))
     stop = threading.Event()  # a failed read ends the hashing too
-    with ThreadPoolExecutor(max_workers=1) as pool:
-        hashes = pool.submit(lambda: tuple(_sha256(Path(p), stop) for p in job.paths))  # overlaps the reading
+    with ThreadPoolExecutor(max_workers=1) as pool:  # no thread starts until something is submitted
+        hashes = pool.submit(lambda: tuple(_sha256(Path(p), stop) for p in job.paths)) if hash_files else None
         try:
             done = _calibrate_job(job, samples)
             return replace(done, calibration=_checked(done, job, hashes))
@@ -272,7 +269,7 @@ def _calibrate_job(job: LogJob, samples: Samples | None) -> LogResult:
     return LogResult(cal, increasing_times(samples), "driving", None, fit, found, None, skipped)  # counts merged stamps
 
 
-def _checked(done: LogResult, job: LogJob, hashes: Future[tuple[str, ...]] | tuple[str, ...]) -> Calibration:
+def _checked(done: LogResult, job: LogJob, hashes: Future[tuple[str, ...]] | None) -> Calibration:
     """The log's calibration with its files' hashes, its conventions and the cross-checks of its cues.
 
     Raises
@@ -302,12 +299,8 @@ def _checked(done: LogResult, job: LogJob, hashes: Future[tuple[str, ...]] | tup
     checks.append(crosscheck.turn_handedness(done.samples, rot_vs, yaw_known))
     if cal.method == "driving":
         checks += plausibility.answer_checks(cal)
-    cal = replace(
-        cal,
-        provenance=replace(
-            cal.provenance, input_sha256=hashes if isinstance(hashes, tuple) else hashes.result(), conventions=stated
-        ),
-    )
+    hashed = () if hashes is None else hashes.result()
+    cal = replace(cal, provenance=replace(cal.provenance, input_sha256=hashed, conventions=stated))
     return plausibility.with_checks(cal, checks)
 
 

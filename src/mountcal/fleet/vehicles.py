@@ -43,8 +43,7 @@ def analyse_fleet(
     vehicles : DataFrame
         One row per vehicle and mounting period (:data:`mountcal.fleet.store.VEHICLE_COLUMNS`).
     """
-    logs = logs.copy()
-    labels, logs = logs.index, logs.reset_index(drop=True)  # positions from here on; the labels go back at the end
+    labels, logs = logs.index, logs.reset_index(drop=True)  # a copy, by positions; the labels go back at the end
     out = _PerLog(len(logs), logs["flags"])
     rows: list[dict[str, Any]] = []
     # one grouping, not a scan of the whole table per vehicle: a fleet of 10⁴ vehicles × 10² logs
@@ -69,13 +68,10 @@ class _PerLog:
 
     def fill(self, logs: pd.DataFrame) -> None:
         logs["flags"] = self.flags
-        logs["segment"] = pd.array(np.where(self.segment >= 0, self.segment, 0), dtype="Int64")
-        logs.loc[self.segment < 0, "segment"] = pd.NA
-        logs["in_consensus"] = pd.array(self.in_consensus == 1, dtype="boolean")
-        logs.loc[self.in_consensus < 0, "in_consensus"] = pd.NA
+        logs["segment"] = pd.arrays.IntegerArray(self.segment, self.segment < 0)
+        logs["in_consensus"] = pd.arrays.BooleanArray(self.in_consensus == 1, self.in_consensus < 0)
         logs["consensus_chi2"] = self.chi2
-        logs["consensus_dof"] = pd.array(self.dof, dtype="Int64")
-        logs.loc[self.dof == 0, "consensus_dof"] = pd.NA
+        logs["consensus_dof"] = pd.arrays.IntegerArray(self.dof, self.dof == 0)
         logs["consensus_p_value"] = self.p_value
 
 
