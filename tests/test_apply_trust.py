@@ -307,6 +307,12 @@ def test_issue_repro_fleet_never_takes_its_own_outputs_as_logs(
         from mountcal.fleet.inputs import collect_jobs
 
         collect_jobs([van / "day2.parquet"])
+    outputs = tmp_path / "outputs"  # a folder of outputs alone: nothing to calibrate, and said why
+    outputs.mkdir()
+    for name in ("day2.parquet", "day3.mcap"):
+        shutil.copy(van / name, outputs / name)
+    with pytest.raises(InputError, match=r"found no log; set aside 2 file\(s\) mountcal wrote, e\.g\. .*day"):
+        collect_jobs([outputs])
 
 
 # --------------------------------------------------------------------------- optional dependencies, checked first

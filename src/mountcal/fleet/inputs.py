@@ -169,10 +169,13 @@ def collect_jobs(
         if discarded is not None:
             discarded[reason] = discarded.get(reason, 0) + n
     if not jobs:
+        found = "no log"
+        if context.ours:  # a folder holding only mountcal's own outputs: say why nothing was taken
+            found += f"; set aside {len(context.ours)} file(s) mountcal wrote, e.g. {context.ours[0]}"
         raise InputError(
             ", ".join(map(str, inputs)) or "INPUTS",
             "log files (" + ", ".join(sorted(log_suffixes())) + "), folders of them, globs or a manifest CSV",
-            "no log",
+            found,
             "Check the paths; a folder is searched recursively for files with those suffixes.",
         )
     return jobs
