@@ -4,10 +4,13 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
 from mountcal.__main__ import _local_fleet
+
+DATA = Path(__file__).resolve().parents[1] / "data"
 
 
 @pytest.mark.parametrize(
@@ -92,6 +95,29 @@ def test_help_imports_no_numerical_library(command: str | None) -> None:
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert done.stdout.splitlines() == ["", "True"], done.stdout + done.stderr
+
+
+def test_the_fleet_command_itself_imports_no_fit(tmp_path: Path) -> None:
+    """`mountcal fleet` lists, hashes, stores and analyses; its workers fit. The command process
+    imports neither the fit nor the estimators (≈ 0.3 s of start-up, serial before the first log goes out)."""
+    import shutil
+
+    logs = tmp_path / "v01"
+    logs.mkdir()
+    shutil.copy(DATA / "parking.mcap", logs / "a.mcap")
+    out = tmp_path / "fleet.parquet"
+    code = (
+        "import sys\n"
+        "from mountcal.__main__ import main\n"
+        f"code = main(['fleet', {str(tmp_path)!r}, '-o', {str(out)!r}, '-q', '--workers', '1'])\n"
+        "fit = ('mountcal.calibration.pipeline', 'mountcal.calibration.fit', 'mountcal.estimate.full',"
+        " 'scipy.optimize')\n"
+        "fit = sorted(m for m in fit if m in sys.modules)\n"
+        "print(code, ','.join(fit))"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert done.stdout.split() == ["0"], done.stdout + done.stderr
+    assert out.exists()
 
 
 def test_every_command_has_the_common_options_and_the_cli_knows_them_all() -> None:

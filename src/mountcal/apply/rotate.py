@@ -14,13 +14,12 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Sequence
-from typing import NoReturn
 
 import numpy as np
 import pandas as pd
 
 from mountcal.core.conventions import G_N, FloatArray
-from mountcal.core.errors import InputError
+from mountcal.core.errors import InputError, refuse_not_confident
 from mountcal.core.option_names import option
 from mountcal.core.result import Calibration
 from mountcal.estimate.effects import apply_corrections
@@ -73,17 +72,6 @@ def check_applicable(
     if level_only and not cal.yaw_determined:
         found.append(f"levelled only: yaw not determined ({cal.yaw_reason}); the heading is the sensor's own")
     return found
-
-
-def refuse_not_confident(where: str, found: str, todo: str) -> NoReturn:
-    """The one refusal of ``require_confident`` (``rotate`` and ``fleet``): ``found`` the results that are not
-    confident, ``todo`` what to do besides accepting them."""
-    raise InputError(
-        where,
-        f"a confident calibration ({option('require_confident', True)})",
-        found,
-        f"{todo}, or drop {option('require_confident', True)} (accept results that are not confident).",
-    )
 
 
 def _matrix(cal: Calibration, level_only: bool) -> FloatArray:

@@ -23,7 +23,7 @@ from mountcal.core.ranges import Number, numbers
 if TYPE_CHECKING:
     from tqdm import tqdm
 
-    from mountcal.calibration.pipeline import LogJob
+    from mountcal.calibration.job import LogJob
     from mountcal.io.reader import LogOptions
     from mountcal.stops.detect import StopDetection
 
@@ -388,12 +388,13 @@ def sensor_options(options: Options, spec: str | None, triad: str | None) -> Opt
     """``options`` with the sensor's limits (``--sensor-spec``) and triad calibration (``--triad``) read in."""
     from dataclasses import replace
 
-    from mountcal.estimate.triad import load
-    from mountcal.io.sensor_spec import read_spec
+    if spec is not None:  # each read only when given: the triad's fit is scipy.optimize, 0.1 s to import
+        from mountcal.io.sensor_spec import read_spec
 
-    if spec is not None:
         options = replace(options, spec=read_spec(spec))
     if triad is not None:
+        from mountcal.estimate.triad import load
+
         options = replace(options, triad=load(triad))
     return options
 
@@ -409,7 +410,7 @@ def gravity(args: argparse.Namespace) -> float | None:
 
 
 def log_job(args: argparse.Namespace, options: Options | None = None) -> LogJob:
-    from mountcal.calibration.pipeline import LogJob
+    from mountcal.calibration.job import LogJob
 
     return LogJob(
         paths=tuple(args.input),

@@ -14,10 +14,13 @@ This is the only module that converts between rotations and Euler angles.
 from __future__ import annotations
 
 import warnings
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial.transform import Rotation
+
+if TYPE_CHECKING:  # scipy.spatial costs a command ~0.2 s to import: only what rotates imports it
+    from scipy.spatial.transform import Rotation
 
 FloatArray = NDArray[np.float64]
 
@@ -38,6 +41,8 @@ CONVENTIONS = {
 
 def rot_vs_from_angles(roll_rad: float, pitch_rad: float, yaw_rad: float) -> Rotation:
     """The mounting rotation from roll γ, pitch θ, yaw φ in radians (docs/conventions.md §1)."""
+    from scipy.spatial.transform import Rotation
+
     return Rotation.from_euler(EULER_SEQUENCE, [yaw_rad, pitch_rad, roll_rad])
 
 

@@ -6,6 +6,10 @@ non-zero without a traceback. Messages say where, what was expected, what was fo
 
 from __future__ import annotations
 
+from typing import NoReturn
+
+from mountcal.core.option_names import option
+
 
 class MountcalError(Exception):
     """Base of every error mountcal raises on purpose."""
@@ -31,3 +35,14 @@ class FitFailed(MountcalError):
     """The estimator did not converge or returned a non-finite answer."""
 
     exit_code = 4
+
+
+def refuse_not_confident(where: str, found: str, todo: str) -> NoReturn:
+    """The one refusal of ``require_confident`` (``rotate`` and ``fleet``): ``found`` the results that are not
+    confident, ``todo`` what to do besides accepting them."""
+    raise InputError(
+        where,
+        f"a confident calibration ({option('require_confident', True)})",
+        found,
+        f"{todo}, or drop {option('require_confident', True)} (accept results that are not confident).",
+    )

@@ -34,8 +34,8 @@ from typing import Any, Literal
 
 import pandas as pd
 
+from mountcal.calibration.job import LogJob
 from mountcal.calibration.options import DEFAULT_USE, Options, Use
-from mountcal.calibration.pipeline import LogJob
 from mountcal.core.errors import InputError
 from mountcal.core.option_names import flags_on
 from mountcal.core.paths import input_file, special_kind

@@ -18,8 +18,7 @@ from typing import Any
 
 import pandas as pd
 
-from mountcal.apply.rotate import refuse_not_confident
-from mountcal.core.errors import InputError, MountcalError
+from mountcal.core.errors import InputError, MountcalError, refuse_not_confident
 from mountcal.core.paths import check_outputs, output_lock
 from mountcal.core.version import software_version
 from mountcal.fleet.agreement import ALPHA
