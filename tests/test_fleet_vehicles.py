@@ -11,7 +11,14 @@ from scipy.spatial.transform import Rotation
 
 from mountcal.calibration.fit import calibrate
 from mountcal.core.conventions import rot_vs_from_angles
-from mountcal.fleet.agreement import angles_with_sigma, consensus, find_change_points, information, tangent_residuals
+from mountcal.fleet.agreement import (
+    angles_with_sigma,
+    consensus,
+    find_change_points,
+    information,
+    segment_consensus,
+    tangent_residuals,
+)
 from mountcal.fleet.vehicles import analyse_fleet
 from mountcal.fleet.worker import calibration_record
 from mountcal.simulate.stops import simulate_stops
@@ -186,3 +193,30 @@ def test_a_big_remount_and_a_second_one_are_both_found() -> None:
     info = information(np.full((12, 3), 0.05))
     points, outliers = find_change_points(rot, info)
     assert [c.index for c in points] == [4, 8] and outliers == []
+
+
+def test_a_period_s_consensus_kept_from_the_split_search_is_the_one_it_would_compute() -> None:
+    angles = [TRUTH] * 5 + [(TRUTH[0] + 2.0, TRUTH[1], TRUTH[2])] * 5
+    rot = Rotation.from_euler("ZYX", [[y, p + 0.01 * i, r] for i, (r, p, y) in enumerate(angles)], degrees=True)
+    info = information(np.full((10, 3), 0.05))
+    runs: dict = {}
+    points, _ = find_change_points(rot, info, runs=runs)
+    assert [c.index for c in points] == [5] and {(0, 10), (0, 5), (5, 10)} <= set(runs)
+    for a, b in ((0, 5), (5, 10)):  # the kept consensus gives the very numbers a fresh one gives
+        kept, fresh = segment_consensus(rot[a:b], info[a:b], of_all=runs[a, b]), segment_consensus(rot[a:b], info[a:b])
+        assert np.array_equal(kept[0].rot_vs.as_quat(), fresh[0].rot_vs.as_quat())
+        assert np.array_equal(kept[2], fresh[2], equal_nan=True) and kept[4] == fresh[4]
+
+
+def test_a_yaw_less_period_names_its_most_common_reason_the_first_by_name_on_a_tie() -> None:
+    rows = _log_rows("v", [TRUTH] * 4, seed=21, headings="none")
+    for row, reason in zip(rows, ["b: no turns", "a: no heading", None, "a: no heading"], strict=True):
+        row["yaw_reason"] = reason
+    _, vehicles = analyse_fleet(pd.DataFrame(rows))
+    assert "(e.g. a: no heading)" in vehicles["yaw_reason"].iloc[0]
+    rows[2]["yaw_reason"] = "b: no turns"  # a tie: the first by name, as pandas' mode orders it
+    _, vehicles = analyse_fleet(pd.DataFrame(rows))
+    assert "(e.g. a: no heading)" in vehicles["yaw_reason"].iloc[0]
+    rows[0]["yaw_reason"] = rows[1]["yaw_reason"] = rows[3]["yaw_reason"] = None
+    _, vehicles = analyse_fleet(pd.DataFrame(rows))
+    assert "(e.g. b: no turns)" in vehicles["yaw_reason"].iloc[0]

@@ -44,6 +44,26 @@ STEP_TOL_RAD = 1e-12
 E_Z = np.array([0.0, 0.0, 1.0])
 
 
+def _blocks() -> dict[bytes, tuple[np.ndarray, tuple[np.ndarray, ...]]]:
+    """Per pattern of observed axes (the bool mask's bytes): its axes and their ``np.ix_`` block.
+
+    Built once: the χ² loops index a 3×3 block thousands of times per vehicle, and building the
+    index arrays cost more than the algebra (the same indexing, so the same numbers).
+    """
+    table = {}
+    for code in range(8):
+        mask = np.array([bool(code & 1), bool(code & 2), bool(code & 4)])
+        axes = np.flatnonzero(mask)
+        block = np.ix_(axes, axes)
+        for a in (axes, *block):
+            a.setflags(write=False)
+        table[mask.tobytes()] = (axes, block)
+    return table
+
+
+_BLOCKS = _blocks()
+
+
 @dataclass(frozen=True)
 class Consensus:
     """The weighted mean mounting of some logs.
@@ -123,8 +143,13 @@ def tangent_residuals(rot_vs: Rotation, ref: Rotation, yaw_known: np.ndarray) ->
     Where ``yaw_known`` is False only the tilt counts: δ_i is the rotation about a horizontal
     vehicle axis taking ``R_iᵀ e_z`` to ``refᵀ e_z``, with no z part.
     """
+    return _tangent_residuals(rot_vs, rot_vs.inv().apply(E_Z), ref, yaw_known)
+
+
+def _tangent_residuals(rot_vs: Rotation, up_sensor: FloatArray, ref: Rotation, yaw_known: np.ndarray) -> FloatArray:
+    """:func:`tangent_residuals` given ``up_sensor = R_iᵀ e_z``, which the consensus iteration keeps."""
     full = (rot_vs * ref.inv()).as_rotvec()
-    up = ref.apply(rot_vs.inv().apply(E_Z))  # the log's "up" in the reference's vehicle frame
+    up = ref.apply(up_sensor)  # the log's "up" in the reference's vehicle frame
     horizontal = np.hypot(up[:, 0], up[:, 1])
     angle = np.arctan2(horizontal, up[:, 2])
     scale = np.where(horizontal > 1e-15, angle / np.where(horizontal > 1e-15, horizontal, 1.0), 1.0)
@@ -143,19 +168,19 @@ def consensus(rot_vs: Rotation, info: FloatArray) -> Consensus:
     """
     yaw_known = info[:, 2, 2] > 0
     total = info.sum(axis=0)
-    observed = np.diag(total) > 0
-    obs = np.flatnonzero(observed)
-    block = np.ix_(obs, obs)
+    observed = total.diagonal() > 0
+    obs, block = _BLOCKS[observed.tobytes()]
     ref = rot_vs[int(np.argmax(np.trace(info, axis1=1, axis2=2)))]
+    up_sensor = rot_vs.inv().apply(E_Z)  # the logs' "up" in their sensor frames: the same every iteration
     for _ in range(MAX_ITERATIONS):
-        delta = tangent_residuals(rot_vs, ref, yaw_known)
+        delta = _tangent_residuals(rot_vs, up_sensor, ref, yaw_known)
         gradient = np.einsum("nij,nj->i", info, delta)
         step = np.zeros(3)
         step[obs] = np.linalg.solve(total[block], gradient[obs])
         ref = Rotation.from_rotvec(step) * ref
         if np.linalg.norm(step) < STEP_TOL_RAD:
             break
-    delta = tangent_residuals(rot_vs, ref, yaw_known)
+    delta = _tangent_residuals(rot_vs, up_sensor, ref, yaw_known)
     cov = np.full((3, 3), np.nan)
     cov[block] = np.linalg.inv(total[block])
     ranks = (np.diagonal(info, axis1=1, axis2=2) > 0).sum()
@@ -171,12 +196,12 @@ def consensus(rot_vs: Rotation, info: FloatArray) -> Consensus:
 
 def _mean_and_cov(info_sum: FloatArray, gradient: FloatArray) -> tuple[FloatArray, FloatArray, np.ndarray]:
     """Mean δ and its covariance from summed information and Σ W_i δ_i, on the observed axes."""
-    observed = np.diag(info_sum) > 0
-    obs = np.flatnonzero(observed)
+    observed = info_sum.diagonal() > 0
+    obs, block = _BLOCKS[observed.tobytes()]
     mean, cov = np.full(3, np.nan), np.full((3, 3), np.nan)
     if obs.size:
-        cov[np.ix_(obs, obs)] = np.linalg.inv(info_sum[np.ix_(obs, obs)])
-        mean[obs] = cov[np.ix_(obs, obs)] @ gradient[obs]
+        cov[block] = np.linalg.inv(info_sum[block])
+        mean[obs] = cov[block] @ gradient[obs]
     return mean, cov, observed
 
 
@@ -184,11 +209,11 @@ def _difference_chi2(
     mean_a: FloatArray, cov_a: FloatArray, mean_b: FloatArray, cov_b: FloatArray, axes: np.ndarray
 ) -> tuple[float, int]:
     """χ² of ``mean_b − mean_a`` on the axes both sides observe, and its dof."""
-    idx = np.flatnonzero(axes)
+    idx, block = _BLOCKS[axes.tobytes()]
     if idx.size == 0:
         return float("nan"), 0
     diff = mean_b[idx] - mean_a[idx]
-    cov = cov_a[np.ix_(idx, idx)] + cov_b[np.ix_(idx, idx)]
+    cov = cov_a[block] + cov_b[block]
     return float(diff @ np.linalg.solve(cov, diff)), int(idx.size)
 
 
@@ -222,16 +247,17 @@ def against(rot_vs: Rotation, info: FloatArray, cons: Consensus) -> tuple[FloatA
     return chi2, dof
 
 
-def best_split(rot_vs: Rotation, info: FloatArray) -> ChangePoint | None:
+def best_split(rot_vs: Rotation, info: FloatArray, cons: Consensus | None = None) -> ChangePoint | None:
     """The most significant single change of mounting in a time-ordered run of logs.
 
-    The statistic of each split is linearised about the run's consensus; the p-value of the best
-    one is Bonferroni-corrected for the ``n − 1`` candidates. None for fewer than two logs.
+    The statistic of each split is linearised about the run's consensus (``cons``, computed if not
+    given); the p-value of the best one is Bonferroni-corrected for the ``n − 1`` candidates. None
+    for fewer than two logs.
     """
     n = info.shape[0]
     if n < 2:
         return None
-    cons = consensus(rot_vs, info)
+    cons = consensus(rot_vs, info) if cons is None else cons
     gradient = np.einsum("nij,nj->ni", info, cons.residual_rad)
     cum_info, cum_gradient = np.cumsum(info, axis=0), np.cumsum(gradient, axis=0)
     best: tuple[float, float, int, int] | None = None  # (log sf, statistic, dof, k)
@@ -250,8 +276,13 @@ def best_split(rot_vs: Rotation, info: FloatArray) -> ChangePoint | None:
     return ChangePoint(k, statistic, dof, float(min(1.0, (n - 1) * np.exp(log_sf))))
 
 
-def find_change_points(rot_vs: Rotation, info: FloatArray, alpha: float = ALPHA) -> tuple[list[ChangePoint], list[int]]:
+def find_change_points(
+    rot_vs: Rotation, info: FloatArray, alpha: float = ALPHA, runs: dict[tuple[int, int], Consensus] | None = None
+) -> tuple[list[ChangePoint], list[int]]:
     """Remounts in a time-ordered run of logs (binary segmentation), and the single-log outliers.
+
+    ``runs``, if given, receives the consensus of every run of logs ``a … b − 1`` tested for a split,
+    by ``(a, b)``: a mounting period's first consensus, which the caller need not compute again.
 
     Returns
     -------
@@ -264,7 +295,12 @@ def find_change_points(rot_vs: Rotation, info: FloatArray, alpha: float = ALPHA)
     pending = [(0, n)]
     while pending:
         a, b = pending.pop()
-        cp = best_split(rot_vs[a:b], info[a:b]) if b - a >= 2 else None
+        cp = None
+        if b - a >= 2:
+            cons = consensus(rot_vs[a:b], info[a:b])
+            cp = best_split(rot_vs[a:b], info[a:b], cons)
+            if runs is not None:
+                runs[a, b] = cons
         if cp is not None and cp.p_value < alpha:
             found.append(ChangePoint(a + cp.index, cp.statistic, cp.dof, cp.p_value))
             pending += [(a, a + cp.index), (a + cp.index, b)]
@@ -301,9 +337,10 @@ def _split_at(rot_vs: Rotation, info: FloatArray, k: int) -> ChangePoint | None:
 
 
 def segment_consensus(
-    rot_vs: Rotation, info: FloatArray, alpha: float = ALPHA
+    rot_vs: Rotation, info: FloatArray, alpha: float = ALPHA, of_all: Consensus | None = None
 ) -> tuple[Consensus, np.ndarray, FloatArray, np.ndarray, float]:
-    """Consensus of one mounting period, dropping disagreeing logs one at a time.
+    """Consensus of one mounting period, dropping disagreeing logs one at a time; ``of_all``, if
+    known, is the consensus of all its logs (the first one this computes).
 
     Returns
     -------
@@ -318,7 +355,7 @@ def segment_consensus(
     n = info.shape[0]
     used = np.ones(n, dtype=bool)
     while True:
-        cons = consensus(rot_vs[used], info[used])
+        cons = of_all if of_all is not None and used.all() else consensus(rot_vs[used], info[used])
         chi2_used, dof_used = leave_one_out(info[used], cons)
         if used.sum() <= 2:
             break
@@ -340,12 +377,13 @@ def segment_consensus(
 
 def analyse_vehicle(rot_vs: Rotation, info: FloatArray, alpha: float = ALPHA) -> tuple[list[Segment], list[int]]:
     """Mounting periods of one vehicle's time-ordered logs, with their consensus; and the outliers."""
-    change_points, outliers = find_change_points(rot_vs, info, alpha)
+    runs: dict[tuple[int, int], Consensus] = {}  # consensus of each run split-tested: not computed twice
+    change_points, outliers = find_change_points(rot_vs, info, alpha, runs)
     edges = [0, *(c.index for c in change_points), info.shape[0]]
     segments = []
     for s in range(len(edges) - 1):
         a, b = edges[s], edges[s + 1]
-        cons, used, chi2, dof, scale = segment_consensus(rot_vs[a:b], info[a:b], alpha)
+        cons, used, chi2, dof, scale = segment_consensus(rot_vs[a:b], info[a:b], alpha, runs.get((a, b)))
         segments.append(Segment(a, b, cons, used, chi2, dof, scale, change_points[s - 1] if s else None))
     return segments, outliers
 

@@ -4,7 +4,9 @@ disagree (:func:`analyse_fleet`), and one row per vehicle (:func:`vehicle_table`
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import replace
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -45,11 +47,12 @@ def analyse_fleet(
     """
     labels, logs = logs.index, logs.reset_index(drop=True)  # a copy, by positions; the labels go back at the end
     out = _PerLog(len(logs), logs["flags"])
+    cells = _LogCells(logs)
     rows: list[dict[str, Any]] = []
     # one grouping, not a scan of the whole table per vehicle: a fleet of 10⁴ vehicles × 10² logs
     groups = logs.groupby("vehicle_id", sort=False).indices
     for vehicle in sorted(groups, key=natural_key):
-        rows += _vehicle_rows(logs.iloc[groups[vehicle]], vehicle, out, alpha, floor_deg)
+        rows += _vehicle_rows(cells, groups[vehicle], vehicle, out, alpha, floor_deg)
     out.fill(logs)
     logs.index = labels
     return logs, pd.DataFrame(rows)
@@ -75,18 +78,44 @@ class _PerLog:
         logs["consensus_p_value"] = self.p_value
 
 
+class _LogCells:
+    """The per-log values the analysis reads, taken out of the table once as arrays and lists (by
+    position): per-vehicle DataFrame slices and row iteration cost more than the statistics."""
+
+    def __init__(self, logs: pd.DataFrame) -> None:
+        self.ok = (logs["status"] == "ok").to_numpy(dtype=bool)
+        self.failed = (logs["status"] != "ok").to_numpy(dtype=bool)
+        needed = logs[["quat_w", "rot_sigma_x_deg", "rot_sigma_y_deg"]].to_numpy(dtype=float)
+        self.usable = self.ok & np.isfinite(needed).all(axis=1)
+        self.logs = logs
+        if self.usable.any():  # the rest is read only from usable logs
+            self.start_known = logs["start_time"].notna().to_numpy(dtype=bool)
+            self.start = logs["start_time"].tolist()  # the scalars .iloc gives: Timestamp / NaT
+            self.log = logs["log"].tolist()
+            self.quat = logs[["quat_x", "quat_y", "quat_z", "quat_w"]].to_numpy(dtype=float)
+            self.sigma = logs[["rot_sigma_x_deg", "rot_sigma_y_deg", "rot_sigma_z_deg"]].to_numpy(dtype=float)
+            sys_columns = [f"rot_sys_sigma_{a}_deg" for a in "xyz"]
+            self.sys = logs[sys_columns].to_numpy(float) if sys_columns[0] in logs else None
+
+    @cached_property
+    def yaw_reason(self) -> np.ndarray:
+        """Read only for a mounting period without yaw."""
+        reasons: np.ndarray = self.logs[YAW_REASON].to_numpy(dtype=object)
+        return reasons
+
+
 def _vehicle_rows(
-    mine: pd.DataFrame, vehicle: str, out: _PerLog, alpha: float, floor_deg: float
+    cells: _LogCells, mine: np.ndarray, vehicle: str, out: _PerLog, alpha: float, floor_deg: float
 ) -> list[dict[str, Any]]:
-    """One vehicle's mounting periods; its logs' columns written into ``out`` (``mine``'s index is positions)."""
-    ok = mine[(mine["status"] == "ok")]
-    usable = ok[np.isfinite(ok[["quat_w", "rot_sigma_x_deg", "rot_sigma_y_deg"]].to_numpy(dtype=float)).all(axis=1)]
-    for idx in ok.index.difference(usable.index):
+    """One vehicle's mounting periods (``mine``: its logs' positions); its logs' columns written into ``out``."""
+    ok = mine[cells.ok[mine]]
+    usable = ok[cells.usable[ok]]
+    for idx in ok[~cells.usable[ok]]:
         out.flags[idx].append("no_uncertainty")
-    n_failed = int((mine["status"] != "ok").sum())
+    n_failed = int(cells.failed[mine].sum())
     base = {"vehicle_id": vehicle, "n_failed_vehicle": n_failed}
-    if usable.empty:
-        reason = f"all {len(mine)} logs failed" if ok.empty else "no successful log carries an uncertainty"
+    if usable.size == 0:
+        reason = f"all {len(mine)} logs failed" if ok.size == 0 else "no successful log carries an uncertainty"
         return [
             {
                 **base,
@@ -102,20 +131,18 @@ def _vehicle_rows(
                 "remount": False,
             }
         ]
-    order = "start_time" if usable["start_time"].notna().all() else "log name"
-    keys = [
-        (row.start_time if order == "start_time" else pd.Timestamp(0, tz="UTC"), natural_key(row.log))
-        for row in usable.itertuples()
-    ]
-    usable = usable.iloc[sorted(range(len(usable)), key=lambda i: keys[i])]
-    rot = Rotation.from_quat(usable[["quat_x", "quat_y", "quat_z", "quat_w"]].to_numpy(dtype=float))
-    sigma = usable[["rot_sigma_x_deg", "rot_sigma_y_deg", "rot_sigma_z_deg"]].to_numpy(dtype=float)
-    info = information(sigma, floor_deg)
+    order = "start_time" if cells.start_known[usable].all() else "log name"
+    if order == "start_time":
+        keys: list[Any] = [(cells.start[i], natural_key(cells.log[i])) for i in usable]
+    else:  # the same order as keying every log with one and the same time
+        keys = [natural_key(cells.log[i]) for i in usable]
+    usable = usable[sorted(range(len(usable)), key=keys.__getitem__)]
+    rot = Rotation.from_quat(cells.quat[usable])
+    info = information(cells.sigma[usable], floor_deg)
     segments, _ = analyse_vehicle(rot, info, alpha)
     rows = []
     for s, seg in enumerate(segments):
-        index = usable.index[seg.start : seg.stop]
-        at = index.to_numpy()
+        at = usable[seg.start : seg.stop]
         p = np.where(seg.log_dof > 0, chi2_sf(np.nan_to_num(seg.log_chi2), np.maximum(seg.log_dof, 1)), np.nan)
         disagree = (p < alpha) | ~seg.used
         out.segment[at] = s
@@ -127,19 +154,18 @@ def _vehicle_rows(
             out.flags[idx] += (["disagrees_with_consensus"] if disagree[j] else []) + (
                 ["remount"] if j == 0 and seg.change is not None else []
             )
-        rows.append({**base, **_segment_row(seg, s, len(segments), usable, index, disagree, order)})
+        rows.append({**base, **_segment_row(seg, s, len(segments), cells, at, disagree, order)})
         if seg.change is not None:
             rows[-1].update(_change_row(segments[s - 1], seg))
     return rows
 
 
 def _segment_row(
-    seg: Segment, s: int, n_segments: int, usable: pd.DataFrame, index: pd.Index, disagree: np.ndarray, order: str
+    seg: Segment, s: int, n_segments: int, cells: _LogCells, at: np.ndarray, disagree: np.ndarray, order: str
 ) -> dict[str, Any]:
     cons = seg.consensus
-    part = usable.loc[index]
-    if "rot_sys_sigma_x_deg" in part:  # the sensor's systematic part, common to its logs: added once
-        cols = part[[f"rot_sys_sigma_{a}_deg" for a in "xyz"]].to_numpy(float).T
+    if cells.sys is not None:  # the sensor's systematic part, common to its logs: added once
+        cols = cells.sys[at].T
         sys = np.array([np.median(c[np.isfinite(c)]) if np.isfinite(c).any() else 0.0 for c in cols])
         cons = replace(cons, cov_rad2=cons.cov_rad2 + np.diag(np.radians(sys) ** 2))
     angles, sigma = angles_with_sigma(cons)
@@ -148,8 +174,8 @@ def _segment_row(
     rot_sigma = np.degrees(np.sqrt(np.clip(np.diagonal(cons.cov_rad2), 0.0, None)))
     yaw_reason = None
     if not cons.observed[2]:
-        reasons = part[YAW_REASON].dropna()
-        common = reasons.mode().iloc[0] if not reasons.empty else "no log determined yaw"
+        reasons = [r for r in cells.yaw_reason[at] if not pd.isna(r)]
+        common = _most_common(reasons) if reasons else "no log determined yaw"
         yaw_reason = f"no log of this mounting period determined yaw (e.g. {common})"
     yaw = angles[2] if cons.observed[2] else None
     consensus = Angles(angles[0], sigma[0], angles[1], sigma[1], yaw, sigma[2], yaw_reason, None, None)
@@ -160,14 +186,14 @@ def _segment_row(
         "status": "ok",
         "reason": None,
         "order": order,
-        "n_logs": len(index),
+        "n_logs": len(at),
         "n_used": int(seg.used.sum()),
         "n_disagreeing": int(disagree.sum()),
-        "disagreeing_logs": [str(x) for x in part["log"][disagree]],
-        "first_log": str(part["log"].iloc[0]),
-        "last_log": str(part["log"].iloc[-1]),
-        "first_start_time": part["start_time"].iloc[0],
-        "last_start_time": part["start_time"].iloc[-1],
+        "disagreeing_logs": [str(cells.log[i]) for i in at[disagree]],
+        "first_log": str(cells.log[at[0]]),
+        "last_log": str(cells.log[at[-1]]),
+        "first_start_time": cells.start[at[0]],
+        "last_start_time": cells.start[at[-1]],
         **consensus.columns(slope=False),  # the table's angle columns, spelled by the type
         "rot_sigma_x_deg": float(rot_sigma[0]),
         "rot_sigma_y_deg": float(rot_sigma[1]),
@@ -181,8 +207,15 @@ def _segment_row(
         "p_value": cons.p_value,
         "sigma_scale": seg.sigma_scale,
         "remount": seg.change is not None,
-        "remount_log": str(part["log"].iloc[0]) if seg.change is not None else None,
+        "remount_log": str(cells.log[at[0]]) if seg.change is not None else None,
     }
+
+
+def _most_common(values: list[Any]) -> Any:
+    """The most frequent value, the smallest of a tie (what ``Series.mode().iloc[0]`` gives)."""
+    counts = Counter(values)
+    top = max(counts.values())
+    return min(v for v, c in counts.items() if c == top)
 
 
 def _change_row(before: Segment, after: Segment) -> dict[str, Any]:
@@ -247,45 +280,100 @@ def vehicle_table(mountings: pd.DataFrame, logs: pd.DataFrame) -> pd.DataFrame:
     order (``mountings``: a list of records, the vehicle's mounting over time)."""
     rows = []
     by_vehicle = logs.groupby("vehicle_id", sort=False).indices  # one grouping, not a scan per vehicle
-    for vehicle, periods in mountings.groupby("vehicle_id", sort=False):
-        periods = periods.sort_values("segment")
-        mine = logs.iloc[by_vehicle.get(vehicle, [])]
-        latest = periods.iloc[-1]
+    table, mine_logs = _Cells(mountings), _VehicleLogs(logs)
+    segment = mountings["segment"].to_numpy(dtype=float, na_value=np.nan)
+    remount = mountings["remount"].fillna(False).astype(bool).to_numpy(dtype=bool)
+    no_logs = np.zeros(0, dtype=np.intp)
+    for vehicle, at in mountings.groupby("vehicle_id", sort=False).indices.items():
+        at = at[np.argsort(segment[at], kind="stable")]  # by segment, missing last (as sort_values)
+        periods = [_Row(table, i) for i in at]
+        mine = by_vehicle.get(vehicle, no_logs)
+        latest = periods[-1]
         ok = latest["status"] == "ok"
-        confident, note = _confidence(latest, mine[mine["segment"] == latest["segment"]]) if ok else (False, None)
-        starts = mine.loc[mine["status"] == "ok", "start_time"].dropna()
+        period = mine_logs.in_period(mine, latest["segment"]) if ok else no_logs
+        confident, note = _confidence(latest, mine_logs, period) if ok else (False, None)
+        starts = mine_logs.starts(mine)
         rows.append(
             {
                 "vehicle_id": vehicle,
                 "status": latest["status"],
                 "reason": latest.get("reason"),
                 "order": latest.get("order") if ok else None,
-                "n_logs": int((mine["status"] == "ok").sum()),
-                "n_failed": int((mine["status"] != "ok").sum()),
+                "n_logs": int(mine_logs.ok[mine].sum()),
+                "n_failed": int(mine_logs.failed[mine].sum()),
                 "n_mountings": len(periods) if ok else 0,
-                "first_start_time": starts.min() if not starts.empty else None,
-                "last_start_time": starts.max() if not starts.empty else None,
+                "first_start_time": min(starts) if starts else None,
+                "last_start_time": max(starts) if starts else None,
                 **({k: _plain(latest.get(k)) for k in LATEST_KEYS} if ok else {"disagreeing_logs": []}),
                 "since_log": latest.get("first_log") if ok else None,
                 "since_time": latest.get("first_start_time") if ok else None,
                 "latest_confident": confident,
                 "confidence_note": note if ok else latest.get("reason"),
-                "n_remounts": int(periods["remount"].fillna(False).astype(bool).sum()),
-                "remounts": [_remount(p) for _, p in periods.iterrows() if bool(p.get("remount"))],
-                "mountings": [{k: _plain(p.get(k)) for k in MOUNTING_KEYS} for _, p in periods.iterrows()]
-                if ok
-                else [],
+                "n_remounts": int(remount[at].sum()),
+                "remounts": [_remount(p) for p in periods if bool(p.get("remount"))],
+                "mountings": [{k: _plain(p.get(k)) for k in MOUNTING_KEYS} for p in periods] if ok else [],
             }
         )
     return pd.DataFrame(rows)
 
 
-def _confidence(latest: pd.Series, period_logs: pd.DataFrame) -> tuple[bool, str | None]:
-    """Whether the current mounting can be trusted as stated, and if not why (for fleet people)."""
+class _Cells:
+    """A table's columns as arrays whose items are the scalars a row (``frame.iloc[i]``) holds:
+    reading cells from them costs a fraction of building a row Series per period."""
+
+    def __init__(self, frame: pd.DataFrame) -> None:
+        self.columns: dict[Any, Any] = {}
+        for name in frame.columns:
+            values = frame[name].array
+            # numpy columns: their ndarray (numpy scalars, as a row has them); others (str, Int64,
+            # datetimes) their extension array, which gives NA / Timestamp as a row does
+            self.columns[name] = values.to_numpy() if isinstance(values, pd.arrays.NumpyExtensionArray) else values
+
+
+class _Row:
+    """One row of a :class:`_Cells` table, read like a row Series (``row[k]``, ``row.get(k)``)."""
+
+    __slots__ = ("cells", "i")
+
+    def __init__(self, cells: _Cells, i: int) -> None:
+        self.cells, self.i = cells, i
+
+    def __getitem__(self, key: str) -> Any:
+        return self.cells.columns[key][self.i]
+
+    def get(self, key: str) -> Any:
+        column = self.cells.columns.get(key)
+        return None if column is None else column[self.i]
+
+
+class _VehicleLogs:
+    """The per-log values vehicle_table reads, as arrays by position."""
+
+    def __init__(self, logs: pd.DataFrame) -> None:
+        self.ok = (logs["status"] == "ok").to_numpy(dtype=bool)
+        self.failed = (logs["status"] != "ok").to_numpy(dtype=bool)
+        self.segment = logs["segment"].to_numpy(dtype=float, na_value=np.nan)
+        self.in_consensus = logs["in_consensus"].fillna(False).astype(bool).to_numpy(dtype=bool)
+        sure = logs["confident"] if "confident" in logs.columns else pd.Series(True, index=logs.index)
+        self.doubtful = np.array([not pd.isna(c) and not bool(c) for c in sure], dtype=bool)
+        self.start_known = self.ok & logs["start_time"].notna().to_numpy(dtype=bool)
+        self.start = logs["start_time"].tolist()  # the scalars a Series gives: Timestamp
+
+    def in_period(self, mine: np.ndarray, segment: Any) -> np.ndarray:
+        """Those of ``mine`` in this mounting period (none for a missing segment, as NA == x is)."""
+        return mine[self.segment[mine] == segment] if not pd.isna(segment) else mine[:0]
+
+    def starts(self, mine: np.ndarray) -> list[Any]:
+        """Start times of the successful logs of ``mine`` that have one."""
+        return [self.start[i] for i in mine[self.start_known[mine]]]
+
+
+def _confidence(latest: _Row, logs: _VehicleLogs, period: np.ndarray) -> tuple[bool, str | None]:
+    """Whether the current mounting can be trusted as stated, and if not why (for fleet people);
+    ``period``: the positions in ``logs`` of its mounting period's logs."""
     reasons = []
-    used = period_logs[period_logs["in_consensus"].fillna(False).astype(bool)]
-    sure = used["confident"] if "confident" in used.columns else pd.Series(True, index=used.index)
-    doubtful = int(sure.map(lambda c: not pd.isna(c) and not bool(c)).sum())
+    used = period[logs.in_consensus[period]]
+    doubtful = int(logs.doubtful[used].sum())
     if len(used) and doubtful == len(used):
         reasons.append(f"its {doubtful} log(s) are not confident (flag not_confident)")
     scale = latest.get("sigma_scale")
@@ -296,7 +384,7 @@ def _confidence(latest: pd.Series, period_logs: pd.DataFrame) -> tuple[bool, str
     return not reasons, "; ".join(reasons) or None
 
 
-def _remount(period: pd.Series) -> dict[str, Any]:
+def _remount(period: _Row) -> dict[str, Any]:
     return {
         "time": period.get("first_start_time"),
         "log": period.get("remount_log"),
