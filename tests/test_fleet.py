@@ -25,7 +25,7 @@ from mountcal.cli import main
 from mountcal.core.result import Calibration
 from mountcal.fleet import FleetOptions, JobDefaults, LocalEngine, collect_jobs, outputs_of, run_fleet
 from mountcal.fleet.progress import Progress
-from mountcal.fleet.store import PartStore, job_hash
+from mountcal.fleet.store import HASH_BLOCK, PartStore, file_digest, job_hash
 from mountcal.fleet.worker import run_job
 from mountcal.io import writers as export
 from mountcal.simulate.stops import ParkingLog, simulate_parking_log, simulate_stops
@@ -450,3 +450,17 @@ def test_fleet_calibrates_a_real_drive_exactly_as_calibrate_does(real_data: Path
     for angle in ("roll", "pitch", "yaw"):
         assert row[f"{angle}_deg"] == pytest.approx(getattr(single, f"{angle}_deg"), abs=1e-9)
         assert row[f"{angle}_sigma_deg"] == pytest.approx(getattr(single, f"{angle}_sigma_deg"), abs=1e-9)
+
+
+@pytest.mark.parametrize("size", [0, 1, HASH_BLOCK - 1, HASH_BLOCK, HASH_BLOCK + 1, 3 * HASH_BLOCK + 5])
+def test_a_file_s_digest_is_the_blake3_of_all_its_bytes_across_read_blocks(tmp_path: Path, size: int) -> None:
+    """Read block by block, the digest is BLAKE3 of the whole file — no byte lost or repeated at a block's edge."""
+    from blake3 import blake3
+
+    data = np.random.default_rng(size).integers(0, 256, size, dtype=np.uint8).tobytes()
+    path = tmp_path / "log.bin"
+    path.write_bytes(data)
+    assert file_digest(path) == f"blake3:{blake3(data).hexdigest()}"
+    if size:
+        path.write_bytes(data[:-1] + bytes([data[-1] ^ 1]))  # the last byte of the last block counts
+        assert file_digest(path) != f"blake3:{blake3(data).hexdigest()}"
