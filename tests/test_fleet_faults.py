@@ -72,6 +72,25 @@ def test_a_scheduler_address_that_names_no_scheduler_is_refused_at_once(
     assert not (tmp_path / "o.parquet").exists()
 
 
+def test_a_scheduler_port_nothing_listens_on_is_refused_at_once(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Not after the Client's 20 s of retries, and saying what was found: nothing listening."""
+    import socket
+
+    with socket.socket() as probe:  # a port that was free a moment ago
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    _stop_tables(tmp_path / "v", 3)
+    address = f"tcp://127.0.0.1:{port}"
+    started = time.monotonic()
+    assert main(["fleet", str(tmp_path / "v"), "-o", str(tmp_path / "o.parquet"), "--scheduler", address, "-q"]) == 2
+    assert time.monotonic() - started < 5.0
+    err = capsys.readouterr().err
+    assert f"--scheduler {address}" in err and f"nothing listening on port {port}" in err and "Traceback" not in err
+    assert not (tmp_path / "o.parquet").exists()
+
+
 def _children(pid: int) -> list[int]:
     out = subprocess.run(["ps", "-o", "pid=", "--ppid", str(pid)], capture_output=True, text=True).stdout
     pids = [int(p) for p in out.split()]

@@ -49,6 +49,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 from mountcal.core.atomic import raise_if_interrupted
 from mountcal.core.errors import InputError, MountcalError
 from mountcal.core.option_names import option
+from mountcal.fleet.scheduler_address import check_scheduler_address
 
 if TYPE_CHECKING:
     from mountcal.fleet.inputs import FleetJob
@@ -363,9 +364,6 @@ def _sigint_ignored() -> Iterator[None]:
         signal.signal(signal.SIGINT, previous)
 
 
-NETWORK_SCHEMES = ("tcp", "tls", "ws", "wss")
-
-
 class DaskEngine:
     """An existing Dask distributed cluster (see the module docstring)."""
 
@@ -396,7 +394,7 @@ class DaskEngine:
                 "it is not installed",
                 "Install it: pip install 'mountcal[fleet]'; or run on the local cores (no scheduler).",
             ) from err
-        self._check_address()
+        check_scheduler_address(self.address)
         try:
             self._client = self._distributed.Client(self.address, timeout=self.timeout_s, set_as_default=False)
         except (OSError, TimeoutError, ValueError) as err:
@@ -438,25 +436,6 @@ class DaskEngine:
         if notes:
             notes.append('for fleets start the cluster as docs/fleet.md shows ("Dask settings for fleets")')
         return ("; ".join(notes),) if notes else ()
-
-    def _check_address(self) -> None:
-        """Refuse an address that cannot name a scheduler of another process before a Client exists
-        (a Client that failed on one still runs its finaliser, which waits 40 s and prints a
-        traceback): a network scheme with a host and port."""
-        from distributed.comm.addressing import parse_address, parse_host_port
-
-        try:
-            scheme, location = parse_address(self.address)
-            if scheme not in NETWORK_SCHEMES:
-                raise ValueError(f"the scheme {scheme}:// reaches no scheduler outside this process")
-            parse_host_port(location)
-        except ValueError as err:
-            raise InputError(
-                option("scheduler", self.address),
-                "a Dask scheduler address, tcp://HOST:PORT (or tls://, ws://, wss://)",
-                f"not such an address ({err})",
-                "Write it as tcp://HOST:PORT, e.g. tcp://10.0.0.5:8786 (the port `dask scheduler` prints).",
-            ) from err
 
     def close(self) -> None:
         if self._client is not None:
