@@ -28,7 +28,7 @@ over median, and paired within repetitions. The four configurations must write i
 Then the engines alone (workers started and warm, logs hashed: submitting the 200 jobs to the last
 result), and the **cost model** ``T(W) = a + s·N + (Σ_i (c_log + c_byte·bytes_i) + n_tasks·c_task) / W``:
 a fixed part ``a`` and a serial part per log ``s`` of the command (start, hashing, storing,
-consolidation) from two resumed runs (everything stored) on the whole fleet and on half of it; the
+consolidation) from resumed runs (everything stored) on the whole fleet and on one vehicle; the
 work per log and per byte from a least-squares fit of each log's calibration time (one worker) on
 its size; the engines' overhead per task from no-op tasks. Its predictions of the four runs are
 printed beside the measured medians, with its prediction for 10 000 vehicles × 100 sessions on a
@@ -65,6 +65,7 @@ UPHILL_AZIMUTH_DEG = 30.0  # simulate_parking_log's default
 REMOUNTED = "v07"
 KINDS = ("csv", "parquet", "mcap")
 RATE_HZ = 200.0
+RESUMED_RUNS = 5  # resumed runs of each size for the serial cost per log (interleaved)
 
 
 def write_log(path: str, kind: str, angles: tuple[float, float, float], seed: int, day: int) -> None:
@@ -305,12 +306,15 @@ def cost_model(
 
     table = pd.read_parquet(output)  # a one-worker run: every log stored, its calibration time measured alone
     vehicles = sorted(p for p in logs.iterdir() if p.is_dir())
-    half = vehicles[: len(vehicles) // 2]
+    # s from the whole fleet against one vehicle (the same parts: nothing computed), interleaved so
+    # that a slow spell hits both; half the fleet against all of it left ±0.2 s of noise on 100 logs,
+    # ±2 ms per log, and moved the 10 000-vehicle prediction by a factor of 2.5 between runs
+    few = vehicles[:1]
     n_all = len(table)
-    n_half = int(table["vehicle_id"].isin([v.name for v in half]).sum())
-    t_all = statistics.median(resumed_run([logs], output) for _ in range(3))
-    t_half = statistics.median(resumed_run(half, output) for _ in range(3))  # the same parts: nothing computed
-    s = max(0.0, (t_all - t_half) / (n_all - n_half))  # negative only when the machine's noise dominates
+    n_few = int(table["vehicle_id"].isin([v.name for v in few]).sum())
+    pairs = [(resumed_run([logs], output), resumed_run(few, output)) for _ in range(RESUMED_RUNS)]
+    t_all, t_few = (statistics.median(t) for t in zip(*pairs, strict=True))
+    s = max(0.0, statistics.median(ta - tf for ta, tf in pairs) / (n_all - n_few))  # < 0 only when noise dominates
     a = t_all - s * n_all
     with dask_cluster([], 1) as address:  # the Dask command's own fixed cost: importing distributed, connecting
         a_dask = statistics.median(resumed_run([logs], output, ("--scheduler", address)) for _ in range(3)) - s * n_all
@@ -330,7 +334,7 @@ def cost_model(
     print("  R = Σ (c_log + c_byte·bytes) + n_tasks·c_task: the workers' work")
     print("  (the first term: each worker has a core; the second: W workers, the cluster's monitoring and the")
     print(f"  command share the machine's C = {cores} cores)")
-    resumed = f"resumed: {t_all:.2f} s for {n_all}, {t_half:.2f} s for {n_half}"
+    resumed = f"resumed, medians of {RESUMED_RUNS}: {t_all:.2f} s for {n_all}, {t_few:.2f} s for {n_few}"
     print(f"  a = {a:.2f} s local, {a_dask:.2f} s Dask; s = {1e3 * s:.2f} ms per log ({resumed})")
     print(
         f"  c_log = {1e3 * c_log:.1f} ms, c_byte = {1e9 * c_byte:.0f} ms/GB "
