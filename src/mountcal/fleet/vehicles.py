@@ -14,7 +14,7 @@ import pandas as pd
 from scipy.spatial.transform import Rotation
 
 from mountcal.core.angles import YAW_REASON, Angles
-from mountcal.core.conventions import levelled
+from mountcal.core.conventions import FloatArray, levelled
 from mountcal.core.pvalues import chi2_sf
 from mountcal.fleet.agreement import ALPHA, Segment, analyse_vehicle, angles_with_sigma, information, tangent_residuals
 from mountcal.fleet.inputs import natural_key
@@ -79,29 +79,81 @@ class _PerLog:
 
 
 class _LogCells:
-    """The per-log values the analysis reads, taken out of the table once as arrays and lists (by
-    position): per-vehicle DataFrame slices and row iteration cost more than the statistics."""
+    """The per-log values the analysis and the vehicle table read, taken out of the table once as
+    arrays and lists (by position), each when first read: per-vehicle DataFrame slices and row
+    iteration cost more than the statistics."""
 
     def __init__(self, logs: pd.DataFrame) -> None:
-        self.ok = (logs["status"] == "ok").to_numpy(dtype=bool)
-        self.failed = (logs["status"] != "ok").to_numpy(dtype=bool)
-        needed = logs[["quat_w", "rot_sigma_x_deg", "rot_sigma_y_deg"]].to_numpy(dtype=float)
-        self.usable = self.ok & np.isfinite(needed).all(axis=1)
         self.logs = logs
-        if self.usable.any():  # the rest is read only from usable logs
-            self.start_known = logs["start_time"].notna().to_numpy(dtype=bool)
-            self.start = logs["start_time"].tolist()  # the scalars .iloc gives: Timestamp / NaT
-            self.log = logs["log"].tolist()
-            self.quat = logs[["quat_x", "quat_y", "quat_z", "quat_w"]].to_numpy(dtype=float)
-            self.sigma = logs[["rot_sigma_x_deg", "rot_sigma_y_deg", "rot_sigma_z_deg"]].to_numpy(dtype=float)
-            sys_columns = [f"rot_sys_sigma_{a}_deg" for a in "xyz"]
-            self.sys = logs[sys_columns].to_numpy(float) if sys_columns[0] in logs else None
+        self.ok = (logs["status"] == "ok").to_numpy(dtype=bool)
+        self.failed = ~self.ok
+
+    @cached_property
+    def usable(self) -> np.ndarray:
+        """Calibrated with an uncertainty."""
+        needed = self.logs[["quat_w", "rot_sigma_x_deg", "rot_sigma_y_deg"]].to_numpy(dtype=float)
+        usable: np.ndarray = self.ok & np.isfinite(needed).all(axis=1)
+        return usable
+
+    @cached_property
+    def start_known(self) -> np.ndarray:
+        known: np.ndarray = self.logs["start_time"].notna().to_numpy(dtype=bool)
+        return known
+
+    @cached_property
+    def start(self) -> list[Any]:
+        return list(self.logs["start_time"].tolist())  # the scalars .iloc gives: Timestamp / NaT
+
+    @cached_property
+    def log(self) -> list[Any]:
+        return list(self.logs["log"].tolist())
+
+    @cached_property
+    def quat(self) -> FloatArray:
+        quat: FloatArray = self.logs[["quat_x", "quat_y", "quat_z", "quat_w"]].to_numpy(dtype=float)
+        return quat
+
+    @cached_property
+    def sigma(self) -> FloatArray:
+        sigma: FloatArray = self.logs[["rot_sigma_x_deg", "rot_sigma_y_deg", "rot_sigma_z_deg"]].to_numpy(dtype=float)
+        return sigma
+
+    @cached_property
+    def sys(self) -> FloatArray | None:
+        """The sensor's systematic σ per log, where the table has it."""
+        columns = [f"rot_sys_sigma_{a}_deg" for a in "xyz"]
+        sys: FloatArray | None = self.logs[columns].to_numpy(float) if columns[0] in self.logs else None
+        return sys
 
     @cached_property
     def yaw_reason(self) -> np.ndarray:
-        """Read only for a mounting period without yaw."""
         reasons: np.ndarray = self.logs[YAW_REASON].to_numpy(dtype=object)
         return reasons
+
+    @cached_property
+    def segment(self) -> FloatArray:  # the analysis's columns, read by the vehicle table
+        segment: FloatArray = self.logs["segment"].to_numpy(dtype=float, na_value=np.nan)
+        return segment
+
+    @cached_property
+    def in_consensus(self) -> np.ndarray:
+        used: np.ndarray = self.logs["in_consensus"].fillna(False).astype(bool).to_numpy(dtype=bool)
+        return used
+
+    @cached_property
+    def doubtful(self) -> np.ndarray:
+        """Flagged not confident (a missing flag or column is not doubt)."""
+        logs = self.logs
+        sure = logs["confident"] if "confident" in logs.columns else pd.Series(True, index=logs.index)
+        return np.array([not pd.isna(c) and not bool(c) for c in sure], dtype=bool)
+
+    def in_period(self, mine: np.ndarray, segment: Any) -> np.ndarray:
+        """Those of ``mine`` in this mounting period (none for a missing segment, as NA == x is)."""
+        return mine[self.segment[mine] == segment] if not pd.isna(segment) else mine[:0]
+
+    def starts(self, mine: np.ndarray) -> list[Any]:
+        """Start times of the successful logs of ``mine`` that have one."""
+        return [self.start[i] for i in mine[(self.ok & self.start_known)[mine]]]
 
 
 def _vehicle_rows(
@@ -280,7 +332,7 @@ def vehicle_table(mountings: pd.DataFrame, logs: pd.DataFrame) -> pd.DataFrame:
     order (``mountings``: a list of records, the vehicle's mounting over time)."""
     rows = []
     by_vehicle = logs.groupby("vehicle_id", sort=False).indices  # one grouping, not a scan per vehicle
-    table, mine_logs = _Cells(mountings), _VehicleLogs(logs)
+    table, mine_logs = _Cells(mountings), _LogCells(logs)
     segment = mountings["segment"].to_numpy(dtype=float, na_value=np.nan)
     remount = mountings["remount"].fillna(False).astype(bool).to_numpy(dtype=bool)
     no_logs = np.zeros(0, dtype=np.intp)
@@ -346,29 +398,7 @@ class _Row:
         return None if column is None else column[self.i]
 
 
-class _VehicleLogs:
-    """The per-log values vehicle_table reads, as arrays by position."""
-
-    def __init__(self, logs: pd.DataFrame) -> None:
-        self.ok = (logs["status"] == "ok").to_numpy(dtype=bool)
-        self.failed = (logs["status"] != "ok").to_numpy(dtype=bool)
-        self.segment = logs["segment"].to_numpy(dtype=float, na_value=np.nan)
-        self.in_consensus = logs["in_consensus"].fillna(False).astype(bool).to_numpy(dtype=bool)
-        sure = logs["confident"] if "confident" in logs.columns else pd.Series(True, index=logs.index)
-        self.doubtful = np.array([not pd.isna(c) and not bool(c) for c in sure], dtype=bool)
-        self.start_known = self.ok & logs["start_time"].notna().to_numpy(dtype=bool)
-        self.start = logs["start_time"].tolist()  # the scalars a Series gives: Timestamp
-
-    def in_period(self, mine: np.ndarray, segment: Any) -> np.ndarray:
-        """Those of ``mine`` in this mounting period (none for a missing segment, as NA == x is)."""
-        return mine[self.segment[mine] == segment] if not pd.isna(segment) else mine[:0]
-
-    def starts(self, mine: np.ndarray) -> list[Any]:
-        """Start times of the successful logs of ``mine`` that have one."""
-        return [self.start[i] for i in mine[self.start_known[mine]]]
-
-
-def _confidence(latest: _Row, logs: _VehicleLogs, period: np.ndarray) -> tuple[bool, str | None]:
+def _confidence(latest: _Row, logs: _LogCells, period: np.ndarray) -> tuple[bool, str | None]:
     """Whether the current mounting can be trusted as stated, and if not why (for fleet people);
     ``period``: the positions in ``logs`` of its mounting period's logs."""
     reasons = []
