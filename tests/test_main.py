@@ -162,3 +162,15 @@ def _required(command: str) -> list[str]:
         "export": ["r.json", "--to", "json", "-o", "-"],
         "triad": ["s.csv", "-o", "t.json"],
     }.get(command, [])
+
+
+def test_the_process_entry_point_skips_the_exit_collections_and_an_in_process_call_does_not() -> None:
+    """The console script's process ends right after ``main()``: its objects are frozen, so CPython's
+    collections at exit skip them. A caller running ``main(argv)`` in its own process keeps its collector."""
+    probe = (
+        "import gc, sys; from mountcal.__main__ import main; "
+        "main(['inspect', 'no-such.csv']); inside = gc.get_freeze_count(); "
+        "sys.argv = ['mountcal', 'inspect', 'no-such.csv']; main(); print(inside, gc.get_freeze_count() > 0)"
+    )
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
+    assert done.stdout.split()[-2:] == ["0", "True"], done.stdout

@@ -49,6 +49,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 from mountcal.core.atomic import raise_if_interrupted
 from mountcal.core.errors import InputError, MountcalError
 from mountcal.core.option_names import option
+from mountcal.core.version import software_version
 from mountcal.fleet.scheduler_address import check_scheduler_address
 
 if TYPE_CHECKING:
@@ -70,6 +71,8 @@ MAX_WORKER_DEATHS = 2  # a log in flight when its worker died this often is reco
 BATCH_TARGET_S = 0.5  # Dask: work per task (a task costs the scheduler and the network milliseconds)
 MAX_BATCH = 64
 CLEANUP_WAIT_S = 5.0  # the longest kill() and close() together wait for the workers (well inside atomic.GRACE_S)
+VERSION_KEY = "mountcal.version"  # in what a worker says of itself (_dask_settings)
+COMPUTED_BY = "_computed_by"  # a record's key for the mountcal version that computed it (checked, removed by the run)
 WATCH_PERIOD_S = 1.0  # where there is no pidfd, a worker checks this often whether the command lives
 # Dask settings for a cluster that runs fleets (docs/fleet.md, "Dask settings for fleets"). Dask's
 # defaults sample every worker thread's stack each 10 ms (its profiler) and poll the event loop, the
@@ -404,13 +407,65 @@ class DaskEngine:
                 f"no connection ({type(err).__name__}: {err})",
                 "Start one (`dask scheduler`, then `dask worker ADDRESS` on each machine) or check the address.",
             ) from err
-        self.notes = self._settings_notes()
-
-    def _settings_notes(self) -> tuple[str, ...]:
-        """A note when the workers run with settings that slow a fleet down (FLEET_DASK_CONFIG)."""
         try:
-            seen = self._client.run(_dask_settings, list(FLEET_DASK_CONFIG))
-        except Exception:  # no workers yet, or a worker that cannot answer: nothing to say
+            self._check_scheduler_software()
+            seen = self._workers_settings()
+            self._check_workers_software(seen)
+        except InputError:
+            self.close()
+            raise
+        self.notes = self._settings_notes(seen)
+
+    def _check_scheduler_software(self) -> None:
+        """Refuse a scheduler that cannot import this mountcal: Dask's scheduler unpickles every task,
+        and a fleet's tasks hold mountcal's jobs (without it every log would fail, one by one)."""
+        ours = software_version()
+        try:
+            theirs = self._client.run_on_scheduler(_mountcal_version)
+        except Exception as err:  # whatever the scheduler's unpickling raised
+            found = f"it cannot ({type(err).__name__}: {str(err).strip().splitlines()[0] if str(err).strip() else ''})"
+        else:
+            if theirs == ours:
+                return
+            found = f"mountcal {theirs}"
+        raise InputError(
+            option("scheduler", self.address),
+            f"a Dask scheduler that imports mountcal {ours}, this command's version (the scheduler unpickles every "
+            "task, and a fleet's tasks hold mountcal's jobs)",
+            found,
+            f"Install mountcal {ours} where the scheduler runs, as on the workers (one software environment "
+            "for the scheduler, the workers and this command).",
+        )
+
+    def _workers_settings(self) -> dict[str, dict[str, object]]:
+        """Each worker's fleet settings and mountcal version ({} when none answers: no workers yet)."""
+        try:
+            return dict(self._client.run(_dask_settings, list(FLEET_DASK_CONFIG)))
+        except Exception:  # no workers yet, or a worker that cannot answer: the records are checked anyway
+            return {}
+
+    def _check_workers_software(self, seen: dict[str, dict[str, object]]) -> None:
+        """Refuse workers with another mountcal version (each record is checked too, for workers that
+        join later: :func:`mountcal.fleet.run`)."""
+        ours = software_version()
+        by_version: dict[str, list[str]] = {}
+        for worker, settings in seen.items():
+            theirs = settings.get(VERSION_KEY)
+            if theirs != ours:
+                by_version.setdefault(str(theirs or "(a version that does not say)"), []).append(worker)
+        if by_version:
+            found = "; ".join(f"mountcal {v} on {', '.join(sorted(ws))}" for v, ws in sorted(by_version.items()))
+            raise InputError(
+                option("scheduler", self.address),
+                f"mountcal {ours} on every Dask worker (this command's version, which the stored results are keyed by)",
+                found,
+                f"Install mountcal {ours} on those workers, or run this command with their version.",
+            )
+
+    @staticmethod
+    def _settings_notes(seen: dict[str, dict[str, object]]) -> tuple[str, ...]:
+        """A note when the workers run with settings that slow a fleet down (FLEET_DASK_CONFIG)."""
+        if not seen:
             return ()
         notes = []
         differ = sorted(
@@ -528,12 +583,22 @@ class DaskEngine:
 
 
 def _dask_settings(keys: list[str]) -> dict[str, object]:
-    """On a worker: its values of the Dask settings named, and whether mountcal's worker module is imported."""
+    """On a worker: its values of the Dask settings named, whether mountcal's worker module is
+    imported, and its mountcal version."""
     import sys
 
     import dask
 
-    return {**{k: dask.config.get(k, None) for k in keys}, WORKER_MODULE: WORKER_MODULE in sys.modules}
+    return {
+        **{k: dask.config.get(k, None) for k in keys},
+        WORKER_MODULE: WORKER_MODULE in sys.modules,
+        VERSION_KEY: software_version(),
+    }
+
+
+def _mountcal_version() -> str:
+    """On the scheduler: the mountcal version it imports (unpickling this function imports mountcal)."""
+    return software_version()
 
 
 class _BatchSizing:

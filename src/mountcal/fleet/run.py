@@ -22,7 +22,7 @@ from mountcal.core.errors import InputError, MountcalError, refuse_not_confident
 from mountcal.core.paths import check_outputs, output_lock
 from mountcal.core.version import software_version
 from mountcal.fleet.agreement import ALPHA
-from mountcal.fleet.engines import make_engine
+from mountcal.fleet.engines import COMPUTED_BY, make_engine
 from mountcal.fleet.inputs import FleetJob
 from mountcal.fleet.overview import check_overview_overwritable, overview_path, write_overview
 from mountcal.fleet.progress import Progress
@@ -190,11 +190,13 @@ def _run_locked(
                     yield key, jobs[i]
 
     pending: set[str] = set()
+    version = software_version()
     with make_engine(options.workers, options.scheduler) as engine:
         if len(stored) < len(jobs):  # likely work to do: start the workers while the first logs are hashed
             engine.start()
         try:
             for key, record in engine.results(todo()):
+                record = _computed_here(record, version)
                 if not record.pop("_transient", False):
                     store.save(key, record)
                 results[key] = record
@@ -287,6 +289,28 @@ def _hash_or_failure(job: FleetJob) -> tuple[str | None, dict[str, Any]]:
         return job_hash(job), {}
     except MountcalError as err:
         return None, {"status": "failed", "error": str(err), "error_type": type(err).__name__}
+
+
+def _computed_here(record: dict[str, Any], version: str) -> dict[str, Any]:
+    """The record, or a failure not to be stored when another mountcal version computed it.
+
+    A log's key names this command's mountcal version; a worker installed apart (a Dask worker
+    from another image, one that joined the cluster later) would store its own version's answer
+    under it, and every later run would take that answer as this version's.
+    """
+    by = record.pop(COMPUTED_BY, None)
+    if by == version or record.get("_transient"):  # the engine's own failures are not stored anyway
+        return record
+    return {
+        "status": "failed",
+        "error": (
+            f"expected this log calibrated by mountcal {version} (this command's version, which its stored "
+            f"result is keyed by), found it calibrated by mountcal {by or '(a version that does not say)'} on a "
+            "worker; install the same mountcal on every worker: the log is not stored and the next run retries it"
+        ),
+        "error_type": "VersionMismatch",
+        "_transient": True,
+    }
 
 
 def _log_table(

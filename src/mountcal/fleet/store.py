@@ -274,7 +274,7 @@ LOG_COLUMNS: tuple[tuple[str, pa.DataType, str], ...] = (
     ("flags", _L, "see docs/fleet.md"),
     ("notes", _S, "the calibration's notes, joined with ' | '"),
     ("error", _S, "why the log failed: the message (file, expected, found, what to do)"),
-    ("error_type", _S, "the exception type of a failure"),
+    ("error_type", _S, "the exception type of a failure (VersionMismatch: computed by another mountcal)"),
     ("segment", _I, "index of the vehicle's mounting period this log belongs to"),
     ("in_consensus", _B, "whether the log entered its segment's consensus"),
     ("consensus_chi2", _F, "χ² of this log against the consensus of the segment's other logs"),

@@ -35,7 +35,9 @@ from mountcal.core.errors import MountcalError
 from mountcal.core.findings import STRUCTURE_P
 from mountcal.core.option_names import as_flags
 from mountcal.core.result import Calibration, Systematic
+from mountcal.core.version import software_version
 from mountcal.estimate import effects as registry
+from mountcal.fleet.engines import COMPUTED_BY
 from mountcal.fleet.inputs import FleetJob
 from mountcal.fleet.storage import is_url, local_copies
 from mountcal.io.logs import join, read_file
@@ -69,6 +71,7 @@ def run_job(job: FleetJob) -> dict[str, Any]:
         kind = f"{type(err).__module__}.{type(err).__qualname__}"
         record.update(error=_in_user_terms(f"unexpected {kind}: {err}", job, local), error_type=kind)
     record["elapsed_s"] = time.perf_counter() - started
+    record[COMPUTED_BY] = software_version()  # the command stores only what its own version computed
     return record
 
 
