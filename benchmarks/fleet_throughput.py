@@ -240,7 +240,7 @@ def dask_cluster(startup_s: list[float], workers: int) -> Iterator[str]:
 
     started = time.perf_counter()
     # the nannies hand this configuration to their worker processes
-    from mountcal.fleet.engines import FLEET_DASK_CONFIG, WORKER_MODULE
+    from mountcal.fleet.dask_cluster import FLEET_DASK_CONFIG, WORKER_MODULE
 
     fleet = {**FLEET_DASK_CONFIG, "distributed.worker.preload": [WORKER_MODULE]}  # as docs/fleet.md starts one
     with (

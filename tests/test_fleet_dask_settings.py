@@ -16,7 +16,8 @@ from pathlib import Path
 
 import pytest
 
-from mountcal.fleet.engines import FLEET_DASK_CONFIG, DaskEngine
+from mountcal.fleet.dask_cluster import FLEET_DASK_CONFIG
+from mountcal.fleet.engines import DaskEngine
 
 pytest.importorskip("distributed")
 REPO = Path(__file__).resolve().parents[1]

@@ -3,6 +3,8 @@
 - :mod:`~mountcal.fleet.inputs`: folders, globs and manifest CSVs → :class:`FleetJob` per log.
 - :mod:`~mountcal.fleet.worker`: one log → one plain record (never raises).
 - :mod:`~mountcal.fleet.engines`: where logs are calibrated (local worker processes, Dask).
+- :mod:`~mountcal.fleet.dask_cluster`: what is checked of a Dask cluster on connecting (one
+  mountcal version everywhere, the settings for fleets).
 - :mod:`~mountcal.fleet.run`: :func:`run_fleet`.
 - :mod:`~mountcal.fleet.store`: content hashes, atomic part files, the tables' columns.
 - :mod:`~mountcal.fleet.vehicles`: consensus on SO(3), disagreeing logs, remount detection.

@@ -13,7 +13,8 @@
   itself when it is gone, so no worker outlives its run holding the terminal or a pipe.
 - :class:`DaskEngine` (``--scheduler tcp://HOST:PORT``): the same jobs on an existing Dask
   distributed cluster via ``distributed.Client(address)``. Workers need only the installed
-  mountcal and the log files at the same paths (a shared file system) or in object storage. Jobs
+  mountcal (the command's version, as the scheduler: :mod:`mountcal.fleet.dask_cluster` checks on
+  connecting) and the log files at the same paths (a shared file system) or in object storage. Jobs
   go to the workers as paths, never bytes, in batches sized so that a batch holds about
   :data:`BATCH_TARGET_S` of work (estimated from the logs done so far; smaller at the end, so that
   the workers finish together): a task costs the scheduler a few milliseconds, a log ~0.1 s. A
@@ -49,13 +50,12 @@ from typing import TYPE_CHECKING, Any, Protocol
 from mountcal.core.atomic import raise_if_interrupted
 from mountcal.core.errors import InputError, MountcalError
 from mountcal.core.option_names import option
-from mountcal.core.version import software_version
+from mountcal.fleet.dask_cluster import WORKER_MODULE, look_at_cluster
 from mountcal.fleet.scheduler_address import check_scheduler_address
 
 if TYPE_CHECKING:
     from mountcal.fleet.inputs import FleetJob
 
-WORKER_MODULE = "mountcal.fleet.worker"  # what the worker server imports before forking workers
 SERVER_MODULE = "mountcal.fleet.server"  # imported first by the worker server: it ignores Ctrl-C
 PASSED_VARIABLES = ("AWS_",)  # the workers see these as the command has them now (object storage)
 THREAD_VARIABLES = (
@@ -71,21 +71,7 @@ MAX_WORKER_DEATHS = 2  # a log in flight when its worker died this often is reco
 BATCH_TARGET_S = 0.5  # Dask: work per task (a task costs the scheduler and the network milliseconds)
 MAX_BATCH = 64
 CLEANUP_WAIT_S = 5.0  # the longest kill() and close() together wait for the workers (well inside atomic.GRACE_S)
-VERSION_KEY = "mountcal.version"  # in what a worker says of itself (_dask_settings)
-COMPUTED_BY = "_computed_by"  # a record's key for the mountcal version that computed it (checked, removed by the run)
 WATCH_PERIOD_S = 1.0  # where there is no pidfd, a worker checks this often whether the command lives
-# Dask settings for a cluster that runs fleets (docs/fleet.md, "Dask settings for fleets"). Dask's
-# defaults sample every worker thread's stack each 10 ms (its profiler) and poll the event loop, the
-# system and each worker's memory several times a second: on a busy single-threaded worker that costs
-# ~10 % of its core, and the scheduler and nannies as much again, where workers and scheduler share
-# cores (measured on a 200-log fleet: the workers' event loops 2.6 → 1.1 s CPU, the scheduler's
-# 2.3 → 1.2 s). The dashboard loses the profile page and keeps coarser system plots.
-FLEET_DASK_CONFIG: dict[str, object] = {
-    "distributed.worker.profile.enabled": False,
-    "distributed.admin.tick.interval": "1s",
-    "distributed.admin.system-monitor.interval": "5s",
-    "distributed.worker.memory.monitor-interval": "1s",
-}
 
 
 class Engine(Protocol):
@@ -408,89 +394,10 @@ class DaskEngine:
                 "Start one (`dask scheduler`, then `dask worker ADDRESS` on each machine) or check the address.",
             ) from err
         try:
-            self._check_scheduler_software()
-            seen = self._workers_settings()
-            self._check_workers_software(seen)
+            self.notes = look_at_cluster(self._client, self.address)
         except InputError:
             self.close()
             raise
-        self.notes = self._settings_notes(seen)
-
-    def _check_scheduler_software(self) -> None:
-        """Refuse a scheduler that cannot import this mountcal: Dask's scheduler unpickles every task,
-        and a fleet's tasks hold mountcal's jobs (without it every log would fail, one by one)."""
-        ours = software_version()
-        try:
-            theirs = self._client.run_on_scheduler(_mountcal_version)
-        except Exception as err:  # whatever the scheduler's unpickling raised
-            found = f"it cannot ({type(err).__name__}: {str(err).strip().splitlines()[0] if str(err).strip() else ''})"
-        else:
-            if theirs == ours:
-                return
-            found = f"mountcal {theirs}"
-        raise InputError(
-            option("scheduler", self.address),
-            f"a Dask scheduler that imports mountcal {ours}, this command's version (the scheduler unpickles every "
-            "task, and a fleet's tasks hold mountcal's jobs)",
-            found,
-            f"Install mountcal {ours} where the scheduler runs, as on the workers (one software environment "
-            "for the scheduler, the workers and this command).",
-        )
-
-    def _workers_settings(self) -> dict[str, dict[str, object]]:
-        """Each worker's fleet settings and mountcal version ({} when none answers: no workers yet)."""
-        try:
-            return dict(self._client.run(_dask_settings, list(FLEET_DASK_CONFIG)))
-        except Exception:  # no workers yet, or a worker that cannot answer: the records are checked anyway
-            return {}
-
-    def _check_workers_software(self, seen: dict[str, dict[str, object]]) -> None:
-        """Refuse workers with another mountcal version (each record is checked too, for workers that
-        join later: :func:`mountcal.fleet.run`)."""
-        ours = software_version()
-        by_version: dict[str, list[str]] = {}
-        for worker, settings in seen.items():
-            theirs = settings.get(VERSION_KEY)
-            if theirs != ours:
-                by_version.setdefault(str(theirs or "(a version that does not say)"), []).append(worker)
-        if by_version:
-            found = "; ".join(f"mountcal {v} on {', '.join(sorted(ws))}" for v, ws in sorted(by_version.items()))
-            raise InputError(
-                option("scheduler", self.address),
-                f"mountcal {ours} on every Dask worker (this command's version, which the stored results are keyed by)",
-                found,
-                f"Install mountcal {ours} on those workers, or run this command with their version.",
-            )
-
-    @staticmethod
-    def _settings_notes(seen: dict[str, dict[str, object]]) -> tuple[str, ...]:
-        """A note when the workers run with settings that slow a fleet down (FLEET_DASK_CONFIG)."""
-        if not seen:
-            return ()
-        notes = []
-        differ = sorted(
-            {
-                k
-                for settings in seen.values()
-                for k, v in settings.items()
-                if k in FLEET_DASK_CONFIG and v != FLEET_DASK_CONFIG[k]
-            }
-        )
-        if differ:
-            values = {k: ", ".join(sorted({str(settings.get(k)) for settings in seen.values()})) for k in differ}
-            shown = ", ".join(f"{k.removeprefix('distributed.')} ({v})" for k, v in values.items())
-            notes.append(
-                f"the Dask workers run with {shown}: Dask's monitoring costs a busy worker about 10 % of its core"
-            )
-        cold = sum(not settings.get(WORKER_MODULE) for settings in seen.values())
-        if cold:
-            notes.append(
-                f"{cold} of {len(seen)} Dask workers have not imported mountcal: each does at its first log (≈ 1 s of "
-                f"CPU); start them with --preload {WORKER_MODULE}"
-            )
-        if notes:
-            notes.append('for fleets start the cluster as docs/fleet.md shows ("Dask settings for fleets")')
-        return ("; ".join(notes),) if notes else ()
 
     def close(self) -> None:
         if self._client is not None:
@@ -582,25 +489,6 @@ class DaskEngine:
         return [engine_failure(error, "the Dask cluster could not run this log")] * n
 
 
-def _dask_settings(keys: list[str]) -> dict[str, object]:
-    """On a worker: its values of the Dask settings named, whether mountcal's worker module is
-    imported, and its mountcal version."""
-    import sys
-
-    import dask
-
-    return {
-        **{k: dask.config.get(k, None) for k in keys},
-        WORKER_MODULE: WORKER_MODULE in sys.modules,
-        VERSION_KEY: software_version(),
-    }
-
-
-def _mountcal_version() -> str:
-    """On the scheduler: the mountcal version it imports (unpickling this function imports mountcal)."""
-    return software_version()
-
-
 class _BatchSizing:
     """How many logs a Dask task takes: about BATCH_TARGET_S of work at the rate seen so far (one log
     until a log has been timed), and at the end no more than an even share of what is left, so that
@@ -632,7 +520,6 @@ def make_engine(workers: int | None = None, scheduler: str | None = None) -> Eng
 
 
 __all__ = [
-    "FLEET_DASK_CONFIG",
     "DaskEngine",
     "Engine",
     "LocalEngine",

@@ -75,6 +75,9 @@ class JobDefaults:
     use: Use = DEFAULT_USE  # a log's parked stops, its driving, or whatever it supports (as `mountcal calibrate`)
 
 
+COMPUTED_BY = "_computed_by"  # in a worker's record of a job: the mountcal version that computed it (the run checks it)
+
+
 @dataclass(frozen=True)
 class FleetJob:
     """One log of one vehicle, ready for a worker.

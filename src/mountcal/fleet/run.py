@@ -22,8 +22,8 @@ from mountcal.core.errors import InputError, MountcalError, refuse_not_confident
 from mountcal.core.paths import check_outputs, output_lock
 from mountcal.core.version import software_version
 from mountcal.fleet.agreement import ALPHA
-from mountcal.fleet.engines import COMPUTED_BY, make_engine
-from mountcal.fleet.inputs import FleetJob
+from mountcal.fleet.engines import make_engine
+from mountcal.fleet.inputs import COMPUTED_BY, FleetJob
 from mountcal.fleet.overview import check_overview_overwritable, overview_path, write_overview
 from mountcal.fleet.progress import Progress
 from mountcal.fleet.storage import is_url, remove_orphans

@@ -37,8 +37,7 @@ from mountcal.core.option_names import as_flags
 from mountcal.core.result import Calibration, Systematic
 from mountcal.core.version import software_version
 from mountcal.estimate import effects as registry
-from mountcal.fleet.engines import COMPUTED_BY
-from mountcal.fleet.inputs import FleetJob
+from mountcal.fleet.inputs import COMPUTED_BY, FleetJob
 from mountcal.fleet.storage import is_url, local_copies
 from mountcal.io.logs import join, read_file
 from mountcal.io.samples import Samples
