@@ -27,14 +27,15 @@ from mountcal.stops.table import write_stop_table
 pytest.importorskip("distributed")
 REPO = Path(__file__).resolve().parents[1]
 DASK = Path(sys.executable).with_name("dask")
-# a scheduler whose Python cannot import mountcal (an image built without it)
-SCHEDULER_WITHOUT_MOUNTCAL = """
+# a scheduler whose Python cannot import a package (an image built without it): sys.argv[1]
+SCHEDULER_WITHOUT = """
 import sys
-class NoMountcal:
+missing = sys.argv.pop(1)
+class Without:
     def find_spec(self, name, path=None, target=None):
-        if name.partition(".")[0] == "mountcal":
+        if name.partition(".")[0] == missing:
             raise ModuleNotFoundError(f"No module named {name!r}")
-sys.meta_path.insert(0, NoMountcal())
+sys.meta_path.insert(0, Without())
 from distributed.cli.dask_scheduler import main
 sys.argv = ["dask-scheduler", *sys.argv[1:]]
 main()
@@ -112,8 +113,10 @@ def _fleet(logs: Path, output: Path, address: str) -> subprocess.CompletedProces
     return subprocess.run(command, capture_output=True, text=True, env=env, timeout=300)
 
 
-def test_a_scheduler_that_cannot_import_mountcal_is_refused_at_once(tmp_path: Path) -> None:
-    started = Cluster(tmp_path, [sys.executable, "-c", SCHEDULER_WITHOUT_MOUNTCAL])
+@pytest.mark.parametrize("missing", ["mountcal", "pandas"])
+def test_a_scheduler_that_cannot_import_mountcal_is_refused_at_once(tmp_path: Path, missing: str) -> None:
+    """Without mountcal, or with mountcal but without a package its jobs need (pandas)."""
+    started = Cluster(tmp_path, [sys.executable, "-c", SCHEDULER_WITHOUT, missing])
     try:
         started.add_worker()
         output = tmp_path / "out" / "fleet.parquet"
@@ -123,7 +126,7 @@ def test_a_scheduler_that_cannot_import_mountcal_is_refused_at_once(tmp_path: Pa
     assert done.returncode == 2, done.stderr
     message = done.stderr
     assert f"--scheduler {started.address}" in message and "scheduler that imports mountcal" in message, message
-    assert "No module named 'mountcal" in message and f"Install mountcal {software_version()}" in message, message
+    assert f"No module named '{missing}" in message and f"Install mountcal {software_version()}" in message, message
     assert "Traceback" not in message
     assert not _outputs(output)
 

@@ -20,6 +20,7 @@ from mountcal.core.errors import InputError
 from mountcal.core.option_names import option
 from mountcal.core.version import software_version
 
+JOBS_MODULE = "mountcal.fleet.inputs"  # the types a fleet's tasks hold (FleetJob and its parts)
 WORKER_MODULE = "mountcal.fleet.worker"  # what a fleet worker (local or Dask) imports before its first log
 VERSION_KEY = "mountcal.version"  # in what a worker says of itself (_worker_settings)
 # Dask settings for a cluster that runs fleets (docs/fleet.md, "Dask settings for fleets"). Dask's
@@ -139,7 +140,12 @@ def _worker_settings(keys: list[str]) -> dict[str, object]:
 
 
 def _scheduler_version() -> str:
-    """On the scheduler: the mountcal version it imports (unpickling this function imports mountcal)."""
+    """On the scheduler: the mountcal version it imports, once it has imported what unpickling a
+    fleet's tasks needs (the jobs' types and what they import: a scheduler with mountcal but without
+    one of its dependencies fails here, not on every log)."""
+    import importlib
+
+    importlib.import_module(JOBS_MODULE)
     return software_version()
 
 
