@@ -24,6 +24,7 @@ import pytest
 from mountcal.cli import main
 from mountcal.core.result import Calibration
 from mountcal.fleet import FleetOptions, JobDefaults, LocalEngine, collect_jobs, outputs_of, run_fleet
+from mountcal.fleet.engines import TRANSIENT
 from mountcal.fleet.progress import Progress
 from mountcal.fleet.store import HASH_BLOCK, PartStore, file_digest, job_hash
 from mountcal.fleet.worker import run_job
@@ -349,7 +350,7 @@ def test_a_worker_killed_mid_run_costs_no_log(fleet: dict) -> None:
             seen.append(key)
             records.append(record)
     assert sorted(seen) == sorted(todo)
-    assert all(r["status"] == "ok" and "_transient" not in r for r in records)
+    assert all(r["status"] == "ok" and TRANSIENT not in r for r in records)
 
 
 def test_a_log_that_trips_a_bug_is_recorded_with_the_exception_type(fleet: dict) -> None:

@@ -7,21 +7,19 @@ import json
 import os
 import re
 import shlex
-import signal
 import subprocess
 import sys
-import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from tests.dask_processes import Cluster
 
 from mountcal.fleet.dask_cluster import FLEET_DASK_CONFIG
 from mountcal.fleet.engines import DaskEngine
 
 pytest.importorskip("distributed")
 REPO = Path(__file__).resolve().parents[1]
-DASK = Path(sys.executable).with_name("dask")
 
 
 def documented_section() -> str:
@@ -63,39 +61,12 @@ def test_the_documented_settings_are_the_engines_and_dask_reads_them_as_written(
 def documented_cluster(tmp_path: Path) -> Iterator[str]:
     """`dask scheduler` and `dask worker` started as docs/fleet.md starts them (with a scheduler file for the port)."""
     env = {**os.environ, **documented_environment()}
-    scheduler_file = tmp_path / "scheduler.json"
-    started = [
-        subprocess.Popen(
-            [str(DASK), "scheduler", "--port", "0", "--no-dashboard", "--scheduler-file", str(scheduler_file)],
-            env=env,
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL,
-            start_new_session=True,
-        )
-    ]
+    cluster = Cluster(tmp_path, env=env)
     try:
-        deadline = time.monotonic() + 60
-        while not scheduler_file.exists() and time.monotonic() < deadline:
-            time.sleep(0.1)
-        address = json.loads(scheduler_file.read_text())["address"]
-        started.append(
-            subprocess.Popen(
-                [str(DASK), *documented_worker_arguments(address), "--no-dashboard"],
-                env=env,
-                stdout=subprocess.DEVNULL,
-                stderr=subprocess.DEVNULL,
-                start_new_session=True,
-            )
-        )
-        from distributed import Client
-
-        with Client(address, timeout=60) as client:
-            client.wait_for_workers(1, timeout=60)
-        yield address
+        cluster.add_worker(env, arguments=documented_worker_arguments(cluster.address))
+        yield cluster.address
     finally:
-        for proc in reversed(started):
-            os.killpg(proc.pid, signal.SIGTERM)
-            proc.wait(30)
+        cluster.close()
 
 
 def test_a_cluster_started_as_documented_draws_no_note(documented_cluster: str) -> None:

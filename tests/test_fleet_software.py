@@ -8,9 +8,7 @@ distribution's metadata ahead on the worker's path (what a second install looks 
 
 from __future__ import annotations
 
-import json
 import os
-import signal
 import subprocess
 import sys
 import time
@@ -19,6 +17,7 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
+from tests.dask_processes import Cluster
 
 from mountcal.core.version import software_version
 from mountcal.simulate.stops import simulate_stops
@@ -26,7 +25,6 @@ from mountcal.stops.table import write_stop_table
 
 pytest.importorskip("distributed")
 REPO = Path(__file__).resolve().parents[1]
-DASK = Path(sys.executable).with_name("dask")
 # a scheduler whose Python cannot import a package (an image built without it): sys.argv[1]
 SCHEDULER_WITHOUT = """
 import sys
@@ -56,41 +54,6 @@ def _other_version(tmp_path: Path) -> dict[str, str]:
     dist.mkdir(parents=True)
     (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: mountcal\nVersion: 99.0\n")
     return {**os.environ, "PYTHONPATH": os.pathsep.join([str(dist.parent), str(REPO / "src")])}
-
-
-class Cluster:
-    """A `dask scheduler` and the `dask worker`s added to it, all ended with the test."""
-
-    def __init__(self, folder: Path, scheduler: list[str] | None = None) -> None:
-        self.folder, self.started = folder, []
-        folder.mkdir(parents=True, exist_ok=True)
-        scheduler_file = folder / "scheduler.json"
-        command = scheduler or [str(DASK), "scheduler"]
-        self._start([*command, "--port", "0", "--no-dashboard", "--scheduler-file", str(scheduler_file)], os.environ)
-        deadline = time.monotonic() + 60
-        while not scheduler_file.exists() and time.monotonic() < deadline:
-            time.sleep(0.1)
-        self.address = json.loads(scheduler_file.read_text())["address"]
-
-    def _start(self, command: list[str], env: dict[str, str] | os._Environ[str]) -> None:
-        self.started.append(
-            subprocess.Popen(
-                command, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True
-            )
-        )
-
-    def add_worker(self, env: dict[str, str] | os._Environ[str] = os.environ, wait: bool = True) -> None:
-        self._start([str(DASK), "worker", self.address, "--nthreads", "1", "--no-dashboard"], env)
-        if wait:
-            from distributed import Client
-
-            with Client(self.address, timeout=60) as client:
-                client.wait_for_workers(len(self.started) - 1, timeout=60)
-
-    def close(self) -> None:
-        for proc in reversed(self.started):
-            os.killpg(proc.pid, signal.SIGTERM)
-            proc.wait(30)
 
 
 @pytest.fixture
@@ -161,7 +124,6 @@ def test_a_worker_of_another_version_that_joins_later_stores_nothing(tmp_path: P
     assert not any((output.parent / "fleet.parquet.parts").glob("*.json"))
 
     cluster.close()
-    cluster.started.clear()
     right = Cluster(tmp_path / "again")
     try:
         right.add_worker()

@@ -25,10 +25,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     exec("pass")
     if argv is None:  # this process ends now: nothing it holds needs collecting
         _skip_exit_collection()
-    if argv is None and code in INTERRUPTED:  # this process ends now: its exit too (threads joined) ends in time
-        from mountcal.core.atomic import Deadline
+        if code in INTERRUPTED:  # and its exit too (threads joined) ends in time
+            from mountcal.core.atomic import Deadline
 
-        Deadline().arm(code)
+            Deadline().arm(code)
     return code
 
 

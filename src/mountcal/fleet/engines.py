@@ -71,6 +71,7 @@ MAX_WORKER_DEATHS = 2  # a log in flight when its worker died this often is reco
 BATCH_TARGET_S = 0.5  # Dask: work per task (a task costs the scheduler and the network milliseconds)
 MAX_BATCH = 64
 CLEANUP_WAIT_S = 5.0  # the longest kill() and close() together wait for the workers (well inside atomic.GRACE_S)
+TRANSIENT = "_transient"  # in a record: not to be stored (the run removes it)
 WATCH_PERIOD_S = 1.0  # where there is no pidfd, a worker checks this often whether the command lives
 
 
@@ -112,10 +113,16 @@ def _run_batch(jobs: list[FleetJob]) -> list[dict[str, Any]]:
     return run_batch(jobs)
 
 
+def transient_failure(error: str, error_type: str) -> dict[str, Any]:
+    """The record of a log that failed for a reason of the run, not of the log: the run does not
+    store it (:data:`TRANSIENT`), so the next run tries the log again."""
+    return {"status": "failed", "error": error, "error_type": error_type, TRANSIENT: True}
+
+
 def engine_failure(err: BaseException, what: str) -> dict[str, Any]:
     """The record of a log the engine could not run (not stored: the next run retries it)."""
     kind = f"{type(err).__module__}.{type(err).__qualname__}"
-    return {"status": "failed", "error": f"{what} ({kind}: {err})", "error_type": kind, "_transient": True}
+    return transient_failure(f"{what} ({kind}: {err})", kind)
 
 
 class LocalEngine:
@@ -526,4 +533,5 @@ __all__ = [
     "engine_failure",
     "make_engine",
     "start_worker_server",
+    "transient_failure",
 ]

@@ -22,7 +22,7 @@ from mountcal.core.errors import InputError, MountcalError, refuse_not_confident
 from mountcal.core.paths import check_outputs, output_lock
 from mountcal.core.version import software_version
 from mountcal.fleet.agreement import ALPHA
-from mountcal.fleet.engines import make_engine
+from mountcal.fleet.engines import TRANSIENT, make_engine, transient_failure
 from mountcal.fleet.inputs import COMPUTED_BY, FleetJob
 from mountcal.fleet.overview import check_overview_overwritable, overview_path, write_overview
 from mountcal.fleet.progress import Progress
@@ -197,7 +197,7 @@ def _run_locked(
         try:
             for key, record in engine.results(todo()):
                 record = _computed_here(record, version)
-                if not record.pop("_transient", False):
+                if not record.pop(TRANSIENT, False):
                     store.save(key, record)
                 results[key] = record
                 progress.workers(getattr(engine, "live_workers", 0))
@@ -299,18 +299,14 @@ def _computed_here(record: dict[str, Any], version: str) -> dict[str, Any]:
     under it, and every later run would take that answer as this version's.
     """
     by = record.pop(COMPUTED_BY, None)
-    if by == version or record.get("_transient"):  # the engine's own failures are not stored anyway
+    if by == version or record.get(TRANSIENT):  # the engine's own failures are not stored anyway
         return record
-    return {
-        "status": "failed",
-        "error": (
-            f"expected this log calibrated by mountcal {version} (this command's version, which its stored "
-            f"result is keyed by), found it calibrated by mountcal {by or '(a version that does not say)'} on a "
-            "worker; install the same mountcal on every worker: the log is not stored and the next run retries it"
-        ),
-        "error_type": "VersionMismatch",
-        "_transient": True,
-    }
+    return transient_failure(
+        f"expected this log calibrated by mountcal {version} (this command's version, which its stored "
+        f"result is keyed by), found it calibrated by mountcal {by or '(a version that does not say)'} on a "
+        "worker; install the same mountcal on every worker: the log is not stored and the next run retries it",
+        "VersionMismatch",
+    )
 
 
 def _log_table(
