@@ -217,3 +217,33 @@ def test_the_help_states_the_rule() -> None:
     for name, p in helps.items():
         assert "--json" in p.format_help(), name
         assert "-q keeps only the answer line" in " ".join(p.format_help().split()), name
+
+
+def _with_stderr_unread(args: list[str]) -> int:
+    """``mountcal ARGS`` with its stderr a pipe nobody reads any more (``2>&1 | head`` once head has ended)."""
+    import os
+    import subprocess
+    import sys
+
+    read, write = os.pipe()
+    os.close(read)
+    try:
+        return subprocess.run(
+            [sys.executable, "-m", "mountcal", *args], stderr=write, stdout=subprocess.DEVNULL
+        ).returncode
+    finally:
+        os.close(write)
+
+
+def test_a_stderr_nobody_reads_does_not_stop_the_results(tmp_path: Path) -> None:
+    """The summary cannot be shown, the result is written all the same (it was exit 0 and no file);
+    bad input still exits non-zero and writes nothing."""
+    unread, read = tmp_path / "unread.json", tmp_path / "read.json"
+    assert _with_stderr_unread(["calibrate", str(STOPS), "-o", str(unread)]) == 0
+    assert main(["calibrate", str(STOPS), "-o", str(read)]) == 0
+    ours, theirs = json.loads(unread.read_text()), json.loads(read.read_text())
+    assert ours["mounting"] == theirs["mounting"], (ours["mounting"], theirs["mounting"])
+    bad = tmp_path / "bad.csv"
+    bad.write_text("a;b\n1;2\n")
+    assert _with_stderr_unread(["calibrate", str(bad), "-o", str(tmp_path / "no.json")]) == 2
+    assert not (tmp_path / "no.json").exists()
