@@ -247,3 +247,12 @@ def test_a_stderr_nobody_reads_does_not_stop_the_results(tmp_path: Path) -> None
     bad.write_text("a;b\n1;2\n")
     assert _with_stderr_unread(["calibrate", str(bad), "-o", str(tmp_path / "no.json")]) == 2
     assert not (tmp_path / "no.json").exists()
+
+
+def test_a_progress_bar_nobody_reads_does_not_stop_the_results(tmp_path: Path) -> None:
+    """The bars write to stderr themselves (tqdm), not through the status lines: the same holds."""
+    (tmp_path / "v").mkdir()
+    (tmp_path / "v" / "a.csv").write_bytes(STOPS.read_bytes())
+    output = tmp_path / "out" / "fleet.parquet"
+    assert _with_stderr_unread(["fleet", str(tmp_path / "v"), "-o", str(output), "--progress"]) == 0
+    assert list(pd.read_parquet(output)["status"]) == ["ok"]

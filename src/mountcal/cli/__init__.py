@@ -25,7 +25,7 @@ from collections.abc import Sequence
 
 from mountcal.cli.options import EXIT_CODES, QUIET_RULE, configure_logging
 from mountcal.cli.path_options import CommandParser, check_paths, command_parser
-from mountcal.cli.results import results_only
+from mountcal.cli.results import results_only, unread_stderr_tolerated
 from mountcal.core import budget
 from mountcal.core.atomic import Terminated, raise_if_interrupted, removed_on_signals
 from mountcal.core.errors import InputError, MountcalError
@@ -42,6 +42,11 @@ log = logging.getLogger("mountcal")
 def main(argv: Sequence[str] | None = None) -> int:
     """Run one command; return its exit code (see :data:`mountcal.cli.options.EXIT_CODES`)."""
     stdout_closed = _standard_streams()
+    with unread_stderr_tolerated():  # status, bars and errors alike: a stderr nobody reads ends nothing
+        return _command(argv, stdout_closed)
+
+
+def _command(argv: Sequence[str] | None, stdout_closed: bool) -> int:
     parser = build_parser()
     args = parser.parse_args(_signed_maps(sys.argv[1:] if argv is None else list(argv)))
     configure_logging(args.verbose - args.quiet)

@@ -9,7 +9,6 @@ import argparse
 import importlib
 import json
 import logging
-import os
 import sys
 import threading
 from collections.abc import Iterator
@@ -64,25 +63,8 @@ class _Stderr(logging.Handler):
             level = "" if record.levelno in (logging.INFO, logging.ERROR) else f"{record.levelname.lower()}: "
             origin = "" if record.name.startswith("mountcal") else f"[{record.name}] "
             text = f"mountcal: {level}{origin}{record.getMessage()}"
-        try:
-            tqdm.write(text, file=sys.stderr)
-            sys.stderr.flush()
-        except BrokenPipeError:  # stderr's reader has gone (`2>&1 | head`): the command still writes its results
-            _discard_stderr()
-
-
-def _discard_stderr() -> None:
-    """Send what is still written to stderr to /dev/null: with nobody reading it, a status line must not
-    end the command before its results are written (it did, exit 0 and no ``-o`` file)."""
-    try:
-        fd = sys.stderr.fileno()
-    except (OSError, ValueError):  # not a file (a test's capture): nothing is written anywhere anyway
-        return
-    null = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(null, fd)
-    finally:
-        os.close(null)
+        tqdm.write(text, file=sys.stderr)
+        sys.stderr.flush()
 
 
 QUIET_RULE = (

@@ -16,6 +16,10 @@ On stderr a command says its summary once, through :func:`say`: the answer in on
 warnings logged before the answer (what was read, found, used, doubted) are held and follow it,
 so the first line a person reads is the answer; errors, and lines logged with ``extra={"now":
 True}`` (a live session's events), are shown at once.
+
+stderr may lose its reader while a command runs (``2>&1 | head`` once head has ended): what is
+still written there then goes to /dev/null (:func:`unread_stderr_tolerated`), and the command goes
+on to write its results — a status line or a progress bar must not end it with exit 0 and no file.
 """
 
 from __future__ import annotations
@@ -116,6 +120,52 @@ def result_stream() -> TextIO:
         err = OSError(9, "the standard output is closed")
         raise SystemFailure("stdout", "writing the result (name a file with -o instead)", err)
     return stream
+
+
+class _UnreadTolerated:
+    """``sys.stderr`` while a command runs: the same stream, but a write or flush that finds its reader
+    gone (EPIPE) points the descriptor at /dev/null and goes on instead of raising."""
+
+    def __init__(self, stream: TextIO) -> None:
+        self._stream = stream
+
+    def write(self, text: str) -> int:
+        try:
+            return self._stream.write(text)
+        except BrokenPipeError:
+            self._discard()
+            return len(text)
+
+    def flush(self) -> None:
+        try:
+            self._stream.flush()
+        except BrokenPipeError:
+            self._discard()
+
+    def _discard(self) -> None:
+        try:
+            fd = self._stream.fileno()
+        except (OSError, ValueError):  # not a file (a test's capture): nothing reaches a reader anyway
+            return
+        null = os.open(os.devnull, os.O_WRONLY)
+        try:
+            os.dup2(null, fd)
+        finally:
+            os.close(null)
+
+    def __getattr__(self, name: str) -> object:
+        return getattr(self._stream, name)
+
+
+@contextmanager
+def unread_stderr_tolerated() -> Iterator[None]:
+    """``sys.stderr`` for the body: once nobody reads it, what follows goes to /dev/null (module docstring)."""
+    original = sys.stderr
+    sys.stderr = _UnreadTolerated(original)
+    try:
+        yield
+    finally:
+        sys.stderr = original
 
 
 @contextmanager
