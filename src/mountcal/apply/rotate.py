@@ -4,6 +4,10 @@
 carries: :func:`mountcal.estimate.effects.apply_corrections`) and rotates; ``acc_to_sensor`` undoes
 it. Angular rates are only rotated.
 
+Samples already in the vehicle (or levelled) frame are refused (:func:`refuse_rotated`): the mounting would
+be applied twice. The readers know it from the file's own metadata (``Samples.rotated``), a DataFrame from
+``attrs["frame"]`` (:func:`frame_to_vehicle` sets it).
+
 A calibration without a determined yaw is refused (its rotation only levels: the heading would be
 the sensor's own), unless the caller asks for exactly that with ``level_only=True``
 (``--level-only``); :func:`check_applicable` is the one place that decides, and also says when a
@@ -14,6 +18,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
@@ -24,7 +29,29 @@ from mountcal.core.option_names import option
 from mountcal.core.result import Calibration
 from mountcal.estimate.effects import apply_corrections
 
+if TYPE_CHECKING:
+    from mountcal.io.frame import Rotated
+
 ACC_COLUMNS = ("ax", "ay", "az")
+ROTATED_FRAMES = ("vehicle", "levelled")  # a DataFrame's attrs["frame"] after frame_to_vehicle
+
+
+def refuse_rotated(rotated: Rotated | None, where: str) -> None:
+    """Refuse samples mountcal already rotated (``rotated`` not None): a second rotation would apply the
+    mounting twice, and nothing in the result could show it.
+
+    Raises
+    ------
+    InputError
+        ``rotated`` says what the file states (the frame, the calibration applied).
+    """
+    if rotated is not None:
+        raise InputError(
+            where,
+            "samples in the sensor's frame",
+            f"{rotated.sentence()}: rotating again would apply the mounting twice",
+            "Rotate the original log.",
+        )
 
 
 def yaw_sources() -> str:
@@ -140,6 +167,11 @@ def frame_to_vehicle(
     ``level_only`` and no determined yaw), ``attrs["confident"]`` the calibration's verdict and
     ``attrs["warnings"]`` what :func:`check_applicable` found (also issued as a ``UserWarning``).
     """
+    frame = df.attrs.get("frame")
+    if frame in ROTATED_FRAMES:
+        from mountcal.io.frame import Rotated
+
+        refuse_rotated(Rotated(str(frame), "", 'its attrs["frame"]'), "DataFrame")
     found = check_applicable(cal, level_only=level_only, require_confident=require_confident)
     for text in found:
         warnings.warn(text, UserWarning, stacklevel=2)

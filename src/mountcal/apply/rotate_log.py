@@ -52,7 +52,7 @@ import numpy as np
 import pandas as pd
 from scipy.spatial.transform import Rotation
 
-from mountcal.apply.rotate import acc_to_vehicle, check_applicable, rate_to_vehicle
+from mountcal.apply.rotate import acc_to_vehicle, check_applicable, rate_to_vehicle, refuse_rotated
 from mountcal.core.angles import ANGLE_NAMES, Angles
 from mountcal.core.atomic import atomic_output
 from mountcal.core.conventions import CONVENTIONS, FloatArray
@@ -64,6 +64,7 @@ from mountcal.core.result import VEHICLE_FRAME, Calibration
 from mountcal.core.threads import helpers_allowed
 from mountcal.core.version import software_version
 from mountcal.estimate import effects
+from mountcal.io.frame import CALIBRATION_KEY, FRAME_KEY, PREFIX
 from mountcal.io.input_conventions import AxisMap, check_same_axes, parse_axes
 from mountcal.io.logs import iter_log
 from mountcal.io.mcap.chunks import open_log
@@ -238,7 +239,7 @@ def rotate_log(
                 "Rotate each MCAP file to its own output, or write Parquet/CSV (which joins splits).",
             )
         with reading(opts.allow_truncated) as cuts:
-            report = _rotate_mcap_copy(files[0], cal, out, opts.topic, frame_id, cuts, checked, axes)
+            report = _rotate_mcap_copy(files[0], cal, out, opts.topic, frame_id, cuts, checked, opts, axes)
     else:
         report = _rotate_stream(files, cal, out, kind, opts, chunk_samples, frame_id, checked)
     return replace(report, frame=cal.frame, warnings=checked.warnings)
@@ -270,13 +271,13 @@ def _metadata(
 ) -> dict[str, str]:
     version = software_version()
     return {
-        "mountcal.frame": cal.frame,
+        PREFIX + FRAME_KEY: cal.frame,  # what the readers recognise (mountcal.io.frame)
         "mountcal.units": "t_s s; ax, ay, az m/s^2 (specific force, bias removed); gx, gy, gz rad/s",
         "mountcal.yaw": "vehicle" if cal.yaw_determined else "sensor's own (not determined)",
         "mountcal.confident": json.dumps(cal.confident),
         "mountcal.warnings": json.dumps(list(checked.warnings)),
         "mountcal.core.conventions": json.dumps(CONVENTIONS),
-        "mountcal.calibration": json.dumps(
+        PREFIX + CALIBRATION_KEY: json.dumps(
             {
                 "quaternion_vs_xyzw": cal.rot_vs.as_quat().tolist(),
                 **{Angles.value_column(n): cal.angles.value(n) for n in ANGLE_NAMES[:3]},  # without σ: as ever
@@ -365,6 +366,7 @@ class _Tally:
         """The chunk's rows to write, in the vehicle frame (None for an empty chunk), counted."""
         self.dropped.update(chunk.dropped)
         self.incomplete += chunk.incomplete
+        refuse_rotated(chunk.rotated, chunk.source)  # any split: the output is dropped (atomic_output)
         n = len(chunk)
         if n == 0:
             return None
@@ -404,7 +406,7 @@ def _writer(
         return ParquetSamples(f, gyro, meta, descriptions=_descriptions(cal))
     if kind == "csv":
         return CsvSamples(f, gyro, meta)
-    return McapImuSamples(f, _topic("/imu", cal), frame_id, {k.removeprefix("mountcal."): v for k, v in meta.items()})
+    return McapImuSamples(f, _topic("/imu", cal), frame_id, {k.removeprefix(PREFIX): v for k, v in meta.items()})
 
 
 def _topic(base: str, cal: Calibration) -> str:
@@ -437,11 +439,18 @@ def _rotate_mcap_copy(
     frame_id: str,
     cuts: Sequence[Cut],
     checked: Checked,
+    opts: LogOptions,
     axes: AxisMap | None = None,
 ) -> RotateReport:
     open_log(src, discover=False).file.close()  # a cut file is refused, or its cut recorded in `cuts`, before writing
+    chunks = iter_log([src], opts, 1)  # a topic mountcal rotated: refused before writing
+    try:
+        first = next(chunks, None)
+    finally:
+        getattr(chunks, "close", lambda: None)()
+    refuse_rotated(None if first is None else first.rotated, str(src))
     incomplete = tuple(c.sentence for c in cuts)
-    meta = {k.removeprefix("mountcal."): v for k, v in _metadata(cal, [src], checked, incomplete).items()}
+    meta = {k.removeprefix(PREFIX): v for k, v in _metadata(cal, [src], checked, incomplete).items()}
     units_checked = False
 
     def transform(msgs: ImuMessages) -> tuple[ImuMessages, int]:
@@ -546,7 +555,8 @@ def to_frame(samples: Samples) -> pd.DataFrame:
         logged, and each auxiliary channel (``speed_mps``, ``heading_deg``, …) at its latest
         value at or before the row's time (NaN before its first sample; channels keep their own
         clock, so this is a sample-and-hold, not an interpolation). ``attrs`` records the frame
-        (``"sensor"``), the source, the axis mapping and the reader's drop counts.
+        (``"sensor"``, or ``"vehicle"``/``"levelled"`` where the file says mountcal rotated it), the source,
+        the axis mapping and the reader's drop counts.
     """
     data: dict[str, Any] = {"t_s": samples.t_s}
     for j, name in enumerate(("ax", "ay", "az")):
@@ -564,7 +574,8 @@ def to_frame(samples: Samples) -> pd.DataFrame:
     df = pd.DataFrame({"t_s": data.pop("t_s")})
     for name, column in data.items():
         df[name] = column
-    df.attrs.update(frame="sensor", source=samples.source, axis_map=samples.axis_map, dropped=dict(samples.dropped))
+    frame = "sensor" if samples.rotated is None else samples.rotated.frame  # frame_to_vehicle refuses a rotated one
+    df.attrs.update(frame=frame, source=samples.source, axis_map=samples.axis_map, dropped=dict(samples.dropped))
     return df
 
 

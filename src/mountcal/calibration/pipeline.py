@@ -33,6 +33,7 @@ from mountcal.core.version import software_version
 from mountcal.estimate import effects
 from mountcal.estimate.driving import DrivingFit, estimate_driving
 from mountcal.estimate.driving_options import DrivingOptions, horizontal_axes_sigma_deg
+from mountcal.io.frame import frame_note
 from mountcal.io.input_conventions import merged, parse_axes
 from mountcal.io.kind import Declared, InputKind, kind_of_input
 from mountcal.io.logs import read_log, stated
@@ -264,6 +265,8 @@ def _checked(done: LogResult, job: LogJob, hashes: Future[tuple[str, ...]] | Non
         checks += plausibility.answer_checks(cal)
     hashed = () if hashes is None else hashes.result()
     cal = replace(cal, provenance=replace(cal.provenance, input_sha256=hashed, conventions=stated))
+    if done.samples.rotated is not None:  # legitimate (checking a rotation), but the angles mean something else
+        cal = replace(cal, notes=(*cal.notes, frame_note(done.samples.rotated)))
     return plausibility.with_checks(cal, checks)
 
 
@@ -316,8 +319,9 @@ def describe(result: LogResult | tuple[Samples, StopTableFromLog], n_files: int)
             + (f"; {unmatched} protocol rows without a stop" if unmatched else "")
         )
         lines += found.notes
-    if done is None:
-        return lines
+    if done is None:  # a result says the frame in its conventions and notes; a stop table has no place for it
+        rotated = samples.rotated
+        return lines + ([] if rotated is None else [f"input frame: {rotated.sentence()}, as {rotated.by} says"])
     if done.driving is not None:
         d = done.driving
         offset = f"{d.time_offset_s:+.3f} s" + (

@@ -41,8 +41,8 @@ from mountcal.core.option_names import flags_on
 from mountcal.core.paths import input_file, special_kind
 from mountcal.fleet.layout import Found, Grouped, Layout, group, infer_layout, unreadable_split
 from mountcal.fleet.storage import is_url, list_objects
+from mountcal.io.frame import written_by_mountcal
 from mountcal.io.inputs import csv_columns
-from mountcal.io.mcap.write import written_by_mountcal
 from mountcal.io.reader import LogOptions
 from mountcal.io.registry import is_log, log_suffixes
 from mountcal.stops.detect import StopDetection

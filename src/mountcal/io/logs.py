@@ -12,8 +12,9 @@ given twice): joining them would interleave two recordings, so they are refused.
 The conventions every reader shares are applied here, once, whatever the format
 (:mod:`mountcal.io.input_conventions`): the axis map ``axes`` (after a reader's own map: a CAN mapping's
 ``axes``, a format's documented frame) to the accelerometer and the gyro, and the unit of the heading
-channel (stated by ``heading_unit``, or checked: radians are refused). ``Samples.conventions`` says
-how each was known.
+channel (stated by ``heading_unit``, or checked: radians are refused); and the frame a file states its
+samples are in when mountcal rotated them (:mod:`mountcal.io.frame`). ``Samples.conventions`` says how
+each was known.
 
 Each file is read under the completeness policy of :mod:`mountcal.io.whole`: a file cut short is
 refused, or with ``LogOptions.allow_truncated`` read to its last whole record and named in
@@ -91,6 +92,7 @@ def stated(samples: Samples, opts: LogOptions, axes: AxisMap | None = None, chec
 
     import numpy as np
 
+    from mountcal.io.frame import frame_convention
     from mountcal.io.input_conventions import axes_convention, heading_channel_unit
     from mountcal.io.samples import Channel
 
@@ -99,6 +101,8 @@ def stated(samples: Samples, opts: LogOptions, axes: AxisMap | None = None, chec
     axes = _axes(opts) if axes is None else axes
     reader_map = samples.axis_map
     conventions = [axes_convention(axes, reader_map, f"the reader ({samples.axis_map})")]
+    if samples.rotated is not None:  # the frame the file states: said in every result made of these samples
+        conventions.append(frame_convention(samples.rotated))
     if axes is not None and not axes.identity:
         samples = replace(
             samples,
@@ -247,6 +251,7 @@ def join(parts: Sequence[Samples]) -> Samples:
         dropped=dict(dropped),
         notes=tuple(dict.fromkeys(n for p in parts for n in p.notes)),
         gravity_free=next((p.gravity_free for p in parts if p.gravity_free), ""),
+        rotated=next((p.rotated for p in parts if p.rotated is not None), None),
         incomplete=tuple(line for p in parts for line in p.incomplete),
         conventions=parts[0].conventions,
     )

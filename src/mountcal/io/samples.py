@@ -17,6 +17,7 @@ from mountcal.core.errors import InputError
 
 if TYPE_CHECKING:
     from mountcal.core.result import Convention
+    from mountcal.io.frame import Rotated
 
 FloatArray = NDArray[np.float64]
 
@@ -55,6 +56,10 @@ class Samples:
     gravity_free : str
         Why ``acc_s`` is known to lack gravity (a "linear acceleration" export), else "": such samples
         rotate, but do not calibrate (the mounting is measured against gravity).
+    rotated : Rotated or None
+        What the file's own metadata say when mountcal already rotated the samples into the vehicle (or
+        levelled) frame (:mod:`mountcal.io.frame`), else None: such samples calibrate (to the rotation
+        left over, ≈ 0), but do not rotate again (the mounting would be applied twice).
     incomplete : tuple of str
         Files read although cut short (``--allow-truncated``): where each ends and what its format
         expected there (:mod:`mountcal.io.whole`); empty when every file was whole.
@@ -71,6 +76,7 @@ class Samples:
     dropped: dict[str, int] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
     gravity_free: str = ""
+    rotated: Rotated | None = None
     incomplete: tuple[str, ...] = ()
     conventions: tuple[Convention, ...] = ()
 

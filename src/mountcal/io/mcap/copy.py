@@ -30,6 +30,7 @@ from numpy.typing import NDArray
 from mountcal.core import budget
 from mountcal.core.errors import InputError
 from mountcal.core.option_names import option
+from mountcal.io.frame import topic_label
 from mountcal.io.inputs import block_too_large, max_block_bytes
 from mountcal.io.mcap.chunks import messages_by_walk, unlz4, unzstd
 from mountcal.io.mcap.records import MAGIC, MESSAGE_HEAD, RECORD_HEAD, Corrupt, U8Array, damaged, record_field
@@ -319,7 +320,9 @@ def _imu_channels(summary: Any, topic: str | None, where: str) -> tuple[frozense
             raise InputError(
                 where,
                 "exactly one sensor_msgs/msg/Imu topic",
-                f"{len(candidates)}: {', '.join(candidates)}" if candidates else f"none; the topics are {listing}",
+                f"{len(candidates)}: {', '.join(topic_label(t, by_topic[t][0].metadata) for t in candidates)}"
+                if candidates
+                else f"none; the topics are {listing}",
                 f"Name the topic to rotate with {option('topic')}.",
             )
         topic = candidates[0]

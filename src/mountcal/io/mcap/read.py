@@ -41,6 +41,7 @@ from numpy.typing import NDArray
 
 from mountcal.core import budget
 from mountcal.core.errors import InputError
+from mountcal.io.frame import Rotated, channel_rotated, topic_label
 from mountcal.io.mcap.chunks import Unit, chunk_units, open_log
 from mountcal.io.mcap.records import (
     ARGUMENT,
@@ -70,6 +71,7 @@ class _Selection:
     topic: str
     channel_ids: frozenset[int]
     encoding: str  # "cdr" or "json"
+    rotated: Rotated | None = None  # what the chosen channel's own metadata say of its frame
 
 
 def schema_fields(text: str) -> tuple[tuple[str, str], ...]:
@@ -88,7 +90,7 @@ def _select(log: Log, kind: str, topic: str | None) -> _Selection | None:
     topics = log.topics()
     argument, flag = ARGUMENT[kind], f"--{ARGUMENT[kind].replace('_', '-')}"
     candidates = [t for t, chs in topics.items() if log.kind(chs[0]) == kind]
-    names = ", ".join(map(repr, candidates))
+    names = ", ".join(topic_label(t, topics[t][0].metadata) for t in candidates)
     if topic is not None:
         if topic not in topics:
             raise InputError(
@@ -122,7 +124,9 @@ def _select(log: Log, kind: str, topic: str | None) -> _Selection | None:
             )
         topic = candidates[0]
         chosen = topics[topic]
-    return _Selection(kind, topic, frozenset(ch.id for ch in chosen), _check_encoding(log, kind, topic, chosen))
+    encoding = _check_encoding(log, kind, topic, chosen)
+    rotated = next((r for ch in chosen if (r := channel_rotated(ch.metadata, topic)) is not None), None)
+    return _Selection(kind, topic, frozenset(ch.id for ch in chosen), encoding, rotated)
 
 
 def _field_hint(log: Log, kind: str) -> str:
@@ -344,6 +348,7 @@ def _read_open(log: Log, topics: dict[str, str | None]) -> Samples:
         channels=channels,
         source=log.where,
         dropped={k: v for k, v in dropped.items() if v},
+        rotated=imu.rotated,
     )
 
 
@@ -457,11 +462,11 @@ def _batches(log: Log, selection: _Selection, max_samples: int) -> Iterator[Samp
                 count += pieces["imu"].t_s.size
             while count >= max_samples:
                 joined = join_unsorted(pending)
-                yield _batch(log, joined, 0, max_samples, dropped)
+                yield _batch(log, selection, joined, 0, max_samples, dropped)
                 pending = [_slice(joined, max_samples, count)]
                 count, total, dropped = count - max_samples, total + max_samples, Counter()
     if count:
-        yield _batch(log, join_unsorted(pending), 0, count, dropped)
+        yield _batch(log, selection, join_unsorted(pending), 0, count, dropped)
     elif not total:
         raise _no_samples(log, selection.topic, dropped)
 
@@ -470,7 +475,7 @@ def _slice(piece: Piece, start: int, stop: int) -> Piece:
     return Piece(piece.t_s[start:stop], {k: v[start:stop] for k, v in piece.columns.items()})
 
 
-def _batch(log: Log, piece: Piece, start: int, stop: int, dropped: Counter[str]) -> Samples:
+def _batch(log: Log, selection: _Selection, piece: Piece, start: int, stop: int, dropped: Counter[str]) -> Samples:
     """Rows ``start:stop`` of ``piece`` as Samples of their own (copied, sorted by time)."""
     part = concat([_slice(piece, start, stop)])
     gyro = gyro_of(part, dropped)
@@ -480,4 +485,5 @@ def _batch(log: Log, piece: Piece, start: int, stop: int, dropped: Counter[str])
         gyro_s=None if gyro is None else gyro.copy(),
         source=log.where,
         dropped={k: v for k, v in dropped.items() if v},
+        rotated=selection.rotated,
     )

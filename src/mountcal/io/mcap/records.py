@@ -13,7 +13,7 @@ import os
 import struct
 import zlib
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, BinaryIO
 
 import numpy as np
@@ -78,6 +78,7 @@ class McapChannel:
     schema_id: int
     topic: str
     message_encoding: str
+    metadata: dict[str, str] = field(default_factory=dict)  # what the writer says of the channel (mountcal.io.frame)
 
 
 @dataclass(frozen=True)
@@ -125,7 +126,14 @@ def parse_schema(body: bytes | memoryview) -> Schema:
 def parse_channel(body: bytes | memoryview) -> McapChannel:
     b = _Body(body, "channel")
     channel_id, schema_id = b.take("<H"), b.take("<H")
-    return McapChannel(channel_id, schema_id, b.text(), b.text())
+    topic, encoding = b.text(), b.text()
+    metadata = {}
+    if b.pos < len(b.data):  # the metadata map: its byte length, then key and value strings
+        pairs = _Body(b.bytes(), "channel metadata")
+        while pairs.pos < len(pairs.data):
+            key = pairs.text()
+            metadata[key] = pairs.text()
+    return McapChannel(channel_id, schema_id, topic, encoding, metadata)
 
 
 def _parse_statistics(body: bytes | memoryview) -> _Statistics:

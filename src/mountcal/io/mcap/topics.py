@@ -7,15 +7,17 @@ from __future__ import annotations
 
 from collections.abc import Generator, Sequence
 from contextlib import closing
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from mountcal.core.errors import InputError
+from mountcal.io.frame import channel_rotated
 from mountcal.io.mcap.chunks import chunk_units, open_log
 from mountcal.io.mcap.records import MESSAGE_HEAD, RECORD_HEAD, Corrupt, Log, damaged, record_field
 from mountcal.io.ros.batches import Batch, samples_of
-from mountcal.io.ros.topics import Selection, Topic
+from mountcal.io.ros.topics import Selection, Topic, choose_imu
 from mountcal.io.ros.types import DefinitionError, Types, from_definition, standard
 from mountcal.io.ros2.cdr import CdrError, cdr_rows
 from mountcal.io.samples import Samples
@@ -49,9 +51,14 @@ def read_mcap_topics(path: str | Path, *, topic: str | None, field: str | None) 
     """An MCAP log read through message definitions (for ``--field``)."""
     log = open_log(path)
     try:
-        return samples_of(
-            log.where, mcap_topics(log), lambda sels: mcap_batches(log, sels), cdr=True, topic=topic, field=field
+        topics = mcap_topics(log)
+        samples = samples_of(
+            log.where, topics, lambda sels: mcap_batches(log, sels), cdr=True, topic=topic, field=field
         )
+        chosen = choose_imu(topics, log.where, topic, field).topic  # the topic samples_of read (metadata only)
+        said = (channel_rotated(log.channels[i].metadata, chosen.name) for i in chosen.ids if i in log.channels)
+        rotated = next((r for r in said if r is not None), None)
+        return samples if rotated is None else replace(samples, rotated=rotated)
     except Corrupt as err:
         raise damaged(log.where, str(err)) from err
     finally:

@@ -17,16 +17,13 @@ import struct
 import zlib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any, BinaryIO
 
 import lz4.frame
 import numpy as np
-import pyarrow.parquet as pq
 import zstandard
 from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
-from mcap.reader import make_reader
 from mcap.records import (
     AttachmentIndex,
     Channel,
@@ -41,7 +38,6 @@ from mcap.records import (
 )
 from numpy.typing import NDArray
 
-from mountcal.core.paths import special_kind
 from mountcal.io.mcap.records import MAGIC, MESSAGE_HEAD, RECORD_HEAD, U8Array
 from mountcal.io.ros2.definitions import ros2_definition
 from mountcal.io.ros2.imu import ImuMessages, encode_imu_messages
@@ -336,27 +332,3 @@ class McapImuSamples:
 
     def close(self) -> None:
         self.out.finish()
-
-
-def written_by_mountcal(path: Path) -> bool:
-    """Whether mountcal wrote this file (recognised by its metadata, not its name).
-
-    A fleet table or a rotated log in Parquet carries ``mountcal.*`` file metadata; a rotated MCAP
-    has a channel whose metadata holds the frame and the calibration applied. Such a file is an
-    output, never a log to calibrate (a rotated log would calibrate to the identity).
-    """
-    suffix = path.suffix.lower()
-    if special_kind(path) is not None:  # a FIFO would block the look inside; its reader refuses it
-        return False
-    try:
-        if suffix in (".parquet", ".pq"):
-            keys = (pq.read_schema(path).metadata or {}).keys()
-            return any(k.startswith(b"mountcal.") for k in keys)
-        if suffix == ".mcap":
-            with path.open("rb") as f:
-                summary = make_reader(f).get_summary()
-            channels = summary.channels.values() if summary is not None else ()
-            return any({"frame", "calibration"} <= c.metadata.keys() for c in channels)
-    except Exception:  # unreadable: not recognisably ours; the log reader will say what is wrong with it
-        return False
-    return False

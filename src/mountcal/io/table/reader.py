@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 from mountcal.io.reader import LogReader
 
 if TYPE_CHECKING:
+    from mountcal.io.frame import Rotated
     from mountcal.io.reader import LogOptions
     from mountcal.io.samples import LogSummary, Samples
     from mountcal.io.table.layout import Layout
@@ -30,7 +31,7 @@ class TableReader(LogReader):
             samples = read_table(path)
         else:
             samples = read_mapped(path, layout, read_as)
-        return check_magnitude(samples, layout, str(path))
+        return _framed(check_magnitude(samples, layout, str(path)), _frame_of(path))
 
     def iter_chunks(self, path: Path, options: LogOptions, max_samples: int) -> Iterator[Samples]:
         from mountcal.io.table.mapped import iter_mapped
@@ -42,7 +43,7 @@ class TableReader(LogReader):
             chunks = iter_table(path, max_samples)
         else:
             chunks = iter_mapped(path, layout, read_as, max_samples)
-        return _checked(chunks, layout, str(path))
+        return _checked(chunks, layout, path)
 
     def inspect(self, path: Path, options: LogOptions) -> LogSummary:
         from mountcal.io.samples import summary
@@ -50,21 +51,37 @@ class TableReader(LogReader):
         return summary(self.read(path, options), path.suffix.lstrip(".").lower(), "table")
 
 
-def _checked(chunks: Iterator[Samples], layout: Layout, where: str) -> Iterator[Samples]:
+def _checked(chunks: Iterator[Samples], layout: Layout, path: Path) -> Iterator[Samples]:
     """The chunks, the first (the first with samples) checked as :func:`check_magnitude` checks a whole table;
-    its verdict (gravity-free) carried to the rest."""
+    its verdict (gravity-free) carried to the rest; each with the frame the file states."""
     from dataclasses import replace
 
     from mountcal.io.table.mapped import check_magnitude
 
     verdict: str | None = None
+    rotated, looked = None, False  # the frame, looked up once the reader has checked the file (its first chunk)
     for chunk in chunks:
         if verdict is None and len(chunk):
-            chunk = check_magnitude(chunk, layout, where)
+            chunk = check_magnitude(chunk, layout, str(path))
             verdict = chunk.gravity_free
         elif verdict:
             chunk = replace(chunk, gravity_free=verdict)
-        yield chunk
+        if not looked:
+            rotated, looked = _frame_of(path), True
+        yield _framed(chunk, rotated)
+
+
+def _frame_of(path: Path) -> Rotated | None:
+    """What a Parquet file's metadata state of its samples' frame (:mod:`mountcal.io.frame`); a CSV states none."""
+    from mountcal.io.frame import parquet_rotated
+
+    return parquet_rotated(path) if path.suffix.lower() in (".parquet", ".pq") else None
+
+
+def _framed(samples: Samples, rotated: Rotated | None) -> Samples:
+    from dataclasses import replace
+
+    return samples if rotated is None else replace(samples, rotated=rotated)
 
 
 def table_layout(path: Path, options: LogOptions) -> tuple[Layout, dict[str, str]]:

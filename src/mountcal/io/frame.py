@@ -1,0 +1,145 @@
+"""What mountcal's outputs look like, the one place that knows it: the frame a file says its samples are in.
+
+``mountcal rotate`` (:mod:`mountcal.apply.rotate_log`) writes the frame and the calibration it applied
+into its output — a Parquet file's key-value metadata (``mountcal.frame``, ``mountcal.calibration``), an
+MCAP output channel's metadata (``frame``, ``calibration``) — and the readers recognise them here by that
+metadata, never by a name, into :class:`Rotated` (``Samples.rotated``): such samples are already in the
+vehicle (or levelled) frame, so applying a calibration again is refused and calibrating them is said to
+measure the rotation left over. A CSV has no place for it: a rotated CSV reads as a sensor-frame log.
+
+:func:`written_by_mountcal` also knows mountcal's other outputs (a fleet table: any ``mountcal.*`` key).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+from mountcal.core.angles import ANGLE_NAMES, Angles
+from mountcal.core.paths import special_kind
+from mountcal.core.result import Convention
+
+PREFIX = "mountcal."  # a Parquet output's keys; an MCAP channel's keys go without it
+FRAME_KEY = "frame"
+CALIBRATION_KEY = "calibration"
+FRAME_NAMES = ("vehicle", "levelled")  # the first word of the frame mountcal writes (core.result's frames)
+
+
+@dataclass(frozen=True)
+class Rotated:
+    """Samples a file says mountcal already rotated: into which frame, by what calibration, and where it says so.
+
+    ``frame`` is ``"vehicle"`` or ``"levelled"``; ``calibration`` what the file records of the calibration
+    applied (its input and angles, "" when it records none); ``by`` the metadata that says it.
+    """
+
+    frame: str
+    calibration: str
+    by: str
+
+    def sentence(self) -> str:
+        """``samples mountcal rotate already put in the vehicle frame (calibration from …, roll … pitch … yaw …)``."""
+        said = f" ({self.calibration})" if self.calibration else ""
+        return f"samples mountcal rotate already put in the {self.frame} frame{said}"
+
+
+def rotated_by(metadata: Mapping[str, str], by: str, prefix: str = "") -> Rotated | None:
+    """What ``metadata`` (keys after ``prefix``) says of a rotation mountcal applied, or None (sensor frame)."""
+    frame = metadata.get(prefix + FRAME_KEY)
+    if frame is None:
+        return None
+    word = frame.split(" ", 1)[0]
+    return Rotated(word if word in FRAME_NAMES else frame, _calibration(metadata.get(prefix + CALIBRATION_KEY)), by)
+
+
+def _calibration(text: str | None) -> str:
+    """The input and angles of the calibration JSON rotate stored (:func:`mountcal.apply.rotate_log`)."""
+    try:
+        doc = json.loads(text) if text else None
+    except ValueError:
+        return ""
+    if not isinstance(doc, dict):
+        return ""
+    angles = [
+        f"{name} {value:.2f}°"
+        for name in ANGLE_NAMES[:3]
+        if isinstance(value := doc.get(Angles.value_column(name)), int | float)
+    ]
+    source = f"from {doc['input']}" if isinstance(doc.get("input"), str) and doc["input"] else ""
+    return "calibration " + ", ".join(filter(None, [source, " ".join(angles)])) if source or angles else ""
+
+
+def parquet_rotated(path: Path) -> Rotated | None:
+    """What a Parquet file's key-value metadata says of its samples' frame (None: sensor frame)."""
+    import pyarrow.parquet as pq
+
+    raw = pq.read_schema(path).metadata or {}
+    metadata = {k.decode(errors="replace"): v.decode(errors="replace") for k, v in raw.items()}
+    return rotated_by(metadata, f"the file's Parquet metadata ({PREFIX}{FRAME_KEY})", PREFIX)
+
+
+def channel_rotated(metadata: Mapping[str, str], topic: str) -> Rotated | None:
+    """What an MCAP channel's metadata says of its samples' frame (None: sensor frame)."""
+    return rotated_by(metadata, f"the metadata of the MCAP channel {topic!r} ({FRAME_KEY})")
+
+
+def topic_label(topic: str, metadata: Mapping[str, str]) -> str:
+    """``'/imu/data/vehicle' (mountcal rotate's vehicle-frame output)`` for a listing of topics."""
+    rotated = channel_rotated(metadata, topic)
+    return repr(topic) + (f" (mountcal rotate's {rotated.frame}-frame output)" if rotated else "")
+
+
+def frame_convention(rotated: Rotated) -> Convention:
+    """The samples' frame as a convention of the input (``provenance.conventions``)."""
+    said = f"; {rotated.calibration}" if rotated.calibration else ""
+    return Convention("frame", f"{rotated.frame} (mountcal rotate's output{said})", "stated", rotated.by)
+
+
+def frame_note(rotated: Rotated) -> str:
+    """What a calibration of such samples measures."""
+    return (
+        f"the samples are already in mountcal's {rotated.frame} frame, as {rotated.by} says: the angles are "
+        f"relative to that frame, the rotation left over (≈ 0 when the rotation applied was right)"
+    )
+
+
+def written_by_mountcal(path: Path) -> bool:
+    """Whether mountcal wrote this file (recognised by its metadata, not its name).
+
+    A fleet table or a rotated log in Parquet carries ``mountcal.*`` file metadata; a rotated MCAP
+    has a channel whose metadata holds the frame and the calibration applied. Such a file is an
+    output, never a log to calibrate (a rotated log would calibrate to the identity).
+    """
+    suffix = path.suffix.lower()
+    if special_kind(path) is not None:  # a FIFO would block the look inside; its reader refuses it
+        return False
+    try:
+        if suffix in (".parquet", ".pq"):
+            import pyarrow.parquet as pq
+
+            keys = (pq.read_schema(path).metadata or {}).keys()
+            return any(k.startswith(PREFIX.encode()) for k in keys)
+        if suffix == ".mcap":
+            from mcap.reader import make_reader
+
+            with path.open("rb") as f:
+                summary = make_reader(f).get_summary()
+            channels = summary.channels.values() if summary is not None else ()
+            return any({FRAME_KEY, CALIBRATION_KEY} <= c.metadata.keys() for c in channels)
+    except Exception:  # unreadable: not recognisably ours; the log reader will say what is wrong with it
+        return False
+    return False
+
+
+__all__ = [
+    "Rotated",
+    "channel_rotated",
+    "frame_convention",
+    "frame_note",
+    "parquet_rotated",
+    "rotated_by",
+    "topic_label",
+    "written_by_mountcal",
+]
