@@ -66,6 +66,7 @@ from mountcal.estimate.driving_intervals import (
 )
 from mountcal.estimate.driving_options import DrivingOptions
 from mountcal.io.samples import Samples
+from mountcal.stops.detect import checked_gyro
 
 AGREE_Z = 2.0  # |z| above this: the two estimates disagree beyond their uncertainties (≈ 95 %)
 DISAGREE_Z = 3.0  # |z| above this (tilt or yaw): a finding; the stops and the drive are not combined
@@ -216,8 +217,7 @@ def estimate_driving(
     """
     opts = options or DrivingOptions()
     speed = speed_channel(samples)
-    t, acc = samples.t_s, samples.acc_s
-    gyro = samples.gyro_s
+    t, acc, gyro = samples.t_s, samples.acc_s, checked_gyro(samples)  # deg/s for rad/s: refused (stops.gyro_unit)
     where = samples.source or "log"
     moving = np.interp(t, speed.t_s + (opts.time_offset_s or 0.0), speed.value) >= opts.min_speed_mps
     moving_s = float(np.sum(np.diff(t)[moving[:-1]])) if t.size > 1 else 0.0
