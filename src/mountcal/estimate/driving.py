@@ -32,8 +32,7 @@ vehicle's x axis exactly as much as the speed changes. The estimator:
    and cross slope (crown) along the route and an accelerometer bias enter it directly, so its σ
    includes ``road_grade_sigma_deg`` and ``road_cross_slope_sigma_deg``; parked stops are better.
 
-Everything is whole-array numpy: cumulative integrals of the IMU, interpolated at the interval
-ends; no per-sample Python.
+Everything is whole-array numpy (cumulative integrals of the IMU at the interval ends); no per-sample Python.
 """
 
 from __future__ import annotations
@@ -217,7 +216,8 @@ def estimate_driving(
     """
     opts = options or DrivingOptions()
     speed = speed_channel(samples)
-    t, acc, gyro = samples.t_s, samples.acc_s, checked_gyro(samples)  # deg/s for rad/s: refused (stops.gyro_unit)
+    t, acc = samples.t_s, samples.acc_s
+    gyro = samples.gyro_s if tilt_from is not None else checked_gyro(samples)  # deg/s: refused; stops: checked
     where = samples.source or "log"
     moving = np.interp(t, speed.t_s + (opts.time_offset_s or 0.0), speed.value) >= opts.min_speed_mps
     moving_s = float(np.sum(np.diff(t)[moving[:-1]])) if t.size > 1 else 0.0
