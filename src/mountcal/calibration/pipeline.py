@@ -204,6 +204,8 @@ def _calibrate_job(job: LogJob, samples: Samples | None) -> LogResult:
             static = calibrate(table, job.options)
         except NotEnoughInformation as err:
             missed = near_miss_advice(found.near_misses) if found is not None else ""
+            if found is not None and found.gyro_rejection:  # the gyro, not the parking, left too few stops
+                missed = f" But the log is not short of parked periods: {found.gyro_rejection}{missed}"
             refusal = NotEnoughInformation(str(err) + missed) if missed else err  # the stops a driver made, dropped
             if job.use == "stops":
                 raise refusal from err

@@ -32,8 +32,7 @@ vehicle's x axis exactly as much as the speed changes. The estimator:
    and cross slope (crown) along the route and an accelerometer bias enter it directly, so its σ
    includes ``road_grade_sigma_deg`` and ``road_cross_slope_sigma_deg``; parked stops are better.
 
-Everything is whole-array numpy: cumulative integrals of the IMU, interpolated at the interval
-ends; no per-sample Python.
+Everything is whole-array numpy (cumulative integrals of the IMU at the interval ends); no per-sample Python.
 """
 
 from __future__ import annotations
@@ -66,6 +65,7 @@ from mountcal.estimate.driving_intervals import (
 )
 from mountcal.estimate.driving_options import DrivingOptions
 from mountcal.io.samples import Samples
+from mountcal.stops.detect import checked_gyro
 
 AGREE_Z = 2.0  # |z| above this: the two estimates disagree beyond their uncertainties (≈ 95 %)
 DISAGREE_Z = 3.0  # |z| above this (tilt or yaw): a finding; the stops and the drive are not combined
@@ -217,7 +217,7 @@ def estimate_driving(
     opts = options or DrivingOptions()
     speed = speed_channel(samples)
     t, acc = samples.t_s, samples.acc_s
-    gyro = samples.gyro_s
+    gyro = samples.gyro_s if tilt_from is not None else checked_gyro(samples)  # deg/s: refused; stops: checked
     where = samples.source or "log"
     moving = np.interp(t, speed.t_s + (opts.time_offset_s or 0.0), speed.value) >= opts.min_speed_mps
     moving_s = float(np.sum(np.diff(t)[moving[:-1]])) if t.size > 1 else 0.0

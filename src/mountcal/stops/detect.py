@@ -22,6 +22,7 @@ from mountcal.core.conventions import FloatArray
 from mountcal.core.option_names import option
 from mountcal.io.samples import Channel, Samples
 from mountcal.io.timestamps import increasing_times, time_ordered
+from mountcal.stops.gyro_unit import GyroLook, look, refuse_degrees
 from mountcal.stops.near_misses import Criterion, NearMiss, near_misses
 
 BATCHES = 10  # batch means for the variance of a stop mean
@@ -126,6 +127,11 @@ class StopSearch:
     counts: dict[str, int] = field(default_factory=dict)
     dropped: tuple[StillPeriod, ...] = ()
     near_misses: tuple[NearMiss, ...] = ()
+    gyro: GyroLook | None = None  # what the gyro read where the accelerometer found the sensor still
+
+    def gyro_rejection(self, source: str, channels: tuple[str, ...] = ()) -> str:
+        """A sentence for a refusal of too few stops: the still periods the gyro rejected (empty when none)."""
+        return "" if self.gyro is None else self.gyro.rejection(source, channels)
 
     def lines(self) -> list[str]:
         return self.thresholds.lines() + [f"{k}: {v}" for k, v in self.counts.items()] + self.near_miss_lines()
@@ -283,6 +289,8 @@ def find_stops(
     samples = increasing_times(logged)  # equal stamps merged, for the moving windows and the runs
     counts = {k: v - before.get(k, 0) for k, v in samples.dropped.items() if v != before.get(k, 0)}
     still, thresholds, unjudged, blocks = _stillness(samples, cfg, acc_lsb, gyro_lsb)
+    gyro = _gyro_look(blocks, cfg)
+    refuse_degrees(gyro, samples.source or "log", tuple(samples.channels))  # deg/s read as rad/s: the true reason
     if unjudged:
         counts[
             f"samples whose {cfg.window_s:g} s window holds fewer than {MIN_WINDOW_SAMPLES} samples or a gap "
@@ -343,7 +351,26 @@ def find_stops(
         missed = near_misses(
             blocks.t_start_s, blocks.t_end_s, blocks.criteria, blocks.judged, kept, cfg.min_duration_s, cfg.trim_s
         )
-    return StopSearch(stops, thresholds, counts, tuple(dropped), tuple(missed))
+    return StopSearch(stops, thresholds, counts, tuple(dropped), tuple(missed), gyro)
+
+
+def _gyro_look(blocks: Blocks | None, cfg: StopDetection) -> GyroLook | None:
+    if blocks is None:
+        return None
+    need_s = cfg.min_duration_s + 2.0 * cfg.trim_s
+    return look(blocks.t_start_s, blocks.t_end_s, blocks.criteria, blocks.judged, need_s)
+
+
+def checked_gyro(samples: Samples, cfg: StopDetection | None = None) -> FloatArray | None:
+    """The samples' gyro, refused when logged in deg/s where its format or columns state rad/s
+    (:mod:`mountcal.stops.gyro_unit`): what every stop search does, for a drive, which looks for no stops."""
+    if samples.gyro_s is None or len(samples) == 0:
+        return samples.gyro_s
+    cfg = cfg or StopDetection()
+    merged = increasing_times(time_ordered(samples))
+    _, _, _, blocks = _stillness(merged, cfg, _lsb(samples.acc_s), _lsb(samples.gyro_s))
+    refuse_degrees(_gyro_look(blocks, cfg), samples.source or "log", tuple(samples.channels))
+    return samples.gyro_s
 
 
 def _steady_heading(

@@ -73,6 +73,7 @@ class StopTableFromLog:
     notes: tuple[str, ...] = ()  # the thresholds used and what detection changed or dropped
     dropped: tuple[StillPeriod, ...] = ()  # still periods not kept as a stop
     near_misses: tuple[NearMiss, ...] = ()  # parked periods that nearly became stops
+    gyro_rejection: str = ""  # the still periods the gyro's thresholds rejected, and what may explain it
 
 
 def near_miss_advice(missed: tuple[NearMiss, ...] | list[NearMiss]) -> str:
@@ -140,11 +141,13 @@ def tabulate(
         windows = list(zip(protocol["t_start_s"], protocol["t_end_s"], strict=True))
         search = find_stops(samples, cfg, windows=windows)
         stops = search.stops
+        gyro = search.gyro_rejection(where, tuple(samples.channels))
         kept = [i for i, (lo, hi) in enumerate(windows) if any(lo <= s.t_start_s and s.t_end_s <= hi for s in stops)]
         if not stops:
             raise NotEnoughInformation(
-                f"{where}: no parked period found inside any protocol interval. Check that "
-                f"the sheet's times are on the log's clock, or {relax()}. Used: {'; '.join(search.lines())}."
+                f"{where}: no parked period found inside any protocol interval. "
+                + (f"But {gyro}" if gyro else f"Check that the sheet's times are on the log's clock, or {relax()}.")
+                + f" Used: {'; '.join(search.lines())}."
             )
         beta = protocol["beta_deg"].to_numpy()[kept]
         stated = (*samples.conventions, *protocol.attrs.get("conventions", ()))
@@ -154,14 +157,20 @@ def tabulate(
             len(windows) - len(kept),
             tuple(search.lines()),
             search.dropped,
+            gyro_rejection=gyro,
         )
     search = find_stops(samples, cfg)
     stops = search.stops
     notes = tuple(search.lines())
+    gyro = search.gyro_rejection(where, tuple(samples.channels))
     if not stops:
         raise NotEnoughInformation(
             f"{where}: no parked period found (no still run ≥ {(cfg or StopDetection()).min_duration_s:g} s)."
-            + (near_miss_advice(search.near_misses) or f" Check that the log holds parked periods, or {relax()}.")
+            + (f" But {gyro}" if gyro else "")
+            + (
+                near_miss_advice(search.near_misses)
+                or ("" if gyro else f" Check that the log holds parked periods, or {relax()}.")
+            )
             + f" Used: {'; '.join(search.thresholds.lines() + [f'{k}: {v}' for k, v in search.counts.items()])}."
         )
     heading = np.array([s.channels.get("heading_deg", np.nan) for s in stops])
@@ -180,6 +189,7 @@ def tabulate(
                 notes=notes,
                 dropped=search.dropped,
                 near_misses=search.near_misses,
+                gyro_rejection=gyro,
             )
         inferred = Convention(
             "heading_reference",
@@ -194,6 +204,7 @@ def tabulate(
             notes=notes,
             dropped=search.dropped,
             near_misses=search.near_misses,
+            gyro_rejection=gyro,
         )
     none = Convention("heading_reference", "none", "inferred", "no protocol sheet and no heading channel in the log")
     return StopTableFromLog(
@@ -202,6 +213,7 @@ def tabulate(
         notes=notes,
         dropped=search.dropped,
         near_misses=search.near_misses,
+        gyro_rejection=gyro,
     )
 
 
