@@ -30,7 +30,7 @@ class TableReader(LogReader):
             samples = read_table(path)
         else:
             samples = read_mapped(path, layout, read_as)
-        return check_magnitude(samples, layout, str(path))
+        return _said(check_magnitude(samples, layout, str(path)), layout)
 
     def iter_chunks(self, path: Path, options: LogOptions, max_samples: int) -> Iterator[Samples]:
         from mountcal.io.table.mapped import iter_mapped
@@ -64,7 +64,14 @@ def _checked(chunks: Iterator[Samples], layout: Layout, where: str) -> Iterator[
             verdict = chunk.gravity_free
         elif verdict:
             chunk = replace(chunk, gravity_free=verdict)
-        yield chunk
+        yield _said(chunk, layout)
+
+
+def _said(samples: Samples, layout: Layout) -> Samples:
+    """The samples carrying the conventions their layout settled (the time unit)."""
+    from dataclasses import replace
+
+    return replace(samples, conventions=(*samples.conventions, *layout.conventions)) if layout.conventions else samples
 
 
 def table_layout(path: Path, options: LogOptions) -> tuple[Layout, dict[str, str]]:
@@ -81,6 +88,7 @@ def table_layout(path: Path, options: LogOptions) -> tuple[Layout, dict[str, str
     from mountcal.core.option_names import option
     from mountcal.io.table.layout import mapping_columns, refuse_unknown, resolve
     from mountcal.io.table.mapped import header
+    from mountcal.io.table.time_unit import settle_time
 
     names, read_as = header(path)
     columns = options.columns
@@ -96,6 +104,8 @@ def table_layout(path: Path, options: LogOptions) -> tuple[Layout, dict[str, str
     layout = resolve(names, path, columns=columns, acc_unit=options.unit)
     if layout is None:
         raise refuse_unknown(names, path)
+    layout, time_unit = settle_time(layout, path, read_as)  # stated and checked, or inferred; said
+    layout = replace(layout, conventions=(*layout.conventions, time_unit))
     return (replace(layout, read_as=read_as) if read_as else layout), read_as
 
 
