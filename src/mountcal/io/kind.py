@@ -201,6 +201,8 @@ def _table_kind(path: Path, form: str) -> InputKind:
     gaps = gaps[gaps > 0]
     spacing = float(np.median(gaps)) if gaps.size else float("nan")
     rows = int(t_s.shape[0])
+    if gaps.size and spacing >= STOP_SPACING_S and rows >= _ROWS_LOOKED_AT:
+        _refuse_stops_or_samples(path, rows, spacing)
     if gaps.size and spacing >= STOP_SPACING_S:
         return InputKind(True, f"a stop table ({form})", f"by its rows: {rows}, a median {spacing:.3g} s apart")
     if rows >= SAMPLE_MIN_ROWS and gaps.size and spacing <= SAMPLE_SPACING_S:
@@ -213,6 +215,29 @@ def _table_kind(path: Path, form: str) -> InputKind:
         f"(≥ {SAMPLE_MIN_ROWS} rows ≤ {SAMPLE_SPACING_S:g} s apart), told by its columns or rows",
         f"columns {', '.join(sorted(columns))} and {found}",
         _SETTLE,
+    )
+
+
+def _refuse_stops_or_samples(path: Path, rows: int, spacing: float) -> None:
+    """Thousands of rows seconds apart: a stop table of more stops than a parking session makes, or samples
+    whose ``t_s`` is in another unit (a logger's ms under mountcal's name). Refused naming both readings
+    where another unit gives an IMU's rate (:mod:`mountcal.io.table.time_unit`)."""
+    from mountcal.core.option_names import option
+    from mountcal.io.table.layout import TIME_UNITS
+    from mountcal.io.table.time_unit import IMU_RATE_HZ
+
+    lo, hi = IMU_RATE_HZ
+    fits = [u for u in ("ms", "us", "ns") if lo <= 1.0 / (spacing * TIME_UNITS[u]) <= hi]
+    if not fits:
+        return
+    unit = fits[0]
+    raise InputError(
+        str(path),
+        f"a stop table (rows ≥ {STOP_SPACING_S:g} s apart, one per stop) or a sample table with t_s in seconds",
+        f"{rows}+ rows a median {spacing:.6g} apart: {rows}+ stops, or samples at "
+        f"{1.0 / (spacing * TIME_UNITS[unit]):.4g} Hz with t_s in {unit}",
+        f"If t_s is in {unit}: {option('columns', f'time=t_s:{unit},ax=ax,ay=ay,az=az')}; if these are stops: "
+        f"{KIND_OPTION} stop-table.",
     )
 
 
@@ -249,20 +274,10 @@ def _columns(path: Path) -> frozenset[str]:
 
 
 def _times(path: Path, form: str) -> np.ndarray:
-    """The first rows' ``t_s`` (a bounded look)."""
-    if form == "CSV":
-        import pandas as pd
+    """The first rows' ``t_s`` in seconds (a bounded look; a timestamp type or date-time text as such)."""
+    from mountcal.io.table.time_unit import first_seconds
 
-        frame = pd.read_csv(
-            path, usecols=lambda c: str(c).strip() == "t_s", nrows=_ROWS_LOOKED_AT, comment="#", skipinitialspace=True
-        )
-        return np.asarray(pd.to_numeric(frame.iloc[:, 0], errors="coerce"), dtype=float)
-    import pyarrow.parquet as pq
-
-    batch = next(pq.ParquetFile(path).iter_batches(batch_size=_ROWS_LOOKED_AT, columns=["t_s"]), None)
-    if batch is None:
-        return np.empty(0)
-    return np.asarray(batch.column(0).to_numpy(zero_copy_only=False), dtype=float)
+    return first_seconds(path, "t_s")
 
 
 __all__ = ["KIND_OPTION", "Declared", "InputKind", "input_kind"]

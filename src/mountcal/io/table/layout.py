@@ -8,8 +8,9 @@ A **column map** names, for each quantity (a *role*), the table's column and opt
 ``time``, ``ax ay az`` (required), ``gx gy gz`` (all three or none), ``speed``, ``heading``,
 ``temperature``, ``latitude``, ``longitude``, ``altitude``. Units (as in the CAN mapping):
 
-- time: ``s`` (default), ``ms``, ``us``, ``ns``, ``iso`` (date-time text; without a zone, UTC),
-  or ``s/N`` — a sample index at N Hz (imucal's ``n_samples``);
+- time: ``s``, ``ms``, ``us``, ``ns``, ``iso`` (date-time text; without a zone, UTC), or ``s/N`` — a
+  sample index at N Hz (imucal's ``n_samples``); without a unit, inferred from the column's spacing
+  (:mod:`mountcal.io.table.time_unit`, which also checks a stated one and reads typed Parquet times);
 - acceleration: ``m/s2`` (default), ``g`` (9.80665 m/s²), ``mg``; gyro: ``rad/s`` (default), ``deg/s``;
   speed ``m/s``, ``km/h``, ``mph``, ``kn``; heading ``deg``, ``rad``; and any unit divided by a count,
   ``g/2048`` for a raw 16-bit reading at ±16 g.
@@ -28,10 +29,14 @@ import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from mountcal.core.errors import InputError
 from mountcal.core.option_names import option
 from mountcal.io.can.signals import G_N, UNIT_HINT, UNIT_KIND, UNITS, normalise_unit
+
+if TYPE_CHECKING:
+    from mountcal.core.result import Convention
 
 ACC = ("ax", "ay", "az")
 GYRO = ("gx", "gy", "gz")
@@ -67,6 +72,7 @@ class Layout:
     notes: tuple[str, ...] = ()
     gravity_free: str = ""  # why the acceleration is known to lack gravity ("" when it has it)
     read_as: dict[str, str] = field(default_factory=dict)  # CSV reading options (sep, decimal)
+    conventions: tuple[Convention, ...] = ()  # how its units are known (the time unit: io.table.time_unit)
 
     @property
     def native(self) -> bool:

@@ -24,6 +24,7 @@ from mountcal.core.option_names import option
 from mountcal.io.inputs import check_parquet_rows, check_regular_file, max_rows, too_many_rows
 from mountcal.io.samples import Channel, FloatArray, Samples
 from mountcal.io.table.layout import ACC, CHANNELS, G_N, GYRO, TIME_UNITS, Layout
+from mountcal.io.table.time_unit import TYPED, typed_seconds
 from mountcal.io.whole import parquet_end, text_end, text_source
 
 PARQUET = (".parquet", ".pq")
@@ -103,6 +104,10 @@ def _numbers(values: Any) -> FloatArray:
 def _time(values: pd.Series, layout: Layout) -> FloatArray:
     """Seconds (Unix epoch or the table's own zero); NaN where unreadable."""
     column = layout.time
+    if column.unit in TYPED:  # a Parquet timestamp or duration (io.table.time_unit)
+        typed = typed_seconds(values)
+        if typed is not None:
+            return typed
     if column.unit == "iso":
         stamps = pd.to_datetime(values, utc=True, errors="coerce", format="ISO8601")
         ns: NDArray[np.int64] = stamps.to_numpy(dtype="datetime64[ns]").astype(np.int64)  # pandas ships no types

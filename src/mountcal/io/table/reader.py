@@ -31,7 +31,7 @@ class TableReader(LogReader):
             samples = read_table(path)
         else:
             samples = read_mapped(path, layout, read_as)
-        return _framed(check_magnitude(samples, layout, str(path)), _frame_of(path))
+        return _said(_framed(check_magnitude(samples, layout, str(path)), _frame_of(path)), layout)
 
     def iter_chunks(self, path: Path, options: LogOptions, max_samples: int) -> Iterator[Samples]:
         from mountcal.io.table.mapped import iter_mapped
@@ -68,7 +68,7 @@ def _checked(chunks: Iterator[Samples], layout: Layout, path: Path) -> Iterator[
             chunk = replace(chunk, gravity_free=verdict)
         if not looked:
             rotated, looked = _frame_of(path), True
-        yield _framed(chunk, rotated)
+        yield _said(_framed(chunk, rotated), layout)
 
 
 def _frame_of(path: Path) -> Rotated | None:
@@ -82,6 +82,13 @@ def _framed(samples: Samples, rotated: Rotated | None) -> Samples:
     from dataclasses import replace
 
     return samples if rotated is None else replace(samples, rotated=rotated)
+
+
+def _said(samples: Samples, layout: Layout) -> Samples:
+    """The samples carrying the conventions their layout settled (the time unit)."""
+    from dataclasses import replace
+
+    return replace(samples, conventions=(*samples.conventions, *layout.conventions)) if layout.conventions else samples
 
 
 def table_layout(path: Path, options: LogOptions) -> tuple[Layout, dict[str, str]]:
@@ -98,6 +105,7 @@ def table_layout(path: Path, options: LogOptions) -> tuple[Layout, dict[str, str
     from mountcal.core.option_names import option
     from mountcal.io.table.layout import mapping_columns, refuse_unknown, resolve
     from mountcal.io.table.mapped import header
+    from mountcal.io.table.time_unit import settle_time
 
     names, read_as = header(path)
     columns = options.columns
@@ -113,6 +121,8 @@ def table_layout(path: Path, options: LogOptions) -> tuple[Layout, dict[str, str
     layout = resolve(names, path, columns=columns, acc_unit=options.unit)
     if layout is None:
         raise refuse_unknown(names, path)
+    layout, time_unit = settle_time(layout, path, read_as)  # stated and checked, or inferred; said
+    layout = replace(layout, conventions=(*layout.conventions, time_unit))
     return (replace(layout, read_as=read_as) if read_as else layout), read_as
 
 

@@ -1,0 +1,268 @@
+"""The unit of a table's time column: stated, checked against its spacing, or inferred from it — once, for
+every table reader (mountcal's own columns, a column map, a known export; CSV and Parquet; whole or in chunks).
+
+A table's time column states its unit by its **type** (a Parquet timestamp or duration: read as seconds,
+timestamps since the Unix epoch), by its **text** (ISO-8601 date-times: read as such), by its **name**
+(``t_s``), by the column map (``time=ts:ms``) or by a known export's documentation. A stated unit is
+checked against the column's spacing: one that makes the log slower than any IMU log while another unit
+makes it an IMU's rate (a logger's milliseconds written under ``t_s``) is refused, naming the unit that
+fits. A map that names no unit states none: the unit is **inferred** from the spacing when exactly one of
+s, ms, us, ns gives an IMU's rate, and said; otherwise it is asked for.
+
+The decision rests on the first rows (:data:`ROWS_LOOKED_AT`), read before the samples: the layout it
+settles reads every chunk of the table alike.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from mountcal.core.errors import InputError
+from mountcal.core.option_names import option
+from mountcal.core.result import Convention
+from mountcal.io.table.layout import TIME_UNITS, Column, Layout
+from mountcal.io.whole import text_source
+
+ROWS_LOOKED_AT = 2000  # rows whose spacing decides (a look, not a read: the first chunk holds them)
+# The sampling rates an IMU log has. Below 2.5 Hz a 2 s window holds fewer than the 5 samples the stop
+# finder needs (mountcal could not use the log), and no IMU logs that slowly; above 10 kHz is beyond the
+# output rates of the accelerometers logged in vehicles (a few kHz at most). The s, ms, us and ns readings
+# of one spacing lie 1000× apart, so at most two of them fall in this band, and only for 2.5–10 Hz in
+# seconds (2.5–10 kHz in ms): there an unstated unit is asked for rather than guessed.
+IMU_RATE_HZ = (2.5, 10_000.0)
+UNITS = ("s", "ms", "us", "ns")
+TYPED = ("timestamp", "duration")  # units a column's type states
+
+
+def first_times(path: Path, name: str, read_as: dict[str, str], whole_lines: bool = True) -> pd.Series:
+    """The first :data:`ROWS_LOOKED_AT` values of column ``name`` as stored: a CSV's as text, a Parquet's
+    in its own type (a timestamp stays a timestamp). ``whole_lines``: a cut CSV's whole lines only (read
+    under the completeness policy, :mod:`mountcal.io.whole`)."""
+    try:
+        if path.suffix.lower() in (".parquet", ".pq"):
+            import pyarrow.parquet as pq
+
+            batch = next(pq.ParquetFile(path).iter_batches(batch_size=ROWS_LOOKED_AT, columns=[name]), None)
+            return pd.Series([], dtype=float) if batch is None else batch.column(0).to_pandas()
+        frame = pd.read_csv(
+            text_source(path) if whole_lines else path,
+            usecols=lambda c: str(c).strip() == name,
+            nrows=ROWS_LOOKED_AT,
+            dtype=str,
+            comment="#",
+            skipinitialspace=True,
+            encoding="utf-8-sig",
+            **read_as,
+        )
+    except (ValueError, pd.errors.ParserError, UnicodeDecodeError, OSError) as err:
+        raise InputError(
+            str(path), "a CSV or Parquet sample table", f"a file that does not parse ({err})", "Check the file."
+        ) from err
+    return frame.iloc[:, 0] if frame.shape[1] else pd.Series([], dtype=str)
+
+
+def typed_seconds(values: pd.Series) -> np.ndarray | None:
+    """Seconds of a timestamp (since the Unix epoch; a zone's instant) or duration column; None for others."""
+    kind = values.dtype
+    if isinstance(kind, pd.DatetimeTZDtype):
+        values = values.dt.tz_convert("UTC").dt.tz_localize(None)
+    elif not (pd.api.types.is_datetime64_dtype(kind) or pd.api.types.is_timedelta64_dtype(kind)):
+        return None
+    raw = values.to_numpy(dtype="timedelta64[ns]" if pd.api.types.is_timedelta64_dtype(kind) else "datetime64[ns]")
+    ns = raw.view(np.int64)
+    out = (ns // 1_000_000_000).astype(np.float64) + (ns % 1_000_000_000) * 1e-9  # exact seconds, then the rest
+    out[np.isnat(raw)] = np.nan
+    return np.asarray(out, dtype=np.float64)
+
+
+def first_seconds(path: Path, name: str) -> np.ndarray:
+    """The first rows of a time column as numbers: seconds where its type or text says so (a timestamp, a
+    duration, ISO-8601 text), else its numbers as they are (what the kind of a table is told by)."""
+    values = first_times(path, name, {}, whole_lines=False)
+    typed = typed_seconds(values)
+    if typed is not None:
+        return typed
+    if (values.dtype == object or pd.api.types.is_string_dtype(values.dtype)) and _is_iso_text(values):
+        stamps = pd.to_datetime(values, utc=True, errors="coerce", format="ISO8601")
+        return typed_seconds(pd.Series(stamps))  # type: ignore[return-value]
+    return np.asarray(pd.to_numeric(values, errors="coerce"), dtype=np.float64)
+
+
+def _is_iso_text(values: pd.Series) -> bool:
+    """Whether the (text) values are date-times: most parse as ISO-8601 and are no plain numbers."""
+    text = values.dropna().astype(str).str.strip()
+    text = text[text != ""]
+    if text.empty or pd.to_numeric(text, errors="coerce").notna().mean() > 0.5:
+        return False
+    parsed = pd.to_datetime(text, utc=True, errors="coerce", format="ISO8601")
+    return bool(parsed.notna().mean() > 0.5)
+
+
+def median_step(values: np.ndarray) -> float:
+    """The median of the positive steps between sorted times: robust to gaps, jitter, repeated stamps."""
+    t = np.sort(values[np.isfinite(values)])
+    steps = np.diff(t)
+    steps = steps[steps > 0]
+    return float(np.median(steps)) if steps.size else float("nan")
+
+
+def _fits(step: float, scale: float) -> bool:
+    lo, hi = IMU_RATE_HZ
+    return bool(np.isfinite(step)) and lo <= 1.0 / (step * scale) <= hi
+
+
+def _rate(step: float, scale: float) -> str:
+    return f"{1.0 / (step * scale):.4g} Hz"
+
+
+def settle_time(layout: Layout, path: Path, read_as: dict[str, str]) -> tuple[Layout, Convention]:
+    """``layout`` with its time column's unit settled from the first rows, and how the unit is known.
+
+    Raises
+    ------
+    InputError
+        A stated unit the spacing contradicts while another fits; a unit stated against the column's
+        type or text; a unit not stated that the spacing does not settle.
+    """
+    where = str(path)
+    time = layout.time
+    values = first_times(path, time.name, read_as)
+    stated, by = _statement(layout)
+    explicit = stated if layout.source == "the column map" else ""  # a name cannot outweigh a type or a text
+    seconds = typed_seconds(values)
+    if seconds is not None:
+        typed = "timestamp" if pd.api.types.is_datetime64_any_dtype(values.dtype) else "duration"
+        if explicit and explicit != "iso":
+            raise _against_type(where, time, explicit, f"a {typed} type ({values.dtype})", by)
+        what = "seconds since the Unix epoch (UTC)" if typed == "timestamp" else "seconds"
+        return _with(layout, Column(time.name, typed)), Convention(
+            "time_unit", typed, "stated", f"the column {time.name}'s type ({values.dtype}): read as {what}"
+        )
+    text = values.dtype == object or pd.api.types.is_string_dtype(values.dtype)
+    iso = text and _is_iso_text(values)
+    if time.unit == "iso" or iso:
+        if explicit and explicit != "iso":
+            raise _against_type(where, time, explicit, "date-time text (ISO-8601)", by)
+        if time.unit == "iso":
+            return layout, Convention("time_unit", "iso", "stated", by)
+        return _with(layout, Column(time.name, "iso")), Convention(
+            "time_unit", "iso", "stated", f"the column {time.name}'s text: ISO-8601 date-times (without a zone, UTC)"
+        )
+    if read_as.get("decimal") == "," and text:
+        values = values.str.replace(",", ".", regex=False)
+    numbers = np.asarray(pd.to_numeric(values, errors="coerce"), dtype=np.float64)
+    step = median_step(numbers)
+    if stated and "/" in stated:  # a sample index at a stated rate: the rate is the statement
+        return layout, Convention("time_unit", stated, "stated", by)
+    if stated:
+        if not time.unit:  # stated by the name alone: read in that unit
+            layout = _with(layout, Column(time.name, stated, TIME_UNITS[stated]))
+        return layout, _checked(where, layout, stated, step, by)
+    return _inferred(where, layout, step)
+
+
+def _statement(layout: Layout) -> tuple[str, str]:
+    """The stated unit of the time column ("" where none is) and what states it."""
+    time = layout.time
+    if layout.source == "mountcal's own columns":
+        return "s", f"the column name {time.name}"
+    if layout.source == "the column map":
+        if time.unit.strip():
+            return time.unit.strip(), f"the column map ({option('columns')} time={time.name}:{time.unit.strip()})"
+        named = re.search(r"_(s|ms|us|ns)$", time.name.strip(), re.IGNORECASE)  # t_s, stamp_ms: the name says it
+        return (named.group(1).lower(), f"the column name {time.name}") if named else ("", "")
+    return time.unit or "", f"{layout.source} (its documented unit)"
+
+
+def _with(layout: Layout, time: Column) -> Layout:
+    return replace(layout, columns={**layout.columns, "time": time})
+
+
+def column_map(columns: dict[str, Column]) -> str:
+    """The ``--columns`` text that reads ``columns`` (each role with its column and unit)."""
+    return ",".join(f"{role}={c.name}" + (f":{c.unit}" if c.unit else "") for role, c in columns.items())
+
+
+def _checked(where: str, layout: Layout, stated: str, step: float, by: str) -> Convention:
+    """A stated unit, refused where the spacing makes the log slower or faster than any IMU's while another
+    unit makes it an IMU's rate."""
+    time = layout.time
+    scale = time.scale
+    if not np.isfinite(step) or _fits(step, scale):
+        checked = f" (checked: a median step of {step:.4g} {stated}, {_rate(step, scale)})" if np.isfinite(step) else ""
+        return Convention("time_unit", stated, "stated", by + checked)
+    others = [u for u in UNITS if u != stated.lower() and _fits(step, TIME_UNITS[u])]
+    if not others:  # nothing fits better: not an IMU's rate in any unit, left to the commands to judge
+        return Convention("time_unit", stated, "stated", f"{by} (its spacing, {_rate(step, scale)}, fits no unit)")
+    fit = others[0]
+    fixed = {**layout.columns, "time": Column(time.name, fit)}
+    raise InputError(
+        where,
+        f"the time column {time.name} in {stated} ({by}) at an IMU's rate, {_band()}",
+        f"a median step of {step:.6g} between its first rows: {_rate(step, scale)} in {stated}, "
+        f"{'slower' if 1.0 / (step * scale) < IMU_RATE_HZ[0] else 'faster'} than any IMU logs; "
+        f"in {fit} it would be {_rate(step, TIME_UNITS[fit])}",
+        f"If {time.name} is in {fit}, say so: {option('columns', column_map(fixed))}.",
+    )
+
+
+def _band() -> str:
+    return f"{IMU_RATE_HZ[0]:g} Hz to {IMU_RATE_HZ[1] / 1000:g} kHz"
+
+
+def _inferred(where: str, layout: Layout, step: float) -> tuple[Layout, Convention]:
+    """A unit not stated: the one of s, ms, us, ns that gives an IMU's rate, else asked for."""
+    time = layout.time
+    fits = [u for u in UNITS if _fits(step, TIME_UNITS[u])]
+    if len(fits) == 1:
+        unit = fits[0]
+        by = (
+            f"the column {time.name}'s spacing: a median step of {step:.6g} between its first rows is "
+            f"{_rate(step, TIME_UNITS[unit])} in {unit} (the only unit giving an IMU's rate, "
+            f"{_band()}; state it with time={time.name}:UNIT)"
+        )
+        return _with(layout, Column(time.name, unit, TIME_UNITS[unit])), Convention("time_unit", unit, "inferred", by)
+    found = (
+        f"no distinct times in the first rows of {time.name}"
+        if not np.isfinite(step)
+        else f"a median step of {step:.6g}, "
+        + (
+            f"an IMU's rate in {' or '.join(fits)} ({', '.join(_rate(step, TIME_UNITS[u]) for u in fits)})"
+            if fits
+            else "an IMU's rate in none of s, ms, us, ns"
+        )
+    )
+    named = " or ".join(option("columns", f"time={time.name}:{u}") for u in fits or ["UNIT"])
+    raise InputError(
+        where,
+        f"the unit of the time column {time.name} (the column map names none)",
+        found,
+        f"Name it: {named} (s, ms, us, ns, iso, or s/N for a sample index at N Hz).",
+    )
+
+
+def _against_type(where: str, time: Column, stated: str, what: str, by: str) -> InputError:
+    keep = "iso" if "text" in what else ""
+    todo = f"{option('columns', f'time={time.name}:iso')}" if keep else f"{option('columns', f'time={time.name}')}"
+    return InputError(
+        where,
+        f"the time column {time.name} in {stated} ({by})",
+        f"{what}, which states its own unit",
+        f"Read it as what it holds: {todo}" + ("." if keep else " (no unit: the type says it)."),
+    )
+
+
+__all__ = [
+    "IMU_RATE_HZ",
+    "ROWS_LOOKED_AT",
+    "first_seconds",
+    "first_times",
+    "median_step",
+    "settle_time",
+    "typed_seconds",
+]
