@@ -21,6 +21,7 @@ import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
+from datetime import UTC
 from pathlib import Path
 from typing import Any
 
@@ -322,6 +323,35 @@ def _mf4_payload(data: NDArray[Any]) -> NDArray[np.uint8]:
     return out
 
 
+HD_LOCAL_TIME = 1  # MDF 4 hd_time_flags bit 0: the start time is the recorder's local time, its zone not recorded
+HD_FLAGS_AT = 64 + 24 + 6 * 8 + 8 + 2 + 2  # the HD block (at 64): header, six links, start ns, tz and DST minutes
+
+
+def start_s(header: Any) -> float:
+    """The measurement's start in s since the Unix epoch: the header's nanoseconds, which are UTC — or, where
+    the header is flagged local time, the recorder's wall clock read as UTC (:func:`local_time_header`).
+
+    Not ``header.start_time.timestamp()``: asammdf returns a local-time start as a naive datetime, whose
+    ``timestamp()`` takes the zone of the machine reading it — the same file would start hours apart on two
+    machines.
+    """
+    stamp = getattr(header, "abs_time", None)  # MDF 4 (and 3.2+); an older MDF 3 header has its date and time only
+    if stamp is not None:
+        return int(stamp) / 1e9
+    start = header.start_time
+    return float((start if start.tzinfo is not None else start.replace(tzinfo=UTC)).timestamp())
+
+
+def local_time_header(path: Path) -> bool:
+    """Whether an MDF 4 file's header says its start time is local time of an unrecorded zone (read from the
+    HD block's flags, without opening the file with asammdf; False for MDF 3 or a file too short to say)."""
+    with path.open("rb") as f:
+        head = f.read(HD_FLAGS_AT + 1)
+    if len(head) <= HD_FLAGS_AT or head[64:68] != b"##HD":
+        return False
+    return bool(head[HD_FLAGS_AT] & HD_LOCAL_TIME)
+
+
 def iter_mf4(path: Path, keep: Filter, max_frames: int) -> Iterator[CanFrames]:
     mdf, layout = _open_mdf(path)
     try:
@@ -334,7 +364,7 @@ def iter_mf4(path: Path, keep: Filter, max_frames: int) -> Iterator[CanFrames]:
             whole[g], values[g] = _check_mf4_vlsd(path, mdf, g, layout)
         if layout.unfinalised and all(whole[g] == mdf.groups[g].channel_group.cycles_nr for g in groups):
             _check_unfinalised_end(path, mdf, layout, values)
-        start = float(mdf.header.start_time.timestamp())
+        start = start_s(mdf.header)
         sources = [_mf4_records(path, mdf, g, start, keep, max_frames, whole[g]) for g in groups]
         if len(sources) == 1:
             yield from sources[0]

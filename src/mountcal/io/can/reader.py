@@ -29,18 +29,42 @@ class CanReader(LogReader):
     def read(self, path: Path, options: LogOptions) -> Samples:
         from mountcal.io.can.read import read_can
 
-        return read_can(path, _dbc(path, options), mapping=options.mapping, channel=options.channel)
+        return _clocked(read_can(path, _dbc(path, options), mapping=options.mapping, channel=options.channel), path)
 
     def iter_chunks(self, path: Path, options: LogOptions, max_samples: int) -> Iterator[Samples]:
         from mountcal.io.can.read import iter_can
 
         dbc = _dbc(path, options)
-        return iter_can(path, dbc, mapping=options.mapping, channel=options.channel, max_samples=max_samples)
+        chunks = iter_can(path, dbc, mapping=options.mapping, channel=options.channel, max_samples=max_samples)
+        return (_clocked(chunk, path) for chunk in chunks)
 
     def inspect(self, path: Path, options: LogOptions) -> LogSummary:
         from mountcal.io.can.read import inspect_can
 
         return inspect_can(path, options.dbc)  # without a DBC: ids per channel
+
+
+def _clocked(samples: Samples, path: Path) -> Samples:
+    """The samples saying their clock where an MF4's header keeps local time (read as UTC, the same on every
+    machine: :func:`mountcal.io.can.mf4.start_s`); every other CAN log's clock goes without saying."""
+    if path.suffix.lower() not in (".mf4", ".mdf"):
+        return samples
+    from mountcal.io.can.mf4 import local_time_header
+
+    if not local_time_header(path):
+        return samples
+    from dataclasses import replace
+
+    from mountcal.core.result import Convention
+
+    clock = Convention(
+        "clock",
+        "the recorder's local time, its time zone not recorded; read as UTC (absolute times, such as a protocol "
+        "sheet's or the fleet's dates, are then off by that zone's offset)",
+        "stated",
+        f"the MF4 header's local-time flag ({path.name})",
+    )
+    return replace(samples, conventions=(*samples.conventions, clock))
 
 
 def _dbc(path: Path, options: LogOptions) -> str | tuple[str, ...]:
