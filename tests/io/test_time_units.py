@@ -170,6 +170,33 @@ def test_slow_tables_and_gaps_raise_no_false_alarm(frame: pd.DataFrame, tmp_path
         assert unit.value == "s" and unit.how == "stated" and "checked" in unit.by, name
 
 
+def test_a_genuine_slow_log_and_a_table_of_stops_are_read_in_seconds_and_their_spacing_said(
+    frame: pd.DataFrame, tmp_path: Path
+) -> None:
+    """A name's unit is doubted only on a log's evidence: a 1 Hz log in seconds (telematics logs so; in ms it
+    would be 1 kHz) and a short table of stop means two minutes apart are read in seconds, said as slow."""
+    telematics = frame.iloc[::100].assign(t_s=np.arange(len(frame.iloc[::100]), dtype=float))  # 1 Hz
+    stops = frame.iloc[:12].assign(t_s=120.0 * np.arange(12))  # 12 rows, 120 s apart
+    for name, table, hz in (("telematics", telematics, "1 Hz"), ("stops", stops, "0.008333 Hz")):
+        path = tmp_path / f"{name}.csv"
+        table.to_csv(path, index=False, float_format="%.17g")
+        got = read_log(path)
+        unit = next(c for c in got.conventions if c.name == "time_unit")
+        assert unit.value == "s" and unit.how == "stated", name
+        assert f"its spacing: {hz}, slower than an IMU's; in ms it would be" in unit.by, (name, unit.by)
+        assert got.t_s[1] - got.t_s[0] == pytest.approx(1.0 if name == "telematics" else 120.0)
+
+
+def test_a_unit_the_user_states_in_the_map_is_read_as_stated(frame: pd.DataFrame, tmp_path: Path) -> None:
+    """ms data read as ``time=t_s:s`` because the user says so: read in seconds, the spacing said beside it."""
+    path = tmp_path / "ms.csv"
+    frame.assign(t_s=np.round(frame["t_s"] * 1e3).astype(np.int64)).to_csv(path, index=False)
+    got = read_log(path, LogOptions(columns=parse_columns("time=t_s:s,ax=ax,ay=ay,az=az")))
+    unit = next(c for c in got.conventions if c.name == "time_unit")
+    assert unit.value == "s" and "in ms it would be 100 Hz" in unit.by
+    assert got.t_s[1] - got.t_s[0] == pytest.approx(10.0)
+
+
 def test_an_unstated_unit_the_spacing_cannot_settle_is_asked_for(frame: pd.DataFrame, tmp_path: Path) -> None:
     slow = frame.iloc[::20].rename(columns={"t_s": "time"})  # 5 Hz in s, or 5 kHz in ms
     path = tmp_path / "slow.csv"

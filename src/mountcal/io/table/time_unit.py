@@ -4,10 +4,11 @@ every table reader (mountcal's own columns, a column map, a known export; CSV an
 A table's time column states its unit by its **type** (a Parquet timestamp or duration: read as seconds,
 timestamps since the Unix epoch), by its **text** (ISO-8601 date-times: read as such), by its **name**
 (``t_s``), by the column map (``time=ts:ms``) or by a known export's documentation. A stated unit is
-checked against the column's spacing: one that makes the log slower than any IMU log while another unit
-makes it an IMU's rate (a logger's milliseconds written under ``t_s``) is refused, naming the unit that
-fits. A map that names no unit states none: the unit is **inferred** from the spacing when exactly one of
-s, ms, us, ns gives an IMU's rate, and said; otherwise it is asked for.
+checked against the column's spacing: a name's unit that makes a log (:data:`EVIDENCE_ROWS`) slower or
+faster than any logger's while another unit makes it an IMU's rate (a logger's milliseconds written under
+``t_s``) is refused, naming the unit that fits; a user's unit (``time=ts:s``) is read as stated. A map
+that names no unit states none: the unit is **inferred** from the spacing when exactly one of s, ms, us, ns
+gives an IMU's rate, and said; otherwise it is asked for.
 
 The decision rests on the first rows (:data:`ROWS_LOOKED_AT`), read before the samples: the layout it
 settles reads every chunk of the table alike.
@@ -36,6 +37,12 @@ ROWS_LOOKED_AT = 2000  # rows whose spacing decides (a look, not a read: the fir
 # seconds (2.5–10 kHz in ms): there an unstated unit is asked for rather than guessed.
 IMU_RATE_HZ = (2.5, 10_000.0)
 UNITS = ("s", "ms", "us", "ns")
+# A unit a column's name states is doubted only on a log's evidence: at least EVIDENCE_ROWS rows (a table of
+# stops has tens, minutes apart, and rotates as it is) slower than SLOWEST_LOG_HZ (no logger of vehicle
+# dynamics samples that slowly; 1 Hz telematics does) or faster than the band. A unit the user states in the
+# column map is never refused: its spacing is said beside it.
+EVIDENCE_ROWS = 500
+SLOWEST_LOG_HZ = 0.5
 TYPED = ("timestamp", "duration")  # units a column's type states
 
 
@@ -162,7 +169,9 @@ def settle_time(layout: Layout, path: Path, read_as: dict[str, str]) -> tuple[La
     if stated:
         if not time.unit:  # stated by the name alone: read in that unit
             layout = _with(layout, Column(time.name, stated, TIME_UNITS[stated]))
-        return layout, _checked(where, layout, stated, step, by)
+        given = layout.source == "the column map" and bool(time.unit.strip())  # the user's word, not a name's
+        doubted = not given and int(np.isfinite(numbers).sum()) >= EVIDENCE_ROWS
+        return layout, _checked(where, layout, stated, step, by, doubted)
     return _inferred(where, layout, step)
 
 
@@ -188,9 +197,10 @@ def column_map(columns: dict[str, Column]) -> str:
     return ",".join(f"{role}={c.name}" + (f":{c.unit}" if c.unit else "") for role, c in columns.items())
 
 
-def _checked(where: str, layout: Layout, stated: str, step: float, by: str) -> Convention:
-    """A stated unit, refused where the spacing makes the log slower or faster than any IMU's while another
-    unit makes it an IMU's rate."""
+def _checked(where: str, layout: Layout, stated: str, step: float, by: str, doubted: bool) -> Convention:
+    """A stated unit, refused where it may be ``doubted`` (a name's, on a log's rows: :data:`EVIDENCE_ROWS`)
+    and the spacing makes the log slower or faster than any logger's while another unit makes it an IMU's
+    rate; otherwise said with what its spacing says."""
     time = layout.time
     scale = time.scale
     if not np.isfinite(step) or _fits(step, scale):
@@ -200,6 +210,18 @@ def _checked(where: str, layout: Layout, stated: str, step: float, by: str) -> C
     if not others:  # nothing fits better: not an IMU's rate in any unit, left to the commands to judge
         return Convention("time_unit", stated, "stated", f"{by} (its spacing, {_rate(step, scale)}, fits no unit)")
     fit = others[0]
+    rate = 1.0 / (step * scale)
+    if not doubted or SLOWEST_LOG_HZ <= rate < IMU_RATE_HZ[0]:
+        return Convention(
+            "time_unit",
+            stated,
+            "stated",
+            f"{by} (its spacing: {_rate(step, scale)}, slower than an IMU's; in {fit} it would be "
+            f"{_rate(step, TIME_UNITS[fit])})"
+            if rate < IMU_RATE_HZ[0]
+            else f"{by} (its spacing: {_rate(step, scale)}, faster than an IMU's; in {fit} it would be "
+            f"{_rate(step, TIME_UNITS[fit])})",
+        )
     fixed = {**layout.columns, "time": Column(time.name, fit)}
     raise InputError(
         where,
