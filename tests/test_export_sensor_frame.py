@@ -252,3 +252,22 @@ def test_the_real_ros2_recording_states_the_frame_its_imu_messages_carry(real_da
     assert samples.frame_ids is not None and dict(samples.frame_ids.counts) == dict(carried)
     (named,) = _sensor_frame(samples.conventions)
     assert named.value == next(iter(carried)) and named.how == "stated"
+
+
+def test_a_json_encoded_mcap_counts_its_frame_ids(tmp_path: Path) -> None:
+    from mcap.writer import Writer as McapWriter
+
+    frames = ["imu_link_ned"] * 40 + ["xsens_imu"] * 3 + ["imu_link_ned"] * 17
+    with (tmp_path / "json.mcap").open("wb") as f:
+        writer = McapWriter(f, chunk_size=2000)
+        writer.start()
+        channel = writer.register_channel(
+            "/imu", "json", writer.register_schema("sensor_msgs/msg/Imu", "jsonschema", b"{}")
+        )
+        for i, frame in enumerate(frames):
+            t_ns = T0_NS + i * 5_000_000
+            data = json.dumps(imu_msg(t_ns, [0.1, 0.2, 9.8], [0.0, 0.0, 0.01], frame_id=frame)).encode()
+            writer.add_message(channel, log_time=t_ns, data=data, publish_time=t_ns)
+        writer.finish()
+    samples = read_log(tmp_path / "json.mcap")
+    assert samples.frame_ids is not None and samples.frame_ids.counts == (("imu_link_ned", 57), ("xsens_imu", 3))

@@ -182,34 +182,40 @@ def string_counts(rows: Rows, at: Offset, end: Offset) -> dict[str, int]:
     """Each value of a string field (bytes ``at`` to ``end`` of each row, checked to lie inside) with how
     many rows hold it; a trailing NUL (CDR's) is not part of the value.
 
-    Vectorised for the usual case, one value in every row: the rows are compared with the first (a
-    strided view when the layout is shared; where the lengths differ, by length first); only when some
-    differ are the values sorted out, one :func:`numpy.unique` per length.
+    Vectorised for the usual case, one value in every row: one length (``end`` one offset), and every
+    row's bytes equal to the first's, compared in one pass (a strided view when the rows are evenly
+    spaced). Only when they differ are the values sorted out: one :func:`numpy.unique` per length.
     """
     n = rows.start.size
     if not n:
         return {}
     rows.need(end, "a string")
-    length = np.broadcast_to(np.asarray(end, np.int64) - np.asarray(at, np.int64), (n,))
-    first = int(length[0])
     if isinstance(at, int) and isinstance(end, int):
-        block = rows.read(at, "u1", first) if first else np.empty((n, 0), np.uint8)
-        differ = int(np.count_nonzero((block != block[0]).any(axis=1))) if first else 0
-    else:
-        same = np.flatnonzero(length == first)
-        block = gather(rows.buf, rows.start[same] + np.broadcast_to(np.asarray(at, np.int64), (n,))[same], first)
-        differ = n - same.size + int(np.count_nonzero((block != block[0]).any(axis=1)))
-    if not differ:
-        return {_text(block[0]): n}
+        if end == at:
+            return {"": n}
+        block = _bytes(rows, at, end - at)
+        if not np.count_nonzero(block != block[0]):
+            return {_text(block[0]): n}
     starts = rows.start + np.broadcast_to(np.asarray(at, np.int64), (n,))
+    length = np.broadcast_to(np.asarray(end, np.int64) - np.asarray(at, np.int64), (n,))
     counts: dict[str, int] = {}
     for size in np.unique(length).tolist():  # a few distinct lengths: one gather and one unique each
-        picked = gather(rows.buf, starts[length == size], int(size))
-        values, seen = np.unique(picked, axis=0, return_counts=True)
+        if not size:
+            counts[""] = counts.get("", 0) + int(np.count_nonzero(length == 0))
+            continue
+        values, seen = np.unique(gather(rows.buf, starts[length == size], int(size)), axis=0, return_counts=True)
         for value, count in zip(values, seen.tolist(), strict=True):
             text = _text(value)
             counts[text] = counts.get(text, 0) + int(count)
     return counts
+
+
+def _bytes(rows: Rows, at: int, nbytes: int) -> U8Array:
+    """Bytes ``at : at + nbytes`` of every row, shape (n, nbytes): a view when the rows are evenly spaced."""
+    if rows.step is None:
+        return gather(rows.buf, rows.start + at, nbytes)
+    shape, strides = (rows.start.size, nbytes), (rows.step, 1)
+    return np.ndarray(shape, np.uint8, buffer=rows.buf, offset=int(rows.start[0]) + at, strides=strides)
 
 
 def _text(raw: U8Array) -> str:
