@@ -271,3 +271,12 @@ def test_a_json_encoded_mcap_counts_its_frame_ids(tmp_path: Path) -> None:
         writer.finish()
     samples = read_log(tmp_path / "json.mcap")
     assert samples.frame_ids is not None and samples.frame_ids.counts == (("imu_link_ned", 57), ("xsens_imu", 3))
+
+
+@pytest.mark.real_data
+def test_the_real_ros1_bag_states_the_same_frame_as_its_ros2_recording(real_data: Path) -> None:
+    bag = read_log(real_data / "robot_localization" / "test1.bag")
+    mcap = read_log(real_data / REAL_MCAP)
+    assert bag.frame_ids is not None and mcap.frame_ids is not None
+    assert bag.frame_ids.counts == mcap.frame_ids.counts and sum(n for _, n in bag.frame_ids.counts) == 11865
+    assert _sensor_frame(bag.conventions)[0].value == _sensor_frame(mcap.conventions)[0].value

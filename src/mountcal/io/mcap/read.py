@@ -277,10 +277,10 @@ def _decode(unit: Unit, mine: NDArray[np.bool_], sel: _Selection) -> cdr.Decoded
     return cdr.Decoded(decoded.sec, decoded.nanosec, {"t": _times(decoded, log_ns), **decoded.columns}, decoded.frames)
 
 
-Decoded = tuple[dict[str, Piece], Counter[str], Counter[str]]  # pieces, drops, IMU frame_ids
+UnitDecoded = tuple[dict[str, Piece], Counter[str], Counter[str]]  # pieces, drops, IMU frame_ids
 
 
-def _decode_unit(unit: Unit, selections: Sequence[_Selection], where: str) -> Decoded:
+def _decode_unit(unit: Unit, selections: Sequence[_Selection], where: str) -> UnitDecoded:
     """One unit's finite, time-sorted pieces of every selection, what was dropped, and the IMU
     messages' ``header.frame_id`` values with their counts."""
     channel = record_field(unit.data, unit.messages, RECORD_HEAD.size, "<u2")
@@ -306,7 +306,7 @@ def _decode_unit(unit: Unit, selections: Sequence[_Selection], where: str) -> De
     return pieces, dropped, frames
 
 
-def _decoded_units(log: Log, selections: Sequence[_Selection]) -> Generator[Decoded, None, None]:
+def _decoded_units(log: Log, selections: Sequence[_Selection]) -> Generator[UnitDecoded, None, None]:
     """Per unit, in file order: what :func:`_decode_unit` gives."""
     wanted = frozenset(i for s in selections for i in s.channel_ids)
     with closing(chunk_units(log, wanted)) as units:
