@@ -39,6 +39,7 @@ from mountcal.io.kind import Declared, InputKind, kind_of_input
 from mountcal.io.logs import read_log, stated
 from mountcal.io.reader import LogOptions
 from mountcal.io.samples import Samples, with_gravity
+from mountcal.io.sensor_frame import sensor_frame_note
 from mountcal.io.timestamps import increasing_times
 from mountcal.io.whole import reading
 from mountcal.loop import crosscheck, plausibility
@@ -269,6 +270,8 @@ def _checked(done: LogResult, job: LogJob, hashes: Future[tuple[str, ...]] | Non
     cal = replace(cal, provenance=replace(cal.provenance, input_sha256=hashed, conventions=stated))
     if done.samples.rotated is not None:  # legitimate (checking a rotation), but the angles mean something else
         cal = replace(cal, notes=(*cal.notes, frame_note(done.samples.rotated)))
+    elif (named := sensor_frame_note(done.samples.frame_ids)) is not None:  # several frames: none is picked
+        cal = replace(cal, notes=(*cal.notes, named))
     return plausibility.with_checks(cal, checks)
 
 

@@ -80,7 +80,11 @@ def add_parser(sub: Any) -> None:
         help="Autoware's sensors_calibration.yaml: the parent's pose in base_link, composed with the mounting "
         "(needed for a parent other than base_link in Autoware)",
     )
-    p.add_argument("--child", default=None, help="the IMU's frame (default imu_link)")
+    p.add_argument(
+        "--child",
+        default=None,
+        help="the IMU's frame (default: the frame_id the calibration's log gave the IMU's messages, else imu_link)",
+    )
     p.add_argument(
         "--translation",
         type=Number("offset_m"),
@@ -101,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
     from mountcal.core.atomic import atomic_path
     from mountcal.core.errors import InputError
     from mountcal.core.result import Calibration
-    from mountcal.outputs.exporters import Frames, export, read_parent_pose
+    from mountcal.outputs.exporters import Frames, export, frames_for, read_parent_pose
 
     result = Path(args.input)
     to_stdout = args.output == STDOUT
@@ -114,15 +118,19 @@ def run(args: argparse.Namespace) -> int:
         read = args.parent_pose and own is not None  # export() refuses frames for the other formats
         frames = Frames(
             parent=parent,
-            child=args.child or base.child,
+            child=args.child,
             translation_m=tuple(args.translation) if args.translation else base.translation_m,
             parent_pose=read_parent_pose(args.parent_pose, parent) if read else None,
         )
+    frames = frames_for(cal, args.to, frames)  # the child named, and what is said of its name
+    if frames is not None and frames.warn:
+        log.warning("%s", safe(frames.said[0]))  # a transform for another frame than the data's: said plainly
     out = export(cal, args.to, yaw=args.yaw_undetermined, accept_unconfident=args.accept_unconfident, frames=frames)
     from mountcal.calibration.summary import answer
 
     where = "stdout" if to_stdout and not args.json else "the JSON on stdout" if to_stdout else safe(args.output)
-    say(f"exported to {args.to} ({where}): {answer(cal)}", [f"from {safe(result)}"])
+    said = [] if frames is None or frames.warn else [safe(line) for line in frames.said]
+    say(f"exported to {args.to} ({where}): {answer(cal)}", [f"from {safe(result)}", *said])
     if to_stdout and not args.json:
         stdout = result_stream()
         if isinstance(out, bytes):

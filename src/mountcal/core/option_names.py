@@ -18,6 +18,7 @@ OPTIONS: dict[str, tuple[str, str]] = {
     "accept_unconfident": ("accept_unconfident", "--accept-unconfident"),
     "allow_truncated": ("LogOptions.allow_truncated", "--allow-truncated"),
     "axes": ("LogOptions.axes", "--axes"),
+    "child": ("Frames.child", "--child"),
     "chunk": ("chunk_samples", "--chunk"),
     "columns": ("LogOptions.columns", "--columns"),
     "dbc": ("LogOptions.dbc", "--dbc"),

@@ -24,6 +24,7 @@ from mountcal.core.result import Convention
 PREFIX = "mountcal."  # a Parquet output's keys; an MCAP channel's keys go without it
 FRAME_KEY = "frame"
 CALIBRATION_KEY = "calibration"
+FRAME_CONVENTION = "frame"  # the name of the Convention saying the samples' frame (frame_convention)
 FRAME_NAMES = ("vehicle", "levelled")  # the first word of the frame mountcal writes (core.result's frames)
 
 
@@ -94,7 +95,7 @@ def topic_label(topic: str, metadata: Mapping[str, str]) -> str:
 def frame_convention(rotated: Rotated) -> Convention:
     """The samples' frame as a convention of the input (``provenance.conventions``)."""
     said = f"; {rotated.calibration}" if rotated.calibration else ""
-    return Convention("frame", f"{rotated.frame} (mountcal rotate's output{said})", "stated", rotated.by)
+    return Convention(FRAME_CONVENTION, f"{rotated.frame} (mountcal rotate's output{said})", "stated", rotated.by)
 
 
 def frame_note(rotated: Rotated) -> str:
@@ -134,6 +135,7 @@ def written_by_mountcal(path: Path) -> bool:
 
 
 __all__ = [
+    "FRAME_CONVENTION",
     "Rotated",
     "channel_rotated",
     "frame_convention",

@@ -13,8 +13,8 @@ The conventions every reader shares are applied here, once, whatever the format
 (:mod:`mountcal.io.input_conventions`): the axis map ``axes`` (after a reader's own map: a CAN mapping's
 ``axes``, a format's documented frame) to the accelerometer and the gyro, and the unit of the heading
 channel (stated by ``heading_unit``, or checked: radians are refused); and the frame a file states its
-samples are in when mountcal rotated them (:mod:`mountcal.io.frame`). ``Samples.conventions`` says how
-each was known.
+samples are in when mountcal rotated them (:mod:`mountcal.io.frame`), or else the name a ROS log gives
+the sensor frame (:mod:`mountcal.io.sensor_frame`). ``Samples.conventions`` says how each was known.
 
 Each file is read under the completeness policy of :mod:`mountcal.io.whole`: a file cut short is
 refused, or with ``LogOptions.allow_truncated`` read to its last whole record and named in
@@ -95,6 +95,7 @@ def stated(samples: Samples, opts: LogOptions, axes: AxisMap | None = None, chec
     from mountcal.io.frame import frame_convention
     from mountcal.io.input_conventions import axes_convention, heading_channel_unit
     from mountcal.io.samples import Channel
+    from mountcal.io.sensor_frame import sensor_frame_convention
 
     if any(c.name == "axes" for c in samples.conventions):
         return samples
@@ -103,6 +104,9 @@ def stated(samples: Samples, opts: LogOptions, axes: AxisMap | None = None, chec
     conventions = [axes_convention(axes, reader_map, f"the reader ({samples.axis_map})")]
     if samples.rotated is not None:  # the frame the file states: said in every result made of these samples
         conventions.append(frame_convention(samples.rotated))
+    elif samples.frame_ids is not None:  # the sensor frame's name (a rotated log's names mountcal's output frame)
+        named = sensor_frame_convention(samples.frame_ids)
+        conventions += [] if named is None else [named]
     if axes is not None and not axes.identity:
         samples = replace(
             samples,
@@ -228,6 +232,7 @@ def join(parts: Sequence[Samples]) -> Samples:
     import numpy as np
 
     from mountcal.io.samples import Channel, Samples
+    from mountcal.io.sensor_frame import joined
 
     parts = sorted(parts, key=lambda s: float(s.t_s[0]) if len(s) else np.inf)
     _check_consecutive([p for p in parts if len(p)])
@@ -254,6 +259,7 @@ def join(parts: Sequence[Samples]) -> Samples:
         rotated=next((p.rotated for p in parts if p.rotated is not None), None),
         incomplete=tuple(line for p in parts for line in p.incomplete),
         conventions=parts[0].conventions,
+        frame_ids=joined([p.frame_ids for p in parts]),
     )
 
 

@@ -18,6 +18,7 @@ from mountcal.core.errors import InputError
 if TYPE_CHECKING:
     from mountcal.core.result import Convention
     from mountcal.io.frame import Rotated
+    from mountcal.io.sensor_frame import FrameIds
 
 FloatArray = NDArray[np.float64]
 
@@ -65,6 +66,9 @@ class Samples:
         expected there (:mod:`mountcal.io.whole`); empty when every file was whole.
     conventions : tuple of Convention
         How the log's conventions were known (axes, heading unit): set by :func:`mountcal.io.logs.read_log`.
+    frame_ids : FrameIds or None
+        The ``header.frame_id`` values of the IMU messages, with their counts (:mod:`mountcal.io.sensor_frame`):
+        the name the log gives the sensor frame; None for a log that names no frames (CAN, tables).
     """
 
     t_s: FloatArray
@@ -79,6 +83,7 @@ class Samples:
     rotated: Rotated | None = None
     incomplete: tuple[str, ...] = ()
     conventions: tuple[Convention, ...] = ()
+    frame_ids: FrameIds | None = None
 
     def __post_init__(self) -> None:
         n = self.t_s.shape[0]

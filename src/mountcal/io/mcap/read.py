@@ -16,7 +16,8 @@ Conventions of every function here:
   the senders stamp their messages. Times are float64 seconds (sub-microsecond resolution at
   Unix-epoch magnitudes).
 - **Units**: SI as in :class:`~mountcal.io.samples.Samples`; vectors in the IMU message's
-  ``frame_id`` frame, taken as the sensor frame ``s`` (``axis_map`` ``"x,y,z"``).
+  ``frame_id`` frame, taken as the sensor frame ``s`` (``axis_map`` ``"x,y,z"``); the ``frame_id``
+  values are counted (``Samples.frame_ids``: :mod:`mountcal.io.sensor_frame`).
 - **Drops**: samples with a NaN or infinite value are dropped and counted in ``Samples.dropped``;
   so are GNSS fixes with ``status < 0`` (no fix) and odometry orientations that are not a rotation.
 - **Gyro**: ``angular_velocity_covariance[0] = −1`` (REP 145: not provided) in any message of a read
@@ -61,6 +62,7 @@ from mountcal.io.reader import CHUNK_SAMPLES
 from mountcal.io.ros.pieces import Piece, concat, gyro_of, join_unsorted, pieces_of
 from mountcal.io.ros2 import cdr
 from mountcal.io.samples import Channel, FloatArray, Samples
+from mountcal.io.sensor_frame import frame_ids
 
 # --------------------------------------------------------------------------- choosing topics
 
@@ -214,6 +216,7 @@ def _decode_json(kind: str, data: U8Array, start: I64Array, size: I64Array) -> c
     """Per-message JSON decoding (the one non-vectorized path), same result shape as CDR's."""
     paths = _JSON_PATHS[kind]
     rows, stamps, unknown = [], [], []
+    frames: Counter[str] = Counter()
     raw = data.tobytes()
     for s, n in zip(start.tolist(), size.tolist(), strict=True):
         try:
@@ -222,6 +225,7 @@ def _decode_json(kind: str, data: U8Array, start: I64Array, size: I64Array) -> c
             raise cdr.CdrError(f"a message that is not JSON ({err})") from err
         stamps.append(_json_stamp(message))
         unknown.append(_json_gyro_unknown(message))
+        frames[_json_frame_id(message)] += 1
         rows.append([_json_value(message, p) for col in paths.values() for p in col])
     table = np.array(rows, dtype=np.float64).reshape(len(rows), -1)
     sec, nanosec = np.array(stamps, dtype=np.int64).reshape(-1, 2).T
@@ -232,7 +236,15 @@ def _decode_json(kind: str, data: U8Array, start: I64Array, size: I64Array) -> c
         i += len(col)
     if kind == "imu":
         columns["gyro_unknown"] = np.array(unknown, np.float64)
+        return cdr.Decoded(sec, nanosec, columns, dict(frames))
     return cdr.Decoded(sec, nanosec, columns)
+
+
+def _json_frame_id(message: object) -> str:
+    """``header.frame_id``, or "" when absent (a message naming no frame)."""
+    header = message.get("header") if isinstance(message, dict) else None
+    frame = header.get("frame_id") if isinstance(header, dict) else None
+    return frame if isinstance(frame, str) else ""
 
 
 def _json_gyro_unknown(message: object) -> bool:
@@ -262,14 +274,19 @@ def _decode(unit: Unit, mine: NDArray[np.bool_], sel: _Selection) -> cdr.Decoded
     else:
         decoded = _decode_json(sel.kind, unit.data, start, size)
     log_ns = record_field(unit.data, at, RECORD_HEAD.size + 6, "<u8")
-    return cdr.Decoded(decoded.sec, decoded.nanosec, {"t": _times(decoded, log_ns), **decoded.columns})
+    return cdr.Decoded(decoded.sec, decoded.nanosec, {"t": _times(decoded, log_ns), **decoded.columns}, decoded.frames)
 
 
-def _decode_unit(unit: Unit, selections: Sequence[_Selection], where: str) -> tuple[dict[str, Piece], Counter[str]]:
-    """One unit's finite, time-sorted pieces of every selection, and what was dropped."""
+UnitDecoded = tuple[dict[str, Piece], Counter[str], Counter[str]]  # pieces, drops, IMU frame_ids
+
+
+def _decode_unit(unit: Unit, selections: Sequence[_Selection], where: str) -> UnitDecoded:
+    """One unit's finite, time-sorted pieces of every selection, what was dropped, and the IMU
+    messages' ``header.frame_id`` values with their counts."""
     channel = record_field(unit.data, unit.messages, RECORD_HEAD.size, "<u2")
     pieces: dict[str, Piece] = {}
     dropped: Counter[str] = Counter()
+    frames: Counter[str] = Counter()
     for sel in selections:
         ids = list(sel.channel_ids)
         mine = channel == ids[0] if len(ids) == 1 else np.isin(channel, ids)
@@ -284,14 +301,13 @@ def _decode_unit(unit: Unit, selections: Sequence[_Selection], where: str) -> tu
                 f"{err}, in the {unit.what}",
                 "The file is damaged or mislabelled; export the topic to CSV instead.",
             ) from err
+        frames.update(decoded.frames)  # only the IMU's are counted (cdr.Decoded.frames)
         pieces.update(pieces_of(decoded, sel.kind, dropped))
-    return pieces, dropped
+    return pieces, dropped, frames
 
 
-def _decoded_units(
-    log: Log, selections: Sequence[_Selection]
-) -> Generator[tuple[dict[str, Piece], Counter[str]], None, None]:
-    """Per unit, in file order: the pieces of every selection and what was dropped."""
+def _decoded_units(log: Log, selections: Sequence[_Selection]) -> Generator[UnitDecoded, None, None]:
+    """Per unit, in file order: what :func:`_decode_unit` gives."""
     wanted = frozenset(i for s in selections for i in s.channel_ids)
     with closing(chunk_units(log, wanted)) as units:
         for unit in units:
@@ -327,9 +343,11 @@ def _read_open(log: Log, topics: dict[str, str | None]) -> Samples:
     selections = [imu, *(s for s in aux if s is not None)]
     collected: dict[str, list[Piece]] = {}
     dropped: Counter[str] = Counter()
+    frames: Counter[str] = Counter()
     with closing(_decoded_units(log, selections)) as units:
-        for pieces, drops in units:
+        for pieces, drops, named in units:
             dropped.update(drops)
+            frames.update(named)
             for key, piece in pieces.items():
                 collected.setdefault(key, []).append(piece)
             # counted a chunk at a time, before the whole log is held
@@ -349,6 +367,7 @@ def _read_open(log: Log, topics: dict[str, str | None]) -> Samples:
         source=log.where,
         dropped={k: v for k, v in dropped.items() if v},
         rotated=imu.rotated,
+        frame_ids=frame_ids(imu.topic, frames, log.where),
     )
 
 
@@ -454,19 +473,21 @@ def _batches(log: Log, selection: _Selection, max_samples: int) -> Iterator[Samp
     pending: list[Piece] = []
     count, total = 0, 0
     dropped: Counter[str] = Counter()
+    frames: Counter[str] = Counter()
     with closing(_decoded_units(log, [selection])) as units:
-        for pieces, drops in units:
+        for pieces, drops, named in units:
             dropped.update(drops)
+            frames.update(named)
             if "imu" in pieces and pieces["imu"].t_s.size:
                 pending.append(pieces["imu"])
                 count += pieces["imu"].t_s.size
             while count >= max_samples:
                 joined = join_unsorted(pending)
-                yield _batch(log, selection, joined, 0, max_samples, dropped)
+                yield _batch(log, selection, joined, 0, max_samples, dropped, frames)
                 pending = [_slice(joined, max_samples, count)]
-                count, total, dropped = count - max_samples, total + max_samples, Counter()
+                count, total, dropped, frames = count - max_samples, total + max_samples, Counter(), Counter()
     if count:
-        yield _batch(log, selection, join_unsorted(pending), 0, count, dropped)
+        yield _batch(log, selection, join_unsorted(pending), 0, count, dropped, frames)
     elif not total:
         raise _no_samples(log, selection.topic, dropped)
 
@@ -475,8 +496,11 @@ def _slice(piece: Piece, start: int, stop: int) -> Piece:
     return Piece(piece.t_s[start:stop], {k: v[start:stop] for k, v in piece.columns.items()})
 
 
-def _batch(log: Log, selection: _Selection, piece: Piece, start: int, stop: int, dropped: Counter[str]) -> Samples:
-    """Rows ``start:stop`` of ``piece`` as Samples of their own (copied, sorted by time)."""
+def _batch(
+    log: Log, selection: _Selection, piece: Piece, start: int, stop: int, dropped: Counter[str], frames: Counter[str]
+) -> Samples:
+    """Rows ``start:stop`` of ``piece`` as Samples of their own (copied, sorted by time); ``dropped`` and
+    ``frames`` count the messages of the chunks that fed it."""
     part = concat([_slice(piece, start, stop)])
     gyro = gyro_of(part, dropped)
     return Samples(
@@ -486,4 +510,5 @@ def _batch(log: Log, selection: _Selection, piece: Piece, start: int, stop: int,
         source=log.where,
         dropped={k: v for k, v in dropped.items() if v},
         rotated=selection.rotated,
+        frame_ids=frame_ids(selection.topic, frames, log.where),
     )

@@ -28,6 +28,7 @@ from mountcal.io.ros.pieces import Piece, concat, gyro_of, keep, pieces_of
 from mountcal.io.ros.topics import Selection, Topic, choose_aux, choose_imu
 from mountcal.io.ros2.cdr import CdrError, Decoded, Rows
 from mountcal.io.samples import Channel, FloatArray, Samples
+from mountcal.io.sensor_frame import frame_ids
 
 I64Array = NDArray[np.int64]
 MIN_COURSE_SPEED_MPS = 1.0  # a GNSS course over ground is a heading only while moving
@@ -63,10 +64,11 @@ def samples_of(
     selections = [imu, *(s for s in aux if s.topic.name != imu.topic.name)]
     collected: dict[str, list[Piece]] = {}
     dropped: Counter[str] = Counter()
+    frames: Counter[str] = Counter()  # the IMU messages' header.frame_id values
     held, limit = 0, max_rows()
     with closing(batches(selections)) as blocks:
         for batch in blocks:
-            for key, piece in _decode(batch, where, cdr, dropped).items():
+            for key, piece in _decode(batch, where, cdr, dropped, frames).items():
                 collected.setdefault(key, []).append(piece)
                 held += piece.t_s.size
             if held > limit:
@@ -96,10 +98,13 @@ def samples_of(
         source=where,
         dropped={k: v for k, v in dropped.items() if v},
         notes=tuple(said),
+        frame_ids=frame_ids(
+            imu.topic.name + (f" field {'.'.join(imu.target.prefix)}" if imu.target.prefix else ""), frames, where
+        ),
     )
 
 
-def _decode(batch: Batch, where: str, cdr: bool, dropped: Counter[str]) -> dict[str, Piece]:
+def _decode(batch: Batch, where: str, cdr: bool, dropped: Counter[str], frames: Counter[str]) -> dict[str, Piece]:
     sel = batch.selection
     try:
         decoded = kinds.decode(batch.rows, sel.topic.definitions(where), sel.target, cdr=cdr)
@@ -111,6 +116,7 @@ def _decode(batch: Batch, where: str, cdr: bool, dropped: Counter[str]) -> dict[
             "The file is damaged, or its definition is not the one its messages were written with; "
             "export the topic to CSV instead.",
         ) from err
+    frames.update(decoded.frames)  # only the IMU's (or the acceleration's) are counted
     t = _times(decoded, batch.record_ns)
     columns = {"t": t, **decoded.columns}
     if sel.kind == "acc":

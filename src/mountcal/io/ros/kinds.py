@@ -15,7 +15,8 @@ Kinds (``Target.kind``) and their message types:
   (:mod:`mountcal.io.ros.nmea`; text, parsed message by message: GNSS rates are low).
 
 A sample's stamp is the ``header.stamp`` nearest the target along its path (the Imu's own header,
-else the enclosing message's); without one, the record's time (see :attr:`Target.stamp`).
+else the enclosing message's); without one, the record's time (see :attr:`Target.stamp`). The
+``frame_id`` of that header names the frame of an IMU's or an acceleration's vectors (``Decoded.frames``).
 """
 
 from __future__ import annotations
@@ -128,8 +129,10 @@ def decode(rows: Rows, types: Types, t: Target, *, cdr: bool) -> Decoded:
     columns = _columns(t)
     stamp = [] if t.stamp is None else [(*t.stamp, "sec"), (*t.stamp, "nanosec")]
     text = [("sentence",)] if t.kind == "nmea" else []
-    wanted = [p for paths in columns.values() for p in paths] + stamp + text
+    frame = [(*t.stamp[:-1], "frame_id")] if t.stamp is not None and t.kind in ("imu", "acc") else []
+    wanted = [p for paths in columns.values() for p in paths] + stamp + text + frame
     found = layout.locate(rows, types, t.type_name, wanted, cdr=cdr)
+    frames = layout.string_counts(rows, found, frame[0]) if frame else {}
     out = {}
     if text:
         speed, course, bad = nmea.parse(layout.read_strings(rows, found, text[0]))
@@ -143,12 +146,12 @@ def decode(rows: Rows, types: Types, t: Target, *, cdr: bool) -> Decoded:
         out["gyro_unknown"] = (out.pop("gyro_cov") == -1.0).astype(np.float64)
     n = rows.start.size
     if t.stamp is None:
-        return Decoded(np.zeros(n, np.int64), np.zeros(n, np.int64), out)
+        return Decoded(np.zeros(n, np.int64), np.zeros(n, np.int64), out, frames)
     sec = layout.read(rows, found, stamp[0]).astype(np.int64)
     nanosec = layout.read(rows, found, stamp[1]).astype(np.int64)
     if np.any((nanosec < 0) | (nanosec >= 1_000_000_000)):
         raise CdrError(f"a {'.'.join(t.stamp)}.nanosec outside 0 … 999999999")
-    return Decoded(sec, nanosec, out)
+    return Decoded(sec, nanosec, out, frames)
 
 
 __all__ = ["FIELD_TYPES", "TYPES", "Target", "decode", "target"]

@@ -28,6 +28,7 @@ from numpy.typing import NDArray
 
 from mountcal.io.ros.types import ARRAY, BASE, NAME, Types
 from mountcal.io.ros2.cdr import CdrError, Offset, Rows, align, as_offset
+from mountcal.io.ros2.cdr import string_counts as cdr_string_counts
 
 Path = tuple[str, ...]
 
@@ -188,6 +189,17 @@ def read_columns(rows: Rows, found: dict[Path, tuple[Offset, str]], paths: list[
     return np.column_stack([read(rows, found, p) for p in paths])
 
 
+def string_counts(rows: Rows, found: dict[Path, tuple[Offset, str]], path: Path) -> dict[str, int]:
+    """The values of one located string field, each with how many messages hold it (vectorised:
+    :func:`mountcal.io.ros2.cdr.string_counts`)."""
+    at, kind = found[path]
+    if kind != "string":
+        raise CdrError(f"field {'.'.join(path)} is not a string")
+    length = rows.take(at, "<u4", 1, ".".join(path))[:, 0].astype(np.int64)
+    first = at + 4 if isinstance(at, int) else as_offset(at + 4)
+    return cdr_string_counts(rows, first, as_offset(at + 4 + length))
+
+
 def read_strings(rows: Rows, found: dict[Path, tuple[Offset, str]], path: Path) -> list[bytes]:
     """The values of one located string field, one ``bytes`` per message (its NUL, in CDR, removed).
 
@@ -203,4 +215,4 @@ def read_strings(rows: Rows, found: dict[Path, tuple[Offset, str]], path: Path) 
     return [bytes(buf[s : s + n]).rstrip(b"\0") for s, n in zip(start.tolist(), length.tolist(), strict=True)]
 
 
-__all__ = ["PRIMITIVES", "locate", "read", "read_columns", "read_strings"]
+__all__ = ["PRIMITIVES", "locate", "read", "read_columns", "read_strings", "string_counts"]

@@ -20,7 +20,7 @@ checks that a log's schema declares exactly those fields (see :data:`FIELDS`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -79,11 +79,15 @@ class Decoded:
         ``header.stamp`` (seconds and nanoseconds); both zero where the sender left it unset.
     columns : dict of str to ndarray of float64, shape (n,) or (n, k)
         The message's numeric fields, in the message's own units (see each ``decode_*``).
+    frames : dict of str to int
+        The IMU messages' ``header.frame_id`` values, each with how many messages carry it (empty for
+        the other messages, and where there is no header).
     """
 
     sec: I64Array
     nanosec: I64Array
     columns: dict[str, F64Array]
+    frames: dict[str, int] = field(default_factory=dict)
 
 
 Offset = I64Array | int  # a byte offset per row, or one shared by all rows (the fast case)
@@ -174,6 +178,50 @@ class Rows:
         return as_offset(at + 4 + length)
 
 
+def string_counts(rows: Rows, at: Offset, end: Offset) -> dict[str, int]:
+    """Each value of a string field (bytes ``at`` to ``end`` of each row, checked to lie inside) with how
+    many rows hold it; a trailing NUL (CDR's) is not part of the value.
+
+    Vectorised for the usual case, one value in every row: one length (``end`` one offset), and every
+    row's bytes equal to the first's, compared in one pass (a strided view when the rows are evenly
+    spaced). Only when they differ are the values sorted out: one :func:`numpy.unique` per length.
+    """
+    n = rows.start.size
+    if not n:
+        return {}
+    rows.need(end, "a string")
+    if isinstance(at, int) and isinstance(end, int):
+        if end == at:
+            return {"": n}
+        block = _bytes(rows, at, end - at)
+        if not np.count_nonzero(block != block[0]):
+            return {_text(block[0]): n}
+    starts = rows.start + np.broadcast_to(np.asarray(at, np.int64), (n,))
+    length = np.broadcast_to(np.asarray(end, np.int64) - np.asarray(at, np.int64), (n,))
+    counts: dict[str, int] = {}
+    for size in np.unique(length).tolist():  # a few distinct lengths: one gather and one unique each
+        if not size:
+            counts[""] = counts.get("", 0) + int(np.count_nonzero(length == 0))
+            continue
+        values, seen = np.unique(gather(rows.buf, starts[length == size], int(size)), axis=0, return_counts=True)
+        for value, count in zip(values, seen.tolist(), strict=True):
+            text = _text(value)
+            counts[text] = counts.get(text, 0) + int(count)
+    return counts
+
+
+def _bytes(rows: Rows, at: int, nbytes: int) -> U8Array:
+    """Bytes ``at : at + nbytes`` of every row, shape (n, nbytes): a view when the rows are evenly spaced."""
+    if rows.step is None:
+        return gather(rows.buf, rows.start + at, nbytes)
+    shape, strides = (rows.start.size, nbytes), (rows.step, 1)
+    return np.ndarray(shape, np.uint8, buffer=rows.buf, offset=int(rows.start[0]) + at, strides=strides)
+
+
+def _text(raw: U8Array) -> str:
+    return bytes(raw).rstrip(b"\0").decode("utf-8", errors="replace")
+
+
 def align(at: Offset, size: int) -> Offset:
     """Round offsets (relative to the byte after the encapsulation header) up to ``size``."""
     return (at + (size - 1)) // size * size
@@ -197,11 +245,15 @@ def cdr_rows(buf: U8Array, start: I64Array, size: I64Array) -> Rows:
 
 
 def _header(rows: Rows) -> tuple[I64Array, I64Array, Offset]:
-    """``std_msgs/Header``: stamp (sec, nanosec) and the offset just after ``frame_id``."""
+    """``std_msgs/Header``: stamp (sec, nanosec) and the offset just after ``frame_id`` (which starts at
+    ``FRAME_ID``)."""
     stamp = rows.take(0, "<i4", 2, "header.stamp")
     sec = stamp[:, 0].astype(np.int64)
     nanosec = stamp[:, 1].astype(np.int64) & 0xFFFFFFFF  # nanosec is a uint32
     return sec, nanosec, rows.string_end(8, "header.frame_id")
+
+
+FRAME_ID = 12  # header.frame_id's bytes: after the stamp (8 B) and the string's length (4 B)
 
 
 # sensor_msgs/msg/Imu after the header, from the (8-aligned) quaternion: field → (offset, float64 count)
@@ -219,11 +271,17 @@ IMU_BYTES = 296  # the quaternion and everything after it
 def imu_rows(buf: U8Array, start: I64Array, size: I64Array) -> tuple[Rows, I64Array, I64Array, Offset]:
     """Imu messages as rows checked to hold every field: rows, ``header.stamp`` (sec, nanosec) and the
     offset of the quaternion (the first field after the header, 8-aligned)."""
+    rows, sec, nanosec, _, orientation = _imu_rows(buf, start, size)
+    return rows, sec, nanosec, orientation
+
+
+def _imu_rows(buf: U8Array, start: I64Array, size: I64Array) -> tuple[Rows, I64Array, I64Array, Offset, Offset]:
+    """:func:`imu_rows`, with the offset just after ``header.frame_id`` before the quaternion's."""
     rows = cdr_rows(buf, start, size)
     sec, nanosec, end = _header(rows)
     orientation = align(end, 8)  # quaternion (32 B), then a 3x3 covariance (72 B)
     rows.need(orientation + IMU_BYTES, "the Imu fields after header")
-    return rows, sec, nanosec, orientation
+    return rows, sec, nanosec, end, orientation
 
 
 def decode_imu(buf: U8Array, start: I64Array, size: I64Array) -> Decoded:
@@ -235,15 +293,16 @@ def decode_imu(buf: U8Array, start: I64Array, size: I64Array) -> Decoded:
         columns ``acc`` (n, 3) ``linear_acceleration`` in m/s² and ``gyro`` (n, 3)
         ``angular_velocity`` in rad/s, both in the message's ``frame_id`` frame, and
         ``gyro_unknown`` (n,), 1.0 where ``angular_velocity_covariance[0]`` is −1: REP 145's mark
-        of a field the device does not provide.
+        of a field the device does not provide; ``frames``: the ``header.frame_id`` values.
     """
-    rows, sec, nanosec, at = imu_rows(buf, start, size)
+    rows, sec, nanosec, end, at = _imu_rows(buf, start, size)
     gyro = rows.read(at + IMU_FIELDS["angular_velocity"][0], "<f8", 3)
     gyro_unknown = (rows.read(at + IMU_FIELDS["angular_velocity_covariance"][0], "<f8", 1)[:, 0] == -1.0).astype(
         np.float64
     )
     acc = rows.read(at + IMU_FIELDS["linear_acceleration"][0], "<f8", 3)
-    return Decoded(sec, nanosec, {"acc": acc, "gyro": gyro, "gyro_unknown": gyro_unknown})
+    frames = string_counts(rows, FRAME_ID, end)
+    return Decoded(sec, nanosec, {"acc": acc, "gyro": gyro, "gyro_unknown": gyro_unknown}, frames)
 
 
 def decode_temperature(buf: U8Array, start: I64Array, size: I64Array) -> Decoded:

@@ -35,6 +35,7 @@ from typing import TYPE_CHECKING
 from mountcal.core.errors import InputError, MountcalError
 from mountcal.core.option_names import option
 from mountcal.outputs.exporters.autoware import read_parent_pose
+from mountcal.outputs.exporters.child import with_child
 from mountcal.outputs.exporters.common import (
     BODY_FRAME,
     Exporter,
@@ -150,6 +151,7 @@ def export(
 
     ``frames`` (parent, child, translation, the parent's pose) applies to the formats that name
     frames (those with :attr:`Exporter.frames`); giving it to another format is refused, not ignored.
+    The child defaults to the frame the calibration's data were in (:func:`frames_for`).
     """
     exporter = get(fmt)
     framed = [e.name for e in builtin().values() if e.frames is not None]
@@ -167,8 +169,17 @@ def export(
             f"a pose from {frames.parent_pose.source}",
             f"Name the parent that pose belongs to ({option('parent')}), or leave the pose out.",
         )
-    chosen = frames if frames is not None else exporter.frames
-    return exporter.write(cal, ExportOptions(yaw, accept_unconfident, chosen))
+    return exporter.write(cal, ExportOptions(yaw, accept_unconfident, frames_for(cal, fmt, frames)))
+
+
+def frames_for(cal: Calibration, fmt: str, frames: Frames | None = None) -> Frames | None:
+    """The frames :func:`export` writes for ``fmt`` (None for a format that names none): ``frames`` or the
+    format's own, the child named (given, else the frame the calibration's data were in, else ``imu_link``),
+    with what the output says of that name (:func:`mountcal.outputs.exporters.child.with_child`)."""
+    own = get(fmt).frames
+    if own is None:
+        return frames  # export() refuses frames given to a format that names none
+    return with_child(cal, frames if frames is not None else own)
 
 
 def markdown_table() -> str:
@@ -190,6 +201,7 @@ __all__ = [
     "builtin",
     "export",
     "exporters",
+    "frames_for",
     "get",
     "markdown_table",
     "mounting",

@@ -30,7 +30,7 @@ from mountcal.outputs.exporters.ros import frame_lines
 if TYPE_CHECKING:
     from mountcal.core.result import Calibration
 
-DEFAULT_FRAMES = Frames(parent="sensor_kit_base_link", child="imu_link")
+DEFAULT_FRAMES = Frames(parent="sensor_kit_base_link")  # child: the IMU's frame (imu_link when the log named none)
 POSE_KEYS = ("x", "y", "z", "roll", "pitch", "yaw")
 
 
@@ -49,7 +49,7 @@ def autoware_yaml(mount: Mounting, frames: Frames = DEFAULT_FRAMES) -> str:
     roll, pitch, yaw = angles_from_rot_vs(frames.in_parent(mount.rot_vs))
     x, y, z = frames.translation_m
     lines = frame_lines(mount, frames, "#")
-    lines += [f"{frames.parent}:", f"  {frames.child}:"]
+    lines += [f"{frames.parent}:", f"  {frames.child_name}:"]
     for key, value, digits in (
         ("x", x, 9),
         ("y", y, 9),

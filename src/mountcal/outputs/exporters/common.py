@@ -33,6 +33,7 @@ if TYPE_CHECKING:
 YawPolicy = Literal["refuse", "zero"]
 JACOBIAN_STEP_RAD = 1e-7  # central differences: error ~ step² (1e-14), rounding ~ 1e-16/step (1e-9)
 BODY_FRAME = "base_link"  # REP 105's name for the REP 103 body frame, and Autoware's
+DEFAULT_CHILD = "imu_link"  # the IMU's frame when the calibration's log named none
 
 
 @dataclass(frozen=True)
@@ -48,12 +49,24 @@ class ParentPose:
 
 @dataclass(frozen=True)
 class Frames:
-    """Frame names, the IMU's position in the parent frame (m), and the parent's pose when it is not the body frame."""
+    """Frame names, the IMU's position in the parent frame (m), and the parent's pose when it is not the body frame.
+
+    ``child`` None: the frame the calibration's data were in, as their log names it, else ``imu_link``
+    (:mod:`mountcal.outputs.exporters.child`, which fills ``said``: what the output says of the child's
+    name, and ``warn``: the child given is not the frame the data were in).
+    """
 
     parent: str = BODY_FRAME
-    child: str = "imu_link"
+    child: str | None = None
     translation_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
     parent_pose: ParentPose | None = None  # None: the parent is a REP 103 body frame aligned with the vehicle
+    said: tuple[str, ...] = ()
+    warn: bool = False
+
+    @property
+    def child_name(self) -> str:
+        """The child frame written."""
+        return self.child or DEFAULT_CHILD
 
     def in_parent(self, rot_vs: Rotation) -> Rotation:
         """The IMU's orientation in the parent frame (maps IMU coordinates to parent coordinates)."""

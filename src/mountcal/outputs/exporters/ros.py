@@ -32,7 +32,7 @@ if TYPE_CHECKING:
 
     from mountcal.core.result import Calibration
 
-DEFAULT_FRAMES = Frames()  # base_link -> imu_link, no translation
+DEFAULT_FRAMES = Frames()  # base_link -> the IMU's frame (imu_link when the log named none), no translation
 
 
 def quaternion_xyzw(mount: Mounting, frames: Frames = DEFAULT_FRAMES) -> np.ndarray:
@@ -47,9 +47,9 @@ def frame_lines(mount: Mounting, frames: Frames, prefix: str) -> list[str]:
 
     from mountcal.core.conventions import angles_from_rot_vs
 
-    lines = [f"{prefix} {h}" for h in mount.header]
+    lines = [f"{prefix} {h}" for h in [*mount.header, *frames.said]]
     lines.append(
-        f"{prefix} transform {frames.parent} -> {frames.child}: the IMU's pose in {frames.parent}, mapping IMU "
+        f"{prefix} transform {frames.parent} -> {frames.child_name}: the IMU's pose in {frames.parent}, mapping IMU "
         f"coordinates to {frames.parent} coordinates (p_parent = q p_imu q*)"
     )
     pose = frames.parent_pose
@@ -78,7 +78,7 @@ def static_transform_command(mount: Mounting, frames: Frames = DEFAULT_FRAMES) -
     lines = frame_lines(mount, frames, "#")
     lines.append(
         f"ros2 run tf2_ros static_transform_publisher --x {x} --y {y} --z {z} "
-        f"--qx {qx} --qy {qy} --qz {qz} --qw {qw} --frame-id {frames.parent} --child-frame-id {frames.child}"
+        f"--qx {qx} --qy {qy} --qz {qz} --qw {qw} --frame-id {frames.parent} --child-frame-id {frames.child_name}"
     )
     return "\n".join(lines) + "\n"
 
@@ -92,14 +92,14 @@ def urdf_joint(mount: Mounting, frames: Frames = DEFAULT_FRAMES, name: str | Non
     rpy = " ".join(number(v, 12) for v in (roll, pitch, yaw))
     # XML comments may not hold "--"
     comments = [f"<!-- {line[2:].replace('--', '- -')} -->" for line in frame_lines(mount, frames, "#")]
-    joint = name or f"{frames.child}_joint"
+    joint = name or f"{frames.child_name}_joint"
     return (
         "\n".join(
             [
                 *comments,
                 f'<joint name="{joint}" type="fixed">',
                 f'  <parent link="{frames.parent}"/>',
-                f'  <child link="{frames.child}"/>',
+                f'  <child link="{frames.child_name}"/>',
                 f'  <origin xyz="{xyz}" rpy="{rpy}"/>',
                 "</joint>",
             ]

@@ -1,0 +1,87 @@
+"""The child frame of an export (the IMU's frame in ROS and Autoware): the frame the calibration's data were in.
+
+A transform is for one named frame. The calibration's sensor frame is the frame its samples were in, which a
+ROS log names (``header.frame_id``, recorded in the result as the ``sensor_frame`` convention:
+:mod:`mountcal.io.sensor_frame`). So the child defaults to that name; a child the user gives is written as
+given (a rename can be deliberate), and when it differs from the recorded frame the output and stderr say
+so. A result whose log named no frame gets mountcal's default, ``imu_link``, said to be one; a result whose
+log named several frames gets no default (picking one would be a guess): the user names the child. A result
+of samples mountcal already rotated (the ``frame`` convention, :mod:`mountcal.io.frame`) is left as before.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import replace
+from typing import TYPE_CHECKING
+
+from mountcal.core.errors import InputError
+from mountcal.core.option_names import option
+from mountcal.core.terminal import safe
+from mountcal.io.sensor_frame import recorded_frame, several
+from mountcal.outputs.exporters.common import DEFAULT_CHILD, Frames
+
+if TYPE_CHECKING:
+    from mountcal.core.result import Calibration
+
+FRAME_NAME = re.compile(r"[A-Za-z0-9_/][A-Za-z0-9_/.-]*")  # a name taken from a log is written only if plain
+
+
+def with_child(cal: Calibration, frames: Frames) -> Frames:
+    """``frames`` with the child named and what the output says of the name (``Frames.said``);
+    ``warn`` set when the child given is not the frame the data were in. Frames already resolved
+    (``said`` set) are returned as they are.
+
+    Raises
+    ------
+    InputError
+        No child given for a calibration whose log named several IMU frames.
+    """
+    from mountcal.io.frame import FRAME_CONVENTION  # loads numpy: not when the formats are listed
+
+    if frames.said:
+        return frames
+    given = frames.child
+    conventions = cal.provenance.conventions
+    if any(c.name == FRAME_CONVENTION for c in conventions):  # rotated samples: their frame is said elsewhere
+        return replace(frames, child=given or DEFAULT_CHILD)
+    recorded = recorded_frame(conventions)
+    if recorded is None:
+        said = (
+            f"child frame {given}: as given; the calibration's log named no frame"
+            if given
+            else f"child frame {DEFAULT_CHILD}: mountcal's default (the calibration's log named no frame; "
+            f"{option('child')} names another)"
+        )
+        return replace(frames, child=given or DEFAULT_CHILD, said=(safe(said),))
+    if several(recorded):
+        if not given:
+            raise InputError(
+                "the child frame of the export",
+                "the one frame the calibration's data were in",
+                f"{recorded.value} ({recorded.by})",
+                f"Name the IMU's frame the transform is for ({option('child')}).",
+            )
+        said = (
+            f"child frame {given}: as given; the calibration's data were in {recorded.value} "
+            f"(stated by {recorded.by}): the transform is written for {given}"
+        )
+        return replace(frames, said=(safe(said),), warn=True)
+    if not given and not FRAME_NAME.fullmatch(recorded.value):
+        raise InputError(
+            "the child frame of the export",
+            "a frame name of letters, digits, '_', '/', '.' and '-' (written into commands and XML as it is)",
+            f"the frame {safe(recorded.value)!r} the calibration's data were in ({recorded.by})",
+            f"Name the IMU's frame the transform is for ({option('child')}).",
+        )
+    if not given or given == recorded.value:
+        said = f"child frame {recorded.value}: the frame the calibration's data were in (stated by {recorded.by})"
+        return replace(frames, child=recorded.value, said=(safe(said),))
+    said = (
+        f"child frame {given}: as given, NOT the frame the calibration's data were in: they were in frame "
+        f"{recorded.value} (stated by {recorded.by}); the transform is written for {given}"
+    )
+    return replace(frames, said=(safe(said),), warn=True)
+
+
+__all__ = ["with_child"]
