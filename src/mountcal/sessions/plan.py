@@ -42,6 +42,7 @@ from mountcal.io.sensor_spec import DEFAULT as DEFAULT_SPEC
 from mountcal.loop.systematic import angle_sigmas, propagate
 from mountcal.simulate.stops import simulate_stops
 from mountcal.stops.detect import StopDetection, detect_stops
+from mountcal.stops.protocol_clock import PLAN_MARK
 from mountcal.stops.table import StopTable
 
 ANGLES: tuple[AngleName, ...] = ANGLE_NAMES[:3]  # the angles a target names
@@ -145,7 +146,7 @@ class Plan:
         says but another format)."""
         check_output_suffix(option("output"), path, (".csv",))
         header = (
-            f"# mountcal plan: {self.n_stops} stops of {self.stop_s:g} s on a {self.slope_deg:g}° slope. The times are "
+            f"{PLAN_MARK} {self.n_stops} stops of {self.stop_s:g} s on a {self.slope_deg:g}° slope. The times are "
             "placeholders from the session start: replace t_start_s, t_end_s with the log's clock.\n"
         )
         with atomic_path(path) as tmp:

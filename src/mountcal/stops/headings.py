@@ -16,6 +16,7 @@ from mountcal.io.input_conventions import HeadingUnit, compass_to_beta, headings
 from mountcal.io.samples import Samples
 from mountcal.stops.detect import StillPeriod, Stop, StopDetection, find_stops
 from mountcal.stops.near_misses import NearMiss
+from mountcal.stops.protocol_clock import PLAN_MARK, on_log_clock
 from mountcal.stops.table import Headings, StopTable, check_degrees, checked
 
 beta_from_heading = compass_to_beta  # β (counter-clockwise from uphill) from compass headings (clockwise from north)
@@ -118,6 +119,9 @@ def read_protocol(path: str, heading_unit: HeadingUnit | None = None) -> pd.Data
     check_values("time_s", values[["t_start_s", "t_end_s"]].to_numpy(), path, "t_start_s, t_end_s")
     values["beta_deg"], unit = headings_in_degrees(values["beta_deg"].to_numpy(dtype=float), heading_unit, path)
     check_degrees(values["beta_deg"].to_numpy(), unit, path, "beta_deg")
+    values.attrs["path"] = path  # a refusal of the sheet's clock names it
+    with open(path, encoding="utf-8", errors="replace") as f:
+        values.attrs["planned"] = f.readline(len(PLAN_MARK)) == PLAN_MARK  # times from `mountcal plan`: placeholders
     values.attrs["conventions"] = (
         Convention("heading_reference", "uphill", "stated", f"the protocol sheet ({option('protocol')})"),
         unit,
@@ -138,6 +142,8 @@ def tabulate(
     """
     where = samples.source or "log"
     if protocol is not None:
+        protocol, clock = on_log_clock(protocol, samples, cfg)  # refused unless on the log's clock, or said
+        shifted = () if clock is None else (f"protocol sheet's times: {clock.value} (inferred from {clock.by})",)
         windows = list(zip(protocol["t_start_s"], protocol["t_end_s"], strict=True))
         search = find_stops(samples, cfg, windows=windows)
         stops = search.stops
@@ -145,17 +151,19 @@ def tabulate(
         kept = [i for i, (lo, hi) in enumerate(windows) if any(lo <= s.t_start_s and s.t_end_s <= hi for s in stops)]
         if not stops:
             raise NotEnoughInformation(
-                f"{where}: no parked period found inside any protocol interval. "
+                f"{where}: no parked period found inside any protocol interval"
+                + (f" (the sheet's times taken as {clock.value}, inferred from {clock.by})" if clock else "")
+                + ". "
                 + (f"But {gyro}" if gyro else f"Check that the sheet's times are on the log's clock, or {relax()}.")
                 + f" Used: {'; '.join(search.lines())}."
             )
         beta = protocol["beta_deg"].to_numpy()[kept]
-        stated = (*samples.conventions, *protocol.attrs.get("conventions", ()))
+        stated = (*samples.conventions, *protocol.attrs.get("conventions", ()), *([clock] if clock else []))
         return StopTableFromLog(
             stop_table(stops, beta, "uphill", where, stated),
             "protocol sheet",
             len(windows) - len(kept),
-            tuple(search.lines()),
+            (*shifted, *search.lines()),
             search.dropped,
             gyro_rejection=gyro,
         )
