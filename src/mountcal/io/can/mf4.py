@@ -328,16 +328,14 @@ HD_FLAGS_AT = 64 + 24 + 6 * 8 + 8 + 2 + 2  # the HD block (at 64): header, six l
 
 
 def start_s(header: Any) -> float:
-    """The measurement's start in s since the Unix epoch: the header's nanoseconds, which are UTC — or, where
-    the header is flagged local time, the recorder's wall clock read as UTC (:func:`local_time_header`).
+    """The measurement's start in s since the Unix epoch, as asammdf dates it (to the microsecond, as python-can's
+    MF4Reader reads it): a UTC header's start, or where the header is flagged local time, the recorder's wall
+    clock read as UTC (:func:`local_time_header`).
 
-    Not ``header.start_time.timestamp()``: asammdf returns a local-time start as a naive datetime, whose
+    Not ``header.start_time.timestamp()`` alone: asammdf returns a local-time start as a naive datetime, whose
     ``timestamp()`` takes the zone of the machine reading it — the same file would start hours apart on two
     machines.
     """
-    stamp = getattr(header, "abs_time", None)  # MDF 4 (and 3.2+); an older MDF 3 header has its date and time only
-    if stamp is not None:
-        return int(stamp) / 1e9
     start = header.start_time
     return float((start if start.tzinfo is not None else start.replace(tzinfo=UTC)).timestamp())
 
