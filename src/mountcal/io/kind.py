@@ -42,7 +42,6 @@ SAMPLE_COLUMNS = frozenset({"gx", "gy", "gz", "speed_mps"})  # only a sample tab
 STOP_SPACING_S = 2.0  # rows at least this far apart (median) are stops: a stop lasts longer
 SAMPLE_SPACING_S = 0.5  # rows at most this far apart (median) are samples, from ...
 SAMPLE_MIN_ROWS = 20  # ... this many rows on
-_ROWS_LOOKED_AT = 2000  # the rows read to measure a table's spacing (a look, not a read)
 _SETTLE = (
     f"Say which: {KIND_OPTION} stop-table or {KIND_OPTION} log; or add the columns that settle it: "
     "beta_deg, or sx, sy, sz and n (a stop table), or gx, gy, gz (a sample table)."
@@ -196,17 +195,19 @@ def _table_kind(path: Path, form: str) -> InputKind:
         if export is not None:  # a phone's or imucal's export holds samples, under its own names
             return InputKind(False, f"a sample table ({form})", f"by its columns: a {export.name} export")
         return InputKind(True, f"a stop table ({form})", "by its columns: no t_s, so not samples in time")
+    from mountcal.io.table.time_unit import ROWS_LOOKED_AT  # the rows _times reads (a look, not a read)
+
     t_s = _times(path, form)
     gaps = np.diff(np.sort(t_s[np.isfinite(t_s)]))
     gaps = gaps[gaps > 0]
     spacing = float(np.median(gaps)) if gaps.size else float("nan")
     rows = int(t_s.shape[0])
-    if gaps.size and spacing >= STOP_SPACING_S and rows >= _ROWS_LOOKED_AT:
+    if gaps.size and spacing >= STOP_SPACING_S and rows >= ROWS_LOOKED_AT:
         _refuse_stops_or_samples(path, rows, spacing)
     if gaps.size and spacing >= STOP_SPACING_S:
         return InputKind(True, f"a stop table ({form})", f"by its rows: {rows}, a median {spacing:.3g} s apart")
     if rows >= SAMPLE_MIN_ROWS and gaps.size and spacing <= SAMPLE_SPACING_S:
-        more = "+" if rows >= _ROWS_LOOKED_AT else ""
+        more = "+" if rows >= ROWS_LOOKED_AT else ""
         return InputKind(False, f"a sample table ({form})", f"by its rows: {rows}{more}, {1 / spacing:.3g} per second")
     found = f"{rows} rows" + (f" a median {spacing:.3g} s apart" if gaps.size else " without distinct times")
     raise InputError(
@@ -224,13 +225,12 @@ def _refuse_stops_or_samples(path: Path, rows: int, spacing: float) -> None:
     where another unit gives an IMU's rate (:mod:`mountcal.io.table.time_unit`)."""
     from mountcal.core.option_names import option
     from mountcal.io.table.layout import TIME_UNITS
-    from mountcal.io.table.time_unit import IMU_RATE_HZ
+    from mountcal.io.table.time_unit import fits
 
-    lo, hi = IMU_RATE_HZ
-    fits = [u for u in ("ms", "us", "ns") if lo <= 1.0 / (spacing * TIME_UNITS[u]) <= hi]
-    if not fits:
+    units = [u for u in ("ms", "us", "ns") if fits(spacing, TIME_UNITS[u])]
+    if not units:
         return
-    unit = fits[0]
+    unit = units[0]
     raise InputError(
         str(path),
         f"a stop table (rows ≥ {STOP_SPACING_S:g} s apart, one per stop) or a sample table with t_s in seconds",

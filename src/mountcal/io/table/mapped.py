@@ -24,7 +24,7 @@ from mountcal.core.option_names import option
 from mountcal.io.inputs import check_parquet_rows, check_regular_file, max_rows, too_many_rows
 from mountcal.io.samples import Channel, FloatArray, Samples
 from mountcal.io.table.layout import ACC, CHANNELS, G_N, GYRO, TIME_UNITS, Layout
-from mountcal.io.table.time_unit import TYPED, typed_seconds
+from mountcal.io.table.time_unit import TYPED, iso_seconds, typed_seconds
 from mountcal.io.whole import parquet_end, text_end, text_source
 
 PARQUET = (".parquet", ".pq")
@@ -109,11 +109,7 @@ def _time(values: pd.Series, layout: Layout) -> FloatArray:
         if typed is not None:
             return typed
     if column.unit == "iso":
-        stamps = pd.to_datetime(values, utc=True, errors="coerce", format="ISO8601")
-        ns: NDArray[np.int64] = stamps.to_numpy(dtype="datetime64[ns]").astype(np.int64)  # pandas ships no types
-        out = (ns // 1_000_000_000).astype(np.float64) + (ns % 1_000_000_000) * 1e-9
-        out[np.isnat(stamps.to_numpy(dtype="datetime64[ns]"))] = np.nan
-        return out
+        return iso_seconds(values)
     if pd.api.types.is_integer_dtype(values.dtype) and column.scale in TIME_UNITS.values() and column.scale < 1:
         per_second = round(1.0 / column.scale)  # whole ns/us/ms since an epoch: exact seconds, then the fraction
         ints: NDArray[np.int64] = values.to_numpy(dtype=np.int64)

@@ -95,9 +95,15 @@ def first_seconds(path: Path, name: str) -> np.ndarray:
     if typed is not None:
         return typed
     if (values.dtype == object or pd.api.types.is_string_dtype(values.dtype)) and _is_iso_text(values):
-        stamps = pd.to_datetime(values, utc=True, errors="coerce", format="ISO8601")
-        return typed_seconds(pd.Series(stamps))  # type: ignore[return-value]
+        return iso_seconds(values)
     return np.asarray(pd.to_numeric(values, errors="coerce"), dtype=np.float64)
+
+
+def iso_seconds(values: pd.Series) -> np.ndarray:
+    """Seconds since the Unix epoch of ISO-8601 date-time text (without a zone, UTC); NaN where unreadable."""
+    seconds = typed_seconds(pd.Series(pd.to_datetime(values, utc=True, errors="coerce", format="ISO8601")))
+    assert seconds is not None  # to_datetime gives a timestamp column
+    return seconds
 
 
 def _is_iso_text(values: pd.Series) -> bool:
@@ -118,7 +124,8 @@ def median_step(values: np.ndarray) -> float:
     return float(np.median(steps)) if steps.size else float("nan")
 
 
-def _fits(step: float, scale: float) -> bool:
+def fits(step: float, scale: float) -> bool:
+    """Whether a median step read at ``scale`` s per unit gives an IMU's rate (:data:`IMU_RATE_HZ`)."""
     lo, hi = IMU_RATE_HZ
     return bool(np.isfinite(step)) and lo <= 1.0 / (step * scale) <= hi
 
@@ -203,32 +210,24 @@ def _checked(where: str, layout: Layout, stated: str, step: float, by: str, doub
     rate; otherwise said with what its spacing says."""
     time = layout.time
     scale = time.scale
-    if not np.isfinite(step) or _fits(step, scale):
+    if not np.isfinite(step) or fits(step, scale):
         checked = f" (checked: a median step of {step:.4g} {stated}, {_rate(step, scale)})" if np.isfinite(step) else ""
         return Convention("time_unit", stated, "stated", by + checked)
-    others = [u for u in UNITS if u != stated.lower() and _fits(step, TIME_UNITS[u])]
+    others = [u for u in UNITS if u != stated.lower() and fits(step, TIME_UNITS[u])]
     if not others:  # nothing fits better: not an IMU's rate in any unit, left to the commands to judge
         return Convention("time_unit", stated, "stated", f"{by} (its spacing, {_rate(step, scale)}, fits no unit)")
     fit = others[0]
     rate = 1.0 / (step * scale)
+    than = "slower" if rate < IMU_RATE_HZ[0] else "faster"
     if not doubted or SLOWEST_LOG_HZ <= rate < IMU_RATE_HZ[0]:
-        return Convention(
-            "time_unit",
-            stated,
-            "stated",
-            f"{by} (its spacing: {_rate(step, scale)}, slower than an IMU's; in {fit} it would be "
-            f"{_rate(step, TIME_UNITS[fit])})"
-            if rate < IMU_RATE_HZ[0]
-            else f"{by} (its spacing: {_rate(step, scale)}, faster than an IMU's; in {fit} it would be "
-            f"{_rate(step, TIME_UNITS[fit])})",
-        )
+        spacing = f"its spacing: {_rate(step, scale)}, {than} than an IMU's; in {fit} it would be"
+        return Convention("time_unit", stated, "stated", f"{by} ({spacing} {_rate(step, TIME_UNITS[fit])})")
     fixed = {**layout.columns, "time": Column(time.name, fit)}
     raise InputError(
         where,
         f"the time column {time.name} in {stated} ({by}) at an IMU's rate, {_band()}",
         f"a median step of {step:.6g} between its first rows: {_rate(step, scale)} in {stated}, "
-        f"{'slower' if 1.0 / (step * scale) < IMU_RATE_HZ[0] else 'faster'} than any IMU logs; "
-        f"in {fit} it would be {_rate(step, TIME_UNITS[fit])}",
+        f"{than} than any IMU logs; in {fit} it would be {_rate(step, TIME_UNITS[fit])}",
         f"If {time.name} is in {fit}, say so: {option('columns', column_map(fixed))}.",
     )
 
@@ -240,9 +239,9 @@ def _band() -> str:
 def _inferred(where: str, layout: Layout, step: float) -> tuple[Layout, Convention]:
     """A unit not stated: the one of s, ms, us, ns that gives an IMU's rate, else asked for."""
     time = layout.time
-    fits = [u for u in UNITS if _fits(step, TIME_UNITS[u])]
-    if len(fits) == 1:
-        unit = fits[0]
+    units = [u for u in UNITS if fits(step, TIME_UNITS[u])]
+    if len(units) == 1:
+        unit = units[0]
         by = (
             f"the column {time.name}'s spacing: a median step of {step:.6g} between its first rows is "
             f"{_rate(step, TIME_UNITS[unit])} in {unit} (the only unit giving an IMU's rate, "
@@ -254,12 +253,12 @@ def _inferred(where: str, layout: Layout, step: float) -> tuple[Layout, Conventi
         if not np.isfinite(step)
         else f"a median step of {step:.6g}, "
         + (
-            f"an IMU's rate in {' or '.join(fits)} ({', '.join(_rate(step, TIME_UNITS[u]) for u in fits)})"
-            if fits
+            f"an IMU's rate in {' or '.join(units)} ({', '.join(_rate(step, TIME_UNITS[u]) for u in units)})"
+            if units
             else "an IMU's rate in none of s, ms, us, ns"
         )
     )
-    named = " or ".join(option("columns", f"time={time.name}:{u}") for u in fits or ["UNIT"])
+    named = " or ".join(option("columns", f"time={time.name}:{u}") for u in units or ["UNIT"])
     raise InputError(
         where,
         f"the unit of the time column {time.name} (the column map names none)",
@@ -284,6 +283,8 @@ __all__ = [
     "ROWS_LOOKED_AT",
     "first_seconds",
     "first_times",
+    "fits",
+    "iso_seconds",
     "median_step",
     "settle_time",
     "typed_seconds",
