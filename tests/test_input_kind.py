@@ -70,7 +70,7 @@ def test_a_timed_stop_table_without_headings_or_noise_is_a_stop_table_by_its_row
     result = json.loads(out.read_text())
     assert result["provenance"]["input_kind"].startswith("a stop table (CSV), by its rows")
     # the same table as triad and fleet see it: the one decision
-    acc, _ = session_stops([str(timed_stops)], "mps2")
+    acc, _, _ = session_stops([str(timed_stops)], "mps2")
     assert acc.shape == (12, 3)
     record = run_job(FleetJob("v", str(timed_stops), LogJob(paths=(str(timed_stops),)), headings="none"))
     assert record["status"] == "ok" and record["input_kind"] == "stop table", record

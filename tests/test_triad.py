@@ -45,7 +45,7 @@ def test_the_hand_held_session_gives_every_term_and_a_calibrated_sensor_reads_g(
     # the stops read as the calibrated sensor reads them: |a| = g far better than raw
     from mountcal.estimate.triad import session_stops
 
-    acc, _ = session_stops([str(session)], "mps2")
+    acc, _, _ = session_stops([str(session)], "mps2")
     raw = np.abs(np.linalg.norm(acc, axis=1) - G_N)
     fixed = np.abs(np.linalg.norm((acc - triad.bias_mps2) @ np.linalg.inv(triad.matrix).T, axis=1) - G_N)
     assert np.sqrt(np.mean(fixed**2)) < 0.01 * np.sqrt(np.mean(raw**2))

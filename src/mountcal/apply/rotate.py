@@ -37,21 +37,11 @@ ROTATED_FRAMES = ("vehicle", "levelled")  # a DataFrame's attrs["frame"] after f
 
 
 def refuse_rotated(rotated: Rotated | None, where: str) -> None:
-    """Refuse samples mountcal already rotated (``rotated`` not None): a second rotation would apply the
-    mounting twice, and nothing in the result could show it.
+    """Refuse samples mountcal already rotated: a second rotation would apply the mounting twice, and
+    nothing in the result could show it (:func:`mountcal.io.frame.refuse_rotated`)."""
+    from mountcal.io.frame import refuse_rotated as refused
 
-    Raises
-    ------
-    InputError
-        ``rotated`` says what the file states (the frame, the calibration applied).
-    """
-    if rotated is not None:
-        raise InputError(
-            where,
-            "samples in the sensor's frame",
-            f"{rotated.sentence()}: rotating again would apply the mounting twice",
-            "Rotate the original log.",
-        )
+    refused(rotated, where, "rotating again would apply the mounting twice", "Rotate the original log.")
 
 
 def yaw_sources() -> str:

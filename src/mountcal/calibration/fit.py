@@ -50,6 +50,7 @@ from mountcal.estimate.bound import crb_deg, euler_gradients
 from mountcal.estimate.geometry import span_ratio
 from mountcal.estimate.observability import separability
 from mountcal.estimate.sensor_errors import SensorErrors, from_spec
+from mountcal.io.frame import with_frame_note
 from mountcal.io.input_conventions import merged
 from mountcal.loop import crosscheck, plausibility, slope_reference
 from mountcal.loop import terms as model_terms
@@ -83,7 +84,8 @@ def calibrate(table: StopTable, options: Options | None = None) -> Calibration:
     else:
         cal = _full(table, g, g_source, opts)
     stated = merged(table.conventions, (gravity_convention(g_source),))
-    cal = replace(cal, provenance=replace(cal.provenance, conventions=stated))
+    notes = with_frame_note(cal.notes, stated)  # stops of rotated samples: the angles are what is left over
+    cal = replace(cal, provenance=replace(cal.provenance, conventions=stated), notes=notes)
     checks = (
         *plausibility.convention_checks(stated),
         sense,

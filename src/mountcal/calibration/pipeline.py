@@ -33,7 +33,7 @@ from mountcal.core.version import software_version
 from mountcal.estimate import effects
 from mountcal.estimate.driving import DrivingFit, estimate_driving
 from mountcal.estimate.driving_options import DrivingOptions, horizontal_axes_sigma_deg
-from mountcal.io.frame import frame_note
+from mountcal.io.frame import with_frame_note
 from mountcal.io.input_conventions import merged, parse_axes
 from mountcal.io.kind import Declared, InputKind, kind_of_input
 from mountcal.io.logs import read_log, stated
@@ -269,7 +269,7 @@ def _checked(done: LogResult, job: LogJob, hashes: Future[tuple[str, ...]] | Non
     hashed = () if hashes is None else hashes.result()
     cal = replace(cal, provenance=replace(cal.provenance, input_sha256=hashed, conventions=stated))
     if done.samples.rotated is not None:  # legitimate (checking a rotation), but the angles mean something else
-        cal = replace(cal, notes=(*cal.notes, frame_note(done.samples.rotated)))
+        cal = replace(cal, notes=with_frame_note(cal.notes, stated))
     elif (named := sensor_frame_note(done.samples.frame_ids)) is not None:  # several frames: none is picked
         cal = replace(cal, notes=(*cal.notes, named))
     return plausibility.with_checks(cal, checks)

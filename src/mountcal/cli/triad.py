@@ -89,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
     from mountcal.io.table.layout import parse_columns
 
     columns = None if args.columns is None else parse_columns(args.columns)
-    acc, cov = session_stops(
+    acc, cov, conventions = session_stops(
         args.input,
         args.unit,
         args.min_stop_s,
@@ -103,7 +103,7 @@ def run(args: argparse.Namespace) -> int:
     for _, why in sphere.loop(acc, g, cov):
         log.info("  %s", why)
     fit = fit_all(acc, g, cov, source)
-    triad = from_sphere(fit, source)
+    triad = from_sphere(fit, source, conventions)
     if args.imucal is not None:
         triad = with_imucal_values(triad, args.imucal)
     first, *rest = describe(triad, fit)

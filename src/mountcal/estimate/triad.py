@@ -5,11 +5,17 @@ triad``), saved as a ``mountcal.estimate.triad`` JSON. The correction is the sph
 ``a ← (I + E)⁻¹ (a − b)``; what remains uncertain of b and E (their covariance) is a systematic
 error common to every stop, which :mod:`mountcal.loop.systematic` carries into the angles in place of
 the datasheet's scale, cross-axis and bias limits.
+
+A triad describes the sensor's own axes, after the axis map the session was read with: the JSON states
+that map (``conventions``), applying it to stops read with another map is refused, and so are samples
+mountcal rotate already put in the vehicle frame, for fitting a triad and for applying one
+(:func:`mountcal.io.frame.refuse_rotated`).
 """
 
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -22,12 +28,15 @@ from mountcal.core.errors import InputError
 from mountcal.core.option_names import option
 from mountcal.core.output_suffix import check_output_suffix
 from mountcal.core.ranges import check_values
+from mountcal.core.result import Convention
 from mountcal.core.result_file import read_json
 from mountcal.core.sensor_limits import SensorLimits
 from mountcal.estimate import sphere
 from mountcal.estimate.effects.scale import SCALE_NAMES
 from mountcal.estimate.sensor_errors import BIAS_NAMES, TEMP_NAMES, SensorErrors, from_spec, heading_u
 from mountcal.estimate.triad_session import MIN_STOP_S, TRIM_S
+from mountcal.io.frame import refuse_rotated, rotated_of
+from mountcal.io.input_conventions import IDENTITY_AXES, axes_convention, parse_axes
 from mountcal.io.kind import Declared
 from mountcal.io.sensor_spec import SensorSpec
 from mountcal.stops.table import StopTable, Unit, read_stop_table
@@ -50,6 +59,7 @@ class Triad:
     cov: FloatArray  # rows and columns of names not in ``fitted`` are zero
     source: str
     fitted: tuple[str, ...] = NAMES  # what the session determined; the others keep the sensor spec's limits
+    conventions: tuple[Convention, ...] = ()  # the session's axis map ("axes"); () in a file that states none
 
     @property
     def matrix(self) -> FloatArray:
@@ -58,7 +68,26 @@ class Triad:
         return np.eye(3) + np.array([[e[0], e[3], e[4]], [e[3], e[1], e[5]], [e[4], e[5], e[2]]], dtype=np.float64)
 
     def correct(self, table: StopTable) -> StopTable:
-        """The stops as the calibrated sensor reads them, ``(I + E)⁻¹ (a − b)``, their covariance mapped alike."""
+        """The stops as the calibrated sensor reads them, ``(I + E)⁻¹ (a − b)``, their covariance mapped alike.
+
+        Raises
+        ------
+        InputError
+            The stops are in mountcal's vehicle frame, or read with another axis map than the triad's session.
+        """
+        todo = (
+            f"Calibrate the original log with {option('triad')}, or leave {option('triad')} out."  # named when raised
+        )
+        refuse_rotated(rotated_of(table.conventions), table.source, _APPLY_ROTATED, todo)
+        made, now = _axes_text(self.conventions), _axes_text(table.conventions)
+        if made is not None and made != (now or IDENTITY_AXES):  # a file that states no map cannot be checked
+            fix = option("axes", made) if made != IDENTITY_AXES else f"no {option('axes')}"
+            raise InputError(
+                table.source,
+                f"stops read with the axes the triad calibration was made with ({made})",
+                now or "the axes as logged",
+                f"Read the log with the same map: {fix}.",
+            )
         inv = np.linalg.inv(self.matrix)
         cov = None if table.cov_s is None else np.einsum("ij,njk,lk->nil", inv, table.cov_s, inv)
         return replace(table, acc_s=(table.acc_s - self.bias_mps2) @ inv.T, cov_s=cov)
@@ -95,6 +124,7 @@ class Triad:
             "fitted": list(self.fitted),
             "values": [*map(float, self.bias_mps2), *map(float, self.scale_e)],
             "covariance": self.cov.tolist(),
+            "conventions": [{"name": c.name, "value": c.value, "how": c.how, "by": c.by} for c in self.conventions],
         }
 
     def save(self, path: str | Path) -> None:
@@ -103,13 +133,15 @@ class Triad:
             tmp.write_text(json.dumps(self.to_dict(), indent=2, allow_nan=False) + "\n", encoding="utf-8")
 
 
-def from_sphere(fit: sphere.SphereFit, source: str) -> Triad:
-    """A triad from a sphere fit (of bias and scale, or of all three terms)."""
+def from_sphere(fit: sphere.SphereFit, source: str, conventions: tuple[Convention, ...] = ()) -> Triad:
+    """A triad from a sphere fit (of bias and scale, or of all three terms); ``conventions`` are the
+    session's (its axis map is kept)."""
     values, cov = np.zeros(9), np.zeros((9, 9))
     idx = [_SPHERE_TO_MODEL[n] for n in fit.names]
     values[idx] = fit.values
     cov[np.ix_(idx, idx)] = fit.cov
-    return Triad(values[:3], values[3:], cov, source, tuple(NAMES[i] for i in idx))
+    axes = tuple(c for c in conventions if c.name == AXES) or (axes_convention(None, IDENTITY_AXES, ""),)
+    return Triad(values[:3], values[3:], cov, source, tuple(NAMES[i] for i in idx), axes)
 
 
 # sphere.py names → positions in NAMES (bias_x…, scale_xx…, cross_xy…)
@@ -149,8 +181,36 @@ def load(path: str | Path) -> Triad:
         ok = ok and bool(np.all(np.abs(values[3:]) < 0.5))
     if not ok:
         raise InputError(str(path), "9 finite values (|E| < 0.5) and a symmetric 9×9 covariance", "other values", todo)
-    return Triad(values[:3], values[3:], cov, str(doc.get("source", path)), tuple(str(n) for n in fitted))
+    conventions = _conventions(doc.get("conventions", []), str(path), todo)
+    return Triad(values[:3], values[3:], cov, str(doc.get("source", path)), tuple(str(n) for n in fitted), conventions)
 
+
+def _conventions(items: object, path: str, todo: str) -> tuple[Convention, ...]:
+    """The ``conventions`` of a triad JSON: the session's axis map, as ``mountcal triad`` wrote it."""
+    keys = ("name", "value", "how", "by")
+    out: list[Convention] = []
+    for item in items if isinstance(items, list) else [None]:
+        if not (isinstance(item, dict) and all(isinstance(item.get(k), str) for k in keys) and item["how"] in _HOWS):
+            raise InputError(path, "conventions as mountcal triad writes them (name, value, how, by)", repr(item), todo)
+        out.append(Convention(item["name"], item["value"], item["how"], item["by"]))
+    try:  # an axis map that does not parse is refused here, not when the triad is applied
+        _axes_text(out)
+    except InputError as err:
+        raise InputError(path, "conventions as mountcal triad writes them: an axis map", err.found, todo) from err
+    return tuple(out)
+
+
+def _axes_text(conventions: Sequence[Convention]) -> str | None:
+    """The axis map an ``axes`` convention states (``x,y,z`` for the axes as logged), or None."""
+    c = next((c for c in conventions if c.name == AXES), None)
+    return None if c is None else parse_axes(c.value.split(" ")[0], AXES).text
+
+
+AXES = "axes"  # the one convention a triad keeps: the axis map of its session
+_HOWS = ("stated", "inferred", "default")
+_FIT_ROTATED = "a triad calibration describes the sensor's own axes, and these are the vehicle's"
+_FIT_TODO = "Fit the triad on the original log, the one mountcal rotate read."
+_APPLY_ROTATED = "a triad calibration corrects the sensor's own axes, and these are the vehicle's"
 
 MIN_STOPS = 6  # six parameters (bias, scale): the six faces, with each stop's noise given
 AGREE_SIGMA = 5.0  # imucal's values within this many σ of mountcal's fit of the same session
@@ -200,11 +260,17 @@ def session_stops(
     log: LogOptions | None = None,
     *,
     declared: Declared = "auto",
-) -> tuple[FloatArray, FloatArray | None]:
-    """Stop means (n, 3) in m/s² and their covariances, from a stop table or from logs (read as ``log``
-    says, its ``axes`` too for a stop table; ``unit`` is a stop table's, and a sample table's where ``log``
-    gives none). :func:`mountcal.io.kind.kind_of_input` decides which; ``declared`` is ``--input-kind``."""
-    from mountcal.io.input_conventions import parse_axes
+) -> tuple[FloatArray, FloatArray | None, tuple[Convention, ...]]:
+    """Stop means (n, 3) in m/s², their covariances and the input's conventions, from a stop table or from
+    logs (read as ``log`` says, its ``axes`` too for a stop table; ``unit`` is a stop table's, and a sample
+    table's where ``log`` gives none). :func:`mountcal.io.kind.kind_of_input` decides which; ``declared``
+    is ``--input-kind``.
+
+    Raises
+    ------
+    InputError
+        Among others: samples (or a stop table's) that mountcal rotate put in the vehicle frame.
+    """
     from mountcal.io.kind import kind_of_input
     from mountcal.io.logs import read_log
     from mountcal.io.reader import LogOptions
@@ -217,14 +283,16 @@ def session_stops(
         axes = None if log.axes is None else parse_axes(log.axes, option("axes"))
         with reading(log.allow_truncated):  # a cut CSV: refused, or its whole rows read
             table = read_stop_table(paths[0], unit=unit, headings="none", axes=axes)
-        return table.acc_s, table.cov_s
+        refuse_rotated(rotated_of(table.conventions), table.source, _FIT_ROTATED, _FIT_TODO)
+        return table.acc_s, table.cov_s, table.conventions
     if log.unit is None and unit != "mps2":
         log = replace(log, unit=unit)
     samples = with_gravity(read_log(paths, log))
+    refuse_rotated(samples.rotated, samples.source, _FIT_ROTATED, _FIT_TODO)
     stops = detect_stops(samples, StopDetection(min_duration_s=min_stop_s, trim_s=trim_s))
     if not stops:
         raise InputError(" + ".join(paths), "a session with still periods", "no stop", _TODO_POSITIONS)
-    return np.array([s.acc_mean_s for s in stops]), np.array([s.acc_cov_mean_s for s in stops])
+    return np.array([s.acc_mean_s for s in stops]), np.array([s.acc_cov_mean_s for s in stops]), samples.conventions
 
 
 def with_imucal_values(triad: Any, path: str) -> Any:
@@ -263,7 +331,9 @@ def with_imucal_values(triad: Any, path: str) -> Any:
             "Pass the session the imucal calibration was made from (its covariance comes from that session), with "
             "the gravity imucal used (9.81 m/s² is its default).",
         )
-    return Triad(values[:3], values[3:], triad.cov, f"imucal {path} (covariance from {triad.source})", triad.fitted)
+    return replace(
+        triad, bias_mps2=values[:3], scale_e=values[3:], source=f"imucal {path} (covariance from {triad.source})"
+    )
 
 
 def describe(triad: Any, fit: Any) -> list[str]:

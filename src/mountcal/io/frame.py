@@ -13,11 +13,13 @@ measure the rotation left over. A CSV has no place for it: a rotated CSV reads a
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping
+import re
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 from mountcal.core.angles import ANGLE_NAMES, Angles
+from mountcal.core.errors import InputError
 from mountcal.core.paths import special_kind
 from mountcal.core.result import Convention
 
@@ -26,6 +28,7 @@ FRAME_KEY = "frame"
 CALIBRATION_KEY = "calibration"
 FRAME_CONVENTION = "frame"  # the name of the Convention saying the samples' frame (frame_convention)
 FRAME_NAMES = ("vehicle", "levelled")  # the first word of the frame mountcal writes (core.result's frames)
+SENSOR = "sensor"  # a table's frame column for the sensor's own axes (what no column means too)
 
 
 @dataclass(frozen=True)
@@ -98,12 +101,73 @@ def frame_convention(rotated: Rotated) -> Convention:
     return Convention(FRAME_CONVENTION, f"{rotated.frame} (mountcal rotate's output{said})", "stated", rotated.by)
 
 
+_FRAME_VALUE = re.compile(r"(?P<frame>\S+) \(mountcal rotate's output(?:; (?P<calibration>.*))?\)", re.S)
+
+
+def rotated_of(conventions: Sequence[Convention]) -> Rotated | None:
+    """The :class:`Rotated` a ``frame`` convention states (:func:`frame_convention`, or a stop table's
+    ``frame`` column), or None: the samples are in the sensor's frame."""
+    c = next((c for c in conventions if c.name == FRAME_CONVENTION), None)
+    if c is None:
+        return None
+    found = _FRAME_VALUE.fullmatch(c.value)
+    if found is None:
+        return Rotated(c.value.split(" ", 1)[0], "", c.by)
+    return Rotated(found["frame"], found["calibration"] or "", c.by)
+
+
+def column_frame(values: Sequence[object], where: str, column: str) -> list[Convention]:
+    """The frame a table's column (a stop table's ``frame``) says its accelerations are in: the sensor's
+    (no convention), or mountcal's vehicle or levelled frame, as :func:`frame_convention` wrote it.
+
+    Raises
+    ------
+    InputError
+        Not one value in every row, or a first word other than ``sensor``, ``vehicle``, ``levelled``.
+    """
+    texts = {str(v).strip() for v in values}
+    words = (SENSOR, *FRAME_NAMES)
+    if len(texts) != 1 or not {t.split(" ", 1)[0] for t in texts} <= set(words):
+        raise InputError(
+            where,
+            f"one frame in the column {column}, its first word {', '.join(words)}",
+            ", ".join(sorted(texts)),
+            f"Give every row the frame of its accelerations ({SENSOR}: the sensor's own axes), or drop the column.",
+        )
+    text = texts.pop()
+    if text.split(" ", 1)[0] == SENSOR:
+        return []
+    return [Convention(FRAME_CONVENTION, text, "stated", f"{where}: column {column}")]
+
+
+def refuse_rotated(rotated: Rotated | None, where: str, because: str, todo: str) -> None:
+    """Refuse samples mountcal already rotated (``rotated`` not None) where the sensor's own frame is
+    needed: applying the mounting again, or fitting or applying a triad calibration (the sensor's axes).
+
+    Raises
+    ------
+    InputError
+        Naming what the file states (the frame, the calibration applied), ``because`` and ``todo``.
+    """
+    if rotated is not None:
+        raise InputError(where, "samples in the sensor's frame", f"{rotated.sentence()}: {because}", todo)
+
+
 def frame_note(rotated: Rotated) -> str:
     """What a calibration of such samples measures."""
     return (
         f"the samples are already in mountcal's {rotated.frame} frame, as {rotated.by} says: the angles are "
         f"relative to that frame, the rotation left over (≈ 0 when the rotation applied was right)"
     )
+
+
+def with_frame_note(notes: tuple[str, ...], conventions: Sequence[Convention]) -> tuple[str, ...]:
+    """``notes`` with what a calibration of rotated samples measures, once, when ``conventions`` say
+    the samples were rotated (from a log's metadata or a stop table's ``frame`` column)."""
+    rotated = rotated_of(conventions)
+    if rotated is None or (note := frame_note(rotated)) in notes:
+        return notes
+    return (*notes, note)
 
 
 def written_by_mountcal(path: Path) -> bool:
@@ -138,10 +202,14 @@ __all__ = [
     "FRAME_CONVENTION",
     "Rotated",
     "channel_rotated",
+    "column_frame",
     "frame_convention",
     "frame_note",
     "parquet_rotated",
+    "refuse_rotated",
     "rotated_by",
+    "rotated_of",
     "topic_label",
+    "with_frame_note",
     "written_by_mountcal",
 ]

@@ -32,6 +32,7 @@ from mountcal.core.output_suffix import check_output_suffix
 from mountcal.core.paths import read_input_bytes
 from mountcal.core.ranges import check_values
 from mountcal.core.result import Convention
+from mountcal.io.frame import FRAME_CONVENTION, column_frame
 from mountcal.io.input_conventions import (
     HEADING_REF,
     AxisMap,
@@ -66,8 +67,10 @@ LON = "lon_deg"
 ALT = "alt_m"
 REQUIRED = ACC
 AXES = "axes"  # the axis map already applied to ax, ay, az (by `mountcal stops --axes`)
+FRAME = "frame"  # the frame of ax, ay, az when mountcal rotate had put the log in the vehicle (levelled) frame
 OPTIONAL = (
-    BETA, HEADING_REF, *STD, COUNT, *STD_MEAN, *CORR, TIME, DURATION, TEMPERATURE, SITE, LAT, LON, ALT, HEADING, AXES
+    BETA, HEADING_REF, *STD, COUNT, *STD_MEAN, *CORR, TIME, DURATION, TEMPERATURE, SITE, LAT, LON, ALT, HEADING, AXES,
+    FRAME,
 )  # fmt: skip
 COLUMNS = (BETA, HEADING_REF, *ACC, *OPTIONAL[2:])
 
@@ -186,6 +189,9 @@ class StopTable:
         applied = stated_axes(self.conventions)
         if applied is not None and not applied.identity:  # the frame of ax, ay, az, for whoever reads it next
             columns[AXES] = applied.text
+        frame = next((c for c in self.conventions if c.name == FRAME_CONVENTION), None)
+        if frame is not None:  # rotated samples' stops: a triad or a second rotation is refused on reading them
+            columns[FRAME] = frame.value
         return pd.DataFrame(columns)
 
 
@@ -332,6 +338,7 @@ def stop_table_from_frame(
     if any(c in df.columns for c in CORR):
         cov = _with_correlations(cov, _numeric(df, [c for c in CORR if c in df.columns], source), df, source)
     applied = _applied_axes(df, source)
+    conventions += [] if FRAME not in df.columns else column_frame(df[FRAME].tolist(), source, FRAME)
     if axes is not None and not axes.identity:  # the device's axes onto the sensor frame, as for a log
         acc = axes.apply(acc)
         cov = None if cov is None else axes.apply_cov(cov)
