@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
@@ -28,19 +27,15 @@ from mountcal.core.errors import InputError, refuse_not_confident
 from mountcal.core.option_names import option
 from mountcal.core.result import Calibration
 from mountcal.estimate.effects import apply_corrections
-
-if TYPE_CHECKING:
-    from mountcal.io.frame import Rotated
+from mountcal.io.frame import FRAME_NAMES, Rotated, refuse_leftover, rotated_of
+from mountcal.io.frame import refuse_rotated as refused
 
 ACC_COLUMNS = ("ax", "ay", "az")
-ROTATED_FRAMES = ("vehicle", "levelled")  # a DataFrame's attrs["frame"] after frame_to_vehicle
 
 
 def refuse_rotated(rotated: Rotated | None, where: str) -> None:
     """Refuse samples mountcal already rotated: a second rotation would apply the mounting twice, and
     nothing in the result could show it (:func:`mountcal.io.frame.refuse_rotated`)."""
-    from mountcal.io.frame import refuse_rotated as refused
-
     refused(rotated, where, "rotating again would apply the mounting twice", "Rotate the original log.")
 
 
@@ -62,9 +57,11 @@ def check_applicable(
     ------
     InputError
         Yaw is not determined and ``level_only`` is False (the rotation would only level); the
-        result is not confident and ``require_confident`` is True.
+        result is not confident and ``require_confident`` is True; the calibration was made of samples
+        mountcal had already rotated (its angles are what that rotation left over).
     """
     where = where or f"calibration of {cal.provenance.input or 'unknown input'}"
+    refuse_leftover(cal.provenance.conventions, where, "rotate samples into the vehicle frame")
     if not cal.yaw_determined and not level_only:
         raise InputError(
             where,
@@ -92,8 +89,8 @@ def check_applicable(
 
 
 def _matrix(cal: Calibration, level_only: bool) -> FloatArray:
-    if not cal.yaw_determined and not level_only:
-        check_applicable(cal)  # raises with the reason and what would determine yaw
+    if (not cal.yaw_determined and not level_only) or rotated_of(cal.provenance.conventions) is not None:
+        check_applicable(cal)  # raises with the reason (and what would determine yaw)
     return np.asarray(cal.rot_vs.as_matrix(), dtype=float)
 
 
@@ -158,9 +155,7 @@ def frame_to_vehicle(
     ``attrs["warnings"]`` what :func:`check_applicable` found (also issued as a ``UserWarning``).
     """
     frame = df.attrs.get("frame")
-    if frame in ROTATED_FRAMES:
-        from mountcal.io.frame import Rotated
-
+    if frame in FRAME_NAMES:  # what frame_to_vehicle sets: the frames mountcal writes
         refuse_rotated(Rotated(str(frame), "", 'its attrs["frame"]'), "DataFrame")
     found = check_applicable(cal, level_only=level_only, require_confident=require_confident)
     for text in found:

@@ -153,6 +153,26 @@ def refuse_rotated(rotated: Rotated | None, where: str, because: str, todo: str)
         raise InputError(where, "samples in the sensor's frame", f"{rotated.sentence()}: {because}", todo)
 
 
+def refuse_leftover(conventions: Sequence[Convention], where: str, to: str) -> None:
+    """Refuse to use as a mounting a calibration made of samples mountcal had already rotated: its angles
+    are the rotation left over in mountcal's frame, not the sensor's mounting (``to``: what it was asked for).
+
+    Raises
+    ------
+    InputError
+        ``conventions`` (the calibration's provenance) state a ``frame`` (:func:`frame_convention`).
+    """
+    rotated = rotated_of(conventions)
+    if rotated is not None:
+        raise InputError(
+            where,
+            f"a calibration of a log in the sensor's own frame, to {to}",
+            f"a calibration of {rotated.sentence()}: its angles are the rotation left over, not the "
+            "sensor's mounting",
+            "Use the calibration that rotation applied, or calibrate the original log.",
+        )
+
+
 def frame_note(rotated: Rotated) -> str:
     """What a calibration of such samples measures."""
     return (
@@ -206,6 +226,7 @@ __all__ = [
     "frame_convention",
     "frame_note",
     "parquet_rotated",
+    "refuse_leftover",
     "refuse_rotated",
     "rotated_by",
     "rotated_of",

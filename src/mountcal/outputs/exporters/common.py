@@ -141,7 +141,8 @@ class Mounting:
 
 
 def mounting(cal: Calibration, yaw: YawPolicy = "refuse", accept_unconfident: bool = False) -> Mounting:
-    """The rotation to export, or a refusal when yaw is not determined or the result not confident.
+    """The rotation to export, or a refusal when yaw is not determined, the result not confident, or
+    it was made of samples mountcal had already rotated (:func:`mountcal.io.frame.refuse_leftover`).
 
     The decision is taken on the result's yaw (None when not determined), never on its rotation
     matrix, which may hold a placeholder yaw.
@@ -149,7 +150,10 @@ def mounting(cal: Calibration, yaw: YawPolicy = "refuse", accept_unconfident: bo
     import numpy as np
 
     from mountcal.core.conventions import rot_vs_from_angles
+    from mountcal.io.frame import refuse_leftover
 
+    where = f"calibration of {cal.provenance.input or 'unknown input'}"
+    refuse_leftover(cal.provenance.conventions, where, "export the sensor's mounting")
     notes: list[str] = []
     if not cal.confident:
         if not accept_unconfident:

@@ -1,9 +1,11 @@
-"""A triad calibration describes the sensor's own axes: the frame and the axis map cross into it and out of it.
+"""The samples' frame and axis map, carried wherever they go after mountcal rotate or --axes.
 
-Fitting a triad on samples mountcal rotate put in the vehicle frame, or applying one to them, is refused
-(a triad of the vehicle's axes corrects the wrong axes, silently); a stop table of such samples says
-its frame in a ``frame`` column, so the refusal and the calibration's note survive the table; a triad
-states the axis map of its session, and applying it to stops read with another map is refused.
+A triad calibration describes the sensor's own axes: fitting one on samples mountcal rotate put in the
+vehicle frame, or applying one to them, is refused (a triad of the vehicle's axes corrects the wrong
+axes, silently). A stop table of such samples says its frame in a ``frame`` column, so the refusal and
+the calibration's note survive the table. A triad states the axis map of its session, and applying it
+to stops read with another map is refused. A calibration of rotated samples measures the rotation left
+over: applying it to a log, or exporting it as the sensor's mounting, is refused.
 """
 
 from __future__ import annotations
@@ -114,6 +116,36 @@ def test_applying_a_triad_to_rotated_stops_is_refused_by_the_command_and_the_lib
         calibrate(read_stop_table(rotated["stops"]), Options(triad=load(triad)))
     # the same triad on the log it was made for (the sensor's frame) is applied
     assert main(["calibrate", str(LOG), "--protocol", str(SHEET), "--triad", str(triad), "-o", str(out), "-q"]) == 0
+
+
+def test_a_calibration_of_rotated_samples_is_neither_applied_nor_exported(
+    rotated: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from mountcal.apply.rotate import acc_to_vehicle, frame_to_vehicle
+    from mountcal.core.result import Calibration
+    from mountcal.outputs.exporters import builtin
+
+    leftover = tmp_path / "leftover.json"
+    assert main(["calibrate", str(rotated["stops"]), "-o", str(leftover), "-q"]) == 0
+    out = tmp_path / "veh2.parquet"
+    for extra in ([], ["--level-only"]):
+        err = _refused(["rotate", str(LOG), "--calibration", str(leftover), "-o", str(out), *extra], capsys, out)
+        assert "rotation left over" in err and "calibration from" in err
+    cal = Calibration.load(leftover)
+    with pytest.raises(InputError, match="rotation left over"):
+        acc_to_vehicle(np.zeros((2, 3)), cal)
+    import pandas as pd
+
+    with pytest.raises(InputError, match="rotation left over"):
+        frame_to_vehicle(pd.DataFrame({"ax": [0.0], "ay": [0.0], "az": [G_N]}), cal)
+    formats = builtin()
+    assert len(formats) >= 10
+    for name, exporter in formats.items():
+        target = tmp_path / f"x{exporter.suffixes[0] if exporter.suffixes else '.out'}"
+        err = _refused(["export", str(leftover), "--to", name, "-o", str(target)], capsys, target)
+        assert "rotation left over" in err, name
+    # the calibration the rotation applied exports as ever
+    assert main(["export", str(rotated["cal"]), "--to", "json", "-o", str(tmp_path / "ok.json"), "-q"]) == 0
 
 
 def _session(path: Path, n: int = 40, seed: int = 3) -> Path:
