@@ -280,3 +280,64 @@ def test_the_real_ros1_bag_states_the_same_frame_as_its_ros2_recording(real_data
     assert bag.frame_ids is not None and mcap.frame_ids is not None
     assert bag.frame_ids.counts == mcap.frame_ids.counts and sum(n for _, n in bag.frame_ids.counts) == 11865
     assert _sensor_frame(bag.conventions)[0].value == _sensor_frame(mcap.conventions)[0].value
+
+
+MAPS = ("y,x,-z", "-x,-y,z", "z,x,y")  # proper signed permutations: the same sensor, its axes named otherwise
+
+
+@pytest.fixture(scope="module")
+def mapped(made: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """The framed log calibrated with each axis map (the calibration's angles are then on the mapped axes)."""
+    out = {}
+    for axes in MAPS:
+        folder = tmp_path_factory.mktemp("mapped")
+        argv = ["calibrate", str(made / "xsens.mcap"), "--protocol", str(PROTOCOL), "--axes", axes]
+        assert main([*argv, "-o", str(folder / "r.json"), "-q"]) == 0
+        out[axes] = folder
+    return out
+
+
+def _numbers(fmt: str, text: str) -> np.ndarray:
+    """The numbers an export writes outside its comments."""
+    comment = {"urdf": "<!--", "tf2": "//"}.get(fmt, "#")
+    lines = [line for line in text.splitlines() if not line.lstrip().startswith(comment)]
+    return np.array([float(x) for x in re.findall(r"-?\d+\.\d+(?:e[-+]?\d+)?", "\n".join(lines))])
+
+
+@pytest.mark.parametrize("fmt", FRAMED)
+def test_an_axis_map_does_not_change_the_transform_for_the_frame_the_data_were_in(
+    made: Path, mapped: dict[str, Path], fmt: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The transform is for the recorded frame's axes, as its messages carry them: however the calibration
+    named the sensor's axes (--axes), the same data give the same transform."""
+    plain, _ = _export(made, fmt, capsys)
+    for axes, folder in mapped.items():
+        doc = json.loads((folder / "r.json").read_text(encoding="utf-8"))
+        assert abs(doc["mounting"]["roll_deg"] - 5.0) > 1.0 or axes == "z,x,y"  # the angles do change
+        text, err = _export(folder, fmt, capsys)
+        assert _child_of(fmt, text) == "xsens_imu"
+        assert f"--axes {axes} is composed in" in err and f"{axes} is composed in" in text  # XML comments hold no "--"
+        np.testing.assert_allclose(_numbers(fmt, text), _numbers(fmt, plain), atol=1e-8, err_msg=axes)
+
+
+def test_a_left_handed_log_made_right_handed_by_a_reflection_has_no_transform_for_its_frame(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    samples = read_log(PARKING)
+    assert samples.gyro_s is not None
+    flip = np.array([1.0, -1.0, 1.0])  # the driver publishes y reversed: not a REP 103 frame
+    mirrored = replace(samples, acc_s=samples.acc_s * flip, gyro_s=samples.gyro_s * flip)
+    write_mcap(tmp_path / "left.mcap", mirrored, frame_id="imu_left", start_time_s=0)
+    result = tmp_path / "r.json"
+    argv = ["calibrate", str(tmp_path / "left.mcap"), "--protocol", str(PROTOCOL), "--axes", "x,-y,z"]
+    assert main([*argv, "-o", str(result), "-q"]) == 0
+    for fmt in FRAMED:
+        out = tmp_path / f"t.{fmt}"
+        parent = ["--parent", "base_link"] if fmt == "autoware" else []
+        capsys.readouterr()
+        assert main(["export", str(result), "--to", fmt, *parent, "-o", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert "a reflection" in err and "imu_left" in err and "--child" in err and not out.exists()
+        # the frame of the mapped axes, named by the user, gets the calibration's own rotation
+        text, err = _export(tmp_path, fmt, capsys, "--child", "imu_mapped")
+        assert _child_of(fmt, text) == "imu_mapped" and "NOT the frame" in err

@@ -7,6 +7,11 @@ given (a rename can be deliberate), and when it differs from the recorded frame 
 so. A result whose log named no frame gets mountcal's default, ``imu_link``, said to be one; a result whose
 log named several frames gets no default (picking one would be a guess): the user names the child. A result
 of samples mountcal already rotated (the ``frame`` convention, :mod:`mountcal.io.frame`) is left as before.
+
+The recorded frame's axes are the data's as its messages carry them, which is what a consumer of the
+transform rotates (robot_localization, imu_transformer). A calibration made with ``--axes`` has its angles
+on the mapped axes, so the transform for the recorded frame composes that map in (``Frames.axes``); a
+reflection cannot be composed into a rotation, and is refused.
 """
 
 from __future__ import annotations
@@ -22,7 +27,10 @@ from mountcal.io.sensor_frame import recorded_frame, several
 from mountcal.outputs.exporters.common import DEFAULT_CHILD, Frames
 
 if TYPE_CHECKING:
-    from mountcal.core.result import Calibration
+    from collections.abc import Sequence
+
+    from mountcal.core.result import Calibration, Convention
+    from mountcal.io.input_conventions import AxisMap
 
 FRAME_NAME = re.compile(r"[A-Za-z0-9_/][A-Za-z0-9_/.-]*")  # a name taken from a log is written only if plain
 
@@ -76,12 +84,39 @@ def with_child(cal: Calibration, frames: Frames) -> Frames:
         )
     if not given or given == recorded.value:
         said = f"child frame {recorded.value}: the frame the calibration's data were in (stated by {recorded.by})"
-        return replace(frames, child=recorded.value, said=(safe(said),))
+        mapped = _user_axes(conventions)
+        if mapped is None:
+            return replace(frames, child=recorded.value, said=(safe(said),))
+        if mapped.reflection:
+            raise InputError(
+                "the child frame of the export",
+                f"a rotation that maps the data of {recorded.value}, as its messages carry them, to {frames.parent}",
+                f"a calibration made with {option('axes')} {mapped.text}, a reflection: those data are left-handed, "
+                "and no rotation mirrors them",
+                f"Fix the axis sign where the data are published (REP 103 frames are right-handed), or name the "
+                f"frame of the mapped axes ({option('child')}).",
+            )
+        said += (
+            f"; the calibration's {option('axes')} {mapped.text} is composed in: the transform maps the data of "
+            f"{recorded.value} as its messages carry them"
+        )
+        return replace(frames, child=recorded.value, said=(safe(said),), axes=mapped.text)
     said = (
         f"child frame {given}: as given, NOT the frame the calibration's data were in: they were in frame "
         f"{recorded.value} (stated by {recorded.by}); the transform is written for {given}"
     )
     return replace(frames, said=(safe(said),), warn=True)
+
+
+def _user_axes(conventions: Sequence[Convention]) -> AxisMap | None:
+    """The axis map stated for the calibration's log (``--axes``: a ROS log has no reader's map), unless identity."""
+    from mountcal.io.input_conventions import parse_axes
+
+    c = next((c for c in conventions if c.name == "axes"), None)
+    if c is None or c.how != "stated":
+        return None
+    mapped = parse_axes(c.value.split(" ")[0])
+    return None if mapped.identity else mapped
 
 
 __all__ = ["with_child"]

@@ -62,6 +62,7 @@ class Frames:
     parent_pose: ParentPose | None = None  # None: the parent is a REP 103 body frame aligned with the vehicle
     said: tuple[str, ...] = ()
     warn: bool = False
+    axes: str | None = None  # the calibration's --axes map, composed into the transform for the child's axes
 
     @property
     def child_name(self) -> str:
@@ -86,8 +87,19 @@ class ExportOptions:
     frames: Frames | None = None
 
     def mounting(self, cal: Calibration) -> Mounting:
-        """The rotation to write, with the refusals every format shares (:func:`mounting`)."""
-        return mounting(cal, self.yaw, self.accept_unconfident)
+        """The rotation to write, with the refusals every format shares (:func:`mounting`); for a child
+        frame whose axes are the data's as logged, the calibration's axis map composed in (``Frames.axes``)."""
+        found = mounting(cal, self.yaw, self.accept_unconfident)
+        if self.frames is None or self.frames.axes is None:
+            return found
+        from dataclasses import replace
+
+        from scipy.spatial.transform import Rotation
+
+        from mountcal.io.input_conventions import parse_axes
+
+        device_to_sensor = Rotation.from_matrix(parse_axes(self.frames.axes).matrix)  # a proper map (child.py)
+        return replace(found, rot_vs=found.rot_vs * device_to_sensor)  # said with the child's name (Frames.said)
 
 
 Writer = Callable[["Calibration", ExportOptions], "str | bytes"]
