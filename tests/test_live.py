@@ -21,6 +21,7 @@ from mountcal.calibration.fit import Calibration, Options, calibrate
 from mountcal.calibration.pipeline import LogJob, calibrate_job
 from mountcal.cli import main
 from mountcal.core.errors import InputError, NotEnoughInformation
+from mountcal.core.option_names import as_flags
 from mountcal.estimate.bound import crb_deg, true_state
 from mountcal.io import writers as export
 from mountcal.io.reader import LogOptions
@@ -87,11 +88,20 @@ def offline(
 
 
 def assert_same(a: Calibration, b: Calibration) -> None:
-    for name in ("roll_deg", "pitch_deg", "yaw_deg", "roll_sigma_deg", "pitch_sigma_deg"):
+    """The session's result ``a`` is calibrate's ``b``: the angles and σ, and what the pipeline adds to a fit —
+    the verdict, the model, the checks, the conventions (their ``by`` aside: the session states its own sheet),
+    the notes and the unexplained findings."""
+    for name in ("roll_deg", "pitch_deg", "yaw_deg", "roll_sigma_deg", "pitch_sigma_deg", "yaw_sigma_deg"):
         x, y = getattr(a, name), getattr(b, name)
         assert (x is None) == (y is None), name
         if x is not None:
             assert abs(x - y) < 1e-6, name
+    assert (a.confident, a.model) == (b.confident, b.model)
+    assert [(c.name, c.passed) for c in a.checks] == [(c.name, c.passed) for c in b.checks]
+    conventions = [[(c.name, c.value, c.how) for c in x.provenance.conventions] for x in (a, b)]
+    assert conventions[0] == conventions[1]
+    assert a.notes == b.notes
+    assert [u.test for u in a.unexplained] == [u.test for u in b.unexplained]
 
 
 def test_a_replayed_simulated_session_gives_calibrate_on_its_recording(sim_blf: Path, tmp_path: Path) -> None:
@@ -236,7 +246,9 @@ def test_ctrl_c_keeps_the_recording_and_what_was_measured(sim_blf: Path, tmp_pat
     result = Calibration.load(prefix.with_suffix(".json"))
     job = LogJob(paths=(str(prefix.with_suffix(".blf")),), log=LogOptions(dbc=DBC, mapping=MAPPING),
                  protocol=str(prefix.with_name("session_protocol.csv")))  # fmt: skip
-    assert_same(result, calibrate_job(job).calibration)
+    with as_flags():  # what `mountcal calibrate` says: the session's notes name the options as flags too
+        offline_result = calibrate_job(job).calibration
+    assert_same(result, offline_result)
 
 
 def test_a_replayed_real_canedge_log_gives_calibrate_on_its_recording(real_data: Path, tmp_path: Path) -> None:

@@ -11,12 +11,13 @@ from __future__ import annotations
 import hashlib
 import threading
 from collections.abc import Callable, Sequence
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 
 from mountcal.calibration.fit import calibrate
 from mountcal.calibration.job import LogJob as LogJob  # defined apart: the fleet command needs it, not the fit
@@ -187,12 +188,24 @@ def calibrate_job(job: LogJob, samples: Samples | None = None, *, hash_files: bo
         hashes = pool.submit(lambda: tuple(_sha256(Path(p), stop) for p in job.paths)) if hash_files else None
         try:
             done = _calibrate_job(job, samples)
-            return replace(done, calibration=_checked(done, job, hashes))
+            cal = checked(done, job.uphill_azimuth_deg, job.protocol is not None)
+            hashed = () if hashes is None else hashes.result()
+            return replace(done, calibration=replace(cal, provenance=replace(cal.provenance, input_sha256=hashed)))
         finally:
             stop.set()
 
 
-def _calibrate_job(job: LogJob, samples: Samples | None) -> LogResult:
+def calibrate_samples(job: LogJob, samples: Samples, protocol: pd.DataFrame | None = None) -> LogResult:
+    """:func:`calibrate_job` of samples in hand with a protocol sheet in hand (``protocol``, as
+    :func:`~mountcal.stops.headings.protocol_sheet` checks it; else the job's file, if any), without the files'
+    hashes: a live session's final answer, the same fit, cross-checks, conventions and notes as ``calibrate``
+    gives on its recording and sheet."""
+    done = _calibrate_job(job, samples, protocol)
+    sheet = protocol is not None or job.protocol is not None
+    return replace(done, calibration=checked(done, job.uphill_azimuth_deg, sheet))
+
+
+def _calibrate_job(job: LogJob, samples: Samples | None, protocol: pd.DataFrame | None = None) -> LogResult:
     # samples read elsewhere get the log conventions here (idempotent: read_log's are kept)
     samples = with_gravity(read_log(list(job.paths), job.log) if samples is None else stated(samples, job.log))
     source = _source(job.paths)
@@ -200,7 +213,7 @@ def _calibrate_job(job: LogJob, samples: Samples | None) -> LogResult:
     static = found = table = None
     if job.use in ("auto", "stops"):
         try:
-            found = _tabulate(samples, job)
+            found = _tabulate(samples, job, protocol)
             table = replace(found.table, source=source, incomplete=samples.incomplete)
             static = calibrate(table, job.options)
         except NotEnoughInformation as err:
@@ -236,8 +249,10 @@ def _calibrate_job(job: LogJob, samples: Samples | None) -> LogResult:
     return LogResult(cal, increasing_times(samples), "driving", None, fit, found, None, skipped)  # counts merged stamps
 
 
-def _checked(done: LogResult, job: LogJob, hashes: Future[tuple[str, ...]] | None) -> Calibration:
-    """The log's calibration with its files' hashes, its conventions and the cross-checks of its cues.
+def checked(done: LogResult, uphill_azimuth_deg: float | None, protocol: bool) -> Calibration:
+    """The log's calibration with its samples' conventions, the cross-checks of its cues (``protocol``: the
+    stops' headings came from a protocol sheet), the answer's plausibility and the notes on its frame: what
+    every log's result carries, whether its samples were read from files or decoded live.
 
     Raises
     ------
@@ -249,9 +264,7 @@ def _checked(done: LogResult, job: LogJob, hashes: Future[tuple[str, ...]] | Non
     checks = []
     disagree = any(u.test == "stops_vs_driving" for u in cal.unexplained)
     if done.static is not None and done.driving is not None:
-        check, found = crosscheck.half_turn(
-            done.static.yaw_deg, done.driving.yaw_deg, job.uphill_azimuth_deg, job.protocol is not None
-        )
+        check, found = crosscheck.half_turn(done.static.yaw_deg, done.driving.yaw_deg, uphill_azimuth_deg, protocol)
         checks.append(check)
         if found is not None:
             cal = replace(cal, unexplained=(*cal.unexplained, found), confident=False)
@@ -266,8 +279,7 @@ def _checked(done: LogResult, job: LogJob, hashes: Future[tuple[str, ...]] | Non
     checks.append(crosscheck.turn_handedness(done.samples, rot_vs, yaw_known))
     if cal.method == "driving":
         checks += plausibility.answer_checks(cal)
-    hashed = () if hashes is None else hashes.result()
-    cal = replace(cal, provenance=replace(cal.provenance, input_sha256=hashed, conventions=stated))
+    cal = replace(cal, provenance=replace(cal.provenance, conventions=stated))
     if done.samples.rotated is not None:  # legitimate (checking a rotation), but the angles mean something else
         cal = replace(cal, notes=with_frame_note(cal.notes, stated))
     elif (named := sensor_frame_note(done.samples.frame_ids)) is not None:  # several frames: none is picked
@@ -368,8 +380,9 @@ def _driving_tests(c: DrivingConsistency) -> str:
     )
 
 
-def _tabulate(samples: Samples, job: LogJob) -> StopTableFromLog:
-    protocol = read_protocol(job.protocol, job.log.heading_unit) if job.protocol else None
+def _tabulate(samples: Samples, job: LogJob, protocol: pd.DataFrame | None = None) -> StopTableFromLog:
+    if protocol is None and job.protocol:
+        protocol = read_protocol(job.protocol, job.log.heading_unit)
     return tabulate(samples, job.detection, protocol, job.uphill_azimuth_deg)
 
 

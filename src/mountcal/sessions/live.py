@@ -11,6 +11,10 @@ Headings β come from the log's heading channel with ``uphill_azimuth_deg``; oth
 takes the next heading of a plan, or the heading suggested before it. Then a protocol sheet on the
 log's clock is written beside the recording, so that ``calibrate REC.blf --protocol SHEET``
 reproduces the result offline.
+
+A refit after each stop is the stops' fit alone (fast, for the suggestions and the target); the final
+evaluation is ``calibrate``'s own pipeline (:func:`mountcal.calibration.pipeline.calibrate_samples`) on the
+whole session and its sheet: the drive's yaw, the cross-checks, the conventions and the notes included.
 """
 
 from __future__ import annotations
@@ -31,6 +35,7 @@ import pandas as pd
 
 from mountcal.calibration.fit import WITH_OFFSET, calibrate
 from mountcal.calibration.options import Options
+from mountcal.calibration.pipeline import LogJob, calibrate_samples
 from mountcal.core.angles import ANGLE_NAMES, AngleName, Angles
 from mountcal.core.atomic import atomic_path
 from mountcal.core.conventions import specific_force_v
@@ -46,7 +51,7 @@ from mountcal.io.logs import stated
 from mountcal.io.reader import LogOptions
 from mountcal.io.samples import Samples
 from mountcal.stops.detect import StillPeriod, StopDetection, detect_stops
-from mountcal.stops.headings import tabulate
+from mountcal.stops.headings import protocol_sheet, tabulate
 from mountcal.stops.table import StopTable, write_stop_table
 
 CANDIDATES_DEG = tuple(float(b) for b in range(0, 360, 5))
@@ -232,12 +237,13 @@ class Live:
                 self.frames.table(), self.opts.dbc, mapping=self.opts.mapping, channel=self.opts.can_channel,
                 source=str(self.recording), complete=final,
             )  # fmt: skip
+            # the heading channel's unit is inferred from the whole session only (a part cannot tell)
+            samples = stated(samples, self._job().log, self.axes, check=final)
         except InputError as err:  # e.g. no accelerometer frame yet: say so, keep listening
             if final:  # the whole session cannot be decoded: no result that the recording would not give
                 self.last.calibration = None
             self._waiting(str(err))
             return False
-        samples = stated(samples, LogOptions(axes=self.opts.axes), self.axes, check=False)
         self.last.samples, self.last.dropped = samples, dict(samples.dropped)
         cfg = self.opts.detection
         if len(samples) < 3 or samples.t_s[-1] - samples.t_s[0] < cfg.min_duration_s + 2 * cfg.trim_s:
@@ -276,16 +282,25 @@ class Live:
             if protocol.empty:
                 return False
         try:
-            found = tabulate(samples, cfg, protocol, self.opts.uphill_azimuth_deg)
-            table = found.table if protocol is not None else found.table.subset(np.arange(len(stops)))
-            table = replace(table, source=str(self.recording))
-            cal = calibrate(table, self.opts.options)
-        except MountcalError as err:  # too few stops yet, one heading, ...
+            sheet = None if protocol is None else protocol_sheet(protocol, self._sheet_where(), stated_by=self._by())
+            if final:  # calibrate's pipeline on the session: what it gives on the recording and sheet
+                done = calibrate_samples(self._job(), samples, sheet)
+                table, cal = done.table, done.calibration
+                dropped = () if done.stops is None else done.stops.dropped
+            else:
+                found = tabulate(samples, cfg, sheet, self.opts.uphill_azimuth_deg)
+                table = found.table if protocol is not None else found.table.subset(np.arange(len(stops)))
+                table, dropped = replace(table, source=str(self.recording)), found.dropped
+                cal = calibrate(table, self.opts.options)
+        except MountcalError as err:  # too few stops yet, one heading, ...; at the end, calibrate's refusal
+            if final:  # no result that the recording would not give
+                self.last.table = self.last.calibration = None
             self._waiting(str(err))
             self._suggest(None, None)
             return False
-        self.last.table, self.last.calibration, self.last.still_not_kept = table, cal, found.dropped
-        event: dict[str, Any] = {"event": "fit", "stops": len(table), "model": list(cal.model)}
+        self.last.table, self.last.calibration, self.last.still_not_kept = table, cal, dropped
+        n = 0 if table is None else len(table)  # none: the drive alone (the stops refused), as calibrate gives
+        event: dict[str, Any] = {"event": "fit", "stops": n, "model": list(cal.model)}
         event |= cal.angles.columns(slope=False)  # the message's flat columns, spelled by the type
         self.emit(event)
         met = target_met(cal, self.opts.target_deg)
@@ -297,8 +312,30 @@ class Live:
             self.told_unreachable = True
             source = cal.systematic.source if cal.systematic is not None else None
             self.emit({"event": "target_unreachable", "systematic_deg": beyond, "source": source})
-        self._suggest(table, cal)
+        if table is not None:
+            self._suggest(table, cal)
         return False
+
+    def _job(self) -> LogJob:
+        """What ``calibrate`` is given for the session's recording (its sheet aside)."""
+        o = self.opts
+        log = LogOptions(dbc=o.dbc, mapping=o.mapping, channel=o.can_channel, axes=o.axes)
+        return LogJob(
+            paths=(str(self.recording),),
+            log=log,
+            detection=o.detection,
+            uphill_azimuth_deg=o.uphill_azimuth_deg,
+            options=o.options,
+        )  # use "auto" and the default driving gates, as `calibrate REC.blf` without those options
+
+    def _sheet_where(self) -> str:
+        return f"the session's protocol sheet (beside {self.recording})"
+
+    def _by(self) -> str:
+        """Who states the sheet's β from uphill: the plan driven, or the headings the session asked for."""
+        if self.opts.plan_beta_deg is not None:
+            return "the session's protocol sheet (the headings of its plan, from uphill)"
+        return "the session's protocol sheet (the headings it asked the driver for, from uphill)"
 
     def _waiting(self, why: str) -> None:
         if why != self.why:  # once per reason, not at every evaluation

@@ -117,13 +117,25 @@ def read_protocol(path: str, heading_unit: HeadingUnit | None = None) -> pd.Data
             "Write one row per stop.",
         )
     check_values("time_s", values[["t_start_s", "t_end_s"]].to_numpy(), path, "t_start_s, t_end_s")
-    values["beta_deg"], unit = headings_in_degrees(values["beta_deg"].to_numpy(dtype=float), heading_unit, path)
-    check_degrees(values["beta_deg"].to_numpy(), unit, path, "beta_deg")
-    values.attrs["path"] = path  # a refusal of the sheet's clock names it
+    values = protocol_sheet(values, path, heading_unit)
     with open(path, encoding="utf-8", errors="replace") as f:
         values.attrs["planned"] = f.readline(len(PLAN_MARK)) == PLAN_MARK  # times from `mountcal plan`: placeholders
+    return values
+
+
+def protocol_sheet(
+    values: pd.DataFrame, where: str, heading_unit: HeadingUnit | None = None, stated_by: str | None = None
+) -> pd.DataFrame:
+    """A protocol sheet's numbers (``t_start_s, t_end_s, beta_deg``) with β's unit checked (degrees unless
+    ``heading_unit`` says radians) and ``attrs["conventions"]``: β from uphill, stated by ``stated_by`` (the
+    ``protocol`` option unless said), and how β's unit is known. What :func:`read_protocol` makes of a file and
+    a live session of the sheet it writes, so both calibrations state the same conventions."""
+    values = values.copy()
+    values["beta_deg"], unit = headings_in_degrees(values["beta_deg"].to_numpy(dtype=float), heading_unit, where)
+    check_degrees(values["beta_deg"].to_numpy(), unit, where, "beta_deg")
+    values.attrs["path"] = where  # a refusal of the sheet's clock names it
     values.attrs["conventions"] = (
-        Convention("heading_reference", "uphill", "stated", f"the protocol sheet ({option('protocol')})"),
+        Convention("heading_reference", "uphill", "stated", stated_by or f"the protocol sheet ({option('protocol')})"),
         unit,
     )
     return values
