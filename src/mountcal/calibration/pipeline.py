@@ -15,9 +15,9 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
 from mountcal.calibration.fit import calibrate
 from mountcal.calibration.job import LogJob as LogJob  # defined apart: the fleet command needs it, not the fit
@@ -47,6 +47,9 @@ from mountcal.loop import crosscheck, plausibility
 from mountcal.stops.detect import StopDetection
 from mountcal.stops.headings import StopTableFromLog, near_miss_advice, read_protocol, tabulate
 from mountcal.stops.table import Headings, StopTable, Unit, read_stop_table
+
+if TYPE_CHECKING:  # the sheet a live session passes in hand; pandas is loaded by the readers anyway
+    import pandas as pd
 
 
 @dataclass(frozen=True)

@@ -167,8 +167,7 @@ def refuse_leftover(conventions: Sequence[Convention], where: str, to: str) -> N
         raise InputError(
             where,
             f"a calibration of a log in the sensor's own frame, to {to}",
-            f"a calibration of {rotated.sentence()}: its angles are the rotation left over, not the "
-            "sensor's mounting",
+            f"a calibration of {rotated.sentence()}: its angles are the rotation left over, not the sensor's mounting",
             "Use the calibration that rotation applied, or calibrate the original log.",
         )
 
