@@ -1,5 +1,5 @@
-"""Shared test fixtures: where the real recordings live (a skip when they are absent), and the
-schema check of every calibration result a test writes."""
+"""Shared test fixtures: where the real recordings live (a skip when they are absent), the schema check
+of every calibration result a test writes, and the command line's refusal of bad input."""
 
 from __future__ import annotations
 
@@ -20,6 +20,25 @@ pytest_plugins = ["pytester"]  # a test runs a session with this conftest to che
 REPO = Path(__file__).resolve().parents[1]
 # beside the checkout, or where MOUNTCAL_REAL_DATA says (a worktree lives elsewhere)
 REAL_DATA = Path(os.environ.get("MOUNTCAL_REAL_DATA", REPO / ".." / "shared" / "data" / "real")).resolve()
+
+
+Refused = Callable[[list[str], Path], str]  # the type of the ``refused`` fixture
+
+
+@pytest.fixture
+def refused(capsys: pytest.CaptureFixture[str]) -> Refused:
+    """Run the command line on ``argv`` expecting bad input refused: exit 2, a message and no traceback,
+    no ``output`` written. Returns the message (stderr)."""
+    from mountcal.cli import main
+
+    def run(argv: list[str], output: Path) -> str:
+        capsys.readouterr()
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert "Traceback" not in err and not output.exists()
+        return err
+
+    return run
 
 
 @pytest.fixture

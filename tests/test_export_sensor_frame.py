@@ -341,3 +341,14 @@ def test_a_left_handed_log_made_right_handed_by_a_reflection_has_no_transform_fo
         # the frame of the mapped axes, named by the user, gets the calibration's own rotation
         text, err = _export(tmp_path, fmt, capsys, "--child", "imu_mapped")
         assert _child_of(fmt, text) == "imu_mapped" and "NOT the frame" in err
+
+
+@pytest.mark.parametrize("fmt", ["novatel", "ublox", "json", "yaml"])
+def test_a_format_naming_no_frame_states_the_axis_map_its_rotation_is_on(
+    mapped: dict[str, Path], made: Path, fmt: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    for axes, folder in mapped.items():
+        text, _ = _export(folder, fmt, capsys)
+        assert f"sensor frame = the log's axes after the calibration's axis map {axes}" in text
+    plain, _ = _export(made, fmt, capsys)
+    assert "axis map" not in plain

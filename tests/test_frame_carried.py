@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
+from tests.conftest import Refused
 
 from mountcal.calibration.fit import Options, calibrate
 from mountcal.cli import main
@@ -53,19 +54,12 @@ def _triad_file(path: Path, axes: str | None = None) -> Path:
     return path
 
 
-def _refused(argv: list[str], capsys: pytest.CaptureFixture[str], output: Path) -> str:
-    assert main(argv) == 2
-    err = capsys.readouterr().err
-    assert "Traceback" not in err and not output.exists()
-    return err
-
-
 def test_a_triad_of_rotated_samples_is_refused_from_the_log_and_from_its_stop_table(
-    rotated: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    refused: Refused, rotated: dict[str, Path], tmp_path: Path
 ) -> None:
     out = tmp_path / "t.json"
     for source in (rotated["veh"], rotated["stops"]):
-        err = _refused(["triad", str(source), "-o", str(out)], capsys, out)
+        err = refused(["triad", str(source), "-o", str(out)], out)
         assert str(source) in err and "vehicle frame" in err and "sensor's own axes" in err
         assert "Fit the triad on the original log" in err
 
@@ -105,12 +99,12 @@ def test_a_frame_column_that_is_not_a_frame_mountcal_knows_is_refused(tmp_path: 
 
 
 def test_applying_a_triad_to_rotated_stops_is_refused_by_the_command_and_the_library(
-    rotated: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    refused: Refused, rotated: dict[str, Path], tmp_path: Path
 ) -> None:
     triad = _triad_file(tmp_path / "t.json")
     out = tmp_path / "r.json"
     for argv in ([str(rotated["veh"]), "--protocol", str(SHEET)], [str(rotated["stops"])]):
-        err = _refused(["calibrate", *argv, "--triad", str(triad), "-o", str(out)], capsys, out)
+        err = refused(["calibrate", *argv, "--triad", str(triad), "-o", str(out)], out)
         assert "vehicle frame" in err and "--triad" in err
     with pytest.raises(InputError, match="sensor's own axes"):
         calibrate(read_stop_table(rotated["stops"]), Options(triad=load(triad)))
@@ -119,7 +113,7 @@ def test_applying_a_triad_to_rotated_stops_is_refused_by_the_command_and_the_lib
 
 
 def test_a_calibration_of_rotated_samples_is_neither_applied_nor_exported(
-    rotated: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    refused: Refused, rotated: dict[str, Path], tmp_path: Path
 ) -> None:
     from mountcal.apply.rotate import acc_to_vehicle, frame_to_vehicle
     from mountcal.core.result import Calibration
@@ -129,7 +123,7 @@ def test_a_calibration_of_rotated_samples_is_neither_applied_nor_exported(
     assert main(["calibrate", str(rotated["stops"]), "-o", str(leftover), "-q"]) == 0
     out = tmp_path / "veh2.parquet"
     for extra in ([], ["--level-only"]):
-        err = _refused(["rotate", str(LOG), "--calibration", str(leftover), "-o", str(out), *extra], capsys, out)
+        err = refused(["rotate", str(LOG), "--calibration", str(leftover), "-o", str(out), *extra], out)
         assert "rotation left over" in err and "calibration from" in err
     cal = Calibration.load(leftover)
     with pytest.raises(InputError, match="rotation left over"):
@@ -142,7 +136,7 @@ def test_a_calibration_of_rotated_samples_is_neither_applied_nor_exported(
     assert len(formats) >= 10
     for name, exporter in formats.items():
         target = tmp_path / f"x{exporter.suffixes[0] if exporter.suffixes else '.out'}"
-        err = _refused(["export", str(leftover), "--to", name, "-o", str(target)], capsys, target)
+        err = refused(["export", str(leftover), "--to", name, "-o", str(target)], target)
         assert "rotation left over" in err, name
     # the calibration the rotation applied exports as ever
     assert main(["export", str(rotated["cal"]), "--to", "json", "-o", str(tmp_path / "ok.json"), "-q"]) == 0
@@ -162,7 +156,10 @@ def _session(path: Path, n: int = 40, seed: int = 3) -> Path:
 
 @pytest.mark.parametrize(("made_with", "applied_with"), [("y,x,-z", None), (None, "y,x,-z"), ("y,x,-z", "-y,x,z")])
 def test_a_triad_states_its_session_axes_and_other_axes_are_refused(
-    made_with: str | None, applied_with: str | None, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    refused: Refused,
+    made_with: str | None,
+    applied_with: str | None,
+    tmp_path: Path,
 ) -> None:
     session, triad = _session(tmp_path / "session.csv"), tmp_path / "t.json"
     given = [] if made_with is None else ["--axes", made_with]
@@ -171,8 +168,9 @@ def test_a_triad_states_its_session_axes_and_other_axes_are_refused(
     assert [c["value"].split(" ")[0] for c in axes] == [made_with or "x,y,z"]
     out = tmp_path / "r.json"
     applied = [] if applied_with is None else ["--axes", applied_with]
-    err = _refused(["calibrate", str(LOG), "--protocol", str(SHEET), "--triad", str(triad), *applied, "-o", str(out)],
-                   capsys, out)  # fmt: skip
+    err = refused(
+        ["calibrate", str(LOG), "--protocol", str(SHEET), "--triad", str(triad), *applied, "-o", str(out)], out
+    )
     assert "the triad calibration was made with" in err
     assert (f"--axes {made_with}" if made_with else "no --axes") in err
     # the map it was made with is accepted

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from tests.conftest import Refused
 
 from mountcal.apply.rotate import frame_to_vehicle
 from mountcal.apply.rotate_log import rotate_log, to_frame
@@ -39,19 +40,9 @@ def made(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return folder
 
 
-def _refused(argv: list[str], out: Path, capsys: pytest.CaptureFixture[str]) -> str:
-    capsys.readouterr()
-    assert main(argv) == 2
-    err = capsys.readouterr().err
-    assert "Traceback" not in err and not out.exists()
-    return err
-
-
-def test_rotating_a_rotated_parquet_is_refused(made: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_rotating_a_rotated_parquet_is_refused(refused: Refused, made: Path) -> None:
     out = made / "twice.csv"
-    err = _refused(
-        ["rotate", str(made / "veh.parquet"), "--calibration", str(made / "r.json"), "-o", str(out)], out, capsys
-    )
+    err = refused(["rotate", str(made / "veh.parquet"), "--calibration", str(made / "r.json"), "-o", str(out)], out)
     assert f"{made / 'veh.parquet'}: expected samples in the sensor's frame" in err
     assert "already put in the vehicle frame" in err and f"from {made / 'parking.mcap'}" in err
     assert "apply the mounting twice" in err and "Rotate the original log." in err
@@ -61,11 +52,11 @@ def test_rotating_a_rotated_parquet_is_refused(made: Path, capsys: pytest.Captur
     ("suffix", "field"), [(".csv", []), (".mcap", []), (".parquet", ["--field", "linear_acceleration"])]
 )
 def test_rotating_the_vehicle_topic_of_a_rotated_mcap_is_refused(
-    made: Path, suffix: str, field: list[str], capsys: pytest.CaptureFixture[str]
+    refused: Refused, made: Path, suffix: str, field: list[str]
 ) -> None:
     out = made / f"twice{suffix}"
     argv = ["rotate", str(made / "veh.mcap"), "--topic", VEHICLE_TOPIC, *field, "--calibration", str(made / "r.json")]
-    err = _refused([*argv, "-o", str(out)], out, capsys)
+    err = refused([*argv, "-o", str(out)], out)
     assert f"{made / 'veh.mcap'}: expected samples in the sensor's frame" in err
     assert f"from {made / 'parking.mcap'}" in err and "apply the mounting twice" in err
 
@@ -102,14 +93,14 @@ def test_the_readers_say_the_frame_of_the_chosen_channel_from_the_metadata(made:
     assert read_log(renamed).rotated == parquet.rotated
 
 
-def test_two_imu_topics_name_the_one_mountcal_rotated(made: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_two_imu_topics_name_the_one_mountcal_rotated(refused: Refused, made: Path) -> None:
     label = f"'{VEHICLE_TOPIC}' (mountcal rotate's vehicle-frame output)"
     with pytest.raises(InputError, match="exactly one sensor_msgs/msg/Imu topic") as err:
         read_log(made / "veh.mcap")
     assert label in str(err.value) and "'/imu/data', " in str(err.value)
     out = made / "which.mcap"  # the copy-through path chooses its topic itself
-    assert label in _refused(
-        ["rotate", str(made / "veh.mcap"), "--calibration", str(made / "r.json"), "-o", str(out)], out, capsys
+    assert label in refused(
+        ["rotate", str(made / "veh.mcap"), "--calibration", str(made / "r.json"), "-o", str(out)], out
     )
 
 

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
+from tests.conftest import Refused
 
 from mountcal.calibration.pipeline import calibrate_log
 from mountcal.cli import main
@@ -31,15 +32,6 @@ def sheet(path: Path, shift_s: float) -> Path:
     df[["t_start_s", "t_end_s"]] += shift_s
     df.to_csv(path, index=False, float_format="%.17g")
     return path
-
-
-def refusal(argv: list[str], out: Path, capsys: pytest.CaptureFixture[str]) -> str:
-    """The CLI's exit 2 for bad input: its message, no traceback, no output file."""
-    capsys.readouterr()
-    assert main(argv) == 2
-    err = capsys.readouterr().err
-    assert "Traceback" not in err and not out.exists()
-    return err
 
 
 def test_a_sheet_counting_from_the_log_s_start_calibrates_as_the_unix_sheet_and_says_so(
@@ -83,30 +75,28 @@ def test_stops_takes_the_relative_sheet_at_the_log_s_times(tmp_path: Path, capsy
     ],
 )
 def test_a_sheet_a_time_zone_off_the_log_is_refused_naming_the_hours_and_the_fix(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str], shift_s: float, said: str, fix: str
+    refused: Refused, tmp_path: Path, shift_s: float, said: str, fix: str
 ) -> None:
     zoned = sheet(tmp_path / "zoned.csv", shift_s)
     out = tmp_path / "r.json"
-    err = refusal(["calibrate", str(PARKING), "--protocol", str(zoned), "-o", str(out)], out, capsys)
+    err = refused(["calibrate", str(PARKING), "--protocol", str(zoned), "-o", str(out)], out)
     assert f"{zoned}: expected the sheet's times on the log's clock (Unix time" in err
     assert said in err and "a time zone's offset" in err and fix in err
     assert "2024-05-01 10:00:00" in err  # the log's start, as a date
     assert "its first stop then starting at 1714557600 (2024-05-01 10:00:00 UTC)" in err
     assert "--max-acc-std" not in err  # not the stillness thresholds: they are not the reason
     stops = tmp_path / "s.csv"
-    assert said in refusal(["stops", str(PARKING), "--protocol", str(zoned), "-o", str(stops)], stops, capsys)
+    assert said in refused(["stops", str(PARKING), "--protocol", str(zoned), "-o", str(stops)], stops)
     with pytest.raises(InputError, match=said):
         calibrate_log(PARKING, protocol=zoned)
 
 
-def test_a_dated_sheet_on_a_log_whose_clock_counts_from_its_start_is_refused(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
+def test_a_dated_sheet_on_a_log_whose_clock_counts_from_its_start_is_refused(refused: Refused, tmp_path: Path) -> None:
     asc = tmp_path / "parking.asc"
     write_log(asc, read_log(str(PARKING)), dbc_path=str(DBC))
     out = tmp_path / "r.json"
     argv = ["calibrate", str(asc), "--dbc", str(DBC), "--mapping", str(MAPPING), "--protocol", str(PROTOCOL)]
-    err = refusal([*argv, "-o", str(out)], out, capsys)
+    err = refused([*argv, "-o", str(out)], out)
     assert f"{PROTOCOL}: expected the sheet's times on the log's clock (its times 0.00025–395.99" in err
     assert "the log's clock has no date, its times count from the start of the recording" in err
     assert "Write the sheet's times as seconds from the log's start" in err and "--max-acc-std" not in err
@@ -114,12 +104,10 @@ def test_a_dated_sheet_on_a_log_whose_clock_counts_from_its_start_is_refused(
         calibrate_log(asc, log=LogOptions(dbc=str(DBC), mapping=str(MAPPING)), protocol=PROTOCOL)
 
 
-def test_a_sheet_with_no_relation_to_the_log_is_refused_with_both_spans(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
+def test_a_sheet_with_no_relation_to_the_log_is_refused_with_both_spans(refused: Refused, tmp_path: Path) -> None:
     far = sheet(tmp_path / "far.csv", 5000.0)  # 1 h 23 min 20 s: no time zone's offset
     out = tmp_path / "r.json"
-    err = refusal(["calibrate", str(PARKING), "--protocol", str(far), "-o", str(out)], out, capsys)
+    err = refused(["calibrate", str(PARKING), "--protocol", str(far), "-o", str(out)], out)
     assert "found no interval on the log: the sheet spans 1714562600–1714562996 s = 2024-05-01 11:23:20" in err
     assert "(Unix time, 1714557600–1714557996 s = 2024-05-01 10:00:00 – 10:06:35 UTC)" in err
     assert "--max-acc-std" not in err
@@ -141,7 +129,7 @@ def test_a_sheet_on_the_log_at_the_wrong_place_behaves_as_before(
         calibrate_log(PARKING, protocol=late, use="stops")
 
 
-def test_fleet_finds_the_clock_of_a_sheet_beside_its_log(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_fleet_finds_the_clock_of_a_sheet_beside_its_log(tmp_path: Path) -> None:
     van = tmp_path / "van"
     van.mkdir()
     for name, shift in (("relative", -T0), ("zoned", 7200.0)):
@@ -157,13 +145,13 @@ def test_fleet_finds_the_clock_of_a_sheet_beside_its_log(tmp_path: Path, capsys:
 
 
 def test_the_placeholder_times_of_a_plan_are_refused_not_taken_from_the_log_s_start(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    refused: Refused, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     plan = tmp_path / "plan.csv"
     argv = ["plan", "--noise", "1", "--target", "roll=1,pitch=1,yaw=2", "--slope-deg", "5", "-o", str(plan)]
     assert main(argv) == 0
     out = tmp_path / "r.json"
-    err = refusal(["calibrate", str(PARKING), "--protocol", str(plan), "-o", str(out)], out, capsys)
+    err = refused(["calibrate", str(PARKING), "--protocol", str(plan), "-o", str(out)], out)
     assert "found the placeholder times of `mountcal plan` (0–240 s" in err and "delete that first line" in err
     lines = plan.read_text(encoding="utf-8").splitlines(keepends=True)
     edited = tmp_path / "edited.csv"  # the same times without the plan's first line: the user's own, from the start

@@ -84,7 +84,7 @@ def with_child(cal: Calibration, frames: Frames) -> Frames:
         )
     if not given or given == recorded.value:
         said = f"child frame {recorded.value}: the frame the calibration's data were in (stated by {recorded.by})"
-        mapped = _user_axes(conventions)
+        mapped = user_axes(conventions)
         if mapped is None:
             return replace(frames, child=recorded.value, said=(safe(said),))
         if mapped.reflection:
@@ -108,7 +108,7 @@ def with_child(cal: Calibration, frames: Frames) -> Frames:
     return replace(frames, said=(safe(said),), warn=True)
 
 
-def _user_axes(conventions: Sequence[Convention]) -> AxisMap | None:
+def user_axes(conventions: Sequence[Convention]) -> AxisMap | None:
     """The axis map stated for the calibration's log (``--axes``: a ROS log has no reader's map), unless identity."""
     from mountcal.io.input_conventions import parse_axes
 
@@ -119,4 +119,4 @@ def _user_axes(conventions: Sequence[Convention]) -> AxisMap | None:
     return None if mapped.identity else mapped
 
 
-__all__ = ["with_child"]
+__all__ = ["user_axes", "with_child"]

@@ -89,10 +89,17 @@ class ExportOptions:
     def mounting(self, cal: Calibration) -> Mounting:
         """The rotation to write, with the refusals every format shares (:func:`mounting`); for a child
         frame whose axes are the data's as logged, the calibration's axis map composed in (``Frames.axes``)."""
-        found = mounting(cal, self.yaw, self.accept_unconfident)
-        if self.frames is None or self.frames.axes is None:
-            return found
         from dataclasses import replace
+
+        found = mounting(cal, self.yaw, self.accept_unconfident)
+        if self.frames is None:  # the format names no frame: its IMU frame must be the calibrated axes
+            from mountcal.outputs.exporters.child import user_axes
+
+            mapped = user_axes(cal.provenance.conventions)
+            said = f"sensor frame = the log's axes after the calibration's axis map {mapped.text}" if mapped else None
+            return found if said is None else replace(found, notes=(*found.notes, said))
+        if self.frames.axes is None:
+            return found
 
         from scipy.spatial.transform import Rotation
 
