@@ -61,6 +61,7 @@ class Case:
     truth: Rotation | None  # None: any answer is wrong (a mirror image has no right rotation)
     fixes: tuple[str, ...]  # strings one of which a refusal must name
     cannot_tell: bool = False  # the data cannot show this slip
+    refuse: bool = False  # a command that writes a file (rotate, triad, export): only a refusal is right
 
 
 @dataclass
@@ -279,6 +280,82 @@ def log_slips(rng: np.random.Generator, folder: Path) -> dict[str, Case]:
     return cases
 
 
+def _quiet(argv: list[str]) -> None:
+    """A preparing step (calibrate, rotate) that must succeed."""
+    with contextlib.redirect_stderr(io.StringIO()), contextlib.redirect_stdout(io.StringIO()):
+        assert main([*argv, "-q"]) == 0, argv
+
+
+def seam_slips(rng: np.random.Generator, folder: Path) -> dict[str, Case]:
+    """Slips where a number crosses a convention into mountcal or out of it: a table's time unit, a gyro's or a
+    speed's unit, a protocol sheet's clock, and mountcal's own outputs taken back in as if they were inputs."""
+    cases: dict[str, Case] = {}
+    s, truth, rows = _parking(rng)
+    start = 1714557600.0  # the log dated (Unix time, UTC) as a logger's clock dates it: a sheet's clock can be compared
+    s = dataclasses.replace(
+        s, t_s=s.t_s + start, channels={k: Channel(c.t_s + start, c.value) for k, c in s.channels.items()}
+    )
+    rows = [(a + start, b + start, c) for a, b, c in rows]
+    sheet = _protocol(rows, folder, "seam_p.csv", float)
+    relative = [(a - start, b - start, c) for a, b, c in rows]  # a sheet counting from the log's start
+    ms = dataclasses.replace(s, t_s=(s.t_s - start) * 1000.0)  # milliseconds under the column name t_s
+    cases["log: t_s in milliseconds"] = Case(
+        ["calibrate", _log(ms, folder, "ms.parquet"), "--protocol", _protocol(relative, folder, "msp.csv", float)],
+        truth,
+        ("--columns", "ms"),
+    )
+    deg = dataclasses.replace(s, gyro_s=np.degrees(s.gyro_s))  # type: ignore[arg-type]
+    cases["log: gyro in deg/s as gx, gy, gz"] = Case(
+        ["calibrate", _log(deg, folder, "deg.parquet"), "--protocol", sheet], truth, ("deg/s",)
+    )
+    local = [(a + 7200.0, b + 7200.0, c) for a, b, c in rows]  # the sheet written in local time, UTC+2
+    cases["log: protocol sheet in local time (UTC+2)"] = Case(
+        ["calibrate", _log(s, folder, "seam.parquet"), "--protocol", _protocol(local, folder, "local.csv", float)],
+        truth,
+        ("time zone", "UTC"),
+    )
+    cases["log: protocol sheet counting from the log's start"] = Case(
+        ["calibrate", str(folder / "seam.parquet"), "--protocol", _protocol(relative, folder, "rel.csv", float)],
+        truth,
+        ("--protocol",),
+    )
+    d, truth_d, _ = _parking(rng, drive_s=500.0)
+    speed = d.channels["speed_mps"]
+    kmh = dataclasses.replace(d, channels={**d.channels, "speed_mps": Channel(speed.t_s, speed.value * 3.6)})
+    cases["log + drive: speed in km/h as speed_mps, driving only"] = Case(
+        ["calibrate", _log(kmh, folder, "kmh.parquet"), "--use", "driving"], truth_d, ("km/h", "speed")
+    )
+    deg_drive = dataclasses.replace(d, gyro_s=np.degrees(d.gyro_s))  # type: ignore[arg-type]
+    cases["log + drive: gyro in deg/s, driving only"] = Case(
+        ["calibrate", _log(deg_drive, folder, "degd.parquet"), "--use", "driving"], truth_d, ("deg/s",)
+    )
+    # mountcal's own outputs taken back in
+    log, cal, veh = str(folder / "seam.parquet"), str(folder / "seam_r.json"), str(folder / "seam_veh.parquet")
+    leftover = str(folder / "seam_left.json")
+    _quiet(["calibrate", log, "--protocol", sheet, "-o", cal])
+    _quiet(["rotate", log, "--calibration", cal, "-o", veh])
+    _quiet(["calibrate", veh, "--protocol", sheet, "-o", leftover])
+    cases["rotate: the vehicle-frame output rotated again"] = Case(
+        ["rotate", veh, "--calibration", cal, "-o", str(folder / "twice.parquet")], None, ("original log",), refuse=True
+    )
+    cases["rotate: the log with the calibration of its rotated output"] = Case(
+        ["rotate", log, "--calibration", leftover, "-o", str(folder / "left.parquet")],
+        None,
+        ("original log", "calibration that rotation applied"),
+        refuse=True,
+    )
+    cases["triad: on the vehicle-frame output"] = Case(
+        ["triad", veh, "-o", str(folder / "triad.json")], None, ("original log",), refuse=True
+    )
+    cases["export: the calibration of the rotated output"] = Case(
+        ["export", leftover, "--to", "ros2-static-tf", "-o", str(folder / "tf.txt")],
+        None,
+        ("original log", "calibration that rotation applied"),
+        refuse=True,
+    )
+    return cases
+
+
 # --------------------------------------------------------------------------- scoring
 
 
@@ -315,6 +392,8 @@ def run_case(case: Case, folder: Path) -> tuple[str, str]:
         return ("refused, names the fix" if named else "refused, fix NOT named"), text.strip().splitlines()[-1][:300]
     if code != 0:
         return f"exit {code}", text[-300:]
+    if case.refuse:
+        return "SILENT WRONG FILE", " ".join(case.argv[:2])
     if case.argv[0] != "calibrate":
         return "answered, not checked", ""
     doc = json.loads(out.read_text(encoding="utf-8"))
@@ -342,7 +421,7 @@ def main_cli(argv: list[str] | None = None) -> int:
         for k in range(args.cases):
             folder = Path(tmp) / f"case{k}"
             folder.mkdir()
-            for name, case in {**table_slips(rng, folder), **log_slips(rng, folder)}.items():
+            for name, case in {**table_slips(rng, folder), **log_slips(rng, folder), **seam_slips(rng, folder)}.items():
                 outcome, detail = run_case(case, folder)
                 tally = tallies.setdefault(name, Tally())
                 tally.counts[outcome] += 1
@@ -354,6 +433,7 @@ def main_cli(argv: list[str] | None = None) -> int:
         "answered, not confident",
         "refused, names the fix",
         "CONFIDENT WRONG",
+        "SILENT WRONG FILE",
         "refused, fix NOT named",
         "traceback",
     ]
@@ -366,7 +446,7 @@ def main_cli(argv: list[str] | None = None) -> int:
         f"slips the data can show ending badly: {bad}; slips they cannot show ending confident and wrong: {unsaid}"
     )
     for name, tally in tallies.items():
-        for outcome in ("CONFIDENT WRONG", "refused, fix NOT named", "traceback"):
+        for outcome in ("CONFIDENT WRONG", "SILENT WRONG FILE", "refused, fix NOT named", "traceback"):
             if outcome in tally.examples and (name not in cannot or outcome == "CONFIDENT WRONG"):
                 print(f"  {name} — {outcome}: {tally.examples[outcome]}", file=sys.stderr)
     return 0

@@ -523,6 +523,23 @@ def test_the_table_slips_of_the_benchmark_end_right_not_confident_or_refused_nam
             assert outcome in good, f"{name}: {outcome} ({detail})"
 
 
+def test_the_seam_slips_of_the_benchmark_end_right_not_confident_or_refused_naming_the_fix(tmp_path: Path) -> None:
+    """One draw of benchmarks/convention_slips.py's seam slips: a time unit, a gyro's and a speed's unit, a sheet's
+    clock, and mountcal's own outputs taken back in (rotated again, their calibration applied or exported, a triad)."""
+    import sys
+
+    sys.path.insert(0, str(REPO / "benchmarks"))
+    import convention_slips as slips
+
+    good = {"answered, right", "answered, not confident", "refused, names the fix"}
+    cases = slips.seam_slips(np.random.default_rng(8), tmp_path)
+    assert sum(case.refuse for case in cases.values()) >= 4
+    for name, case in cases.items():
+        outcome, detail = slips.run_case(case, tmp_path)
+        assert outcome in good, f"{name}: {outcome} ({detail})"
+        assert not case.refuse or outcome == "refused, names the fix", name
+
+
 def test_two_readings_of_a_heading_that_turn_opposite_ways_are_not_confident() -> None:
     """β (counter-clockwise from uphill) and a compass heading (clockwise from north) must add up to one
     azimuth; a heading column that turns the other way (an ENU yaw) contradicts the protocol's β."""
