@@ -99,6 +99,7 @@ from mountcal.estimate.driving_intervals import (
     turned_share,
     turned_tilt_removed,
 )
+from mountcal.estimate.speed_unit import scale_note
 from mountcal.io.samples import Channel
 
 if TYPE_CHECKING:
@@ -223,13 +224,8 @@ def run(inp: Inputs) -> Checks:
     findings = tuple(unexplained(tests, FAMILY_ALPHA))
     model_error = _model_error(findings, comparisons, parts, cues, inp.opts.horizontal_axes_sigma_deg)
     notes = [_note(f, cues.comparison) for f in findings]
-    if scale.noted:
-        notes.append(
-            f"the IMU's longitudinal acceleration is {scale.value:.3f} ± {scale.sigma:.3f} × d(speed)/dt (errors in "
-            f"both counted; {abs(scale.z or 0.0):.1f}σ from 1): a speed scale error (tyre radius, a GNSS speed's "
-            "filter), an accelerometer scale error"
-            + ("" if inp.gyro else ", or the body pitching on its suspension under load (no gyro to remove it)")
-        )
+    if scale.noted and scale.value is not None and scale.sigma is not None:
+        notes.append(scale_note(scale.value, scale.sigma, scale.z or 0.0, inp.gyro))
     grade = _grade(inp, unit)
     effects = _effects(inp, wide, grade)
     document = DrivingConsistency(
