@@ -280,6 +280,7 @@ def checked(done: LogResult, uphill_azimuth_deg: float | None, protocol: bool) -
         # yaw still tells left from right, so the turns are compared and the mirror is named, not passed over
         rot_vs, yaw_known = done.driving.rot_vs_longitudinal, True
     checks.append(crosscheck.turn_handedness(done.samples, rot_vs, yaw_known))
+    checks.append(crosscheck.gyro_scale(done.samples, rot_vs, yaw_known))
     if cal.method == "driving":
         checks += plausibility.answer_checks(cal)
     cal = replace(cal, provenance=replace(cal.provenance, conventions=stated))

@@ -14,6 +14,12 @@ tested (with the reason), or refuse with the option that fixes the convention:
   lateral acceleration against ``v·ω`` (a left turn pushes the specific force to the left, +y).
   They agree in sign on a right-handed sensor; a negative correlation refuses, naming the cue that
   disagrees and the option.
+- :func:`gyro_scale`: the same cues' sizes. The gyro's yaw rate against the heading's rate and against
+  ``a_y / v`` is 1 (a few per cent: scale errors, sideslip); 57.3 is a gyro logged in deg/s and read as rad/s,
+  1/57.3 one in rad/s stated to be deg/s. Refused with what states the unit when ``a_y / v`` (which has no
+  unit to get wrong) says so and the heading, if any, agrees; the heading alone (its unit is a convention
+  too) only says it. A quiet gyro on a highway, which no rate at rest or in a tight turn gives away
+  (:mod:`mountcal.stops.gyro_unit`), still turns.
 - :func:`heading_agreement`: two ways of reading a heading — the protocol's β (counter-clockwise
   from uphill) and the log's compass heading (clockwise from north) — must add up to one uphill
   azimuth; β − h constant instead means one of them runs the wrong way (the result is not confident).
@@ -35,6 +41,7 @@ from mountcal.core.option_names import option
 from mountcal.core.result import Check
 from mountcal.io.input_conventions import negated
 from mountcal.io.samples import Samples
+from mountcal.stops.gyro_unit import DEG_PER_RAD, fix
 from mountcal.stops.table import StopTable
 
 SENSE_CLEAR = 0.9  # |mean e^{i(φ ∓ β)}| of the sense the stops follow
@@ -44,6 +51,7 @@ TURN_BIN_S = 1.0  # the cues are compared as 1 s means (vibration and the clocks
 TURN_Z = 5.0  # ... and lies this many σ from no correlation (a refusal must not come from noise)
 BINS_PER_INDEPENDENT = 3.0  # 1 s means of a drive correlate over a few seconds
 MIN_SPEED_MPS = 3.0
+SCALE_BAND = 2.5  # a yaw-rate ratio within this factor of 57.3 (or of 1/57.3) is a unit; within it of 1, agreement
 HALF_TURN_DEG = 150.0  # stops and drive further apart than this in yaw: half a turn, not noise
 AXES = "xyz"
 
@@ -151,6 +159,57 @@ def turn_handedness(samples: Samples, rot_vs: Rotation, yaw_known: bool) -> Chec
         f"opposite turns: {shown}",
         _turn_advice(wrong, set(pairs), rot_vs),
     )
+
+
+def gyro_scale(samples: Samples, rot_vs: Rotation, yaw_known: bool) -> Check:
+    """The gyro's yaw rate over the heading's rate and over ``a_y / v``, where they turn together (module docstring).
+
+    Raises
+    ------
+    InputError
+        Every reference puts the gyro 57.3 times too large (deg/s read as rad/s) or too small (rad/s said deg/s).
+    """
+    name = "gyro_scale"
+    cues = _turn_cues(samples, rot_vs, yaw_known)
+    if cues is None or "gyro" not in cues:
+        return Check(name, None, "the log holds no gyro beside a heading channel or a speed with turns to compare")
+    ratios = {}
+    for ref in ("heading", "lateral"):
+        if ref in cues and (r := _sign_test(cues["gyro"], cues[ref], cues[ref])) is not None and r > 0:
+            ok = np.isfinite(cues["gyro"]) & np.isfinite(cues[ref])
+            ratios[ref] = float(np.std(cues["gyro"][ok]) / np.std(cues[ref][ok]))
+    if not ratios:
+        return Check(name, None, "too little turning to compare the gyro's yaw rate with another cue's")
+    shown = "; ".join(f"{ratio:.3g} times {_CUE[ref]}" for ref, ratio in ratios.items())
+    if "lateral" not in ratios and not 1.0 / SCALE_BAND < ratios["heading"] < SCALE_BAND:
+        # a heading channel's unit is a convention too (--heading-unit): only a_y / v, which has none, can tell
+        return Check(
+            name,
+            None,
+            f"the gyro's yaw rate is {shown}: a gyro's or a heading channel's unit off by 57.3 would give it, and "
+            "without turns at speed nothing in the log tells which",
+        )
+    if all(DEG_PER_RAD / SCALE_BAND < k < DEG_PER_RAD * SCALE_BAND for k in ratios.values()):
+        raise InputError(
+            samples.source or "log",
+            "angular rates in rad/s, the gyro's unit as the format, the columns or the mapping state it",
+            f"a yaw rate 57.3 times too large while the vehicle turns, as a gyro in deg/s reads: {shown}",
+            f"The gyro is logged in deg/s: {fix(samples.source or '', samples.channels)}",
+        )
+    if all(1.0 / (DEG_PER_RAD * SCALE_BAND) < k < SCALE_BAND / DEG_PER_RAD for k in ratios.values()):
+        raise InputError(
+            samples.source or "log",
+            "angular rates in rad/s, converted from the unit stated for the gyro",
+            f"a yaw rate 57.3 times too small while the vehicle turns, as rad/s stated to be deg/s reads: {shown}",
+            "The gyro is in rad/s already: drop the deg/s stated for it (a column map's :deg/s, a CAN mapping's "
+            "[units] gyro, the DBC signal's unit).",
+        )
+    if all(1.0 / SCALE_BAND < k < SCALE_BAND for k in ratios.values()):
+        return Check(name, True, f"the gyro's yaw rate is {shown}")
+    if 1.0 / SCALE_BAND < ratios.get("lateral", 0.0) < SCALE_BAND:
+        said = f"the gyro agrees with v·ω, the heading channel's rate does not (its unit, {option('heading_unit')}?)"
+        return Check(name, None, f"the gyro's yaw rate is {shown}: {said}")
+    return Check(name, None, f"the gyro's yaw rate is {shown}: no unit explains it, and it is not judged")
 
 
 _CUE = {

@@ -24,13 +24,10 @@ from mountcal.core.errors import InputError
 from mountcal.core.option_names import option
 from mountcal.core.terminal import safe
 from mountcal.io.sensor_frame import recorded_frame, several
-from mountcal.outputs.exporters.common import DEFAULT_CHILD, Frames
+from mountcal.outputs.exporters.common import DEFAULT_CHILD, Frames, user_axes
 
 if TYPE_CHECKING:
-    from collections.abc import Sequence
-
-    from mountcal.core.result import Calibration, Convention
-    from mountcal.io.input_conventions import AxisMap
+    from mountcal.core.result import Calibration
 
 FRAME_NAME = re.compile(r"[A-Za-z0-9_/][A-Za-z0-9_/.-]*")  # a name taken from a log is written only if plain
 
@@ -108,15 +105,4 @@ def with_child(cal: Calibration, frames: Frames) -> Frames:
     return replace(frames, said=(safe(said),), warn=True)
 
 
-def user_axes(conventions: Sequence[Convention]) -> AxisMap | None:
-    """The axis map stated for the calibration's log (``--axes``: a ROS log has no reader's map), unless identity."""
-    from mountcal.io.input_conventions import parse_axes
-
-    c = next((c for c in conventions if c.name == "axes"), None)
-    if c is None or c.how != "stated":
-        return None
-    mapped = parse_axes(c.value.split(" ")[0])
-    return None if mapped.identity else mapped
-
-
-__all__ = ["user_axes", "with_child"]
+__all__ = ["with_child"]

@@ -25,10 +25,13 @@ from mountcal.core.errors import NotEnoughInformation
 from mountcal.core.option_names import option
 
 if TYPE_CHECKING:
+    from collections.abc import Sequence
+
     from scipy.spatial.transform import Rotation
 
     from mountcal.core.conventions import FloatArray
-    from mountcal.core.result import Calibration
+    from mountcal.core.result import Calibration, Convention
+    from mountcal.io.input_conventions import AxisMap
 
 YawPolicy = Literal["refuse", "zero"]
 JACOBIAN_STEP_RAD = 1e-7  # central differences: error ~ step² (1e-14), rounding ~ 1e-16/step (1e-9)
@@ -93,8 +96,6 @@ class ExportOptions:
 
         found = mounting(cal, self.yaw, self.accept_unconfident)
         if self.frames is None:  # the format names no frame: its IMU frame must be the calibrated axes
-            from mountcal.outputs.exporters.child import user_axes
-
             mapped = user_axes(cal.provenance.conventions)
             said = f"sensor frame = the log's axes after the calibration's axis map {mapped.text}" if mapped else None
             return found if said is None else replace(found, notes=(*found.notes, said))
@@ -193,6 +194,17 @@ def mounting(cal: Calibration, yaw: YawPolicy = "refuse", accept_unconfident: bo
         rot = rot_vs_from_angles(np.radians(cal.roll_deg), np.radians(cal.pitch_deg), 0.0)
         return Mounting(rot, (sx, sy, None), True, tuple(notes))
     return Mounting(cal.rot_vs, (sx, sy, _radians(cal.rotation_sigma_deg[2])), False, tuple(notes))
+
+
+def user_axes(conventions: Sequence[Convention]) -> AxisMap | None:
+    """The axis map stated for the calibration's log (``--axes``: a ROS log has no reader's map), unless identity."""
+    from mountcal.io.input_conventions import parse_axes
+
+    c = next((c for c in conventions if c.name == "axes"), None)
+    if c is None or c.how != "stated":
+        return None
+    mapped = parse_axes(c.value.split(" ")[0])
+    return None if mapped.identity else mapped
 
 
 def propagate_sigma(
