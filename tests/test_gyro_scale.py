@@ -11,16 +11,22 @@ import dataclasses
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from mountcal.core.errors import InputError
+from mountcal.core.result import Check
 from mountcal.io.samples import Samples
-from mountcal.loop.crosscheck import DEG_PER_RAD, gyro_scale
+from mountcal.loop.crosscheck import DEG_PER_RAD, gyro_scale, turn_cues
 from mountcal.simulate.drive import simulate_drive
 
 
 @pytest.fixture(scope="module")
 def drive():  # type: ignore[no-untyped-def]
     return simulate_drive(3.0, -4.0, 30.0, duration_s=600.0, seed=21)
+
+
+def _check(samples: Samples, rot_vs: Rotation, yaw_known: bool) -> Check:
+    return gyro_scale(samples, turn_cues(samples, rot_vs, yaw_known))
 
 
 def _scaled(samples: Samples, factor: float) -> Samples:
@@ -30,7 +36,7 @@ def _scaled(samples: Samples, factor: float) -> Samples:
 
 @pytest.mark.parametrize(("heading", "yaw_known"), [(True, True), (False, True), (True, False)])
 def test_a_gyro_in_rad_s_turns_as_the_heading_and_the_lateral_acceleration(drive, heading, yaw_known) -> None:  # type: ignore[no-untyped-def]
-    check = gyro_scale(drive.to_samples(heading=heading), drive.truth.rot_vs, yaw_known)
+    check = _check(drive.to_samples(heading=heading), drive.truth.rot_vs, yaw_known)
     assert check.passed is True
     ratios = [float(x) for x in check.reason.split("is ")[1].replace(";", "").split() if x[0].isdigit()]
     assert ratios and all(0.8 < r < 1.25 for r in ratios), check.reason
@@ -40,34 +46,34 @@ def test_a_gyro_in_rad_s_turns_as_the_heading_and_the_lateral_acceleration(drive
 def test_a_gyro_in_deg_s_read_as_rad_s_is_refused_with_what_states_its_unit(drive, heading, yaw_known) -> None:  # type: ignore[no-untyped-def]
     samples = _scaled(drive.to_samples(heading=heading), DEG_PER_RAD)
     with pytest.raises(InputError, match=r"57\.3 times too large") as err:
-        gyro_scale(samples, drive.truth.rot_vs, yaw_known)
+        _check(samples, drive.truth.rot_vs, yaw_known)
     assert str(err.value).startswith("drive.parquet: ") and "add :deg/s to its gx, gy, gz" in str(err.value)
 
 
 def test_a_gyro_in_rad_s_stated_to_be_deg_s_is_refused(drive) -> None:  # type: ignore[no-untyped-def]
     samples = _scaled(drive.to_samples(heading=True), 1.0 / DEG_PER_RAD)
     with pytest.raises(InputError, match=r"57\.3 times too small"):
-        gyro_scale(samples, drive.truth.rot_vs, True)
+        _check(samples, drive.truth.rot_vs, True)
 
 
 def test_the_heading_alone_says_the_mismatch_and_refuses_nothing(drive) -> None:  # type: ignore[no-untyped-def]
     """A heading channel's unit is a convention too (stated radians on a channel in degrees): without v·ω, a
     57.3 between gyro and heading cannot tell whose unit is wrong."""
     samples = _scaled(drive.to_samples(heading=True), DEG_PER_RAD)
-    check = gyro_scale(samples, drive.truth.rot_vs, False)  # the lateral cue needs the yaw
+    check = _check(samples, drive.truth.rot_vs, False)  # the lateral cue needs the yaw
     assert check.passed is None and "heading channel's unit" in check.reason
     heading = drive.to_samples(heading=True)
     h = heading.channels["heading_deg"]
     wrong = dataclasses.replace(
         heading, channels={**heading.channels, "heading_deg": dataclasses.replace(h, value=h.value * DEG_PER_RAD)}
     )
-    check = gyro_scale(wrong, drive.truth.rot_vs, True)  # v·ω sides with the gyro
+    check = _check(wrong, drive.truth.rot_vs, True)  # v·ω sides with the gyro
     assert check.passed is None and "the heading channel's rate does not" in check.reason
 
 
 def test_no_turns_or_no_second_cue_is_not_judged(drive) -> None:  # type: ignore[no-untyped-def]
     samples = drive.to_samples()
-    assert gyro_scale(dataclasses.replace(samples, channels={}), drive.truth.rot_vs, True).passed is None
-    assert gyro_scale(samples, drive.truth.rot_vs, False).passed is None  # no heading, and a_y needs the yaw
+    assert _check(dataclasses.replace(samples, channels={}), drive.truth.rot_vs, True).passed is None
+    assert _check(samples, drive.truth.rot_vs, False).passed is None  # no heading, and a_y needs the yaw
     still = dataclasses.replace(samples, gyro_s=np.zeros_like(samples.gyro_s) + 1e-4)
-    assert gyro_scale(still, drive.truth.rot_vs, True).passed is None
+    assert _check(still, drive.truth.rot_vs, True).passed is None

@@ -279,8 +279,8 @@ def checked(done: LogResult, uphill_azimuth_deg: float | None, protocol: bool) -
         # cues half a turn apart, and the model-error term that follows exceeds the limit): the longitudinal cue's
         # yaw still tells left from right, so the turns are compared and the mirror is named, not passed over
         rot_vs, yaw_known = done.driving.rot_vs_longitudinal, True
-    checks.append(crosscheck.turn_handedness(done.samples, rot_vs, yaw_known))
-    checks.append(crosscheck.gyro_scale(done.samples, rot_vs, yaw_known))
+    cues = crosscheck.turn_cues(done.samples, rot_vs, yaw_known)
+    checks += [crosscheck.turn_handedness(done.samples, rot_vs, cues), crosscheck.gyro_scale(done.samples, cues)]
     if cal.method == "driving":
         checks += plausibility.answer_checks(cal)
     cal = replace(cal, provenance=replace(cal.provenance, conventions=stated))

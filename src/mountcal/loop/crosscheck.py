@@ -54,6 +54,7 @@ MIN_SPEED_MPS = 3.0
 SCALE_BAND = 2.5  # a yaw-rate ratio within this factor of 57.3 (or of 1/57.3) is a unit; within it of 1, agreement
 HALF_TURN_DEG = 150.0  # stops and drive further apart than this in yaw: half a turn, not noise
 AXES = "xyz"
+TurnCues = dict[str, FloatArray] | None  # "gyro", "heading", "lateral": yaw rates as 1 s means while moving
 
 
 # --------------------------------------------------------------------------- the stops' sense
@@ -125,11 +126,11 @@ def _suggested_flip(up_s: FloatArray) -> Any:
 # --------------------------------------------------------------------------- turns
 
 
-def turn_handedness(samples: Samples, rot_vs: Rotation, yaw_known: bool) -> Check:
+def turn_handedness(samples: Samples, rot_vs: Rotation, cues: TurnCues) -> Check:
     """Whether the gyro, the heading and the lateral acceleration turn the same way (module docstring).
 
-    ``rot_vs`` is the calibration (sensor → vehicle; its up axis levels the gyro); the lateral cue needs
-    its yaw (``yaw_known``). Each available pair is compared over 1 s means while moving.
+    ``cues`` are :func:`turn_cues` of ``samples`` with ``rot_vs``, the calibration (its up axis levels the
+    gyro). Each available pair is compared over 1 s means while moving.
 
     Raises
     ------
@@ -137,7 +138,6 @@ def turn_handedness(samples: Samples, rot_vs: Rotation, yaw_known: bool) -> Chec
         A pair turns opposite ways: which cue disagrees, and the option that fixes it.
     """
     name = "handedness_turns"
-    cues = _turn_cues(samples, rot_vs, yaw_known)
     if cues is None:
         return Check(name, None, "the log holds no two of gyro, heading channel and speed with turns to compare")
     pairs = {}
@@ -161,8 +161,9 @@ def turn_handedness(samples: Samples, rot_vs: Rotation, yaw_known: bool) -> Chec
     )
 
 
-def gyro_scale(samples: Samples, rot_vs: Rotation, yaw_known: bool) -> Check:
-    """The gyro's yaw rate over the heading's rate and over ``a_y / v``, where they turn together (module docstring).
+def gyro_scale(samples: Samples, cues: TurnCues) -> Check:
+    """The gyro's yaw rate over the heading's rate and over ``a_y / v``, where they turn together (module docstring);
+    ``cues`` are :func:`turn_cues` of ``samples``.
 
     Raises
     ------
@@ -170,7 +171,6 @@ def gyro_scale(samples: Samples, rot_vs: Rotation, yaw_known: bool) -> Check:
         Every reference puts the gyro 57.3 times too large (deg/s read as rad/s) or too small (rad/s said deg/s).
     """
     name = "gyro_scale"
-    cues = _turn_cues(samples, rot_vs, yaw_known)
     if cues is None or "gyro" not in cues:
         return Check(name, None, "the log holds no gyro beside a heading channel or a speed with turns to compare")
     ratios = {}
@@ -255,8 +255,9 @@ def _turn_advice(wrong: set[tuple[str, str]], tested: set[tuple[str, str]], rot_
     return f"Either {mirrored}, or one of the signals has the wrong sign at its source (a DBC factor)."
 
 
-def _turn_cues(samples: Samples, rot_vs: Rotation, yaw_known: bool) -> dict[str, FloatArray] | None:
-    """The cues as 1 s means while moving: yaw rates (rad/s) and the lateral acceleration's ``a_y / v``."""
+def turn_cues(samples: Samples, rot_vs: Rotation, yaw_known: bool) -> TurnCues:
+    """The cues as 1 s means while moving: yaw rates (rad/s) and the lateral acceleration's ``a_y / v`` (which
+    needs the calibration's yaw, ``yaw_known``); None when fewer than two are in the log."""
     t = samples.t_s
     if len(samples) < 10 or t[-1] - t[0] < 4 * TURN_BIN_S:
         return None
