@@ -1,8 +1,8 @@
 """Samples mountcal already rotated, read back: the readers say so from the file's own metadata (a Parquet
 file's ``mountcal.frame``, the chosen MCAP channel's ``frame``), rotating them again is refused — by the
-command line and the library alike — and calibrating them says what the angles are relative to. A CSV
-carries no metadata: it cannot be told apart (docs/conventions.md). Every file is written by mountcal's
-own ``rotate``."""
+command line and the library alike — and calibrating them says what the angles are relative to. A CSV,
+which carries no metadata, says it in a column (tests/test_rotated_csv.py). Every file is written by
+mountcal's own ``rotate``."""
 
 from __future__ import annotations
 
@@ -10,8 +10,6 @@ import json
 import shutil
 from pathlib import Path
 
-import numpy as np
-import pandas as pd
 import pytest
 from tests.conftest import Refused
 
@@ -29,12 +27,12 @@ VEHICLE_TOPIC = "/imu/data/vehicle"
 
 @pytest.fixture(scope="module")
 def made(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The parking log, its calibration and its rotated copies (Parquet, MCAP, CSV), all by the command line."""
+    """The parking log, its calibration and its rotated copies (Parquet, MCAP), all by the command line."""
     folder = tmp_path_factory.mktemp("rotated")
     shutil.copy(DATA / "parking.mcap", folder / "parking.mcap")
     protocol = ["--protocol", str(DATA / "parking_protocol.csv")]
     assert main(["calibrate", str(folder / "parking.mcap"), *protocol, "-o", str(folder / "r.json"), "-q"]) == 0
-    for name in ("veh.parquet", "veh.mcap", "veh.csv"):
+    for name in ("veh.parquet", "veh.mcap"):
         args = ["rotate", str(folder / "parking.mcap"), "--calibration", str(folder / "r.json"), "-o"]
         assert main([*args, str(folder / name), "-q"]) == 0
     return folder
@@ -129,16 +127,6 @@ def test_a_sensor_frame_log_states_no_frame(made: Path) -> None:
     doc = json.loads((made / "r.json").read_text())
     assert "frame" not in [c["name"] for c in doc["provenance"]["conventions"]]
     assert not any("relative to that frame" in note for note in doc["notes"])
-
-
-def test_a_rotated_csv_cannot_be_told_apart(made: Path) -> None:
-    """The documented limit: a CSV has no metadata, so its samples read as the sensor's and rotate again."""
-    assert read_log(made / "veh.csv").rotated is None
-    twice = made / "twice_from.csv"
-    assert main(["rotate", str(made / "veh.csv"), "--calibration", str(made / "r.json"), "-o", str(twice), "-q"]) == 0
-    once, again = (pd.read_csv(p)[["ax", "ay", "az"]].mean().to_numpy() for p in (made / "veh.csv", twice))
-    turned = np.degrees(np.arccos(once @ again / np.linalg.norm(once) / np.linalg.norm(again)))
-    assert turned > 5  # the mounting (roll 5°, pitch 6°) applied a second time tilts the mean specific force
 
 
 def test_the_stops_command_says_the_frame_of_its_stops(made: Path, capsys: pytest.CaptureFixture[str]) -> None:

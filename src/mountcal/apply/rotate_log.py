@@ -64,7 +64,7 @@ from mountcal.core.result import VEHICLE_FRAME, Calibration
 from mountcal.core.threads import helpers_allowed
 from mountcal.core.version import software_version
 from mountcal.estimate import effects
-from mountcal.io.frame import CALIBRATION_KEY, FRAME_KEY, PREFIX
+from mountcal.io.frame import CALIBRATION_KEY, FRAME_KEY, PREFIX, frame_word
 from mountcal.io.input_conventions import AxisMap, check_same_axes, parse_axes
 from mountcal.io.logs import iter_log
 from mountcal.io.mcap.chunks import open_log
@@ -405,7 +405,7 @@ def _writer(
     if kind == "parquet":
         return ParquetSamples(f, gyro, meta, descriptions=_descriptions(cal))
     if kind == "csv":
-        return CsvSamples(f, gyro, meta)
+        return CsvSamples(f, gyro, frame_word(cal.frame))  # a CSV has no metadata: the frame in a column
     return McapImuSamples(f, _topic("/imu", cal), frame_id, {k.removeprefix(PREFIX): v for k, v in meta.items()})
 
 

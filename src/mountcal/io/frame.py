@@ -5,18 +5,23 @@ into its output — a Parquet file's key-value metadata (``mountcal.frame``, ``m
 MCAP output channel's metadata (``frame``, ``calibration``) — and the readers recognise them here by that
 metadata, never by a name, into :class:`Rotated` (``Samples.rotated``): such samples are already in the
 vehicle (or levelled) frame, so applying a calibration again is refused and calibrating them is said to
-measure the rotation left over. A CSV has no place for it: a rotated CSV reads as a sensor-frame log.
+measure the rotation left over. A CSV has no metadata: a table says its frame in a column ``frame``
+(:data:`FRAME_COLUMN`) — a rotated CSV's (the frame's first word in every row: :func:`table_column_rotated`
+reads it over the whole file) and a stop table's (its whole text) — by one rule (:func:`column_text`).
 
 :func:`written_by_mountcal` also knows mountcal's other outputs (a fleet table: any ``mountcal.*`` key).
 """
 
 from __future__ import annotations
 
+import io
 import json
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Generator, Mapping, Sequence
+from contextlib import closing
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from mountcal.core.angles import ANGLE_NAMES, Angles
 from mountcal.core.errors import InputError
@@ -29,6 +34,7 @@ CALIBRATION_KEY = "calibration"
 FRAME_CONVENTION = "frame"  # the name of the Convention saying the samples' frame (frame_convention)
 FRAME_NAMES = ("vehicle", "levelled")  # the first word of the frame mountcal writes (core.result's frames)
 SENSOR = "sensor"  # a table's frame column for the sensor's own axes (what no column means too)
+FRAME_COLUMN = "frame"  # a table's column saying its samples' frame (a CSV has no metadata to say it)
 
 
 @dataclass(frozen=True)
@@ -54,8 +60,13 @@ def rotated_by(metadata: Mapping[str, str], by: str, prefix: str = "") -> Rotate
     frame = metadata.get(prefix + FRAME_KEY)
     if frame is None:
         return None
-    word = frame.split(" ", 1)[0]
+    word = frame_word(frame)
     return Rotated(word if word in FRAME_NAMES else frame, _calibration(metadata.get(prefix + CALIBRATION_KEY)), by)
+
+
+def frame_word(frame: str) -> str:
+    """The first word of a frame's text (``vehicle``, ``levelled``, ``sensor``): what a rotated CSV's column holds."""
+    return frame.strip().split(" ", 1)[0]
 
 
 def _calibration(text: str | None) -> str:
@@ -117,27 +128,119 @@ def rotated_of(conventions: Sequence[Convention]) -> Rotated | None:
 
 
 def column_frame(values: Sequence[object], where: str, column: str) -> list[Convention]:
-    """The frame a table's column (a stop table's ``frame``) says its accelerations are in: the sensor's
-    (no convention), or mountcal's vehicle or levelled frame, as :func:`frame_convention` wrote it.
+    """The frame a stop table's column ``frame`` says its accelerations are in: the sensor's (no convention),
+    or mountcal's vehicle or levelled frame, as :func:`frame_convention` wrote it (:func:`column_text`'s rule)."""
+    text = column_text(values, where, column)
+    return [] if text is None else [Convention(FRAME_CONVENTION, text, "stated", f"{where}: column {column}")]
+
+
+def column_rotated(values: Sequence[object], where: str, column: str = FRAME_COLUMN) -> Rotated | None:
+    """What a sample table's column ``frame`` says (``values``: the column's distinct values over the whole
+    file): None for the sensor's frame, else the :class:`Rotated` of mountcal rotate's CSV output (the word
+    its rows hold; a column records no calibration). The rule is :func:`column_text`'s."""
+    text = column_text(values, where, column)
+    return None if text is None else Rotated(frame_word(text), "", f"the column {column} of {where}")
+
+
+def column_text(values: Sequence[object], where: str, column: str) -> str | None:
+    """The one frame a table's column holds in every row (None: ``sensor``, the sensor's own axes).
 
     Raises
     ------
     InputError
-        Not one value in every row, or a first word other than ``sensor``, ``vehicle``, ``levelled``.
+        Not one value in every row, or a first word other than ``sensor``, ``vehicle``, ``levelled``:
+        naming the file, the column and the values found (a column of that name holding something else
+        is taken for mountcal's mark by its name, so it is to be renamed).
     """
-    texts = {str(v).strip() for v in values}
+    texts = {_text(v) for v in values}
     words = (SENSOR, *FRAME_NAMES)
-    if len(texts) != 1 or not {t.split(" ", 1)[0] for t in texts} <= set(words):
+    if len(texts) != 1 or not {frame_word(t) for t in texts} <= set(words):
+        shown = sorted(repr(t) for t in texts)
         raise InputError(
             where,
-            f"one frame in the column {column}, its first word {', '.join(words)}",
-            ", ".join(sorted(texts)),
-            f"Give every row the frame of its accelerations ({SENSOR}: the sensor's own axes), or drop the column.",
+            f"one frame in every row of the column {column}, its first word {', '.join(words)}",
+            f"{len(texts)} value(s) in the column {column}: {', '.join(shown)}"
+            if len(shown) <= _SHOWN
+            else f"more than {_SHOWN} values in the column {column}, among them {', '.join(shown[:_SHOWN])}",
+            f"Give every row the frame of its samples ({SENSOR}: the sensor's own axes; vehicle or levelled: "
+            f"mountcal rotate's output), one file per frame; a column {column} holding anything else: rename it.",
         )
     text = texts.pop()
-    if text.split(" ", 1)[0] == SENSOR:
-        return []
-    return [Convention(FRAME_CONVENTION, text, "stated", f"{where}: column {column}")]
+    return None if frame_word(text) == SENSOR else text
+
+
+_SHOWN = 6  # the values a refusal lists
+
+
+def _text(value: object) -> str:
+    """A cell as text: empty for a missing one (None, NaN), bytes decoded."""
+    if value is None or (isinstance(value, float) and value != value):
+        return ""
+    return (value.decode(errors="replace") if isinstance(value, bytes) else str(value)).strip()
+
+
+def table_column_rotated(path: Path, names: Sequence[str], sep: str = ",") -> Rotated | None:
+    """What a table's column ``frame`` says over the whole file (:func:`column_rotated`); None without one.
+
+    ``names`` are the table's columns (its header), ``sep`` a CSV's delimiter. The column is read alone,
+    before any sample is used — a file read in chunks is judged as a whole one — and only its distinct
+    values reach Python (pyarrow's ``unique`` a batch; a CSV by position, as bytes, its whole lines when
+    it was cut and that is allowed, a row with too few or too many fields skipped: it holds no sample).
+
+    Raises
+    ------
+    InputError
+        The column's values (:func:`column_text`), or a CSV that does not parse.
+    """
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    if FRAME_COLUMN not in names:
+        return None
+    found: set[object] = set()
+    batches = _parquet_column(path) if path.suffix.lower() in (".parquet", ".pq") else _csv_column(path, names, sep)
+    with closing(batches):
+        try:
+            for column in batches:
+                found.update(pc.unique(column).to_pylist())
+                if len(found) > _SHOWN:  # refused whatever follows: reading on would only list more
+                    break
+        except (pa.ArrowInvalid, OSError) as err:
+            raise InputError(
+                str(path), "a sample table", f"a file that does not parse ({err})", "Check the file."
+            ) from err
+    return column_rotated(sorted(found, key=str), str(path))
+
+
+def _parquet_column(path: Path) -> Generator[Any, None, None]:
+    import pyarrow.parquet as pq
+
+    for batch in pq.ParquetFile(path).iter_batches(batch_size=1 << 20, columns=[FRAME_COLUMN]):
+        yield batch.column(0)
+
+
+def _csv_column(path: Path, names: Sequence[str], sep: str) -> Generator[Any, None, None]:
+    import pyarrow as pa
+    import pyarrow.csv as pa_csv
+
+    from mountcal.io.whole import text_source
+
+    ours = f"c{list(names).index(FRAME_COLUMN)}"  # by position: the caller has read (and stripped) the names
+    source = text_source(path)
+    try:
+        reader = pa_csv.open_csv(
+            source,
+            read_options=pa_csv.ReadOptions(
+                skip_rows=1, column_names=[f"c{i}" for i in range(len(names))], block_size=1 << 22
+            ),
+            parse_options=pa_csv.ParseOptions(delimiter=sep, invalid_row_handler=lambda _: "skip"),
+            convert_options=pa_csv.ConvertOptions(include_columns=[ours], column_types={ours: pa.binary()}),
+        )
+        for batch in reader:
+            yield batch.column(0)
+    finally:
+        if isinstance(source, io.IOBase):  # a cut file's whole lines (mountcal.io.whole)
+            source.close()
 
 
 def refuse_rotated(rotated: Rotated | None, where: str, because: str, todo: str) -> None:
@@ -193,8 +296,9 @@ def written_by_mountcal(path: Path) -> bool:
     """Whether mountcal wrote this file (recognised by its metadata, not its name).
 
     A fleet table or a rotated log in Parquet carries ``mountcal.*`` file metadata; a rotated MCAP
-    has a channel whose metadata holds the frame and the calibration applied. Such a file is an
-    output, never a log to calibrate (a rotated log would calibrate to the identity).
+    has a channel whose metadata holds the frame and the calibration applied; a rotated CSV says
+    ``vehicle`` or ``levelled`` in its column ``frame``. Such a file is an output, never a log to
+    calibrate (a rotated log would calibrate to the identity).
     """
     suffix = path.suffix.lower()
     if special_kind(path) is not None:  # a FIFO would block the look inside; its reader refuses it
@@ -212,23 +316,34 @@ def written_by_mountcal(path: Path) -> bool:
                 summary = make_reader(f).get_summary()
             channels = summary.channels.values() if summary is not None else ()
             return any({FRAME_KEY, CALIBRATION_KEY} <= c.metadata.keys() for c in channels)
+        if suffix == ".csv":  # as mountcal rotate writes it: comma-separated, its column frame named exactly
+            import pyarrow.csv as pa_csv
+
+            with pa_csv.open_csv(path, read_options=pa_csv.ReadOptions(block_size=1 << 16)) as head:
+                names = head.schema.names  # its first 64 KiB parsed, no more
+            return table_column_rotated(path, names) is not None
     except Exception:  # unreadable: not recognisably ours; the log reader will say what is wrong with it
         return False
     return False
 
 
 __all__ = [
+    "FRAME_COLUMN",
     "FRAME_CONVENTION",
     "Rotated",
     "channel_rotated",
     "column_frame",
+    "column_rotated",
+    "column_text",
     "frame_convention",
     "frame_note",
+    "frame_word",
     "parquet_rotated",
     "refuse_leftover",
     "refuse_rotated",
     "rotated_by",
     "rotated_of",
+    "table_column_rotated",
     "topic_label",
     "with_frame_note",
     "written_by_mountcal",

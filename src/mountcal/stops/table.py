@@ -32,7 +32,7 @@ from mountcal.core.output_suffix import check_output_suffix
 from mountcal.core.paths import read_input_bytes
 from mountcal.core.ranges import check_values
 from mountcal.core.result import Convention
-from mountcal.io.frame import FRAME_CONVENTION, column_frame
+from mountcal.io.frame import FRAME_COLUMN, FRAME_CONVENTION, column_frame
 from mountcal.io.input_conventions import (
     HEADING_REF,
     AxisMap,
@@ -67,7 +67,7 @@ LON = "lon_deg"
 ALT = "alt_m"
 REQUIRED = ACC
 AXES = "axes"  # the axis map already applied to ax, ay, az (by `mountcal stops --axes`)
-FRAME = "frame"  # the frame of ax, ay, az when mountcal rotate had put the log in the vehicle (levelled) frame
+FRAME = FRAME_COLUMN  # the frame of ax, ay, az when mountcal rotate had put the log in the vehicle (levelled) frame
 OPTIONAL = (
     BETA, HEADING_REF, *STD, COUNT, *STD_MEAN, *CORR, TIME, DURATION, TEMPERATURE, SITE, LAT, LON, ALT, HEADING, AXES,
     FRAME,

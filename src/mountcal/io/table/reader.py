@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Collection, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -31,7 +31,8 @@ class TableReader(LogReader):
             samples = read_table(path)
         else:
             samples = read_mapped(path, layout, read_as)
-        return _said(_framed(check_magnitude(samples, layout, str(path)), _frame_of(path)), layout)
+        rotated = table_rotated(path, read_as, _data(layout))
+        return _said(_framed(check_magnitude(samples, layout, str(path)), rotated), layout)
 
     def iter_chunks(self, path: Path, options: LogOptions, max_samples: int) -> Iterator[Samples]:
         from mountcal.io.table.mapped import iter_mapped
@@ -43,7 +44,7 @@ class TableReader(LogReader):
             chunks = iter_table(path, max_samples)
         else:
             chunks = iter_mapped(path, layout, read_as, max_samples)
-        return _checked(chunks, layout, path)
+        return _checked(chunks, layout, read_as, path)
 
     def inspect(self, path: Path, options: LogOptions) -> LogSummary:
         from mountcal.io.samples import summary
@@ -51,9 +52,9 @@ class TableReader(LogReader):
         return summary(self.read(path, options), path.suffix.lstrip(".").lower(), "table")
 
 
-def _checked(chunks: Iterator[Samples], layout: Layout, path: Path) -> Iterator[Samples]:
+def _checked(chunks: Iterator[Samples], layout: Layout, read_as: dict[str, str], path: Path) -> Iterator[Samples]:
     """The chunks, the first (the first with samples) checked as :func:`check_magnitude` checks a whole table;
-    its verdict (gravity-free) carried to the rest; each with the frame the file states."""
+    its verdict (gravity-free) carried to the rest; each with the frame the whole file states."""
     from dataclasses import replace
 
     from mountcal.io.table.mapped import check_magnitude
@@ -67,15 +68,33 @@ def _checked(chunks: Iterator[Samples], layout: Layout, path: Path) -> Iterator[
         elif verdict:
             chunk = replace(chunk, gravity_free=verdict)
         if not looked:
-            rotated, looked = _frame_of(path), True
+            rotated, looked = table_rotated(path, read_as, _data(layout)), True
         yield _said(_framed(chunk, rotated), layout)
 
 
-def _frame_of(path: Path) -> Rotated | None:
-    """What a Parquet file's metadata state of its samples' frame (:mod:`mountcal.io.frame`); a CSV states none."""
-    from mountcal.io.frame import parquet_rotated
+def table_rotated(path: Path, read_as: dict[str, str], data: Collection[str] = ()) -> Rotated | None:
+    """What a table states of its samples' frame (:mod:`mountcal.io.frame`): a Parquet file's metadata (naming
+    the calibration applied), else its column ``frame`` over the whole file — a CSV's only way to say it —
+    unless ``data``, the columns its layout reads, hold it (a column map naming ``frame``: data, not a mark).
 
-    return parquet_rotated(path) if path.suffix.lower() in (".parquet", ".pq") else None
+    Raises
+    ------
+    InputError
+        A column ``frame`` without one value in every row, or with a word other than ``sensor``,
+        ``vehicle``, ``levelled`` (:func:`mountcal.io.frame.column_text`).
+    """
+    from mountcal.io.frame import FRAME_COLUMN, parquet_rotated, table_column_rotated
+    from mountcal.io.table.mapped import PARQUET, header
+
+    stated = parquet_rotated(path) if path.suffix.lower() in PARQUET else None
+    if stated is not None or FRAME_COLUMN in data:
+        return stated
+    return table_column_rotated(path, header(path)[0], read_as.get("sep", ","))
+
+
+def _data(layout: Layout) -> list[str]:
+    """The columns the layout reads as data."""
+    return [c.name for c in layout.columns.values()]
 
 
 def _framed(samples: Samples, rotated: Rotated | None) -> Samples:
@@ -126,4 +145,4 @@ def table_layout(path: Path, options: LogOptions) -> tuple[Layout, dict[str, str
     return (replace(layout, read_as=read_as) if read_as else layout), read_as
 
 
-__all__ = ["TableReader", "table_layout"]
+__all__ = ["TableReader", "table_layout", "table_rotated"]

@@ -4,7 +4,8 @@
   ``t_s, ax, ay, az`` (and ``gx, gy, gz``) in s, m/s², rad/s; the frame and the calibration in the
   file's key-value metadata.
 - :class:`CsvSamples`: the same columns as CSV (pyarrow's writer: shortest round-trip decimal, so
-  the numbers read back exactly).
+  the numbers read back exactly), then a column ``frame`` holding the frame's word in every row (a CSV
+  has no metadata; the table reader recognises it, :mod:`mountcal.io.frame`).
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import pyarrow as pa
 import pyarrow.csv as pa_csv
 import pyarrow.parquet as pq
 
+from mountcal.io.frame import FRAME_COLUMN
 from mountcal.io.samples import FloatArray
 
 ACC_COLUMNS = ("ax", "ay", "az")
@@ -79,16 +81,31 @@ class ParquetSamples:
 
 
 class CsvSamples:
-    """Samples to a CSV file (header line, then rows), written chunk by chunk."""
+    """Samples to a CSV file (header line, then rows), written chunk by chunk.
 
-    def __init__(self, file: BinaryIO, gyro: bool, metadata: Mapping[str, str]) -> None:
-        self.schema = _schema(gyro, {})
+    Parameters
+    ----------
+    file : binary file
+        Where to write.
+    gyro : bool
+        Whether the rows carry ``gx, gy, gz``.
+    frame : str
+        The word written in the last column, ``frame``, of every row (``vehicle``, ``levelled``): what
+        the file's samples are in, where a Parquet file has its metadata.
+    """
+
+    def __init__(self, file: BinaryIO, gyro: bool, frame: str) -> None:
+        self._numbers = _schema(gyro, {})
+        self.schema = self._numbers.append(pa.field(FRAME_COLUMN, pa.string()))
         self.gyro = gyro
-        self._writer = pa_csv.CSVWriter(file, self.schema)
+        self.frame = frame
+        # Unquoted: the numbers never are, and the word needs no quotes (8 bytes a row, not 10).
+        self._writer = pa_csv.CSVWriter(file, self.schema, write_options=pa_csv.WriteOptions(quoting_style="none"))
 
     def write(self, t_s: FloatArray, acc: FloatArray, gyro: FloatArray | None) -> None:
         """Append rows: ``t_s`` (m,) s, ``acc`` (m, 3) m/s², ``gyro`` (m, 3) rad/s."""
-        self._writer.write_table(_table(t_s, acc, gyro if self.gyro else None, self.schema))
+        rows = _table(t_s, acc, gyro if self.gyro else None, self._numbers)
+        self._writer.write_table(rows.append_column(self.schema.field(FRAME_COLUMN), pa.repeat(self.frame, len(t_s))))
 
     def close(self) -> None:
         self._writer.close()
