@@ -338,6 +338,11 @@ def seam_slips(rng: np.random.Generator, folder: Path) -> dict[str, Case]:
     cases["rotate: the vehicle-frame output rotated again"] = Case(
         ["rotate", veh, "--calibration", cal, "-o", str(folder / "twice.parquet")], None, ("original log",), refuse=True
     )
+    veh_csv = str(folder / "seam_veh.csv")
+    _quiet(["rotate", log, "--calibration", cal, "-o", veh_csv])
+    cases["rotate: the vehicle-frame CSV rotated again"] = Case(
+        ["rotate", veh_csv, "--calibration", cal, "-o", str(folder / "twice.csv")], None, ("original log",), refuse=True
+    )
     cases["rotate: the log with the calibration of its rotated output"] = Case(
         ["rotate", log, "--calibration", leftover, "-o", str(folder / "left.parquet")],
         None,
