@@ -127,11 +127,12 @@ def test_level_only_writes_a_frame_whose_metadata_and_columns_say_yaw_is_the_sen
     # the data: the parked samples have gravity on +z (levelled) whatever the heading
     df = pd.read_parquet(out)
     assert float(df["az"].median()) > 9.7
-    # CSV cannot carry the warning: refused
-    assert (
-        main(["rotate", str(PARKING), "--calibration", str(result), "-o", str(tmp_path / "o.csv"), "--level-only"]) == 2
-    )
-    assert not (tmp_path / "o.csv").exists()
+    # a CSV says it in its column frame, and reads back as levelled samples (rotating them again is refused)
+    csv = tmp_path / "o.csv"
+    assert main(["rotate", str(PARKING), "--calibration", str(result), "-o", str(csv), "--level-only"]) == 0
+    assert set(pd.read_csv(csv)["frame"]) == {"levelled"}
+    again = ["rotate", str(csv), "--calibration", str(result), "-o", str(tmp_path / "o2.csv"), "--level-only"]
+    assert main(again) == 2 and not (tmp_path / "o2.csv").exists()
 
 
 def test_level_only_mcap_uses_a_levelled_topic_and_frame_id(noyaw: Calibration, tmp_path: Path) -> None:

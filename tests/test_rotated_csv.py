@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from tests.conftest import Refused
 
 from mountcal.cli import main
 from mountcal.estimate.triad import Triad
@@ -42,15 +43,6 @@ def made(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def _digest(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
-
-
-def _refused(argv: list[str], out: Path, capsys: pytest.CaptureFixture[str]) -> str:
-    """The command's refusal: exit 2, no traceback, no output, its message."""
-    capsys.readouterr()
-    assert main(argv) == 2
-    err = capsys.readouterr().err
-    assert "Traceback" not in err and not out.exists()
-    return err
 
 
 def _calibrated(log: Path, out: Path) -> dict:
@@ -80,30 +72,26 @@ def test_rotate_writes_the_frame_word_in_every_row_after_the_columns_it_wrote_be
 
 
 @pytest.mark.parametrize(("suffix", "chunk"), [(".csv", []), (".parquet", ["--chunk", "1000"]), (".mcap", [])])
-def test_rotating_a_rotated_csv_again_is_refused(
-    made: Path, suffix: str, chunk: list[str], capsys: pytest.CaptureFixture[str]
-) -> None:
+def test_rotating_a_rotated_csv_again_is_refused(refused: Refused, made: Path, suffix: str, chunk: list[str]) -> None:
     before = _digest(made / "veh.csv")
     out = made / f"twice{suffix}"
     argv = ["rotate", str(made / "veh.csv"), "--calibration", str(made / "r.json"), *chunk, "-o", str(out)]
-    err = _refused(argv, out, capsys)
+    err = refused(argv, out)
     assert f"{made / 'veh.csv'}: expected samples in the sensor's frame" in err
     assert "already put in the vehicle frame" in err and "apply the mounting twice" in err
     assert _digest(made / "veh.csv") == before
 
 
-def test_a_triad_is_refused_on_a_rotated_csv_fitted_or_applied(
-    made: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
+def test_a_triad_is_refused_on_a_rotated_csv_fitted_or_applied(refused: Refused, made: Path, tmp_path: Path) -> None:
     out = tmp_path / "t.json"
-    err = _refused(["triad", str(made / "veh.csv"), "-o", str(out)], out, capsys)
+    err = refused(["triad", str(made / "veh.csv"), "-o", str(out)], out)
     assert f"{made / 'veh.csv'}: expected samples in the sensor's frame" in err and "sensor's own axes" in err
     triad = tmp_path / "triad.json"
     fitted = Triad(np.array([0.02, -0.01, 0.03]), np.zeros(6), np.eye(9) * 1e-8, "test")
     triad.write_text(json.dumps(fitted.to_dict()), encoding="utf-8")
     out = tmp_path / "r.json"
     argv = ["calibrate", str(made / "veh.csv"), "--protocol", str(SHEET), "--triad", str(triad), "-o", str(out)]
-    err = _refused(argv, out, capsys)
+    err = refused(argv, out)
     assert "vehicle frame" in err and "--triad" in err
 
 
@@ -117,15 +105,13 @@ def test_calibrating_a_rotated_csv_states_its_frame_and_what_the_angles_measure(
         assert abs(doc["mounting"][angle]) < 0.15, doc["mounting"]
 
 
-def test_the_stop_table_of_a_rotated_csv_keeps_its_frame(
-    made: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
+def test_the_stop_table_of_a_rotated_csv_keeps_its_frame(refused: Refused, made: Path, tmp_path: Path) -> None:
     stops = tmp_path / "stops.csv"
     assert main(["stops", str(made / "veh.csv"), "--protocol", str(SHEET), "-o", str(stops), "-q"]) == 0
     frames = set(pd.read_csv(stops, comment="#")["frame"].astype(str))
     assert frames == {"vehicle (mountcal rotate's output)"}
     out = tmp_path / "t.json"
-    assert "sensor's own axes" in _refused(["triad", str(stops), "-o", str(out)], out, capsys)
+    assert "sensor's own axes" in refused(["triad", str(stops), "-o", str(out)], out)
 
 
 def _with_frames(made: Path, target: Path, word: str, rows: dict[int, str] | None = None) -> Path:
@@ -148,14 +134,14 @@ def _with_frames(made: Path, target: Path, word: str, rows: dict[int, str] | Non
     ],
 )
 def test_a_frame_column_with_several_or_unknown_values_is_refused(
-    made: Path, tmp_path: Path, word: str, rows: dict[int, str] | None, found: str, capsys: pytest.CaptureFixture[str]
+    refused: Refused, made: Path, tmp_path: Path, word: str, rows: dict[int, str] | None, found: str
 ) -> None:
     log = _with_frames(made, tmp_path / "mixed.csv", word, rows)
     for out, argv in (
         (tmp_path / "o.parquet", ["rotate", str(log), "--calibration", str(made / "r.json"), "--chunk", "1000"]),
         (tmp_path / "o.json", ["calibrate", str(log), "--protocol", str(SHEET)]),
     ):
-        err = _refused([*argv, "-o", str(out)], out, capsys)
+        err = refused([*argv, "-o", str(out)], out)
         assert f"{log}: expected one frame in every row of the column frame" in err and found in err
         assert "one file per frame" in err
 
@@ -181,7 +167,7 @@ def test_a_frame_column_saying_sensor_reads_as_a_log(made: Path, tmp_path: Path)
 
 
 def test_a_rotated_csv_and_a_rotated_parquet_of_the_same_log_calibrate_and_refuse_alike(
-    made: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    refused: Refused, made: Path, tmp_path: Path
 ) -> None:
     docs = {s: _calibrated(made / f"veh.{s}", tmp_path / f"{s}.json") for s in ("csv", "parquet")}
     for angle in ("roll_deg", "pitch_deg", "yaw_deg"):
@@ -192,7 +178,7 @@ def test_a_rotated_csv_and_a_rotated_parquet_of_the_same_log_calibrate_and_refus
     def refusal(command: str, suffix: str) -> str:
         log, out = made / f"veh.{suffix}", tmp_path / ("o.csv" if command == "rotate" else "o.json")
         given = ["--calibration", str(made / "r.json")] if command == "rotate" else []
-        err = _refused([command, str(log), *given, "-o", str(out)], out, capsys).replace(str(log), "LOG")
+        err = refused([command, str(log), *given, "-o", str(out)], out).replace(str(log), "LOG")
         return re.sub(r" \(calibration from [^)]*\)", "", err)  # what a Parquet file records of the calibration
 
     for command in ("rotate", "triad"):
@@ -201,13 +187,13 @@ def test_a_rotated_csv_and_a_rotated_parquet_of_the_same_log_calibrate_and_refus
 
 
 def test_a_fleet_sets_a_rotated_csv_aside_as_it_does_a_rotated_parquet(
-    made: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    refused: Refused, made: Path, tmp_path: Path
 ) -> None:
     folder = tmp_path / "logs"
     folder.mkdir()
     shutil.copy(made / "veh.csv", folder / "veh.csv")
     out = tmp_path / "fleet.parquet"
-    err = _refused(["fleet", str(folder), "--workers", "1", "-o", str(out)], out, capsys)
+    err = refused(["fleet", str(folder), "--workers", "1", "-o", str(out)], out)
     assert f"no log; set aside 1 file(s) mountcal wrote, e.g. {folder / 'veh.csv'}" in err
-    err = _refused(["fleet", str(folder / "veh.csv"), "--workers", "1", "-o", str(out)], out, capsys)
+    err = refused(["fleet", str(folder / "veh.csv"), "--workers", "1", "-o", str(out)], out)
     assert "a log already rotated into the vehicle frame" in err

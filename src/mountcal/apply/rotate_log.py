@@ -220,14 +220,7 @@ def rotate_log(
     )
     axes = None if opts.axes is None else parse_axes(opts.axes, option("axes"))
     check_same_axes(cal.provenance.conventions, axes, " + ".join(map(str, files)))
-    if not cal.yaw_determined:
-        if kind == "csv":
-            raise InputError(
-                str(out),
-                "Parquet or MCAP for a levelled frame (their metadata say the heading is the sensor's own)",
-                "CSV, which has no place to say it",
-                "Write .parquet or .mcap, or determine yaw first.",
-            )
+    if not cal.yaw_determined:  # a CSV says so in its column frame ("levelled"), the others in their metadata
         frame_id = LEVELLED_FRAME_ID if frame_id == VEHICLE_FRAME_ID else frame_id
     check("chunk_samples", chunk_samples, option("chunk"))
     if kind == "mcap" and any(reader_for(f, opts).name == "mcap" for f in files):  # copied through
