@@ -11,6 +11,7 @@ over: applying it to a log, or exporting it as the sensor's mounting, is refused
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -200,3 +201,22 @@ def read_csv_column(path: Path, column: str) -> list[str]:
 
 def read_csv_header(path: Path) -> list[str]:
     return next(line for line in path.read_text(encoding="utf-8").splitlines() if not line.startswith("#")).split(",")
+
+
+def test_mountcal_s_own_answers_given_as_input_are_refused_saying_what_they_are(
+    refused: Refused, rotated: dict[str, Path], tmp_path: Path
+) -> None:
+    """A fleet table, a calibration result, a triad JSON: recognised by their content, not their name."""
+    fleet_dir = tmp_path / "fleet"
+    (fleet_dir / "v01").mkdir(parents=True)
+    shutil.copy(LOG, fleet_dir / "v01" / "s1.mcap")
+    shutil.copy(SHEET, fleet_dir / "v01" / "s1.protocol.csv")
+    table = tmp_path / "fleet.parquet"
+    assert main(["fleet", str(fleet_dir), "-o", str(table), "-q", "--workers", "1"]) == 0
+    triad = _triad_file(tmp_path / "t.json")
+    out = tmp_path / "r.json"
+    for given, said in ((table, "mountcal fleet wrote"), (rotated["cal"], "mountcal.calibration JSON"),
+                        (triad, "mountcal.estimate.triad JSON")):  # fmt: skip
+        for command in ("calibrate", "triad"):
+            err = refused([command, str(given), "-o", str(out)], out)
+            assert f"{given}: expected a log or a stop table, found a" in err and said in err, (command, given)

@@ -28,10 +28,11 @@ from mountcal.core.errors import InputError
 from mountcal.core.paths import special_kind
 from mountcal.core.version import software_version  # part of every key: another version may answer differently
 from mountcal.fleet.inputs import FleetJob
+from mountcal.io.frame import FLEET_MARK
 
 PART_FORMAT = "mountcal.fleet.part"
 PART_VERSION = 2  # 2: a log without yaw stores the levelling rotation (1 stored an invented yaw)
-TABLE_MARK = b"mountcal.fleet"  # Parquet metadata key of the tables written here
+TABLE_MARK = FLEET_MARK  # Parquet metadata key of the tables written here (io.frame knows it too)
 
 
 HASH_BLOCK = 1 << 18  # bytes read at a time by file_digest: within the core's L2 cache

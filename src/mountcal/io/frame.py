@@ -25,6 +25,7 @@ from typing import Any
 
 from mountcal.core.angles import ANGLE_NAMES, Angles
 from mountcal.core.errors import InputError
+from mountcal.core.option_names import option
 from mountcal.core.paths import special_kind
 from mountcal.core.result import Convention
 
@@ -292,6 +293,43 @@ def with_frame_note(notes: tuple[str, ...], conventions: Sequence[Convention]) -
     return (*notes, note)
 
 
+FLEET_MARK = b"mountcal.fleet"  # a fleet table's Parquet key (mountcal.fleet.store writes it)
+_JSON_LOOK = 1 << 20  # bytes of a JSON file read to see whether mountcal wrote it (its "format" comes first)
+
+
+def not_samples(path: Path) -> tuple[str, str] | None:
+    """What an output of mountcal holds when it is not samples — a fleet table, a calibration result, a triad
+    calibration — and what to do with it; None for anything else (a rotated log holds samples).
+
+    A file given where a log or a stop table is expected, recognised by its content, never by its name.
+    """
+    suffix = path.suffix.lower()
+    if special_kind(path) is not None or not path.is_file():
+        return None
+    try:
+        if suffix in (".parquet", ".pq"):
+            import pyarrow.parquet as pq
+
+            if FLEET_MARK in (pq.read_schema(path).metadata or {}):
+                return (
+                    "a table mountcal fleet wrote (its Parquet metadata mountcal.fleet): results per log, not samples",
+                    "Calibrate the logs it lists (its column log), or read it with pandas.",
+                )
+        if suffix == ".json":
+            with path.open("rb") as f:
+                found = re.search(rb'"format"\s*:\s*"(mountcal\.[a-z_.]+)"', f.read(_JSON_LOOK))
+            if found is not None:
+                what = found[1].decode()
+                use = f"pass it with {option('triad')}" if what.endswith("triad") else "rotate or export with it"
+                return (
+                    f"a {what} JSON mountcal wrote: an answer, not a log",
+                    f"Calibrate the log it came from; {use}.",
+                )
+    except Exception:  # unreadable: not recognisably ours; the reader will say what is wrong with it
+        return None
+    return None
+
+
 def written_by_mountcal(path: Path) -> bool:
     """Whether mountcal wrote this file (recognised by its metadata, not its name).
 
@@ -338,6 +376,7 @@ __all__ = [
     "frame_convention",
     "frame_note",
     "frame_word",
+    "not_samples",
     "parquet_rotated",
     "refuse_leftover",
     "refuse_rotated",

@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 
 from mountcal.core.errors import InputError
+from mountcal.io.frame import not_samples
 from mountcal.io.magic import check_named_for_content
 
 if TYPE_CHECKING:
@@ -134,6 +135,8 @@ def _kind_of(path: Path, dbc: bool, columns: bool, declared: Declared) -> InputK
     if special is not None:  # refused by the reader, without opening it
         return InputKind(declared != "log", special, "not a regular file")
     check_named_for_content(path)  # a Parquet file named .csv, an MCAP named .csv: said, not misread
+    if (held := not_samples(path)) is not None:  # mountcal's own answer given back as its input
+        raise InputError(str(path), "a log or a stop table", held[0], held[1])
     if declared == "stop-table":
         if not table:
             raise InputError(
