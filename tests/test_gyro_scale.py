@@ -8,6 +8,8 @@ whatever the speed and however gentle the turns (a highway drive shows no rate a
 from __future__ import annotations
 
 import dataclasses
+import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -77,3 +79,18 @@ def test_no_turns_or_no_second_cue_is_not_judged(drive) -> None:  # type: ignore
     assert _check(samples, drive.truth.rot_vs, False).passed is None  # no heading, and a_y needs the yaw
     still = dataclasses.replace(samples, gyro_s=np.zeros_like(samples.gyro_s) + 1e-4)
     assert _check(still, drive.truth.rot_vs, True).passed is None
+
+
+@pytest.mark.real_data
+def test_the_real_canedge_car_s_gyro_turns_as_its_gnss_heading_and_its_v_omega(real_data: Path) -> None:
+    """A real drive (CANedge GNSS/IMU logger, on its side in the car): the check passes, both ratios near 1."""
+    from mountcal.calibration.pipeline import calibrate_log
+    from mountcal.io.reader import LogOptions
+
+    car = real_data / "canedge" / "3BA199E2_car_DK_2021-07-26" / "00000164"
+    opts = LogOptions(dbc=str(real_data / "canedge" / "dbc" / "gnss.dbc"), channel=2)
+    cal = calibrate_log(sorted(car.glob("*.MF4")), log=opts).calibration
+    check = next(c for c in cal.checks if c.name == "gyro_scale")
+    assert check.passed is True, check.reason
+    ratios = [float(x) for x in re.findall(r"is ([\d.]+) times|; ([\d.]+) times", check.reason) for x in x if x]
+    assert len(ratios) == 2 and all(0.85 < r < 1.15 for r in ratios), check.reason
