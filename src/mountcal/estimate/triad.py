@@ -36,7 +36,7 @@ from mountcal.estimate.effects.scale import SCALE_NAMES
 from mountcal.estimate.sensor_errors import BIAS_NAMES, TEMP_NAMES, SensorErrors, from_spec, heading_u
 from mountcal.estimate.triad_session import MIN_STOP_S, TRIM_S
 from mountcal.io.frame import refuse_rotated, rotated_of
-from mountcal.io.input_conventions import IDENTITY_AXES, axes_convention, parse_axes
+from mountcal.io.input_conventions import IDENTITY_AXES, axes_convention, axes_stated, parse_axes
 from mountcal.io.kind import Declared
 from mountcal.io.sensor_spec import SensorSpec
 from mountcal.stops.table import StopTable, Unit, read_stop_table
@@ -202,8 +202,8 @@ def _conventions(items: object, path: str, todo: str) -> tuple[Convention, ...]:
 
 def _axes_text(conventions: Sequence[Convention]) -> str | None:
     """The axis map an ``axes`` convention states (``x,y,z`` for the axes as logged), or None."""
-    c = next((c for c in conventions if c.name == AXES), None)
-    return None if c is None else parse_axes(c.value.split(" ")[0], AXES).text
+    found = axes_stated(conventions, AXES)
+    return None if found is None else found[1].text
 
 
 AXES = "axes"  # the one convention a triad keeps: the axis map of its session

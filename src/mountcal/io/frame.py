@@ -124,7 +124,7 @@ def rotated_of(conventions: Sequence[Convention]) -> Rotated | None:
         return None
     found = _FRAME_VALUE.fullmatch(c.value)
     if found is None:
-        return Rotated(c.value.split(" ", 1)[0], "", c.by)
+        return Rotated(frame_word(c.value), "", c.by)
     return Rotated(found["frame"], found["calibration"] or "", c.by)
 
 

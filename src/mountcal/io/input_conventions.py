@@ -430,12 +430,19 @@ def acceleration_unit(unit: str, stated: bool) -> Convention:
     )
 
 
+def axes_stated(conventions: Sequence[Convention], where: str = "axes") -> tuple[Convention, AxisMap] | None:
+    """The ``axes`` convention among ``conventions`` and the map its value states (its text before any
+    description: ``"x,-y,z (a reflection: …)"``), or None without one; ``where`` names it in a refusal."""
+    c = next((c for c in conventions if c.name == "axes"), None)
+    return None if c is None else (c, parse_axes(c.value.split(" ")[0], where))
+
+
 def stated_axes(conventions: Sequence[Convention]) -> AxisMap | None:
     """The ``axes`` map a result was made with (None: the axes as read)."""
-    c = next((c for c in conventions if c.name == "axes"), None)
-    if c is None or c.how != "stated" or not c.by.startswith(option("axes")):
+    found = axes_stated(conventions)
+    if found is None or found[0].how != "stated" or not found[0].by.startswith(option("axes")):
         return None
-    return parse_axes(c.value.split(" ")[0])
+    return found[1]
 
 
 def check_same_axes(conventions: Sequence[Convention], given: AxisMap | None, where: str) -> None:

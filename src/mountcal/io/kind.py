@@ -198,21 +198,20 @@ def _table_kind(path: Path, form: str) -> InputKind:
         if export is not None:  # a phone's or imucal's export holds samples, under its own names
             return InputKind(False, f"a sample table ({form})", f"by its columns: a {export.name} export")
         return InputKind(True, f"a stop table ({form})", "by its columns: no t_s, so not samples in time")
-    from mountcal.io.table.time_unit import ROWS_LOOKED_AT  # the rows _times reads (a look, not a read)
+    from mountcal.io.table.time_unit import ROWS_LOOKED_AT, median_step  # the rows _times reads (a look)
 
     t_s = _times(path, form)
-    gaps = np.diff(np.sort(t_s[np.isfinite(t_s)]))
-    gaps = gaps[gaps > 0]
-    spacing = float(np.median(gaps)) if gaps.size else float("nan")
+    spacing = median_step(t_s)  # NaN without two distinct times
+    spaced = bool(np.isfinite(spacing))
     rows = int(t_s.shape[0])
-    if gaps.size and spacing >= STOP_SPACING_S and rows >= ROWS_LOOKED_AT:
+    if spaced and spacing >= STOP_SPACING_S and rows >= ROWS_LOOKED_AT:
         _refuse_stops_or_samples(path, rows, spacing)
-    if gaps.size and spacing >= STOP_SPACING_S:
+    if spaced and spacing >= STOP_SPACING_S:
         return InputKind(True, f"a stop table ({form})", f"by its rows: {rows}, a median {spacing:.3g} s apart")
-    if rows >= SAMPLE_MIN_ROWS and gaps.size and spacing <= SAMPLE_SPACING_S:
+    if rows >= SAMPLE_MIN_ROWS and spaced and spacing <= SAMPLE_SPACING_S:
         more = "+" if rows >= ROWS_LOOKED_AT else ""
         return InputKind(False, f"a sample table ({form})", f"by its rows: {rows}{more}, {1 / spacing:.3g} per second")
-    found = f"{rows} rows" + (f" a median {spacing:.3g} s apart" if gaps.size else " without distinct times")
+    found = f"{rows} rows" + (f" a median {spacing:.3g} s apart" if spaced else " without distinct times")
     raise InputError(
         str(path),
         f"a stop table (rows ≥ {STOP_SPACING_S:g} s apart) or a sample table "

@@ -198,13 +198,12 @@ def mounting(cal: Calibration, yaw: YawPolicy = "refuse", accept_unconfident: bo
 
 def user_axes(conventions: Sequence[Convention]) -> AxisMap | None:
     """The axis map stated for the calibration's log (``--axes``: a ROS log has no reader's map), unless identity."""
-    from mountcal.io.input_conventions import parse_axes
+    from mountcal.io.input_conventions import axes_stated
 
-    c = next((c for c in conventions if c.name == "axes"), None)
-    if c is None or c.how != "stated":
+    found = axes_stated(conventions)
+    if found is None or found[0].how != "stated" or found[1].identity:
         return None
-    mapped = parse_axes(c.value.split(" ")[0])
-    return None if mapped.identity else mapped
+    return found[1]
 
 
 def propagate_sigma(
