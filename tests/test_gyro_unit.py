@@ -120,3 +120,39 @@ def test_a_sensor_turned_fast_by_hand_is_not_flagged(real_data: Path, tmp_path: 
     assert main(["triad", str(session), "--mapping", str(mapping), "-o", str(tmp_path / "triad.json")]) == 0
     args = ["stops", str(session), "--mapping", str(mapping), "--trim-s", "0", "--min-stop-s", "3"]
     assert main([*args, "-o", str(tmp_path / "stops.csv")]) == 0
+
+
+def test_rotate_refuses_a_gyro_in_deg_per_s_before_writing_on_every_output_path(
+    parking: Samples, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The calibration is right (made with the column map that reads deg/s); the log rotated without that map
+    would be written with rates 57.3 times too large labelled rad/s — a silent wrong file."""
+    table = _table(parking, tmp_path / "degs.csv", DEG)
+    fix = "time=t_s,ax=ax,ay=ay,az=az,gx=gx:deg/s,gy=gy:deg/s,gz=gz:deg/s,speed=speed_mps"
+    cal = tmp_path / "cal.json"
+    assert main(["calibrate", str(table), "--columns", fix, "-o", str(cal)]) == 0
+    mcap = _mcap(parking, tmp_path / "degs.mcap", DEG)
+    rotate = ["rotate", "--calibration", str(cal), "--level-only"]  # the table's stops carry no headings
+    for log, out in ((table, "v.parquet"), (table, "v.csv"), (mcap, "v.mcap"), (mcap, "w.parquet")):
+        err = _refusal(capsys, [*rotate, str(log)], tmp_path / out)
+        assert log.name in err and "deg/s" in err and "57.3" in err, err
+    # read as it is logged, the same table rotates; so do the logs in rad/s
+    assert main([*rotate, str(table), "--columns", fix, "-o", str(tmp_path / "ok.csv")]) == 0
+    rads = _mcap(parking, tmp_path / "rads.mcap", 1.0)
+    for out in ("ok.mcap", "ok.parquet"):
+        assert main([*rotate, str(rads), "-o", str(tmp_path / out)]) == 0
+
+
+def test_rotate_looks_at_the_gyro_unit_until_a_still_period_shows_it_not_at_every_chunk(parking: Samples) -> None:
+    from mountcal.stops.detect import GYRO_LOOK_S, GyroUnitWatch
+
+    watch = GyroUnitWatch()
+    watch.look(parking)  # a parking session: still periods of 20 s and more show rad/s
+    assert watch.settled and watch.done
+    moving = replace(parking, acc_s=parking.acc_s + np.random.default_rng(2).normal(0, 1.0, parking.acc_s.shape))
+    watch = GyroUnitWatch()
+    watch.look(moving)  # never still: nothing shown, looked at for at most GYRO_LOOK_S
+    assert not watch.settled and watch.looked_s == pytest.approx(float(parking.t_s[-1] - parking.t_s[0]))
+    assert watch.done == (watch.looked_s >= GYRO_LOOK_S)
+    with pytest.raises(Exception, match="deg/s"):
+        GyroUnitWatch().look(replace(parking, gyro_s=parking.gyro_s * DEG if parking.gyro_s is not None else None))

@@ -76,6 +76,7 @@ from mountcal.io.ros2.imu import ImuMessages
 from mountcal.io.samples import Samples
 from mountcal.io.table.write import CsvSamples, ParquetSamples
 from mountcal.io.whole import Cut, reading
+from mountcal.stops.detect import GyroUnitWatch
 
 FORMATS = {".parquet": "parquet", ".pq": "parquet", ".csv": "csv", ".mcap": "mcap"}
 VEHICLE_FRAME_ID = "base_link"  # REP 103's body frame: x forward, y left, z up = ISO 8855
@@ -352,6 +353,7 @@ class _Tally:
     largest: int = 0
     dropped: Counter[str] = field(default_factory=Counter)
     incomplete: list[str] = field(default_factory=list)
+    gyro_unit: GyroUnitWatch = field(default_factory=GyroUnitWatch)  # deg/s read as rad/s: refused, not written
 
     def rotate(
         self, chunk: Samples, cal: Calibration, level_only: bool
@@ -370,6 +372,7 @@ class _Tally:
                 "a file without the gyro" if self.gyro else "a gyro in only some files",
                 "Rotate the files separately.",
             )
+        self.gyro_unit.look(chunk)
         # Units checked on the first chunk; yaw by rotate_log (level_only: its decision, passed on).
         acc_v = acc_to_vehicle(chunk.acc_s, cal, check_units=False, level_only=level_only)
         gyro_v = rate_to_vehicle(chunk.gyro_s, cal, level_only=level_only) if chunk.gyro_s is not None else None
@@ -436,12 +439,16 @@ def _rotate_mcap_copy(
     axes: AxisMap | None = None,
 ) -> RotateReport:
     open_log(src, discover=False).file.close()  # a cut file is refused, or its cut recorded in `cuts`, before writing
-    chunks = iter_log([src], opts, 1)  # a topic mountcal rotated: refused before writing
+    chunks = iter_log([src], opts, CHUNK_SAMPLES)  # a topic mountcal rotated, a gyro in deg/s: refused before writing
+    gyro_unit = GyroUnitWatch()
     try:
-        first = next(chunks, None)
+        first = chunk = next(chunks, None)
+        refuse_rotated(None if first is None else first.rotated, str(src))
+        while chunk is not None and not gyro_unit.done:
+            gyro_unit.look(chunk)
+            chunk = next(chunks, None)
     finally:
         getattr(chunks, "close", lambda: None)()
-    refuse_rotated(None if first is None else first.rotated, str(src))
     incomplete = tuple(c.sentence for c in cuts)
     meta = {k.removeprefix(PREFIX): v for k, v in _metadata(cal, [src], checked, incomplete).items()}
     units_checked = False

@@ -22,7 +22,7 @@ from mountcal.core.conventions import FloatArray
 from mountcal.core.option_names import option
 from mountcal.io.samples import Channel, Samples
 from mountcal.io.timestamps import increasing_times, time_ordered
-from mountcal.stops.gyro_unit import GyroLook, look, refuse_degrees
+from mountcal.stops.gyro_unit import MIN_REST_S, GyroLook, look, refuse_degrees
 from mountcal.stops.near_misses import Criterion, NearMiss, near_misses
 
 BATCHES = 10  # batch means for the variance of a stop mean
@@ -364,13 +364,45 @@ def _gyro_look(blocks: Blocks | None, cfg: StopDetection) -> GyroLook | None:
 def checked_gyro(samples: Samples, cfg: StopDetection | None = None) -> FloatArray | None:
     """The samples' gyro, refused when logged in deg/s where its format or columns state rad/s
     (:mod:`mountcal.stops.gyro_unit`): what every stop search does, for a drive, which looks for no stops."""
-    if samples.gyro_s is None or len(samples) == 0:
-        return samples.gyro_s
-    cfg = cfg or StopDetection()
+    if samples.gyro_s is not None and len(samples) > 0:
+        _checked_look(samples, cfg or StopDetection())
+    return samples.gyro_s
+
+
+def _checked_look(samples: Samples, cfg: StopDetection) -> GyroLook | None:
     merged = increasing_times(time_ordered(samples))
     _, _, _, blocks = _stillness(merged, cfg, _lsb(samples.acc_s), _lsb(samples.gyro_s))
-    refuse_degrees(_gyro_look(blocks, cfg), samples.source or "log", tuple(samples.channels))
-    return samples.gyro_s
+    found = _gyro_look(blocks, cfg)
+    refuse_degrees(found, samples.source or "log", tuple(samples.channels))
+    return found
+
+
+GYRO_LOOK_S = 900.0  # of a stream, the time looked at for the gyro's unit at most (a still period shows it)
+
+
+@dataclass
+class GyroUnitWatch:
+    """:func:`checked_gyro` over a stream's chunks (``mountcal rotate``): a chunk is refused where it shows deg/s,
+    until one holds a still period long enough to show rad/s or :data:`GYRO_LOOK_S` of the log were looked at —
+    a deg/s gyro shows at its first still period, so a long log pays for one look, not one per chunk."""
+
+    cfg: StopDetection = field(default_factory=StopDetection)
+    looked_s: float = 0.0
+    settled: bool = False
+
+    @property
+    def done(self) -> bool:
+        return self.settled or self.looked_s >= GYRO_LOOK_S
+
+    def look(self, samples: Samples) -> None:
+        if self.done or len(samples) == 0:
+            return
+        if samples.gyro_s is None:
+            self.settled = True
+            return
+        found = _checked_look(samples, self.cfg)
+        self.settled = found is None or found.rest_s >= MIN_REST_S
+        self.looked_s += float(samples.t_s[-1] - samples.t_s[0])
 
 
 def _steady_heading(
