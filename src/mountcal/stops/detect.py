@@ -370,6 +370,7 @@ def checked_gyro(samples: Samples, cfg: StopDetection | None = None) -> FloatArr
 
 
 def _checked_look(samples: Samples, cfg: StopDetection) -> GyroLook | None:
+    assert samples.gyro_s is not None
     merged = increasing_times(time_ordered(samples))
     _, _, _, blocks = _stillness(merged, cfg, _lsb(samples.acc_s), _lsb(samples.gyro_s))
     found = _gyro_look(blocks, cfg)
