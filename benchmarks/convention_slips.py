@@ -349,6 +349,13 @@ def seam_slips(rng: np.random.Generator, folder: Path) -> dict[str, Case]:
         ("original log", "calibration that rotation applied"),
         refuse=True,
     )
+    # the deg/s log calibrated with the column map that reads it, then rotated without that map
+    cases["rotate: a gyro in deg/s, rotated without the column map its calibration read it with"] = Case(
+        ["rotate", str(folder / "deg.parquet"), "--calibration", cal, "-o", str(folder / "deg_veh.parquet")],
+        None,
+        ("deg/s",),
+        refuse=True,
+    )
     cases["triad: on the vehicle-frame output"] = Case(
         ["triad", veh, "-o", str(folder / "triad.json")], None, ("original log",), refuse=True
     )
