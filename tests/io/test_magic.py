@@ -10,10 +10,11 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
+from tests.conftest import Refused
 
 from mountcal.cli import main
 from mountcal.core.errors import InputError
-from mountcal.io.magic import SIGNATURES, content_format
+from mountcal.io.magic import DECOMPRESS, SIGNATURES, content_format
 
 DATA = Path(__file__).resolve().parents[2] / "data"
 DBC = ["--dbc", str(DATA / "imu_mm5_10.dbc"), "--mapping", str(DATA / "imu_mm5_10.toml")]
@@ -49,7 +50,11 @@ def test_a_file_named_for_another_format_is_refused_naming_its_content(
         err = capsys.readouterr().err
         what = content_format(path)
         assert what is not None and what[1] == content
-        assert f"log{named}" in err and what[0] in err and f"log{content}" in err, err
+        assert f"log{named}" in err and what[0] in err, err
+        if content in DECOMPRESS:  # no suffix makes a compressed file readable: the fix decompresses it
+            assert f"{DECOMPRESS[content]} log{named} > log_plain{named}" in err, err
+        else:
+            assert f"log{content}" in err, err
         assert "Traceback" not in err
         assert hashlib.sha256(path.read_bytes()).hexdigest() == before
         assert not (tmp_path / "s.csv").exists()
@@ -90,3 +95,14 @@ def test_a_suffix_mountcal_does_not_own_is_not_judged(tmp_path: Path) -> None:
     check_named_for_content(path)  # no refusal
     with pytest.raises(InputError, match=r"drive\.parquet"):
         check_named_for_content(path.rename(tmp_path / "drive.csv"))
+
+
+def test_a_compressed_log_is_refused_naming_the_command_that_gives_the_file_inside(
+    tmp_path: Path, refused: Refused
+) -> None:
+    """``log.csv.gz``: no reader takes ``.gz``; the refusal names the decompression, and its output reads."""
+    gz = _contents(tmp_path)[".gz"]
+    err = refused(["calibrate", str(gz), "-o", str(tmp_path / "r.json")], tmp_path / "r.json")
+    assert "real.csv.gz" in err and "gzip -dc real.csv.gz > real.csv" in err, err
+    (tmp_path / "real.csv").write_bytes(gzip.decompress(gz.read_bytes()))  # what that command writes
+    assert main(["calibrate", str(tmp_path / "real.csv"), "-o", str(tmp_path / "r.json")]) == 0

@@ -30,6 +30,8 @@ SIGNATURES: tuple[tuple[bytes, str, str], ...] = (
     (b"BZh", "a bzip2 archive", ".bz2"),
     (b"\x28\xb5\x2f\xfd", "a Zstandard archive", ".zst"),
 )
+# compressed content: the tool that writes the file inside to stdout (mountcal reads logs uncompressed)
+DECOMPRESS = {".gz": "gzip -dc", ".zip": "unzip -p", ".xz": "xz -dc", ".bz2": "bzip2 -dc", ".zst": "zstd -dc"}
 # the suffixes whose content starts with a signature above (the others name text formats)
 SIGNED_SUFFIXES = {".blf": ".blf", ".mf4": ".mf4", ".mdf": ".mf4", ".mcap": ".mcap", ".bag": ".bag"}
 SIGNED_SUFFIXES |= {".parquet": ".parquet", ".pq": ".parquet", ".db3": ".db3"}
@@ -70,9 +72,24 @@ def check_named_for_content(path: Path) -> None:
         str(path),
         f"the format its name says ({named or 'no suffix'})",
         f"{what}: it starts with {signature!r}",
-        f"Rename it with the suffix of its content ({path.with_suffix(suffix).name}) — mountcal reads a file as "
-        "its name says — or export it again in the format you meant.",
+        _decompress(path, suffix, path.with_name(f"{path.stem}_plain{path.suffix}"))
+        if suffix in DECOMPRESS
+        else f"Rename it with the suffix of its content ({path.with_suffix(suffix).name}) — mountcal reads a file "
+        "as its name says — or export it again in the format you meant.",
     )
 
 
-__all__ = ["SIGNATURES", "check_named_for_content", "content_format"]
+def decompress_hint(path: Path) -> str:
+    """How to get at the log inside a file whose suffix names an archive ("" for other suffixes)."""
+    suffix = path.suffix.lower()
+    return _decompress(path, suffix, path.with_suffix("")) if suffix in DECOMPRESS else ""
+
+
+def _decompress(path: Path, suffix: str, inner: Path) -> str:
+    return (
+        f"It is compressed: decompress it ({DECOMPRESS[suffix]} {path.name} > {inner.name}) and give the file "
+        "inside; mountcal reads logs uncompressed."
+    )
+
+
+__all__ = ["DECOMPRESS", "SIGNATURES", "check_named_for_content", "content_format", "decompress_hint"]

@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING
 
 from mountcal.core.errors import InputError, MountcalError
 from mountcal.core.plugins import Plugin, entry_points_of, output_to_stderr
-from mountcal.io.magic import check_named_for_content
+from mountcal.io.magic import check_named_for_content, decompress_hint
 from mountcal.io.reader import LogReader
 
 if TYPE_CHECKING:
@@ -165,7 +165,7 @@ def reader_for(path: Path, options: LogOptions) -> LogReader:
         return reader
     formats = "; ".join(f"{r.description} ({' '.join(r.suffixes)})" for r in readers() if r.suffixes)
     broken = _registry()[1]
-    todo = "Convert it, or name it by its format."
+    todo = decompress_hint(path) or "Convert it, or name it by its format."
     if broken:
         todo += " These format plugins failed to load: " + "; ".join(str(b) for b in broken)
     found = "a folder no reader takes" if path.is_dir() else f"a file ending in {path.suffix or '(nothing)'}"
