@@ -84,8 +84,8 @@ def record(
     return folder
 
 
-def zipped(folder: Path) -> Path:
-    path = folder.with_suffix(".zip")
+def zipped(folder: Path, path: Path | None = None) -> Path:
+    path = folder.with_suffix(".zip") if path is None else path
     with zipfile.ZipFile(path, "w") as z:
         for f in sorted(folder.iterdir()):
             z.write(f, f.name)
@@ -250,14 +250,14 @@ def still_ios_zip(path: Path) -> Path:
     rng = np.random.default_rng(5)
     t = np.arange(0.0, 30.0, 0.01)
     gravity = np.tile([0.0, 0.0, G_N], (t.size, 1))
-    folder = path.with_suffix("")
+    folder = path.parent / f"{path.stem}_unzipped"
     folder.mkdir()
     pd.DataFrame([{"version": "3", "device name": "phone", "platform": "iOS"}]).to_csv(
         folder / "Metadata.csv", index=False
     )
     _vectors(folder / "Accelerometer.csv", t, -rng.normal(0, 0.02, (t.size, 3)))
     _vectors(folder / "Gravity.csv", t, -gravity)
-    return zipped(folder)
+    return zipped(folder, path)
 
 
 def test_the_inputs_doc_command_reads_a_recording_zip(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
