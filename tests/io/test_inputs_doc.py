@@ -12,6 +12,7 @@ import pandas as pd
 import pytest
 from rosbags.convert.converter import convert
 from tests.io.test_bags import write_vn_mcap
+from tests.test_sensor_logger import still_ios_zip
 
 from mountcal.cli import main
 
@@ -57,6 +58,7 @@ def _phone_exports(folder: Path) -> None:
     pd.DataFrame({"time": ns, "seconds_elapsed": t, "z": acc[:, 2], "y": acc[:, 1], "x": acc[:, 0]}).to_csv(
         folder / "sensorlogger" / "TotalAcceleration.csv", index=False
     )
+    still_ios_zip(folder / "sensorlogger.zip")  # a whole recording, as the app zips it
     gforce = pd.DataFrame({"time": t} | {f"gF{c}": acc[:, i] / G_N for i, c in enumerate("xyz")})
     gforce.assign(TgF=np.linalg.norm(acc, axis=1) / G_N).to_csv(folder / "ptss_gforce.csv", index=False)
 
@@ -112,6 +114,7 @@ def test_the_inputs_doc_commands_run(
     for export in (
         "a phyphox export",
         "a Sensor Logger TotalAcceleration.csv",
+        "a Sensor Logger recording (iOS)",
         "a Physics Toolbox Sensor Suite export",
     ):
         assert f"note: read as {export}" in text, export  # recognised, and said

@@ -307,7 +307,8 @@ def test_a_gyro_only_export_is_refused_naming_the_file_to_read(
 ) -> None:
     assert main(["calibrate", str(exports["Gyroscope"])]) == 2
     err = capsys.readouterr().err
-    assert "Sensor Logger Gyroscope.csv" in err and "read TotalAcceleration.csv" in err
+    assert "Sensor Logger Gyroscope.csv" in err and f"its folder {exports['Gyroscope'].resolve().parent}" not in err
+    assert "the zip Sensor Logger exported, or the folder it unzips to" in err  # no Metadata.csv beside it
 
 
 # --------------------------------------------------------------------------- refusals

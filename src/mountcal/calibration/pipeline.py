@@ -26,7 +26,7 @@ from mountcal.calibration.options import DEFAULT_USE, Options, Use
 from mountcal.calibration.record import local_gravity
 from mountcal.calibration.with_driving import combine, driving_calibration, not_combined
 from mountcal.core.driving_document import Comparison, DrivingConsistency
-from mountcal.core.errors import NotEnoughInformation
+from mountcal.core.errors import InputError, NotEnoughInformation
 from mountcal.core.option_names import option
 from mountcal.core.paths import special_kind
 from mountcal.core.result import Calibration, Provenance
@@ -41,6 +41,7 @@ from mountcal.io.logs import read_log, stated
 from mountcal.io.reader import LogOptions
 from mountcal.io.samples import Samples, with_gravity
 from mountcal.io.sensor_frame import sensor_frame_note
+from mountcal.io.sensor_logger import other_sign, setting_hint
 from mountcal.io.timestamps import increasing_times
 from mountcal.io.whole import reading
 from mountcal.loop import crosscheck, plausibility
@@ -190,8 +191,7 @@ def calibrate_job(job: LogJob, samples: Samples | None = None, *, hash_files: bo
     with ThreadPoolExecutor(max_workers=1) as pool:  # no thread starts until something is submitted
         hashes = pool.submit(lambda: tuple(_sha256(Path(p), stop) for p in job.paths)) if hash_files else None
         try:
-            done = _calibrate_job(job, samples)
-            cal = checked(done, job.uphill_azimuth_deg, job.protocol is not None)
+            done, cal = _signed(job, samples, None)
             hashed = () if hashes is None else hashes.result()
             return replace(done, calibration=replace(cal, provenance=replace(cal.provenance, input_sha256=hashed)))
         finally:
@@ -203,9 +203,40 @@ def calibrate_samples(job: LogJob, samples: Samples, protocol: pd.DataFrame | No
     :func:`~mountcal.stops.headings.protocol_sheet` checks it; else the job's file, if any), without the files'
     hashes: a live session's final answer, the same fit, cross-checks, conventions and notes as ``calibrate``
     gives on its recording and sheet."""
-    done = _calibrate_job(job, samples, protocol)
+    done, cal = _signed(job, samples, protocol)
+    return replace(done, calibration=cal)
+
+
+def _signed(job: LogJob, samples: Samples | None, protocol: pd.DataFrame | None) -> tuple[LogResult, Calibration]:
+    """The log's result and its checked calibration; where a handedness check finds the data mirrored and the
+    acceleration's sign was only a default (an iOS Sensor Logger recording), the other sign, inferred and said
+    (:func:`mountcal.io.sensor_logger.other_sign`). A mirror the sign cannot explain is refused as found, with
+    what the sign rests on.
+
+    Raises
+    ------
+    InputError
+        The data are mirrored with either sign, or with a sign that was stated or inferred.
+    """
+    samples = with_gravity(read_log(list(job.paths), job.log) if samples is None else stated(samples, job.log))
     sheet = protocol is not None or job.protocol is not None
-    return replace(done, calibration=checked(done, job.uphill_azimuth_deg, sheet))
+    try:
+        done = _calibrate_job(job, samples, protocol)
+        return done, checked(done, job.uphill_azimuth_deg, sheet)
+    except crosscheck.Mirrored as err:
+        turned = other_sign(samples, err.found)
+        if turned is None:
+            raise _with_sign_hint(err, samples) from err
+    try:
+        done = _calibrate_job(job, turned, protocol)
+        return done, checked(done, job.uphill_azimuth_deg, sheet)
+    except crosscheck.Mirrored as err:
+        raise _with_sign_hint(err, turned) from err
+
+
+def _with_sign_hint(err: crosscheck.Mirrored, samples: Samples) -> InputError:
+    hint = setting_hint(samples)
+    return crosscheck.Mirrored(err.where, err.expected, err.found, err.todo + hint) if hint else err
 
 
 def _calibrate_job(job: LogJob, samples: Samples | None, protocol: pd.DataFrame | None = None) -> LogResult:
@@ -283,6 +314,10 @@ def checked(done: LogResult, uphill_azimuth_deg: float | None, protocol: bool) -
     checks += [crosscheck.turn_handedness(done.samples, rot_vs, cues), crosscheck.gyro_scale(done.samples, cues)]
     if cal.method == "driving":
         checks += plausibility.answer_checks(cal)
+    sign = plausibility.sign_check(stated, (*cal.checks, *checks))  # a sign only assumed: confirmed or not
+    if sign is not None:
+        checks.append(sign[0])
+        stated = merged(stated, (sign[1],))
     cal = replace(cal, provenance=replace(cal.provenance, conventions=stated))
     if done.samples.rotated is not None:  # legitimate (checking a rotation), but the angles mean something else
         cal = replace(cal, notes=with_frame_note(cal.notes, stated))

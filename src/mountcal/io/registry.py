@@ -5,6 +5,7 @@ Built-in readers (in this order; the first that claims a path reads it):
 - ``mcap``: ``.mcap``, ROS 2 Imu in CDR or JSON (:mod:`mountcal.io.mcap`);
 - ``bag``: ``.bag`` (ROS 1), a ROS 2 bag folder (``metadata.yaml``) or ``.db3`` (:mod:`mountcal.io.bag`);
 - ``can``: ``.blf .asc .log .trc .mf4 .mdf``, and ``.csv`` when a DBC is given (:mod:`mountcal.io.can`);
+- ``sensor-logger``: a Sensor Logger recording, its ``.zip`` or its folder (:mod:`mountcal.io.sensor_logger`);
 - ``table``: ``.csv .parquet .pq`` sample tables (:mod:`mountcal.io.table`);
 - ``comma2k19``: a comma2k19 segment folder (:mod:`mountcal.io.comma2k19`).
 
@@ -44,6 +45,7 @@ BUILTIN = (
     "mountcal.io.mcap.reader:McapReader",
     "mountcal.io.bag.reader:BagReader",
     "mountcal.io.can.reader:CanReader",
+    "mountcal.io.sensor_logger:SensorLoggerReader",
     "mountcal.io.table.reader:TableReader",
     "mountcal.io.comma2k19:Comma2k19Reader",
 )

@@ -8,7 +8,7 @@ tested (with the reason), or refuse with the option that fixes the convention:
 - :func:`stops_sense`: the stops' order of headings against their pattern. With headings, the stop
   means go round their circle **counter-clockwise about the up axis** as β grows (docs/conventions.md
   §2) in a right-handed sensor frame; a mirrored sensor (one axis reversed: a left-handed triad) or
-  headings that run clockwise make them go round the other way. Refused, naming ``axes``.
+  headings that run clockwise make them go round the other way. Refused (:class:`Mirrored`), naming ``axes``.
 - :func:`turn_handedness`: three readings of the vehicle's yaw rate while it drives — the gyro about the
   calibration's up axis, the compass heading's rate (clockwise from north, so ω = −dh/dt), and the
   lateral acceleration against ``v·ω`` (a left turn pushes the specific force to the left, +y).
@@ -57,6 +57,11 @@ AXES = "xyz"
 TurnCues = dict[str, FloatArray] | None  # "gyro", "heading", "lateral": yaw rates as 1 s means while moving
 
 
+class Mirrored(InputError):
+    """The refusal of data that turn the wrong way (a mirror image): what a sign only assumed where the log
+    was read can be turned round on (:mod:`mountcal.calibration.pipeline`)."""
+
+
 # --------------------------------------------------------------------------- the stops' sense
 
 
@@ -83,7 +88,7 @@ def stops_sense(table: StopTable) -> Check:
         return Check(name, True, f"the stops go round their circle counter-clockwise as β grows (|R| = {right:.2f})")
     if mirror >= SENSE_CLEAR and right <= SENSE_OTHER:
         fix = _suggested_flip(normal)
-        raise InputError(
+        raise Mirrored(
             table.source,
             "stop means that go round their circle counter-clockwise about the up axis as β grows (a "
             "right-handed sensor; β counter-clockwise from uphill, seen from above)",
@@ -152,7 +157,7 @@ def turn_handedness(samples: Samples, rot_vs: Rotation, cues: TurnCues) -> Check
     wrong = {p for p, r in pairs.items() if r < 0}
     if not wrong:
         return Check(name, True, f"the cues turn the same way ({shown})")
-    raise InputError(
+    raise Mirrored(
         samples.source or "log",
         "a gyro, heading and lateral acceleration that turn the same way (a right-handed sensor, a compass "
         "heading clockwise from north)",

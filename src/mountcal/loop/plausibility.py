@@ -13,6 +13,9 @@ handedness) run where the input is read or cross-checked (:mod:`mountcal.io.inpu
 - ``noise_scale``: stops that scatter far less than their stated noise (χ²/dof under
   :data:`MIN_CHI2_RATIO`): ``sx, sy, sz`` in another unit than ``ax, ay, az``, or an overstated noise.
 - ``gravity``: the gravity used, stated or fitted, within :data:`GRAVITY_TOLERANCE` of gₙ.
+- ``acceleration_sign``: an acceleration whose sign only an app's default gave (a Sensor Logger recording
+  from iOS, :mod:`mountcal.io.sensor_logger`) must be confirmed by a handedness check (a sign reversed in
+  all three axes mirrors the data): failed where none could test it (:func:`sign_check`).
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ from collections.abc import Sequence
 from dataclasses import replace
 
 from mountcal.core.conventions import G_N
+from mountcal.core.option_names import option
 from mountcal.core.pvalues import chi2_sf
 from mountcal.core.result import Calibration, Check, Convention
 
@@ -112,6 +116,31 @@ def convention_checks(conventions: Sequence[Convention]) -> tuple[Check, ...]:
         if c.name == "heading_reference" and c.how == "default" and c.value == "uphill":
             out.append(Check(c.name, False, f"assumed, not stated: {c.by}"))
     return tuple(out)
+
+
+SIGN = "acceleration_sign"
+HANDEDNESS = ("handedness_stops", "handedness_turns")
+
+
+def sign_check(conventions: Sequence[Convention], checks: Sequence[Check]) -> tuple[Check, Convention] | None:
+    """The check of the acceleration's sign, and its convention as the handedness checks leave it; None where
+    the input states no sign. A default is confirmed (now inferred) by a handedness check that passed — the
+    other sign would have mirrored the data — and otherwise fails: nothing showed it right."""
+    sign = next((c for c in conventions if c.name == SIGN), None)
+    if sign is None:
+        return None
+    if sign.how != "default":
+        return Check(SIGN, True, f"{sign.value}: {sign.how} by {sign.by}"), sign
+    passed = [c.name for c in checks if c.name in HANDEDNESS and c.passed]
+    if passed:
+        by = f"{sign.by}, confirmed by {' and '.join(passed)} (the other sign would mirror the data)"
+        return Check(SIGN, True, f"{sign.value}: {by}"), replace(sign, how="inferred", by=by)
+    reason = (
+        f"assumed, not confirmed: {sign.value} is {sign.by}, and no handedness check could test it (no stops with "
+        "headings, no turns with a heading or speed): the other sign gives a sensor upside down. Record "
+        f"AccelerometerUncalibrated (its unit tells the sign), or give the stops' headings ({option('protocol')})"
+    )
+    return Check(SIGN, False, reason), sign
 
 
 def with_checks(cal: Calibration, checks: Sequence[Check]) -> Calibration:

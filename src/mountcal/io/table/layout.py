@@ -18,7 +18,9 @@ A **column map** names, for each quantity (a *role*), the table's column and opt
 Without a map, mountcal's own columns (``t_s, ax, ay, az`` in s and m/s², ``gx, gy, gz`` in rad/s) are
 read, or one of the **known exports** is recognised by its exact column names and *stated* (the
 notes say which export and which units were taken): imucal sessions, phyphox, Sensor Logger and
-Physics Toolbox Sensor Suite (:data:`EXPORTS`). A **gravity-free** ("linear") acceleration is
+Physics Toolbox Sensor Suite (:data:`EXPORTS`); a whole Sensor Logger recording (its folder or zip) is
+:mod:`mountcal.io.sensor_logger`'s, and its single files other than TotalAcceleration.csv are refused naming
+it. A **gravity-free** ("linear") acceleration is
 recognised too and marked: it reads, but calibration refuses it (the mounting is measured against
 gravity).
 """
@@ -214,6 +216,7 @@ class Export:
 _PHYPHOX_ACC = {f"a{c}": (f"Acceleration {c} (m/s^2)", "m/s2") for c in "xyz"}
 _PHYPHOX_GYRO = {f"g{c}": (f"Gyroscope {c} (rad/s)", "rad/s") for c in "xyz"}
 _SENSOR_LOGGER = {"time": ("time", "ns"), **{f"a{c}": (c, "m/s2") for c in "xyz"}}
+_RECORDING = "give the recording itself: {recording}"  # filled in with the file's folder (_recording_of)
 _IMUCAL = {f"a{c}": (f"acc_{c}", "m/s2") for c in "xyz"} | {f"g{c}": (f"gyr_{c}", "deg/s") for c in "xyz"}
 
 EXPORTS = (
@@ -230,8 +233,7 @@ EXPORTS = (
         "a Sensor Logger Accelerometer.csv",
         _SENSOR_LOGGER,
         file_name="accelerometer.csv",
-        gravity_free="Sensor Logger's Accelerometer.csv is the acceleration with gravity removed; "
-        "read TotalAcceleration.csv from the same recording",
+        gravity_free=f"Sensor Logger's Accelerometer.csv is the acceleration with gravity removed; {_RECORDING}",
     ),
     Export(
         "a Physics Toolbox Sensor Suite export (g-force)",
@@ -255,13 +257,13 @@ EXPORTS = (
         "a Sensor Logger Gyroscope.csv",
         {"time": ("time", "ns"), **{f"g{c}": (c, "rad/s") for c in "xyz"}},
         file_name="gyroscope.csv",
-        refuse="it holds the gyro only; read TotalAcceleration.csv (acceleration with gravity) of the same recording",
+        refuse=f"it holds the gyro only; {_RECORDING}",
     ),
     Export(
         "a Sensor Logger Gravity.csv",
         {"time": ("time", "ns"), **{f"a{c}": (c, "m/s2") for c in "xyz"}},
         file_name="gravity.csv",
-        refuse="it holds the phone's estimate of gravity, not the accelerometer; read TotalAcceleration.csv",
+        refuse=f"it holds the phone's estimate of gravity, not the accelerometer; {_RECORDING}",
     ),
     Export(
         "a phyphox gyroscope export",
@@ -351,7 +353,10 @@ def _export_layout(export: Export, names: list[str], path: Path, acc_unit: str |
         cols[role] = Column(name, unit, scale, offset)
     if export.refuse:
         raise InputError(
-            where, "a table with an acceleration", f"{export.name}: {export.refuse}", "Read that file instead."
+            where,
+            "a table with an acceleration",
+            f"{export.name}: {export.refuse.replace('{recording}', _recording_of(path))}",
+            "Give that input instead.",
         )
     if export.needs == "rate":
         raise InputError(
@@ -364,7 +369,24 @@ def _export_layout(export: Export, names: list[str], path: Path, acc_unit: str |
     units = ", ".join(sorted({f"{c.unit}" for r, c in cols.items() if r != "time" and c.unit}))
     time = cols["time"]
     note = f"read as {export.name}: columns {', '.join(c.name for c in cols.values())}; time in {time.unit}, {units}"
-    return Layout(_with_acc_unit(cols, acc_unit, where, export.name), export.name, (note,), export.gravity_free)
+    gravity_free = export.gravity_free.replace("{recording}", _recording_of(path))
+    return Layout(_with_acc_unit(cols, acc_unit, where, export.name), export.name, (note,), gravity_free)
+
+
+def _recording_of(path: Path) -> str:
+    """The Sensor Logger recording a single file of it belongs to, as the input to give (both platforms:
+    iOS logs no TotalAcceleration.csv, so its acceleration with gravity is Accelerometer + Gravity)."""
+    folder = path.resolve().parent
+    try:
+        whole = any(p.name.lower() == "metadata.csv" for p in folder.iterdir())
+    except OSError:
+        whole = False
+    if whole:
+        return f"its folder {folder} (mountcal reads it as one log: the acceleration with gravity, gyro, location)"
+    return (
+        "the zip Sensor Logger exported, or the folder it unzips to (Metadata.csv with the sensors' CSVs; "
+        f"{folder} has no Metadata.csv): mountcal reads it as one log (the acceleration with gravity, gyro, location)"
+    )
 
 
 def _imucal_map(time: str) -> str:
