@@ -268,3 +268,48 @@ def test_the_inputs_doc_command_reads_a_recording_zip(tmp_path: Path, monkeypatc
     assert main(shlex.split(command)) == 0
     samples = read_log(tmp_path / "sensorlogger.zip")
     np.testing.assert_allclose(np.median(samples.acc_s, axis=0), [0.0, 0.0, G_N], atol=0.01)  # +g up: negated
+
+
+def test_rotate_reads_the_recording_with_the_sign_its_calibration_found(
+    session: ParkingLog, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """iOS with the setting on: calibrate turns the app's default round (the handedness checks); rotate, which
+    checks no handedness, must apply the calibration to the data as calibrated, not to their mirror image."""
+    ios = record(tmp_path / "ios_on", session, "iOS", standardised=True)
+    android = record(tmp_path / "android", session, "Android")
+    frames = {}
+    for name, rec in (("ios", ios), ("android", android)):
+        cal = tmp_path / f"{name}.json"
+        assert (
+            main(["calibrate", str(rec), "--protocol", str(_protocol(session, tmp_path / "p.csv")), "-o", str(cal)])
+            == 0
+        )
+        out = tmp_path / f"{name}.parquet"
+        assert main(["rotate", str(rec), "--calibration", str(cal), "-o", str(out)]) == 0
+        frames[name] = pd.read_parquet(out)
+    ios_v, android_v = frames["ios"], frames["android"]
+    n = min(len(ios_v), len(android_v))
+    # the same vehicle-frame data (Accelerometer + Gravity rebuilt against TotalAcceleration: within 0.05 m/s²)
+    for c in ("ax", "ay", "az"):
+        assert np.median(np.abs(ios_v[c].to_numpy()[-n:] - android_v[c].to_numpy()[-n:])) < 0.05, c
+    assert ios_v["az"].median() == pytest.approx(G_N, abs=0.2)  # +g up: not the mirror image (−g)
+
+
+def test_rotate_says_a_sign_nothing_confirmed(
+    session: ParkingLog, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    ios = record(tmp_path / "ios", session, "iOS", motion=False)
+    cal = tmp_path / "cal.json"
+    assert main(["calibrate", str(ios), "-o", str(cal)]) == 0  # no headings, no drive: the sign is only assumed
+    capsys.readouterr()
+    assert main(["rotate", str(ios), "--calibration", str(cal), "--level-only", "-o", str(tmp_path / "v.parquet")]) == 0
+    err = capsys.readouterr().err
+    assert "Standardise Units & Frames" in err and "mirror image" in err, err
+    meta = pq_metadata(tmp_path / "v.parquet")
+    assert "Standardise Units & Frames" in meta["mountcal.warnings"]
+
+
+def pq_metadata(path: Path) -> dict[str, str]:
+    import pyarrow.parquet as pq
+
+    return {k.decode(): v.decode() for k, v in (pq.read_schema(path).metadata or {}).items()}

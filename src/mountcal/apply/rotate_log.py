@@ -74,6 +74,7 @@ from mountcal.io.reader import CHUNK_SAMPLES, LogOptions
 from mountcal.io.registry import reader_for
 from mountcal.io.ros2.imu import ImuMessages
 from mountcal.io.samples import Samples
+from mountcal.io.sensor_logger import sign_for_calibration
 from mountcal.io.table.write import CsvSamples, ParquetSamples
 from mountcal.io.whole import Cut, reading
 from mountcal.stops.detect import GyroUnitWatch
@@ -236,7 +237,7 @@ def rotate_log(
             report = _rotate_mcap_copy(files[0], cal, out, opts.topic, frame_id, cuts, checked, opts, axes)
     else:
         report = _rotate_stream(files, cal, out, kind, opts, chunk_samples, frame_id, checked)
-    return replace(report, frame=cal.frame, warnings=checked.warnings)
+    return replace(report, frame=cal.frame, warnings=report.warnings or checked.warnings)
 
 
 @dataclass(frozen=True)
@@ -304,7 +305,9 @@ def _rotate_stream(
     if first is None:
         raise InputError(" + ".join(map(str, files)), "IMU samples", "none", "Check the log and the topic/DBC.")
     acc_to_vehicle(first.acc_s, cal, check_units=True, level_only=checked.level_only)  # g units refused before output
-    tally = _Tally(gyro=first.gyro_s is not None, several=len(files) > 1)
+    flip, said = sign_for_calibration(first, cal.provenance.conventions)  # a phone app's sign (Sensor Logger)
+    checked = replace(checked, warnings=(*checked.warnings, said)) if said else checked
+    tally = _Tally(gyro=first.gyro_s is not None, several=len(files) > 1, flip_sign=flip)
     with atomic_output(out) as f, ThreadPoolExecutor(max_workers=1) as encoder:
         writer = _writer(f, kind, tally.gyro, cal, files, frame_id, first.incomplete, checked)
         # Encoding and compressing chunk k (pyarrow releases the GIL) overlaps reading chunk k + 1;
@@ -339,6 +342,7 @@ def _rotate_stream(
         gyro=tally.gyro,
         topic=_topic("/imu", cal) if kind == "mcap" else None,
         incomplete=tuple(tally.incomplete),
+        warnings=checked.warnings,
     )
 
 
@@ -348,6 +352,7 @@ class _Tally:
 
     gyro: bool
     several: bool
+    flip_sign: bool = False  # the acceleration read with the other sign than the calibration found
     samples: int = 0
     chunks: int = 0
     largest: int = 0
@@ -374,7 +379,8 @@ class _Tally:
             )
         self.gyro_unit.look(chunk)
         # Units checked on the first chunk; yaw by rotate_log (level_only: its decision, passed on).
-        acc_v = acc_to_vehicle(chunk.acc_s, cal, check_units=False, level_only=level_only)
+        acc_s = -chunk.acc_s if self.flip_sign else chunk.acc_s
+        acc_v = acc_to_vehicle(acc_s, cal, check_units=False, level_only=level_only)
         gyro_v = rate_to_vehicle(chunk.gyro_s, cal, level_only=level_only) if chunk.gyro_s is not None else None
         self.samples, self.chunks, self.largest = self.samples + n, self.chunks + 1, max(self.largest, n)
         return chunk.t_s, acc_v, gyro_v

@@ -28,6 +28,7 @@ from __future__ import annotations
 import io
 import re
 import zipfile
+from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path, PurePosixPath
 from typing import TYPE_CHECKING
@@ -347,7 +348,7 @@ def _location(rec: _Recording) -> tuple[dict[str, Channel], list[str]]:
 def other_sign(samples: Samples, why: str) -> Samples | None:
     """``samples`` with the acceleration's other sign, where it was only the app's default (else None):
     what a handedness check that found the default mirrored (``why``) infers."""
-    sign = next((c for c in samples.conventions if c.name == SIGN), None)
+    sign = _sign(samples.conventions)
     if sign is None or sign.how != "default":
         return None
     value = AS_LOGGED if sign.value == NEGATED else NEGATED
@@ -362,13 +363,49 @@ def other_sign(samples: Samples, why: str) -> Samples | None:
 
 def setting_hint(samples: Samples) -> str:
     """What to say about the sign in a refusal of mirrored data from a Sensor Logger recording ("" otherwise)."""
-    sign = next((c for c in samples.conventions if c.name == SIGN), None)
+    sign = _sign(samples.conventions)
     if sign is None:
         return ""
     return (
         f" A Sensor Logger recording: the acceleration was read {sign.value} ({sign.how}: {sign.by}); an iOS "
         f"recording made with {SETTING!r} on or off, where the other was taken, mirrors the data this way."
     )
+
+
+def sign_for_calibration(samples: Samples, made_with: Sequence[Convention]) -> tuple[bool, str]:
+    """Whether to turn the acceleration of ``samples`` round before applying a calibration made with the
+    conventions ``made_with`` (``mountcal rotate``), and what to say. A sign the reading only assumed (the app's
+    default) gives way to the one the calibration stated or inferred; a default nothing confirmed is said.
+
+    Raises
+    ------
+    InputError
+        The reading and the calibration state or infer different signs.
+    """
+    read = _sign(samples.conventions)
+    if read is None:
+        return False, ""
+    made = _sign(made_with)
+    if made is not None and made.value != read.value:
+        if read.how == "default":
+            return True, f"acceleration {made.value}, as the calibration found it ({made.how} by {made.by})"
+        raise InputError(
+            samples.source or "log",
+            f"the acceleration's sign the calibration was made with: {made.value} ({made.how} by {made.by})",
+            f"{read.value} ({read.how} by {read.by})",
+            "Apply a calibration made from this recording (calibrate it), or one made with the same app setting.",
+        )
+    if read.how == "default" and (made is None or made.how == "default"):
+        return False, (
+            f"acceleration {read.value}: the app's default, which nothing confirmed ({read.by}); recorded with "
+            f"{SETTING!r} on, the vehicle-frame data are a mirror image: calibrate this recording with headings "
+            "(--protocol) or a drive to check it"
+        )
+    return False, ""
+
+
+def _sign(conventions: Sequence[Convention]) -> Convention | None:
+    return next((c for c in conventions if c.name == SIGN), None)
 
 
 class SensorLoggerReader(LogReader):
@@ -388,4 +425,12 @@ class SensorLoggerReader(LogReader):
         return read_recording(path)
 
 
-__all__ = ["SIGN", "SensorLoggerReader", "other_sign", "read_recording", "setting_hint", "sign_of"]
+__all__ = [
+    "SIGN",
+    "SensorLoggerReader",
+    "other_sign",
+    "read_recording",
+    "setting_hint",
+    "sign_for_calibration",
+    "sign_of",
+]
