@@ -313,3 +313,25 @@ def pq_metadata(path: Path) -> dict[str, str]:
     import pyarrow.parquet as pq
 
     return {k.decode(): v.decode() for k, v in (pq.read_schema(path).metadata or {}).items()}
+
+
+def test_a_fleet_reads_each_recording_folder_and_zip_as_one_log_of_its_vehicle(
+    session: ParkingLog, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A fleet folder of recordings: a recording's CSVs are its parts, not logs of their own (before, each file
+    was a log, the recording's folder its vehicle, and every file but TotalAcceleration.csv failed)."""
+    logs = tmp_path / "logs"
+    record(logs / "v01" / "rec_a", session, "Android")
+    zipped(record(tmp_path / "rec_b", session, "iOS"), logs / "v01" / "rec_b.zip")
+    record(logs / "v02" / "rec_c", session, "iOS", uncalibrated="g")
+    out = tmp_path / "fleet.parquet"
+    assert main(["fleet", str(logs), "-o", str(out)]) == 0, capsys.readouterr().err
+    table = pd.read_parquet(out).sort_values("log")
+    assert [Path(p).name for p in table["log"]] == ["rec_a", "rec_b.zip", "rec_c"]
+    assert list(table["vehicle_id"]) == ["v01", "v01", "v02"]
+    alone = _calibrate(logs / "v02" / "rec_c", tmp_path)
+    assert table["roll_deg"].iloc[2] == pytest.approx(alone["mounting"]["roll_deg"], abs=1e-6)
+    assert (table["roll_deg"] - 5.0).abs().max() < 0.5 and (table["pitch_deg"] - 6.0).abs().max() < 0.5
+    capsys.readouterr()
+    assert main(["fleet", str(logs), "-o", str(out)]) == 0  # resumed: the folders' contents key their results
+    assert "0 calibrated now, 3 from earlier runs" in capsys.readouterr().err

@@ -2,8 +2,9 @@
 
 - A **folder** is searched recursively (hidden files and folders skipped); every file a reader
   takes (:func:`mountcal.io.registry.is_log`: the suffixes of the built-in and plugin formats) is
-  one log and its vehicle id is its parent folder's name. A folder a reader takes itself (a
-  comma2k19 segment) is one log. A sheet named
+  one log and its vehicle id is its parent folder's name (as found: a link's folder, not its target's). A
+  folder a reader takes itself (a Sensor Logger recording, a ROS 2 bag, a comma2k19 segment) is one log,
+  given or found inside a folder, keyed by its files' contents; its files are not searched. A sheet named
   ``<log name>.protocol.csv`` beside a log is that log's protocol sheet.
 - A **glob** (``'fleet/*/*.mcap'``, quoted so that mountcal expands it) names logs the same way.
 - A **manifest** is a CSV with the columns :data:`MANIFEST_COLUMNS` (``vehicle_id`` and ``log``
@@ -177,9 +178,10 @@ def collect_jobs(
             found += f"; set aside {len(context.ours)} file(s) mountcal wrote, e.g. {context.ours[0]}"
         raise InputError(
             ", ".join(map(str, inputs)) or "INPUTS",
-            "log files (" + ", ".join(sorted(log_suffixes())) + "), folders of them, globs or a manifest CSV",
+            "log files (" + ", ".join(sorted(log_suffixes())) + "), log folders (a Sensor Logger recording, a "
+            "ROS 2 bag, a comma2k19 segment), folders of them, globs or a manifest CSV",
             found,
-            "Check the paths; a folder is searched recursively for files with those suffixes.",
+            "Check the paths; a folder is searched recursively for logs.",
         )
     return jobs
 
@@ -223,7 +225,7 @@ def _jobs_of_input(item: str, ctx: _Context) -> Iterator[FleetJob]:
     elif path.is_dir():
         files = []
         for file in _walk_logs(path, ctx.skip, ctx.defaults.log):
-            if written_by_mountcal(file):
+            if file.is_file() and written_by_mountcal(file):
                 ctx.ours.append(file)
                 continue
             files.append(Found(str(file), str(_resolved(file))))
@@ -310,11 +312,16 @@ def _grouped_jobs(files: Sequence[Found], item: str, ctx: _Context, origin: str)
 
 
 def _walk_logs(folder: Path, skip: set[Path], options: LogOptions) -> Iterator[Path]:
+    """The logs under ``folder``: files a reader takes, and folders that are one log (a Sensor Logger recording,
+    a ROS 2 bag, a comma2k19 segment), whose files are the log's parts and not logs of their own."""
     for root, dirs, files in os.walk(folder):
         here = Path(root)
-        dirs[:] = sorted(
+        subfolders = sorted(
             (d for d in dirs if not d.startswith(".") and _resolved(here / d) not in skip), key=natural_key
         )
+        logs = [d for d in subfolders if is_log(here / d, options)]
+        yield from (here / d for d in logs)
+        dirs[:] = [d for d in subfolders if d not in logs]
         for name in sorted(files, key=natural_key):
             file = here / name
             if (
@@ -336,8 +343,10 @@ def _file_job(found: Found, ctx: _Context, origin: str) -> FleetJob:
     remote = found.stamp is not None
     path = Path(found.path.split("://", 1)[1]) if remote else Path(found.path)
     sheet = path.with_name(path.name.rsplit(".", 1)[0] + PROTOCOL_SUFFIX)
+    # the folder as the user's layout names it (a link's folder, not its target's)
+    vehicle = "" if remote else Path(found.shown).parent.name
     return FleetJob(
-        vehicle_id=path.parent.name,
+        vehicle_id=vehicle or path.parent.name,
         log=found.shown,
         job=LogJob(
             paths=(found.path,),
