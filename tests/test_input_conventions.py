@@ -616,3 +616,16 @@ def test_a_fleet_calibration_skips_only_the_provenance_hashes(tmp_path: Path) ->
     assert unhashed.calibration.provenance.input_sha256 == ()
     _same_answer(hashed.calibration, unhashed.calibration)
     assert unhashed.calibration.provenance.conventions == hashed.calibration.provenance.conventions
+
+
+def test_the_uphill_azimuth_says_it_must_share_the_heading_channels_north(tmp_path: Path) -> None:
+    """True and magnetic north differ by the declination, which the data cannot tell: said, not assumed silently."""
+    table = tmp_path / "compass.csv"
+    df = pd.read_csv(REPO / "data" / "zhang2011_stops.csv")
+    df["heading_deg"] = (30.0 - df["beta_deg"]) % 360.0
+    df.drop(columns=["beta_deg"]).to_csv(table, index=False)
+    out = tmp_path / "r.json"
+    assert main(["calibrate", str(table), "--uphill-azimuth-deg", "30", "-o", str(out)]) == 0
+    said = json.loads(out.read_text())["provenance"]["conventions"]
+    by = next(c for c in said if c["name"] == "uphill_azimuth")["by"]
+    assert "same north" in by and "declination" in by, by

@@ -230,7 +230,8 @@ def add_log_options(
         type=Number("angle_deg"),
         default=None,
         help="compass azimuth of the slope's uphill direction, with a heading signal in the log (or a stop table's "
-        "compass column heading_deg)",
+        "compass column heading_deg), from the same north as that heading (true or magnetic: they differ by the "
+        "local declination, which turns yaw by as much)",
     )
     add_detection_options(p)
 

@@ -235,7 +235,13 @@ def uphill_azimuth(azimuth_deg: float, channel: str) -> tuple[Convention, Conven
             "stated",
             f"{option('uphill_azimuth')} {azimuth_deg:g} with {channel} (a compass heading, clockwise from north)",
         ),
-        Convention("uphill_azimuth", f"{azimuth_deg:g}", "stated", option("uphill_azimuth")),
+        Convention(
+            "uphill_azimuth",
+            f"{azimuth_deg:g}",
+            "stated",
+            f"{option('uphill_azimuth')}, taken from the same north as {channel} (true or magnetic north: they differ "
+            "by the local declination, which turns yaw by as much; the data cannot tell)",
+        ),
     )
 
 
