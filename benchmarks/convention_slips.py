@@ -263,6 +263,9 @@ def log_slips(rng: np.random.Generator, folder: Path) -> dict[str, Case]:
     cases["log + drive: uphill azimuth counter-clockwise from east"] = Case(
         ["calibrate", log, "--uphill-azimuth-deg", "60", *LOG_DETECTION], truth, ("--uphill-azimuth-deg",)
     )
+    cases["log + drive: uphill azimuth from another north (declination 8°)"] = Case(
+        ["calibrate", log, "--uphill-azimuth-deg", "38", *LOG_DETECTION], truth, ("--uphill-azimuth-deg",)
+    )
     cases["log + drive: relative β called uphill (azimuth 0)"] = Case(
         ["calibrate", log, "--uphill-azimuth-deg", "0", *LOG_DETECTION], truth, ("--uphill-azimuth-deg",)
     )

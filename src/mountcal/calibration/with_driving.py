@@ -115,7 +115,8 @@ def not_combined(static: Calibration, fit: DrivingFit, found: Finding) -> Calibr
     words = (
         f"stops and driving DISAGREE: {found.size}, beyond {DISAGREE_Z:g}σ; they are not combined and the "
         "result is not confident. One of them misses an effect (a remount between the stops and the drive, "
-        "a wrong protocol heading or uphill azimuth, a speed channel not along the vehicle x axis, the stops' "
+        "a wrong protocol heading or uphill azimuth (or one from another north than the heading channel's: the "
+        "declination), a speed channel not along the vehicle x axis, the stops' "
         "mirror solution)"
     )
     return replace(
