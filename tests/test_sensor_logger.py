@@ -335,3 +335,19 @@ def test_a_fleet_reads_each_recording_folder_and_zip_as_one_log_of_its_vehicle(
     capsys.readouterr()
     assert main(["fleet", str(logs), "-o", str(out)]) == 0  # resumed: the folders' contents key their results
     assert "0 calibrated now, 3 from earlier runs" in capsys.readouterr().err
+
+
+def test_a_recording_zip_cut_short_or_without_readable_rows_is_refused_saying_so(
+    session: ParkingLog, tmp_path: Path, refused: Refused
+) -> None:
+    whole = zipped(record(tmp_path / "rec", session, "Android"))
+    cut = tmp_path / "cut.zip"
+    cut.write_bytes(whole.read_bytes()[: whole.stat().st_size // 2])  # an interrupted download
+    err = refused(["calibrate", str(cut), "-o", str(tmp_path / "r.json")], tmp_path / "r.json")
+    assert "cut.zip" in err and "does not open" in err and "cut short" in err, err
+    for rows, name in (("foo,bar,1,2,3\n", "garbled.zip"), ("", "empty.zip")):
+        with zipfile.ZipFile(tmp_path / name, "w") as z:
+            z.writestr("Metadata.csv", "platform\nAndroid\n")
+            z.writestr("TotalAcceleration.csv", "time,seconds_elapsed,z,y,x\n" + rows)
+        err = refused(["calibrate", str(tmp_path / name), "-o", str(tmp_path / "r.json")], tmp_path / "r.json")
+        assert f"{name}:TotalAcceleration.csv" in err and "none among its" in err, err  # not "no parked period"

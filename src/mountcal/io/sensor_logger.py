@@ -112,16 +112,24 @@ def _open_zip(path: Path) -> zipfile.ZipFile:
     try:
         return zipfile.ZipFile(path)
     except (OSError, zipfile.BadZipFile) as err:
-        raise InputError(str(path), WHAT + " (a zip)", f"no readable zip archive ({err})", "Export again.") from err
+        raise InputError(
+            str(path),
+            WHAT + " (a zip)",
+            f"a zip archive that does not open ({err}): cut short in a copy or a download?",
+            "Copy or export it again.",
+        ) from err
 
 
 def _is_recording_zip(path: Path) -> bool:
-    """A zip holding CSV files (a phone app's export): claimed, to be read or refused saying what it holds.
-    Other zips are left to plugins (a plugin's format may be a zip inside)."""
+    """A zip holding CSV files (a phone app's export), or one that does not open (cut short): claimed, to be read
+    or refused saying what it holds or why it does not open. Other zips are left to plugins (a plugin's format
+    may be a zip inside)."""
     try:
         with zipfile.ZipFile(path) as z:
             return any(n.lower().endswith(".csv") for n in z.namelist())
-    except (OSError, zipfile.BadZipFile):
+    except zipfile.BadZipFile:
+        return path.is_file()  # no zip's directory at its end (cut short): refused by the reader, naming that
+    except OSError:
         return False
 
 
@@ -139,6 +147,13 @@ def _vectors(rec: _Recording, name: str) -> tuple[FloatArray, FloatArray, int]:
     t = _seconds(frame["time"])
     values = frame[["x", "y", "z"]].apply(pd.to_numeric, errors="coerce").to_numpy(np.float64)
     ok = np.isfinite(t) & np.isfinite(values).all(axis=1)
+    if not ok.any():
+        raise InputError(
+            rec.where(name),
+            "rows with a time (ns since 1970) and finite x, y, z",
+            f"none among its {t.size} rows",
+            "Export the recording again with Sensor Logger.",
+        )
     order = np.argsort(t[ok], kind="stable")
     return t[ok][order], values[ok][order], int((~ok).sum())
 
