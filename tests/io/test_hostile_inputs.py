@@ -387,6 +387,21 @@ def test_the_fuzzer_flips_that_crashed_asammdf_are_refused(
     assert not (tmp_path / "out.csv").exists()
 
 
+@pytest.mark.parametrize("command", ["inspect", "stops", "calibrate"])
+def test_the_fuzzer_splice_that_made_a_data_bytes_offset_negative_is_refused(
+    real_data: Path, tmp_path: Path, command: str
+) -> None:
+    """Found by benchmarks/fuzz.py --mutations 30 (case 25): 266 bytes spliced into the car's MF4 gave a value
+    offset beyond 2⁶³, negative as a signed index, which the word reader took for a place inside the data."""
+    data = (real_data / "canedge" / "3BA199E2_car_DK_2021-07-26" / "00000164" / "00000005-60FEB5A8.MF4").read_bytes()
+    log = tmp_path / "spliced.MF4"
+    log.write_bytes(data[:18468] + data[176452 : 176452 + 266] + data[18468 + 266 :])
+    out = tmp_path / ("out.json" if command == "calibrate" else "out.csv")
+    args = ["--dbc", str(real_data / "canedge" / "dbc" / "gnss.dbc"), "-o", str(out)]
+    assert_refused(*run_cli(command, str(log), *(args if command != "inspect" else [])), str(log), "DataBytes")
+    assert not out.exists()
+
+
 @pytest.mark.parametrize("command", ["stops", "calibrate"])
 def test_the_desk_log_with_times_far_apart_finds_no_stop_and_says_why(
     real_data: Path, tmp_path: Path, command: str

@@ -224,19 +224,19 @@ def iter_blf(path: Path, keep: Filter) -> Iterator[CanFrames]:
 
 
 def _gather(arr: NDArray[np.uint8], pos: IntArray, width: int) -> NDArray[np.uint8]:
-    """Bytes ``arr[pos + k]`` for k < width, shape (len(pos), width); reads past the end give 0."""
+    """Bytes ``arr[pos + k]`` for k < width, shape (len(pos), width); reads past either end give 0."""
     index = pos[:, None] + np.arange(width)[None, :]
-    if index.size and index[:, -1].max() < arr.shape[0]:
+    if index.size and index[:, -1].max() < arr.shape[0] and pos.min() >= 0:
         return np.asarray(arr[index], dtype=np.uint8)
-    inside = index < arr.shape[0]
-    return np.where(inside, arr[np.minimum(index, arr.shape[0] - 1)], 0).astype(np.uint8)
+    inside = (index >= 0) & (index < arr.shape[0])
+    return np.where(inside, arr[np.clip(index, 0, arr.shape[0] - 1)], 0).astype(np.uint8)
 
 
 def le_field(arr: NDArray[np.uint8], pos: IntArray, dtype: str) -> NDArray[Any]:
     """A little-endian integer field at each of ``pos``, shape (len(pos),).
 
     Read as whole words from the four (or two, eight) aligned views of the buffer, which is much
-    cheaper than gathering bytes; a position too close to the end reads as 0.
+    cheaper than gathering bytes; a position too close to the end, or before the start, reads as 0.
     """
     width = np.dtype(dtype).itemsize
     out = np.zeros(pos.shape[0], dtype)
@@ -246,8 +246,8 @@ def le_field(arr: NDArray[np.uint8], pos: IntArray, dtype: str) -> NDArray[Any]:
         words = np.frombuffer(arr, dtype, count=max(count, 0), offset=int(r))
         sel = residue == r if width > 1 else slice(None)
         index = (pos[sel] - r) // width
-        inside = index < count
-        out[sel] = np.where(inside, words[np.minimum(index, max(count - 1, 0))] if count > 0 else 0, 0)
+        inside = (index >= 0) & (index < count)
+        out[sel] = np.where(inside, words[np.clip(index, 0, max(count - 1, 0))] if count > 0 else 0, 0)
     return out
 
 

@@ -455,8 +455,8 @@ def _value_ends(data: NDArray[np.uint8], offsets: NDArray[np.uint64]) -> NDArray
     """Where each variable-length value ends (its 4-byte length and bytes); past the data where its
     length is not there to read."""
     size = data.shape[0]
-    starts = offsets.astype(np.int64)
-    inside = starts <= size - 4
+    starts = offsets.astype(np.int64)  # an offset beyond 2⁶³ (a corrupt file) turns negative: outside too
+    inside = (starts >= 0) & (starts <= size - 4)
     lengths = le_field(data, np.where(inside, starts, 0), "<u4").astype(np.int64)
     return np.where(inside, starts + 4 + lengths, size + 1)
 
