@@ -38,6 +38,7 @@ from mountcal.core.result import (
     Angles,
     AngleValues,
     Calibration,
+    Convention,
     FitQuality,
     ModelSelection,
     ModelStep,
@@ -55,6 +56,7 @@ from mountcal.io.input_conventions import merged
 from mountcal.loop import crosscheck, plausibility, slope_reference
 from mountcal.loop import terms as model_terms
 from mountcal.loop.model_choice import close_the_loop, effect_values
+from mountcal.loop.sign import other_table_sign, turned_once, with_turn_note
 from mountcal.loop.steps import Loop, Step
 from mountcal.loop.systematic import assess
 from mountcal.stops.table import StopTable, check_count
@@ -64,14 +66,29 @@ WITH_OFFSET: tuple[str, ...] = (*BASE, registry.offset().name)  # the paper's mo
 MIN_DISTINCT_HEADINGS = 3
 
 
-def calibrate(table: StopTable, options: Options | None = None) -> Calibration:
+def calibrate(table: StopTable, options: Options | None = None, *, sign_by_caller: bool = False) -> Calibration:
     """Estimate the mounting rotation (and slope, and bias when called for) from a stop table.
 
     Besides the fit, the stops' headings are checked against their pattern (a mirrored sensor is
     refused, :func:`mountcal.loop.crosscheck.stops_sense`) and the answer's plausibility
     (:mod:`mountcal.loop.plausibility`); the checks and the input's conventions are in the result.
+    An acceleration sign only assumed (a stop table of a Sensor Logger recording from iOS, its column
+    ``acceleration_sign``) is turned round once where the stops go round mirrored (:mod:`mountcal.loop.sign`),
+    and leaves the result not confident where no handedness check confirms it; ``sign_by_caller``: a log's
+    pipeline does both on its samples (:mod:`mountcal.calibration.pipeline`), with the drive's turns too.
     """
     opts = options or Options()
+    if sign_by_caller:
+        return _calibrate(table, opts, False)
+    cal = turned_once(lambda t: _calibrate(t, opts, True), table, other_table_sign, _conventions)
+    return with_turn_note(cal, table.conventions)
+
+
+def _conventions(table: StopTable) -> tuple[Convention, ...]:
+    return table.conventions
+
+
+def _calibrate(table: StopTable, opts: Options, check_sign: bool) -> Calibration:
     if opts.triad is not None:
         table = opts.triad.correct(table)
     _check_geometry(table)
@@ -84,14 +101,18 @@ def calibrate(table: StopTable, options: Options | None = None) -> Calibration:
     else:
         cal = _full(table, g, g_source, opts)
     stated = merged(table.conventions, (gravity_convention(g_source),))
-    notes = with_frame_note(cal.notes, stated)  # stops of rotated samples: the angles are what is left over
-    cal = replace(cal, provenance=replace(cal.provenance, conventions=stated), notes=notes)
-    checks = (
+    checks = [
         *plausibility.convention_checks(stated),
         sense,
         crosscheck.heading_agreement(table),
         *plausibility.answer_checks(cal),
-    )
+    ]
+    signed = plausibility.sign_check(stated, checks) if check_sign else None  # a sign only assumed: confirmed?
+    if signed is not None:
+        checks.append(signed[0])
+        stated = merged(stated, (signed[1],))
+    notes = with_frame_note(cal.notes, stated)  # stops of rotated samples: the angles are what is left over
+    cal = replace(cal, provenance=replace(cal.provenance, conventions=stated), notes=notes)
     return plausibility.with_checks(cal, checks)
 
 

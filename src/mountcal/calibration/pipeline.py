@@ -26,10 +26,10 @@ from mountcal.calibration.options import DEFAULT_USE, Options, Use
 from mountcal.calibration.record import local_gravity
 from mountcal.calibration.with_driving import combine, driving_calibration, not_combined
 from mountcal.core.driving_document import Comparison, DrivingConsistency
-from mountcal.core.errors import InputError, NotEnoughInformation
+from mountcal.core.errors import NotEnoughInformation
 from mountcal.core.option_names import option
 from mountcal.core.paths import special_kind
-from mountcal.core.result import Calibration, Provenance
+from mountcal.core.result import Calibration, Convention, Provenance
 from mountcal.core.version import software_version
 from mountcal.estimate import effects
 from mountcal.estimate.driving import DrivingFit, estimate_driving
@@ -41,10 +41,11 @@ from mountcal.io.logs import read_log, stated
 from mountcal.io.reader import LogOptions
 from mountcal.io.samples import Samples, with_gravity
 from mountcal.io.sensor_frame import sensor_frame_note
-from mountcal.io.sensor_logger import other_sign, setting_hint
+from mountcal.io.sensor_logger import other_sign
 from mountcal.io.timestamps import increasing_times
 from mountcal.io.whole import reading
 from mountcal.loop import crosscheck, plausibility
+from mountcal.loop.sign import turned_once
 from mountcal.stops.detect import StopDetection
 from mountcal.stops.headings import StopTableFromLog, near_miss_advice, read_protocol, tabulate
 from mountcal.stops.table import Headings, StopTable, Unit, read_stop_table
@@ -220,23 +221,16 @@ def _signed(job: LogJob, samples: Samples | None, protocol: pd.DataFrame | None)
     """
     samples = with_gravity(read_log(list(job.paths), job.log) if samples is None else stated(samples, job.log))
     sheet = protocol is not None or job.protocol is not None
-    try:
-        done = _calibrate_job(job, samples, protocol)
+
+    def run(read: Samples) -> tuple[LogResult, Calibration]:
+        done = _calibrate_job(job, read, protocol)
         return done, checked(done, job.uphill_azimuth_deg, sheet)
-    except crosscheck.Mirrored as err:
-        turned = other_sign(samples, err.found)
-        if turned is None:
-            raise _with_sign_hint(err, samples) from err
-    try:
-        done = _calibrate_job(job, turned, protocol)
-        return done, checked(done, job.uphill_azimuth_deg, sheet)
-    except crosscheck.Mirrored as err:
-        raise _with_sign_hint(err, turned) from err
+
+    return turned_once(run, samples, other_sign, _conventions)
 
 
-def _with_sign_hint(err: crosscheck.Mirrored, samples: Samples) -> InputError:
-    hint = setting_hint(samples)
-    return crosscheck.Mirrored(err.where, err.expected, err.found, err.todo + hint) if hint else err
+def _conventions(samples: Samples) -> tuple[Convention, ...]:
+    return samples.conventions
 
 
 def _calibrate_job(job: LogJob, samples: Samples | None, protocol: pd.DataFrame | None = None) -> LogResult:
@@ -249,7 +243,7 @@ def _calibrate_job(job: LogJob, samples: Samples | None, protocol: pd.DataFrame 
         try:
             found = _tabulate(samples, job, protocol)
             table = replace(found.table, source=source, incomplete=samples.incomplete)
-            static = calibrate(table, job.options)
+            static = calibrate(table, job.options, sign_by_caller=True)  # the sign: on the samples (_signed)
         except NotEnoughInformation as err:
             missed = near_miss_advice(found.near_misses) if found is not None else ""
             if found is not None and found.gyro_rejection:  # the gyro, not the parking, left too few stops

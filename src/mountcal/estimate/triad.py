@@ -10,6 +10,12 @@ A triad describes the sensor's own axes, after the axis map the session was read
 that map (``conventions``), applying it to stops read with another map is refused, and so are samples
 mountcal rotate already put in the vehicle frame, for fitting a triad and for applying one
 (:func:`mountcal.io.frame.refuse_rotated`).
+
+The JSON states the acceleration's sign too, where the session's reading stated one (a Sensor Logger recording:
+``acceleration_sign``). The sphere fit sees magnitudes only: an acceleration negated in all three axes (a
+reflection, which no symmetric ``I + E`` near I can hold: its determinant stays positive) fits as well, with the
+bias negated. So a triad whose sign was only the app's default has a bias whose sign rests on that default; it
+is said when fitted, and applying it to stops read with the other sign is refused naming the setting.
 """
 
 from __future__ import annotations
@@ -38,6 +44,7 @@ from mountcal.estimate.triad_session import MIN_STOP_S, TRIM_S
 from mountcal.io.frame import refuse_rotated, rotated_of
 from mountcal.io.input_conventions import IDENTITY_AXES, axes_convention, axes_stated, parse_axes
 from mountcal.io.kind import Declared
+from mountcal.io.sensor_logger import SETTING, SIGN
 from mountcal.io.sensor_spec import SensorSpec
 from mountcal.stops.table import StopTable, Unit, read_stop_table
 
@@ -88,6 +95,7 @@ class Triad:
                 now or "the axes as logged",
                 f"Read the log with the same map: {fix}.",
             )
+        _check_sign(self, table)
         inv = np.linalg.inv(self.matrix)
         cov = None if table.cov_s is None else np.einsum("ij,njk,lk->nil", inv, table.cov_s, inv)
         return replace(table, acc_s=(table.acc_s - self.bias_mps2) @ inv.T, cov_s=cov)
@@ -141,7 +149,8 @@ def from_sphere(fit: sphere.SphereFit, source: str, conventions: tuple[Conventio
     values[idx] = fit.values
     cov[np.ix_(idx, idx)] = fit.cov
     axes = tuple(c for c in conventions if c.name == AXES) or (axes_convention(None, IDENTITY_AXES, ""),)
-    return Triad(values[:3], values[3:], cov, source, tuple(NAMES[i] for i in idx), axes)
+    signs = tuple(c for c in conventions if c.name == SIGN)  # the bias's sign rests on it (module docstring)
+    return Triad(values[:3], values[3:], cov, source, tuple(NAMES[i] for i in idx), axes + signs)
 
 
 # sphere.py names → positions in NAMES (bias_x…, scale_xx…, cross_xy…)
@@ -204,6 +213,35 @@ def _axes_text(conventions: Sequence[Convention]) -> str | None:
     """The axis map an ``axes`` convention states (``x,y,z`` for the axes as logged), or None."""
     found = axes_stated(conventions, AXES)
     return None if found is None else found[1].text
+
+
+def _check_sign(triad: Triad, table: StopTable) -> None:
+    """Refuse stops read with the other acceleration sign than a triad whose sign was only the app's default:
+    its bias would apply negated if both sessions were recorded with the same setting (module docstring)."""
+    made = next((c for c in triad.conventions if c.name == SIGN), None)
+    now = next((c for c in table.conventions if c.name == SIGN), None)
+    if made is None or now is None or made.how != "default" or made.value == now.value:
+        return
+    raise InputError(
+        f"{table.source} with {option('triad')} {triad.source}",
+        f"stops read with the acceleration sign the triad's bias was fitted with: {made.value} (the app's default)",
+        f"{now.value} ({now.how}: {now.by})",
+        f"The triad's session assumed the app's default for {SETTING!r}; if it was recorded with the setting as "
+        "these stops were, its bias has the wrong sign. Fit the triad again on a session whose sign is known "
+        "(record AccelerometerUncalibrated with it, or state the sign in its stop table's column acceleration_sign).",
+    )
+
+
+def sign_note(triad: Triad) -> list[str]:
+    """A note for ``mountcal triad`` where the session's acceleration sign was only the app's default."""
+    sign = next((c for c in triad.conventions if c.name == SIGN), None)
+    if sign is None or sign.how != "default" or "bias_x" not in triad.fitted:
+        return []
+    return [
+        f"  note: the acceleration was read {sign.value}, {sign.by}, which a triad session cannot confirm (the "
+        "sphere fit sees magnitudes only): the bias's sign rests on it, the scale and cross-axis do not; calibrating "
+        "with this triad refuses stops read with the other sign"
+    ]
 
 
 AXES = "axes"  # the one convention a triad keeps: the axis map of its session
@@ -351,5 +389,6 @@ def describe(triad: Any, fit: Any) -> list[str]:
     ]
     if fit.dof == 0:
         lines.append("  note: as many stops as parameters: the values fit exactly and nothing checks the model")
+    lines += sign_note(triad)
     lines.append("  (bias in m/s², scale and cross-axis as fractions; 1σ)")
     return lines

@@ -31,7 +31,7 @@ import zipfile
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path, PurePosixPath
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 import pandas as pd
@@ -61,6 +61,7 @@ WHAT = (
     "a Sensor Logger recording: Metadata.csv with TotalAcceleration.csv (Android) or Accelerometer.csv and "
     "Gravity.csv (iOS)"
 )
+_HOWS: tuple[Literal["stated", "inferred", "default"], ...] = ("stated", "inferred", "default")
 _G_RANGE = (0.8, 1.2)  # a still uncalibrated accelerometer's median |a| in g ...
 _MPS2_RANGE = (7.8, 11.8)  # ... and in m/s²
 
@@ -363,7 +364,18 @@ def _location(rec: _Recording) -> tuple[dict[str, Channel], list[str]]:
 def other_sign(samples: Samples, why: str) -> Samples | None:
     """``samples`` with the acceleration's other sign, where it was only the app's default (else None):
     what a handedness check that found the default mirrored (``why``) infers."""
-    sign = _sign(samples.conventions)
+    turned = turned_sign(samples.conventions, why)
+    if turned is None:
+        return None
+    conventions, note = turned
+    return replace(samples, acc_s=-samples.acc_s, conventions=conventions, notes=(*samples.notes, note))
+
+
+def turned_sign(conventions: Sequence[Convention], why: str) -> tuple[tuple[Convention, ...], str] | None:
+    """The conventions with the acceleration's other sign, inferred, and the note saying so, where the sign was only
+    the app's default (else None): what a handedness check that found the default mirrored (``why``) infers, for a
+    recording's samples (:func:`other_sign`) and for a stop table made from one (its column ``acceleration_sign``)."""
+    sign = _sign(conventions)
     if sign is None or sign.how != "default":
         return None
     value = AS_LOGGED if sign.value == NEGATED else NEGATED
@@ -371,20 +383,51 @@ def other_sign(samples: Samples, why: str) -> Samples | None:
     if value == AS_LOGGED:
         by += f" — {SETTING!r} was on"
     turned = Convention(SIGN, value, "inferred", by)
-    conventions = tuple(turned if c.name == SIGN else c for c in samples.conventions)
     note = f"acceleration_sign: {value}, inferred by the handedness checks (the app's default was mirrored)"
-    return replace(samples, acc_s=-samples.acc_s, conventions=conventions, notes=(*samples.notes, note))
+    return tuple(turned if c.name == SIGN else c for c in conventions), note
 
 
 def setting_hint(samples: Samples) -> str:
     """What to say about the sign in a refusal of mirrored data from a Sensor Logger recording ("" otherwise)."""
-    sign = _sign(samples.conventions)
+    return sign_hint(samples.conventions)
+
+
+def sign_hint(conventions: Sequence[Convention]) -> str:
+    """:func:`setting_hint` of the conventions of samples or of a stop table."""
+    sign = _sign(conventions)
     if sign is None:
         return ""
     return (
         f" A Sensor Logger recording: the acceleration was read {sign.value} ({sign.how}: {sign.by}); an iOS "
         f"recording made with {SETTING!r} on or off, where the other was taken, mirrors the data this way."
     )
+
+
+def sign_column(conventions: Sequence[Convention]) -> str | None:
+    """A stop table's column ``acceleration_sign``: the sign its means were read with and how it is known
+    (``<value>; <how>: <by>``), or None where the input states no sign."""
+    sign = _sign(conventions)
+    return None if sign is None else f"{sign.value}; {sign.how}: {sign.by}"
+
+
+def column_sign(values: Sequence[object], where: str, column: str = SIGN) -> Convention:
+    """The sign a stop table's column ``acceleration_sign`` states (:func:`sign_column`'s text, one in every row;
+    a value alone, ``as logged`` or ``negated``, is stated by the column), as the convention it was written from."""
+    texts = sorted({str(v).strip() for v in values})
+    said, _, known = (texts[0] if len(texts) == 1 else "").partition("; ")
+    value = next((v for v in (AS_LOGGED, NEGATED) if said.lower() in (v.lower(), v.split(" (")[0])), "")
+    said_how, _, by = known.partition(": ")
+    how = next((h for h in _HOWS if h == (said_how or "stated")), None)
+    if not value or how is None:
+        raise InputError(
+            where,
+            f"one sign in the column {column}: '{AS_LOGGED.split(' (')[0]}' or '{NEGATED.split(' (')[0]}', as "
+            "`mountcal stops` writes it ('<sign>; <stated|inferred|default>: <by what>')",
+            ", ".join(map(repr, texts)) or "no value",
+            "Give every row the sign the stops were read with, or drop the column.",
+        )
+    column_said = f"{where}: column {column}"
+    return Convention(SIGN, value, how, f"{by} ({column_said})" if by else column_said)
 
 
 def sign_for_calibration(samples: Samples, made_with: Sequence[Convention]) -> tuple[bool, str]:
@@ -443,9 +486,13 @@ class SensorLoggerReader(LogReader):
 __all__ = [
     "SIGN",
     "SensorLoggerReader",
+    "column_sign",
     "other_sign",
     "read_recording",
     "setting_hint",
+    "sign_column",
     "sign_for_calibration",
+    "sign_hint",
     "sign_of",
+    "turned_sign",
 ]

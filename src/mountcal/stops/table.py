@@ -47,6 +47,7 @@ from mountcal.io.input_conventions import (
 )
 from mountcal.io.input_conventions import Headings as Headings  # one definition, imported from here by many
 from mountcal.io.inputs import check_parquet_rows, csv_columns
+from mountcal.io.sensor_logger import SIGN, column_sign, sign_column
 from mountcal.io.whole import parquet_end, text_bytes_end
 
 # Column names of the stop table file.
@@ -68,9 +69,10 @@ ALT = "alt_m"
 REQUIRED = ACC
 AXES = "axes"  # the axis map already applied to ax, ay, az (by `mountcal stops --axes`)
 FRAME = FRAME_COLUMN  # the frame of ax, ay, az when mountcal rotate had put the log in the vehicle (levelled) frame
+# SIGN (acceleration_sign): the sign a phone app's acceleration was read with and how it is known (Sensor Logger)
 OPTIONAL = (
     BETA, HEADING_REF, *STD, COUNT, *STD_MEAN, *CORR, TIME, DURATION, TEMPERATURE, SITE, LAT, LON, ALT, HEADING, AXES,
-    FRAME,
+    FRAME, SIGN,
 )  # fmt: skip
 COLUMNS = (BETA, HEADING_REF, *ACC, *OPTIONAL[2:])
 
@@ -192,6 +194,8 @@ class StopTable:
         frame = next((c for c in self.conventions if c.name == FRAME_CONVENTION), None)
         if frame is not None:  # rotated samples' stops: a triad or a second rotation is refused on reading them
             columns[FRAME] = frame.value
+        if (sign := sign_column(self.conventions)) is not None:  # an assumed sign stays assumed in the table
+            columns[SIGN] = sign
         return pd.DataFrame(columns)
 
 
@@ -339,6 +343,7 @@ def stop_table_from_frame(
         cov = _with_correlations(cov, _numeric(df, [c for c in CORR if c in df.columns], source), df, source)
     applied = _applied_axes(df, source)
     conventions += [] if FRAME not in df.columns else column_frame(df[FRAME].tolist(), source, FRAME)
+    conventions += [] if SIGN not in df.columns else [column_sign(df[SIGN].tolist(), source)]
     if axes is not None and not axes.identity:  # the device's axes onto the sensor frame, as for a log
         acc = axes.apply(acc)
         cov = None if cov is None else axes.apply_cov(cov)
