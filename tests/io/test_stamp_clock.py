@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from rosbags.convert.converter import convert
 
 from mountcal.cli import main
 from mountcal.io.logs import read_log
@@ -81,6 +82,18 @@ def test_a_boot_time_imu_calibrates_from_its_drive(tmp_path: Path) -> None:
     doc = _result(out)
     _within_sigma(doc, {"roll_deg": 4.0, "pitch_deg": -3.0, "yaw_deg": 25.0})
     assert [c["name"] for c in doc["provenance"]["conventions"]].count("stamp_clock") == 1
+
+
+def test_a_ros2_bag_of_the_boot_time_log_reads_on_the_recorders_clock_too(parking, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """The path every bag is read through (here a ROS 2 SQLite bag that rosbags converted): the same rule."""
+    boot, _, _ = parking
+    bag = tmp_path / "boot_bag"
+    convert([boot], bag, "sqlite3", 9, None, "file", None, None, [], [], [], [])
+    moved, direct = read_log(bag), read_log(boot)
+    np.testing.assert_array_equal(moved.t_s, direct.t_s)
+    np.testing.assert_array_equal(moved.channels["speed_mps"].t_s, direct.channels["speed_mps"].t_s)
+    (clock,) = [c for c in moved.conventions if c.name == "stamp_clock"]
+    assert IMU_TOPIC in clock.value and clock.by.startswith("header.stamp against the record time")
 
 
 def test_stamps_on_the_recorders_clock_are_read_as_stamped(parking) -> None:  # type: ignore[no-untyped-def]
