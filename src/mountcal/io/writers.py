@@ -189,6 +189,7 @@ def write_mcap(
     with_fix: tuple[float, float, float] | None = None,
     with_odometry: bool = True,
     start_time_s: float = START_TIME_S,
+    stamp_offsets_s: Mapping[str, float] | None = None,
 ) -> WrittenLog:
     """Write a ROS 2 MCAP log (CDR) with the real writer, ``mcap_ros2.writer.Writer``.
 
@@ -215,6 +216,8 @@ def write_mcap(
         ``twist.twist.linear.x``, heading as the orientation's yaw = 90° − compass heading.
     start_time_s : float
         Unix time of the log's ``t_s = 0``: every ``header.stamp`` and log time is ``start_time_s + t``.
+    stamp_offsets_s : mapping of topic to float, optional
+        A driver's clock: the topic's ``header.stamp`` = log time + offset (s) (boot time: ``100 - start_time_s``).
 
     Returns
     -------
@@ -251,6 +254,8 @@ def write_mcap(
         for t_ns, topic, type_name, message in heapq.merge(*streams, key=lambda m: m[0]):
             if topic not in schemas:
                 schemas[topic] = writer.register_msgdef(type_name, ros2_definition(type_name))
+            if stamp_offsets_s and topic in stamp_offsets_s:  # a driver stamping on its own clock
+                message["header"] = _header(t_ns + _to_ns(stamp_offsets_s[topic]), message["header"]["frame_id"])
             writer.write_message(
                 topic, schemas[topic], message, log_time=t_ns, publish_time=t_ns, sequence=counts[topic]
             )

@@ -12,9 +12,13 @@ Conventions of every function here:
 
 - **Time**: a message's time is its ``header.stamp`` (``sec + nanosec·1e-9``, seconds); where the
   stamp is zero (unset) the MCAP ``log_time`` (the recorder's receive time) is used instead. The
-  rule is applied per message and identically on every topic, so all channels share one clock when
-  the senders stamp their messages. Times are float64 seconds (sub-microsecond resolution at
-  Unix-epoch magnitudes).
+  rule is applied per message and identically on every topic. A topic stamped on another clock
+  than the recorder's (a driver's boot time, seconds since power-on, against ``log_time`` in Unix
+  time: more than 60 s apart) is moved onto the recorder's by its median ``log_time − stamp``, one
+  constant per topic, and said (convention ``stamp_clock``, :mod:`mountcal.io.stamp_clock`), so all
+  channels share one clock; topics on the recorder's clock are left as stamped. Times are float64
+  seconds (sub-microsecond resolution at Unix-epoch magnitudes). :func:`iter_mcap` streams the IMU
+  alone, as stamped.
 - **Units**: SI as in :class:`~mountcal.io.samples.Samples`; vectors in the IMU message's
   ``frame_id`` frame, taken as the sensor frame ``s`` (``axis_map`` ``"x,y,z"``); the ``frame_id``
   values are counted (``Samples.frame_ids``: :mod:`mountcal.io.sensor_frame`).
@@ -63,6 +67,7 @@ from mountcal.io.ros.pieces import Piece, concat, gyro_of, join_unsorted, pieces
 from mountcal.io.ros2 import cdr
 from mountcal.io.samples import Channel, FloatArray, Samples
 from mountcal.io.sensor_frame import frame_ids
+from mountcal.io.stamp_clock import StampClocks
 
 # --------------------------------------------------------------------------- choosing topics
 
@@ -263,8 +268,9 @@ def _times(decoded: cdr.Decoded, log_ns: NDArray[np.uint64]) -> FloatArray:
     return sec.astype(np.float64) + nanosec.astype(np.float64) * 1e-9
 
 
-def _decode(unit: Unit, mine: NDArray[np.bool_], sel: _Selection) -> cdr.Decoded:
-    """Fields of the unit's messages selected by ``mine`` (``sel``'s topic), with ``t`` in seconds."""
+def _decode(unit: Unit, mine: NDArray[np.bool_], sel: _Selection) -> tuple[cdr.Decoded, NDArray[np.uint64]]:
+    """Fields of the unit's messages selected by ``mine`` (``sel``'s topic), with ``t`` in seconds; their
+    log times (ns)."""
     at, size = unit.messages, unit.lengths - MESSAGE_HEAD
     if not mine.all():
         at, size = at[mine], size[mine]
@@ -274,15 +280,19 @@ def _decode(unit: Unit, mine: NDArray[np.bool_], sel: _Selection) -> cdr.Decoded
     else:
         decoded = _decode_json(sel.kind, unit.data, start, size)
     log_ns = record_field(unit.data, at, RECORD_HEAD.size + 6, "<u8")
-    return cdr.Decoded(decoded.sec, decoded.nanosec, {"t": _times(decoded, log_ns), **decoded.columns}, decoded.frames)
+    columns = {"t": _times(decoded, log_ns), **decoded.columns}
+    return cdr.Decoded(decoded.sec, decoded.nanosec, columns, decoded.frames), log_ns
 
 
 UnitDecoded = tuple[dict[str, Piece], Counter[str], Counter[str]]  # pieces, drops, IMU frame_ids
 
 
-def _decode_unit(unit: Unit, selections: Sequence[_Selection], where: str) -> UnitDecoded:
+def _decode_unit(
+    unit: Unit, selections: Sequence[_Selection], where: str, clocks: StampClocks | None = None
+) -> UnitDecoded:
     """One unit's finite, time-sorted pieces of every selection, what was dropped, and the IMU
-    messages' ``header.frame_id`` values with their counts."""
+    messages' ``header.frame_id`` values with their counts; each topic's stamps against its log times
+    told to ``clocks``."""
     channel = record_field(unit.data, unit.messages, RECORD_HEAD.size, "<u2")
     pieces: dict[str, Piece] = {}
     dropped: Counter[str] = Counter()
@@ -293,7 +303,7 @@ def _decode_unit(unit: Unit, selections: Sequence[_Selection], where: str) -> Un
         if not mine.any():
             continue
         try:
-            decoded = _decode(unit, mine, sel)
+            decoded, log_ns = _decode(unit, mine, sel)
         except cdr.CdrError as err:
             raise InputError(
                 where,
@@ -302,16 +312,21 @@ def _decode_unit(unit: Unit, selections: Sequence[_Selection], where: str) -> Un
                 "The file is damaged or mislabelled; export the topic to CSV instead.",
             ) from err
         frames.update(decoded.frames)  # only the IMU's are counted (cdr.Decoded.frames)
-        pieces.update(pieces_of(decoded, sel.kind, dropped))
+        mine_pieces = pieces_of(decoded, sel.kind, dropped)
+        if clocks is not None:
+            clocks.add(sel.topic, decoded.sec, decoded.nanosec, log_ns.astype(np.int64), mine_pieces)
+        pieces.update(mine_pieces)
     return pieces, dropped, frames
 
 
-def _decoded_units(log: Log, selections: Sequence[_Selection]) -> Generator[UnitDecoded, None, None]:
+def _decoded_units(
+    log: Log, selections: Sequence[_Selection], clocks: StampClocks | None = None
+) -> Generator[UnitDecoded, None, None]:
     """Per unit, in file order: what :func:`_decode_unit` gives."""
     wanted = frozenset(i for s in selections for i in s.channel_ids)
     with closing(chunk_units(log, wanted)) as units:
         for unit in units:
-            decoded = _decode_unit(unit, selections, log.where)
+            decoded = _decode_unit(unit, selections, log.where, clocks)
             del unit  # not held while the next chunk is read
             yield decoded
 
@@ -344,7 +359,8 @@ def _read_open(log: Log, topics: dict[str, str | None]) -> Samples:
     collected: dict[str, list[Piece]] = {}
     dropped: Counter[str] = Counter()
     frames: Counter[str] = Counter()
-    with closing(_decoded_units(log, selections)) as units:
+    clocks = StampClocks("log_time")
+    with closing(_decoded_units(log, selections, clocks)) as units:
         for pieces, drops, named in units:
             dropped.update(drops)
             frames.update(named)
@@ -359,7 +375,7 @@ def _read_open(log: Log, topics: dict[str, str | None]) -> Samples:
     for key, parts in collected.items():
         joined = concat(parts)
         channels[key] = Channel(joined.t_s, joined.columns["value"])
-    return Samples(
+    read = Samples(
         t_s=samples.t_s,
         acc_s=samples.columns["acc"],
         gyro_s=gyro_of(samples, dropped),
@@ -369,6 +385,7 @@ def _read_open(log: Log, topics: dict[str, str | None]) -> Samples:
         rotated=imu.rotated,
         frame_ids=frame_ids(imu.topic, frames, log.where),
     )
+    return clocks.settle(read)  # topics stamped on another clock than the recorder's: onto it, said
 
 
 @budget.scoped

@@ -5,7 +5,8 @@ messages located a block at a time by their container (:mod:`mountcal.io.bag.rea
 the whole block from the message definitions (:mod:`.kinds`).
 
 Conventions as :mod:`mountcal.io.mcap.read` states them: a sample's time is its ``header.stamp``
-(the record's time where the stamp is zero or the message has none); SI units; vectors in the
+(the record's time where the stamp is zero or the message has none), a topic stamped on another clock than
+the recorder's moved onto it (:mod:`mountcal.io.stamp_clock`); SI units; vectors in the
 IMU message's frame; NaN or infinite values dropped and counted; a gyro marked unknown
 (``angular_velocity_covariance[0] = −1``) is no gyro. Speed from a GNSS velocity is the horizontal
 magnitude of its linear velocity (never negative); from odometry, ``twist.twist.linear.x``.
@@ -29,6 +30,7 @@ from mountcal.io.ros.topics import Selection, Topic, choose_aux, choose_imu
 from mountcal.io.ros2.cdr import CdrError, Decoded, Rows
 from mountcal.io.samples import Channel, FloatArray, Samples
 from mountcal.io.sensor_frame import frame_ids
+from mountcal.io.stamp_clock import StampClocks
 
 I64Array = NDArray[np.int64]
 MIN_COURSE_SPEED_MPS = 1.0  # a GNSS course over ground is a heading only while moving
@@ -66,9 +68,10 @@ def samples_of(
     dropped: Counter[str] = Counter()
     frames: Counter[str] = Counter()  # the IMU messages' header.frame_id values
     held, limit = 0, max_rows()
+    clocks = StampClocks("the record time (the recorder's receive time)")
     with closing(batches(selections)) as blocks:
         for batch in blocks:
-            for key, piece in _decode(batch, where, cdr, dropped, frames).items():
+            for key, piece in _decode(batch, where, cdr, dropped, frames, clocks).items():
                 collected.setdefault(key, []).append(piece)
                 held += piece.t_s.size
             if held > limit:
@@ -90,7 +93,7 @@ def samples_of(
         gyro = gyro_of(samples, dropped)
     if imu.target.prefix and imu.kind == "imu":
         said.append(f"IMU from {imu.topic.name} field {'.'.join(imu.target.prefix)} ({imu.topic.type_name})")
-    return Samples(
+    read = Samples(
         t_s=samples.t_s,
         acc_s=samples.columns["acc"],
         gyro_s=gyro,
@@ -102,9 +105,13 @@ def samples_of(
             imu.topic.name + (f" field {'.'.join(imu.target.prefix)}" if imu.target.prefix else ""), frames, where
         ),
     )
+    return clocks.settle(read)  # topics stamped on another clock than the recorder's: onto it, said
 
 
-def _decode(batch: Batch, where: str, cdr: bool, dropped: Counter[str], frames: Counter[str]) -> dict[str, Piece]:
+def _decode(
+    batch: Batch, where: str, cdr: bool, dropped: Counter[str], frames: Counter[str], clocks: StampClocks
+) -> dict[str, Piece]:
+    """The batch's pieces (keyed as ``Samples.channels``, the IMU's ``"imu"``); its stamps told to ``clocks``."""
     sel = batch.selection
     try:
         decoded = kinds.decode(batch.rows, sel.topic.definitions(where), sel.target, cdr=cdr)
@@ -117,21 +124,26 @@ def _decode(batch: Batch, where: str, cdr: bool, dropped: Counter[str], frames: 
             "export the topic to CSV instead.",
         ) from err
     frames.update(decoded.frames)  # only the IMU's (or the acceleration's) are counted
-    t = _times(decoded, batch.record_ns)
+    pieces = _pieces(sel.kind, decoded, _times(decoded, batch.record_ns), dropped)
+    clocks.add(sel.topic.name, decoded.sec, decoded.nanosec, batch.record_ns, pieces)  # no header: all unset
+    return pieces
+
+
+def _pieces(kind: str, decoded: Decoded, t: FloatArray, dropped: Counter[str]) -> dict[str, Piece]:
     columns = {"t": t, **decoded.columns}
-    if sel.kind == "acc":
+    if kind == "acc":
         ok = np.isfinite(columns["acc"]).all(axis=1)
         dropped["imu_nonfinite"] += int((~ok).sum())
         return {"imu": keep(t, {"acc": columns["acc"]}, ok)}
-    if sel.kind == "velocity":
+    if kind == "velocity":
         v = columns["v"]
         speed = np.hypot(v[:, 0], v[:, 1])
         ok = np.isfinite(speed)
         dropped["speed_mps_nonfinite"] += int((~ok).sum())
         return {"speed_mps": keep(t, {"value": speed}, ok)}
-    if sel.kind == "nmea":
+    if kind == "nmea":
         return _nmea(t, columns, dropped)
-    return pieces_of(Decoded(decoded.sec, decoded.nanosec, columns), sel.kind, dropped)
+    return pieces_of(Decoded(decoded.sec, decoded.nanosec, columns), kind, dropped)
 
 
 def _nmea(t: FloatArray, columns: dict[str, FloatArray], dropped: Counter[str]) -> dict[str, Piece]:
