@@ -402,6 +402,21 @@ def test_the_fuzzer_splice_that_made_a_data_bytes_offset_negative_is_refused(
     assert not out.exists()
 
 
+@pytest.mark.parametrize("command", ["inspect", "calibrate"])
+def test_asammdfs_printed_traceback_of_an_unfinalised_file_it_cannot_finalise_is_not_shown(
+    real_data: Path, tmp_path: Path, command: str
+) -> None:
+    """Found by benchmarks/fuzz_mutations.py --count 300 --seed 7 (case 113): a block length of the desk log
+    one byte short made asammdf print a traceback (to stdout) while finalising, before raising."""
+    data = bytearray((real_data / DESK_MF4).read_bytes())
+    struct.pack_into("<Q", data, 5296, 63)  # was 64
+    log = tmp_path / "short.MF4"
+    log.write_bytes(bytes(data))
+    out = tmp_path / "out.json"
+    assert_refused(*run_cli(command, str(log), *(["-o", str(out)] if command == "calibrate" else [])), "short.MF4")
+    assert not out.exists()
+
+
 @pytest.mark.parametrize("command", ["stops", "calibrate"])
 def test_the_desk_log_with_times_far_apart_finds_no_stop_and_says_why(
     real_data: Path, tmp_path: Path, command: str

@@ -12,7 +12,9 @@ file the logger closed there: its samples say so (:func:`mountcal.io.whole.found
 
 from __future__ import annotations
 
+import contextlib
 import gc
+import io
 import logging
 import math
 import mmap
@@ -194,14 +196,16 @@ def _check_mf4_channel_groups(path: Path) -> None:
 
 @contextmanager
 def _asammdf_quiet() -> Iterator[None]:
-    """asammdf's logger silenced: on a damaged file it prints tracebacks of errors it recovers
-    from (its own bus-logging decoding, which these raw frames do not use); what cannot be read
-    raises, and becomes an InputError here."""
+    """asammdf's logger silenced: on a damaged file it logs tracebacks of errors it recovers
+    from (its own bus-logging decoding, which these raw frames do not use), and finalising an
+    unfinalised file prints the traceback of an error before raising it (to stdout, which is
+    mountcal's answer's): what cannot be read raises, and becomes an InputError here."""
     logger = logging.getLogger("asammdf")
     level = logger.level
     logger.setLevel(logging.CRITICAL + 1)
     try:
-        yield
+        with contextlib.redirect_stdout(io.StringIO()):
+            yield
     finally:
         logger.setLevel(level)
 
