@@ -87,12 +87,14 @@ def test_an_mf4_missing_its_last_bytes_is_refused_with_the_byte_where_it_ends(pa
         assert "--allow-truncated" in done.stderr
 
 
-def test_with_allow_truncated_stdout_parses_and_the_library_noise_is_on_stderr(parking_mf4_cut: Path) -> None:
+def test_with_allow_truncated_stdout_parses_and_the_library_noise_is_not_shown(parking_mf4_cut: Path) -> None:
     inspected = run("inspect", parking_mf4_cut, "--json", "--dbc", DBC, "--allow-truncated")
     assert inspected.returncode == 0, inspected.stderr
     listing = json.loads(inspected.stdout)
     assert listing["streams"] and listing["incomplete"], listing
-    assert "IndexError" in inspected.stderr  # asammdf's own tracebacks: kept, on stderr
+    # asammdf prints the traceback of an error it recovers from while finalising the cut file: captured where
+    # the MF4 is opened (mountcal.io.can.mf4), neither on stdout nor on stderr; the cut is said instead
+    assert "Traceback" not in inspected.stderr + inspected.stdout and "read in part" in inspected.stderr
 
     calibrated = run("calibrate", parking_mf4_cut, "--json", "--dbc", DBC, "--allow-truncated")
     assert calibrated.returncode == 0, calibrated.stderr
