@@ -44,7 +44,7 @@ from mountcal.estimate.triad_session import MIN_STOP_S, TRIM_S
 from mountcal.io.frame import refuse_rotated, rotated_of
 from mountcal.io.input_conventions import IDENTITY_AXES, axes_convention, axes_stated, parse_axes
 from mountcal.io.kind import Declared
-from mountcal.io.sensor_logger import SETTING, SIGN
+from mountcal.io.sensor_logger import SETTING, SIGN, acceleration_sign
 from mountcal.io.sensor_spec import SensorSpec
 from mountcal.stops.table import StopTable, Unit, read_stop_table
 
@@ -218,8 +218,8 @@ def _axes_text(conventions: Sequence[Convention]) -> str | None:
 def _check_sign(triad: Triad, table: StopTable) -> None:
     """Refuse stops read with the other acceleration sign than a triad whose sign was only the app's default:
     its bias would apply negated if both sessions were recorded with the same setting (module docstring)."""
-    made = next((c for c in triad.conventions if c.name == SIGN), None)
-    now = next((c for c in table.conventions if c.name == SIGN), None)
+    made = acceleration_sign(triad.conventions)
+    now = acceleration_sign(table.conventions)
     if made is None or now is None or made.how != "default" or made.value == now.value:
         return
     raise InputError(
@@ -234,7 +234,7 @@ def _check_sign(triad: Triad, table: StopTable) -> None:
 
 def sign_note(triad: Triad) -> list[str]:
     """A note for ``mountcal triad`` where the session's acceleration sign was only the app's default."""
-    sign = next((c for c in triad.conventions if c.name == SIGN), None)
+    sign = acceleration_sign(triad.conventions)
     if sign is None or sign.how != "default":  # every sphere fit has a bias (module docstring)
         return []
     return [

@@ -375,7 +375,7 @@ def turned_sign(conventions: Sequence[Convention], why: str) -> tuple[tuple[Conv
     """The conventions with the acceleration's other sign, inferred, and the note saying so, where the sign was only
     the app's default (else None): what a handedness check that found the default mirrored (``why``) infers, for a
     recording's samples (:func:`other_sign`) and for a stop table made from one (its column ``acceleration_sign``)."""
-    sign = _sign(conventions)
+    sign = acceleration_sign(conventions)
     if sign is None or sign.how != "default":
         return None
     value = AS_LOGGED if sign.value == NEGATED else NEGATED
@@ -387,14 +387,10 @@ def turned_sign(conventions: Sequence[Convention], why: str) -> tuple[tuple[Conv
     return tuple(turned if c.name == SIGN else c for c in conventions), note
 
 
-def setting_hint(samples: Samples) -> str:
-    """What to say about the sign in a refusal of mirrored data from a Sensor Logger recording ("" otherwise)."""
-    return sign_hint(samples.conventions)
-
-
 def sign_hint(conventions: Sequence[Convention]) -> str:
-    """:func:`setting_hint` of the conventions of samples or of a stop table."""
-    sign = _sign(conventions)
+    """What to say about the sign in a refusal of mirrored data from a Sensor Logger recording, its samples' or its
+    stop table's conventions ("" otherwise)."""
+    sign = acceleration_sign(conventions)
     if sign is None:
         return ""
     return (
@@ -406,7 +402,7 @@ def sign_hint(conventions: Sequence[Convention]) -> str:
 def sign_column(conventions: Sequence[Convention]) -> str | None:
     """A stop table's column ``acceleration_sign``: the sign its means were read with and how it is known
     (``<value>; <how>: <by>``), or None where the input states no sign."""
-    sign = _sign(conventions)
+    sign = acceleration_sign(conventions)
     return None if sign is None else f"{sign.value}; {sign.how}: {sign.by}"
 
 
@@ -440,10 +436,10 @@ def sign_for_calibration(samples: Samples, made_with: Sequence[Convention]) -> t
     InputError
         The reading and the calibration state or infer different signs.
     """
-    read = _sign(samples.conventions)
+    read = acceleration_sign(samples.conventions)
     if read is None:
         return False, ""
-    made = _sign(made_with)
+    made = acceleration_sign(made_with)
     if made is not None and made.value != read.value:
         if read.how == "default":
             return True, f"acceleration {made.value}, as the calibration found it ({made.how} by {made.by})"
@@ -462,7 +458,8 @@ def sign_for_calibration(samples: Samples, made_with: Sequence[Convention]) -> t
     return False, ""
 
 
-def _sign(conventions: Sequence[Convention]) -> Convention | None:
+def acceleration_sign(conventions: Sequence[Convention]) -> Convention | None:
+    """The ``acceleration_sign`` convention among ``conventions`` (None: the input states no sign)."""
     return next((c for c in conventions if c.name == SIGN), None)
 
 
@@ -486,10 +483,10 @@ class SensorLoggerReader(LogReader):
 __all__ = [
     "SIGN",
     "SensorLoggerReader",
+    "acceleration_sign",
     "column_sign",
     "other_sign",
     "read_recording",
-    "setting_hint",
     "sign_column",
     "sign_for_calibration",
     "sign_hint",

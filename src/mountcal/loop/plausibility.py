@@ -27,6 +27,7 @@ from mountcal.core.conventions import G_N
 from mountcal.core.option_names import option
 from mountcal.core.pvalues import chi2_sf
 from mountcal.core.result import Calibration, Check, Convention
+from mountcal.io.sensor_logger import SIGN, acceleration_sign
 
 MAX_PARKED_SLOPE_DEG = 30.0
 EXACT_RMS_MPS2 = 1e-9 * G_N  # below this residual the stop means sit on the model to rounding
@@ -118,7 +119,6 @@ def convention_checks(conventions: Sequence[Convention]) -> tuple[Check, ...]:
     return tuple(out)
 
 
-SIGN = "acceleration_sign"
 HANDEDNESS = ("handedness_stops", "handedness_turns")
 
 
@@ -126,7 +126,7 @@ def sign_check(conventions: Sequence[Convention], checks: Sequence[Check]) -> tu
     """The check of the acceleration's sign, and its convention as the handedness checks leave it; None where
     the input states no sign. A default is confirmed (now inferred) by a handedness check that passed — the
     other sign would have mirrored the data — and otherwise fails: nothing showed it right."""
-    sign = next((c for c in conventions if c.name == SIGN), None)
+    sign = acceleration_sign(conventions)
     if sign is None:
         return None
     if sign.how != "default":

@@ -15,7 +15,7 @@ from dataclasses import replace
 from typing import TypeVar
 
 from mountcal.core.result import Calibration, Convention
-from mountcal.io.sensor_logger import SIGN, sign_hint, turned_sign
+from mountcal.io.sensor_logger import acceleration_sign, sign_hint, turned_sign
 from mountcal.loop.crosscheck import Mirrored
 from mountcal.stops.table import StopTable
 
@@ -61,7 +61,7 @@ def other_table_sign(table: StopTable, why: str) -> StopTable | None:
 
 def with_turn_note(cal: Calibration, given: Sequence[Convention]) -> Calibration:
     """The calibration with a note where its sign is not the one ``given`` (the stops were turned round)."""
-    before, after = _sign(given), _sign(cal.provenance.conventions)
+    before, after = acceleration_sign(given), acceleration_sign(cal.provenance.conventions)
     if before is None or after is None or before.value == after.value:
         return cal
     note = (
@@ -69,10 +69,6 @@ def with_turn_note(cal: Calibration, given: Sequence[Convention]) -> Calibration
         "mirrored the stops): the stops' means were turned round and fitted again"
     )
     return replace(cal, notes=(*cal.notes, note))
-
-
-def _sign(conventions: Sequence[Convention]) -> Convention | None:
-    return next((c for c in conventions if c.name == SIGN), None)
 
 
 def _with_hint(err: Mirrored, conventions: Sequence[Convention]) -> Mirrored:
