@@ -201,6 +201,18 @@ def _parking(
     return Samples(t, acc, gyro, channels, source="<simulated>"), park.truth.rot_vs, park.protocol
 
 
+def _reversed_into(s: Samples, rows: list[tuple[float, float, float]], k: int) -> Samples:
+    """The log with stop ``k`` entered in reverse as a course over ground sees it: the heading channel a half turn
+    off from 3 s before the stop until the vehicle moves again."""
+    h, v = s.channels["heading_deg"], s.channels["speed_mps"]
+    start, end = rows[k][0] - 3.0, rows[k][1]
+    moving = v.t_s[(v.t_s > end) & (v.value > 0.3)]
+    end = float(moving[0]) if moving.size else float(h.t_s[-1])
+    inside = (h.t_s >= start) & (h.t_s <= end)
+    turned = Channel(h.t_s, np.where(inside, (h.value + 180.0) % 360.0, h.value))
+    return dataclasses.replace(s, channels={**s.channels, "heading_deg": turned})
+
+
 def _log(samples: Samples, folder: Path, name: str) -> str:
     path = folder / name
     to_frame(samples).to_parquet(path, index=False)
@@ -268,6 +280,17 @@ def log_slips(rng: np.random.Generator, folder: Path) -> dict[str, Case]:
     )
     cases["log + drive: relative β called uphill (azimuth 0)"] = Case(
         ["calibrate", log, "--uphill-azimuth-deg", "0", *LOG_DETECTION], truth, ("--uphill-azimuth-deg",)
+    )
+    cases["log + drive: uphill azimuth given downhill, --use stops"] = Case(
+        ["calibrate", log, "--uphill-azimuth-deg", "210", "--use", "stops", *LOG_DETECTION],
+        truth,
+        ("--uphill-azimuth-deg",),
+    )
+    s_rev, truth_rev, rows_rev = _parking(rng)
+    cases["log: one stop entered in reverse (its heading a course over ground), --uphill-azimuth-deg"] = Case(
+        ["calibrate", _log(_reversed_into(s_rev, rows_rev, 3), folder, "rev.parquet"), "--uphill-azimuth-deg", "30"],
+        truth_rev,
+        ("--uphill-azimuth-deg",),
     )
     mirrored = dataclasses.replace(s, acc_s=s.acc_s * flip, gyro_s=s.gyro_s * flip)  # type: ignore[operator]
     cases["log + drive: y negated, driving only"] = Case(

@@ -340,6 +340,14 @@ def test_an_uphill_azimuth_given_downhill_is_a_finding_that_names_it(tmp_path: P
     check = _check(doc, "stops_vs_driving_direction")
     assert check["passed"] is False and "--uphill-azimuth-deg 30" in check["reason"]
     assert any(u["test"] == "stops_vs_driving_direction" for u in doc["unexplained"])
+    assert not any("backwards" in n for n in doc["notes"])  # the drive settled the direction: no doubt left open
+    stops_only = ["--use", "stops", "-o", str(out)]
+    assert main(["calibrate", str(log), "--uphill-azimuth-deg", "210", *detection, *stops_only]) == 0
+    doc = _result(out)  # the stops alone: a sensor facing backwards, or the azimuth downhill
+    assert any("backwards" in n and "downhill" in n for n in doc["notes"])
+    # and the drive's turns, compared with that yaw, run backwards and mirrored: a half turn, not a mirror image
+    # (this was refused as a left-handed sensor, naming --axes x,-y,z)
+    assert not doc["confident"] and "half a turn off" in _check(doc, "handedness_turns")["reason"]
     assert main(["calibrate", str(log), "--uphill-azimuth-deg", "30", *detection, "-o", str(out)]) == 0
     doc = _result(out)
     assert _check(doc, "stops_vs_driving_direction")["passed"] is True

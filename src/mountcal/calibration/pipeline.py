@@ -294,6 +294,8 @@ def checked(done: LogResult, uphill_azimuth_deg: float | None, protocol: bool) -
     if done.static is not None and done.driving is not None:
         check, found = crosscheck.half_turn(done.static.yaw_deg, done.driving.yaw_deg, uphill_azimuth_deg, protocol)
         checks.append(check)
+        if check.passed is not None:  # the drive told the sensor's direction: the stops' doubt about it is settled
+            cal = replace(cal, notes=tuple(n for n in cal.notes if not n.startswith(plausibility.BACKWARD)))
         if found is not None:
             cal = replace(cal, unexplained=(*cal.unexplained, found), confident=False)
     # the lateral cue needs a yaw both sources agree on; the yaw rate needs only the up axis

@@ -47,6 +47,7 @@ def summary_parts(cal: Calibration) -> tuple[str, list[str], list[str]]:
     how = "fixed, not chosen" if sel.mode == "fixed" else "auto: " + " → ".join(sel.steps)
     how = how if cal.method == "full" else cal.method  # "paper", or "driving" when there were no stops
     lines = [f"{cal.method} method, model: {', '.join(cal.model)} ({how}); uncertainties are 1σ"]
+    lines += [f"stop set aside: {step.reason}" for step in cal.model_steps if step.added == "outlier"]
     if cal.systematic is not None:
         from mountcal.loop.systematic import summary_line
 

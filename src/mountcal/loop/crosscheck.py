@@ -13,7 +13,9 @@ tested (with the reason), or refuse with the option that fixes the convention:
   calibration's up axis, the compass heading's rate (clockwise from north, so ω = −dh/dt), and the
   lateral acceleration against ``v·ω`` (a left turn pushes the specific force to the left, +y).
   They agree in sign on a right-handed sensor; a negative correlation refuses, naming the cue that
-  disagrees and the option.
+  disagrees and the option — except where the lateral cue alone disagrees and the longitudinal one (``a_x``
+  against ``dv/dt``) runs backwards too: x and y both reversed is the calibration's yaw half a turn off (the
+  stops' headings from downhill), no mirror image, and the check fails (not confident) saying so.
 - :func:`gyro_scale`: the same cues' sizes. The gyro's yaw rate against the heading's rate and against
   ``a_y / v`` is 1 (a few per cent: scale errors, sideslip); 57.3 is a gyro logged in deg/s and read as rad/s,
   1/57.3 one in rad/s stated to be deg/s. Refused with what states the unit when ``a_y / v`` (which has no
@@ -55,6 +57,8 @@ SCALE_BAND = 2.5  # a yaw-rate ratio within this factor of 57.3 (or of 1/57.3) i
 HALF_TURN_DEG = 150.0  # stops and drive further apart than this in yaw: half a turn, not noise
 AXES = "xyz"
 TurnCues = dict[str, FloatArray] | None  # "gyro", "heading", "lateral": yaw rates as 1 s means while moving
+# and, where the yaw is known and a speed logged, "forward" (a_x) and "speeding" (dv/dt), m/s², which tell a yaw
+# half a turn off (x and y both reversed) from a mirror image (y alone)
 
 
 class Mirrored(InputError):
@@ -157,12 +161,33 @@ def turn_handedness(samples: Samples, rot_vs: Rotation, cues: TurnCues) -> Check
     wrong = {p for p, r in pairs.items() if r < 0}
     if not wrong:
         return Check(name, True, f"the cues turn the same way ({shown})")
+    backwards = _backwards(wrong, set(pairs), cues)
+    if backwards is not None:  # x reversed as well as y: no mirror image but a yaw half a turn off
+        return Check(name, False, f"{backwards} ({shown})")
     raise Mirrored(
         samples.source or "log",
         "a gyro, heading and lateral acceleration that turn the same way (a right-handed sensor, a compass "
         "heading clockwise from north)",
         f"opposite turns: {shown}",
         _turn_advice(wrong, set(pairs), rot_vs),
+    )
+
+
+def _backwards(wrong: set[tuple[str, str]], tested: set[tuple[str, str]], cues: dict[str, FloatArray]) -> str | None:
+    """Why only the lateral cue turns the wrong way, where the longitudinal one runs backwards too; else None."""
+    if _odd(wrong, tested) != {"lateral"} or "forward" not in cues:
+        return None
+    # the lateral cue already failed: this only chooses between two readings of it, so the correlation's
+    # significance decides it without a floor on its size (grades and body pitch dilute a_x against dv/dt)
+    r = _sign_test(cues["forward"], cues["speeding"], cues["speeding"], min_r=0.0)
+    if r is None or r > 0:
+        return None
+    return (
+        f"the calibration's yaw is half a turn off: the lateral acceleration turns mirrored and the longitudinal one "
+        f"falls as the speed rises (r = {r:+.2f}), so its x and y axes both point the wrong way — a yaw turned by "
+        "180°, not a mirror image. A yaw from the stops' headings turns so when they are half a turn off: an uphill "
+        "azimuth that names the downhill direction, β measured from downhill, courses over ground of a vehicle that "
+        "reversed into its spots"
     )
 
 
@@ -224,18 +249,23 @@ _CUE = {
 }
 
 
-def _turn_advice(wrong: set[tuple[str, str]], tested: set[tuple[str, str]], rot_vs: Rotation) -> str:
-    matrix = rot_vs.as_matrix()
-    lateral_axis = AXES[int(np.argmax(np.abs(matrix[1])))]  # the sensor axis nearest the vehicle's y
-    vertical_axis = AXES[int(np.argmax(np.abs(matrix[2])))]
-    flip_lateral = negated(AXES.index(lateral_axis)).text
-    # the cue that disagrees: in every pair that turns the wrong way, and in no pair that agrees
+def _odd(wrong: set[tuple[str, str]], tested: set[tuple[str, str]]) -> set[str]:
+    """The cue that disagrees: in every pair that turns the wrong way, and in no pair that agrees (empty when no
+    single cue is)."""
     odd = {
         c
         for c in ("gyro", "heading", "lateral")
         if all(c in p for p in wrong) and all(p in wrong for p in tested if c in p)
     }
-    odd = odd if len(odd) == 1 else set()
+    return odd if len(odd) == 1 else set()
+
+
+def _turn_advice(wrong: set[tuple[str, str]], tested: set[tuple[str, str]], rot_vs: Rotation) -> str:
+    matrix = rot_vs.as_matrix()
+    lateral_axis = AXES[int(np.argmax(np.abs(matrix[1])))]  # the sensor axis nearest the vehicle's y
+    vertical_axis = AXES[int(np.argmax(np.abs(matrix[2])))]
+    flip_lateral = negated(AXES.index(lateral_axis)).text
+    odd = _odd(wrong, tested)
     mirrored = (
         f"the sensor is a mirror image (a left-handed triad: one axis reversed): state its axes with "
         f"{option('axes', flip_lateral)} (here the axis nearest the vehicle's lateral axis, sensor {lateral_axis}; "
@@ -296,16 +326,21 @@ def turn_cues(samples: Samples, rot_vs: Rotation, yaw_known: bool) -> TurnCues:
         a_y = rot_vs.apply(means(samples.acc_s))[:, 1]
         with np.errstate(divide="ignore", invalid="ignore"):
             cues["lateral"] = np.where(moving, a_y / v, np.nan)  # ω = a_y / v in a steady turn
-    available = [k for k in ("gyro", "heading", "lateral") if k in cues]
+    available: list[str] = [k for k in ("gyro", "heading", "lateral") if k in cues]
     if len(available) < 2:
         return None
+    if "lateral" in cues and v is not None:
+        cues["forward"] = rot_vs.apply(means(samples.acc_s))[:, 0]
+        cues["speeding"] = np.gradient(v, centre)
+        available += ["forward", "speeding"]
     return {k: np.where(moving, cues[k], np.nan) for k in available}
 
 
-def _sign_test(a: FloatArray, b: FloatArray, reference: FloatArray) -> float | None:
+def _sign_test(a: FloatArray, b: FloatArray, reference: FloatArray, min_r: float = TURN_R) -> float | None:
     """The correlation of two cues over the 1 s bins both have, when it decides their relative sign: beyond
     ±:data:`TURN_R` and :data:`TURN_Z` σ from none (Fisher's z, neighbouring bins counted as one in
-    :data:`BINS_PER_INDEPENDENT`). ``reference`` is the cue whose turning must be present in those bins."""
+    :data:`BINS_PER_INDEPENDENT`). ``reference`` is the cue whose turning must be present in those bins; ``min_r``
+    the size below which a correlation decides nothing however significant."""
     ok = np.isfinite(a) & np.isfinite(b) & np.isfinite(reference)
     n_eff = ok.sum() / BINS_PER_INDEPENDENT
     if n_eff < 4:
@@ -315,7 +350,7 @@ def _sign_test(a: FloatArray, b: FloatArray, reference: FloatArray) -> float | N
     if den == 0:
         return None
     r = float(np.clip(x @ y / den, -0.999999, 0.999999))
-    decided = abs(r) >= TURN_R and abs(np.arctanh(r)) * np.sqrt(n_eff - 3) >= TURN_Z
+    decided = abs(r) >= min_r and abs(np.arctanh(r)) * np.sqrt(n_eff - 3) >= TURN_Z
     return r if decided else None
 
 
@@ -365,7 +400,9 @@ def half_turn(
     if uphill_azimuth_deg is not None:
         fix = (
             f"the uphill azimuth {option('uphill_azimuth', f'{uphill_azimuth_deg:g}')} names the downhill direction: "
-            f"{option('uphill_azimuth', f'{(uphill_azimuth_deg + 180.0) % 360.0:g}')} makes them agree"
+            f"{option('uphill_azimuth', f'{(uphill_azimuth_deg + 180.0) % 360.0:g}')} makes them agree (or the "
+            "heading channel is a course over ground, the direction of motion, and the vehicle reversed into its "
+            "spots)"
         )
     elif protocol:
         fix = "the protocol's β are measured from downhill: add 180° to its beta_deg"

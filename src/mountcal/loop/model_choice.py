@@ -32,6 +32,7 @@ from mountcal.loop.diagnose import (
     leave_one_out,
     step_alternative,
 )
+from mountcal.loop.half_turn import half_turn_note
 from mountcal.loop.separability import (
     ALIAS_SHARE,
     PLACE_COLUMNS,
@@ -392,9 +393,10 @@ def _outlier(cur: Step, table: StopTable, g: float, k: int) -> tuple[float, Step
     except FitFailed:  # the others alone cannot be fitted: they cannot judge it either
         return None
     beta = "" if table.beta_rad is None else f", β = {np.degrees(table.beta_rad[original]) % 360:.0f}°"
+    turned = half_turn_note(cur.table, i, cur.terms, g, f)
     reason = (
         f"stop {original + 1}{beta} is not predicted by the others: held-out miss {press[i] * 1e3:.3g} mm/s², "
-        f"χ²(3) = {d2[i]:.1f}, p = {min(np.exp(logp), 1.0):.3g} (worst of {n})"
+        f"χ²(3) = {d2[i]:.1f}, p = {min(np.exp(logp), 1.0):.3g} (worst of {n})" + (f"; {turned}" if turned else "")
     )
     step = Step("outlier", reason, cur.terms, (*cur.excluded, original), sub, f)
     return logp + np.log(k), step

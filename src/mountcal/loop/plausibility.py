@@ -155,3 +155,20 @@ def with_checks(cal: Calibration, checks: Sequence[Check]) -> Calibration:
         notes=(*cal.notes, *(n for n in notes if n not in known)),
         confident=cal.confident and not failed,
     )
+
+
+BACKWARD = "the stops put the sensor's x axis backwards"  # how the note begins (a drive that tests it removes it)
+
+
+def backward_yaw_note(yaw_deg: float | None, headings: str) -> str | None:
+    """A yaw from headings more than 90° from straight ahead: the sensor faces backwards, or the headings are a
+    half turn off, and stops alone cannot tell which (each turns the answer about the vertical by 180°)."""
+    if yaw_deg is None or headings != "uphill" or abs((yaw_deg + 180.0) % 360.0 - 180.0) <= 90.0:
+        return None
+    return (
+        f"{BACKWARD} (yaw {yaw_deg:.1f}°). If it faces forwards, the headings are a half turn off and the yaw is "
+        f"{(yaw_deg % 360.0) - 180.0:.1f}°: an uphill azimuth that names the downhill direction (a slope's aspect, "
+        "as maps give it, is downhill), β measured from downhill, or headings that are courses over ground (the "
+        "direction of motion) of a vehicle that reversed into its spots. The stops cannot tell these apart; a "
+        "drive in the same log can"
+    )
