@@ -67,3 +67,28 @@ def test_headings_all_a_half_turn_off_turn_the_yaw_and_the_answer_names_the_othe
 def test_headings_that_fix_no_yaw_say_nothing_of_its_direction(headings: str) -> None:
     table, _ = simulate_stops(5.0, 6.0, 170.0, slope_deg=5.0, beta_deg=BETA, headings=headings, seed=7)  # type: ignore[arg-type]
     assert not any("backwards" in n for n in calibrate(table).notes)
+
+
+@pytest.mark.parametrize(("stops", "seed"), [([1, 6], 2), ([0, 4, 9], 3), ([2, 11], 4)])
+def test_several_stops_entered_in_reverse_are_named_and_the_answer_is_not_confident(
+    stops: list[int], seed: int
+) -> None:
+    """More stops than the loop sets aside: the misfit is not explained, and the note names which headings, turned,
+    make every stop fit (the answer itself is not changed: the user corrects the headings)."""
+    beta = np.arange(0.0, 360.0, 30.0)
+    table, _ = simulate_stops(5.0, 6.0, 7.0, slope_deg=5.0, beta_deg=beta, seed=seed)
+    cal = calibrate(_turned(table, stops))
+    assert not cal.confident
+    (note,) = [n for n in cal.notes if "half a turn away" in n]
+    named = [int(k) - 1 for k in re.findall(r"(\d+) \(β = ", note)]
+    assert named == sorted(stops)
+
+
+def test_stops_knocked_out_of_place_are_not_called_a_half_turn() -> None:
+    beta = np.arange(0.0, 360.0, 30.0)
+    kick = np.zeros((len(beta), 3))
+    kick[[1, 6]] = [[0.3, -0.2, 0.05], [-0.25, 0.1, 0.1]]
+    table, _ = simulate_stops(5.0, 6.0, 7.0, slope_deg=5.0, beta_deg=beta, disturbance_mps2=kick, seed=8)
+    cal = calibrate(table)
+    assert not cal.confident
+    assert not any("half a turn" in n for n in cal.notes)

@@ -55,6 +55,7 @@ from mountcal.io.frame import with_frame_note
 from mountcal.io.input_conventions import merged
 from mountcal.loop import crosscheck, plausibility, slope_reference
 from mountcal.loop import terms as model_terms
+from mountcal.loop.half_turn import reversed_stops
 from mountcal.loop.model_choice import close_the_loop, effect_values
 from mountcal.loop.sign import other_table_sign, turned_once, with_turn_note
 from mountcal.loop.steps import Loop, Step
@@ -192,6 +193,9 @@ def _full(table: StopTable, g: float, g_source: str, opts: Options) -> Calibrati
             + "; ".join(f"{u.what}: {u.size}" for u in flagged)
             + f"); the σ are widened ×{birge:.2f} (Birge ratio) and the result is not confident"
         )
+        turned = reversed_stops(table, g)  # what a heading slip explains (said, not applied)
+        if turned is not None:
+            notes.append(turned)
     if any(u.test == slope_reference.TEST for u in flagged):
         notes.append(
             "the stops read the body at another slope than the reference. If the reference is the ground's, the body "

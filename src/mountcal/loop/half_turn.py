@@ -15,6 +15,8 @@ from dataclasses import replace
 import numpy as np
 from scipy import stats
 
+from mountcal.core.conventions import FloatArray
+from mountcal.core.errors import FitFailed, NotEnoughInformation
 from mountcal.estimate import full
 from mountcal.stops.table import StopTable
 
@@ -52,3 +54,58 @@ def half_turn_note(table: StopTable, i: int, terms: tuple[str, ...], g: float, o
 def _chi2(one: StopTable, terms: tuple[str, ...], g: float, fit: full.Fit) -> float:
     r = full.StaticModel(one, terms, g).residual(fit.state)
     return float(r @ r)
+
+
+def reversed_stops(table: StopTable, g: float) -> str | None:
+    """Words naming the stops whose headings, turned by half a turn, make every stop fit; else None.
+
+    For stops the model leaves unexplained: the stop gaining most from its heading turned is turned, the
+    base model refitted, and so on, while each turn helps, until the stops fit (χ² at the level of
+    :data:`FITS_P`, or within twice their stated noise) — at most a third of them (more is the whole session's
+    reference turned, which the answer's own note on a backward yaw covers).
+    """
+    if table.beta_rad is None or table.headings == "none" or table.cov_s is None:
+        return None
+    n = len(table)
+    turned: list[int] = []
+    current = table
+    try:
+        fit = full.fit(current, full.BASE, g)
+        while len(turned) < n // 3:
+            gain = _per_stop(current, g, fit) - _per_stop(_all_turned(current), g, fit)
+            gain[turned] = -np.inf
+            i = int(np.argmax(gain))
+            if gain[i] <= BETTER:
+                return None
+            turned.append(i)
+            current = replace(current, beta_rad=_turn(current.beta_rad, [i]))  # type: ignore[arg-type]
+            fit = full.fit(current, full.BASE, g, fit.state)
+            if fit.dof > 0 and (fit.chi2 <= stats.chi2.isf(FITS_P, fit.dof) or fit.chi2 <= 2.0 * fit.dof):
+                break
+        else:
+            return None
+    except (FitFailed, NotEnoughInformation, np.linalg.LinAlgError):
+        return None
+    named = ", ".join(f"{i + 1} (β = {np.degrees(table.beta_rad[i]) % 360:.0f}°)" for i in sorted(turned))
+    return (
+        f"stop{'s' if len(turned) > 1 else ''} {named} fit{'' if len(turned) > 1 else 's'} a heading half a turn away: "
+        f"with {'their' if len(turned) > 1 else 'its'} β turned by 180° every stop fits (χ² = {fit.chi2:.1f} on "
+        f"{fit.dof} dof) — stops entered in reverse where the headings are courses over ground (the direction of "
+        "motion), or headings written from the wrong end of the vehicle. Correct those headings and calibrate again"
+    )
+
+
+def _turn(beta: FloatArray, stops: list[int]) -> FloatArray:
+    out = beta.copy()
+    out[stops] = (out[stops] + np.pi) % (2.0 * np.pi)
+    return out
+
+
+def _all_turned(table: StopTable) -> StopTable:
+    assert table.beta_rad is not None
+    return replace(table, beta_rad=_turn(table.beta_rad, list(range(len(table)))))
+
+
+def _per_stop(table: StopTable, g: float, fit: full.Fit) -> FloatArray:
+    r = full.StaticModel(table, full.BASE, g).residual(fit.state).reshape(-1, 3)
+    return np.asarray((r**2).sum(axis=1), dtype=np.float64)
