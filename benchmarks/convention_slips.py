@@ -213,6 +213,15 @@ def _reversed_into(s: Samples, rows: list[tuple[float, float, float]], k: int) -
     return dataclasses.replace(s, channels={**s.channels, "heading_deg": turned})
 
 
+def _course_at_rest(s: Samples, value: float) -> Samples:
+    """The log with its heading channel as a receiver's course over ground: ``value`` (NaN: empty) wherever the
+    vehicle is at rest."""
+    h, v = s.channels["heading_deg"], s.channels["speed_mps"]
+    still = np.interp(h.t_s, v.t_s, v.value) < 0.2
+    course = Channel(h.t_s, np.where(still, value, h.value))
+    return dataclasses.replace(s, channels={**s.channels, "heading_deg": course})
+
+
 def _log(samples: Samples, folder: Path, name: str) -> str:
     path = folder / name
     to_frame(samples).to_parquet(path, index=False)
@@ -286,6 +295,18 @@ def log_slips(rng: np.random.Generator, folder: Path) -> dict[str, Case]:
         truth,
         ("--uphill-azimuth-deg",),
     )
+    for name, at_rest, file in (("empty at rest (NaN)", np.nan, "cog_nan"), ("held at 0° at rest", 0.0, "cog_0")):
+        s_cog, truth_cog, _ = _parking(rng)
+        cases[f"log: heading channel a course over ground, {name}, --uphill-azimuth-deg"] = Case(
+            [
+                "calibrate",
+                _log(_course_at_rest(s_cog, at_rest), folder, f"{file}.parquet"),
+                "--uphill-azimuth-deg",
+                "30",
+            ],
+            truth_cog,
+            ("--uphill-azimuth-deg",),
+        )
     s_rev, truth_rev, rows_rev = _parking(rng)
     cases["log: one stop entered in reverse (its heading a course over ground), --uphill-azimuth-deg"] = Case(
         ["calibrate", _log(_reversed_into(s_rev, rows_rev, 3), folder, "rev.parquet"), "--uphill-azimuth-deg", "30"],

@@ -15,6 +15,7 @@ from mountcal.core.result import Convention
 from mountcal.io.input_conventions import HeadingUnit, compass_to_beta, headings_in_degrees, uphill_azimuth
 from mountcal.io.samples import Samples
 from mountcal.stops.detect import StillPeriod, Stop, StopDetection, find_stops
+from mountcal.stops.heading_at_rest import stop_headings
 from mountcal.stops.near_misses import NearMiss
 from mountcal.stops.protocol_clock import PLAN_MARK, on_log_clock
 from mountcal.stops.table import Headings, StopTable, check_degrees, checked
@@ -193,6 +194,8 @@ def tabulate(
             )
             + f" Used: {'; '.join(search.thresholds.lines() + [f'{k}: {v}' for k, v in search.counts.items()])}."
         )
+    read = stop_headings(stops, samples, (cfg or StopDetection()).trim_s)
+    stops, read_as = read.stops, (*samples.conventions, *([read.convention] if read.convention else []))
     heading = np.array([s.channels.get("heading_deg", np.nan) for s in stops])
     if np.all(np.isfinite(heading)):
         if uphill_azimuth_deg is not None:
@@ -203,7 +206,7 @@ def tabulate(
                     beta_from_heading(heading, uphill_azimuth_deg),
                     "uphill",
                     where,
-                    (*samples.conventions, *stated),
+                    (*read_as, *stated),
                 ),
                 f"heading channel with uphill azimuth {uphill_azimuth_deg:g}°",
                 notes=notes,
@@ -219,14 +222,28 @@ def tabulate(
             f"{option('protocol')} would make the headings uphill)",
         )
         return StopTableFromLog(
-            stop_table(stops, beta_from_heading(heading, 0.0), "relative", where, (*samples.conventions, inferred)),
+            stop_table(stops, beta_from_heading(heading, 0.0), "relative", where, (*read_as, inferred)),
             "heading channel without the uphill azimuth (relative)",
             notes=notes,
             dropped=search.dropped,
             near_misses=search.near_misses,
             gyro_rejection=gyro,
         )
-    none = Convention("heading_reference", "none", "inferred", "no protocol sheet and no heading channel in the log")
+    none = Convention(
+        "heading_reference",
+        "none",
+        "inferred",
+        "no protocol sheet, and "
+        + (
+            read.missing
+            or ("no heading channel in the log" if "heading_deg" not in samples.channels else "no heading at the stops")
+        )
+        + (
+            f" ({option('uphill_azimuth')} {uphill_azimuth_deg:g} left unused)"
+            if uphill_azimuth_deg is not None
+            else ""
+        ),
+    )
     return StopTableFromLog(
         stop_table(stops, None, "none", where, (*samples.conventions, none)),
         "none",
