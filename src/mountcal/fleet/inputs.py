@@ -12,8 +12,9 @@
   relative to the manifest's folder; empty cells take the command-line defaults.
 - Any other file is one log of the vehicle named by its parent folder.
 - A **URL** (``s3://bucket/LOG``, any fsspec protocol) is listed like a folder
-  (:mod:`mountcal.fleet.storage`); its objects are keyed by their ETag, size and time, and fetched
-  by the worker that calibrates them.
+  (:mod:`mountcal.fleet.storage`, :mod:`mountcal.fleet.storage_logs`): a prefix that is one log is one log,
+  as a local folder is; its objects are keyed by their ETag, size and time, and fetched by the worker
+  that calibrates them.
 
 Folders, globs and URLs are read in a **layout** (:mod:`mountcal.fleet.layout`): ``folders`` (each
 file one log of its parent folder's vehicle) or ``canedge`` (``<device>/<session>/<split>.MF4``: the
@@ -40,8 +41,9 @@ from mountcal.calibration.options import DEFAULT_USE, Options, Use
 from mountcal.core.errors import InputError
 from mountcal.core.option_names import flags_on
 from mountcal.core.paths import input_file, special_kind
-from mountcal.fleet.layout import Found, Grouped, Layout, group, infer_layout, unreadable_split
-from mountcal.fleet.storage import is_url, list_objects
+from mountcal.fleet.layout import Found, Grouped, Layout, group, infer_layout, natural_key, unreadable_split
+from mountcal.fleet.storage import RemoteObject, is_url, list_objects
+from mountcal.fleet.storage_logs import storage_logs
 from mountcal.io.frame import written_by_mountcal
 from mountcal.io.inputs import csv_columns
 from mountcal.io.reader import LogOptions
@@ -109,6 +111,9 @@ class FleetJob:
         key); None for a local file, whose bytes are hashed. Empty: all local.
     storage : tuple of (str, value)
         fsspec options for the paths that are URLs.
+    folder_objects : tuple of RemoteObject
+        For a log that is a prefix in storage (a folder of objects: one path, the prefix's URL), its objects
+        with their paths below it; the worker fetches them into one local folder. Empty otherwise.
     flags : bool
         Messages spell options as command-line flags (the job came from the command line).
     """
@@ -125,6 +130,7 @@ class FleetJob:
     stamps: tuple[str | None, ...] = ()
     storage: tuple[tuple[str, Any], ...] = ()
     flags: bool = False
+    folder_objects: tuple[RemoteObject, ...] = ()
 
 
 def collect_jobs(
@@ -214,11 +220,19 @@ def _jobs_of_input(item: str, ctx: _Context) -> Iterator[FleetJob]:
             special_kind(path) or ("a folder" if path.is_dir() else "a file without those columns"),
             "Pass the manifest, or choose another --layout.",
         )
-    if is_url(item):
+    if is_url(item):  # its logs as a local folder's: a prefix that is one log is one log
         objects = list_objects(item, ctx.storage)
-        found = [Found(o.url, o.url, o.stamp) for o in objects if _is_candidate(Path(o.url.split("://", 1)[1]), ctx)]
+        found, set_aside = storage_logs(objects, ctx.defaults.log, lambda p: _is_candidate(Path(p), ctx))
+        for reason, n in set_aside.items():
+            ctx.discarded[reason] = ctx.discarded.get(reason, 0) + n
         if not found:
-            raise InputError(item, "log objects (" + ", ".join(sorted(log_suffixes())) + ")", "none", "Check the URL.")
+            raise InputError(
+                item,
+                "log objects (" + ", ".join(sorted(log_suffixes())) + ") or log folders (a Sensor Logger recording, "
+                "a ROS 2 bag, a comma2k19 segment)",
+                "none",
+                "Check the URL.",
+            )
         yield from _grouped_jobs(found, item, ctx, origin=f"storage {item}")
     elif path.is_dir() and is_log(path, ctx.defaults.log):  # a log that is a folder (a comma2k19 segment)
         yield _file_job(Found(item, str(_resolved(path))), ctx, origin=item)
@@ -363,6 +377,7 @@ def _file_job(found: Found, ctx: _Context, origin: str) -> FleetJob:
         stamps=(found.stamp,) if remote else (),
         storage=tuple(sorted(ctx.storage.items())) if remote else (),
         flags=ctx.flags,
+        folder_objects=found.objects,
     )
 
 
@@ -502,8 +517,3 @@ def parse_start_time(value: str, where: str) -> str:
         raise InputError(where, "start_time as ISO 8601", repr(value), "Fix the cell or leave it empty.")
     stamp = stamp.tz_localize("UTC") if stamp.tzinfo is None else stamp.tz_convert("UTC")
     return str(stamp.isoformat())
-
-
-def natural_key(name: str | Path) -> tuple[tuple[int, int | str], ...]:
-    """Sort key that orders ``log_9`` before ``log_10``."""
-    return tuple((0, int(t)) if t.isdigit() else (1, t) for t in re.split(r"(\d+)", str(name)) if t)

@@ -23,6 +23,7 @@ from pathlib import PurePath
 from typing import Literal
 
 from mountcal.core.errors import InputError
+from mountcal.fleet.storage import RemoteObject
 
 Layout = Literal["auto", "canedge", "folders", "manifest"]
 LAYOUTS = ("auto", "canedge", "folders", "manifest")
@@ -35,13 +36,14 @@ UNREADABLE_SPLITS = ("mfc", "mfe", "mfm")  # CANedge's compressed and encrypted 
 class Found:
     """A file found for the fleet: how the user sees it, and where a reader finds it.
 
-    ``path`` is the absolute local path or the object's URL; ``stamp`` identifies an object's
-    version (None for a local file, whose bytes are hashed).
+    ``path`` is the absolute local path or the object's URL (a prefix's, for a log that is a folder of
+    objects); ``stamp`` identifies an object's version (None for a local file, whose bytes are hashed).
     """
 
     shown: str
     path: str
     stamp: str | None = None
+    objects: tuple[RemoteObject, ...] = ()  # a log that is a prefix in storage: its objects (paths below it)
 
     @property
     def parts(self) -> tuple[str, ...]:
@@ -68,6 +70,11 @@ class Grouped:
 
     def count(self, reason: str, n: int = 1) -> None:
         self.set_aside[reason] = self.set_aside.get(reason, 0) + n
+
+
+def natural_key(name: str | PurePath) -> tuple[tuple[int, int | str], ...]:
+    """Sort key that orders ``log_9`` before ``log_10``."""
+    return tuple((0, int(t)) if t.isdigit() else (1, t) for t in re.split(r"(\d+)", str(name)) if t)
 
 
 def unreadable_split(name: str) -> bool:
@@ -146,5 +153,6 @@ __all__ = [
     "canedge_split",
     "group",
     "infer_layout",
+    "natural_key",
     "unreadable_split",
 ]

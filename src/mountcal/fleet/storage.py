@@ -5,8 +5,10 @@
   bytes: resuming a fleet in a bucket reads no log again.
 - :func:`local_copies` fetches the objects of one log (the splits of one session) to a private
   scratch folder on the worker, in blocks of :data:`BLOCK_BYTES` (the memory one fetch holds),
-  and deletes them when the log is calibrated. mountcal's readers work on files (memory maps,
-  seeks), so a worker holds one log's objects on its scratch disk at a time — never the fleet.
+  and deletes them when the log is calibrated; :func:`local_folder` fetches a log that is a prefix
+  (a Sensor Logger recording, a ROS 2 bag …) into one folder, its objects at their paths below it.
+  mountcal's readers work on files (memory maps, seeks), so a worker holds one log's objects on its
+  scratch disk at a time — never the fleet.
 
 Endpoint and credentials come from the standard AWS variables and profiles (``AWS_ACCESS_KEY_ID``,
 ``AWS_SECRET_ACCESS_KEY``, ``AWS_PROFILE``, ``AWS_ENDPOINT_URL`` for MinIO or another S3-compatible
@@ -18,6 +20,7 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
+import hashlib
 import os
 import re
 import shutil
@@ -43,11 +46,13 @@ def is_url(text: str) -> bool:
 
 @dataclass(frozen=True)
 class RemoteObject:
-    """One listed object: its URL, size in bytes and stamp (what identifies this version of it)."""
+    """One listed object: its URL, size in bytes, stamp (what identifies this version of it) and its path
+    below the URL listed (its key's rest; ``""`` for an object the URL names itself)."""
 
     url: str
     size: int
     stamp: str
+    relative: str = ""
 
 
 def parse_storage_options(items: Sequence[str]) -> dict[str, Any]:
@@ -159,6 +164,7 @@ def list_objects(url: str, options: Mapping[str, Any]) -> list[RemoteObject]:
     except _storage_errors() as err:
         raise storage_error(url, err, "listing") from err
     protocol = url.split("://", 1)[0]
+    top = root.rstrip("/") + "/"
     objects = []
     for path, info in found.items():
         if info.get("type", "file") != "file":
@@ -166,10 +172,26 @@ def list_objects(url: str, options: Mapping[str, Any]) -> list[RemoteObject]:
         relative = PurePosixPath(path).parts[len(PurePosixPath(root).parts) :]
         if any(part.startswith(".") for part in relative):
             continue
-        objects.append(RemoteObject(f"{protocol}://{path}", int(info.get("size") or 0), stamp_of(info)))
+        below = path[len(top) :] if path.startswith(top) else ""  # as stored (a key may hold "//")
+        objects.append(RemoteObject(f"{protocol}://{path}", int(info.get("size") or 0), stamp_of(info), below))
     if not objects:
         raise InputError(url, "objects under this URL", "none", "Check the bucket and prefix.")
     return sorted(objects, key=lambda o: o.url)
+
+
+def folder_stamp(objects: Sequence[RemoteObject]) -> str:
+    """The stamp of a log that is a folder of objects: its objects' paths inside it and their stamps (as a
+    local folder's key is its files' paths and digests)."""
+    digest = hashlib.sha256()
+    for obj in sorted(objects, key=lambda o: o.relative):
+        digest.update(f"{obj.relative}\0{obj.stamp}\0".encode())
+    return f"objects={len(objects)} sha256={digest.hexdigest()}"
+
+
+def is_file_path(relative: str) -> bool:
+    """Whether an object's path below a prefix can be a file's path inside a local folder (no empty, ``.``
+    or ``..`` part: a copy never lands outside its folder)."""
+    return all(part not in ("", ".", "..") for part in relative.split("/"))
 
 
 @contextlib.contextmanager
@@ -182,6 +204,42 @@ def local_copies(urls: Sequence[str], options: Mapping[str, Any], stamps: Sequen
     InputError
         An object is missing, unreadable, or changed since it was listed (its stamp differs).
     """
+    with _scratch() as scratch:
+        paths = []
+        for i, (url, stamp) in enumerate(zip(urls, stamps, strict=True)):
+            target = os.path.join(scratch, str(i), PurePosixPath(filesystem(url, options)[1]).name)
+            os.mkdir(os.path.dirname(target))
+            _fetch(url, stamp, options, target)
+            paths.append(target)
+        yield paths
+
+
+@contextlib.contextmanager
+def local_folder(url: str, objects: Sequence[RemoteObject], options: Mapping[str, Any]) -> Iterator[str]:
+    """A local folder holding the objects of a log that is a prefix in storage (``url``; a Sensor Logger
+    recording, a ROS 2 bag …), each at its path below the prefix (``relative``) and checked against its
+    listed stamp, fetched as :func:`local_copies` fetches; deleted afterwards however the block ends.
+
+    Raises
+    ------
+    InputError
+        An object is missing, unreadable, changed since it was listed, or has no file's path.
+    """
+    with _scratch() as scratch:
+        folder = os.path.join(scratch, "0", PurePosixPath(filesystem(url, options)[1]).name or "log")
+        for obj in objects:
+            if not is_file_path(obj.relative):  # the listing sets these aside: never written outside the folder
+                raise InputError(obj.url, f"an object below {url}", f"the path {obj.relative!r}", "Rename it.")
+            target = os.path.join(folder, *obj.relative.split("/"))
+            os.makedirs(os.path.dirname(target), exist_ok=True)
+            _fetch(obj.url, obj.stamp, options, target)
+        yield folder
+
+
+@contextlib.contextmanager
+def _scratch() -> Iterator[str]:
+    """A private scratch folder on the worker, locked while the block runs and deleted afterwards;
+    killed workers' folders are swept before and after."""
     remove_orphans()
     scratch = tempfile.mkdtemp(prefix=f"{SCRATCH_PREFIX}{os.getpid()}-")
     lock = os.path.join(scratch, SCRATCH_LOCK)
@@ -189,32 +247,32 @@ def local_copies(urls: Sequence[str], options: Mapping[str, Any], stamps: Sequen
     try:
         fcntl.flock(held, fcntl.LOCK_EX)
         os.rename(lock + ".new", lock)  # seen by others only once locked
-        paths = []
-        for i, (url, stamp) in enumerate(zip(urls, stamps, strict=True)):
-            fs, path = filesystem(url, options)
-            target = os.path.join(scratch, str(i), PurePosixPath(path).name)
-            os.mkdir(os.path.dirname(target))
-            try:
-                info = fs.info(path)
-                if stamp is not None and stamp_of(info) != stamp:
-                    raise InputError(
-                        url,
-                        "the object as it was listed",
-                        f"another version ({stamp_of(info)}; listed {stamp})",
-                        "It changed during the run: run the same command again.",
-                    )
-                with fs.open(path, "rb", block_size=BLOCK_BYTES, cache_type="none") as src, open(target, "wb") as out:
-                    shutil.copyfileobj(src, out, BLOCK_BYTES)
-            except InputError:
-                raise
-            except _storage_errors() as err:
-                raise storage_error(url, err, "reading an object") from err
-            paths.append(target)
-        yield paths
+        yield scratch
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
         os.close(held)
         remove_orphans()  # again: a worker killed moments ago may still have held its lock at the start
+
+
+def _fetch(url: str, stamp: str | None, options: Mapping[str, Any], target: str) -> None:
+    """One object into the file ``target``, in :data:`BLOCK_BYTES` reads, refused if it is not the version listed."""
+    fs, path = filesystem(url, options)
+    try:
+        fs.invalidate_cache(path)  # the object as it is now, not as a listing in this process cached it
+        info = fs.info(path)
+        if stamp is not None and stamp_of(info) != stamp:
+            raise InputError(
+                url,
+                "the object as it was listed",
+                f"another version ({stamp_of(info)}; listed {stamp})",
+                "It changed during the run: run the same command again.",
+            )
+        with fs.open(path, "rb", block_size=BLOCK_BYTES, cache_type="none") as src, open(target, "wb") as out:
+            shutil.copyfileobj(src, out, BLOCK_BYTES)
+    except InputError:
+        raise
+    except _storage_errors() as err:
+        raise storage_error(url, err, "reading an object") from err
 
 
 def remove_orphans() -> int:
@@ -259,9 +317,12 @@ __all__ = [
     "BLOCK_BYTES",
     "RemoteObject",
     "filesystem",
+    "folder_stamp",
+    "is_file_path",
     "is_url",
     "list_objects",
     "local_copies",
+    "local_folder",
     "parse_storage_options",
     "remove_orphans",
     "stamp_of",

@@ -102,7 +102,7 @@ def job_hash(job: FleetJob) -> str:
     Paths and the vehicle id are not part of it (a renamed or moved log is the same log); the file
     suffixes (they choose the reader), the contents of the DBC, mapping and protocol sheet are, as
     is the mountcal version. An object in storage counts by its listed stamp (ETag, size, time), not
-    its bytes: a resumed run reads no object twice.
+    its bytes (a prefix that is one log: its objects' paths and stamps): a resumed run reads no object twice.
     """
     lj = job.job
     stamps = job.stamps or (None,) * len(lj.paths)

@@ -17,7 +17,7 @@ from mountcal.core.angles import YAW_REASON, Angles
 from mountcal.core.conventions import FloatArray, levelled
 from mountcal.core.pvalues import chi2_sf
 from mountcal.fleet.agreement import ALPHA, Segment, analyse_vehicle, angles_with_sigma, information, tangent_residuals
-from mountcal.fleet.inputs import natural_key
+from mountcal.fleet.layout import natural_key
 
 # --- tables -------------------------------------------------------------------------------------
 

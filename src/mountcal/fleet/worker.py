@@ -6,7 +6,7 @@ found, what to do) or, for anything unexpected, the exception's type and text â€
 terms: the files as they named them (not the absolute paths or scratch copies the worker read) and,
 for a command-line run, the options as flags. Workers need nothing but the installed package;
 paths in the job are absolute, or URLs whose objects the worker fetches itself
-(:func:`mountcal.fleet.storage.local_copies`).
+(:func:`mountcal.fleet.storage.local_copies`; a prefix that is one log: :func:`~mountcal.fleet.storage.local_folder`).
 
 The splits of one log are read one by one and joined in time order; the gaps between them (more
 than :data:`GAP_S` without a sample) and their overlaps are counted in the record.
@@ -38,7 +38,7 @@ from mountcal.core.result import Calibration, Systematic
 from mountcal.core.version import software_version
 from mountcal.estimate import effects as registry
 from mountcal.fleet.inputs import COMPUTED_BY, FleetJob
-from mountcal.fleet.storage import is_url, local_copies
+from mountcal.fleet.storage import is_url, local_copies, local_folder
 from mountcal.io.logs import join, read_file
 from mountcal.io.samples import Samples
 from mountcal.io.whole import is_cut
@@ -120,8 +120,13 @@ def _env_bytes(name: str, default: int) -> int:
 
 @contextlib.contextmanager
 def _fetched(job: FleetJob) -> Iterator[Sequence[str]]:
-    """The job's files as local paths: objects in storage fetched to scratch files for the block."""
+    """The job's files as local paths: objects in storage fetched to scratch files for the block (a log that
+    is a prefix: its objects into one folder)."""
     paths = job.job.paths
+    if job.folder_objects:
+        with local_folder(paths[0], job.folder_objects, dict(job.storage)) as folder:
+            yield (folder,)
+        return
     if not any(is_url(p) for p in paths):
         yield paths
         return

@@ -35,11 +35,13 @@ from numpy.typing import NDArray
 from mountcal.core.errors import InputError
 from mountcal.io.can.dbc import decode, load_dbc
 from mountcal.io.can.frames import DATA_WIDTH, CanFrames
+from mountcal.io.folder import LocalFolder
 from mountcal.io.reader import LogReader
 from mountcal.io.samples import Channel, FloatArray, Samples
 from mountcal.io.whole import found_cut, unreadable_part
 
 if TYPE_CHECKING:
+    from mountcal.io.folder import Folder
     from mountcal.io.reader import LogOptions
 
 AXIS_MAP = "x,-y,-z"  # sensor [forward, left, up] from device [forward, right, down]
@@ -176,7 +178,10 @@ class Comma2k19Reader(LogReader):
     description = "comma2k19 segment folder (processed_log/IMU)"
 
     def claims(self, path: Path, options: LogOptions) -> bool:
-        return (path / "processed_log" / "IMU" / "accelerometer").is_dir()
+        return path.is_dir() and self.claims_folder(LocalFolder(path), options)
+
+    def claims_folder(self, folder: Folder, options: LogOptions) -> bool:
+        return folder.has_folder("processed_log/IMU/accelerometer")
 
     def read(self, path: Path, options: LogOptions) -> Samples:
         return read_segment_samples(path)

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, ClassVar, Literal
 
 if TYPE_CHECKING:
+    from mountcal.io.folder import Folder
     from mountcal.io.samples import LogSummary, Samples
 
 CHUNK_SAMPLES = (
@@ -65,6 +66,14 @@ class LogReader(ABC):
         """Whether this reader takes ``path`` (by default: by its suffix). May look at the path,
         e.g. a folder's layout; must not be slow (fleet asks it of every file of a tree)."""
         return path.suffix.lower() in self.suffixes
+
+    def claims_folder(self, folder: Folder, options: LogOptions) -> bool:
+        """Whether this reader takes a folder holding these files as one log (a recording of several
+        files), judged by the names alone: the same rule then finds such a folder on disk and under a
+        prefix in object storage (``mountcal fleet s3://…``), where only the objects' names are known.
+        By default no folder; a format that is a folder answers here and its :meth:`claims` of a local
+        folder asks this (``claims_folder(LocalFolder(path), options)``)."""
+        return False
 
     @abstractmethod
     def read(self, path: Path, options: LogOptions) -> Samples:

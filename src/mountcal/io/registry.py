@@ -37,6 +37,7 @@ from mountcal.io.magic import check_named_for_content, decompress_hint
 from mountcal.io.reader import LogReader
 
 if TYPE_CHECKING:
+    from mountcal.io.folder import Folder
     from mountcal.io.reader import LogOptions
     from mountcal.io.samples import LogSummary, Samples
 
@@ -83,7 +84,7 @@ class _PluginReader(LogReader):
         self.name, self.suffixes, self.description = reader.name, reader.suffixes, reader.description  # type: ignore[misc]
 
     @contextlib.contextmanager
-    def _call(self, what: str, path: Path) -> Iterator[None]:
+    def _call(self, what: str, path: Path | Folder) -> Iterator[None]:
         try:
             with output_to_stderr(self._plugin.where):
                 yield
@@ -95,6 +96,10 @@ class _PluginReader(LogReader):
     def claims(self, path: Path, options: LogOptions) -> bool:
         with self._call("judge", path):
             return bool(self._reader.claims(path, options))
+
+    def claims_folder(self, folder: Folder, options: LogOptions) -> bool:
+        with self._call("judge the folder", folder):
+            return bool(self._reader.claims_folder(folder, options))
 
     def read(self, path: Path, options: LogOptions) -> Samples:
         with self._call("read", path):
@@ -153,6 +158,14 @@ def is_log(path: Path, options: LogOptions) -> bool:
     return _claimant(path, options) is not None
 
 
+def is_log_folder(folder: Folder, options: LogOptions) -> bool:
+    """Whether some reader takes a folder as one log, judged by its files' names (:meth:`LogReader.claims_folder`):
+    fleet's test of which prefixes in object storage are one log, as :func:`is_log` of a local folder."""
+    if any(reader.claims_folder(folder, options) for reader in _builtin()):
+        return True
+    return any(reader.claims_folder(folder, options) for reader in readers()[len(BUILTIN) :])
+
+
 def reader_for(path: Path, options: LogOptions) -> LogReader:
     """The first reader claiming ``path``.
 
@@ -174,4 +187,4 @@ def reader_for(path: Path, options: LogOptions) -> LogReader:
     raise InputError(str(path), f"a log mountcal reads: {formats}", found, todo)
 
 
-__all__ = ["BUILTIN", "GROUP", "is_log", "log_suffixes", "reader_for", "readers"]
+__all__ = ["BUILTIN", "GROUP", "is_log", "is_log_folder", "log_suffixes", "reader_for", "readers"]

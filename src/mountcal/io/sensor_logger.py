@@ -39,10 +39,12 @@ from numpy.typing import NDArray
 
 from mountcal.core.errors import InputError
 from mountcal.core.result import Convention
+from mountcal.io.folder import LocalFolder
 from mountcal.io.reader import LogReader
 from mountcal.io.samples import Channel, FloatArray, Samples
 
 if TYPE_CHECKING:
+    from mountcal.io.folder import Folder
     from mountcal.io.reader import LogOptions
 
 METADATA = "metadata.csv"
@@ -472,9 +474,12 @@ class SensorLoggerReader(LogReader):
 
     def claims(self, path: Path, options: LogOptions) -> bool:
         if path.is_dir():
-            names = {p.name.lower() for p in path.iterdir() if p.is_file()}
-            return METADATA in names and bool(names & {TOTAL, LINEAR, GRAVITY, GYRO})
+            return self.claims_folder(LocalFolder(path), options)
         return path.suffix.lower() == ".zip" and _is_recording_zip(path)
+
+    def claims_folder(self, folder: Folder, options: LogOptions) -> bool:
+        names = {name.lower() for name in folder.files()}
+        return METADATA in names and bool(names & {TOTAL, LINEAR, GRAVITY, GYRO})
 
     def read(self, path: Path, options: LogOptions) -> Samples:
         return read_recording(path)

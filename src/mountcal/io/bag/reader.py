@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 from mountcal.io.reader import LogReader
 
 if TYPE_CHECKING:
+    from mountcal.io.folder import Folder
     from mountcal.io.reader import LogOptions
     from mountcal.io.samples import LogSummary, Samples
 
@@ -24,6 +25,11 @@ class BagReader(LogReader):
         from mountcal.io.bag.ros2 import bag_folder
 
         return bag_folder(path) is not None
+
+    def claims_folder(self, folder: Folder, options: LogOptions) -> bool:
+        from mountcal.io.bag.ros2 import holds_bag
+
+        return holds_bag(folder)
 
     def read(self, path: Path, options: LogOptions) -> Samples:
         if path.suffix.lower() == ".bag":

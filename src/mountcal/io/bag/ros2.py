@@ -14,6 +14,7 @@ from typing import Any
 
 from mountcal.core.errors import InputError
 from mountcal.io.bag.read import sqlite_batches
+from mountcal.io.folder import Folder, LocalFolder
 from mountcal.io.mcap.topics import mcap_batches, mcap_topics
 from mountcal.io.ros.batches import Batch, samples_of
 from mountcal.io.ros.topics import Selection, Topic
@@ -21,6 +22,7 @@ from mountcal.io.ros.types import DefinitionError, Types, from_definition, stand
 from mountcal.io.samples import LogSummary, Samples, Stream
 
 STORAGES = {".db3": "sqlite3", ".mcap": "mcap"}
+METADATA = "metadata.yaml"
 
 
 @dataclass(frozen=True)
@@ -42,7 +44,12 @@ def bag_folder(path: Path) -> Path | None:
     Its ``metadata.yaml`` alone is not claimed: a folder walk (``mountcal fleet``) would read the bag
     once for that file and once more for its storage files.
     """
-    return path if path.is_dir() and (path / "metadata.yaml").is_file() else None
+    return path if path.is_dir() and holds_bag(LocalFolder(path)) else None
+
+
+def holds_bag(folder: Folder) -> bool:
+    """Whether a folder (on disk, or a prefix listed in object storage) is a ROS 2 bag: it holds ``metadata.yaml``."""
+    return folder.has_file(METADATA)
 
 
 @contextmanager
@@ -223,4 +230,4 @@ def _spans(bag: Opened) -> dict[str, tuple[int, int, int]]:
     return out
 
 
-__all__ = ["bag_folder", "inspect_ros2", "open_bag", "read_ros2"]
+__all__ = ["bag_folder", "holds_bag", "inspect_ros2", "open_bag", "read_ros2"]
