@@ -239,6 +239,7 @@ def s3(canedge: Path) -> Iterator[dict[str, str]]:
             else:
                 os.environ[k] = v
         server.stop()
+        s3fs.S3FileSystem.clear_instance_cache()  # fsspec keys filesystems by arguments, not the environment
 
 
 def _comparable(frame: pd.DataFrame, prefix: str) -> pd.DataFrame:

@@ -33,7 +33,7 @@ from mountcal.simulate.stops import simulate_parking_log
 
 REPO = Path(__file__).resolve().parents[1]
 PARKING = REPO / "data" / "parking.mcap"
-BUCKET = "s3://fleet/LOG"
+BUCKET = "s3://folders/LOG"
 FOLDER_LOGS = ("v01/rec_a", "v01/rec_b", "v02/bag_db3", "v02/bag_mcap")  # each one log, as locally
 PLAIN = "v03/plain.mcap"
 SEGMENT = "rav4_2018-08-02--08-34-47_seg40"
@@ -59,7 +59,7 @@ def fleet(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope="module")
 def s3(fleet: Path) -> Iterator[Any]:
-    """moto's standalone S3 server on 127.0.0.1 with the fleet uploaded to s3://fleet/LOG; the s3fs filesystem."""
+    """moto's standalone S3 server on 127.0.0.1 with the fleet uploaded to s3://folders/LOG; the s3fs filesystem."""
     pytest.importorskip("s3fs")
     server_module = pytest.importorskip("moto.server")
     server = server_module.ThreadedMotoServer(ip_address="127.0.0.1", port=0, verbose=False)
@@ -77,8 +77,8 @@ def s3(fleet: Path) -> Iterator[Any]:
         import s3fs
 
         fs = s3fs.S3FileSystem(endpoint_url=env["AWS_ENDPOINT_URL"])
-        fs.mkdir("fleet")
-        fs.put(str(fleet), "fleet/LOG", recursive=True)
+        fs.mkdir("folders")  # its own bucket: moto keeps one store per process (test_fleet_canedge made "fleet")
+        fs.put(str(fleet), "folders/LOG", recursive=True)
         yield fs
     finally:
         for k, v in saved.items():
@@ -87,6 +87,7 @@ def s3(fleet: Path) -> Iterator[Any]:
             else:
                 os.environ[k] = v
         server.stop()
+        s3fs.S3FileSystem.clear_instance_cache()  # fsspec keys filesystems by arguments, not the environment
 
 
 def run(inputs: list[str], output: Path) -> FleetResult:
@@ -148,11 +149,11 @@ def test_a_resumed_run_against_the_bucket_recalculates_nothing_and_a_changed_fol
 
     output = tmp_path / "fleet.parquet"  # a copy of the finished run, to change the bucket under it
     shutil.copytree(s3_run.parts, output.with_name(s3_run.parts.name))
-    s3.pipe("fleet/LOG/v02/bag_db3/notes.txt", b"one more object in the bag's folder\n")
+    s3.pipe("folders/LOG/v02/bag_db3/notes.txt", b"one more object in the bag's folder\n")
     try:
         changed = run([BUCKET], output)
     finally:
-        s3.rm("fleet/LOG/v02/bag_db3/notes.txt")
+        s3.rm("folders/LOG/v02/bag_db3/notes.txt")
     assert changed.computed == 1 and changed.reused == 4  # the folder's objects are its key
     redone = changed.logs.set_index("log").loc[f"{BUCKET}/v02/bag_db3"]
     before = s3_run.logs.set_index("log").loc[f"{BUCKET}/v02/bag_db3"]
@@ -169,13 +170,13 @@ def test_a_url_naming_a_log_folder_is_that_one_log(s3: Any) -> None:
 
 def test_the_worker_fetches_a_prefix_into_one_folder_with_its_paths_and_leaves_nothing(s3: Any, fleet: Path) -> None:
     bag = fleet / "v02" / "bag_mcap"
-    s3.put(str(bag), "fleet/FETCH/v02/bag_mcap", recursive=True)  # a copy: the fleet's bucket stays as listed
+    s3.put(str(bag), "folders/FETCH/v02/bag_mcap", recursive=True)  # a copy: the fleet's bucket stays as listed
     try:
         found, _ = storage_logs(
-            list_objects("s3://fleet/FETCH", {}), LogOptions(), lambda p: is_log(Path(p), LogOptions())
+            list_objects("s3://folders/FETCH", {}), LogOptions(), lambda p: is_log(Path(p), LogOptions())
         )
         (log,) = found
-        assert log.path == "s3://fleet/FETCH/v02/bag_mcap"
+        assert log.path == "s3://folders/FETCH/v02/bag_mcap"
         assert sorted(o.relative for o in log.objects) == ["bag_mcap.mcap", "metadata.yaml"]
         with local_folder(log.path, log.objects, {}) as folder:
             local = Path(folder)
@@ -185,14 +186,14 @@ def test_the_worker_fetches_a_prefix_into_one_folder_with_its_paths_and_leaves_n
                 assert (local / name).read_bytes() == (bag / name).read_bytes()
         assert not local.parent.parent.exists()  # the scratch folder went with the block
 
-        s3.pipe("fleet/FETCH/v02/bag_mcap/metadata.yaml", (bag / "metadata.yaml").read_bytes() + b"\n")
+        s3.pipe("folders/FETCH/v02/bag_mcap/metadata.yaml", (bag / "metadata.yaml").read_bytes() + b"\n")
         with pytest.raises(InputError, match="changed during the run"), local_folder(log.path, log.objects, {}):
             pass
-        outside = RemoteObject("s3://fleet/FETCH/v02/x.csv", 1, "etag=x", "../x.csv")
+        outside = RemoteObject("s3://folders/FETCH/v02/x.csv", 1, "etag=x", "../x.csv")
         with pytest.raises(InputError, match="Rename it"), local_folder(log.path, (outside,), {}):
             pass
     finally:
-        s3.rm("fleet/FETCH", recursive=True)
+        s3.rm("folders/FETCH", recursive=True)
 
 
 def test_a_listed_folder_is_judged_by_the_rule_that_judges_it_on_disk(fleet: Path) -> None:
@@ -228,13 +229,13 @@ def test_a_real_comma2k19_segment_in_the_bucket_is_one_log_as_on_disk(real_data:
     logs.mkdir(parents=True)
     (logs / "seg40").symlink_to(segment, target_is_directory=True)
     local = run([str(tmp_path / "REAL")], tmp_path / "local.parquet")
-    s3.put(str(segment), "fleet/REAL/rav4/seg40", recursive=True)
+    s3.put(str(segment), "folders/REAL/rav4/seg40", recursive=True)
     try:
-        remote = run(["s3://fleet/REAL"], tmp_path / "s3.parquet")
+        remote = run(["s3://folders/REAL"], tmp_path / "s3.parquet")
     finally:
-        s3.rm("fleet/REAL", recursive=True)
-    assert list(remote.logs["log"]) == ["s3://fleet/REAL/rav4/seg40"] and list(remote.logs["vehicle_id"]) == ["rav4"]
+        s3.rm("folders/REAL", recursive=True)
+    assert list(remote.logs["log"]) == ["s3://folders/REAL/rav4/seg40"] and list(remote.logs["vehicle_id"]) == ["rav4"]
     assert remote.discarded.get(NOT_LOGS, 0) == 0  # every object is part of the segment (before: all dropped)
     pd.testing.assert_frame_equal(
-        _comparable(remote.logs, "s3://fleet/REAL"), _comparable(local.logs, str(tmp_path / "REAL")), check_exact=True
+        _comparable(remote.logs, "s3://folders/REAL"), _comparable(local.logs, str(tmp_path / "REAL")), check_exact=True
     )
