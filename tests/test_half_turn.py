@@ -92,3 +92,11 @@ def test_stops_knocked_out_of_place_are_not_called_a_half_turn() -> None:
     cal = calibrate(table)
     assert not cal.confident
     assert not any("half a turn" in n for n in cal.notes)
+
+
+@pytest.mark.parametrize(("yaw", "noted"), [(100.0, False), (-110.0, False), (160.0, True), (-150.0, True)])
+def test_only_an_x_axis_pointing_backwards_is_said_to_have_another_reading(yaw: float, noted: bool) -> None:
+    """Any yaw from headings has the half-turn reading; the note is for the one that looks like it (x backwards),
+    not for a sensor turned sideways."""
+    table, _ = simulate_stops(5.0, 6.0, yaw, slope_deg=5.0, beta_deg=BETA, seed=9)
+    assert any("backwards" in n for n in calibrate(table).notes) is noted

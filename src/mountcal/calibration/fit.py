@@ -113,7 +113,7 @@ def _calibrate(table: StopTable, opts: Options, check_sign: bool) -> Calibration
         checks.append(signed[0])
         stated = merged(stated, (signed[1],))
     notes = with_frame_note(cal.notes, stated)  # stops of rotated samples: the angles are what is left over
-    backward = plausibility.backward_yaw_note(cal.yaw_deg, table.headings)
+    backward = plausibility.backward_yaw_note(cal, table.headings)
     notes = notes if backward is None else (*notes, backward)
     cal = replace(cal, provenance=replace(cal.provenance, conventions=stated), notes=notes)
     return plausibility.with_checks(cal, checks)

@@ -23,6 +23,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import replace
 
+import numpy as np
+
 from mountcal.core.conventions import G_N
 from mountcal.core.option_names import option
 from mountcal.core.pvalues import chi2_sf
@@ -160,10 +162,15 @@ def with_checks(cal: Calibration, checks: Sequence[Check]) -> Calibration:
 BACKWARD = "the stops put the sensor's x axis backwards"  # how the note begins (a drive that tests it removes it)
 
 
-def backward_yaw_note(yaw_deg: float | None, headings: str) -> str | None:
-    """A yaw from headings more than 90° from straight ahead: the sensor faces backwards, or the headings are a
-    half turn off, and stops alone cannot tell which (each turns the answer about the vertical by 180°)."""
-    if yaw_deg is None or headings != "uphill" or abs((yaw_deg + 180.0) % 360.0 - 180.0) <= 90.0:
+def backward_yaw_note(cal: Calibration, headings: str) -> str | None:
+    """A yaw from headings that points the sensor's x axis backwards (within 45° of the vehicle's −x, seen from
+    above): the sensor faces backwards, or the headings are a half turn off, and stops alone cannot tell which
+    (each turns the answer about the vertical by 180°). Nothing for an x axis that points up, down or sideways."""
+    yaw_deg = cal.yaw_deg
+    if yaw_deg is None or headings != "uphill":
+        return None
+    x_v = cal.rot_vs.apply([1.0, 0.0, 0.0])  # the sensor's x axis in the vehicle frame
+    if not (x_v[0] < -abs(x_v[1]) and np.hypot(x_v[0], x_v[1]) > 0.5):
         return None
     return (
         f"{BACKWARD} (yaw {yaw_deg:.1f}°). If it faces forwards, the headings are a half turn off and the yaw is "
