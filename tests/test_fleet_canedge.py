@@ -24,6 +24,7 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
+from tests.s3_server import s3_server
 
 from mountcal.cli import main
 from mountcal.core.result import Calibration
@@ -212,34 +213,8 @@ def test_splits_uploaded_twice_or_compressed_are_counted_and_a_mixed_folder_asks
 @pytest.fixture(scope="module")
 def s3(canedge: Path) -> Iterator[dict[str, str]]:
     """moto's standalone S3 server on 127.0.0.1 with the fleet uploaded to s3://fleet/LOG."""
-    pytest.importorskip("s3fs")
-    server_module = pytest.importorskip("moto.server")
-    server = server_module.ThreadedMotoServer(ip_address="127.0.0.1", port=0, verbose=False)
-    server.start()
-    host, port = server.get_host_and_port()
-    env = {
-        "AWS_ENDPOINT_URL": f"http://{host}:{port}",
-        "AWS_ACCESS_KEY_ID": "testing",
-        "AWS_SECRET_ACCESS_KEY": "testing",
-        "AWS_DEFAULT_REGION": "us-east-1",
-    }
-    saved = {k: os.environ.get(k) for k in env}
-    os.environ.update(env)
-    try:
-        import s3fs
-
-        fs = s3fs.S3FileSystem(endpoint_url=env["AWS_ENDPOINT_URL"])
-        fs.mkdir("fleet")
-        fs.put(str(canedge), "fleet/LOG", recursive=True)
+    with s3_server(canedge, "fleet") as (env, _):
         yield env
-    finally:
-        for k, v in saved.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
-        server.stop()
-        s3fs.S3FileSystem.clear_instance_cache()  # fsspec keys filesystems by arguments, not the environment
 
 
 def _comparable(frame: pd.DataFrame, prefix: str) -> pd.DataFrame:

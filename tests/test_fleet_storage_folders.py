@@ -11,7 +11,6 @@ the bag, and a comma2k19 segment's objects (no suffix) were dropped without a wo
 
 from __future__ import annotations
 
-import os
 import shutil
 from collections.abc import Iterator
 from pathlib import Path
@@ -20,6 +19,7 @@ from typing import Any
 import pandas as pd
 import pytest
 from tests.io.test_bags import _convert
+from tests.s3_server import s3_server
 from tests.test_sensor_logger import record
 
 from mountcal.core.errors import InputError
@@ -60,34 +60,8 @@ def fleet(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.fixture(scope="module")
 def s3(fleet: Path) -> Iterator[Any]:
     """moto's standalone S3 server on 127.0.0.1 with the fleet uploaded to s3://folders/LOG; the s3fs filesystem."""
-    pytest.importorskip("s3fs")
-    server_module = pytest.importorskip("moto.server")
-    server = server_module.ThreadedMotoServer(ip_address="127.0.0.1", port=0, verbose=False)
-    server.start()
-    host, port = server.get_host_and_port()
-    env = {
-        "AWS_ENDPOINT_URL": f"http://{host}:{port}",
-        "AWS_ACCESS_KEY_ID": "testing",
-        "AWS_SECRET_ACCESS_KEY": "testing",
-        "AWS_DEFAULT_REGION": "us-east-1",
-    }
-    saved = {k: os.environ.get(k) for k in env}
-    os.environ.update(env)
-    try:
-        import s3fs
-
-        fs = s3fs.S3FileSystem(endpoint_url=env["AWS_ENDPOINT_URL"])
-        fs.mkdir("folders")  # its own bucket: moto keeps one store per process (test_fleet_canedge made "fleet")
-        fs.put(str(fleet), "folders/LOG", recursive=True)
+    with s3_server(fleet, "folders") as (_, fs):
         yield fs
-    finally:
-        for k, v in saved.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
-        server.stop()
-        s3fs.S3FileSystem.clear_instance_cache()  # fsspec keys filesystems by arguments, not the environment
 
 
 def run(inputs: list[str], output: Path) -> FleetResult:
