@@ -9,6 +9,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+import pandas as pd
 import pytest
 
 
@@ -44,3 +45,16 @@ def s3_server(folder: Path, bucket: str, prefix: str = "LOG") -> Iterator[tuple[
                 os.environ[k] = v
         server.stop()
         s3fs.S3FileSystem.clear_instance_cache()  # fsspec keys filesystems by arguments, not the environment
+
+
+def comparable(frame: pd.DataFrame, prefix: str) -> pd.DataFrame:
+    """A fleet table with the storage's names mapped away (``prefix``: the URL or folder its logs were listed
+    under) and what differs by design (timings, content keys) dropped: the same fleet from a bucket and from disk
+    compare equal."""
+    out = frame.drop(columns=[c for c in ("elapsed_s", "content_hash") if c in frame]).copy()
+    for column in ("log", "first_log", "last_log", "since_log", "disagreeing_logs"):
+        if column in out:
+            out[column] = out[column].map(
+                lambda v: [x.replace(prefix, "") for x in v] if not isinstance(v, str) else v.replace(prefix, "")
+            )
+    return out

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
-from tests.s3_server import s3_server
+from tests.s3_server import comparable, s3_server
 
 from mountcal.cli import main
 from mountcal.core.result import Calibration
@@ -217,17 +217,6 @@ def s3(canedge: Path) -> Iterator[dict[str, str]]:
         yield env
 
 
-def _comparable(frame: pd.DataFrame, prefix: str) -> pd.DataFrame:
-    """The table with what names the storage (paths, keys) mapped away and the timings dropped."""
-    out = frame.drop(columns=[c for c in ("elapsed_s", "content_hash") if c in frame]).copy()
-    for column in ("log", "first_log", "last_log", "since_log", "disagreeing_logs"):
-        if column in out:
-            out[column] = out[column].map(
-                lambda v: [x.replace(prefix, "") for x in v] if not isinstance(v, str) else v.replace(prefix, "")
-            )
-    return out
-
-
 def test_the_fleet_from_the_s3_server_gives_the_local_table(
     canedge: Path, local_run: dict, s3: dict[str, str], tmp_path: Path
 ) -> None:
@@ -238,13 +227,13 @@ def test_the_fleet_from_the_s3_server_gives_the_local_table(
     assert set(logs["log"]) == {f"s3://fleet/LOG/{d}/{s}" for d, ss in SESSIONS.items() for s, _, _ in ss}
     assert logs["content_hash"].isin(local_run["logs"]["content_hash"]).sum() == 0  # keyed by ETag, not bytes
     pd.testing.assert_frame_equal(
-        _comparable(logs, "s3://fleet/LOG"), _comparable(local_run["logs"], str(canedge)), check_exact=True
+        comparable(logs, "s3://fleet/LOG"), comparable(local_run["logs"], str(canedge)), check_exact=True
     )
     vehicles = pd.read_parquet(outputs_of(output)[1])
     assert (
         vehicles.drop(columns=["remounts", "mountings"])
-        .pipe(_comparable, "s3://fleet/LOG")
-        .equals(local_run["vehicles"].drop(columns=["remounts", "mountings"]).pipe(_comparable, str(canedge)))
+        .pipe(comparable, "s3://fleet/LOG")
+        .equals(local_run["vehicles"].drop(columns=["remounts", "mountings"]).pipe(comparable, str(canedge)))
     )
 
     # a killed worker's copies (its lock free) go at the end of a run even when it fetches nothing

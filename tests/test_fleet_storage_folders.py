@@ -19,7 +19,7 @@ from typing import Any
 import pandas as pd
 import pytest
 from tests.io.test_bags import _convert
-from tests.s3_server import s3_server
+from tests.s3_server import comparable, s3_server
 from tests.test_sensor_logger import record
 
 from mountcal.core.errors import InputError
@@ -80,17 +80,6 @@ def s3_run(s3: Any, tmp_path_factory: pytest.TempPathFactory) -> FleetResult:
     return run([BUCKET], tmp_path_factory.mktemp("s3") / "fleet.parquet")
 
 
-def _comparable(frame: pd.DataFrame, prefix: str) -> pd.DataFrame:
-    """The table with the storage's names mapped away and what differs by design (timings, keys) dropped."""
-    out = frame.drop(columns=[c for c in ("elapsed_s", "content_hash") if c in frame]).copy()
-    for column in ("log", "first_log", "last_log", "since_log", "disagreeing_logs"):
-        if column in out:
-            out[column] = out[column].map(
-                lambda v: [x.replace(prefix, "") for x in v] if not isinstance(v, str) else v.replace(prefix, "")
-            )
-    return out
-
-
 def test_the_fleet_from_the_bucket_gives_the_local_table_a_prefix_that_is_one_log_one_row(
     fleet: Path, local_run: FleetResult, s3_run: FleetResult
 ) -> None:
@@ -101,10 +90,10 @@ def test_the_fleet_from_the_bucket_gives_the_local_table_a_prefix_that_is_one_lo
     assert (remote["status"] == "ok").all(), remote[["log", "error"]]
     for column in ("roll_deg", "pitch_deg", "yaw_deg", "roll_sigma_deg", "pitch_sigma_deg"):
         assert list(remote[column].fillna(-999.0)) == list(local[column].fillna(-999.0)), column
-    pd.testing.assert_frame_equal(_comparable(remote, BUCKET), _comparable(local, str(fleet)), check_exact=True)
+    pd.testing.assert_frame_equal(comparable(remote, BUCKET), comparable(local, str(fleet)), check_exact=True)
     pd.testing.assert_frame_equal(
-        _comparable(s3_run.vehicles.drop(columns=["remounts", "mountings"]), BUCKET),
-        _comparable(local_run.vehicles.drop(columns=["remounts", "mountings"]), str(fleet)),
+        comparable(s3_run.vehicles.drop(columns=["remounts", "mountings"]), BUCKET),
+        comparable(local_run.vehicles.drop(columns=["remounts", "mountings"]), str(fleet)),
         check_exact=True,
     )
     assert not remote["content_hash"].isin(local["content_hash"]).any()  # keyed by the objects' stamps
@@ -211,5 +200,5 @@ def test_a_real_comma2k19_segment_in_the_bucket_is_one_log_as_on_disk(real_data:
     assert list(remote.logs["log"]) == ["s3://folders/REAL/rav4/seg40"] and list(remote.logs["vehicle_id"]) == ["rav4"]
     assert remote.discarded.get(NOT_LOGS, 0) == 0  # every object is part of the segment (before: all dropped)
     pd.testing.assert_frame_equal(
-        _comparable(remote.logs, "s3://folders/REAL"), _comparable(local.logs, str(tmp_path / "REAL")), check_exact=True
+        comparable(remote.logs, "s3://folders/REAL"), comparable(local.logs, str(tmp_path / "REAL")), check_exact=True
     )
