@@ -141,6 +141,18 @@ def test_android_and_ios_recordings_give_the_simulated_mounting(
     assert "the app's default" in ios["by"] and "confirmed by handedness_stops" in ios["by"]
 
 
+@pytest.mark.parametrize("platform", ["Android", "iOS"])
+def test_the_bearing_invalid_while_parked_gives_the_stops_the_course_before_them(
+    session: ParkingLog, tmp_path: Path, platform: str
+) -> None:
+    """Location.csv's bearing is a course over ground: −1 while parked. With the uphill azimuth, each stop takes
+    the course it was driven in by (said in the result), and yaw comes out as with a protocol sheet."""
+    doc = _calibrate(record(tmp_path / platform, session, platform), tmp_path, "--uphill-azimuth-deg", "30")
+    read = next(c for c in doc["provenance"]["conventions"] if c["name"] == "heading_at_stops")
+    assert read["how"] == "inferred" and "empty at" in read["by"]
+    _assert_truth(doc, session)
+
+
 def test_ios_samples_are_the_specific_force_only_with_the_negation(session: ParkingLog, tmp_path: Path) -> None:
     """The negation is what makes iOS read right: the samples are the simulator's specific force (+g up)."""
     samples = read_log(record(tmp_path / "ios", session, "iOS"))
