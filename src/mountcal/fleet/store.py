@@ -46,7 +46,7 @@ def file_digest(path: str | Path, where: str | None = None) -> str:
 
     The key only has to tell logs apart, and the command hashes every local log of a fleet while the
     workers calibrate: XXH3 costs 0.02-0.03 s of CPU per GB here against 0.16-0.18 s for BLAKE3 (and
-    0.5 s for SHA-256), leaving the ~0.1 s per GB of reading the file. 128 bits make an accidental
+    about 0.9 s for SHA-256), leaving the ~0.1 s per GB of reading the file. 128 bits make an accidental
     collision negligible (about 10^-27 among a million logs); a deliberate one is possible, as with any
     non-cryptographic hash, but only someone who can put logs into the fleet could use it, and they
     could as well put in a wrong log.

@@ -323,17 +323,14 @@ def turn_cues(samples: Samples, rot_vs: Rotation, yaw_known: bool) -> TurnCues:
         rate = -np.diff(at) / TURN_BIN_S  # compass: clockwise from north; ω counter-clockwise
         cues["heading"] = np.where(inside, rate, np.nan)
     if yaw_known and v is not None:
-        a_y = rot_vs.apply(means(samples.acc_s))[:, 1]
+        acc_v = rot_vs.apply(means(samples.acc_s))
         with np.errstate(divide="ignore", invalid="ignore"):
-            cues["lateral"] = np.where(moving, a_y / v, np.nan)  # ω = a_y / v in a steady turn
-    available: list[str] = [k for k in ("gyro", "heading", "lateral") if k in cues]
+            cues["lateral"] = np.where(moving, acc_v[:, 1] / v, np.nan)  # ω = a_y / v in a steady turn
+        cues["forward"], cues["speeding"] = acc_v[:, 0], np.gradient(v, centre)
+    available = [k for k in ("gyro", "heading", "lateral") if k in cues]
     if len(available) < 2:
         return None
-    if "lateral" in cues and v is not None:
-        cues["forward"] = rot_vs.apply(means(samples.acc_s))[:, 0]
-        cues["speeding"] = np.gradient(v, centre)
-        available += ["forward", "speeding"]
-    return {k: np.where(moving, cues[k], np.nan) for k in available}
+    return {k: np.where(moving, c, np.nan) for k, c in cues.items()}
 
 
 def _sign_test(a: FloatArray, b: FloatArray, reference: FloatArray, min_r: float = TURN_R) -> float | None:

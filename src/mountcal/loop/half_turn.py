@@ -32,14 +32,10 @@ def half_turn_note(table: StopTable, i: int, terms: tuple[str, ...], g: float, o
     """
     if table.beta_rad is None or table.headings == "none":
         return None
-    keep = np.zeros(len(table), dtype=bool)
-    keep[i] = True
-    one = table.subset(keep)
-    flipped = replace(one, beta_rad=(table.beta_rad[i : i + 1] + np.pi) % (2.0 * np.pi))
     try:
-        stated = _chi2(one, terms, g, others)
-        turned = _chi2(flipped, terms, g, others)
-    except (ValueError, IndexError, np.linalg.LinAlgError):  # a per-site term the lone stop cannot carry
+        stated = float(_per_stop(table, terms, g, others)[i])
+        turned = float(_per_stop(_all_turned(table), terms, g, others)[i])
+    except (ValueError, IndexError, np.linalg.LinAlgError):  # a state the whole table does not fit (per-stop terms)
         return None
     scale = max(1.0, others.chi2 / others.dof) if others.dof > 0 else 1.0
     if turned / scale > stats.chi2.isf(FITS_P, 3) or turned * BETTER > stated:
@@ -49,11 +45,6 @@ def half_turn_note(table: StopTable, i: int, terms: tuple[str, ...], g: float, o
         f"{turned / scale:.1f}): a stop entered in reverse where the headings are a course over ground (the "
         "direction of motion), or its heading written from the wrong end of the vehicle"
     )
-
-
-def _chi2(one: StopTable, terms: tuple[str, ...], g: float, fit: full.Fit) -> float:
-    r = full.StaticModel(one, terms, g).residual(fit.state)
-    return float(r @ r)
 
 
 def reversed_stops(table: StopTable, g: float) -> str | None:
@@ -72,7 +63,7 @@ def reversed_stops(table: StopTable, g: float) -> str | None:
     try:
         fit = full.fit(current, full.BASE, g)
         while len(turned) < n // 3:
-            gain = _per_stop(current, g, fit) - _per_stop(_all_turned(current), g, fit)
+            gain = _per_stop(current, full.BASE, g, fit) - _per_stop(_all_turned(current), full.BASE, g, fit)
             gain[turned] = -np.inf
             i = int(np.argmax(gain))
             if gain[i] <= BETTER:
@@ -106,6 +97,7 @@ def _all_turned(table: StopTable) -> StopTable:
     return replace(table, beta_rad=_turn(table.beta_rad, list(range(len(table)))))
 
 
-def _per_stop(table: StopTable, g: float, fit: full.Fit) -> FloatArray:
-    r = full.StaticModel(table, full.BASE, g).residual(fit.state).reshape(-1, 3)
+def _per_stop(table: StopTable, terms: tuple[str, ...], g: float, fit: full.Fit) -> FloatArray:
+    """Each stop's χ² (3 dof) against the fitted model ``terms`` at ``fit``'s state."""
+    r = full.StaticModel(table, terms, g).residual(fit.state).reshape(-1, 3)
     return np.asarray((r**2).sum(axis=1), dtype=np.float64)

@@ -38,7 +38,6 @@ class StopHeadings:
     stops: list[Stop]
     convention: Convention | None  # None: read at rest, as the channel gives them
     missing: str | None  # why no stop has a heading (None when they all have one)
-    set_aside: int = 0  # stops without a course before them (the log began there)
 
 
 def stop_headings(stops: list[Stop], samples: Samples, trim_s: float) -> StopHeadings:
@@ -51,9 +50,11 @@ def stop_headings(stops: list[Stop], samples: Samples, trim_s: float) -> StopHea
         return StopHeadings(stops, None, None)
     at_rest = np.array([s.channels.get("heading_deg", np.nan) for s in stops])
     empty, held = ~np.isfinite(at_rest), _one_value(at_rest)
+    if not empty.any() and not held:  # a heading at every stop that moves with the vehicle: read at rest
+        return StopHeadings(stops, None, None)
     placeholder = float(np.nanmedian(at_rest)) if held else None
     before = np.array([_course_before(samples, heading, speed, s, s.t_start_s - trim_s, placeholder) for s in stops])
-    if not empty.any() and not (held and _spread_deg(before) > TURNED_DEG):
+    if not empty.any() and _spread_deg(before) <= TURNED_DEG:  # one value, and the vehicle did not turn either
         return StopHeadings(stops, None, None)
     why = (
         f"empty at {int(empty.sum())} of {len(stops)} stops"
@@ -84,7 +85,7 @@ def stop_headings(stops: list[Stop], samples: Samples, trim_s: float) -> StopHea
         for s, h, ok in zip(stops, before, has, strict=True)
         if ok
     ]
-    return StopHeadings(turned, convention, None, int((~has).sum()))
+    return StopHeadings(turned, convention, None)
 
 
 def _course_before(
@@ -93,15 +94,17 @@ def _course_before(
     """The channel's last finite value in the ``APPROACH_S`` before ``t_halt`` while moving, turned by the gyro's
     yaw since then (NaN if there is none); without a speed, the values that are the at-rest ``placeholder`` are
     left out instead."""
-    inside = (heading.t_s >= t_halt - APPROACH_S) & (heading.t_s < t_halt) & np.isfinite(heading.value)
+    lo, hi = np.searchsorted(heading.t_s, [t_halt - APPROACH_S, t_halt])  # the window alone, not the whole log
+    t, value = heading.t_s[lo:hi], heading.value[lo:hi]
+    inside = np.isfinite(value)
     if speed is not None and speed.t_s.size >= 2:
-        inside &= np.interp(heading.t_s, speed.t_s, speed.value, left=np.nan, right=np.nan) >= MOVING_MPS
+        inside &= np.interp(t, speed.t_s, speed.value, left=np.nan, right=np.nan) >= MOVING_MPS
     elif placeholder is not None:
-        inside &= np.abs((heading.value - placeholder + 180.0) % 360.0 - 180.0) >= ONE_VALUE_DEG
+        inside &= np.abs((value - placeholder + 180.0) % 360.0 - 180.0) >= ONE_VALUE_DEG
     if not inside.any():
         return float("nan")
     last = int(np.flatnonzero(inside)[-1])
-    return float((heading.value[last] - np.degrees(_turn_since(samples, stop, heading.t_s[last]))) % 360.0)
+    return float((value[last] - np.degrees(_turn_since(samples, stop, t[last]))) % 360.0)
 
 
 def _turn_since(samples: Samples, stop: Stop, t_from: float) -> float:
