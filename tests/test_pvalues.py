@@ -53,3 +53,32 @@ def test_an_underflowed_tail_is_finite_and_follows_the_asymptote() -> None:
     x = 1e5
     assert pvalues.chi2_logsf(x, 1) == pytest.approx(-x / 2 - 0.5 * np.log(np.pi * x / 2), rel=1e-8)
     assert np.isfinite(pvalues.f_logsf(1e300, 3, 2000))
+
+
+@pytest.mark.parametrize("dof", [1, 3, 17])
+def test_chi2_threshold_equals_scipy_stats(dof: int) -> None:
+    p = np.array([1e-12, 1e-6, 0.001, 0.05, 0.5, 0.99])
+    np.testing.assert_allclose(pvalues.chi2_isf(p, dof), stats.chi2.isf(p, dof), rtol=1e-12, atol=0)
+
+
+def test_no_module_of_mountcal_imports_scipy_stats() -> None:
+    """Every module of the package imported (the fleet worker's whole calibration stack among them):
+    scipy.stats stays out — its import alone costs ~0.3 s of every command and of every fleet worker
+    server's start, and this module's functions give the same values."""
+    import subprocess
+    import sys
+
+    code = (
+        "import importlib, pkgutil, sys, mountcal\n"
+        "names = [m.name for m in pkgutil.walk_packages(mountcal.__path__, 'mountcal.')]\n"
+        "for name in names:\n"
+        "    try:\n"
+        "        importlib.import_module(name)\n"
+        "    except ImportError as err:  # an optional extra not installed: its modules are not ours to weigh\n"
+        "        if not (err.name or '').split('.')[0] in ('dask', 'distributed', 'matplotlib', 's3fs'):\n"
+        "            raise\n"
+        "print(len(names), 'scipy.stats' in sys.modules)"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True)
+    count, imported = done.stdout.split()
+    assert int(count) > 100 and imported == "False", done.stdout + done.stderr

@@ -1,6 +1,6 @@
 """Tail probabilities of the χ² and F distributions, from ``scipy.special``.
 
-The same values as ``scipy.stats.chi2.sf`` / ``logsf`` and ``scipy.stats.f.sf`` / ``logsf`` (which
+The same values as ``scipy.stats.chi2.sf`` / ``logsf`` / ``isf`` and ``scipy.stats.f.sf`` / ``logsf`` (which
 evaluate these functions too), without importing ``scipy.stats``: that import alone costs about
 0.4 s, paid by every command and by every fleet worker server at start-up.
 
@@ -25,6 +25,11 @@ FAMILY_ALPHA = 0.01  # all tests together flag a fit that explains the stops wit
 def chi2_sf(x: Any, dof: Any) -> Any:
     """P(χ²(dof) > x)."""
     return special.chdtrc(dof, np.maximum(x, 0.0))
+
+
+def chi2_isf(p: Any, dof: Any) -> Any:
+    """The x with P(χ²(dof) > x) = p: the threshold a χ² statistic is tested against."""
+    return special.chdtri(dof, p)
 
 
 def chi2_logsf(x: Any, dof: Any) -> Any:

@@ -13,10 +13,10 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
-from scipy import stats
 
 from mountcal.core.conventions import FloatArray
 from mountcal.core.errors import FitFailed, NotEnoughInformation
+from mountcal.core.pvalues import chi2_isf
 from mountcal.estimate import full
 from mountcal.stops.table import StopTable
 
@@ -38,7 +38,7 @@ def half_turn_note(table: StopTable, i: int, terms: tuple[str, ...], g: float, o
     except (ValueError, IndexError, np.linalg.LinAlgError):  # a state the whole table does not fit (per-stop terms)
         return None
     scale = max(1.0, others.chi2 / others.dof) if others.dof > 0 else 1.0
-    if turned / scale > stats.chi2.isf(FITS_P, 3) or turned * BETTER > stated:
+    if turned / scale > chi2_isf(FITS_P, 3) or turned * BETTER > stated:
         return None
     return (
         f"its reading fits a heading a half turn away (β = {np.degrees(table.beta_rad[i] + np.pi) % 360:.0f}°, χ²(3) = "
@@ -71,7 +71,7 @@ def reversed_stops(table: StopTable, g: float) -> str | None:
             turned.append(i)
             current = replace(current, beta_rad=_turn(current.beta_rad, [i]))  # type: ignore[arg-type]
             fit = full.fit(current, full.BASE, g, fit.state)
-            if fit.dof > 0 and (fit.chi2 <= stats.chi2.isf(FITS_P, fit.dof) or fit.chi2 <= 2.0 * fit.dof):
+            if fit.dof > 0 and (fit.chi2 <= chi2_isf(FITS_P, fit.dof) or fit.chi2 <= 2.0 * fit.dof):
                 break
         else:
             return None
