@@ -17,20 +17,24 @@ which the outlier step and the half-turn check name one stop at a time.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import replace
 
 import numpy as np
 from scipy import optimize
 
 from mountcal.core.conventions import FloatArray
-from mountcal.core.pvalues import chi2_logsf
+from mountcal.core.pvalues import FAMILY_ALPHA, chi2_logsf, f_sf
+from mountcal.core.result import Declined
 from mountcal.estimate import full
+from mountcal.loop.diagnose import DRIFT_MODES, time_order
 from mountcal.loop.steps import Step
 from mountcal.stops.table import StopTable
 
 NAME = "heading_scatter"
 MAX_HEADING_SCATTER_DEG = 5.0
 MIN_STOPS = 4  # a variance needs residual degrees of freedom beyond the rotation and the slope
+STRUCTURED = "the stops' heading errors follow"  # how a decline for structure opens (:func:`found_structured`)
 
 
 def candidate(table: StopTable) -> bool:
@@ -46,9 +50,10 @@ def with_heading_scatter(table: StopTable, tangents: FloatArray, sigma_rad: floa
     return replace(table, cov_s=table.cov_s + extra)
 
 
-def heading_scatter_step(cur: Step, g: float, k: int) -> tuple[float, Step] | None:
-    """The step that models each stop's heading error, with its Bonferroni-adjusted log p (``k`` candidates), or
-    None where the stops do not call for it (no scatter, or more than headings are off by)."""
+def heading_scatter_step(cur: Step, g: float, k: int) -> tuple[float, Step] | str | None:
+    """The step that models each stop's heading error, with its Bonferroni-adjusted log p (``k`` candidates); None
+    where the stops do not call for it (no scatter, or more than headings are off by); the reason it is declined
+    where the headings' errors follow the time order or the heading (:func:`structure`)."""
     if not candidate(cur.table) or cur.fit.dof < 2:
         return None
     base = cur.table
@@ -88,6 +93,9 @@ def heading_scatter_step(cur: Step, g: float, k: int) -> tuple[float, Step] | No
         return None
     stat = max(_neg2loglik(base, cur.fit) - value, 0.0)
     logp = float(chi2_logsf(stat, 1))
+    pattern = structure(base, tangents, resid, float(np.exp(x)))
+    if pattern is not None:
+        return pattern
     rel = f" (1σ, ±{np.sqrt(2.0 / curvature):.0%})" if curvature > 0 else " (1σ)"
     reason = (
         f"each stop's own heading off by {np.degrees(np.exp(x)):.2g}°{rel} (parking by eye, a compass or a course "
@@ -97,8 +105,65 @@ def heading_scatter_step(cur: Step, g: float, k: int) -> tuple[float, Step] | No
     return logp + np.log(k), Step(NAME, reason, terms, cur.excluded, table, replace(fit, terms=terms))
 
 
+def structure(table: StopTable, tangents: FloatArray, resid: FloatArray, sigma_rad: float) -> str | None:
+    """Why the stops' heading errors are not scatter, or None: they follow the time order (a heading source that
+    drifts, an integrating gyro) or the heading itself (a compass's deviation). Such errors have a common part
+    too, which moves yaw and shows in no residual: modelled as scatter, they would pass as explained.
+
+    Each stop's heading error ``ε_i = tᵀC⁻¹r / tᵀC⁻¹t`` (its variance ``1 / tᵀC⁻¹t`` from the noise, plus ``σ_h²``)
+    is regressed, weighted, on a mean, the first cosine modes of the time order and the 1β, 2β harmonics; an F-test
+    at the residual tests' level says whether they explain more than scatter does.
+    """
+    solved = np.linalg.solve(table.cov_s, np.stack([tangents, resid], axis=2))  # type: ignore[arg-type]
+    info = np.einsum("ni,ni->n", tangents, solved[:, :, 0])
+    eps = np.einsum("ni,ni->n", tangents, solved[:, :, 1]) / info
+    weight = 1.0 / (1.0 / info + sigma_rad**2)
+    n = len(eps)
+    rank = np.empty(n)
+    rank[time_order(table)] = np.arange(n)
+    beta = np.asarray(table.beta_rad)
+    columns = {"the time order": np.cos(np.pi * np.outer(rank + 0.5, np.arange(1, DRIFT_MODES + 1)) / n)}
+    distinct = np.unique(np.round(np.mod(beta, 2 * np.pi), 6)).size
+    harmonics = [np.column_stack([np.cos(h * beta), np.sin(h * beta)]) for h in (1, 2) if 2 * h < distinct]
+    if harmonics:
+        columns["the heading"] = np.hstack(harmonics)
+    found = []
+    for name, x in columns.items():
+        design = np.column_stack([np.ones(n), x])
+        dof = n - design.shape[1]
+        if dof < 2:
+            continue
+        root = np.sqrt(weight)
+        total = float(np.sum(weight * (eps - np.average(eps, weights=weight)) ** 2))
+        fitted, *_ = np.linalg.lstsq(design * root[:, None], eps * root, rcond=None)
+        left = float(np.sum(weight * (eps - design @ fitted) ** 2))
+        f = ((total - left) / x.shape[1]) / max(left / dof, 1e-300)
+        if float(f_sf(f, x.shape[1], dof)) < FAMILY_ALPHA:
+            found.append(name)
+    if not found:
+        return None
+    return (
+        f"{STRUCTURED} {' and '.join(found)} (a heading source that drifts or deviates), not scatter: their common "
+        "part would move yaw unseen"
+    )
+
+
+def found_structured(declined: Sequence[Declined]) -> bool:
+    """Whether an earlier round found the headings' errors structured: a stop set aside since does not make them
+    scatter (the rest of a drift is a smaller drift, which the fewer stops may not show)."""
+    return any(d.effect == NAME and d.why.startswith(STRUCTURED) for d in declined)
+
+
 def _neg2loglik(table: StopTable, fit: full.Fit) -> float:
     return fit.chi2 + float(np.sum(np.linalg.slogdet(table.cov_s)[1]))  # type: ignore[arg-type]
 
 
-__all__ = ["MAX_HEADING_SCATTER_DEG", "NAME", "candidate", "heading_scatter_step", "with_heading_scatter"]
+__all__ = [
+    "MAX_HEADING_SCATTER_DEG",
+    "NAME",
+    "candidate",
+    "found_structured",
+    "heading_scatter_step",
+    "structure",
+    "with_heading_scatter",
+]

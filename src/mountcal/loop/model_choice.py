@@ -134,7 +134,7 @@ def close_the_loop(
         if step is None:
             step, analysed = _named_by_residual(steps[-1], len(table), g_mps2, gravity_known, alpha, declined)
         if step is None:
-            step, analysed = _scatter_named_by_residual(steps[-1], len(table), g_mps2, analysed)
+            step, analysed = _scatter_named_by_residual(steps[-1], len(table), g_mps2, analysed, declined)
         took = time.perf_counter() - t0
         log.log(
             level,
@@ -205,13 +205,17 @@ def _next_step(
                 options.append(option)
             continue
         if name == heading_scatter.NAME:
+            if heading_scatter.found_structured(declined):
+                continue
             try:
-                option = heading_scatter.heading_scatter_step(cur, g, k)
+                scatter = heading_scatter.heading_scatter_step(cur, g, k)
             except FitFailed as err:
                 _decline(declined, name, f"its fit failed ({err}): {_why_adrift(cur)}", len(cur.excluded))
                 continue
-            if option is not None:
-                options.append(option)
+            if isinstance(scatter, str):
+                _decline(declined, name, scatter, len(cur.excluded))
+            elif scatter is not None:
+                options.append(scatter)
             continue
         effect = registry.get(name)
         terms = (*cur.terms, *(r for r in effect.requires if r not in cur.terms), name)
@@ -344,24 +348,30 @@ def _named_by_residual(
 
 
 def _scatter_named_by_residual(
-    cur: Step, n_rows: int, g: float, findings: list[Finding] | None
+    cur: Step, n_rows: int, g: float, findings: list[Finding] | None, declined: list[Declined]
 ) -> tuple[Step | None, list[Finding] | None]:
     """Each stop's heading error, where the final residual names it ("single stops turned about the vertical") and
     its likelihood ratio passes at the residual tests' own level. Headings set by eye are never exact: the
     Bonferroni cost of every candidate can hide an error the residual still shows, and the noise model adds no
     term to the prediction (the angles stay; yaw's σ takes the headings' scatter in)."""
-    if heading_scatter.NAME in cur.terms or not heading_scatter.candidate(cur.table):
+    if (
+        heading_scatter.NAME in cur.terms
+        or not heading_scatter.candidate(cur.table)
+        or heading_scatter.found_structured(declined)
+    ):
         return None, findings
     findings = analyse(cur.table, cur.fit, _rows(cur, n_rows)) if findings is None else findings
     if "stop_heading" not in {f.test for f in unexplained(findings)}:
         return None, findings
     try:
-        option = heading_scatter.heading_scatter_step(cur, g, 1)
+        scatter = heading_scatter.heading_scatter_step(cur, g, 1)
     except FitFailed:
         return None, findings
-    if option is None or option[0] >= np.log(FAMILY_ALPHA):
+    if isinstance(scatter, str):
+        _decline(declined, heading_scatter.NAME, scatter, len(cur.excluded))
+    if scatter is None or isinstance(scatter, str) or scatter[0] >= np.log(FAMILY_ALPHA):
         return None, findings
-    step = option[1]
+    step = scatter[1]
     return replace(
         step, reason=f"named by the residual test (single stops turned about the vertical); {step.reason}"
     ), None
