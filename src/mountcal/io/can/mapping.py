@@ -118,6 +118,8 @@ class Plan:
     axes: NDArray[np.float64]  # (3, 3): sensor axis i = axes[i] · device axes
     axis_map: str
     channel: int | None
+    # the accelerometer's signals as read: (label, unit, what states the unit, scale to m/s²), ax, ay, az
+    acc_units: tuple[tuple[str, str, str, float], ...] = ()
 
     def sources(self) -> list[Source]:
         return self.imu + [a[0] for a in self.aux.values()]
@@ -372,16 +374,24 @@ def resolve(db: Any, text: Any, role: str, present: Presence, where: str) -> _Re
     return _Ref(messages[0], signal)
 
 
+def _unit_of(ref: _Ref, role: str, units: Mapping[str, Any]) -> tuple[str, str]:
+    """The unit a signal is read in and what states it: the mapping's ``[units]``, else the DBC."""
+    kind = UNIT_KIND[role]
+    key = "accel" if kind == "accel" else "gyro" if kind == "gyro" else role
+    given = units.get(key)
+    if given is not None:
+        return str(given), f"the mapping's units.{key}"
+    return str(ref.message.get_signal_by_name(ref.signal).unit or ""), f"the DBC unit of {ref.label}"
+
+
 def _unit_scale(ref: _Ref, role: str, units: Mapping[str, Any], where: str) -> tuple[float, float]:
     """Scale and offset from the signal's unit (the mapping's, else the DBC's) to SI."""
     kind = UNIT_KIND[role]
     key = "accel" if kind == "accel" else "gyro" if kind == "gyro" else role
-    given = units.get(key)
-    unit = str(given) if given is not None else str(ref.message.get_signal_by_name(ref.signal).unit or "")
+    unit, source = _unit_of(ref, role, units)
     scale = si_scale(role, unit)
     if scale is not None:
         return scale
-    source = "the mapping's units." + key if given is not None else f"the DBC unit of {ref.label}"
     raise InputError(
         where,
         f"{'an acceleration' if kind == 'accel' else 'a ' + kind} unit ({UNIT_HINT[kind]}) for {role}",
@@ -425,7 +435,8 @@ def build_plan(
     placements = _placements(spec.get("messages", {}), db, where)
     for source in sources + [a[0] for a in aux.values()]:
         source.place(placements, channel)
-    return Plan(where, db, sources, columns, has_gyro, aux, aux_required, axes, axis_map, channel)
+    acc_units = tuple((refs[r].label, *_unit_of(refs[r], r, units), columns[i][2]) for i, r in enumerate(ACCEL_ROLES))
+    return Plan(where, db, sources, columns, has_gyro, aux, aux_required, axes, axis_map, channel, acc_units)
 
 
 def _placements(table: Any, db: Any, where: str) -> dict[str, tuple[int | None, bool | None, int | None]]:

@@ -1,0 +1,116 @@
+"""The conventions a CAN log's numbers cross into mountcal with, run through the command line: the unit a
+DBC (or the mapping's ``[units]``) gives a signal, and the text encoding of the DBC that spells it. A unit
+that gravity contradicts is refused naming what stated it and the fix, by every command, before anything
+is written; a unit spelled right is read whatever the DBC's encoding."""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+from pathlib import Path
+
+import pytest
+
+from mountcal.cli import main
+
+REPO = Path(__file__).resolve().parents[2]
+DATA = REPO / "data"
+MM5_FACTOR = "(0.000127465,-4.1768) [-4.1768|4.1765]"  # the MM5.10's accelerometer signals, in g
+
+
+def _dbc(tmp_path: Path, name: str, factor: str, unit: str, encoding: str = "cp1252") -> Path:
+    """data/imu_mm5_10.dbc with the accelerometer signals' factor and unit replaced (a real DBC's text)."""
+    text = (DATA / "imu_mm5_10.dbc").read_text(encoding="cp1252")
+    lines = []
+    for line in text.splitlines(True):
+        if re.match(r" SG_ (AX1|AY1|AZ) ", line):
+            line = line.replace(MM5_FACTOR, factor).replace('"g"', f'"{unit}"')
+        lines.append(line)
+    path = tmp_path / name
+    path.write_text("".join(lines), encoding=encoding)
+    return path
+
+
+def _log(tmp_path: Path) -> Path:
+    """data/parking.blf (written by python-can's BLFWriter), copied: the frames stay as logged."""
+    return Path(shutil.copy(DATA / "parking.blf", tmp_path / "parking.blf"))
+
+
+def test_rotate_refuses_a_log_whose_dbc_says_g_for_signals_in_m_s2(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The DBC gives the m/s² factor (×9.80665) but calls the unit g: every sample decodes 9.8 times too
+    large. rotate wrote them (|a| ≈ 96 m/s² in the vehicle frame, exit 0): its own check only caught
+    magnitudes below 0.3 g. The CAN reader now refuses, naming the DBC's unit and the one that fits."""
+    g = 9.80665
+    dbc = _dbc(tmp_path, "mps2_called_g.dbc", f"({0.000127465 * g:.9g},{-4.1768 * g:.9g}) [-40.96|40.96]", "g")
+    log, cal, out = _log(tmp_path), tmp_path / "cal.json", tmp_path / "vehicle.csv"
+    assert main(["calibrate", str(DATA / "zhang2011_stops.csv"), "-o", str(cal)]) == 0
+    capsys.readouterr()
+    assert main(["rotate", str(log), "--dbc", str(dbc), "--calibration", str(cal), "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert not out.exists() and "Traceback" not in err
+    assert "read in g (the DBC unit of MM5_10_TX2.AX1, MM5_10_TX1.AY1, MM5_10_TX3.AZ)" in err
+    assert re.search(r"\(9\.8\d* g\)", err) and 'accel = "m/s^2"' in err
+
+
+@pytest.mark.parametrize(
+    ("factor", "unit", "fits"), [(MM5_FACTOR, "m/s^2", "g"), ("(0.127465,-4176.8) [-4176.8|4176.5]", "g", "mg")]
+)
+def test_stops_names_the_can_mapping_unit_that_fits_not_unit_g(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], factor: str, unit: str, fits: str
+) -> None:
+    """A DBC calling g signals m/s² (or the counts of mg signals g): `stops` and `calibrate` refused naming
+    `--unit g`, which a CAN log refuses in turn ("Drop --unit"); a signal read 1000 times too large gave
+    "no static reading in either unit". They name the mapping's [units] accel now, and with it the log
+    calibrates to the simulated mounting (roll 5°, pitch 6°, yaw 7°)."""
+    dbc = _dbc(tmp_path, "wrong_unit.dbc", factor, unit)
+    log, stops = _log(tmp_path), tmp_path / "stops.csv"
+    capsys.readouterr()
+    assert main(["stops", str(log), "--dbc", str(dbc), "-o", str(stops)]) == 2
+    err = capsys.readouterr().err
+    assert not stops.exists() and "--unit" not in err and f'accel = "{fits}"' in err
+    mapping = tmp_path / "mapping.toml"
+    mapping.write_text((DATA / "imu_mm5_10.toml").read_text() + f'\n[units]\naccel = "{fits}"\n', encoding="utf-8")
+    out = tmp_path / "result.json"
+    protocol = ["--protocol", str(DATA / "parking_protocol.csv")]
+    assert main(["calibrate", str(log), "--dbc", str(dbc), "--mapping", str(mapping), *protocol, "-o", str(out)]) == 0
+    doc = json.loads(out.read_text(encoding="utf-8"))
+    truth = {"roll_deg": 5.0, "pitch_deg": 6.0, "yaw_deg": 7.0}
+    assert doc["confident"] and all(abs(doc["mounting"][k] - v) < 0.05 for k, v in truth.items())
+
+
+@pytest.mark.parametrize("bom", [False, True])
+def test_a_utf8_dbc_with_degree_and_squared_units_reads_as_its_units_say(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], bom: bool
+) -> None:
+    """A DBC saved as UTF-8 (as tools of today write it; CSS Electronics' J1939 DBC is UTF-8) with the gyro
+    in "°/s", the accelerometer in "m/s²" and the heading in "°": read as cp1252 (cantools' default), "°/s"
+    became "Â°/s" and calibrate refused the gyro for a unit the DBC states plainly. The acceleration is
+    re-encoded in m/s² by cantools (the same frames' values), so the answer must be the simulated one."""
+    import can
+    import cantools
+
+    db = cantools.database.load_file(DATA / "imu_mm5_10.dbc")
+    text = (DATA / "imu_mm5_10.dbc").read_text(encoding="cp1252")  # its gyro in "°/s"
+    text = text.replace('"deg"', '"°"').replace(f'{MM5_FACTOR} "g"', '(0.00125,-40.96) [-40.96|40.95] "m/s²"')
+    dbc = tmp_path / "utf8.dbc"
+    dbc.write_bytes((b"\xef\xbb\xbf" if bom else b"") + text.encode("utf-8"))
+    utf8 = cantools.database.load_string(text, database_format="dbc")
+    log = tmp_path / "parking.blf"
+    with can.BLFReader(str(DATA / "parking.blf")) as reader, can.BLFWriter(str(log)) as writer:
+        for frame in reader:
+            message = db.get_message_by_frame_id(frame.arbitration_id)
+            values = message.decode(frame.data, decode_choices=False)
+            if message.name.startswith("MM5_10"):
+                values = {k: v * 9.80665 if k in ("AX1", "AY1", "AZ") else v for k, v in values.items()}
+            frame.data = bytearray(utf8.get_message_by_name(message.name).encode(values, strict=False))
+            writer.on_message_received(frame)
+    out = tmp_path / "result.json"
+    capsys.readouterr()
+    argv = ["calibrate", str(log), "--dbc", str(dbc), "--mapping", str(DATA / "imu_mm5_10.toml")]
+    assert main([*argv, "--protocol", str(DATA / "parking_protocol.csv"), "-o", str(out)]) == 0, capsys.readouterr().err
+    doc = json.loads(out.read_text(encoding="utf-8"))
+    truth = {"roll_deg": 5.0, "pitch_deg": 6.0, "yaw_deg": 7.0}
+    assert doc["confident"] and all(abs(doc["mounting"][k] - v) < 0.05 for k, v in truth.items())
