@@ -326,6 +326,27 @@ def test_missing_message_in_the_log(tmp_path: Path) -> None:
         read_can(path, OWN_DBC, mapping=spec)
 
 
+def test_a_message_sent_with_the_other_id_kind_is_named_with_the_placement_that_reads_it(tmp_path: Path) -> None:
+    """The IMU's 0x576 sent as a 29-bit 0x00000576 (a gateway, a logger set to extended ids): the refusal
+    listed the log's nearest 11-bit ids (0x343) and not the frames themselves; it names them and the
+    mapping's [messages] placement, which then reads them."""
+    messages = _mm5_messages(50)
+    for m in messages:
+        if m.arbitration_id == 0x576:
+            m.is_extended_id = True
+    path = _write(tmp_path / "tx3_extended.blf", messages)
+    spec: dict[str, Any] = {"signals": {"ax": "MM5_10_TX2.AX1", "ay": "MM5_10_TX1.AY1", "az": "MM5_10_TX3.AZ"}}
+    with pytest.raises(InputError) as err:
+        read_can(path, OWN_DBC, mapping=spec)
+    assert (
+        "MM5_10_TX3's id is in the log as a 29-bit id, 0x00000576 (50 frames), where the DBC has an 11-bit 0x576"
+        in str(err.value)
+    )
+    assert "[messages] MM5_10_TX3 = { id = 0x576, extended = true }" in str(err.value)
+    placed = read_can(path, OWN_DBC, mapping={**spec, "messages": {"MM5_10_TX3": {"id": 0x576, "extended": True}}})
+    np.testing.assert_allclose(placed.acc_s, _expected_acc(placed.t_s), atol=1e-3)
+
+
 def test_wrong_dbc_lists_ids_seen_and_expected(tmp_path: Path) -> None:
     messages = [
         can.Message(timestamp=T0 + k * 0.01, arbitration_id=0x7E8 + k % 2, is_extended_id=False, data=b"\0" * 8)
