@@ -114,3 +114,26 @@ def test_a_utf8_dbc_with_degree_and_squared_units_reads_as_its_units_say(
     doc = json.loads(out.read_text(encoding="utf-8"))
     truth = {"roll_deg": 5.0, "pitch_deg": 6.0, "yaw_deg": 7.0}
     assert doc["confident"] and all(abs(doc["mounting"][k] - v) < 0.05 for k, v in truth.items())
+
+
+def test_an_auto_detected_heading_of_an_unknown_unit_is_said_to_be_left_out(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The heading found by its name, in a unit no table knows ("degrees true"), was left out without a
+    word: the stops had no headings, --uphill-azimuth-deg went unused and yaw was undetermined. It is still
+    left out (a unit is not guessed), but said, with the [units] entry that reads it; stated so, yaw is found."""
+    text = (DATA / "imu_mm5_10.dbc").read_text(encoding="cp1252")
+    text = re.sub(r'(SG_ Heading .*)"deg"', r'\1"degrees true"', text)
+    dbc = tmp_path / "heading_degrees_true.dbc"
+    dbc.write_text(text, encoding="cp1252")
+    log, out = _log(tmp_path), tmp_path / "result.json"
+    argv = ["calibrate", str(log), "--dbc", str(dbc), "--uphill-azimuth-deg", "30", "-o", str(out)]
+    capsys.readouterr()
+    assert main(argv) == 0
+    err = capsys.readouterr().err
+    assert "heading not read: SIM_GNSS_HEADING.Heading was found by its name, but its DBC unit 'degrees true'" in err
+    assert json.loads(out.read_text(encoding="utf-8"))["mounting"]["yaw_deg"] is None
+    mapping = tmp_path / "units.toml"
+    mapping.write_text('[units]\nheading = "deg"\n', encoding="utf-8")
+    assert main([*argv, "--mapping", str(mapping)]) == 0
+    assert abs(json.loads(out.read_text(encoding="utf-8"))["mounting"]["yaw_deg"] - 7.0) < 0.05

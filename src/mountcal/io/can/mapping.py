@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 
 from mountcal.core import paths
 from mountcal.core.errors import InputError
+from mountcal.core.option_names import option
 from mountcal.io.can.dbc import frame_id_text, id_match, load_dbcs
 from mountcal.io.can.files import iter_frames, log_format
 from mountcal.io.can.mismatch import SHOWN, Want, log_mismatch
@@ -120,6 +121,7 @@ class Plan:
     channel: int | None
     # the accelerometer's signals as read: (label, unit, what states the unit, scale to m/s²), ax, ay, az
     acc_units: tuple[tuple[str, str, str, float], ...] = ()
+    notes: tuple[str, ...] = ()  # what the plan left out and says (an auto-detected channel's unknown unit)
 
     def sources(self) -> list[Source]:
         return self.imu + [a[0] for a in self.aux.values()]
@@ -419,6 +421,7 @@ def build_plan(
         source.signals.append(ref.signal)
         columns.append((sources.index(source), ref.signal, _unit_scale(ref, role, units, where)[0]))
     aux: dict[str, tuple[Source, str, float, float]] = {}
+    notes: list[str] = []
     for role, key in AUX_KEYS.items():
         if role in refs:
             try:
@@ -426,7 +429,16 @@ def build_plan(
             except InputError:
                 if explicit:
                     raise
-                continue  # an auto-detected optional channel with an unknown unit is left out
+                # an auto-detected optional channel with an unknown unit is left out, and said
+                unit, _ = _unit_of(refs[role], role, units)
+                kind = UNIT_KIND[role]
+                first = UNIT_HINT[kind].split(",")[0].split(" ")[0]
+                notes.append(
+                    f"{role} not read: {refs[role].label} was found by its name, but its DBC unit {unit!r} is no "
+                    f"{kind} unit ({UNIT_HINT[kind]}); if that is the {role}, state its unit in the CAN mapping's "
+                    f'[units] table: {role} = "{first}" (or {UNIT_HINT[kind]}; {option("mapping")})'
+                )
+                continue
             source = Source(refs[role].message, _mux_of(refs[role]), [refs[role].signal])
             aux[key] = (source, refs[role].signal, scale, offset)
     _assign_validity(sources + [a[0] for a in aux.values()], spec.get("valid"), db, where, present)
@@ -436,7 +448,9 @@ def build_plan(
     for source in sources + [a[0] for a in aux.values()]:
         source.place(placements, channel)
     acc_units = tuple((refs[r].label, *_unit_of(refs[r], r, units), columns[i][2]) for i, r in enumerate(ACCEL_ROLES))
-    return Plan(where, db, sources, columns, has_gyro, aux, aux_required, axes, axis_map, channel, acc_units)
+    plan = Plan(where, db, sources, columns, has_gyro, aux, aux_required, axes, axis_map, channel, acc_units)
+    plan.notes = tuple(notes)
+    return plan
 
 
 def _placements(table: Any, db: Any, where: str) -> dict[str, tuple[int | None, bool | None, int | None]]:

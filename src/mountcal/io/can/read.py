@@ -138,7 +138,7 @@ def read_can(
     path = Path(path)
     plan = make_plan(path, dbc, mapping, channel)
     samples = _concat(hold(_pieces(path, plan, _FRAMES_PER_CHUNK), str(path), "samples"), plan, str(path))
-    return check_magnitude(samples, plan)
+    return _noted(check_magnitude(samples, plan), plan)
 
 
 def iter_can(
@@ -173,7 +173,7 @@ def iter_can(
         if held:
             piece, held = _concat([*held, piece], plan, str(path)), []
         if verdict is None:
-            piece = check_magnitude(piece, plan)
+            piece = _noted(check_magnitude(piece, plan), plan)
             verdict = piece.gravity_free
         elif verdict:
             piece = replace(piece, gravity_free=verdict)
@@ -530,6 +530,11 @@ def _split(samples: Samples, n: int) -> tuple[Samples, Samples]:
 
 # ---------------------------------------------------------------------------------------------
 # The unit the accelerometer was read in, checked by gravity
+
+
+def _noted(samples: Samples, plan: Plan) -> Samples:
+    """The samples with what the plan left out and says (:attr:`Plan.notes`)."""
+    return replace(samples, notes=(*samples.notes, *plan.notes)) if plan.notes else samples
 
 
 def check_magnitude(samples: Samples, plan: Plan) -> Samples:
