@@ -137,3 +137,37 @@ def test_an_auto_detected_heading_of_an_unknown_unit_is_said_to_be_left_out(
     mapping.write_text('[units]\nheading = "deg"\n', encoding="utf-8")
     assert main([*argv, "--mapping", str(mapping)]) == 0
     assert abs(json.loads(out.read_text(encoding="utf-8"))["mounting"]["yaw_deg"] - 7.0) < 0.05
+
+
+def test_a_log_whose_clock_restarts_is_refused_where_it_steps_back(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """data/parking.blf rewritten by python-can with its second half restamped from the log's start (a logger
+    whose clock restarted): its samples, put in time order, interleaved two stretches of the session, and
+    calibrate answered "no parked period found … relax the stillness thresholds" (exit 3), an untrue reason.
+    It is refused naming the step back. A step back of 1 s (a clock synchronised) is put in order, as before."""
+    import can
+
+    with can.BLFReader(str(DATA / "parking.blf")) as reader:
+        frames = list(reader)
+    half = len(frames) // 2
+    t0, t_half = frames[0].timestamp, frames[half].timestamp
+    argv = ["--dbc", str(DATA / "imu_mm5_10.dbc"), "--mapping", str(DATA / "imu_mm5_10.toml")]
+    protocol = ["--protocol", str(DATA / "parking_protocol.csv")]
+    for name, back in (("restart.blf", t_half - t0 - 0.001), ("synced.blf", 1.0)):
+        log, out = tmp_path / name, tmp_path / f"{name}.json"
+        with can.BLFWriter(str(log)) as writer:
+            for k, frame in enumerate(frames):
+                frame.timestamp -= back if k >= half else 0.0
+                writer.on_message_received(frame)
+                frame.timestamp += back if k >= half else 0.0
+        capsys.readouterr()
+        code = main(["calibrate", str(log), *argv, *protocol, "-o", str(out)])
+        err = capsys.readouterr().err
+        if name == "synced.blf":
+            assert code == 0 and abs(json.loads(out.read_text(encoding="utf-8"))["mounting"]["roll_deg"] - 5.0) < 0.05
+            continue
+        assert code == 2 and not out.exists() and "Traceback" not in err
+        assert f"{log}: expected sample times on one clock that runs forward" in err
+        assert re.search(r"the clock stepping back by \d+\.\d s at sample \d+ \(t = 17145577\d\d\.\d+ s", err)
+        assert "Split the log where its clock steps back" in err
