@@ -79,6 +79,10 @@ def test_stops_names_the_can_mapping_unit_that_fits_not_unit_g(
     doc = json.loads(out.read_text(encoding="utf-8"))
     truth = {"roll_deg": 5.0, "pitch_deg": 6.0, "yaw_deg": 7.0}
     assert doc["confident"] and all(abs(doc["mounting"][k] - v) < 0.05 for k, v in truth.items())
+    # the result says in which units the signals were read, and what stated them (it did not)
+    units = next(c for c in doc["provenance"]["conventions"] if c["name"] == "can_units")
+    assert units["value"].startswith(f"ax, ay, az: {fits}; gx, gy, gz: °/s;") and units["how"] == "stated"
+    assert units["by"].startswith("the DBC's signal units, and the mapping's units.accel")
 
 
 @pytest.mark.parametrize("bom", [False, True])

@@ -122,6 +122,7 @@ class Plan:
     # the accelerometer's signals as read: (label, unit, what states the unit, scale to m/s²), ax, ay, az
     acc_units: tuple[tuple[str, str, str, float], ...] = ()
     notes: tuple[str, ...] = ()  # what the plan left out and says (an auto-detected channel's unknown unit)
+    units: tuple[str, str] = ("", "")  # the units the signals are read in, and what stated them
 
     def sources(self) -> list[Source]:
         return self.imu + [a[0] for a in self.aux.values()]
@@ -450,7 +451,26 @@ def build_plan(
     acc_units = tuple((refs[r].label, *_unit_of(refs[r], r, units), columns[i][2]) for i, r in enumerate(ACCEL_ROLES))
     plan = Plan(where, db, sources, columns, has_gyro, aux, aux_required, axes, axis_map, channel, acc_units)
     plan.notes = tuple(notes)
+    read = [r for r in (*ACCEL_ROLES, *(GYRO_ROLES if has_gyro else ())) if r in refs]
+    read += [r for r, k in AUX_KEYS.items() if k in aux]
+    plan.units = _units_said(refs, read, units)
     return plan
+
+
+def _units_said(refs: dict[str, _Ref], roles: Sequence[str], units: Mapping[str, Any]) -> tuple[str, str]:
+    """The units the signals were read in, grouped (``ax, ay, az: g; gx, gy, gz: deg/s; …``), and what
+    stated them (the DBC, or the mapping's [units] for some)."""
+    grouped: dict[str, list[str]] = {}
+    overridden: list[str] = []
+    for role in roles:
+        unit, by = _unit_of(refs[role], role, units)
+        grouped.setdefault(unit, []).append(role)
+        if by.startswith("the mapping") and by not in overridden:
+            overridden.append(by)
+    value = "; ".join(f"{', '.join(rs)}: {unit}" for unit, rs in grouped.items())
+    by = "the DBC's signal units" + (", and " + ", ".join(overridden) if overridden else "")
+    checked = "converted to SI; checked: the accelerometer's against gravity, the gyro's where stops or a drive show it"
+    return value, f"{by} ({checked})"
 
 
 def _placements(table: Any, db: Any, where: str) -> dict[str, tuple[int | None, bool | None, int | None]]:

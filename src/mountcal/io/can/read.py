@@ -533,8 +533,12 @@ def _split(samples: Samples, n: int) -> tuple[Samples, Samples]:
 
 
 def _noted(samples: Samples, plan: Plan) -> Samples:
-    """The samples with what the plan left out and says (:attr:`Plan.notes`)."""
-    return replace(samples, notes=(*samples.notes, *plan.notes)) if plan.notes else samples
+    """The samples with what the plan left out and says (:attr:`Plan.notes`), and the units their signals
+    were read in (the convention ``can_units``, stated by the DBC or the mapping)."""
+    from mountcal.core.result import Convention
+
+    said = (Convention("can_units", plan.units[0], "stated", plan.units[1]),) if plan.units[0] else ()
+    return replace(samples, notes=(*samples.notes, *plan.notes), conventions=(*samples.conventions, *said))
 
 
 def check_magnitude(samples: Samples, plan: Plan) -> Samples:
