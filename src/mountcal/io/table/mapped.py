@@ -25,6 +25,7 @@ from mountcal.io.inputs import check_parquet_rows, check_regular_file, max_rows,
 from mountcal.io.samples import Channel, FloatArray, Samples
 from mountcal.io.table.layout import ACC, CHANNELS, G_N, GYRO, TIME_UNITS, Layout
 from mountcal.io.table.time_unit import TYPED, iso_seconds, typed_seconds
+from mountcal.io.timestamps import REORDERED, table_order
 from mountcal.io.whole import parquet_end, text_end, text_source
 
 PARQUET = (".parquet", ".pq")
@@ -36,7 +37,7 @@ _DROPPED = "rows with missing or non-numeric values"
 
 
 def header(path: Path) -> tuple[list[str], dict[str, str]]:
-    """The column names of a CSV or Parquet table, and how to read a CSV (``sep``, ``decimal``)."""
+    """The column names of a CSV or Parquet table, and how to read a CSV (:func:`dialect`)."""
     check_regular_file(path, "sample table")
     where = str(path)
     if path.suffix.lower() in PARQUET:
@@ -49,18 +50,76 @@ def header(path: Path) -> tuple[list[str], dict[str, str]]:
             raise InputError(
                 where, "a Parquet table", f"a file that does not parse ({err})", "Check the file."
             ) from err
+    with path.open("rb") as f:
+        check_text(f.read(256), where)  # UTF-16 first: its last line break is two bytes, read as a cut file
     text_end(path)  # a last line without its line break: cut short, refused unless allowed
-    with path.open("r", encoding="utf-8-sig", errors="replace", newline="") as f:
-        lines = [f.readline() for _ in range(2)]
-    first = lines[0].rstrip("\r\n")
+    return csv_header(path)
+
+
+def csv_header(path: Path) -> tuple[list[str], dict[str, str]]:
+    """:func:`dialect` of a CSV file's first lines: the comment lines above its header (a bounded number),
+    the header, a row. A look at its head only (whether the file is whole is its reader's to say)."""
+    lines: list[bytes] = []
+    with path.open("rb") as f:
+        while len(lines) <= _MAX_COMMENTS:
+            lines.append(f.readline())
+            if not lines[-1].lstrip(b"\xef\xbb\xbf \t").startswith(b"#"):
+                break
+        lines.append(f.readline())
+    return dialect(b"".join(lines), str(path))
+
+
+_MAX_COMMENTS = 1000  # comment lines looked past above a header
+_COMMENT = "#"
+
+
+def check_text(head: bytes, where: str) -> None:
+    """Refuse a CSV in UTF-16 or UTF-32 (a spreadsheet's "Unicode text"), told by its first bytes ``head``:
+    a byte-order mark, or zero bytes between the characters. Read as UTF-8 it would be noise.
+
+    Raises
+    ------
+    InputError
+        Naming the encoding found and how to save the file as UTF-8.
+    """
+    head = head[:256]
+    if head.startswith((b"\xff\xfe", b"\xfe\xff")) or head.count(0) > len(head) // 4:
+        raise InputError(
+            where,
+            "a CSV in UTF-8 (or ASCII)",
+            "UTF-16 or UTF-32 text (a byte-order mark or zero bytes between the characters)",
+            'Save it as UTF-8 (a spreadsheet\'s "CSV UTF-8"), e.g. iconv -f UTF-16 -t UTF-8 IN > OUT.csv.',
+        )
+
+
+def dialect(head: bytes, where: str) -> tuple[list[str], dict[str, str]]:
+    """The column names of a CSV from its first bytes ``head``, and how to read it (``read_as``, the
+    :func:`pandas.read_csv` options every reader of a table passes): its delimiter (``,``, ``;`` or tab, the
+    one the header line holds most), a decimal comma where a ``;``-separated file's first row writes one, and
+    ``comment`` where lines starting with ``#`` (a logger's preamble) stand above the header.
+
+    Raises
+    ------
+    InputError
+        UTF-16 or UTF-32 text (:func:`check_text`).
+    """
+    check_text(head, where)
+    lines = head.decode("utf-8", errors="replace").removeprefix("\ufeff").splitlines()
+    skipped = 0
+    while skipped < len(lines) and lines[skipped].lstrip().startswith(_COMMENT):
+        skipped += 1
+    first = lines[skipped] if skipped < len(lines) else ""
+    row = lines[skipped + 1] if skipped + 1 < len(lines) else ""
     sep = max((",", ";", "\t"), key=first.count)
     names = next(csv.reader([first], delimiter=sep)) if first else []
     read_as = {} if sep == "," else {"sep": sep}
-    fields = [f.strip() for f in lines[1].split(sep)]
+    fields = [f.strip() for f in row.split(sep)]
     if sep != "," and sum(bool(_COMMA_DECIMAL.fullmatch(f)) for f in fields) > sum(
         bool(_DOT_DECIMAL.fullmatch(f)) for f in fields
     ):
         read_as["decimal"] = ","
+    if skipped:
+        read_as["comment"] = _COMMENT
     return [n.strip() for n in names], read_as
 
 
@@ -133,14 +192,17 @@ def _samples(df: pd.DataFrame, layout: Layout, where: str) -> Samples:
             v = _numbers(df[cols[role].name]) * cols[role].scale + cols[role].offset
             good = np.isfinite(v) & np.isfinite(t)
             channels[key] = Channel(t[good], v[good])
-    order = np.argsort(t[ok], kind="stable")
+    order, reordered = table_order(t[ok], where)  # joined recordings refused; out of order: said
+    dropped = {_DROPPED: int((~ok).sum())} if not ok.all() else {}
+    if reordered:
+        dropped[REORDERED] = reordered
     return Samples(
         t[ok][order],
         acc[ok][order],
         None if gyro is None else gyro[ok][order],
         {k: _sorted(ch) for k, ch in channels.items()},
         source=where,
-        dropped={_DROPPED: int((~ok).sum())} if not ok.all() else {},
+        dropped=dropped,
         notes=layout.notes,
         gravity_free=layout.gravity_free,
     )
@@ -229,4 +291,4 @@ def _refuse(where: str, read_as: str, m: float, todo: str) -> Samples:
     )
 
 
-__all__ = ["check_magnitude", "header", "iter_mapped", "read_mapped"]
+__all__ = ["check_magnitude", "check_text", "csv_header", "dialect", "header", "iter_mapped", "read_mapped"]

@@ -25,6 +25,7 @@ from mountcal.core.option_names import option
 from mountcal.core.ranges import in_range
 from mountcal.io.inputs import check_parquet_rows, check_regular_file, csv_columns
 from mountcal.io.samples import Channel, FloatArray, Samples
+from mountcal.io.timestamps import REORDERED, table_order
 from mountcal.io.whole import parquet_end, text_end, text_source
 
 TABLE_CHANNELS = ("speed_mps", "heading_deg", "temperature_c", "lat_deg", "lon_deg", "alt_m")
@@ -41,7 +42,7 @@ def read_table(path: Path) -> Samples:
         csv_columns(path, str(path))
     source = path if parquet else text_source(path)  # a cut CSV: refused, or its whole lines (allowed)
     try:
-        df = pd.read_parquet(source) if parquet else pd.read_csv(source)
+        df = pd.read_parquet(source) if parquet else pd.read_csv(source, low_memory=False)
     except FileNotFoundError as err:
         raise InputError(str(path), "a readable sample table", "no such file", "Check the path.") from err
     except Exception as err:  # pandas raises many types for malformed files
@@ -80,13 +81,14 @@ def read_table(path: Path) -> Samples:
             "no row with numbers in all of them",
             "Check the table's columns and units.",
         )
-    order = np.argsort(values[ok, 0], kind="stable")
+    order, reordered = table_order(values[ok, 0], str(path))  # joined recordings refused; out of order: said
+    if reordered:
+        dropped[REORDERED] = reordered
     channels = {}
     for name in TABLE_CHANNELS:
         if name in df.columns:
             v = pd.to_numeric(df[name], errors="coerce").to_numpy(dtype=float)
-            t = df["t_s"].to_numpy(dtype=float)
-            channels[name] = _channel(name, t, v, dropped)
+            channels[name] = _channel(name, values[:, 0], v, dropped)  # t_s as the samples read it (a text row: NaN)
     return Samples(
         values[ok, 0][order],
         values[ok, 1:][order],

@@ -61,10 +61,9 @@ def first_times(path: Path, name: str, read_as: dict[str, str], whole_lines: boo
             usecols=lambda c: str(c).strip() == name,
             nrows=ROWS_LOOKED_AT,
             dtype=str,
-            comment="#",
             skipinitialspace=True,
             encoding="utf-8-sig",
-            **read_as,
+            **{"comment": "#", **read_as},
         )
     except (ValueError, pd.errors.ParserError, UnicodeDecodeError, OSError) as err:
         raise InputError(
@@ -87,16 +86,23 @@ def typed_seconds(values: pd.Series) -> np.ndarray | None:
     return np.asarray(out, dtype=np.float64)
 
 
-def first_seconds(path: Path, name: str) -> np.ndarray:
+def first_seconds(path: Path, name: str, read_as: dict[str, str] | None = None) -> np.ndarray:
     """The first rows of a time column as numbers: seconds where its type or text says so (a timestamp, a
-    duration, ISO-8601 text), else its numbers as they are (what the kind of a table is told by)."""
-    values = first_times(path, name, {}, whole_lines=False)
+    duration, ISO-8601 text), else its numbers as they are (what the kind of a table is told by); a CSV read
+    as ``read_as`` says (:func:`mountcal.io.table.mapped.dialect`)."""
+    values = first_times(path, name, read_as or {}, whole_lines=False)
+    if read_as and read_as.get("decimal") == "," and _is_text(values):
+        values = values.str.replace(",", ".", regex=False)
     typed = typed_seconds(values)
     if typed is not None:
         return typed
-    if (values.dtype == object or pd.api.types.is_string_dtype(values.dtype)) and _is_iso_text(values):
+    if _is_text(values) and _is_iso_text(values):
         return iso_seconds(values)
     return np.asarray(pd.to_numeric(values, errors="coerce"), dtype=np.float64)
+
+
+def _is_text(values: pd.Series) -> bool:
+    return bool(values.dtype == object or pd.api.types.is_string_dtype(values.dtype))
 
 
 def iso_seconds(values: pd.Series) -> np.ndarray:

@@ -1,0 +1,170 @@
+"""Tables as loggers, spreadsheets and phone apps write them, read the same way by every reader of a table
+(the kind of the input, a sample table whole or in chunks, a stop table, a protocol sheet): ``;`` with
+decimal commas, comment lines above the header, UTF-16 text, a units row under the header, and a time
+column that restarts (recordings joined) or is out of order. The tables are written by pandas."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from mountcal.cli import main
+from mountcal.simulate.stops import simulate_parking_log
+
+T0 = 1714557600.0
+TRUTH = (4.0, -3.0, 20.0)  # roll, pitch, yaw (deg)
+
+
+@pytest.fixture(scope="module")
+def session() -> tuple[pd.DataFrame, pd.DataFrame]:
+    """A parking session at 50 Hz on a 6° slope (Unix times), and its protocol sheet."""
+    log = simulate_parking_log(*TRUTH, slope_deg=6.0, seed=3, stop_s=20.0, drive_s=10.0, rate_hz=50.0)
+    columns = {"t_s": log.t_s + T0} | {f"a{c}": log.acc_s[:, i] for i, c in enumerate("xyz")}
+    columns |= {f"g{c}": log.gyro_s[:, i] for i, c in enumerate("xyz")}
+    frame = pd.DataFrame(columns | {"speed_mps": log.speed_mps, "heading_deg": log.heading_deg})
+    sheet = pd.DataFrame(
+        [(a + T0, b + T0, c) for a, b, c in log.protocol], columns=["t_start_s", "t_end_s", "beta_deg"]
+    )
+    return frame, sheet
+
+
+def _angles(out: Path) -> np.ndarray:
+    m = json.loads(out.read_text())["mounting"]
+    return np.array([m["roll_deg"], m["pitch_deg"], m["yaw_deg"]], dtype=float)
+
+
+def _calibrated(path: Path, tmp_path: Path, *args: str) -> np.ndarray:
+    out = tmp_path / f"{path.stem}.json"
+    assert main(["calibrate", str(path), "-o", str(out), *args]) == 0
+    return _angles(out)
+
+
+def test_a_semicolon_table_with_decimal_commas_and_its_protocol_sheet_calibrate(
+    session: tuple[pd.DataFrame, pd.DataFrame], tmp_path: Path
+) -> None:
+    """Only t_s, ax, ay, az (its kind told by its rows), ``;`` and decimal commas, as a German Excel writes
+    them; the protocol sheet too. Before: refused as a stop table without ax, ay, az (the header read as one
+    column 't_s;ax;ay;az'), and the sheet as having no t_start_s."""
+    frame, sheet = session
+    table, proto = tmp_path / "excel_de.csv", tmp_path / "protocol_de.csv"
+    frame[["t_s", "ax", "ay", "az"]].to_csv(table, index=False, sep=";", decimal=",", float_format="%.10f")
+    sheet.to_csv(proto, index=False, sep=";", decimal=",")
+    assert np.allclose(_calibrated(table, tmp_path, "--protocol", str(proto)), TRUTH, atol=1.0)
+
+
+def test_a_semicolon_stop_table_with_decimal_commas_calibrates_as_written(
+    session: tuple[pd.DataFrame, pd.DataFrame], tmp_path: Path
+) -> None:
+    """A stop table `mountcal stops` wrote, saved by a spreadsheet with ``;`` and decimal commas: the same
+    answer as the original. Before: refused, "no column ax, ay, az"."""
+    frame, sheet = session
+    log, proto = tmp_path / "log.csv", tmp_path / "protocol.csv"
+    frame.to_csv(log, index=False, float_format="%.17g")
+    sheet.to_csv(proto, index=False, float_format="%.17g")
+    stops = tmp_path / "stops.csv"
+    assert main(["stops", str(log), "--protocol", str(proto), "-o", str(stops)]) == 0
+    resaved = tmp_path / "stops_de.csv"
+    pd.read_csv(stops).to_csv(resaved, index=False, sep=";", decimal=",", float_format="%.17g")
+    assert np.allclose(_calibrated(resaved, tmp_path), _calibrated(stops, tmp_path), atol=1e-9)
+
+
+def test_comment_lines_above_the_header_are_read_past(
+    session: tuple[pd.DataFrame, pd.DataFrame], tmp_path: Path
+) -> None:
+    """A logger's preamble (``# …`` lines) above mountcal's own columns. Before: refused, its columns said
+    to be '# logger v1.2'."""
+    frame, sheet = session
+    table, proto = tmp_path / "preamble.csv", tmp_path / "protocol.csv"
+    table.write_text("# logger v1.2, serial 0042\n# rate 50 Hz\n" + frame.to_csv(index=False, float_format="%.17g"))
+    sheet.to_csv(proto, index=False, float_format="%.17g")
+    assert np.allclose(_calibrated(table, tmp_path, "--protocol", str(proto)), TRUTH, atol=1.0)
+
+
+@pytest.mark.parametrize("kind", ["samples", "stops"])
+def test_utf16_text_is_refused_as_such(
+    session: tuple[pd.DataFrame, pd.DataFrame], tmp_path: Path, capsys: pytest.CaptureFixture[str], kind: str
+) -> None:
+    """A spreadsheet's "Unicode text" (UTF-16 with a byte-order mark). Before: refused as a file cut short
+    (its last line break is two bytes) or as a UnicodeDecodeError, neither the reason."""
+    frame, _ = session
+    path = tmp_path / f"{kind}_utf16.csv"
+    table = frame if kind == "samples" else frame.iloc[::500][["ax", "ay", "az"]].assign(beta_deg=30.0)
+    table.to_csv(path, index=False, encoding="utf-16")
+    args = ["--input-kind", "stop-table"] if kind == "stops" else []
+    assert main(["calibrate", str(path), "-o", str(tmp_path / "r.json"), *args]) == 2
+    err = capsys.readouterr().err
+    assert "UTF-16" in err and "UTF-8" in err and str(path) in err, err
+    assert not (tmp_path / "r.json").exists()
+
+
+def test_a_units_row_under_the_header_is_a_row_dropped_and_counted(
+    session: tuple[pd.DataFrame, pd.DataFrame], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A units row ('s,m/s2,…') under mountcal's own columns. Before: a traceback (ValueError: could not
+    convert string to float: 's')."""
+    frame, sheet = session
+    head, rows = frame.to_csv(index=False, float_format="%.17g").split("\n", 1)
+    table, proto = tmp_path / "units_row.csv", tmp_path / "protocol.csv"
+    table.write_text(f"{head}\ns,m/s2,m/s2,m/s2,rad/s,rad/s,rad/s,m/s,deg\n{rows}")
+    sheet.to_csv(proto, index=False, float_format="%.17g")
+    out = tmp_path / "r.json"
+    assert main(["calibrate", str(table), "--protocol", str(proto), "-o", str(out)]) == 0
+    assert np.allclose(_angles(out), TRUTH, atol=1.0)
+    assert "dropped rows with missing or non-numeric values: 1" in capsys.readouterr().err
+
+
+def _joined(frame: pd.DataFrame) -> pd.DataFrame:
+    """Two recordings, each counting from its own start, one after the other in one table."""
+    joined = frame.copy()
+    half = len(joined) // 2
+    t = joined["t_s"].to_numpy() - T0
+    t[half:] -= t[half]
+    return joined.assign(t_s=t)
+
+
+@pytest.mark.parametrize("command", ["calibrate", "stops"])
+@pytest.mark.parametrize("mapped", [False, True])
+def test_recordings_joined_in_one_table_are_refused_naming_the_row(
+    session: tuple[pd.DataFrame, pd.DataFrame],
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    command: str,
+    mapped: bool,
+) -> None:
+    """Sorting by time interleaved the two recordings. Before: `stops` wrote 6 stops of the mixture (exit 0)
+    and `calibrate` answered from them (not confident, for a structure the residual could not name)."""
+    frame, _ = session
+    joined = _joined(frame)
+    path = tmp_path / "joined.csv"
+    args: list[str] = []
+    if mapped:
+        joined = joined.rename(columns={"t_s": "time"})
+        args = ["--columns", "time=time:s,ax=ax,ay=ay,az=az,gx=gx,gy=gy,gz=gz,speed=speed_mps"]
+    joined.to_csv(path, index=False, float_format="%.17g")
+    out = tmp_path / ("r.json" if command == "calibrate" else "stops.csv")
+    assert main([command, str(path), "-o", str(out), *args]) == 2
+    err = capsys.readouterr().err
+    row = len(joined) // 2 + 1
+    assert f"data row {row}" in err and "joined" in err and str(path) in err, err
+    assert not out.exists()
+
+
+def test_rows_out_of_order_are_sorted_and_said(
+    session: tuple[pd.DataFrame, pd.DataFrame], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Rows shuffled (a spreadsheet sorted by another column): put in time order, the count said — they were
+    sorted before too, silently."""
+    frame, sheet = session
+    table, proto = tmp_path / "shuffled.csv", tmp_path / "protocol.csv"
+    frame.sample(frac=1.0, random_state=0).to_csv(table, index=False, float_format="%.17g")
+    sheet.to_csv(proto, index=False, float_format="%.17g")
+    out = tmp_path / "r.json"
+    assert main(["calibrate", str(table), "--protocol", str(proto), "-o", str(out)]) == 0
+    assert np.allclose(_angles(out), TRUTH, atol=1.0)
+    err = capsys.readouterr().err  # the samples' own count (the channels' were said before too)
+    assert re.search(r"read \d+ samples from 1 file\(s\); dropped samples out of time order \(put in order\): \d+", err)
