@@ -196,7 +196,7 @@ def _table_kind(path: Path, form: str) -> InputKind:
 
         export = detect(header(path)[0] if form == "CSV" else sorted(columns), path)
         if export is not None:  # a phone's or imucal's export holds samples, under its own names
-            return InputKind(False, f"a sample table ({form})", f"by its columns: a {export.name} export")
+            return InputKind(False, f"a sample table ({form})", f"by its columns: {export.name}")
         return InputKind(True, f"a stop table ({form})", "by its columns: no t_s, so not samples in time")
     from mountcal.io.table.time_unit import ROWS_LOOKED_AT, median_step  # the rows _times reads (a look)
 

@@ -8,8 +8,8 @@ A **column map** names, for each quantity (a *role*), the table's column and opt
 ``time``, ``ax ay az`` (required), ``gx gy gz`` (all three or none), ``speed``, ``heading``,
 ``temperature``, ``latitude``, ``longitude``, ``altitude``. Units (as in the CAN mapping):
 
-- time: ``s``, ``ms``, ``us``, ``ns``, ``iso`` (date-time text; without a zone, UTC), or ``s/N`` — a
-  sample index at N Hz (imucal's ``n_samples``); without a unit, inferred from the column's spacing
+- time: ``s``, ``ms``, ``us``, ``ns``, ``iso`` (date-time text; without a zone, UTC), ``clock`` (a time of
+  day), or ``s/N`` — a sample index at N Hz (imucal's ``n_samples``); without a unit, inferred from the column's spacing
   (:mod:`mountcal.io.table.time_unit`, which also checks a stated one and reads typed Parquet times);
 - acceleration: ``m/s2`` (default), ``g`` (9.80665 m/s²), ``mg``; gyro: ``rad/s`` (default), ``deg/s``;
   speed ``m/s``, ``km/h``, ``mph``, ``kn``; heading ``deg``, ``rad``; and any unit divided by a count,
@@ -105,7 +105,7 @@ def unit_scale(role: str, unit: str, where: str) -> tuple[float, float]:
     if role == "time":
         if text.lower() in TIME_UNITS and divisor > 0:
             return TIME_UNITS[text.lower()] / divisor, 0.0
-        raise _unit_error(role, unit, where, "s, ms, us, ns, iso, or s/N for a sample index at N Hz")
+        raise _unit_error(role, unit, where, "s, ms, us, ns, iso, clock, or s/N for a sample index at N Hz")
     found = UNITS[UNIT_KIND[role]].get(normalise_unit(text))
     if found is None or divisor <= 0:
         raise _unit_error(role, unit, where, UNIT_HINT[UNIT_KIND[role]] + ", optionally /N for counts of 1/N unit")
@@ -130,8 +130,8 @@ def _column(role: str, spec: str, names: list[str], where: str) -> Column:
             f"columns {', '.join(map(repr, names))}",
             f"Name an existing column in {option('columns')}.",
         )
-    if role == "time" and unit.strip().lower() == "iso":
-        return Column(name, "iso")
+    if role == "time" and unit.strip().lower() in ("iso", "clock"):
+        return Column(name, unit.strip().lower())
     scale, offset = unit_scale(role, unit, where) if unit else (1.0, 0.0)
     return Column(name, unit, scale, offset)
 
@@ -367,8 +367,8 @@ def _export_layout(export: Export, names: list[str], path: Path, acc_unit: str |
             "(102.4 Hz for imucal's example session; acc in m/s², gyro in deg/s as imucal's examples).",
         )
     units = ", ".join(sorted({f"{c.unit}" for r, c in cols.items() if r != "time" and c.unit}))
-    time = cols["time"]
-    note = f"read as {export.name}: columns {', '.join(c.name for c in cols.values())}; time in {time.unit}, {units}"
+    # the time's unit is said once, by the convention its column's type, text or spacing settles (io.table.time_unit)
+    note = f"read as {export.name}: columns {', '.join(c.name for c in cols.values())}; units {units}"
     gravity_free = export.gravity_free.replace("{recording}", _recording_of(path))
     return Layout(_with_acc_unit(cols, acc_unit, where, export.name), export.name, (note,), gravity_free)
 

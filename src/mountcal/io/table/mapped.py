@@ -24,7 +24,7 @@ from mountcal.core.option_names import option
 from mountcal.io.inputs import check_parquet_rows, check_regular_file, max_rows, too_many_rows
 from mountcal.io.samples import Channel, FloatArray, Samples
 from mountcal.io.table.layout import ACC, CHANNELS, G_N, GYRO, TIME_UNITS, Layout
-from mountcal.io.table.time_unit import TYPED, iso_seconds, typed_seconds
+from mountcal.io.table.time_unit import TYPED, clock_seconds, iso_seconds, typed_seconds
 from mountcal.io.timestamps import REORDERED, table_order
 from mountcal.io.whole import parquet_end, text_end, text_source
 
@@ -139,7 +139,7 @@ def _frames(path: Path, layout: Layout, read_as: dict[str, str], rows: int | Non
         reader = pd.read_csv(
             text_source(path),  # a cut file read with --allow-truncated: its whole lines
             usecols=lambda c: str(c).strip() in used,
-            dtype={layout.time.name: str} if layout.time.unit == "iso" else None,
+            dtype={layout.time.name: str} if layout.time.unit in ("iso", "clock") else None,
             chunksize=rows,
             skipinitialspace=True,
             encoding="utf-8-sig",
@@ -169,6 +169,8 @@ def _time(values: pd.Series, layout: Layout) -> FloatArray:
             return typed
     if column.unit == "iso":
         return iso_seconds(values)
+    if column.unit == "clock":
+        return clock_seconds(values)
     if pd.api.types.is_integer_dtype(values.dtype) and column.scale in TIME_UNITS.values() and column.scale < 1:
         per_second = round(1.0 / column.scale)  # whole ns/us/ms since an epoch: exact seconds, then the fraction
         ints: NDArray[np.int64] = values.to_numpy(dtype=np.int64)
