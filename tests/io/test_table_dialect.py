@@ -168,3 +168,54 @@ def test_rows_out_of_order_are_sorted_and_said(
     assert np.allclose(_angles(out), TRUTH, atol=1.0)
     err = capsys.readouterr().err  # the samples' own count (the channels' were said before too)
     assert re.search(r"read \d+ samples from 1 file\(s\); dropped samples out of time order \(put in order\): \d+", err)
+
+
+def _suggested(err: str) -> str:
+    """The column map a refusal names (quoted for a shell: the names hold spaces)."""
+    found = re.search(r"--columns '([^']+)'", err)
+    assert found is not None, err
+    return found.group(1)
+
+
+def test_units_in_column_names_are_named_back_as_the_column_map_that_reads_them(
+    session: tuple[pd.DataFrame, pd.DataFrame], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A logger's headers with their units ('time (s)', 'ax [g]', 'gyro_x (dps)', 'speed (km/h)'): refused —
+    the roles are the names' guess — naming the map the names say, which reads the table right. Before:
+    refused with a generic example map ('time=ts:ms,ax=acc_x:g,…'), none of the table's columns in it."""
+    frame, sheet = session
+    table = pd.DataFrame(
+        {"time (s)": frame["t_s"]}
+        | {f"a{c} [g]": frame[f"a{c}"] / 9.80665 for c in "xyz"}
+        | {f"gyro_{c} (dps)": np.degrees(frame[f"g{c}"]) for c in "xyz"}
+        | {"speed (km/h)": frame["speed_mps"] * 3.6}
+    )
+    path, proto = tmp_path / "named_units.csv", tmp_path / "protocol.csv"
+    table.to_csv(path, index=False, float_format="%.17g")
+    sheet.to_csv(proto, index=False, float_format="%.17g")
+    out = tmp_path / "r.json"
+    assert main(["calibrate", str(path), "--protocol", str(proto), "-o", str(out)]) == 2
+    columns = _suggested(capsys.readouterr().err)
+    assert columns == (
+        "time=time (s):s,ax=ax [g]:g,ay=ay [g]:g,az=az [g]:g,"
+        "gx=gyro_x (dps):dps,gy=gyro_y (dps):dps,gz=gyro_z (dps):dps,speed=speed (km/h):km/h"
+    )
+    assert main(["calibrate", str(path), "--protocol", str(proto), "--columns", columns, "-o", str(out)]) == 0
+    assert np.allclose(_angles(out), TRUTH, atol=1.0)
+
+
+def test_a_unit_in_a_column_name_the_values_contradict_is_refused_when_given(
+    session: tuple[pd.DataFrame, pd.DataFrame], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Headers saying g over values in m/s²: the map the names say is refused where it is given (the
+    acceleration 9.8 g), never answered."""
+    frame, _ = session
+    table = frame[["t_s", "ax", "ay", "az"]].rename(columns={f"a{c}": f"a{c} [g]" for c in "xyz"})
+    path = tmp_path / "says_g.csv"
+    table.to_csv(path, index=False, float_format="%.17g")
+    out = tmp_path / "r.json"
+    assert main(["calibrate", str(path), "-o", str(out)]) == 2
+    columns = _suggested(capsys.readouterr().err)
+    assert main(["calibrate", str(path), "--columns", columns, "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "near 1 g" in err and "m/s2" in err and not out.exists(), err

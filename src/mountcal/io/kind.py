@@ -191,12 +191,16 @@ def _table_kind(path: Path, form: str) -> InputKind:
     if sample:
         return InputKind(False, f"a sample table ({form})", f"by its columns {', '.join(sample)}")
     if "t_s" not in columns:
-        from mountcal.io.table.layout import detect
+        from mountcal.io.table.layout import detect, suggested_map
         from mountcal.io.table.mapped import header
 
         export = detect(header(path)[0] if form == "CSV" else sorted(columns), path)
         if export is not None:  # a phone's or imucal's export holds samples, under its own names
             return InputKind(False, f"a sample table ({form})", f"by its columns: {export.name}")
+        if not {"ax", "ay", "az"} <= columns and suggested_map(sorted(columns)) is not None:
+            # no stop table (it names ax, ay, az so), but a time and an accelerometer named as a logger names
+            # them ('time (s)', 'ax [g]'): samples, whose reader names the column map they say
+            return InputKind(False, f"a sample table ({form})", "by its columns: a time and an acceleration")
         return InputKind(True, f"a stop table ({form})", "by its columns: no t_s, so not samples in time")
     from mountcal.io.table.time_unit import ROWS_LOOKED_AT, median_step  # the rows _times reads (a look)
 

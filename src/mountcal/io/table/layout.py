@@ -28,6 +28,7 @@ gravity).
 from __future__ import annotations
 
 import re
+import shlex
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -433,16 +434,79 @@ def _linear_named(cols: dict[str, Column]) -> str:
 
 
 def refuse_unknown(names: list[str], path: Path) -> InputError:
-    """The refusal of a table whose columns are neither mountcal's, mapped, nor a known export."""
+    """The refusal of a table whose columns are neither mountcal's, mapped, nor a known export; where the
+    column names say the roles and units (``ax [g]``, ``acc_x (m/s^2)``, ``gyro_x (dps)``, ``time (s)``), it
+    names the column map that reads them (:func:`suggested_map`), to be checked and given."""
+    from mountcal.core.option_names import flags_on
+
     shown = ", ".join(map(repr, names[:12])) + (" …" if len(names) > 12 else "")
+    suggested = suggested_map(names)
+    if suggested is not None:
+        given = option("columns", shlex.quote(suggested) if flags_on() else suggested)
+        todo = f"The column names read as: {given} (roles and units taken from the names: check them, then give it)."
+    else:
+        todo = f"Name the columns, e.g. {option('columns', 'time=ts:ms,ax=acc_x:g,ay=acc_y:g,az=acc_z:g')}"
     return InputError(
         str(path),
         "a sample table: columns t_s, ax, ay, az (s, m/s²), a known export (imucal, phyphox, Sensor Logger, "
         "Physics Toolbox), or a column map",
         f"columns {shown}",
-        f"Name the columns, e.g. {option('columns', 'time=ts:ms,ax=acc_x:g,ay=acc_y:g,az=acc_z:g')}; "
-        f"a CAN log in CSV needs a DBC ({option('dbc')}).",
+        f"{todo}; a CAN log in CSV needs a DBC ({option('dbc')}).",
     )
+
+
+# a column name's unit: in brackets or parentheses after it, or a suffix (accX_mg, time_ms)
+_NAMED_UNIT = re.compile(
+    r"(?P<base>.*?)\s*(?:[\[(](?P<bracketed>[^\])]+)[\])]|_(?P<suffix>mg|g|mps2|mps|kmh|dps|rads|deg|rad|ms|us|ns|s|c|m))\s*",
+    re.I,
+)
+_ROLE_OF = (  # a column name (lower case, without spaces, '_' and '-') → a role
+    (re.compile(r"(?:t|time|timestamp|stamp|secondselapsed|elapsed)"), "time"),
+    (re.compile(r"(?:a|acc|accel|accelerometer|acceleration|gf)(?P<axis>[xyz])"), "a"),
+    (re.compile(r"(?:g|w|gyr|gyro|gyroscope|rotationrate|angularvelocity)(?P<axis>[xyz])"), "g"),
+    (re.compile(r"(?:speed|velocity)"), "speed"),
+    (re.compile(r"(?:heading|bearing|course)"), "heading"),
+    (re.compile(r"(?:temperature|temp)"), "temperature"),
+    (re.compile(r"(?:lat|latitude)"), "latitude"),
+    (re.compile(r"(?:lon|lng|longitude)"), "longitude"),
+    (re.compile(r"(?:alt|altitude)"), "altitude"),
+)
+
+
+def suggested_map(names: list[str]) -> str | None:
+    """The column map the names say (``time (s)`` → ``time=time (s):s``, ``ax [g]`` → ``ax=ax [g]:g``, a unit
+    only where it is one mountcal reads for the role); None where they do not name time, ax, ay and az each
+    once with a unit mountcal reads (two IMUs, ``ax1`` and ``ax2``, are for the user to choose), or a name
+    holds a comma. A channel (speed, heading, …) named once with a readable unit (or none) is added."""
+    found: dict[str, list[str]] = {}
+    for name in names:
+        match = _NAMED_UNIT.fullmatch(name)
+        base, unit = (name, "") if match is None else (match["base"], match["bracketed"] or match["suffix"] or "")
+        key = re.sub(r"[\s_\-]", "", base).lower()
+        for pattern, role in _ROLE_OF:
+            hit = pattern.fullmatch(key)
+            if hit is not None:
+                role = role[0] + hit["axis"] if role in ("a", "g") else role
+                known = _known(role, unit)
+                spec = f"{name}:{unit.strip()}" if known else name
+                found.setdefault(role, []).append(spec if known or not unit.strip() else "")  # "": a unit not read
+                break
+    required = ["time", *ACC] + ([*GYRO] if any(r in found for r in GYRO) else [])
+    if any(found.get(r, [""]) in ([], [""]) or len(found[r]) != 1 for r in required):
+        return None
+    extra = [r for r in CHANNELS if len(found.get(r, [])) == 1 and found[r][0]]  # a channel named once, readable
+    if any("," in found[r][0] for r in (*required, *extra)):
+        return None
+    return ",".join(f"{r}={found[r][0]}" for r in (*required, *extra))
+
+
+def _known(role: str, unit: str) -> bool:
+    """Whether ``unit`` is one mountcal reads for ``role``."""
+    if not unit.strip():
+        return False
+    if role == "time":
+        return unit.strip().lower() in TIME_UNITS
+    return normalise_unit(unit) in UNITS[UNIT_KIND[role]]
 
 
 __all__ = [
@@ -460,5 +524,6 @@ __all__ = [
     "parse_columns",
     "refuse_unknown",
     "resolve",
+    "suggested_map",
     "unit_scale",
 ]
