@@ -219,3 +219,26 @@ def test_a_unit_in_a_column_name_the_values_contradict_is_refused_when_given(
     assert main(["calibrate", str(path), "--columns", columns, "-o", str(out)]) == 2
     err = capsys.readouterr().err
     assert "near 1 g" in err and "m/s2" in err and not out.exists(), err
+
+
+def test_a_rotated_csv_with_a_comment_line_above_its_header_is_still_known_rotated(
+    session: tuple[pd.DataFrame, pd.DataFrame], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`mountcal rotate -o x.csv`'s output with a line '# …' added above its header, rotated again: refused as
+    already in the vehicle frame. Once comment lines were read past, the column frame was read from the
+    header's line on (its value 'frame' among 'vehicle') and refused for that."""
+    frame, sheet = session
+    log, proto, result = tmp_path / "log.csv", tmp_path / "protocol.csv", tmp_path / "r.json"
+    frame.to_csv(log, index=False, float_format="%.17g")
+    sheet.to_csv(proto, index=False, float_format="%.17g")
+    assert main(["calibrate", str(log), "--protocol", str(proto), "-o", str(result)]) == 0
+    rotated = tmp_path / "vehicle.csv"
+    assert main(["rotate", str(log), "--calibration", str(result), "-o", str(rotated)]) == 0
+    noted = tmp_path / "vehicle_noted.csv"
+    noted.write_text("# rotated by mountcal, checked by hand\n" + rotated.read_text())
+    capsys.readouterr()
+    again = tmp_path / "again.csv"
+    assert main(["rotate", str(noted), "--calibration", str(result), "-o", str(again)]) == 2
+    err = capsys.readouterr().err
+    assert "already put in the vehicle frame" in err and "'frame'" not in err, err
+    assert not again.exists()

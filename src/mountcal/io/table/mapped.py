@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 
 from mountcal.core.errors import InputError
 from mountcal.core.option_names import option
-from mountcal.io.inputs import check_parquet_rows, check_regular_file, max_rows, too_many_rows
+from mountcal.io.inputs import check_parquet_rows, check_regular_file, comment_lines, max_rows, too_many_rows
 from mountcal.io.samples import Channel, FloatArray, Samples
 from mountcal.io.table.layout import ACC, CHANNELS, G_N, GYRO, TIME_UNITS, Layout
 from mountcal.io.table.time_unit import TYPED, clock_seconds, iso_seconds, typed_seconds
@@ -59,17 +59,11 @@ def header(path: Path) -> tuple[list[str], dict[str, str]]:
 def csv_header(path: Path) -> tuple[list[str], dict[str, str]]:
     """:func:`dialect` of a CSV file's first lines: the comment lines above its header (a bounded number),
     the header, a row. A look at its head only (whether the file is whole is its reader's to say)."""
-    lines: list[bytes] = []
     with path.open("rb") as f:
-        while len(lines) <= _MAX_COMMENTS:
-            lines.append(f.readline())
-            if not lines[-1].lstrip(b"\xef\xbb\xbf \t").startswith(b"#"):
-                break
-        lines.append(f.readline())
+        lines = [f.readline() for _ in range(comment_lines(path) + 2)]
     return dialect(b"".join(lines), str(path))
 
 
-_MAX_COMMENTS = 1000  # comment lines looked past above a header
 _COMMENT = "#"
 
 
@@ -148,8 +142,9 @@ def _frames(path: Path, layout: Layout, read_as: dict[str, str], rows: int | Non
         if rows is None:
             yield reader.rename(columns=str.strip)
         else:
-            for chunk in reader:
-                yield chunk.rename(columns=str.strip)
+            with reader:  # closed when the reading stops early too (a refusal after the first chunk)
+                for chunk in reader:
+                    yield chunk.rename(columns=str.strip)
     except (ValueError, pd.errors.ParserError, UnicodeDecodeError, OSError) as err:
         raise InputError(
             where, "a CSV or Parquet sample table", f"a file that does not parse ({err})", "Check the file."
