@@ -242,3 +242,25 @@ def test_a_rotated_csv_with_a_comment_line_above_its_header_is_still_known_rotat
     err = capsys.readouterr().err
     assert "already put in the vehicle frame" in err and "'frame'" not in err, err
     assert not again.exists()
+
+
+def test_a_stop_tables_columns_not_read_are_named(
+    session: tuple[pd.DataFrame, pd.DataFrame], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A stop table from `mountcal stops` whose beta_deg a spreadsheet user renamed 'beta': yaw is not
+    determined (no β read) and the note names the column left unread. Before: 'heading_reference: none',
+    the column 'beta' never mentioned."""
+    frame, sheet = session
+    log, proto, stops = tmp_path / "log.csv", tmp_path / "protocol.csv", tmp_path / "stops.csv"
+    frame.to_csv(log, index=False, float_format="%.17g")
+    sheet.to_csv(proto, index=False, float_format="%.17g")
+    assert main(["stops", str(log), "--protocol", str(proto), "-o", str(stops)]) == 0
+    renamed = tmp_path / "renamed.csv"
+    pd.read_csv(stops).rename(columns={"beta_deg": "beta"}).to_csv(renamed, index=False, float_format="%.17g")
+    capsys.readouterr()
+    out = tmp_path / "r.json"
+    assert main(["calibrate", str(renamed), "-o", str(out)]) == 0
+    result = json.loads(out.read_text())
+    assert result["mounting"]["yaw_deg"] is None
+    assert any("columns not read: 'beta'" in n for n in result["notes"]), result["notes"]
+    assert "columns not read: 'beta'" in capsys.readouterr().err

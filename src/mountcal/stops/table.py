@@ -382,7 +382,18 @@ def stop_table_from_frame(
         heading_deg=optional(HEADING),
         source=source,
         conventions=tuple(conventions),
+        notes=_unread(df, source),
     )
+
+
+def _unread(df: pd.DataFrame, source: str) -> tuple[str, ...]:
+    """The note naming the columns of a stop table that no column of :data:`COLUMNS` is (a heading column
+    renamed in a spreadsheet, 'beta', loses yaw: said, not silent); none for pandas' unnamed index."""
+    unread = [str(c) for c in df.columns if c not in COLUMNS and not str(c).startswith("Unnamed:")]
+    if not unread:
+        return ()
+    shown = ", ".join(map(repr, unread[:8])) + (" …" if len(unread) > 8 else "")
+    return (f"{source}: columns not read: {shown} (a stop table's are {', '.join(COLUMNS)}; β only from {BETA})",)
 
 
 def _applied_axes(df: pd.DataFrame, source: str) -> AxisMap | None:
