@@ -264,3 +264,45 @@ def test_a_stop_tables_columns_not_read_are_named(
     assert result["mounting"]["yaw_deg"] is None
     assert any("columns not read: 'beta'" in n for n in result["notes"]), result["notes"]
     assert "columns not read: 'beta'" in capsys.readouterr().err
+
+
+def test_rotate_keeps_each_row_where_it_stood_whatever_reader_reads_the_table(
+    session: tuple[pd.DataFrame, pd.DataFrame], tmp_path: Path
+) -> None:
+    """Recordings joined in one table, rotated: row for row in the file's order, from the comma file (the
+    chunked native reader) and from the same table saved with ';' and decimal commas (the chunked reader of
+    a dialect or column map) alike. Before: the second sorted each chunk by time, interleaving the two
+    recordings in the file it wrote (exit 0)."""
+    frame, sheet = session
+    log, proto, result = tmp_path / "log.csv", tmp_path / "protocol.csv", tmp_path / "r.json"
+    frame.to_csv(log, index=False, float_format="%.17g")
+    sheet.to_csv(proto, index=False, float_format="%.17g")
+    assert main(["calibrate", str(log), "--protocol", str(proto), "-o", str(result)]) == 0
+    joined = _joined(frame)
+    comma, semicolon = tmp_path / "joined.csv", tmp_path / "joined_de.csv"
+    joined.to_csv(comma, index=False, float_format="%.17g")
+    joined.to_csv(semicolon, index=False, sep=";", decimal=",", float_format="%.17g")
+    written = []
+    for path in (comma, semicolon):
+        out = tmp_path / f"{path.stem}_vehicle.csv"
+        assert main(["rotate", str(path), "--calibration", str(result), "-o", str(out)]) == 0
+        written.append(pd.read_csv(out))
+    np.testing.assert_allclose(written[0]["t_s"], joined["t_s"], atol=1e-9)
+    np.testing.assert_allclose(written[1][["t_s", "ax", "ay", "az"]], written[0][["t_s", "ax", "ay", "az"]], atol=1e-9)
+
+
+def test_times_in_32_bit_floats_coarser_than_the_samples_are_refused(
+    session: tuple[pd.DataFrame, pd.DataFrame], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Unix seconds stored as float32 in a Parquet file (128 s resolution): refused naming the type. Before:
+    "no parked period found". Seconds from the start as float32 (resolution 0.03 ms) read as before."""
+    frame, _ = session
+    coarse, fine = tmp_path / "coarse.parquet", tmp_path / "fine.parquet"
+    frame.assign(t_s=frame["t_s"].astype(np.float32)).to_parquet(coarse, index=False)
+    frame.assign(t_s=(frame["t_s"] - T0).astype(np.float32)).to_parquet(fine, index=False)
+    out = tmp_path / "r.json"
+    assert main(["calibrate", str(coarse), "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "32-bit floats" in err and "resolution is 128" in err and "no parked period" not in err, err
+    assert not out.exists()
+    assert np.allclose(_calibrated(fine, tmp_path)[:2], TRUTH[:2], atol=1.0)

@@ -173,7 +173,10 @@ def _time(values: pd.Series, layout: Layout) -> FloatArray:
     return _numbers(values) * column.scale + column.offset
 
 
-def _samples(df: pd.DataFrame, layout: Layout, where: str) -> Samples:
+def _samples(df: pd.DataFrame, layout: Layout, where: str, whole: bool = True) -> Samples:
+    """The samples of ``df``: of a ``whole`` table in time order (recordings joined refused, rows put in order
+    counted); of a chunk in the file's order, as the chunked native reader keeps it (``rotate`` writes each
+    row where it stood; a chunk cannot see the rows it would be sorted among)."""
     cols = layout.columns
     t = _time(df[cols["time"].name], layout)
     acc = np.column_stack([_numbers(df[cols[r].name]) * cols[r].scale + cols[r].offset for r in ACC])
@@ -189,7 +192,7 @@ def _samples(df: pd.DataFrame, layout: Layout, where: str) -> Samples:
             v = _numbers(df[cols[role].name]) * cols[role].scale + cols[role].offset
             good = np.isfinite(v) & np.isfinite(t)
             channels[key] = Channel(t[good], v[good])
-    order, reordered = table_order(t[ok], where)  # joined recordings refused; out of order: said
+    order, reordered = table_order(t[ok], where) if whole else (np.arange(int(ok.sum())), 0)
     dropped = {_DROPPED: int((~ok).sum())} if not ok.all() else {}
     if reordered:
         dropped[REORDERED] = reordered
@@ -233,7 +236,7 @@ def iter_mapped(path: Path, layout: Layout, read_as: dict[str, str], max_samples
     """The table's samples in batches of at most ``max_samples`` rows (each sorted by time)."""
     where = str(path)
     for df in _frames(path, layout, read_as, max_samples):
-        yield _samples(df, layout, where)
+        yield _samples(df, layout, where, whole=False)
 
 
 def check_magnitude(samples: Samples, layout: Layout, where: str) -> Samples:

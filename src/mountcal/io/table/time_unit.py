@@ -154,6 +154,34 @@ def clock_seconds(values: pd.Series) -> np.ndarray:
     return np.asarray(out, dtype=np.float64)
 
 
+def _check_resolution(where: str, name: str, values: pd.Series, numbers: np.ndarray, step: float) -> None:
+    """Refuse times stored as 32-bit floats too coarse for their samples: 24 bits hold Unix seconds to 128 s,
+    so every sample of two minutes shares a time, and the spacing is the format's, not the logger's.
+
+    Raises
+    ------
+    InputError
+        Naming the column, its resolution where its values lie, and the types that hold them.
+    """
+    finite = numbers[np.isfinite(numbers)]
+    if values.dtype != np.float32 or finite.size < 2:
+        return
+    resolution = float(np.spacing(np.float32(np.abs(finite).max())))
+    if np.isfinite(step) and step > 2.0 * resolution:
+        return
+    raise InputError(
+        where,
+        f"times in the column {name} finer than the samples' spacing",
+        f"32-bit floats: at {np.abs(finite).max():.10g} their resolution is {resolution:g} (its unit), and "
+        + (
+            f"the first rows' median step is {step:g}: the format's, not the logger's"
+            if np.isfinite(step)
+            else "the first rows share one time"
+        ),
+        "Write the times as 64-bit floats, integer nanoseconds (int64) or a timestamp type.",
+    )
+
+
 EXCEL_DAYS = (20_000.0, 80_000.0)  # a spreadsheet's serial days of 1954–2119 (day 25 569 is 1970-01-01)
 
 
@@ -247,6 +275,7 @@ def settle_time(layout: Layout, path: Path, read_as: dict[str, str]) -> tuple[La
             f"numbers with their unit ({option('columns', f'time={time.name}:s')}; s, ms, us, ns).",
         )
     step = median_step(numbers)
+    _check_resolution(where, time.name, values, numbers, step)
     given = layout.source == "the column map" and bool(time.unit.strip())  # the user's word, not a name's
     if not given and _excel_days(numbers, step):
         raise InputError(
