@@ -306,3 +306,22 @@ def test_times_in_32_bit_floats_coarser_than_the_samples_are_refused(
     assert "32-bit floats" in err and "resolution is 128" in err and "no parked period" not in err, err
     assert not out.exists()
     assert np.allclose(_calibrated(fine, tmp_path)[:2], TRUTH[:2], atol=1.0)
+
+
+def test_raw_counts_under_mountcals_own_names_are_refused_naming_their_unit(
+    session: tuple[pd.DataFrame, pd.DataFrame], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A 16-bit accelerometer's counts (2048 per g) under ax, ay, az: every row outside the physical range.
+    Before: refused, "no row with numbers in all of them" (they are numbers). The map it names reads them."""
+    frame, sheet = session
+    counts = frame.assign(**{f"a{c}": np.round(frame[f"a{c}"] / 9.80665 * 2048) for c in "xyz"})
+    path, proto = tmp_path / "counts.csv", tmp_path / "protocol.csv"
+    counts.to_csv(path, index=False, float_format="%.17g")
+    sheet.to_csv(proto, index=False, float_format="%.17g")
+    out = tmp_path / "r.json"
+    assert main(["calibrate", str(path), "--protocol", str(proto), "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "no row with numbers" not in err and "g/2048" in err and not out.exists(), err
+    columns = err.split("--columns ")[1].split()[0].rstrip(".")
+    assert main(["calibrate", str(path), "--protocol", str(proto), "--columns", columns, "-o", str(out)]) == 0
+    assert np.allclose(_angles(out), TRUTH, atol=1.0)

@@ -256,21 +256,26 @@ def check_magnitude(samples: Samples, layout: Layout, where: str) -> Samples:
     if lo * G_N <= m <= hi * G_N:
         return samples
     read_as = layout.columns["ax"].unit or "m/s2"
-    per_g = m / G_N if read_as.split("/")[0] == "g" else m  # the value 1 g takes in the column, roughly
-    if 0.8 <= per_g <= 1.25:
-        fits = "g"
-    elif 800 <= per_g <= 1250:
-        fits = "mg"
-    elif per_g > 16:
-        fits = f"g/{2 ** round(np.log2(per_g))}"  # raw counts: N per g, N a power of two for most sensors
-    else:
-        fits = ""
+    fits = fitting_unit(m, read_as)
     todo = (
         f"If the columns are in {fits}, say so: {option('columns', _column_map(layout, fits))}."
         if fits
         else f"Give the columns' unit in {option('columns')} (g, mg, m/s2, or g/N for counts of 1/N g)."
     )
     return _refuse(where, read_as, m, todo)
+
+
+def fitting_unit(m: float, read_as: str = "m/s2") -> str:
+    """The acceleration unit a median magnitude ``m`` (m/s², as read in ``read_as``) fits: ``g``, ``mg``, or
+    raw counts ``g/N`` (N per g, a power of two for most sensors); "" where none does."""
+    per_g = m / G_N if read_as.split("/")[0] == "g" else m  # the value 1 g takes in the column, roughly
+    if 0.8 <= per_g <= 1.25:
+        return "g"
+    if 800 <= per_g <= 1250:
+        return "mg"
+    if per_g > 16:
+        return f"g/{2 ** round(np.log2(per_g))}"
+    return ""
 
 
 def _column_map(layout: Layout, acc_unit: str) -> str:

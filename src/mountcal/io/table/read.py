@@ -74,6 +74,8 @@ def read_table(path: Path) -> Samples:
         dropped["rows with missing or non-numeric values"] = int((~numeric).sum())
     if (numeric & ~ok).any():
         dropped[_OUT_OF_RANGE] = int((numeric & ~ok).sum())
+    if not ok.any() and numeric.any():  # numbers, all outside a physical range: a unit, said as such
+        raise _outside(str(path), values[numeric], gyro is not None)
     if not ok.any():
         raise InputError(
             str(path),
@@ -101,6 +103,26 @@ def read_table(path: Path) -> Samples:
 
 _REQUIRED = ("t_s", "ax", "ay", "az")
 _OUT_OF_RANGE = "rows with a time, acceleration or rate outside its physical range (docs/reliability.md)"
+
+
+def _outside(where: str, values: FloatArray, gyro: bool) -> InputError:
+    """The refusal of a table whose rows are numbers but none inside the physical ranges: the acceleration's
+    median magnitude, and the unit it fits (:func:`mountcal.io.table.mapped.fitting_unit`)."""
+    from mountcal.io.table.mapped import fitting_unit
+
+    m = float(np.median(np.linalg.norm(values[:, 1:], axis=1)))
+    unit = fitting_unit(m)
+    rest = ",gx=gx,gy=gy,gz=gz" if gyro else ""
+    fix = f"time=t_s,ax=ax:{unit},ay=ay:{unit},az=az:{unit}{rest}"
+    return InputError(
+        where,
+        "t_s, ax, ay, az in s and m/s² inside their physical ranges (docs/reliability.md)",
+        f"{values.shape[0]} rows of numbers, none inside them: the acceleration's median magnitude is {m:.4g} "
+        "read as m/s²" + (f", as 1 g reads in {unit}" if unit else ""),
+        f"If ax, ay, az are in {unit}, say so: {option('columns', fix)}."
+        if unit
+        else f"Give the columns' units in {option('columns')} (g, mg, m/s2, or g/N for counts of 1/N g).",
+    )
 
 
 def _channel(name: str, t: FloatArray, v: FloatArray, dropped: dict[str, int]) -> Channel:
