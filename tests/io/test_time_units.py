@@ -229,3 +229,62 @@ def test_a_mapped_column_named_with_its_unit_states_it(frame: pd.DataFrame, tmp_
     np.testing.assert_allclose(got.t_s, frame["t_s"].to_numpy(), atol=1e-9)
     with pytest.raises(InputError, match="in ms it would be 100 Hz"):  # t_s mapped: its name says s
         read_log(path, LogOptions(columns=parse_columns("time=t_s,ax=ax,ay=ay,az=az")))
+
+
+# --------------------------------------------------------------------------- times written as text
+
+
+def _clock(seconds: np.ndarray, start: str, sep: str) -> list[str]:
+    """Times of day as Physics Toolbox Sensor Suite writes them (``HH:MM:SS:mmm``; ``.``: a fraction)."""
+    t = pd.Timestamp(start) + pd.to_timedelta(np.round(seconds * 1e3), unit="ms")
+    return [f"{x:%H:%M:%S}{sep}{x.microsecond // 1000:03d}" for x in t]
+
+
+@pytest.mark.parametrize(("start", "sep"), [("2024-05-01T10:00:00", ":"), ("2024-05-01T23:58:00", ".")])
+def test_times_of_day_are_read_as_seconds_since_midnight_carried_over_it(
+    frame: pd.DataFrame, seconds: tuple[Path, np.ndarray], tmp_path: Path, start: str, sep: str
+) -> None:
+    """Physics Toolbox Sensor Suite's g-force export with its ``HH:MM:SS:mmm`` times (and one starting two
+    minutes before midnight, as ``HH:MM:SS.fff``): the angles of the table in seconds. Before: refused, "no
+    row with numbers" (the times read as numbers); past midnight the day after would have sorted first."""
+    table = pd.DataFrame(
+        {"time": _clock(frame["t_s"].to_numpy(), start, sep)}
+        | {f"gF{c}": frame[f"a{c}"] / 9.80665 for c in "xyz"}
+        | {f"w{c}": frame[f"g{c}"] for c in "xyz"}
+    )
+    path = tmp_path / "ptss.csv"
+    table.to_csv(path, index=False, float_format="%.17g")
+    result = _calibrate(path, tmp_path)
+    assert _time_unit(result)["value"] == "clock" and "time of day" in _time_unit(result)["by"]
+    np.testing.assert_allclose(_angles(result), seconds[1], atol=0.02)
+    got = read_log(path, LogOptions())  # the samples in their own order, past midnight too
+    np.testing.assert_allclose(got.t_s - got.t_s[0], frame["t_s"] - frame["t_s"].iloc[0], atol=1.5e-3)
+
+
+def test_time_text_that_is_no_date_time_is_refused_naming_it(
+    frame: pd.DataFrame, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """MATLAB's default date-time text ('01-May-2024 10:00:00.000'). Before: refused, "no distinct times"."""
+    text = (EPOCH + pd.to_timedelta(frame["t_s"], unit="s")).dt.strftime("%d-%b-%Y %H:%M:%S.%f").str[:-3]
+    path = tmp_path / "matlab.csv"
+    frame.assign(Timestamp=text).drop(columns="t_s").to_csv(path, index=False, float_format="%.17g")
+    out = tmp_path / "r.json"
+    assert main(["calibrate", str(path), "--columns", "time=Timestamp,ax=ax,ay=ay,az=az", "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "'01-May-2024 10:00:00.000'" in err and "ISO-8601" in err and "no distinct times" not in err, err
+    assert not out.exists()
+
+
+def test_a_spreadsheets_serial_days_are_refused_as_such(
+    frame: pd.DataFrame, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Unix seconds turned into a spreadsheet's serial days under t_s. Before: "no parked period found"
+    (100 Hz read as 8.6 MHz), or with a protocol sheet "the log's clock has no date"."""
+    days = (EPOCH.timestamp() + frame["t_s"]) / 86400.0 + 25569.0
+    path = tmp_path / "days.csv"
+    frame.assign(t_s=days).to_csv(path, index=False, float_format="%.17g")
+    out = tmp_path / "r.json"
+    assert main(["calibrate", str(path), "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "serial days" in err and "100 Hz in days" in err and "no parked period" not in err, err
+    assert not out.exists()

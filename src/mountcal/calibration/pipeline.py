@@ -172,6 +172,7 @@ def calibrate_input(
                 uphill_azimuth_deg=job.uphill_azimuth_deg if table_azimuth else None,
             )
         cal, done = calibrate(table, job.options), None
+        cal = replace(cal, notes=(*cal.notes, *table.notes))  # what the table held that was not read
     else:
         done = calibrate_job(job, None if read is None else read(job), hash_files=hash_files)
         cal, table = done.calibration, done.table

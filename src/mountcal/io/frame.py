@@ -224,15 +224,17 @@ def _csv_column(path: Path, names: Sequence[str], sep: str) -> Generator[Any, No
     import pyarrow as pa
     import pyarrow.csv as pa_csv
 
+    from mountcal.io.inputs import comment_lines
     from mountcal.io.whole import text_source
 
     ours = f"c{list(names).index(FRAME_COLUMN)}"  # by position: the caller has read (and stripped) the names
+    above = comment_lines(path)  # '#' lines above the header (mountcal.io.table.mapped.dialect reads past them)
     source = text_source(path)
     try:
         reader = pa_csv.open_csv(
             source,
             read_options=pa_csv.ReadOptions(
-                skip_rows=1, column_names=[f"c{i}" for i in range(len(names))], block_size=1 << 22
+                skip_rows=above + 1, column_names=[f"c{i}" for i in range(len(names))], block_size=1 << 22
             ),
             parse_options=pa_csv.ParseOptions(delimiter=sep, invalid_row_handler=lambda _: "skip"),
             convert_options=pa_csv.ConvertOptions(include_columns=[ours], column_types={ours: pa.binary()}),

@@ -99,6 +99,19 @@ def csv_columns(head: bytes | Path, where: str, *, charge: bool = True) -> None:
     budget.charge("columns", line.count(b",") + 1, where, "table columns", total=charge)
 
 
+MAX_COMMENT_LINES = 1000  # '#' lines looked past above a CSV's header
+
+
+def comment_lines(path: Path) -> int:
+    """How many lines starting with ``#`` (a logger's preamble) stand above a CSV's header, at most
+    :data:`MAX_COMMENT_LINES`: what every reader of a table skips (:func:`mountcal.io.table.mapped.dialect`)."""
+    count = 0
+    with path.open("rb") as f:
+        while count < MAX_COMMENT_LINES and f.readline().lstrip(b"\xef\xbb\xbf \t").startswith(b"#"):
+            count += 1
+    return count
+
+
 def check_parquet_rows(path: Path) -> int | None:
     """The rows a Parquet file declares (None: an unreadable footer), refusing more than
     :func:`max_rows` from its footer alone (a few kilobytes of run-length-encoded zeros can declare

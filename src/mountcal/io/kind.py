@@ -191,12 +191,16 @@ def _table_kind(path: Path, form: str) -> InputKind:
     if sample:
         return InputKind(False, f"a sample table ({form})", f"by its columns {', '.join(sample)}")
     if "t_s" not in columns:
-        from mountcal.io.table.layout import detect
+        from mountcal.io.table.layout import detect, suggested_map
         from mountcal.io.table.mapped import header
 
         export = detect(header(path)[0] if form == "CSV" else sorted(columns), path)
         if export is not None:  # a phone's or imucal's export holds samples, under its own names
-            return InputKind(False, f"a sample table ({form})", f"by its columns: a {export.name} export")
+            return InputKind(False, f"a sample table ({form})", f"by its columns: {export.name}")
+        if not {"ax", "ay", "az"} <= columns and suggested_map(sorted(columns)) is not None:
+            # no stop table (it names ax, ay, az so), but a time and an accelerometer named as a logger names
+            # them ('time (s)', 'ax [g]'): samples, whose reader names the column map they say
+            return InputKind(False, f"a sample table ({form})", "by its columns: a time and an acceleration")
         return InputKind(True, f"a stop table ({form})", "by its columns: no t_s, so not samples in time")
     from mountcal.io.table.time_unit import ROWS_LOOKED_AT, median_step  # the rows _times reads (a look)
 
@@ -244,27 +248,35 @@ def _refuse_stops_or_samples(path: Path, rows: int, spacing: float) -> None:
 
 
 def _columns(path: Path) -> frozenset[str]:
+    return frozenset(_header(path)[0])
+
+
+def _header(path: Path) -> tuple[list[str], dict[str, str]]:
+    """The table's column names and how to read it as CSV (:func:`mountcal.io.table.mapped.dialect`: the
+    delimiter, a decimal comma, comment lines above the header), as every reader of a table takes them."""
     if path.suffix.lower() == ".csv" and path.is_file():  # a million columns: refused before pandas reads them
         from mountcal.io.inputs import csv_columns
 
         csv_columns(path, str(path), charge=False)
     try:
         if path.suffix.lower() == ".csv":
-            import pandas as pd
+            from mountcal.io.table.mapped import csv_header
 
-            names = pd.read_csv(path, nrows=0, comment="#", skipinitialspace=True).columns
-        else:
-            import pyarrow.parquet as pq
+            names, read_as = csv_header(path)
+            if not names:
+                raise ValueError("no header line")
+            return names, read_as
+        import pyarrow.parquet as pq
 
-            names = pq.read_schema(path).names
+        return [str(c).strip() for c in pq.read_schema(path).names], {}
+    except InputError:
+        raise
     except FileNotFoundError:
         found = "no such file"
     except OSError as err:
         found = f"a file that cannot be read ({err.strerror or err})"
     except Exception as err:  # pandas and pyarrow raise many types for malformed files
         found = f"a file that does not parse ({type(err).__name__}: {err})"
-    else:
-        return frozenset(str(c).strip() for c in names)
     if found.startswith("a file that does not parse") and path.stat().st_size == 0:
         found = "an empty file (0 bytes)"
     raise InputError(
@@ -279,7 +291,7 @@ def _times(path: Path, form: str) -> np.ndarray:
     """The first rows' ``t_s`` in seconds (a bounded look; a timestamp type or date-time text as such)."""
     from mountcal.io.table.time_unit import first_seconds
 
-    return first_seconds(path, "t_s")
+    return first_seconds(path, "t_s", _header(path)[1] if form == "CSV" else None)
 
 
 __all__ = ["KIND_OPTION", "Declared", "InputKind", "input_kind"]

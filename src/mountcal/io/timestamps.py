@@ -117,6 +117,57 @@ def check_one_clock(t: FloatArray, source: str) -> None:
     )
 
 
+JOIN_STEP_S = 1.0  # a step back in time longer than this (and than JOIN_STEPS samples) is no clock jitter
+JOIN_STEPS = 50
+JOIN_PIECES = 20  # more steps back than this: rows out of order (a sorted copy), not recordings joined
+
+
+def table_order(t: FloatArray, where: str) -> tuple[np.ndarray, int]:
+    """The time order of a table's rows (``t`` in file order, finite) and how many rows stepped back in time.
+
+    Rows out of order are put in order: rows shuffled, or the parts of one recording listed in another
+    order (imucal's annotated sessions). But where the time steps back by seconds and the rows after the step
+    fall *between* the rows before it — recordings joined one after another, the second counting from its
+    own start — time order would interleave two recordings' samples. Refused.
+
+    Raises
+    ------
+    InputError
+        Naming the row where the time steps back, the times before and after it, and the rows interleaved.
+    """
+    from mountcal.core.errors import InputError
+
+    steps = np.diff(t)
+    positive = steps[steps > 0]
+    dt = float(np.median(positive)) if positive.size else 0.0
+    jumps = np.flatnonzero(steps < -max(JOIN_STEP_S, JOIN_STEPS * dt))
+    if 0 < jumps.size <= JOIN_PIECES:
+        bounds = [0, *(jumps + 1).tolist(), t.size]
+        for k in range(len(bounds) - 2):
+            row = bounds[k + 1]
+            before, after = t[bounds[k] : row], t[row : bounds[k + 2]]
+            mixed = _interleaved(before, after)
+            if mixed > JOIN_STEP_S / max(dt, 1e-9):  # more than a second of samples between each other's
+                raise InputError(
+                    where,
+                    "one recording: times that go forward (rows out of order are sorted)",
+                    f"the time steps back from {t[row - 1]:.6g} s to {t[row]:.6g} s at data row {row + 1}, and the "
+                    f"{after.size} rows after it fall between the {before.size} rows before it (in time order the "
+                    f"two alternate {mixed} times): recordings joined, whose samples sorting would interleave",
+                    f"Give each recording as its own file (split the table before data row {row + 1}), or "
+                    "write times that continue from one recording to the next.",
+                )
+    return _order(t)
+
+
+def _interleaved(a: FloatArray, b: FloatArray) -> int:
+    """How often the rows of ``a`` and ``b`` alternate in their joint time order (2 for two blocks that
+    merely overlap at their ends, ~2·min(len) for two recordings over the same times)."""
+    labels = np.concatenate([np.zeros(a.size, dtype=np.int8), np.ones(b.size, dtype=np.int8)])
+    order = np.argsort(np.concatenate([a, b]), kind="stable")
+    return int(np.count_nonzero(np.diff(labels[order])))
+
+
 def _order(t: FloatArray) -> tuple[np.ndarray, int]:
     """A stable time order and how many samples stepped back in time."""
     backwards = int(np.count_nonzero(np.diff(t) < 0))

@@ -96,11 +96,14 @@ def read_protocol(path: str, heading_unit: HeadingUnit | None = None) -> pd.Data
     from mountcal.core.paths import input_file
     from mountcal.core.ranges import check_values
     from mountcal.io.inputs import csv_columns
+    from mountcal.io.table.mapped import dialect
 
     checked = input_file(path, "a protocol sheet CSV")  # not a FIFO or a device: reading ends
     csv_columns(checked, path)  # a header of a million columns is refused before pandas parses it
     try:
-        df = pd.read_csv(path, comment="#", skipinitialspace=True)
+        with open(checked, "rb") as f:
+            read_as = dialect(f.read(1 << 16), path)[1]  # ";" with decimal commas, as every table's reader
+        df = pd.read_csv(path, skipinitialspace=True, **{"comment": "#", **read_as})
     except (OSError, ValueError) as err:
         raise InputError(
             path,

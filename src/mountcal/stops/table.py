@@ -48,6 +48,7 @@ from mountcal.io.input_conventions import (
 from mountcal.io.input_conventions import Headings as Headings  # one definition, imported from here by many
 from mountcal.io.inputs import check_parquet_rows, csv_columns
 from mountcal.io.sensor_logger import SIGN, column_sign, sign_column
+from mountcal.io.table.mapped import check_text, dialect
 from mountcal.io.whole import parquet_end, text_bytes_end
 
 # Column names of the stop table file.
@@ -89,6 +90,7 @@ _QUANTITY = {
 Unit = Literal["mps2", "g"]
 MIN_STOPS = 3
 GRAVITY_BAND = (0.7, 1.3)  # a static reading outside this fraction of g is not gravity
+_HEAD_BYTES = 1 << 16  # the bytes a CSV's delimiter and decimal mark are told from (its header and first row)
 _NO_GUESS = "Fill or remove those rows; mountcal does not guess missing stops."
 
 
@@ -233,6 +235,7 @@ def read_stop_table(
         parquet_end(raw=raw, where=where)
         _check_stop_count(check_parquet_rows(path) or 0, where, "rows")
     else:  # a million columns or stops are refused before pandas parses them
+        check_text(raw, where)  # UTF-16: refused as such (its last line break is two bytes: not a cut file)
         cut = text_bytes_end(raw, where)
         csv_columns(raw, where)
         _check_stop_count(raw.count(b"\n"), where, "lines")
@@ -241,7 +244,8 @@ def read_stop_table(
             df = pd.read_parquet(io.BytesIO(raw))
         else:
             rows = raw if cut is None else memoryview(raw)[: cut.whole]
-            df = pd.read_csv(io.BytesIO(rows), comment="#", skipinitialspace=True)
+            read_as = dialect(raw[:_HEAD_BYTES], where)[1]  # ";" with decimal commas, as every table's reader
+            df = pd.read_csv(io.BytesIO(rows), skipinitialspace=True, **{"comment": "#", **read_as})
     except Exception as err:  # pandas/pyarrow raise many types for malformed files
         raise InputError(
             where,
@@ -378,7 +382,18 @@ def stop_table_from_frame(
         heading_deg=optional(HEADING),
         source=source,
         conventions=tuple(conventions),
+        notes=_unread(df, source),
     )
+
+
+def _unread(df: pd.DataFrame, source: str) -> tuple[str, ...]:
+    """The note naming the columns of a stop table that no column of :data:`COLUMNS` is (a heading column
+    renamed in a spreadsheet, 'beta', loses yaw: said, not silent); none for pandas' unnamed index."""
+    unread = [str(c) for c in df.columns if c not in COLUMNS and not str(c).startswith("Unnamed:")]
+    if not unread:
+        return ()
+    shown = ", ".join(map(repr, unread[:8])) + (" …" if len(unread) > 8 else "")
+    return (f"{source}: columns not read: {shown} (a stop table's are {', '.join(COLUMNS)}; β only from {BETA})",)
 
 
 def _applied_axes(df: pd.DataFrame, source: str) -> AxisMap | None:

@@ -8,8 +8,8 @@ A **column map** names, for each quantity (a *role*), the table's column and opt
 ``time``, ``ax ay az`` (required), ``gx gy gz`` (all three or none), ``speed``, ``heading``,
 ``temperature``, ``latitude``, ``longitude``, ``altitude``. Units (as in the CAN mapping):
 
-- time: ``s``, ``ms``, ``us``, ``ns``, ``iso`` (date-time text; without a zone, UTC), or ``s/N`` — a
-  sample index at N Hz (imucal's ``n_samples``); without a unit, inferred from the column's spacing
+- time: ``s``, ``ms``, ``us``, ``ns``, ``iso`` (date-time text; without a zone, UTC), ``clock`` (a time of
+  day), or ``s/N`` — a sample index at N Hz (imucal's ``n_samples``); without a unit, inferred from the column's spacing
   (:mod:`mountcal.io.table.time_unit`, which also checks a stated one and reads typed Parquet times);
 - acceleration: ``m/s2`` (default), ``g`` (9.80665 m/s²), ``mg``; gyro: ``rad/s`` (default), ``deg/s``;
   speed ``m/s``, ``km/h``, ``mph``, ``kn``; heading ``deg``, ``rad``; and any unit divided by a count,
@@ -28,6 +28,7 @@ gravity).
 from __future__ import annotations
 
 import re
+import shlex
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -105,7 +106,7 @@ def unit_scale(role: str, unit: str, where: str) -> tuple[float, float]:
     if role == "time":
         if text.lower() in TIME_UNITS and divisor > 0:
             return TIME_UNITS[text.lower()] / divisor, 0.0
-        raise _unit_error(role, unit, where, "s, ms, us, ns, iso, or s/N for a sample index at N Hz")
+        raise _unit_error(role, unit, where, "s, ms, us, ns, iso, clock, or s/N for a sample index at N Hz")
     found = UNITS[UNIT_KIND[role]].get(normalise_unit(text))
     if found is None or divisor <= 0:
         raise _unit_error(role, unit, where, UNIT_HINT[UNIT_KIND[role]] + ", optionally /N for counts of 1/N unit")
@@ -130,8 +131,8 @@ def _column(role: str, spec: str, names: list[str], where: str) -> Column:
             f"columns {', '.join(map(repr, names))}",
             f"Name an existing column in {option('columns')}.",
         )
-    if role == "time" and unit.strip().lower() == "iso":
-        return Column(name, "iso")
+    if role == "time" and unit.strip().lower() in ("iso", "clock"):
+        return Column(name, unit.strip().lower())
     scale, offset = unit_scale(role, unit, where) if unit else (1.0, 0.0)
     return Column(name, unit, scale, offset)
 
@@ -367,8 +368,8 @@ def _export_layout(export: Export, names: list[str], path: Path, acc_unit: str |
             "(102.4 Hz for imucal's example session; acc in m/s², gyro in deg/s as imucal's examples).",
         )
     units = ", ".join(sorted({f"{c.unit}" for r, c in cols.items() if r != "time" and c.unit}))
-    time = cols["time"]
-    note = f"read as {export.name}: columns {', '.join(c.name for c in cols.values())}; time in {time.unit}, {units}"
+    # the time's unit is said once, by the convention its column's type, text or spacing settles (io.table.time_unit)
+    note = f"read as {export.name}: columns {', '.join(c.name for c in cols.values())}; units {units}"
     gravity_free = export.gravity_free.replace("{recording}", _recording_of(path))
     return Layout(_with_acc_unit(cols, acc_unit, where, export.name), export.name, (note,), gravity_free)
 
@@ -433,16 +434,79 @@ def _linear_named(cols: dict[str, Column]) -> str:
 
 
 def refuse_unknown(names: list[str], path: Path) -> InputError:
-    """The refusal of a table whose columns are neither mountcal's, mapped, nor a known export."""
+    """The refusal of a table whose columns are neither mountcal's, mapped, nor a known export; where the
+    column names say the roles and units (``ax [g]``, ``acc_x (m/s^2)``, ``gyro_x (dps)``, ``time (s)``), it
+    names the column map that reads them (:func:`suggested_map`), to be checked and given."""
+    from mountcal.core.option_names import flags_on
+
     shown = ", ".join(map(repr, names[:12])) + (" …" if len(names) > 12 else "")
+    suggested = suggested_map(names)
+    if suggested is not None:
+        given = option("columns", shlex.quote(suggested) if flags_on() else suggested)
+        todo = f"The column names read as: {given} (roles and units taken from the names: check them, then give it)."
+    else:
+        todo = f"Name the columns, e.g. {option('columns', 'time=ts:ms,ax=acc_x:g,ay=acc_y:g,az=acc_z:g')}"
     return InputError(
         str(path),
         "a sample table: columns t_s, ax, ay, az (s, m/s²), a known export (imucal, phyphox, Sensor Logger, "
         "Physics Toolbox), or a column map",
         f"columns {shown}",
-        f"Name the columns, e.g. {option('columns', 'time=ts:ms,ax=acc_x:g,ay=acc_y:g,az=acc_z:g')}; "
-        f"a CAN log in CSV needs a DBC ({option('dbc')}).",
+        f"{todo}; a CAN log in CSV needs a DBC ({option('dbc')}).",
     )
+
+
+# a column name's unit: in brackets or parentheses after it, or a suffix (accX_mg, time_ms)
+_NAMED_UNIT = re.compile(
+    r"(?P<base>.*?)\s*(?:[\[(](?P<bracketed>[^\])]+)[\])]|_(?P<suffix>mg|g|mps2|mps|kmh|dps|rads|deg|rad|ms|us|ns|s|c|m))\s*",
+    re.I,
+)
+_ROLE_OF = (  # a column name (lower case, without spaces, '_' and '-') → a role
+    (re.compile(r"(?:t|time|timestamp|stamp|secondselapsed|elapsed)"), "time"),
+    (re.compile(r"(?:a|acc|accel|accelerometer|acceleration|gf)(?P<axis>[xyz])"), "a"),
+    (re.compile(r"(?:g|w|gyr|gyro|gyroscope|rotationrate|angularvelocity)(?P<axis>[xyz])"), "g"),
+    (re.compile(r"(?:speed|velocity)"), "speed"),
+    (re.compile(r"(?:heading|bearing|course)"), "heading"),
+    (re.compile(r"(?:temperature|temp)"), "temperature"),
+    (re.compile(r"(?:lat|latitude)"), "latitude"),
+    (re.compile(r"(?:lon|lng|longitude)"), "longitude"),
+    (re.compile(r"(?:alt|altitude)"), "altitude"),
+)
+
+
+def suggested_map(names: list[str]) -> str | None:
+    """The column map the names say (``time (s)`` → ``time=time (s):s``, ``ax [g]`` → ``ax=ax [g]:g``, a unit
+    only where it is one mountcal reads for the role); None where they do not name time, ax, ay and az each
+    once with a unit mountcal reads (two IMUs, ``ax1`` and ``ax2``, are for the user to choose), or a name
+    holds a comma. A channel (speed, heading, …) named once with a readable unit (or none) is added."""
+    found: dict[str, list[str]] = {}
+    for name in names:
+        match = _NAMED_UNIT.fullmatch(name)
+        base, unit = (name, "") if match is None else (match["base"], match["bracketed"] or match["suffix"] or "")
+        key = re.sub(r"[\s_\-]", "", base).lower()
+        for pattern, role in _ROLE_OF:
+            hit = pattern.fullmatch(key)
+            if hit is not None:
+                role = role[0] + hit["axis"] if role in ("a", "g") else role
+                known = _known(role, unit)
+                spec = f"{name}:{unit.strip()}" if known else name
+                found.setdefault(role, []).append(spec if known or not unit.strip() else "")  # "": a unit not read
+                break
+    required = ["time", *ACC] + ([*GYRO] if any(r in found for r in GYRO) else [])
+    if any(found.get(r, [""]) in ([], [""]) or len(found[r]) != 1 for r in required):
+        return None
+    extra = [r for r in CHANNELS if len(found.get(r, [])) == 1 and found[r][0]]  # a channel named once, readable
+    if any("," in found[r][0] for r in (*required, *extra)):
+        return None
+    return ",".join(f"{r}={found[r][0]}" for r in (*required, *extra))
+
+
+def _known(role: str, unit: str) -> bool:
+    """Whether ``unit`` is one mountcal reads for ``role``."""
+    if not unit.strip():
+        return False
+    if role == "time":
+        return unit.strip().lower() in TIME_UNITS
+    return normalise_unit(unit) in UNITS[UNIT_KIND[role]]
 
 
 __all__ = [
@@ -460,5 +524,6 @@ __all__ = [
     "parse_columns",
     "refuse_unknown",
     "resolve",
+    "suggested_map",
     "unit_scale",
 ]

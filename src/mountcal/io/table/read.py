@@ -25,6 +25,7 @@ from mountcal.core.option_names import option
 from mountcal.core.ranges import in_range
 from mountcal.io.inputs import check_parquet_rows, check_regular_file, csv_columns
 from mountcal.io.samples import Channel, FloatArray, Samples
+from mountcal.io.timestamps import REORDERED, table_order
 from mountcal.io.whole import parquet_end, text_end, text_source
 
 TABLE_CHANNELS = ("speed_mps", "heading_deg", "temperature_c", "lat_deg", "lon_deg", "alt_m")
@@ -41,7 +42,7 @@ def read_table(path: Path) -> Samples:
         csv_columns(path, str(path))
     source = path if parquet else text_source(path)  # a cut CSV: refused, or its whole lines (allowed)
     try:
-        df = pd.read_parquet(source) if parquet else pd.read_csv(source)
+        df = pd.read_parquet(source) if parquet else pd.read_csv(source, low_memory=False)
     except FileNotFoundError as err:
         raise InputError(str(path), "a readable sample table", "no such file", "Check the path.") from err
     except Exception as err:  # pandas raises many types for malformed files
@@ -73,6 +74,8 @@ def read_table(path: Path) -> Samples:
         dropped["rows with missing or non-numeric values"] = int((~numeric).sum())
     if (numeric & ~ok).any():
         dropped[_OUT_OF_RANGE] = int((numeric & ~ok).sum())
+    if not ok.any() and numeric.any():  # numbers, all outside a physical range: a unit, said as such
+        raise _outside(str(path), values[numeric], gyro is not None)
     if not ok.any():
         raise InputError(
             str(path),
@@ -80,13 +83,14 @@ def read_table(path: Path) -> Samples:
             "no row with numbers in all of them",
             "Check the table's columns and units.",
         )
-    order = np.argsort(values[ok, 0], kind="stable")
+    order, reordered = table_order(values[ok, 0], str(path))  # joined recordings refused; out of order: said
+    if reordered:
+        dropped[REORDERED] = reordered
     channels = {}
     for name in TABLE_CHANNELS:
         if name in df.columns:
             v = pd.to_numeric(df[name], errors="coerce").to_numpy(dtype=float)
-            t = df["t_s"].to_numpy(dtype=float)
-            channels[name] = _channel(name, t, v, dropped)
+            channels[name] = _channel(name, values[:, 0], v, dropped)  # t_s as the samples read it (a text row: NaN)
     return Samples(
         values[ok, 0][order],
         values[ok, 1:][order],
@@ -99,6 +103,26 @@ def read_table(path: Path) -> Samples:
 
 _REQUIRED = ("t_s", "ax", "ay", "az")
 _OUT_OF_RANGE = "rows with a time, acceleration or rate outside its physical range (docs/reliability.md)"
+
+
+def _outside(where: str, values: FloatArray, gyro: bool) -> InputError:
+    """The refusal of a table whose rows are numbers but none inside the physical ranges: the acceleration's
+    median magnitude, and the unit it fits (:func:`mountcal.io.table.mapped.fitting_unit`)."""
+    from mountcal.io.table.mapped import fitting_unit
+
+    m = float(np.median(np.linalg.norm(values[:, 1:], axis=1)))
+    unit = fitting_unit(m)
+    rest = ",gx=gx,gy=gy,gz=gz" if gyro else ""
+    fix = f"time=t_s,ax=ax:{unit},ay=ay:{unit},az=az:{unit}{rest}"
+    return InputError(
+        where,
+        "t_s, ax, ay, az in s and m/s² inside their physical ranges (docs/reliability.md)",
+        f"{values.shape[0]} rows of numbers, none inside them: the acceleration's median magnitude is {m:.4g} "
+        "read as m/s²" + (f", as 1 g reads in {unit}" if unit else ""),
+        f"If ax, ay, az are in {unit}, say so: {option('columns', fix)}."
+        if unit
+        else f"Give the columns' units in {option('columns')} (g, mg, m/s2, or g/N for counts of 1/N g).",
+    )
 
 
 def _channel(name: str, t: FloatArray, v: FloatArray, dropped: dict[str, int]) -> Channel:

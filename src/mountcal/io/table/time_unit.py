@@ -61,10 +61,9 @@ def first_times(path: Path, name: str, read_as: dict[str, str], whole_lines: boo
             usecols=lambda c: str(c).strip() == name,
             nrows=ROWS_LOOKED_AT,
             dtype=str,
-            comment="#",
             skipinitialspace=True,
             encoding="utf-8-sig",
-            **read_as,
+            **{"comment": "#", **read_as},
         )
     except (ValueError, pd.errors.ParserError, UnicodeDecodeError, OSError) as err:
         raise InputError(
@@ -87,16 +86,25 @@ def typed_seconds(values: pd.Series) -> np.ndarray | None:
     return np.asarray(out, dtype=np.float64)
 
 
-def first_seconds(path: Path, name: str) -> np.ndarray:
+def first_seconds(path: Path, name: str, read_as: dict[str, str] | None = None) -> np.ndarray:
     """The first rows of a time column as numbers: seconds where its type or text says so (a timestamp, a
-    duration, ISO-8601 text), else its numbers as they are (what the kind of a table is told by)."""
-    values = first_times(path, name, {}, whole_lines=False)
+    duration, ISO-8601 text), else its numbers as they are (what the kind of a table is told by); a CSV read
+    as ``read_as`` says (:func:`mountcal.io.table.mapped.dialect`)."""
+    values = first_times(path, name, read_as or {}, whole_lines=False)
+    if read_as and read_as.get("decimal") == "," and _is_text(values):
+        values = values.str.replace(",", ".", regex=False)
     typed = typed_seconds(values)
     if typed is not None:
         return typed
-    if (values.dtype == object or pd.api.types.is_string_dtype(values.dtype)) and _is_iso_text(values):
+    if _is_text(values) and _is_iso_text(values):
         return iso_seconds(values)
+    if _is_text(values) and _is_clock_text(values):
+        return clock_seconds(values)
     return np.asarray(pd.to_numeric(values, errors="coerce"), dtype=np.float64)
+
+
+def _is_text(values: pd.Series) -> bool:
+    return bool(values.dtype == object or pd.api.types.is_string_dtype(values.dtype))
 
 
 def iso_seconds(values: pd.Series) -> np.ndarray:
@@ -114,6 +122,82 @@ def _is_iso_text(values: pd.Series) -> bool:
         return False
     parsed = pd.to_datetime(text, utc=True, errors="coerce", format="ISO8601")
     return bool(parsed.notna().mean() > 0.5)
+
+
+_CLOCK = re.compile(r"\s*(\d{1,2}):(\d{2}):(\d{2})(?:([:.,])(\d{1,9}))?\s*")
+DAY_S = 86400.0
+
+
+def _is_clock_text(values: pd.Series) -> bool:
+    """Whether the (text) values are times of day, ``HH:MM:SS`` with milliseconds after ``:`` (Physics
+    Toolbox Sensor Suite's ``HH:MM:SS:mmm``) or a fraction after ``.``: most of them."""
+    text = values.dropna().astype(str)
+    text = text[text.str.strip() != ""]
+    return bool(not text.empty and text.str.fullmatch(_CLOCK).mean() > 0.5)
+
+
+def clock_seconds(values: pd.Series) -> np.ndarray:
+    """Seconds since midnight of time-of-day text (:func:`_is_clock_text`), NaN where unreadable; a step back
+    of more than half a day is midnight passed, so the day after counts on (86 400 s later)."""
+    parts = values.astype(str).str.extract(_CLOCK.pattern)
+    h, m, sec = (pd.to_numeric(parts[i], errors="coerce").to_numpy(dtype=np.float64) for i in range(3))
+    digits = parts[4].fillna("")
+    sub = pd.to_numeric(digits, errors="coerce").fillna(0.0).to_numpy(dtype=np.float64)
+    per = np.where(parts[3].fillna("") == ":", 1000.0, 10.0 ** digits.str.len().to_numpy(dtype=np.float64))
+    out = h * 3600.0 + m * 60.0 + sec + sub / per
+    bad = (h > 23) | (m > 59) | (sec > 60) | ((parts[3] == ":").to_numpy() & (sub >= 1000.0))
+    out[bad] = np.nan
+    finite = np.flatnonzero(np.isfinite(out))
+    if finite.size > 1:
+        wraps = np.concatenate([[0.0], np.cumsum(np.diff(out[finite]) < -DAY_S / 2)]) * DAY_S
+        out[finite] += wraps
+    return np.asarray(out, dtype=np.float64)
+
+
+def _check_resolution(where: str, name: str, values: pd.Series, numbers: np.ndarray, step: float) -> None:
+    """Refuse times stored as 32-bit floats too coarse for their samples: 24 bits hold Unix seconds to 128 s,
+    so every sample of two minutes shares a time, and the spacing is the format's, not the logger's.
+
+    Raises
+    ------
+    InputError
+        Naming the column, its resolution where its values lie, and the types that hold them.
+    """
+    finite = numbers[np.isfinite(numbers)]
+    if values.dtype != np.float32 or finite.size < 2:
+        return
+    resolution = float(np.spacing(np.float32(np.abs(finite).max())))
+    if np.isfinite(step) and step > 2.0 * resolution:
+        return
+    raise InputError(
+        where,
+        f"times in the column {name} finer than the samples' spacing",
+        f"32-bit floats: at {np.abs(finite).max():.10g} their resolution is {resolution:g} (its unit), and "
+        + (
+            f"the first rows' median step is {step:g}: the format's, not the logger's"
+            if np.isfinite(step)
+            else "the first rows share one time"
+        ),
+        "Write the times as 64-bit floats, integer nanoseconds (int64) or a timestamp type.",
+    )
+
+
+EXCEL_DAYS = (20_000.0, 80_000.0)  # a spreadsheet's serial days of 1954–2119 (day 25 569 is 1970-01-01)
+
+
+def _excel_days(numbers: np.ndarray, step: float) -> bool:
+    """Whether times are a spreadsheet's serial days: all within :data:`EXCEL_DAYS`, an IMU's rate in days
+    (no unit of seconds gives one: their step is a 10⁻⁷ of a day)."""
+    finite = numbers[np.isfinite(numbers)]
+    lo, hi = EXCEL_DAYS
+    return bool(finite.size >= 2 and finite.min() >= lo and finite.max() <= hi and fits(step, DAY_S))
+
+
+def _mostly_text(values: pd.Series, numbers: np.ndarray) -> bool:
+    """Whether most non-empty values of a text column are no numbers (a units row under a header is one)."""
+    text = values.dropna().astype(str).str.strip()
+    filled = int((text != "").sum())
+    return filled > 0 and int(np.isfinite(numbers).sum()) < filled / 2
 
 
 def median_step(values: np.ndarray) -> float:
@@ -167,16 +251,48 @@ def settle_time(layout: Layout, path: Path, read_as: dict[str, str]) -> tuple[La
         return _with(layout, Column(time.name, "iso")), Convention(
             "time_unit", "iso", "stated", f"the column {time.name}'s text: ISO-8601 date-times (without a zone, UTC)"
         )
+    clock = text and _is_clock_text(values)
+    if time.unit == "clock" or clock:
+        if explicit and explicit != "clock":
+            raise _against_type(where, time, explicit, "time-of-day text (HH:MM:SS…)", by)
+        return _with(layout, Column(time.name, "clock")), Convention(
+            "time_unit",
+            "clock",
+            "stated",
+            f"the column {time.name}'s text: a time of day ({values.dropna().astype(str).iloc[0].strip()!r}; "
+            "after the seconds, ':' counts milliseconds, '.' starts a fraction) without a date: read as seconds "
+            "since midnight, carried over midnight",
+        )
     if read_as.get("decimal") == "," and text:
         values = values.str.replace(",", ".", regex=False)
     numbers = np.asarray(pd.to_numeric(values, errors="coerce"), dtype=np.float64)
+    if text and _mostly_text(values, numbers):
+        raise InputError(
+            where,
+            f"times in the column {time.name}: numbers, ISO-8601 date-times or a time of day (HH:MM:SS.fff)",
+            f"text that is none of these, e.g. {values.dropna().astype(str).iloc[0].strip()!r}",
+            "Write the times as ISO-8601 (2024-05-01T10:00:00.000, with a zone where they are not UTC) or as "
+            f"numbers with their unit ({option('columns', f'time={time.name}:s')}; s, ms, us, ns).",
+        )
     step = median_step(numbers)
+    _check_resolution(where, time.name, values, numbers, step)
+    given = layout.source == "the column map" and bool(time.unit.strip())  # the user's word, not a name's
+    if not given and _excel_days(numbers, step):
+        raise InputError(
+            where,
+            f"the time column {time.name} in {stated or 's, ms, us or ns'}" + (f" ({by})" if stated else ""),
+            f"numbers from {np.nanmin(numbers):.6f} to {np.nanmax(numbers):.6f} in its first rows, a median "
+            f"{step:.3g} apart: "
+            f"a spreadsheet's serial days (days since 1899-12-30; {_rate(step, DAY_S)} in days), not "
+            "seconds or any unit of them",
+            "Write the times as ISO-8601 text (a spreadsheet's format yyyy-mm-ddThh:mm:ss.000) or as Unix seconds "
+            "((days − 25569) × 86400).",
+        )
     if stated and "/" in stated:  # a sample index at a stated rate: the rate is the statement
         return layout, Convention("time_unit", stated, "stated", by)
     if stated:
         if not time.unit:  # stated by the name alone: read in that unit
             layout = _with(layout, Column(time.name, stated, TIME_UNITS[stated]))
-        given = layout.source == "the column map" and bool(time.unit.strip())  # the user's word, not a name's
         doubted = not given and int(np.isfinite(numbers).sum()) >= EVIDENCE_ROWS
         return layout, _checked(where, layout, stated, step, by, doubted)
     return _inferred(where, layout, step)
@@ -281,6 +397,7 @@ def _against_type(where: str, time: Column, stated: str, what: str, by: str) -> 
 __all__ = [
     "IMU_RATE_HZ",
     "ROWS_LOOKED_AT",
+    "clock_seconds",
     "first_seconds",
     "first_times",
     "fits",
