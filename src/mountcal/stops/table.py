@@ -33,6 +33,7 @@ from mountcal.core.paths import read_input_bytes
 from mountcal.core.ranges import check_values
 from mountcal.core.result import Convention
 from mountcal.io.frame import FRAME_COLUMN, FRAME_CONVENTION, column_frame
+from mountcal.io.heading_frame import HEADING_FRAME, odometry_frame_column, odometry_frame_from_column
 from mountcal.io.input_conventions import (
     HEADING_REF,
     AxisMap,
@@ -70,9 +71,10 @@ REQUIRED = ACC
 AXES = "axes"  # the axis map already applied to ax, ay, az (by `mountcal stops --axes`)
 FRAME = FRAME_COLUMN  # the frame of ax, ay, az when mountcal rotate had put the log in the vehicle (levelled) frame
 # SIGN (acceleration_sign): the sign a phone app's acceleration was read with and how it is known (Sensor Logger)
+# HEADING_FRAME (heading_frame): β from an odometry heading in a frame not known to face east (io.heading_frame)
 OPTIONAL = (
     BETA, HEADING_REF, *STD, COUNT, *STD_MEAN, *CORR, TIME, DURATION, TEMPERATURE, SITE, LAT, LON, ALT, HEADING, AXES,
-    FRAME, SIGN,
+    FRAME, SIGN, HEADING_FRAME,
 )  # fmt: skip
 COLUMNS = (BETA, HEADING_REF, *ACC, *OPTIONAL[2:])
 
@@ -196,6 +198,10 @@ class StopTable:
             columns[FRAME] = frame.value
         if (sign := sign_column(self.conventions)) is not None:  # an assumed sign stays assumed in the table
             columns[SIGN] = sign
+        if (
+            odometry := odometry_frame_column(self.conventions)
+        ) is not None:  # β resting on an odometry frame's alignment
+            columns[HEADING_FRAME] = odometry
         return pd.DataFrame(columns)
 
 
@@ -344,6 +350,9 @@ def stop_table_from_frame(
     applied = _applied_axes(df, source)
     conventions += [] if FRAME not in df.columns else column_frame(df[FRAME].tolist(), source, FRAME)
     conventions += [] if SIGN not in df.columns else [column_sign(df[SIGN].tolist(), source)]
+    conventions += (
+        [] if HEADING_FRAME not in df.columns else [odometry_frame_from_column(df[HEADING_FRAME].tolist(), source)]
+    )
     if axes is not None and not axes.identity:  # the device's axes onto the sensor frame, as for a log
         acc = axes.apply(acc)
         cov = None if cov is None else axes.apply_cov(cov)

@@ -281,7 +281,10 @@ def copy_mcap_with_imu(
                 msgs = decode_imu_messages(records, fields["start"], fields["size"])
             except cdr.CdrError as err:
                 raise InputError(
-                    where, f"sensor_msgs/msg/Imu messages in CDR on {imu_topic!r}", str(err), "The file is damaged."
+                    where,
+                    f"sensor_msgs/msg/Imu messages in CDR on {imu_topic!r}",
+                    str(err),
+                    err.fix or "The file is damaged.",
                 ) from err
             rotated, bad = transform(msgs)
             w.add_messages(
