@@ -304,6 +304,13 @@ def _rotate_stream(
     first = next(chunks, None)
     if first is None:
         raise InputError(" + ".join(map(str, files)), "IMU samples", "none", "Check the log and the topic/DBC.")
+    if first.gravity_free:  # marked where read: the output would call it specific force
+        raise InputError(
+            first.source,
+            "the specific force (an accelerometer's reading, gravity included), written as the vehicle frame's",
+            f"an acceleration without gravity: {first.gravity_free}",
+            "Rotate the raw accelerometer (with g); mountcal writes no gravity-free acceleration as specific force.",
+        )
     acc_to_vehicle(first.acc_s, cal, check_units=True, level_only=checked.level_only)  # g units refused before output
     flip, said = sign_for_calibration(first, cal.provenance.conventions)  # a phone app's sign (Sensor Logger)
     checked = replace(checked, warnings=(*checked.warnings, said)) if said else checked

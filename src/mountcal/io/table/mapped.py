@@ -11,7 +11,6 @@ from __future__ import annotations
 import csv
 import re
 from collections.abc import Iterator
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -22,7 +21,7 @@ from numpy.typing import NDArray
 from mountcal.core.errors import InputError
 from mountcal.core.option_names import option
 from mountcal.io.inputs import check_parquet_rows, check_regular_file, max_rows, too_many_rows
-from mountcal.io.samples import Channel, FloatArray, Samples
+from mountcal.io.samples import Channel, FloatArray, Samples, marked_gravity_free
 from mountcal.io.table.layout import ACC, CHANNELS, G_N, GYRO, TIME_UNITS, Layout
 from mountcal.io.table.time_unit import TYPED, iso_seconds, typed_seconds
 from mountcal.io.whole import parquet_end, text_end, text_source
@@ -30,7 +29,6 @@ from mountcal.io.whole import parquet_end, text_end, text_source
 PARQUET = (".parquet", ".pq")
 _COMMA_DECIMAL = re.compile(r"[-+]?\d+,\d+(?:[eE][-+]?\d+)?")
 _DOT_DECIMAL = re.compile(r"[-+]?\d*\.\d+(?:[eE][-+]?\d+)?")
-GRAVITY_FREE_MPS2 = 0.5  # a median |a| below this has no gravity in it (g read as m/s² gives ≈ 1)
 GRAVITY_BAND_G = (0.5, 1.5)  # the median |a| of samples with gravity: at rest 1 g, driving close to it
 _DROPPED = "rows with missing or non-numeric values"
 
@@ -186,10 +184,10 @@ def check_magnitude(samples: Samples, layout: Layout, where: str) -> Samples:
     """
     if not len(samples) or layout.gravity_free:
         return samples
+    marked = marked_gravity_free(samples)
+    if marked.gravity_free:
+        return marked
     m = float(np.median(np.linalg.norm(samples.acc_s, axis=1)))  # m/s², as read
-    if m < GRAVITY_FREE_MPS2:
-        reason = f"the acceleration's median magnitude is {m:.3g} m/s²: no gravity in it, as in a 'linear acceleration'"
-        return replace(samples, gravity_free=reason)
     lo, hi = GRAVITY_BAND_G
     if lo * G_N <= m <= hi * G_N:
         return samples
