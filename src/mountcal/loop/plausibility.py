@@ -30,6 +30,7 @@ from mountcal.core.option_names import option
 from mountcal.core.pvalues import chi2_sf
 from mountcal.core.result import Calibration, Check, Convention
 from mountcal.io.heading_frame import heading_frame_check
+from mountcal.io.sensor_frame import several_frames_check
 from mountcal.io.sensor_logger import SIGN, acceleration_sign
 
 MAX_PARKED_SLOPE_DEG = 30.0
@@ -121,7 +122,8 @@ def convention_checks(conventions: Sequence[Convention]) -> tuple[Check, ...]:
         if c.name == "heading_reference" and c.how == "default" and c.value == "uphill":
             out.append(Check(c.name, False, f"assumed, not stated: {c.by}"))
     frame = heading_frame_check(conventions)  # β from an odometry heading in a frame not known to face east
-    return (*out, *([frame] if frame else []))
+    sensors = several_frames_check(conventions)  # IMU messages naming several frames: perhaps two sensors
+    return (*out, *(c for c in (frame, sensors) if c is not None))
 
 
 HANDEDNESS = ("handedness_stops", "handedness_turns")
