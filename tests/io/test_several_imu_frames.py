@@ -87,3 +87,15 @@ def test_one_frame_still_rotates(files: dict[str, Path], tmp_path: Path) -> None
     out = tmp_path / "vehicle.mcap"
     assert main(["rotate", str(PARKING), "--calibration", str(files["calibration"]), "-o", str(out), "-q"]) == 0
     assert out.stat().st_size > 0
+
+
+def test_a_stop_table_of_two_frames_keeps_them(files: dict[str, Path], tmp_path: Path) -> None:
+    """`mountcal stops` writes the frames into its column sensor_frame: the table is not confident either
+    (before, the table read back as one sensor's stops: confident, yaw −3.06°)."""
+    table, out = tmp_path / "stops.csv", tmp_path / "r.json"
+    assert main(["stops", str(files["log"]), "--protocol", str(PROTOCOL), "-o", str(table), "-q"]) == 0
+    assert main(["calibrate", str(table), "-o", str(out), "-q"]) == 0
+    doc = json.loads(out.read_text(encoding="utf-8"))
+    assert not doc["confident"] and any(c["name"] == "sensor_frame" and c["passed"] is False for c in doc["checks"])
+    (said,) = [c for c in doc["provenance"]["conventions"] if c["name"] == "sensor_frame"]
+    assert said["value"].startswith("several frames") and said["by"].endswith("column sensor_frame)")

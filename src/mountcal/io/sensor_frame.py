@@ -105,6 +105,31 @@ def several_frames_check(conventions: Iterable[Convention]) -> Check | None:
     )
 
 
+def several_column(conventions: Iterable[Convention]) -> str | None:
+    """A stop table's column ``sensor_frame``: written where the stops' samples named several frames (the
+    check above then fails on the table too), with what stated it; else None."""
+    frame = recorded_frame(conventions)
+    return None if frame is None or not several(frame) else f"{frame.value}; {frame.by}"
+
+
+def column_several(values: Sequence[object], where: str) -> Convention:
+    """The convention a stop table's column ``sensor_frame`` states (:func:`several_column`'s text)."""
+    from mountcal.core.errors import InputError
+    from mountcal.core.result import Convention
+
+    texts = sorted({str(v).strip() for v in values})
+    value, _, by = (texts[0] if len(texts) == 1 else "").partition("; ")
+    if not value.startswith(SEVERAL):
+        raise InputError(
+            where,
+            f"one text in the column {SENSOR_FRAME}, as `mountcal stops` writes it ('{SEVERAL}…; <by what>')",
+            ", ".join(map(repr, texts)) or "no value",
+            "Give every row the text the table was written with, or drop the column.",
+        )
+    said = f"{where}: column {SENSOR_FRAME}"
+    return Convention(SENSOR_FRAME, value, "stated", f"{by} ({said})" if by else said)
+
+
 def refuse_several(counts: Mapping[str, int], topic: str, where: str) -> None:
     """Refuse to apply one calibration to IMU messages naming several frames (``rotate``): the samples of a
     frame it was not made for would be written rotated as if they were."""
@@ -137,6 +162,7 @@ def several(convention: Convention) -> bool:
 __all__ = [
     "SENSOR_FRAME",
     "FrameIds",
+    "column_several",
     "frame_ids",
     "joined",
     "recorded_frame",
@@ -144,5 +170,6 @@ __all__ = [
     "sensor_frame_convention",
     "sensor_frame_note",
     "several",
+    "several_column",
     "several_frames_check",
 ]
