@@ -11,6 +11,7 @@ the bag, and a comma2k19 segment's objects (no suffix) were dropped without a wo
 
 from __future__ import annotations
 
+import contextlib
 import shutil
 from collections.abc import Iterator
 from pathlib import Path
@@ -202,3 +203,41 @@ def test_a_real_comma2k19_segment_in_the_bucket_is_one_log_as_on_disk(real_data:
     pd.testing.assert_frame_equal(
         comparable(remote.logs, "s3://folders/REAL"), comparable(local.logs, str(tmp_path / "REAL")), check_exact=True
     )
+
+
+def test_an_endpoint_changed_between_two_runs_in_one_process_is_the_one_reached(tmp_path: Path) -> None:
+    """A notebook points AWS_ENDPOINT_URL at another server between two runs: fsspec keys its filesystems by
+    their arguments, not by the environment, and reached the first server still (here stopped: a connection
+    error; were it running, its bucket would have been listed in place of the one asked for)."""
+    import os
+
+    server_module = pytest.importorskip("moto.server")
+    pytest.importorskip("s3fs")
+    keys = {"AWS_ACCESS_KEY_ID": "testing", "AWS_SECRET_ACCESS_KEY": "testing", "AWS_DEFAULT_REGION": "us-east-1"}
+    saved = {k: os.environ.get(k) for k in (*keys, "AWS_ENDPOINT_URL")}
+    first = server_module.ThreadedMotoServer(ip_address="127.0.0.1", port=0, verbose=False)
+    second = server_module.ThreadedMotoServer(ip_address="127.0.0.1", port=0, verbose=False)
+    try:
+        os.environ.update(keys)
+        first.start()
+        host, port = first.get_host_and_port()
+        os.environ["AWS_ENDPOINT_URL"] = f"http://{host}:{port}"
+        import s3fs
+
+        writer = s3fs.S3FileSystem(skip_instance_cache=True)
+        writer.mkdir("endpoints")
+        writer.pipe("endpoints/LOG/v01/a.mcap", PARKING.read_bytes())
+        assert [o.url for o in list_objects("s3://endpoints/LOG", {})] == ["s3://endpoints/LOG/v01/a.mcap"]
+        first.stop()
+        second.start()  # moto keeps one store per process: the second server holds the same bucket
+        host, port = second.get_host_and_port()
+        os.environ["AWS_ENDPOINT_URL"] = f"http://{host}:{port}"
+        assert [o.url for o in list_objects("s3://endpoints/LOG", {})] == ["s3://endpoints/LOG/v01/a.mcap"]
+    finally:
+        with contextlib.suppress(Exception):  # not started when the first part failed
+            second.stop()
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v

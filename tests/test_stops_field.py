@@ -14,10 +14,10 @@ from mountcal import cli
 from mountcal.apply.rotate_log import to_frame
 from mountcal.calibration.fit import calibrate
 from mountcal.cli.options import detection
-from mountcal.core.errors import NotEnoughInformation
+from mountcal.core.errors import InputError, NotEnoughInformation
 from mountcal.core.option_names import as_flags
 from mountcal.io.samples import Channel, Samples
-from mountcal.io.timestamps import MERGED, increasing_times
+from mountcal.io.timestamps import MERGED, increasing_times, time_ordered
 from mountcal.simulate.stops import ParkingLog, simulate_parking_log
 from mountcal.stops.detect import StopDetection, Thresholds, _cov_of_mean, detect_stops, find_stops, still_mask
 from mountcal.stops.headings import beta_from_heading, relax, stop_table, tabulate
@@ -86,6 +86,22 @@ def test_a_constant_rate_is_still_and_a_changing_one_is_not() -> None:
     stops = detect_stops(Samples(t, acc, gyro))
     assert len(stops) == 2
     assert stops[0].t_end_s < 40.5 and stops[1].t_start_s > 79.5
+
+
+def test_a_clock_that_restarts_is_refused_and_stray_or_short_steps_back_are_put_in_order() -> None:
+    """Steps back of under 10 s, or a few stray stamps far back, are put in order and counted; a clock
+    stepping back further, with samples behind it spanning more than 10 s (a restart, two recordings in
+    one file), would interleave two stretches of the log: refused, naming where (io.timestamps)."""
+    t = np.arange(6000) / 100.0  # 60 s
+    acc = np.tile([0.0, 0.0, 9.81], (t.size, 1))
+    for shifted in (np.where(t >= 30.0, t - 9.0, t), np.where(np.arange(t.size) % 1000 == 999, t - 40.0, t)):
+        s = time_ordered(Samples(shifted, acc, source="jitter.blf"))
+        assert np.all(np.diff(s.t_s) >= 0) and s.dropped["samples out of time order (put in order)"] >= 1
+    restarted = np.where(t >= 30.0, t - 29.0, t)
+    with pytest.raises(InputError, match=r"restart.blf: expected sample times on one clock that runs forward"):
+        time_ordered(Samples(restarted, acc, source="restart.blf"))
+    with pytest.raises(InputError, match=r"stepping back by 29\.0 s at sample 3001 \(t = 29\.990 s → 1\.000 s\)"):
+        detect_stops(Samples(restarted, acc, source="restart.blf"))
 
 
 def test_a_turn_at_a_steady_rate_away_from_the_bias_is_not_still() -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import random
 from pathlib import Path
 from typing import Any
@@ -223,3 +224,32 @@ def test_unparsable_and_missing_dbc_are_reported(tmp_path: Path) -> None:
         load_dbc(bad)
     with pytest.raises(InputError, match=r"no such file"):
         load_dbc(tmp_path / "none.dbc")
+
+
+@pytest.mark.parametrize(
+    ("role", "unit", "scale"),
+    [("ax", "m·s⁻²", 1.0), ("ax", "m/s²", 1.0), ("gx", "°·s⁻¹", math.pi / 180.0), ("gx", "° / s", math.pi / 180.0)],
+)
+def test_unit_spellings_with_typographic_characters(role: str, unit: str, scale: float) -> None:
+    """SI's typographic spellings (a middle dot, superscript minus): "m·s⁻²" was no known unit, and an
+    accelerometer so declared was refused."""
+    from mountcal.io.can.signals import si_scale
+
+    assert si_scale(role, unit) == pytest.approx((scale, 0.0))
+
+
+def test_a_utf8_dbc_is_read_as_utf8_and_a_cp1252_one_as_cp1252(tmp_path: Path) -> None:
+    """cantools reads a DBC as cp1252 by default: a UTF-8 file's "°/s" came out "Â°/s". A file that is valid
+    UTF-8 beyond ASCII is read as UTF-8 (with or without a byte-order mark); Vector's cp1252 stays cp1252."""
+    text = (
+        'VERSION ""\n\n\nNS_ :\n\nBS_:\n\nBU_:\n\n\nBO_ 16 IMU: 8 Vector__XXX\n'
+        ' SG_ GyroZ : 0|16@1- (0.01,0) [-300|300] "°/s" Vector__XXX\n'
+    )
+    for name, raw in (
+        ("utf8.dbc", text.encode("utf-8")),
+        ("bom.dbc", b"\xef\xbb\xbf" + text.encode("utf-8")),
+        ("cp1252.dbc", text.encode("cp1252")),
+    ):
+        path = tmp_path / name
+        path.write_bytes(raw)
+        assert load_dbc(path).get_message_by_name("IMU").get_signal_by_name("GyroZ").unit == "°/s", name

@@ -176,12 +176,72 @@ def test_mapping_file_with_axis_permutation(tmp_path: Path) -> None:
     assert speed.value.shape == (100,) and np.allclose(speed.value, 10.0)
 
 
+def _dbc_with_acc_unit(tmp_path: Path, unit: str) -> Path:
+    """The test DBC with the MM5.10's accelerometer signals (in g) declared in ``unit``: a DBC that lies."""
+    text = OWN_DBC.read_text(encoding="cp1252")
+    lines = [line.replace('"g"', f'"{unit}"') if " SG_ A" in line else line for line in text.splitlines(True)]
+    path = tmp_path / f"mm5_acc_{unit.replace('/', '_')}.dbc"
+    path.write_text("".join(lines), encoding="cp1252")
+    return path
+
+
 def test_mapping_as_dict_overrides_units_and_channel_argument_wins(tmp_path: Path) -> None:
     path = _write(tmp_path / "mm5.blf", _mm5_messages(100, channel=1))
     spec = {"channel": 5, "signals": {"ax": "MM5_10_TX2.AX1", "ay": "MM5_10_TX1.AY1", "az": "MM5_10_TX3.AZ"}}
     in_g = read_can(path, OWN_DBC, mapping=spec, channel=1)
-    as_is = read_can(path, OWN_DBC, mapping={**spec, "units": {"accel": "m/s^2"}}, channel=1)
-    np.testing.assert_allclose(in_g.acc_s, as_is.acc_s * G_N)
+    wrong_dbc = _dbc_with_acc_unit(tmp_path, "m/s^2")  # the frames are in g, as the mapping says
+    overridden = read_can(path, wrong_dbc, mapping={**spec, "units": {"accel": "g"}}, channel=1)
+    np.testing.assert_array_equal(in_g.acc_s, overridden.acc_s)
+    np.testing.assert_allclose(in_g.acc_s, _expected_acc(in_g.t_s), atol=1e-3)
+
+
+@pytest.mark.parametrize(
+    ("dbc_unit", "units", "fits", "said"),
+    [
+        ("m/s^2", {}, "g", "read in m/s^2 (the DBC unit of MM5_10_TX2.AX1, MM5_10_TX1.AY1, MM5_10_TX3.AZ)"),
+        ("g", {"accel": "m/s^2"}, "g", "read in m/s^2 (the mapping's units.accel)"),
+        ("mg", {}, "g", "read in mg (the DBC unit of"),
+        ("g", {"accel": "mg"}, "g", "read in mg (the mapping's units.accel)"),
+    ],
+)
+def test_an_acceleration_unit_gravity_contradicts_is_refused_naming_the_unit_that_fits(
+    tmp_path: Path, dbc_unit: str, units: dict[str, str], fits: str, said: str
+) -> None:
+    """Frames in g read in another unit (the DBC's, or the mapping's [units]) have a median magnitude far
+    from 1 g: refused, in the reader every command goes through (rotate wrote such samples, exit 0, and
+    stops/calibrate named --unit g, which a CAN log refuses), naming what stated the unit and the one that fits."""
+    path = _write(tmp_path / "mm5.blf", _mm5_messages(100))
+    dbc = OWN_DBC if dbc_unit == "g" else _dbc_with_acc_unit(tmp_path, dbc_unit)
+    mapping = {"units": units} if units else None
+    for read in (
+        lambda: read_can(path, dbc, mapping=mapping),
+        lambda: next(iter_can(path, dbc, mapping=mapping, max_samples=10)),
+    ):
+        with pytest.raises(InputError) as err:
+            read()
+        text = str(err.value)
+        assert said in text and "(0.5–1.5 g)" in text
+        assert f'accel = "{fits}"' in text and "--unit" not in text
+
+
+def test_acceleration_whose_unit_fits_none_names_the_dbc_factor(tmp_path: Path) -> None:
+    """A factor off by 2048 (raw counts declared in g) fits no unit: the refusal says so and points at the
+    factor; a median under 0.5 m/s² (a gravity-free signal) is marked, not refused, as for tables."""
+    db = cantools.database.load_file(OWN_DBC)
+    path = _write(tmp_path / "mm5.blf", _mm5_messages(50))
+    text = OWN_DBC.read_text(encoding="cp1252").replace("(0.000127465,-4.1768)", "(0.261048,-8554.09)")
+    counts = tmp_path / "counts.dbc"
+    counts.write_text(text, encoding="cp1252")
+    with pytest.raises(
+        InputError, match=r"No unit fits: .* decode to a median magnitude of 20\d\d g, where 1 g is 1 g"
+    ):
+        read_can(path, counts)
+    noise = np.random.default_rng(5).normal(0.0, 0.01, (50, 3))  # g: a gravity-free signal, mean ≈ 0
+    still = [_frame(db, "MM5_10_TX1", T0 + 0.01 * k, {"Yaw_Rate": 0.0, "AY1": noise[k, 1]}) for k in range(50)]
+    still += [_frame(db, "MM5_10_TX2", T0 + 0.01 * k + 1e-4, {"Roll_Rate": 0.0, "AX1": noise[k, 0]}) for k in range(50)]
+    still += [_frame(db, "MM5_10_TX3", T0 + 0.01 * k + 2e-4, {"AZ": noise[k, 2]}) for k in range(50)]
+    linear = read_can(_write(tmp_path / "linear.blf", still), OWN_DBC)
+    assert linear.gravity_free.startswith("the acceleration's median magnitude is 0.1")
 
 
 def test_a_left_handed_axis_map_is_a_statement_recorded_as_a_reflection(tmp_path: Path) -> None:
@@ -264,6 +324,27 @@ def test_missing_message_in_the_log(tmp_path: Path) -> None:
         r"\. Nearest ids to MM5_10_TX3's: 0x343",
     ):
         read_can(path, OWN_DBC, mapping=spec)
+
+
+def test_a_message_sent_with_the_other_id_kind_is_named_with_the_placement_that_reads_it(tmp_path: Path) -> None:
+    """The IMU's 0x576 sent as a 29-bit 0x00000576 (a gateway, a logger set to extended ids): the refusal
+    listed the log's nearest 11-bit ids (0x343) and not the frames themselves; it names them and the
+    mapping's [messages] placement, which then reads them."""
+    messages = _mm5_messages(50)
+    for m in messages:
+        if m.arbitration_id == 0x576:
+            m.is_extended_id = True
+    path = _write(tmp_path / "tx3_extended.blf", messages)
+    spec: dict[str, Any] = {"signals": {"ax": "MM5_10_TX2.AX1", "ay": "MM5_10_TX1.AY1", "az": "MM5_10_TX3.AZ"}}
+    with pytest.raises(InputError) as err:
+        read_can(path, OWN_DBC, mapping=spec)
+    assert (
+        "MM5_10_TX3's id is in the log as a 29-bit id, 0x00000576 (50 frames), where the DBC has an 11-bit 0x576"
+        in str(err.value)
+    )
+    assert "[messages] MM5_10_TX3 = { id = 0x576, extended = true }" in str(err.value)
+    placed = read_can(path, OWN_DBC, mapping={**spec, "messages": {"MM5_10_TX3": {"id": 0x576, "extended": True}}})
+    np.testing.assert_allclose(placed.acc_s, _expected_acc(placed.t_s), atol=1e-3)
 
 
 def test_wrong_dbc_lists_ids_seen_and_expected(tmp_path: Path) -> None:

@@ -106,3 +106,41 @@ def test_a_compressed_log_is_refused_naming_the_command_that_gives_the_file_insi
     assert "real.csv.gz" in err and "gzip -dc real.csv.gz > real.csv" in err, err
     (tmp_path / "real.csv").write_bytes(gzip.decompress(gz.read_bytes()))  # what that command writes
     assert main(["calibrate", str(tmp_path / "real.csv"), "-o", str(tmp_path / "r.json")]) == 0
+
+
+@pytest.mark.parametrize(
+    ("suffix", "what"), [(".MFC", "compressed"), (".MFE", "encrypted"), (".mfm", "compressed and")]
+)
+def test_a_canedge_packed_log_is_refused_naming_what_unpacks_it(
+    tmp_path: Path, refused: Refused, suffix: str, what: str
+) -> None:
+    """A CANedge log compressed or encrypted was refused as any unknown suffix: "Convert it, or name it by its
+    format" — and named .MF4 it would still be packed. The refusal says what it is and what unpacks it."""
+    log = tmp_path / f"00000001{suffix}"
+    log.write_bytes(b"\x00" * 64)  # its content is not looked at: the suffix decides
+    err = refused(["stops", str(log), "-o", str(tmp_path / "s.csv")], tmp_path / "s.csv")
+    assert f"It is a CANedge log, {what}" in err and "mdf2finalized" in err and "name it by its format" not in err
+
+
+def test_a_fleet_folder_counts_a_canedge_packed_log_whatever_its_name(tmp_path: Path) -> None:
+    """fleet --layout folders found only files a reader takes, and CANedge splits by their split names: a
+    packed log renamed (van1/b.MFC) was never seen, not counted, not reported. It is one failed log now."""
+    import contextlib
+    import io
+
+    van = tmp_path / "fleet" / "van1"
+    van.mkdir(parents=True)
+    shutil.copy(DATA / "parking.blf", van / "a.blf")
+    shutil.copy(DATA / "parking_protocol.csv", van / "a.blf.protocol.csv")
+    (van / "b.MFC").write_bytes(b"\x00" * 64)
+    (van / "c.MFE").write_bytes(b"\x00" * 64)
+    out = tmp_path / "fleet.parquet"
+    can = ["--dbc", str(DATA / "imu_mm5_10.dbc"), "--mapping", str(DATA / "imu_mm5_10.toml")]
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        code = main(["fleet", str(tmp_path / "fleet"), "--layout", "folders", *can, "--workers", "1", "-o", str(out)])
+    logs = pd.read_parquet(out).set_index("log")
+    assert code == 0 and len(logs) == 3, err.getvalue()
+    assert logs.loc[str(van / "a.blf"), "status"] == "ok"
+    for name in ("b.MFC", "c.MFE"):
+        assert logs.loc[str(van / name), "status"] == "failed" and "CANedge log" in logs.loc[str(van / name), "error"]

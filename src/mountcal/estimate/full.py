@@ -37,8 +37,9 @@ NULL_TOL = 1e-10  # relative eigenvalue of the normalised Fisher information cou
 
 
 def known_terms() -> tuple[str, ...]:
-    """Every term a model may name. "surface" (a random road tilt per stop) lives in the stop covariances."""
-    return (*BASE, *registry.registered(), "surface")
+    """Every term a model may name. "surface" (a random road tilt per stop) and "heading_scatter" (an error of each
+    stop's own heading) live in the stop covariances."""
+    return (*BASE, *registry.registered(), "surface", "heading_scatter")
 
 
 @dataclass(frozen=True)
@@ -220,8 +221,7 @@ class StaticModel:
         da = np.zeros((n, 3, len(self.sites)))
         da[np.arange(n), :, self.site_index] = df_da @ rt.T
         blocks = [np.concatenate([rot, da], axis=2)]
-        df_db = g * np.sin(alpha)[:, None] * np.column_stack([-np.sin(beta), -np.cos(beta), np.zeros(n)])
-        db = df_db @ rt.T
+        db = _heading_derivative(alpha, beta, g) @ rt.T
         for effect, values in zip(self.chain, self._values(state), strict=True):
             p, d_values, d_p = effect.apply(self.table, values, p, g)
             if d_p is not None:
@@ -230,6 +230,13 @@ class StaticModel:
             blocks.append(d_values)
         jac = -(self.whiten @ np.concatenate(blocks, axis=2)).reshape(3 * n, -1)  # matmul: 5× einsum here
         return jac, -np.einsum("nij,nj->ni", self.whiten, db).ravel()
+
+    def heading_tangents(self, state: State) -> FloatArray:
+        """Each stop's prediction's change per radian of its own heading, (n, 3), sensor frame: where an error in
+        that heading moves the stop (g·sin α long, horizontal in the vehicle frame, through every effect)."""
+        alpha, _, _ = self._base(state)
+        d_base = _heading_derivative(alpha, self.beta(state), state.g0_mps2) @ state.rot_vs.inv().as_matrix().T
+        return self.carry(state, d_base)
 
     def retract(self, state: State, step: np.ndarray) -> State:
         k = 3 if self.fit_yaw else 2
@@ -415,6 +422,12 @@ def _force(alpha: FloatArray, beta: FloatArray, g: float) -> FloatArray:
     """f_v for per-stop slopes α_i, shape (n, 3) (docs/conventions.md §2)."""
     sa, ca = np.sin(alpha), np.cos(alpha)
     return g * np.column_stack([sa * np.cos(beta), -sa * np.sin(beta), ca])
+
+
+def _heading_derivative(alpha: FloatArray, beta: FloatArray, g: float) -> FloatArray:
+    """∂f_v/∂β per stop, shape (n, 3)."""
+    tangent = np.column_stack([-np.sin(beta), -np.cos(beta), np.zeros(len(beta))])
+    return np.asarray(g * np.sin(alpha)[:, None] * tangent, dtype=np.float64)
 
 
 def parameter_values(state: State, names: tuple[str, ...]) -> FloatArray:

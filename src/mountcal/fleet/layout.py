@@ -78,10 +78,9 @@ def natural_key(name: str | PurePath) -> tuple[tuple[int, int | str], ...]:
 
 
 def unreadable_split(name: str) -> bool:
-    """Whether a file name is a CANedge split mountcal cannot read (compressed or encrypted): the
-    layout counts it instead of leaving it unseen."""
-    match = SPLIT.match(name)
-    return match is not None and match["ext"].lower() in UNREADABLE_SPLITS
+    """Whether a file is a CANedge log mountcal cannot read (compressed or encrypted), by its suffix
+    whatever its name (a split renamed stays one): the layout counts it instead of leaving it unseen."""
+    return PurePath(name).suffix.lower().lstrip(".") in UNREADABLE_SPLITS
 
 
 def canedge_split(found: Found) -> re.Match[str] | None:

@@ -98,9 +98,14 @@ def filesystem(url: str, options: Mapping[str, Any]) -> tuple[Any, str]:
     """
     import fsspec
 
+    key = (url.split("://", 1)[0], repr(sorted(options.items())), _storage_environment())
     try:
-        fs, path = fsspec.core.url_to_fs(url, **dict(options))  # fsspec is untyped: the filesystem stays Any
-        return fs, str(path)
+        # fsspec reuses a filesystem made with the same arguments, whatever the environment now says: a
+        # notebook that points AWS_ENDPOINT_URL (or a profile, or keys) elsewhere between two runs would
+        # list the old server's bucket. A filesystem is reused here only where the environment is the same.
+        fs, path = fsspec.core.url_to_fs(url, skip_instance_cache=True, **dict(options))
+        held = _FILESYSTEMS.setdefault(key, fs)  # fsspec is untyped: the filesystem stays Any
+        return held, str(path)
     except ImportError as err:
         raise InputError(
             url,
@@ -112,6 +117,14 @@ def filesystem(url: str, options: Mapping[str, Any]) -> tuple[Any, str]:
         raise InputError(
             url, "storage options the protocol takes", str(err), f"Check {STORAGE_OPTION} and the URL."
         ) from err
+
+
+_FILESYSTEMS: dict[tuple[Any, ...], Any] = {}
+_ENVIRONMENT_PREFIXES = ("AWS_", "FSSPEC_", "GOOGLE_", "AZURE_")  # where fsspec's protocols read settings
+
+
+def _storage_environment() -> tuple[tuple[str, str], ...]:
+    return tuple(sorted((k, v) for k, v in os.environ.items() if k.startswith(_ENVIRONMENT_PREFIXES)))
 
 
 def storage_error(url: str, err: BaseException, doing: str) -> InputError:

@@ -79,9 +79,20 @@ def check_named_for_content(path: Path) -> None:
     )
 
 
+# CANedge's own packed logs: an MF4 compressed, encrypted, or both, that CSS Electronics' tools unpack
+CANEDGE_PACKED = {".mfc": "compressed", ".mfe": "encrypted", ".mfm": "compressed and encrypted"}
+
+
 def decompress_hint(path: Path) -> str:
-    """How to get at the log inside a file whose suffix names an archive ("" for other suffixes)."""
+    """How to get at the log inside a file whose suffix names an archive, or a CANedge log compressed or
+    encrypted ("" for other suffixes)."""
     suffix = path.suffix.lower()
+    if suffix in CANEDGE_PACKED:
+        return (
+            f"It is a CANedge log, {CANEDGE_PACKED[suffix]} ({path.suffix}): turn it into an MF4 with CSS "
+            "Electronics' MF4 converters (mdf2finalized; an encrypted log needs the device's password file) and "
+            "give the .MF4."
+        )
     return _decompress(path, suffix, path.with_suffix("")) if suffix in DECOMPRESS else ""
 
 
@@ -92,4 +103,4 @@ def _decompress(path: Path, suffix: str, inner: Path) -> str:
     )
 
 
-__all__ = ["DECOMPRESS", "SIGNATURES", "check_named_for_content", "content_format", "decompress_hint"]
+__all__ = ["CANEDGE_PACKED", "DECOMPRESS", "SIGNATURES", "check_named_for_content", "content_format", "decompress_hint"]

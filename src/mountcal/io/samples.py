@@ -22,6 +22,10 @@ if TYPE_CHECKING:
 
 FloatArray = NDArray[np.float64]
 
+# what gravity does to a log's acceleration, for every reader that checks the unit it read in (tables, CAN)
+GRAVITY_FREE_MPS2 = 0.5  # a median |a| below this has no gravity in it (g read as m/s² gives ≈ 1)
+GRAVITY_BAND_G = (0.5, 1.5)  # the median |a| of samples with gravity: at rest 1 g, driving close to it
+
 
 @dataclass(frozen=True)
 class Channel:
@@ -159,9 +163,6 @@ def summary(samples: Samples, fmt: str, kind: str) -> LogSummary:
     rate = (n - 1) / dur if dur > 0 else 0.0
     fields = ("ax", "ay", "az", *(("gx", "gy", "gz") if samples.gyro_s is not None else ()), *samples.channels)
     return LogSummary(samples.source, fmt, dur, (Stream("samples", kind, n, rate, fields),), samples.notes)
-
-
-GRAVITY_FREE_MPS2 = 0.5  # a median |a| below this has no gravity in it (g read as m/s² gives ≈ 1)
 
 
 def marked_gravity_free(samples: Samples) -> Samples:

@@ -12,6 +12,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from mountcal.core.errors import InputError
 from mountcal.io.samples import Channel, FloatArray, Samples
 
 MERGED = "samples merged (duplicate timestamp)"
@@ -47,12 +48,24 @@ def increasing_times(samples: Samples) -> Samples:
     )
 
 
+RESTART_S = 10.0  # a clock stepping back further, for longer, is not jitter: a restart, or two recordings
+
+
 def time_ordered(samples: Samples) -> Samples:
     """The samples in time order (stable), equal stamps kept; channels made strictly increasing.
 
     Statistics of the samples themselves (a quantised sensor's codes) need every sample as
     logged; only the order is fixed here, and counted.
+
+    Raises
+    ------
+    InputError
+        The clock steps back by more than 10 s and a run of samples behind it spans more than 10 s of its own:
+        a restarted clock or two recordings in one file, whose samples put in order would interleave two
+        stretches of the drive (stops would be searched in a mixture). A step back of a second (a clock
+        synchronised, jitter) is put in order and counted, as before.
     """
+    check_one_clock(samples.t_s, samples.source)
     dropped = dict(samples.dropped)
     channels = {}
     for key, ch in samples.channels.items():
@@ -71,6 +84,36 @@ def time_ordered(samples: Samples) -> Samples:
         gyro_s=None if samples.gyro_s is None else samples.gyro_s[order],
         channels=channels,
         dropped=dropped,
+    )
+
+
+def check_one_clock(t: FloatArray, source: str) -> None:
+    """Refuse times whose clock restarts (see :func:`time_ordered`), naming where it steps back."""
+    if t.size < 2:
+        return
+    latest = np.maximum.accumulate(t)
+    behind = t < latest - RESTART_S
+    if not behind.any():
+        return
+    # runs of consecutive samples behind: a restart is one long run, stray stamps are single samples
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], behind.astype(np.int8), [0]])))
+    starts, ends = edges[::2], edges[1::2]
+    spans = np.maximum.reduceat(np.where(behind, t, -np.inf), starts) - np.minimum.reduceat(
+        np.where(behind, t, np.inf), starts
+    )  # each run's span: a segment from a run's start to the next run's holds that run alone
+    longest = int(np.argmax(spans))
+    if spans[longest] <= RESTART_S:
+        return  # stray stamps, or a short stretch: put in order and counted
+    first, span = int(starts[longest]), float(spans[longest])
+    step = float(latest[first - 1] - t[first])
+    raise InputError(
+        source,
+        "sample times on one clock that runs forward (steps back under 10 s, or a few stray stamps, are put in order)",
+        f"the clock stepping back by {step:.1f} s at sample {first + 1} (t = {latest[first - 1]:.3f} s → "
+        f"{t[first]:.3f} s), and {int(ends[longest] - first)} samples over {span:.0f} s behind the times before it: a "
+        "restarted clock, or two recordings in one file, whose samples put in order would interleave",
+        "Split the log where its clock steps back and give each part on its own (their times overlap: they are "
+        "not splits of one log), or fix the logger's time source.",
     )
 
 

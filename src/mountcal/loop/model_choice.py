@@ -22,10 +22,11 @@ from scipy.spatial.transform import Rotation
 
 from mountcal.core.errors import FitFailed
 from mountcal.core.findings import Finding
-from mountcal.core.pvalues import chi2_logsf, nested_test, unexplained
+from mountcal.core.pvalues import FAMILY_ALPHA, chi2_logsf, nested_test, unexplained
 from mountcal.core.result import Declined, EffectValue
 from mountcal.estimate import effects as registry
 from mountcal.estimate import full
+from mountcal.loop import heading_scatter
 from mountcal.loop.diagnose import (
     analyse,
     competing_explanations,
@@ -58,6 +59,8 @@ def candidates(table: StopTable, terms: tuple[str, ...], gravity_known: bool) ->
     out = [e.name for e in registry.registered().values() if e.candidate(table, gravity_known)]
     if table.cov_s is not None and _moved(table):
         out.append("surface")
+    if heading_scatter.candidate(table):
+        out.append(heading_scatter.NAME)
     return [c for c in out if c not in terms]
 
 
@@ -130,6 +133,8 @@ def close_the_loop(
         step = _next_step(steps[-1], table, g_mps2, gravity_known, alpha, declined)
         if step is None:
             step, analysed = _named_by_residual(steps[-1], len(table), g_mps2, gravity_known, alpha, declined)
+        if step is None:
+            step, analysed = _scatter_named_by_residual(steps[-1], len(table), g_mps2, analysed, declined)
         took = time.perf_counter() - t0
         log.log(
             level,
@@ -198,6 +203,19 @@ def _next_step(
                 continue
             if option is not None:
                 options.append(option)
+            continue
+        if name == heading_scatter.NAME:
+            if heading_scatter.found_structured(declined):
+                continue
+            try:
+                scatter = heading_scatter.heading_scatter_step(cur, g, k)
+            except FitFailed as err:
+                _decline(declined, name, f"its fit failed ({err}): {_why_adrift(cur)}", len(cur.excluded))
+                continue
+            if isinstance(scatter, str):
+                _decline(declined, name, scatter, len(cur.excluded))
+            elif scatter is not None:
+                options.append(scatter)
             continue
         effect = registry.get(name)
         terms = (*cur.terms, *(r for r in effect.requires if r not in cur.terms), name)
@@ -327,6 +345,36 @@ def _named_by_residual(
         )
         return Step(name, reason, terms, cur.excluded, cur.table, f, _loo_rms(cur)), None
     return None, findings
+
+
+def _scatter_named_by_residual(
+    cur: Step, n_rows: int, g: float, findings: list[Finding] | None, declined: list[Declined]
+) -> tuple[Step | None, list[Finding] | None]:
+    """Each stop's heading error, where the final residual names it ("single stops turned about the vertical") and
+    its likelihood ratio passes at the residual tests' own level. Headings set by eye are never exact: the
+    Bonferroni cost of every candidate can hide an error the residual still shows, and the noise model adds no
+    term to the prediction (the angles stay; yaw's σ takes the headings' scatter in)."""
+    if (
+        heading_scatter.NAME in cur.terms
+        or not heading_scatter.candidate(cur.table)
+        or heading_scatter.found_structured(declined)
+    ):
+        return None, findings
+    findings = analyse(cur.table, cur.fit, _rows(cur, n_rows)) if findings is None else findings
+    if "stop_heading" not in {f.test for f in unexplained(findings)}:
+        return None, findings
+    try:
+        scatter = heading_scatter.heading_scatter_step(cur, g, 1)
+    except FitFailed:
+        return None, findings
+    if isinstance(scatter, str):
+        _decline(declined, heading_scatter.NAME, scatter, len(cur.excluded))
+    if scatter is None or isinstance(scatter, str) or scatter[0] >= np.log(FAMILY_ALPHA):
+        return None, findings
+    step = scatter[1]
+    return replace(
+        step, reason=f"named by the residual test (single stops turned about the vertical); {step.reason}"
+    ), None
 
 
 def _why_adrift(cur: Step) -> str:
@@ -487,7 +535,7 @@ def _without_beta(state: full.State, i: int) -> full.State:
     return replace(state, beta_rad=np.delete(state.beta_rad, i))
 
 
-NOISE_MODEL_STEPS = ("outlier", "surface")
+NOISE_MODEL_STEPS = ("outlier", "surface", heading_scatter.NAME)
 
 
 def _among_exclusive(best: Step, rivals: list[Step], g: float, declined: list[Declined]) -> Step:

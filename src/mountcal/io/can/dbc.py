@@ -54,15 +54,16 @@ def _load_cached(path: str, mtime_ns: int, size: int) -> Any:
     import cantools
 
     errors: list[str] = []
+    encoding = _text_encoding(path)
     with _quiet_cantools():
         for strict in (True, False):
             try:
-                return cantools.database.load_file(path, strict=strict)
+                return cantools.database.load_file(path, encoding=encoding, strict=strict)
             except Exception as err:  # cantools raises its own errors, ValueError, KeyError, ...
                 errors.append(f"{type(err).__name__}: {err}")
                 last = err
         if path.lower().endswith(".dbc"):
-            text = Path(path).read_text(encoding="cp1252", errors="replace")  # as cantools reads it
+            text = Path(path).read_text(encoding=encoding or "cp1252", errors="replace")  # as cantools reads it
             cleaned, dropped = _NAMELESS_COMMENT.subn("", text)
             if dropped:
                 try:
@@ -76,6 +77,26 @@ def _load_cached(path: str, mtime_ns: int, size: int) -> Any:
         "; ".join(dict.fromkeys(errors)),
         "Fix the line cantools names (or remove it if it is only a comment) and try again.",
     ) from last
+
+
+def _text_encoding(path: str) -> str | None:
+    """The encoding of a DBC's text: UTF-8 where the file is valid UTF-8 beyond ASCII (a unit written
+    ``°/s`` or ``m/s²`` by a tool of today), else None, cantools' default for DBC (cp1252, Vector's).
+
+    Read as cp1252, UTF-8's ``°`` is ``Â°``: ``°/s`` became no known unit and the gyro was refused for a
+    unit the DBC states plainly. A cp1252 file with such characters is not valid UTF-8 (``°`` is the lone
+    byte 0xB0), so the two cannot be confused; files of other formats keep cantools' own encoding.
+    """
+    if not path.lower().endswith(".dbc"):
+        return None
+    raw = Path(path).read_bytes()
+    if raw.isascii():
+        return None
+    try:
+        raw.decode("utf-8")
+    except UnicodeDecodeError:
+        return None
+    return "utf-8-sig" if raw.startswith(b"\xef\xbb\xbf") else "utf-8"
 
 
 def load_dbcs(paths: str | Path | Sequence[str | Path]) -> Any:

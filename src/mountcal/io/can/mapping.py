@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 
 from mountcal.core import paths
 from mountcal.core.errors import InputError
+from mountcal.core.option_names import option
 from mountcal.io.can.dbc import frame_id_text, id_match, load_dbcs
 from mountcal.io.can.files import iter_frames, log_format
 from mountcal.io.can.mismatch import SHOWN, Want, log_mismatch
@@ -118,6 +119,10 @@ class Plan:
     axes: NDArray[np.float64]  # (3, 3): sensor axis i = axes[i] · device axes
     axis_map: str
     channel: int | None
+    # the accelerometer's signals as read: (label, unit, what states the unit, scale to m/s²), ax, ay, az
+    acc_units: tuple[tuple[str, str, str, float], ...] = ()
+    notes: tuple[str, ...] = ()  # what the plan left out and says (an auto-detected channel's unknown unit)
+    units: tuple[str, str] = ("", "")  # the units the signals are read in, and what stated them
 
     def sources(self) -> list[Source]:
         return self.imu + [a[0] for a in self.aux.values()]
@@ -372,16 +377,24 @@ def resolve(db: Any, text: Any, role: str, present: Presence, where: str) -> _Re
     return _Ref(messages[0], signal)
 
 
+def _unit_of(ref: _Ref, role: str, units: Mapping[str, Any]) -> tuple[str, str]:
+    """The unit a signal is read in and what states it: the mapping's ``[units]``, else the DBC."""
+    kind = UNIT_KIND[role]
+    key = "accel" if kind == "accel" else "gyro" if kind == "gyro" else role
+    given = units.get(key)
+    if given is not None:
+        return str(given), f"the mapping's units.{key}"
+    return str(ref.message.get_signal_by_name(ref.signal).unit or ""), f"the DBC unit of {ref.label}"
+
+
 def _unit_scale(ref: _Ref, role: str, units: Mapping[str, Any], where: str) -> tuple[float, float]:
     """Scale and offset from the signal's unit (the mapping's, else the DBC's) to SI."""
     kind = UNIT_KIND[role]
     key = "accel" if kind == "accel" else "gyro" if kind == "gyro" else role
-    given = units.get(key)
-    unit = str(given) if given is not None else str(ref.message.get_signal_by_name(ref.signal).unit or "")
+    unit, source = _unit_of(ref, role, units)
     scale = si_scale(role, unit)
     if scale is not None:
         return scale
-    source = "the mapping's units." + key if given is not None else f"the DBC unit of {ref.label}"
     raise InputError(
         where,
         f"{'an acceleration' if kind == 'accel' else 'a ' + kind} unit ({UNIT_HINT[kind]}) for {role}",
@@ -409,6 +422,7 @@ def build_plan(
         source.signals.append(ref.signal)
         columns.append((sources.index(source), ref.signal, _unit_scale(ref, role, units, where)[0]))
     aux: dict[str, tuple[Source, str, float, float]] = {}
+    notes: list[str] = []
     for role, key in AUX_KEYS.items():
         if role in refs:
             try:
@@ -416,7 +430,16 @@ def build_plan(
             except InputError:
                 if explicit:
                     raise
-                continue  # an auto-detected optional channel with an unknown unit is left out
+                # an auto-detected optional channel with an unknown unit is left out, and said
+                unit, _ = _unit_of(refs[role], role, units)
+                kind = UNIT_KIND[role]
+                first = UNIT_HINT[kind].split(",")[0].split(" ")[0]
+                notes.append(
+                    f"{role} not read: {refs[role].label} was found by its name, but its DBC unit {unit!r} is no "
+                    f"{kind} unit ({UNIT_HINT[kind]}); if that is the {role}, state its unit in the CAN mapping's "
+                    f'[units] table: {role} = "{first}" (or {UNIT_HINT[kind]}; {option("mapping")})'
+                )
+                continue
             source = Source(refs[role].message, _mux_of(refs[role]), [refs[role].signal])
             aux[key] = (source, refs[role].signal, scale, offset)
     _assign_validity(sources + [a[0] for a in aux.values()], spec.get("valid"), db, where, present)
@@ -425,7 +448,29 @@ def build_plan(
     placements = _placements(spec.get("messages", {}), db, where)
     for source in sources + [a[0] for a in aux.values()]:
         source.place(placements, channel)
-    return Plan(where, db, sources, columns, has_gyro, aux, aux_required, axes, axis_map, channel)
+    acc_units = tuple((refs[r].label, *_unit_of(refs[r], r, units), columns[i][2]) for i, r in enumerate(ACCEL_ROLES))
+    plan = Plan(where, db, sources, columns, has_gyro, aux, aux_required, axes, axis_map, channel, acc_units)
+    plan.notes = tuple(notes)
+    read = [r for r in (*ACCEL_ROLES, *(GYRO_ROLES if has_gyro else ())) if r in refs]
+    read += [r for r, k in AUX_KEYS.items() if k in aux]
+    plan.units = _units_said(refs, read, units)
+    return plan
+
+
+def _units_said(refs: dict[str, _Ref], roles: Sequence[str], units: Mapping[str, Any]) -> tuple[str, str]:
+    """The units the signals were read in, grouped (``ax, ay, az: g; gx, gy, gz: deg/s; …``), and what
+    stated them (the DBC, or the mapping's [units] for some)."""
+    grouped: dict[str, list[str]] = {}
+    overridden: list[str] = []
+    for role in roles:
+        unit, by = _unit_of(refs[role], role, units)
+        grouped.setdefault(unit, []).append(role)
+        if by.startswith("the mapping") and by not in overridden:
+            overridden.append(by)
+    value = "; ".join(f"{', '.join(rs)}: {unit}" for unit, rs in grouped.items())
+    by = "the DBC's signal units" + (", and " + ", ".join(overridden) if overridden else "")
+    checked = "converted to SI; checked: the accelerometer's against gravity, the gyro's where stops or a drive show it"
+    return value, f"{by} ({checked})"
 
 
 def _placements(table: Any, db: Any, where: str) -> dict[str, tuple[int | None, bool | None, int | None]]:

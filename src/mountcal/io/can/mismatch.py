@@ -98,6 +98,15 @@ def _closest(want: Want, stats: dict[tuple[int, int, bool], _IdStat]) -> str:
     if elsewhere:
         where = ", ".join(f"channel {c} ({n} frames)" for c, n in sorted(elsewhere)[:SHOWN])
         return f". {want.name} is on {where}"
+    other_kind = sum(e.count for (_, i, x), e in stats.items() if x != want.extended and i == want.value)
+    if other_kind and want.mask == 0x1FFFFFFF:  # the same number as the other id kind: 0x070 sent as 0x00000070
+        kind, theirs = ("an 11", "a 29") if want.extended else ("a 29", "an 11")
+        return (
+            f". {want.name}'s id is in the log as {kind}-bit id, "
+            f"{frame_id_text(want.value, not want.extended)} ({other_kind} frames), where the DBC has {theirs}-bit "
+            f"{frame_id_text(want.value, want.extended)}: if those are its frames, place it in the mapping, "
+            f"[messages] {want.name} = {{ id = 0x{want.value:X}, extended = {str(not want.extended).lower()} }}"
+        )
     same_kind = sorted({(i, x) for (_, i, x) in stats if x == want.extended}, key=lambda k: abs(k[0] - want.value))
     if not same_kind:
         return f". No {'29' if want.extended else '11'}-bit id in the log for {want.name}"

@@ -1,8 +1,8 @@
 """DBC signals in SI: the unit spellings of CAN databases and the message lookup, for reader and writer.
 
-A signal's unit is normalised (lower case, spaces removed, ``²`` → ``^2``, ``°`` → ``deg``) and
-looked up per kind of quantity; the reader multiplies by the scale and adds the offset, the writer
-inverts that. A message is named by its name (possibly defined twice) or its id.
+A signal's unit is normalised (lower case, spaces and ``·`` removed, ``⁻²`` → ``^-2``, ``²`` → ``^2``,
+``°`` → ``deg``) and looked up per kind of quantity; the reader multiplies by the scale and adds the
+offset, the writer inverts that. A message is named by its name (possibly defined twice) or its id.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from typing import Any
 # not imported from there, which would load scipy into every CAN read
 G_N = 9.80665
 
-# unit spellings (lower case, spaces removed, ² → ^2, ° → deg) → (scale, offset) to SI
+# unit spellings (as normalise_unit leaves them) → (scale, offset) to SI
 UNITS: dict[str, dict[str, tuple[float, float]]] = {
     "accel": {
         **dict.fromkeys(("m/s^2", "m/s2", "m/s/s", "ms^-2", "ms-2", "mps2", "m/sec^2", "m/sec2"), (1.0, 0.0)),
@@ -85,7 +85,8 @@ def message_refs(db: Any, text: str) -> list[Any]:
 
 def normalise_unit(unit: str) -> str:
     """A unit spelling as :data:`UNITS` lists it."""
-    return unit.strip().lower().replace(" ", "").replace("²", "^2").replace("°", "deg")
+    text = unit.strip().lower().replace(" ", "").replace("·", "").replace("⁻²", "^-2").replace("⁻¹", "^-1")
+    return text.replace("²", "^2").replace("°", "deg")
 
 
 def si_scale(role: str, unit: str) -> tuple[float, float] | None:

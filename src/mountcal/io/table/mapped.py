@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 from mountcal.core.errors import InputError
 from mountcal.core.option_names import option
 from mountcal.io.inputs import check_parquet_rows, check_regular_file, max_rows, too_many_rows
-from mountcal.io.samples import Channel, FloatArray, Samples, marked_gravity_free
+from mountcal.io.samples import GRAVITY_BAND_G, Channel, FloatArray, Samples, marked_gravity_free
 from mountcal.io.table.layout import ACC, CHANNELS, G_N, GYRO, TIME_UNITS, Layout
 from mountcal.io.table.time_unit import TYPED, iso_seconds, typed_seconds
 from mountcal.io.whole import parquet_end, text_end, text_source
@@ -29,7 +29,6 @@ from mountcal.io.whole import parquet_end, text_end, text_source
 PARQUET = (".parquet", ".pq")
 _COMMA_DECIMAL = re.compile(r"[-+]?\d+,\d+(?:[eE][-+]?\d+)?")
 _DOT_DECIMAL = re.compile(r"[-+]?\d*\.\d+(?:[eE][-+]?\d+)?")
-GRAVITY_BAND_G = (0.5, 1.5)  # the median |a| of samples with gravity: at rest 1 g, driving close to it
 _DROPPED = "rows with missing or non-numeric values"
 
 
