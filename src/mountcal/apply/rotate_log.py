@@ -74,6 +74,7 @@ from mountcal.io.reader import CHUNK_SAMPLES, LogOptions
 from mountcal.io.registry import reader_for
 from mountcal.io.ros2.imu import ImuMessages
 from mountcal.io.samples import Samples
+from mountcal.io.sensor_frame import refuse_several
 from mountcal.io.sensor_logger import sign_for_calibration
 from mountcal.io.table.write import CsvSamples, ParquetSamples
 from mountcal.io.whole import Cut, reading
@@ -304,6 +305,7 @@ def _rotate_stream(
     first = next(chunks, None)
     if first is None:
         raise InputError(" + ".join(map(str, files)), "IMU samples", "none", "Check the log and the topic/DBC.")
+    _refuse_gravity_free(first)
     acc_to_vehicle(first.acc_s, cal, check_units=True, level_only=checked.level_only)  # g units refused before output
     flip, said = sign_for_calibration(first, cal.provenance.conventions)  # a phone app's sign (Sensor Logger)
     checked = replace(checked, warnings=(*checked.warnings, said)) if said else checked
@@ -314,8 +316,12 @@ def _rotate_stream(
         # one chunk in flight keeps memory bounded.
         overlap = helpers_allowed()
         pending: Future[None] | None = None
+        frames: Counter[str] = Counter()  # the IMU messages' frame names so far: one calibration, one frame
         try:
             for chunk in _chain(first, chunks):
+                if chunk.frame_ids is not None:
+                    frames.update(dict(chunk.frame_ids.counts))
+                    refuse_several(frames, chunk.frame_ids.topic, chunk.source)
                 rows = tally.rotate(chunk, cal, checked.level_only)
                 if pending is not None:
                     pending.result()
@@ -433,6 +439,17 @@ def _descriptions(cal: Calibration) -> dict[str, str]:
 # --------------------------------------------------------------------------- MCAP copied through
 
 
+def _refuse_gravity_free(samples: Samples) -> None:
+    """Refuse an acceleration marked gravity-free where it was read: the output would call it specific force."""
+    if samples.gravity_free:
+        raise InputError(
+            samples.source,
+            "the specific force (an accelerometer's reading, gravity included), written as the vehicle frame's",
+            f"an acceleration without gravity: {samples.gravity_free}",
+            "Rotate the raw accelerometer (with g); mountcal writes no gravity-free acceleration as specific force.",
+        )
+
+
 def _rotate_mcap_copy(
     src: Path,
     cal: Calibration,
@@ -450,6 +467,8 @@ def _rotate_mcap_copy(
     try:
         first = chunk = next(chunks, None)
         refuse_rotated(None if first is None else first.rotated, str(src))
+        if first is not None:
+            _refuse_gravity_free(first)
         while chunk is not None and not gyro_unit.done:
             gyro_unit.look(chunk)
             chunk = next(chunks, None)

@@ -94,9 +94,10 @@ def stated(samples: Samples, opts: LogOptions, axes: AxisMap | None = None, chec
 
     from mountcal.io.frame import frame_convention
     from mountcal.io.input_conventions import axes_convention, heading_channel_unit
-    from mountcal.io.samples import Channel
+    from mountcal.io.samples import Channel, marked_gravity_free
     from mountcal.io.sensor_frame import sensor_frame_convention
 
+    samples = marked_gravity_free(samples)  # every reader's: an acceleration without gravity reads, not calibrates
     if any(c.name == "axes" for c in samples.conventions):
         return samples
     axes = _axes(opts) if axes is None else axes
@@ -258,7 +259,7 @@ def join(parts: Sequence[Samples]) -> Samples:
         gravity_free=next((p.gravity_free for p in parts if p.gravity_free), ""),
         rotated=next((p.rotated for p in parts if p.rotated is not None), None),
         incomplete=tuple(line for p in parts for line in p.incomplete),
-        conventions=parts[0].conventions,
+        conventions=tuple(dict.fromkeys(c for p in parts for c in p.conventions)),  # each file's, once
         frame_ids=joined([p.frame_ids for p in parts]),
     )
 

@@ -59,8 +59,10 @@ class Samples:
     notes : tuple of str
         What the reader inferred or chose and says (a detected export, the topic a speed came from).
     gravity_free : str
-        Why ``acc_s`` is known to lack gravity (a "linear acceleration" export), else "": such samples
-        rotate, but do not calibrate (the mounting is measured against gravity).
+        Why ``acc_s`` is known to lack gravity (a "linear acceleration" export, or any log whose median
+        magnitude is below 0.5 m/s²: :func:`marked_gravity_free`), else "": such samples read and list, but
+        neither calibrate (the mounting is measured against gravity) nor rotate (the output would call them
+        specific force).
     rotated : Rotated or None
         What the file's own metadata say when mountcal already rotated the samples into the vehicle (or
         levelled) frame (:mod:`mountcal.io.frame`), else None: such samples calibrate (to the rotation
@@ -161,6 +163,20 @@ def summary(samples: Samples, fmt: str, kind: str) -> LogSummary:
     rate = (n - 1) / dur if dur > 0 else 0.0
     fields = ("ax", "ay", "az", *(("gx", "gy", "gz") if samples.gyro_s is not None else ()), *samples.channels)
     return LogSummary(samples.source, fmt, dur, (Stream("samples", kind, n, rate, fields),), samples.notes)
+
+
+def marked_gravity_free(samples: Samples) -> Samples:
+    """``samples``, marked gravity-free (``gravity_free``) where their acceleration's median magnitude is
+    below 0.5 m/s²: gravity is in every accelerometer's reading, so such an acceleration had it removed
+    (a ROS ``Imu`` of "free" or linear acceleration, a phone's linear accelerometer). Applied to every log
+    reader's samples (:func:`mountcal.io.logs.stated`); such samples read, but neither calibrate nor rotate."""
+    if samples.gravity_free or not len(samples):
+        return samples
+    m = float(np.median(np.linalg.norm(samples.acc_s, axis=1)))
+    if m >= GRAVITY_FREE_MPS2:
+        return samples
+    reason = f"the acceleration's median magnitude is {m:.3g} m/s²: no gravity in it, as in a 'linear acceleration'"
+    return replace(samples, gravity_free=reason)
 
 
 def with_gravity(samples: Samples) -> Samples:

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 from mountcal.core.option_names import option
 
 if TYPE_CHECKING:  # core.result loads numpy: the exporters' registry reads this module without it
-    from mountcal.core.result import Convention
+    from mountcal.core.result import Check, Convention
 
 SENSOR_FRAME = "sensor_frame"  # the Convention's name
 SEVERAL = "several frames: "  # how the value of a topic naming several frames starts
@@ -88,6 +88,63 @@ def sensor_frame_note(ids: FrameIds | None) -> str | None:
     )
 
 
+def several_frames_check(conventions: Iterable[Convention]) -> Check | None:
+    """A failed check where the IMU messages read name several frames: the samples were taken as one
+    sensor's, which mixes two mountings where the names are two sensors (two drivers on one topic)."""
+    from mountcal.core.result import Check
+
+    frame = recorded_frame(conventions)
+    if frame is None or not several(frame):
+        return None
+    return Check(
+        SENSOR_FRAME,
+        False,
+        f"the IMU messages name {frame.value.removeprefix(SEVERAL)} ({frame.by}): the samples were taken as one "
+        "sensor's; if the names are several sensors (two drivers publishing on one topic), the answer mixes their "
+        f"mountings. Record each sensor on its own topic and read one ({option('topic')})",
+    )
+
+
+def several_column(conventions: Iterable[Convention]) -> str | None:
+    """A stop table's column ``sensor_frame``: written where the stops' samples named several frames (the
+    check above then fails on the table too), with what stated it; else None."""
+    frame = recorded_frame(conventions)
+    return None if frame is None or not several(frame) else f"{frame.value}; {frame.by}"
+
+
+def column_several(values: Sequence[object], where: str) -> Convention:
+    """The convention a stop table's column ``sensor_frame`` states (:func:`several_column`'s text)."""
+    from mountcal.core.errors import InputError
+    from mountcal.core.result import Convention
+
+    texts = sorted({str(v).strip() for v in values})
+    value, _, by = (texts[0] if len(texts) == 1 else "").partition("; ")
+    if not value.startswith(SEVERAL):
+        raise InputError(
+            where,
+            f"one text in the column {SENSOR_FRAME}, as `mountcal stops` writes it ('{SEVERAL}…; <by what>')",
+            ", ".join(map(repr, texts)) or "no value",
+            "Give every row the text the table was written with, or drop the column.",
+        )
+    said = f"{where}: column {SENSOR_FRAME}"
+    return Convention(SENSOR_FRAME, value, "stated", f"{by} ({said})" if by else said)
+
+
+def refuse_several(counts: Mapping[str, int], topic: str, where: str) -> None:
+    """Refuse to apply one calibration to IMU messages naming several frames (``rotate``): the samples of a
+    frame it was not made for would be written rotated as if they were."""
+    named = sorted(name for name, n in counts.items() if name and n)
+    if len(named) > 1:
+        from mountcal.core.errors import InputError
+
+        raise InputError(
+            where,
+            f"IMU messages on {topic} in one sensor frame, as one calibration applies to",
+            "messages naming several frames: " + ", ".join(f"{name} ({counts[name]})" for name in named),
+            f"Record each sensor on its own topic and rotate one ({option('topic')}) with its own calibration.",
+        )
+
+
 def _listing(ids: FrameIds) -> str:
     return ", ".join(f"{name or '(empty)'} ({n} messages)" for name, n in ids.counts)
 
@@ -105,10 +162,14 @@ def several(convention: Convention) -> bool:
 __all__ = [
     "SENSOR_FRAME",
     "FrameIds",
+    "column_several",
     "frame_ids",
     "joined",
     "recorded_frame",
+    "refuse_several",
     "sensor_frame_convention",
     "sensor_frame_note",
     "several",
+    "several_column",
+    "several_frames_check",
 ]

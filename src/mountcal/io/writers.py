@@ -190,6 +190,7 @@ def write_mcap(
     with_odometry: bool = True,
     start_time_s: float = START_TIME_S,
     stamp_offsets_s: Mapping[str, float] | None = None,
+    odometry_frame: str = "enu",
 ) -> WrittenLog:
     """Write a ROS 2 MCAP log (CDR) with the real writer, ``mcap_ros2.writer.Writer``.
 
@@ -212,12 +213,15 @@ def write_mcap(
         Write this fixed position as ``sensor_msgs/msg/NavSatFix`` at 1 Hz on ``/gnss/fix``
         (WGS 84, altitude above the ellipsoid); without it, a Samples' own position channels.
     with_odometry : bool
-        Write ``nav_msgs/msg/Odometry`` on ``/odom`` (frame ``map``, ENU): speed in
+        Write ``nav_msgs/msg/Odometry`` on ``/odom`` (frame ``odometry_frame``): speed in
         ``twist.twist.linear.x``, heading as the orientation's yaw = 90° − compass heading.
     start_time_s : float
         Unix time of the log's ``t_s = 0``: every ``header.stamp`` and log time is ``start_time_s + t``.
     stamp_offsets_s : mapping of topic to float, optional
         A driver's clock: the topic's ``header.stamp`` = log time + offset (s) (boot time: ``100 - start_time_s``).
+    odometry_frame : str
+        The odometry's ``header.frame_id``: ``enu`` (default), the name that says its yaw is east-north-up,
+        as the headings written are (:mod:`mountcal.io.heading_frame`).
 
     Returns
     -------
@@ -245,7 +249,7 @@ def write_mcap(
         _imu_messages(series, ok, start_ns, imu_topic, frame_id),
         _temperature_messages(series, start_ns, frame_id) if with_temperature else iter(()),
         _fix_messages(series, start_ns),
-        _odometry_messages(series, start_ns) if with_odometry else iter(()),
+        _odometry_messages(series, start_ns, odometry_frame) if with_odometry else iter(()),
     ]
     counts: Counter[str] = Counter()
     schemas: dict[str, Any] = {}
@@ -334,7 +338,7 @@ def _fix_messages(series: _Series, start_ns: int) -> Iterator[_Message]:
         )
 
 
-def _odometry_messages(series: _Series, start_ns: int) -> Iterator[_Message]:
+def _odometry_messages(series: _Series, start_ns: int, frame_id: str) -> Iterator[_Message]:
     ch = series.channels
     if "speed_mps" not in ch:
         return
@@ -351,7 +355,7 @@ def _odometry_messages(series: _Series, start_ns: int) -> Iterator[_Message]:
             ODOMETRY_TOPIC,
             "nav_msgs/msg/Odometry",
             {
-                "header": _header(t_ns, "map"),
+                "header": _header(t_ns, frame_id),
                 "child_frame_id": "base_link",
                 "pose": {
                     "pose": {"position": {"x": 0.0, "y": 0.0, "z": 0.0}, "orientation": quat},

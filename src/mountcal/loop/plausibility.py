@@ -29,6 +29,8 @@ from mountcal.core.conventions import G_N
 from mountcal.core.option_names import option
 from mountcal.core.pvalues import chi2_sf
 from mountcal.core.result import Calibration, Check, Convention
+from mountcal.io.heading_frame import heading_frame_check
+from mountcal.io.sensor_frame import several_frames_check
 from mountcal.io.sensor_logger import SIGN, acceleration_sign
 
 MAX_PARKED_SLOPE_DEG = 30.0
@@ -110,7 +112,8 @@ def answer_checks(cal: Calibration) -> tuple[Check, ...]:
 
 def convention_checks(conventions: Sequence[Convention]) -> tuple[Check, ...]:
     """The conventions checked where the input was read (a refusal there), listed as passed checks;
-    and a heading reference that nothing stated (``heading_reference``), a failed one: stops alone
+    and a heading reference that nothing stated (``heading_reference``), a failed one (so is β from an
+    odometry heading in a frame not known to face east: :mod:`mountcal.io.heading_frame`): stops alone
     cannot tell β from uphill, from downhill or with a common offset (each turns the answer about the
     vertical), so a yaw resting on an assumed reference is not a confident one."""
     checked = {"heading_unit", "acceleration_unit"}  # refused where read when they fail
@@ -118,7 +121,9 @@ def convention_checks(conventions: Sequence[Convention]) -> tuple[Check, ...]:
     for c in conventions:
         if c.name == "heading_reference" and c.how == "default" and c.value == "uphill":
             out.append(Check(c.name, False, f"assumed, not stated: {c.by}"))
-    return tuple(out)
+    frame = heading_frame_check(conventions)  # β from an odometry heading in a frame not known to face east
+    sensors = several_frames_check(conventions)  # IMU messages naming several frames: perhaps two sensors
+    return (*out, *(c for c in (frame, sensors) if c is not None))
 
 
 HANDEDNESS = ("handedness_stops", "handedness_turns")

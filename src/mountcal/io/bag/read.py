@@ -134,7 +134,10 @@ def _sqlite_batch(
         return Batch(sel, cdr_rows(buf, start, size), record, what)
     except CdrError as err:
         raise InputError(
-            str(file), f"CDR messages on {sel.topic.name!r}", str(err), "The file is damaged or not a ROS 2 bag."
+            str(file),
+            f"CDR messages on {sel.topic.name!r}",
+            str(err),
+            err.fix or "The file is damaged or not a ROS 2 bag.",
         ) from err
 
 

@@ -37,6 +37,7 @@ from mountcal.io.mcap.records import MAGIC, MESSAGE_HEAD, RECORD_HEAD, Corrupt, 
 from mountcal.io.mcap.write import IMU_SCHEMA_NAME, McapOut
 from mountcal.io.ros2 import cdr
 from mountcal.io.ros2.imu import decode_imu_messages, encode_imu_messages
+from mountcal.io.sensor_frame import refuse_several
 
 
 def chunk_counts(raw: bytes, index: ChunkIndex) -> dict[int, int] | None:
@@ -258,6 +259,7 @@ def copy_mcap_with_imu(
             )
         )
         n_imu = nonfinite = chunks = largest = copied = 0
+        frames: dict[str, int] = {}  # the IMU messages' frame names so far
         for index in sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset):
             raw = read_at(f, index.chunk_start_offset, index.chunk_length + index.message_index_length)
             counts = chunk_counts(raw, index)
@@ -279,10 +281,16 @@ def copy_mcap_with_imu(
             try:
                 fields = message_fields(records, imu_at)
                 msgs = decode_imu_messages(records, fields["start"], fields["size"])
+                for name, times in cdr.decode_imu(records, fields["start"], fields["size"]).frames.items():
+                    frames[name] = frames.get(name, 0) + times
             except cdr.CdrError as err:
                 raise InputError(
-                    where, f"sensor_msgs/msg/Imu messages in CDR on {imu_topic!r}", str(err), "The file is damaged."
+                    where,
+                    f"sensor_msgs/msg/Imu messages in CDR on {imu_topic!r}",
+                    str(err),
+                    err.fix or "The file is damaged.",
                 ) from err
+            refuse_several(frames, imu_topic, where)  # one calibration, one sensor frame
             rotated, bad = transform(msgs)
             w.add_messages(
                 new_id,

@@ -40,6 +40,7 @@ from collections import Counter
 from collections.abc import Generator, Iterator, Sequence
 from contextlib import closing
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
@@ -47,6 +48,7 @@ from numpy.typing import NDArray
 from mountcal.core import budget
 from mountcal.core.errors import InputError
 from mountcal.io.frame import Rotated, channel_rotated, topic_label
+from mountcal.io.heading_frame import heading_frame_convention
 from mountcal.io.mcap.chunks import Unit, chunk_units, open_log
 from mountcal.io.mcap.records import (
     ARGUMENT,
@@ -68,6 +70,9 @@ from mountcal.io.ros2 import cdr
 from mountcal.io.samples import Channel, FloatArray, Samples
 from mountcal.io.sensor_frame import frame_ids
 from mountcal.io.stamp_clock import StampClocks
+
+if TYPE_CHECKING:
+    from mountcal.core.result import Convention
 
 # --------------------------------------------------------------------------- choosing topics
 
@@ -241,8 +246,7 @@ def _decode_json(kind: str, data: U8Array, start: I64Array, size: I64Array) -> c
         i += len(col)
     if kind == "imu":
         columns["gyro_unknown"] = np.array(unknown, np.float64)
-        return cdr.Decoded(sec, nanosec, columns, dict(frames))
-    return cdr.Decoded(sec, nanosec, columns)
+    return cdr.Decoded(sec, nanosec, columns, dict(frames) if kind in ("imu", "odom") else {})
 
 
 def _json_frame_id(message: object) -> str:
@@ -284,19 +288,21 @@ def _decode(unit: Unit, mine: NDArray[np.bool_], sel: _Selection) -> tuple[cdr.D
     return cdr.Decoded(decoded.sec, decoded.nanosec, columns, decoded.frames), log_ns
 
 
-UnitDecoded = tuple[dict[str, Piece], Counter[str], Counter[str]]  # pieces, drops, IMU frame_ids
+# pieces, drops, the IMU's and the odometry's frame_ids
+UnitDecoded = tuple[dict[str, Piece], Counter[str], Counter[str], Counter[str]]
 
 
 def _decode_unit(
     unit: Unit, selections: Sequence[_Selection], where: str, clocks: StampClocks | None = None
 ) -> UnitDecoded:
     """One unit's finite, time-sorted pieces of every selection, what was dropped, and the IMU
-    messages' ``header.frame_id`` values with their counts; each topic's stamps against its log times
-    told to ``clocks``."""
+    messages' and the odometry's ``header.frame_id`` values with their counts; each topic's stamps
+    against its log times told to ``clocks``."""
     channel = record_field(unit.data, unit.messages, RECORD_HEAD.size, "<u2")
     pieces: dict[str, Piece] = {}
     dropped: Counter[str] = Counter()
     frames: Counter[str] = Counter()
+    odom_frames: Counter[str] = Counter()
     for sel in selections:
         ids = list(sel.channel_ids)
         mine = channel == ids[0] if len(ids) == 1 else np.isin(channel, ids)
@@ -309,14 +315,14 @@ def _decode_unit(
                 where,
                 f"{TYPE_NAME[sel.kind]} messages on {sel.topic!r} laid out as the schema says",
                 f"{err}, in the {unit.what}",
-                "The file is damaged or mislabelled; export the topic to CSV instead.",
+                err.fix or "The file is damaged or mislabelled; export the topic to CSV instead.",
             ) from err
-        frames.update(decoded.frames)  # only the IMU's are counted (cdr.Decoded.frames)
+        (frames if sel.kind == "imu" else odom_frames).update(decoded.frames)  # IMU's and odometry's only
         mine_pieces = pieces_of(decoded, sel.kind, dropped)
         if clocks is not None:
             clocks.add(sel.topic, decoded.sec, decoded.nanosec, log_ns.astype(np.int64), mine_pieces)
         pieces.update(mine_pieces)
-    return pieces, dropped, frames
+    return pieces, dropped, frames, odom_frames
 
 
 def _decoded_units(
@@ -359,11 +365,13 @@ def _read_open(log: Log, topics: dict[str, str | None]) -> Samples:
     collected: dict[str, list[Piece]] = {}
     dropped: Counter[str] = Counter()
     frames: Counter[str] = Counter()
+    odom_frames: Counter[str] = Counter()
     clocks = StampClocks("log_time")
     with closing(_decoded_units(log, selections, clocks)) as units:
-        for pieces, drops, named in units:
+        for pieces, drops, named, odom_named in units:
             dropped.update(drops)
             frames.update(named)
+            odom_frames.update(odom_named)
             for key, piece in pieces.items():
                 collected.setdefault(key, []).append(piece)
             # counted a chunk at a time, before the whole log is held
@@ -384,8 +392,20 @@ def _read_open(log: Log, topics: dict[str, str | None]) -> Samples:
         dropped={k: v for k, v in dropped.items() if v},
         rotated=imu.rotated,
         frame_ids=frame_ids(imu.topic, frames, log.where),
+        conventions=_heading_frame(aux, channels, odom_frames, log.where),
     )
     return clocks.settle(read)  # topics stamped on another clock than the recorder's: onto it, said
+
+
+def _heading_frame(
+    aux: Sequence[_Selection | None], channels: dict[str, Channel], counts: Counter[str], where: str
+) -> tuple[Convention, ...]:
+    """The frame of the heading channel, where it came from odometry (:mod:`mountcal.io.heading_frame`)."""
+    odom = next((s for s in aux if s is not None and s.kind == "odom"), None)
+    if odom is None or "heading_deg" not in channels:
+        return ()
+    said = heading_frame_convention(odom.topic, counts, where)
+    return () if said is None else (said,)
 
 
 @budget.scoped
@@ -492,7 +512,7 @@ def _batches(log: Log, selection: _Selection, max_samples: int) -> Iterator[Samp
     dropped: Counter[str] = Counter()
     frames: Counter[str] = Counter()
     with closing(_decoded_units(log, [selection])) as units:
-        for pieces, drops, named in units:
+        for pieces, drops, named, _ in units:
             dropped.update(drops)
             frames.update(named)
             if "imu" in pieces and pieces["imu"].t_s.size:

@@ -88,7 +88,7 @@ def mcap_batches(
                         log.where,
                         f"CDR messages on {sel.topic.name!r}",
                         f"{err}, in the {unit.what}",
-                        "Check the file.",
+                        err.fix or "Check the file.",
                     ) from err
                 yield Batch(sel, rows, record, unit.what)
             del unit

@@ -18,11 +18,13 @@ from collections import Counter
 from collections.abc import Callable, Generator, Sequence
 from contextlib import closing
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
 from mountcal.core.errors import InputError
+from mountcal.io.heading_frame import heading_frame_convention
 from mountcal.io.inputs import max_rows, too_many_rows
 from mountcal.io.ros import kinds
 from mountcal.io.ros.pieces import Piece, concat, gyro_of, keep, pieces_of
@@ -31,6 +33,9 @@ from mountcal.io.ros2.cdr import CdrError, Decoded, Rows
 from mountcal.io.samples import Channel, FloatArray, Samples
 from mountcal.io.sensor_frame import frame_ids
 from mountcal.io.stamp_clock import StampClocks
+
+if TYPE_CHECKING:
+    from mountcal.core.result import Convention
 
 I64Array = NDArray[np.int64]
 MIN_COURSE_SPEED_MPS = 1.0  # a GNSS course over ground is a heading only while moving
@@ -67,11 +72,13 @@ def samples_of(
     collected: dict[str, list[Piece]] = {}
     dropped: Counter[str] = Counter()
     frames: Counter[str] = Counter()  # the IMU messages' header.frame_id values
+    odom_frames: Counter[str] = Counter()  # the odometry's (the frame of its heading)
     held, limit = 0, max_rows()
     clocks = StampClocks("the record time (the recorder's receive time)")
     with closing(batches(selections)) as blocks:
         for batch in blocks:
-            for key, piece in _decode(batch, where, cdr, dropped, frames, clocks).items():
+            named = frames if batch.selection.kind in ("imu", "acc") else odom_frames
+            for key, piece in _decode(batch, where, cdr, dropped, named, clocks).items():
                 collected.setdefault(key, []).append(piece)
                 held += piece.t_s.size
             if held > limit:
@@ -104,6 +111,7 @@ def samples_of(
         frame_ids=frame_ids(
             imu.topic.name + (f" field {'.'.join(imu.target.prefix)}" if imu.target.prefix else ""), frames, where
         ),
+        conventions=_heading_frame(aux, channels, odom_frames, where),
     )
     return clocks.settle(read)  # topics stamped on another clock than the recorder's: onto it, said
 
@@ -120,13 +128,25 @@ def _decode(
             where,
             f"{sel.target.label} messages on {sel.topic.name!r} laid out as their definition says",
             f"{err}, in the {batch.what}",
-            "The file is damaged, or its definition is not the one its messages were written with; "
+            err.fix
+            or "The file is damaged, or its definition is not the one its messages were written with; "
             "export the topic to CSV instead.",
         ) from err
-    frames.update(decoded.frames)  # only the IMU's (or the acceleration's) are counted
+    frames.update(decoded.frames)  # the IMU's (or the acceleration's), or the odometry's: the caller's counter
     pieces = _pieces(sel.kind, decoded, _times(decoded, batch.record_ns), dropped)
     clocks.add(sel.topic.name, decoded.sec, decoded.nanosec, batch.record_ns, pieces)  # no header: all unset
     return pieces
+
+
+def _heading_frame(
+    aux: Sequence[Selection], channels: dict[str, Channel], counts: Counter[str], where: str
+) -> tuple[Convention, ...]:
+    """The frame of the heading channel, where it came from odometry (:mod:`mountcal.io.heading_frame`)."""
+    odom = next((s for s in aux if s.kind == "odom"), None)
+    if odom is None or "heading_deg" not in channels or not counts:
+        return ()
+    said = heading_frame_convention(odom.topic.name, counts, where)
+    return () if said is None else (said,)
 
 
 def _pieces(kind: str, decoded: Decoded, t: FloatArray, dropped: Counter[str]) -> dict[str, Piece]:

@@ -16,7 +16,8 @@ Kinds (``Target.kind``) and their message types:
 
 A sample's stamp is the ``header.stamp`` nearest the target along its path (the Imu's own header,
 else the enclosing message's); without one, the record's time (see :attr:`Target.stamp`). The
-``frame_id`` of that header names the frame of an IMU's or an acceleration's vectors (``Decoded.frames``).
+``frame_id`` of that header names the frame of an IMU's or an acceleration's vectors, or of an odometry's
+pose (``Decoded.frames``).
 """
 
 from __future__ import annotations
@@ -129,7 +130,7 @@ def decode(rows: Rows, types: Types, t: Target, *, cdr: bool) -> Decoded:
     columns = _columns(t)
     stamp = [] if t.stamp is None else [(*t.stamp, "sec"), (*t.stamp, "nanosec")]
     text = [("sentence",)] if t.kind == "nmea" else []
-    frame = [(*t.stamp[:-1], "frame_id")] if t.stamp is not None and t.kind in ("imu", "acc") else []
+    frame = [(*t.stamp[:-1], "frame_id")] if t.stamp is not None and t.kind in ("imu", "acc", "odom") else []
     wanted = [p for paths in columns.values() for p in paths] + stamp + text + frame
     found = layout.locate(rows, types, t.type_name, wanted, cdr=cdr)
     frames = layout.string_counts(rows, found, frame[0]) if frame else {}

@@ -66,7 +66,26 @@ FIELDS: dict[str, tuple[tuple[str, str], ...]] = {
 
 
 class CdrError(ValueError):
-    """The bytes do not hold the expected CDR layout; the text says what was found."""
+    """The bytes do not hold the expected CDR layout; the text says what was found, and ``fix`` what to do
+    where the bytes are valid but in a representation mountcal does not decode (else None: damage)."""
+
+    def __init__(self, message: str, fix: str | None = None) -> None:
+        super().__init__(message)
+        self.fix = fix
+
+
+# Encapsulation kinds (RTPS / DDS-XTypes) a valid message may start with, other than little-endian CDR
+_REPRESENTATIONS = {
+    0x0000: "big-endian CDR",
+    0x0002: "big-endian parameter-list CDR",
+    0x0003: "little-endian parameter-list CDR",
+    0x0006: "big-endian XCDR2",
+    0x0007: "little-endian XCDR2",
+    0x0008: "big-endian parameter-list XCDR2",
+    0x0009: "little-endian parameter-list XCDR2",
+    0x000A: "big-endian delimited XCDR2",
+    0x000B: "little-endian delimited XCDR2",
+}
 
 
 @dataclass(frozen=True)
@@ -80,8 +99,9 @@ class Decoded:
     columns : dict of str to ndarray of float64, shape (n,) or (n, k)
         The message's numeric fields, in the message's own units (see each ``decode_*``).
     frames : dict of str to int
-        The IMU messages' ``header.frame_id`` values, each with how many messages carry it (empty for
-        the other messages, and where there is no header).
+        The ``header.frame_id`` values of IMU messages (the sensor frame) and of odometry (the frame its
+        heading is in), each with how many messages carry it (empty for the other messages, and where
+        there is no header).
     """
 
     sec: I64Array
@@ -236,10 +256,16 @@ def cdr_rows(buf: U8Array, start: I64Array, size: I64Array) -> Rows:
     head = rows.read(0, "u1", 2)
     bad = np.flatnonzero((head[:, 0] != CDR_LE[0]) | (head[:, 1] != CDR_LE[1]))
     if bad.size:
-        found = bytes(head[int(bad[0])].astype(np.uint8)).hex(" ")
+        first = head[int(bad[0])].astype(np.uint8)
+        found = bytes(first).hex(" ")
+        kind = _REPRESENTATIONS.get(int(first[0]) << 8 | int(first[1]))
+        if kind is None:  # no representation: the bytes are not what the channel says
+            raise CdrError(f"encapsulation header {found} on {bad.size} message(s), expected 00 01 (little-endian CDR)")
         raise CdrError(
-            f"encapsulation header {found} on {bad.size} message(s), expected 00 01 "
-            "(little-endian CDR; big-endian and XCDR2 are not supported)"
+            f"encapsulation header {found} on {bad.size} message(s): {kind}, a valid representation that mountcal "
+            "does not decode (it reads little-endian CDR, 00 01, as ROS 2 writes on every common platform)",
+            "Re-serialize the messages as little-endian CDR (rosbags: deserialize_cdr, then serialize_cdr with "
+            "little_endian=True), or export the topic to CSV.",
         )
     return rows.shifted(HEADER_BYTES)
 
@@ -331,7 +357,8 @@ def decode_odometry(buf: U8Array, start: I64Array, size: I64Array) -> Decoded:
     """``nav_msgs/msg/Odometry``.
 
     Columns ``vx`` (n,) = ``twist.twist.linear.x`` in m/s (child frame, signed: negative when
-    reversing) and ``quat`` (n, 4) = ``pose.pose.orientation`` as (x, y, z, w), in the header's frame.
+    reversing) and ``quat`` (n, 4) = ``pose.pose.orientation`` as (x, y, z, w), in the header's frame;
+    ``frames``: the ``header.frame_id`` values (the frame the heading is in: :mod:`mountcal.io.heading_frame`).
     """
     rows = cdr_rows(buf, start, size)
     sec, nanosec, end = _header(rows)
@@ -340,7 +367,7 @@ def decode_odometry(buf: U8Array, start: I64Array, size: I64Array) -> Decoded:
     rows.need(position + 352, "pose and twist.twist.linear.x")
     quat = rows.read(position + 24, "<f8", 4)
     vx = rows.read(position + 344, "<f8", 1)[:, 0]
-    return Decoded(sec, nanosec, {"vx": vx, "quat": quat})
+    return Decoded(sec, nanosec, {"vx": vx, "quat": quat}, string_counts(rows, FRAME_ID, end))
 
 
 DECODERS = {

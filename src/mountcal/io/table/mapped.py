@@ -11,7 +11,6 @@ from __future__ import annotations
 import csv
 import re
 from collections.abc import Iterator
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -22,7 +21,7 @@ from numpy.typing import NDArray
 from mountcal.core.errors import InputError
 from mountcal.core.option_names import option
 from mountcal.io.inputs import check_parquet_rows, check_regular_file, comment_lines, max_rows, too_many_rows
-from mountcal.io.samples import GRAVITY_BAND_G, GRAVITY_FREE_MPS2, Channel, FloatArray, Samples
+from mountcal.io.samples import GRAVITY_BAND_G, Channel, FloatArray, Samples, marked_gravity_free
 from mountcal.io.table.layout import ACC, CHANNELS, G_N, GYRO, TIME_UNITS, Layout
 from mountcal.io.table.time_unit import TYPED, clock_seconds, iso_seconds, typed_seconds
 from mountcal.io.timestamps import REORDERED, table_order
@@ -246,10 +245,10 @@ def check_magnitude(samples: Samples, layout: Layout, where: str) -> Samples:
     """
     if not len(samples) or layout.gravity_free:
         return samples
+    marked = marked_gravity_free(samples)
+    if marked.gravity_free:
+        return marked
     m = float(np.median(np.linalg.norm(samples.acc_s, axis=1)))  # m/s², as read
-    if m < GRAVITY_FREE_MPS2:
-        reason = f"the acceleration's median magnitude is {m:.3g} m/s²: no gravity in it, as in a 'linear acceleration'"
-        return replace(samples, gravity_free=reason)
     lo, hi = GRAVITY_BAND_G
     if lo * G_N <= m <= hi * G_N:
         return samples
