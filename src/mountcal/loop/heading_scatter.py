@@ -5,9 +5,9 @@ On a slope α such an error ε moves the stop by ``ε · ∂prediction/∂β`` (
 vehicle frame): on a 5° slope 1° is 15 mm/s², a hundred times the noise of a 20 s stop mean. Unmodelled, the
 residual tests name it ("single stops turned about the vertical") and the result is not confident, although the
 angles are right. Modelled, it widens each stop's covariance along that direction by ``σ_h²``, with ``σ_h``
-found by maximum likelihood (the mean model held at the current fit, then refitted at the optimum), as the
-random road tilt per stop is (``surface`` in :mod:`mountcal.loop.model_choice`), then refined on the profile
-likelihood (the mean model refitted) at the vertex of its parabola. Yaw then rests less on each
+found by maximum likelihood as the random road tilt per stop is (``surface`` in :mod:`mountcal.loop.model_choice`):
+searched with the mean model held at the current fit, then refined on the profile likelihood (the mean model
+refitted). Yaw then rests less on each
 stop's heading, and its statistical σ grows accordingly. A common error of all the headings shows nowhere in the
 stops: it stays in the systematic budget (:mod:`mountcal.loop.systematic`).
 
@@ -28,7 +28,7 @@ from mountcal.core.pvalues import FAMILY_ALPHA, chi2_logsf, f_sf
 from mountcal.core.result import Declined
 from mountcal.estimate import full
 from mountcal.loop.diagnose import DRIFT_MODES, time_order
-from mountcal.loop.steps import Step
+from mountcal.loop.steps import Step, held_neg2loglik, neg2loglik
 from mountcal.stops.table import StopTable
 
 NAME = "heading_scatter"
@@ -61,9 +61,7 @@ def heading_scatter_step(cur: Step, g: float, k: int) -> tuple[float, Step] | st
     resid = cur.fit.residual_s
 
     def held(log_sigma: float) -> float:
-        cov = with_heading_scatter(base, tangents, float(np.exp(log_sigma))).cov_s
-        chi2 = np.einsum("ni,ni->", resid, np.linalg.solve(cov, resid[..., None])[..., 0])  # type: ignore[arg-type]
-        return float(chi2 + np.sum(np.linalg.slogdet(cov)[1]))  # type: ignore[arg-type]
+        return held_neg2loglik(resid, with_heading_scatter(base, tangents, float(np.exp(log_sigma))).cov_s)  # type: ignore[arg-type]
 
     lower, upper = float(np.log(np.radians(0.01))), float(np.log(np.radians(MAX_HEADING_SCATTER_DEG)))
     x = float(optimize.minimize_scalar(held, bounds=(lower, upper), method="bounded", options={"xatol": 0.01}).x)
@@ -73,7 +71,7 @@ def heading_scatter_step(cur: Step, g: float, k: int) -> tuple[float, Step] | st
     def refitted(log_sigma: float) -> tuple[float, StopTable, full.Fit]:
         table = with_heading_scatter(base, tangents, float(np.exp(log_sigma)))
         fit = full.fit(table, cur.terms, g, cur.fit.state)
-        return _neg2loglik(table, fit), table, fit
+        return neg2loglik(table, fit), table, fit
 
     h = 0.05
     value, table, fit = refitted(x)
@@ -91,7 +89,7 @@ def heading_scatter_step(cur: Step, g: float, k: int) -> tuple[float, Step] | st
         curvature = (refitted(x + h)[0] - 2 * value + refitted(x - h)[0]) / h**2
     if x > upper - 0.05:
         return None
-    stat = max(_neg2loglik(base, cur.fit) - value, 0.0)
+    stat = max(neg2loglik(base, cur.fit) - value, 0.0)
     logp = float(chi2_logsf(stat, 1))
     pattern = structure(base, tangents, resid, float(np.exp(x)))
     if pattern is not None:
@@ -152,10 +150,6 @@ def found_structured(declined: Sequence[Declined]) -> bool:
     """Whether an earlier round found the headings' errors structured: a stop set aside since does not make them
     scatter (the rest of a drift is a smaller drift, which the fewer stops may not show)."""
     return any(d.effect == NAME and d.why.startswith(STRUCTURED) for d in declined)
-
-
-def _neg2loglik(table: StopTable, fit: full.Fit) -> float:
-    return fit.chi2 + float(np.sum(np.linalg.slogdet(table.cov_s)[1]))  # type: ignore[arg-type]
 
 
 __all__ = [

@@ -43,7 +43,7 @@ from mountcal.loop.separability import (
     inseparable,
     refuse_inseparable,
 )
-from mountcal.loop.steps import Loop, Step
+from mountcal.loop.steps import Loop, Step, held_neg2loglik, neg2loglik
 from mountcal.stops.table import StopTable
 
 log = logging.getLogger(__name__)
@@ -461,10 +461,6 @@ def with_surface(table: StopTable, rot_vs: Rotation, sigma_rad: float, g: float)
     return replace(table, cov_s=table.cov_s + extra)
 
 
-def _neg2loglik(table: StopTable, fit: full.Fit) -> float:
-    return fit.chi2 + float(np.sum(np.linalg.slogdet(table.cov_s)[1]))  # type: ignore[arg-type]
-
-
 def _surface(cur: Step, g: float, k: int) -> tuple[float, Step] | None:
     """A random road tilt per stop (stops on different surfaces): its σ by maximum likelihood.
 
@@ -481,14 +477,12 @@ def _surface(cur: Step, g: float, k: int) -> tuple[float, Step] | None:
     resid = cur.fit.residual_s
 
     def held(log_sigma: float) -> float:
-        cov = with_surface(base, rot, float(np.exp(log_sigma)), g).cov_s
-        chi2 = np.einsum("ni,ni->", resid, np.linalg.solve(cov, resid[..., None])[..., 0])  # type: ignore[arg-type]
-        return float(chi2 + np.sum(np.linalg.slogdet(cov)[1]))  # type: ignore[arg-type]
+        return held_neg2loglik(resid, with_surface(base, rot, float(np.exp(log_sigma)), g).cov_s)  # type: ignore[arg-type]
 
     def cost(log_sigma: float, start: full.State) -> tuple[float, StopTable, full.Fit]:
         table = with_surface(base, rot, float(np.exp(log_sigma)), g)
         f = full.fit(table, cur.terms, g, start)
-        return _neg2loglik(table, f), table, f
+        return neg2loglik(table, f), table, f
 
     lower, upper = float(np.log(1e-5)), float(np.log(np.radians(MAX_SURFACE_TILT_DEG)))
     x = float(optimize.minimize_scalar(held, bounds=(lower, upper), method="bounded", options={"xatol": 0.01}).x)
@@ -514,7 +508,7 @@ def _surface(cur: Step, g: float, k: int) -> tuple[float, Step] | None:
         x = float(res.x)
         value, table, f = cost(x, cur.fit.state)
         curvature = (cost(x + h, cur.fit.state)[0] - 2 * value + cost(x - h, cur.fit.state)[0]) / h**2
-    stat = max(_neg2loglik(base, cur.fit) - value, 0.0)
+    stat = max(neg2loglik(base, cur.fit) - value, 0.0)
     logp = float(chi2_logsf(stat, 1))
     sigma = float(np.exp(x))
     if x > upper - 0.05:

@@ -5,6 +5,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numpy as np
+
+from mountcal.core.conventions import FloatArray
 from mountcal.core.findings import Finding
 from mountcal.core.pvalues import unexplained
 from mountcal.core.result import Declined
@@ -44,4 +47,16 @@ class Loop:
         return unexplained(self.findings)
 
 
-__all__ = ["Loop", "Step"]
+def neg2loglik(table: StopTable, fit: full.Fit) -> float:
+    """−2 log-likelihood of a fit of ``table`` (up to a constant): χ² and the stops' covariances' log-determinants,
+    what a noise model (a road tilt, the headings' scatter) trades against each other."""
+    return fit.chi2 + float(np.sum(np.linalg.slogdet(table.cov_s)[1]))  # type: ignore[arg-type]
+
+
+def held_neg2loglik(resid: FloatArray, cov: FloatArray) -> float:
+    """The same for the residual ``resid`` (n, 3) of a mean model held fixed, under the stop covariances ``cov``."""
+    chi2 = np.einsum("ni,ni->", resid, np.linalg.solve(cov, resid[..., None])[..., 0])
+    return float(chi2 + np.sum(np.linalg.slogdet(cov)[1]))
+
+
+__all__ = ["Loop", "Step", "held_neg2loglik", "neg2loglik"]
