@@ -29,6 +29,7 @@ from mountcal.core.result import Calibration
 from mountcal.estimate.effects import apply_corrections
 from mountcal.io.frame import FRAME_NAMES, Rotated, refuse_leftover, rotated_of
 from mountcal.io.frame import refuse_rotated as refused
+from mountcal.io.samples import Samples
 
 ACC_COLUMNS = ("ax", "ay", "az")
 
@@ -37,6 +38,17 @@ def refuse_rotated(rotated: Rotated | None, where: str) -> None:
     """Refuse samples mountcal already rotated: a second rotation would apply the mounting twice, and
     nothing in the result could show it (:func:`mountcal.io.frame.refuse_rotated`)."""
     refused(rotated, where, "rotating again would apply the mounting twice", "Rotate the original log.")
+
+
+def refuse_gravity_free(samples: Samples) -> None:
+    """Refuse an acceleration marked gravity-free where it was read: the output would call it specific force."""
+    if samples.gravity_free:
+        raise InputError(
+            samples.source,
+            "the specific force (an accelerometer's reading, gravity included), written as the vehicle frame's",
+            f"an acceleration without gravity: {samples.gravity_free}",
+            "Rotate the raw accelerometer (with g); mountcal writes no gravity-free acceleration as specific force.",
+        )
 
 
 def yaw_sources() -> str:

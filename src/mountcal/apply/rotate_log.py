@@ -1,18 +1,13 @@
 """Whole logs into the vehicle frame, streamed; and the notebook API around it.
 
-:func:`rotate_log` reads a log in bounded chunks (:func:`~mountcal.io.logs.iter_log`: each
-format's reader, streaming), applies a calibration to each (:mod:`mountcal.apply.rotate`: bias
-removed, then ``acc_v = R_vs · (acc_s − b)``; angular rates only rotated) and writes the
-vehicle-frame samples with their original timestamps to Parquet (default), CSV or MCAP
-(:mod:`mountcal.io.mcap.write`). The output appears only when complete (a process killed mid-write
-leaves no file), never over an input; every sample read is written, and whatever a reader dropped
-is counted in the report.
+:func:`rotate_log` reads a log in bounded chunks (:func:`~mountcal.io.logs.iter_log`), applies a calibration
+to each (:mod:`mountcal.apply.rotate`: bias removed, then ``acc_v = R_vs · (acc_s − b)``; rates only rotated)
+and writes the vehicle-frame samples with their timestamps to Parquet (default), CSV or MCAP. The output appears
+only when complete, never over an input; every sample read is written; what a reader dropped is counted.
 
-An MCAP input rotated to MCAP keeps everything: each chunk, message index, schema, channel,
-attachment and metadata record is copied byte for byte, and a channel ``<topic>/vehicle`` is added
-with one vehicle-frame ``sensor_msgs/msg/Imu`` (CDR) per original IMU message — same stamp,
-sequence, log and publish time; ``frame_id`` ``base_link`` (REP 103: x forward, y left, z up);
-orientation, when known, turned to the vehicle's; the rate and acceleration covariances rotated.
+An MCAP input rotated to MCAP keeps every record byte for byte and gains a channel ``<topic>/vehicle``: one
+vehicle-frame ``sensor_msgs/msg/Imu`` per IMU message (same stamps; ``frame_id`` ``base_link``, REP 103: x forward,
+y left, z up; orientation, when known, and the covariances turned to the vehicle's).
 
 Notebook use — read a log into a table, load a calibration, apply it:
 
@@ -52,7 +47,13 @@ import numpy as np
 import pandas as pd
 from scipy.spatial.transform import Rotation
 
-from mountcal.apply.rotate import acc_to_vehicle, check_applicable, rate_to_vehicle, refuse_rotated
+from mountcal.apply.rotate import (
+    acc_to_vehicle,
+    check_applicable,
+    rate_to_vehicle,
+    refuse_gravity_free,
+    refuse_rotated,
+)
 from mountcal.core.angles import ANGLE_NAMES, Angles
 from mountcal.core.atomic import atomic_output
 from mountcal.core.conventions import CONVENTIONS, FloatArray
@@ -305,7 +306,7 @@ def _rotate_stream(
     first = next(chunks, None)
     if first is None:
         raise InputError(" + ".join(map(str, files)), "IMU samples", "none", "Check the log and the topic/DBC.")
-    _refuse_gravity_free(first)
+    refuse_gravity_free(first)
     acc_to_vehicle(first.acc_s, cal, check_units=True, level_only=checked.level_only)  # g units refused before output
     flip, said = sign_for_calibration(first, cal.provenance.conventions)  # a phone app's sign (Sensor Logger)
     checked = replace(checked, warnings=(*checked.warnings, said)) if said else checked
@@ -439,17 +440,6 @@ def _descriptions(cal: Calibration) -> dict[str, str]:
 # --------------------------------------------------------------------------- MCAP copied through
 
 
-def _refuse_gravity_free(samples: Samples) -> None:
-    """Refuse an acceleration marked gravity-free where it was read: the output would call it specific force."""
-    if samples.gravity_free:
-        raise InputError(
-            samples.source,
-            "the specific force (an accelerometer's reading, gravity included), written as the vehicle frame's",
-            f"an acceleration without gravity: {samples.gravity_free}",
-            "Rotate the raw accelerometer (with g); mountcal writes no gravity-free acceleration as specific force.",
-        )
-
-
 def _rotate_mcap_copy(
     src: Path,
     cal: Calibration,
@@ -468,7 +458,7 @@ def _rotate_mcap_copy(
         first = chunk = next(chunks, None)
         refuse_rotated(None if first is None else first.rotated, str(src))
         if first is not None:
-            _refuse_gravity_free(first)
+            refuse_gravity_free(first)
         while chunk is not None and not gyro_unit.done:
             gyro_unit.look(chunk)
             chunk = next(chunks, None)

@@ -5,8 +5,8 @@ The formats' own writers do the writing, so a file is what a real recorder would
 - **MCAP**: ``mcap_ros2.writer.Writer`` (CDR, zstd chunks) with ``sensor_msgs/msg/Imu``,
   ``sensor_msgs/msg/Temperature``, ``sensor_msgs/msg/NavSatFix`` and ``nav_msgs/msg/Odometry``.
   The schemas are the standard definitions (field and constant lines; comments left out),
-  concatenated as rosbag2 does: the top-level ``.msg``, then each dependency after a line of 80
-  ``=`` and ``MSG: package/Type``, depth first, dependencies in sorted order, each once.
+  concatenated as rosbag2 does: the top-level ``.msg``, then each dependency (depth first, sorted, each
+  once) after a line of 80 ``=`` and ``MSG: package/Type``.
 - **CAN**: python-can's writer for the suffix (BLF, ASC, candump ``.log``, TRC, CSV; MF4 through
   its ``MF4Writer``, which uses asammdf), every frame encoded by cantools from a DBC. The default
   layout is ``data/imu_mm5_10.dbc``: the Bosch MM5.10 IMU (AY1 + Yaw_Rate in 0x70, AX1 + Roll_Rate
@@ -19,13 +19,10 @@ Conventions of every writer here:
   returns :class:`WrittenLog` whose ``start_time_s`` is the log's ``t_s = 0`` *on the clock
   mountcal's reader gives that file* — the written start for every format but ASC, which python-can
   reads relative to its first frame. Write the protocol sheet with that value and it lines up.
-- **Quantisation is real**: a CAN signal holds what its DBC scaling can (the MM5.10's 1.25 mm/s²);
-  python-can stores times as float seconds (≈ 0.24 µs at Unix-epoch magnitudes); BLF keeps ns,
-  the text formats µs. A value outside a signal's DBC range is written at the range's end
-  (saturated, as the sensor would) and counted; a non-finite sample is not written and counted.
-- **Output**: written to a temporary file beside the target and renamed into place, so a failure
-  never leaves a partial file.
-- **Units**: SI in; the sensor frame's x, y, z go to ax/ay/az (and gx/gy/gz) as they are.
+- **Quantisation is real**: a CAN signal holds what its DBC scaling can (the MM5.10's 1.25 mm/s²); python-can
+  stores times as float seconds (≈ 0.24 µs at Unix-epoch magnitudes; BLF keeps ns, the text formats µs). A value
+  outside a signal's DBC range is written saturated and counted; a non-finite sample is not written and counted.
+- **Output**: a temporary file renamed into place (never a partial file). **Units**: SI, x, y, z as ax/ay/az.
 """
 
 from __future__ import annotations
@@ -220,8 +217,7 @@ def write_mcap(
     stamp_offsets_s : mapping of topic to float, optional
         A driver's clock: the topic's ``header.stamp`` = log time + offset (s) (boot time: ``100 - start_time_s``).
     odometry_frame : str
-        The odometry's ``header.frame_id``: ``enu`` (default), the name that says its yaw is east-north-up,
-        as the headings written are (:mod:`mountcal.io.heading_frame`).
+        The odometry's ``header.frame_id``: ``enu`` says its yaw is east-north-up (:mod:`mountcal.io.heading_frame`).
 
     Returns
     -------

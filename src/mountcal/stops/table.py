@@ -32,8 +32,7 @@ from mountcal.core.output_suffix import check_output_suffix
 from mountcal.core.paths import read_input_bytes
 from mountcal.core.ranges import check_values
 from mountcal.core.result import Convention
-from mountcal.io.frame import FRAME_COLUMN, FRAME_CONVENTION, column_frame
-from mountcal.io.heading_frame import HEADING_FRAME, odometry_frame_column, odometry_frame_from_column
+from mountcal.io.frame import FRAME_COLUMN
 from mountcal.io.input_conventions import (
     HEADING_REF,
     AxisMap,
@@ -48,10 +47,10 @@ from mountcal.io.input_conventions import (
 )
 from mountcal.io.input_conventions import Headings as Headings  # one definition, imported from here by many
 from mountcal.io.inputs import check_parquet_rows, csv_columns
-from mountcal.io.sensor_frame import SENSOR_FRAME, column_several, several_column
-from mountcal.io.sensor_logger import SIGN, column_sign, sign_column
 from mountcal.io.table.mapped import check_text, dialect
 from mountcal.io.whole import parquet_end, text_bytes_end
+from mountcal.stops.convention_columns import NAMES as CONVENTION_COLUMNS
+from mountcal.stops.convention_columns import convention_columns, conventions_from_columns
 
 # Column names of the stop table file.
 BETA = "beta_deg"
@@ -72,13 +71,10 @@ ALT = "alt_m"
 REQUIRED = ACC
 AXES = "axes"  # the axis map already applied to ax, ay, az (by `mountcal stops --axes`)
 FRAME = FRAME_COLUMN  # the frame of ax, ay, az when mountcal rotate had put the log in the vehicle (levelled) frame
-# SIGN (acceleration_sign): the sign a phone app's acceleration was read with and how it is known (Sensor Logger)
-# HEADING_FRAME (heading_frame): β from an odometry heading in a frame not known to face east (io.heading_frame)
-# SENSOR_FRAME (sensor_frame): the IMU messages of the stops named several frames (io.sensor_frame)
 OPTIONAL = (
     BETA, HEADING_REF, *STD, COUNT, *STD_MEAN, *CORR, TIME, DURATION, TEMPERATURE, SITE, LAT, LON, ALT, HEADING, AXES,
-    FRAME, SIGN, HEADING_FRAME, SENSOR_FRAME,
-)  # fmt: skip
+    *CONVENTION_COLUMNS,
+)  # fmt: skip  # the last: the input conventions' columns (frame, acceleration_sign, …: stops.convention_columns)
 COLUMNS = (BETA, HEADING_REF, *ACC, *OPTIONAL[2:])
 
 # the physical range of each optional column (mountcal.core.ranges; the noise columns are checked where read)
@@ -197,17 +193,7 @@ class StopTable:
         applied = stated_axes(self.conventions)
         if applied is not None and not applied.identity:  # the frame of ax, ay, az, for whoever reads it next
             columns[AXES] = applied.text
-        frame = next((c for c in self.conventions if c.name == FRAME_CONVENTION), None)
-        if frame is not None:  # rotated samples' stops: a triad or a second rotation is refused on reading them
-            columns[FRAME] = frame.value
-        if (sign := sign_column(self.conventions)) is not None:  # an assumed sign stays assumed in the table
-            columns[SIGN] = sign
-        odometry = odometry_frame_column(self.conventions)  # β resting on an odometry frame's alignment
-        if odometry is not None:
-            columns[HEADING_FRAME] = odometry
-        sensors = several_column(self.conventions)  # the stops' IMU messages named several frames
-        if sensors is not None:
-            columns[SENSOR_FRAME] = sensors
+        columns.update(convention_columns(self.conventions))  # what qualified the log's readings comes back
         return pd.DataFrame(columns)
 
 
@@ -356,12 +342,7 @@ def stop_table_from_frame(
     if any(c in df.columns for c in CORR):
         cov = _with_correlations(cov, _numeric(df, [c for c in CORR if c in df.columns], source), df, source)
     applied = _applied_axes(df, source)
-    conventions += [] if FRAME not in df.columns else column_frame(df[FRAME].tolist(), source, FRAME)
-    conventions += [] if SIGN not in df.columns else [column_sign(df[SIGN].tolist(), source)]
-    if HEADING_FRAME in df.columns:  # β from an odometry heading in a frame not known to face east
-        conventions.append(odometry_frame_from_column(df[HEADING_FRAME].tolist(), source))
-    if SENSOR_FRAME in df.columns:  # the stops' IMU messages named several frames
-        conventions.append(column_several(df[SENSOR_FRAME].tolist(), source))
+    conventions += conventions_from_columns(df, source)
     if axes is not None and not axes.identity:  # the device's axes onto the sensor frame, as for a log
         acc = axes.apply(acc)
         cov = None if cov is None else axes.apply_cov(cov)
