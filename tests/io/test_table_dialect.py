@@ -44,6 +44,15 @@ def _calibrated(path: Path, tmp_path: Path, *args: str) -> np.ndarray:
     return _angles(out)
 
 
+def _written(session: tuple[pd.DataFrame, pd.DataFrame], tmp_path: Path) -> tuple[Path, Path]:
+    """The session's log and protocol sheet, written as comma CSVs (the reference every dialect is read against)."""
+    frame, sheet = session
+    log, proto = tmp_path / "log.csv", tmp_path / "protocol.csv"
+    frame.to_csv(log, index=False, float_format="%.17g")
+    sheet.to_csv(proto, index=False, float_format="%.17g")
+    return log, proto
+
+
 def test_a_semicolon_table_with_decimal_commas_and_its_protocol_sheet_calibrate(
     session: tuple[pd.DataFrame, pd.DataFrame], tmp_path: Path
 ) -> None:
@@ -62,10 +71,7 @@ def test_a_semicolon_stop_table_with_decimal_commas_calibrates_as_written(
 ) -> None:
     """A stop table `mountcal stops` wrote, saved by a spreadsheet with ``;`` and decimal commas: the same
     answer as the original. Before: refused, "no column ax, ay, az"."""
-    frame, sheet = session
-    log, proto = tmp_path / "log.csv", tmp_path / "protocol.csv"
-    frame.to_csv(log, index=False, float_format="%.17g")
-    sheet.to_csv(proto, index=False, float_format="%.17g")
+    log, proto = _written(session, tmp_path)
     stops = tmp_path / "stops.csv"
     assert main(["stops", str(log), "--protocol", str(proto), "-o", str(stops)]) == 0
     resaved = tmp_path / "stops_de.csv"
@@ -227,10 +233,8 @@ def test_a_rotated_csv_with_a_comment_line_above_its_header_is_still_known_rotat
     """`mountcal rotate -o x.csv`'s output with a line '# …' added above its header, rotated again: refused as
     already in the vehicle frame. Once comment lines were read past, the column frame was read from the
     header's line on (its value 'frame' among 'vehicle') and refused for that."""
-    frame, sheet = session
-    log, proto, result = tmp_path / "log.csv", tmp_path / "protocol.csv", tmp_path / "r.json"
-    frame.to_csv(log, index=False, float_format="%.17g")
-    sheet.to_csv(proto, index=False, float_format="%.17g")
+    log, proto = _written(session, tmp_path)
+    result = tmp_path / "r.json"
     assert main(["calibrate", str(log), "--protocol", str(proto), "-o", str(result)]) == 0
     rotated = tmp_path / "vehicle.csv"
     assert main(["rotate", str(log), "--calibration", str(result), "-o", str(rotated)]) == 0
@@ -250,10 +254,8 @@ def test_a_stop_tables_columns_not_read_are_named(
     """A stop table from `mountcal stops` whose beta_deg a spreadsheet user renamed 'beta': yaw is not
     determined (no β read) and the note names the column left unread. Before: 'heading_reference: none',
     the column 'beta' never mentioned."""
-    frame, sheet = session
-    log, proto, stops = tmp_path / "log.csv", tmp_path / "protocol.csv", tmp_path / "stops.csv"
-    frame.to_csv(log, index=False, float_format="%.17g")
-    sheet.to_csv(proto, index=False, float_format="%.17g")
+    log, proto = _written(session, tmp_path)
+    stops = tmp_path / "stops.csv"
     assert main(["stops", str(log), "--protocol", str(proto), "-o", str(stops)]) == 0
     renamed = tmp_path / "renamed.csv"
     pd.read_csv(stops).rename(columns={"beta_deg": "beta"}).to_csv(renamed, index=False, float_format="%.17g")
@@ -273,12 +275,10 @@ def test_rotate_refuses_recordings_joined_in_one_table_whatever_reader_reads_it(
     table saved with ';' and decimal commas (the chunked reader of a dialect or column map) alike, refused where
     the clock steps back, with no file written. Before: the second sorted each chunk by time, interleaving the two
     recordings in the file it wrote (exit 0)."""
-    frame, sheet = session
-    log, proto, result = tmp_path / "log.csv", tmp_path / "protocol.csv", tmp_path / "r.json"
-    frame.to_csv(log, index=False, float_format="%.17g")
-    sheet.to_csv(proto, index=False, float_format="%.17g")
+    log, proto = _written(session, tmp_path)
+    result = tmp_path / "r.json"
     assert main(["calibrate", str(log), "--protocol", str(proto), "-o", str(result)]) == 0
-    joined = _joined(frame)
+    joined = _joined(session[0])
     comma, semicolon = tmp_path / "joined.csv", tmp_path / "joined_de.csv"
     joined.to_csv(comma, index=False, float_format="%.17g")
     joined.to_csv(semicolon, index=False, sep=";", decimal=",", float_format="%.17g")
