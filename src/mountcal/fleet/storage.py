@@ -99,6 +99,9 @@ def filesystem(url: str, options: Mapping[str, Any]) -> tuple[Any, str]:
     import fsspec
 
     key = (url.split("://", 1)[0], repr(sorted(options.items())), _storage_environment())
+    held = _FILESYSTEMS.get(key)
+    if held is not None and "::" not in url:  # a chained URL's path is the chain's to strip
+        return held, str(held._strip_protocol(url))
     try:
         # fsspec reuses a filesystem made with the same arguments, whatever the environment now says: a
         # notebook that points AWS_ENDPOINT_URL (or a profile, or keys) elsewhere between two runs would
