@@ -45,6 +45,7 @@ from scipy.spatial.transform import Rotation
 
 from mountcal.apply.rotate_log import to_frame
 from mountcal.cli import main
+from mountcal.core.result import Calibration
 from mountcal.io.samples import Channel, Samples
 from mountcal.simulate.drive import simulate_drive
 from mountcal.simulate.stops import simulate_parking_log, simulate_stops
@@ -401,6 +402,33 @@ def seam_slips(rng: np.random.Generator, folder: Path) -> dict[str, Case]:
         ["rotate", str(folder / "deg.parquet"), "--calibration", cal, "-o", str(folder / "deg_veh.parquet")],
         None,
         ("deg/s",),
+        refuse=True,
+    )
+    # a drive's log rotated with a calibration made from the same vehicle's drive in rad/s (rotate's TurnWatch)
+    drive_log, drive_cal = _log(d, folder, "drive.parquet"), str(folder / "drive_r.json")
+    _quiet(["calibrate", drive_log, "--use", "driving", "-o", drive_cal])
+    stated_deg = "time=t_s,ax=ax,ay=ay,az=az,gx=gx:deg/s,gy=gy:deg/s,gz=gz:deg/s,speed=speed_mps,heading=heading_deg"
+    cases["rotate: a drive's gyro in rad/s, stated deg/s by the column map"] = Case(
+        ["rotate", drive_log, "--calibration", drive_cal, "--columns", stated_deg, "-o", str(folder / "dv.parquet")],
+        None,
+        ("57.3 times too small",),
+        refuse=True,
+    )
+    gz_negated = dataclasses.replace(d, gyro_s=d.gyro_s * np.array([1.0, 1.0, -1.0]))  # type: ignore[operator]
+    cases["rotate: a drive with its gyro's z negated (a DBC sign)"] = Case(
+        ["rotate", _log(gz_negated, folder, "gzn.parquet"), "--calibration", drive_cal, "-o", str(folder / "g.csv")],
+        None,
+        ("wrong sign",),
+        refuse=True,
+    )
+    right = Calibration.load(drive_cal)
+    half_cal = str(folder / "drive_half.json")
+    half = Rotation.from_euler("z", 180.0, degrees=True) * right.rot_vs
+    dataclasses.replace(right, rot_vs=half, yaw_deg=((right.yaw_deg or 0.0) + 360.0) % 360.0 - 180.0).save(half_cal)
+    cases["rotate: a drive with a calibration half a turn off in yaw"] = Case(
+        ["rotate", drive_log, "--calibration", half_cal, "-o", str(folder / "h.parquet")],
+        None,
+        ("half a turn",),
         refuse=True,
     )
     cases["triad: on the vehicle-frame output"] = Case(

@@ -463,7 +463,12 @@ def test_iter_chunks_concatenate_to_read(tmp_path: Path, max_samples: int) -> No
     np.testing.assert_array_equal(np.concatenate([b.t_s for b in batches]), whole.t_s)
     np.testing.assert_array_equal(np.concatenate([b.acc_s for b in batches]), whole.acc_s)
     np.testing.assert_array_equal(np.concatenate([b.gyro_s for b in batches if b.gyro_s is not None]), whole.gyro_s)
-    assert all(b.channels == {} and b.source == str(path) for b in batches)
+    assert all(b.source == str(path) for b in batches)
+    assert whole.channels  # the auxiliary channels come with the batches, each sample once
+    for key, channel in whole.channels.items():
+        parts = [b.channels[key] for b in batches if key in b.channels]
+        np.testing.assert_array_equal(np.concatenate([c.t_s for c in parts]), channel.t_s)
+        np.testing.assert_array_equal(np.concatenate([c.value for c in parts]), channel.value)
 
 
 def test_single_thread_path_equals_threaded(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

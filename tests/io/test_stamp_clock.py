@@ -96,6 +96,26 @@ def test_a_ros2_bag_of_the_boot_time_log_reads_on_the_recorders_clock_too(parkin
     assert IMU_TOPIC in clock.value and clock.by.startswith("header.stamp against the record time")
 
 
+def test_the_stream_rotate_reads_moves_the_boot_time_imu_as_the_whole_read_does(parking, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    """``rotate`` reads an MCAP a batch at a time (iter_mcap). Before, its batches kept the IMU's boot-time stamps
+    and carried no odometry: a log calibrated on Unix time was written 54 years earlier, and no speed came
+    with it. Now each batch has its odometry, every topic on the recorder's clock, as :func:`read_log` gives."""
+    import pandas as pd
+
+    from mountcal.io.logs import iter_log
+
+    boot, _, sheet = parking
+    whole = read_log(boot)
+    batches = list(iter_log(boot, max_samples=5000))
+    np.testing.assert_array_equal(np.concatenate([b.t_s for b in batches]), whole.t_s)
+    speed = [b.channels["speed_mps"] for b in batches if "speed_mps" in b.channels]
+    np.testing.assert_array_equal(np.concatenate([c.t_s for c in speed]), whole.channels["speed_mps"].t_s)
+    cal, out = tmp_path / "r.json", tmp_path / "v.parquet"
+    assert main(["calibrate", str(boot), "--protocol", str(sheet), "-o", str(cal), "-q"]) == 0
+    assert main(["rotate", "--calibration", str(cal), str(boot), "-o", str(out), "-q"]) == 0
+    np.testing.assert_array_equal(pd.read_parquet(out)["t_s"].to_numpy(), whole.t_s)
+
+
 def test_stamps_on_the_recorders_clock_are_read_as_stamped(parking) -> None:  # type: ignore[no-untyped-def]
     _, unix, _ = parking
     samples = read_log(unix)

@@ -175,11 +175,35 @@ def frame_to_vehicle(
     out = df.copy()
     out[list(acc_columns)] = acc_to_vehicle(_columns(df, acc_columns), cal, level_only=level_only)
     if gyro_columns is not None:
+        _check_turns(df, cal, acc_columns, gyro_columns)
         out[list(gyro_columns)] = rate_to_vehicle(_columns(df, gyro_columns), cal, level_only=level_only)
     out.attrs.update(
         frame="vehicle" if cal.yaw_determined else "levelled", confident=cal.confident, warnings=list(found)
     )
     return out
+
+
+def _check_turns(df: pd.DataFrame, cal: Calibration, acc_columns: Sequence[str], gyro_columns: Sequence[str]) -> None:
+    """What ``rotate`` checks of a log's turns against a calibration made elsewhere (:class:`TurnWatch`: a gyro
+    axis reversed, a calibration half a turn off), where the frame holds the times and a speed or heading
+    (:func:`~mountcal.apply.rotate_log.to_frame`'s columns)."""
+    aux = [key for key in ("speed_mps", "heading_deg") if key in df.columns]
+    if "t_s" not in df.columns or not aux:
+        return
+    from mountcal.io.samples import Channel, Samples
+    from mountcal.loop.crosscheck import TurnWatch
+
+    t = np.asarray(df["t_s"].to_numpy(dtype=float), dtype=np.float64)
+    channels = {}
+    for key in aux:
+        value = np.asarray(df[key].to_numpy(dtype=float), dtype=np.float64)
+        known = np.isfinite(value) & np.isfinite(t)
+        channels[key] = Channel(t[known], value[known])
+    acc, gyro = _columns(df, acc_columns), _columns(df, gyro_columns)
+    rows = np.isfinite(t) & np.isfinite(acc).all(axis=1) & np.isfinite(gyro).all(axis=1)
+    source = str(df.attrs.get("source") or "DataFrame")
+    # the turns' sense only: this API rotates rates in any unit
+    TurnWatch.of(cal, scale=False).look(Samples(t[rows], acc[rows], gyro[rows], channels=channels, source=source))
 
 
 def frame_to_sensor(

@@ -54,6 +54,7 @@ from mountcal.apply.rotate import (
     refuse_gravity_free,
     refuse_rotated,
 )
+from mountcal.apply.rotate_report import RotateReport
 from mountcal.core.angles import ANGLE_NAMES, Angles
 from mountcal.core.atomic import atomic_output
 from mountcal.core.conventions import CONVENTIONS, FloatArray
@@ -61,7 +62,7 @@ from mountcal.core.errors import InputError
 from mountcal.core.option_names import option
 from mountcal.core.output_suffix import check_output_suffix
 from mountcal.core.ranges import check
-from mountcal.core.result import VEHICLE_FRAME, Calibration
+from mountcal.core.result import Calibration
 from mountcal.core.threads import helpers_allowed
 from mountcal.core.version import software_version
 from mountcal.estimate import effects
@@ -70,6 +71,7 @@ from mountcal.io.input_conventions import AxisMap, check_same_axes, parse_axes
 from mountcal.io.logs import iter_log
 from mountcal.io.mcap.chunks import open_log
 from mountcal.io.mcap.copy import copy_mcap_with_imu
+from mountcal.io.mcap.read import has_odometry
 from mountcal.io.mcap.write import McapImuSamples
 from mountcal.io.reader import CHUNK_SAMPLES, LogOptions
 from mountcal.io.registry import reader_for
@@ -79,61 +81,12 @@ from mountcal.io.sensor_frame import refuse_several
 from mountcal.io.sensor_logger import sign_for_calibration
 from mountcal.io.table.write import CsvSamples, ParquetSamples
 from mountcal.io.whole import Cut, reading
+from mountcal.loop.crosscheck import TurnWatch
 from mountcal.stops.detect import GyroUnitWatch
 
 FORMATS = {".parquet": "parquet", ".pq": "parquet", ".csv": "csv", ".mcap": "mcap"}
 VEHICLE_FRAME_ID = "base_link"  # REP 103's body frame: x forward, y left, z up = ISO 8855
 LEVELLED_FRAME_ID = "mountcal_levelled"  # z up, heading the sensor's own: not REP 103's base_link
-
-
-@dataclass(frozen=True)
-class RotateReport:
-    """What :func:`rotate_log` read, wrote and dropped.
-
-    ``samples_in`` are the IMU samples the readers delivered and ``samples_out`` those written
-    (always equal); ``dropped`` counts what the readers discarded, by reason. For an MCAP copied
-    through, ``copied_messages`` counts the input's messages (every channel, the original IMU one
-    included) and ``nonfinite`` the IMU messages with NaN or infinite values (rotated, so still
-    NaN, and kept so the new channel has one message per original).
-    """
-
-    output: str
-    format: str
-    inputs: tuple[str, ...]
-    samples_in: int
-    samples_out: int
-    dropped: dict[str, int]
-    chunks: int
-    largest_chunk: int
-    gyro: bool
-    topic: str | None = None
-    copied_messages: int = 0
-    copied_channels: int = 0
-    nonfinite: int = 0
-    frame: str = VEHICLE_FRAME
-    warnings: tuple[str, ...] = ()  # what check_applicable found: not confident, levelled only
-    incomplete: tuple[str, ...] = ()  # inputs cut short, read in part (--allow-truncated): where each ends
-
-    def lines(self) -> list[str]:
-        """Lines for the user."""
-        dropped = ", ".join(f"{k}: {v}" for k, v in self.dropped.items())
-        out = [
-            f"read {self.samples_in} IMU samples from {len(self.inputs)} file(s)"
-            + (f"; the readers dropped {dropped}" if dropped else "; nothing dropped"),
-            f"wrote {self.samples_out} {'vehicle' if self.frame == VEHICLE_FRAME else 'levelled'}-frame samples "
-            "(accelerometer"
-            + (" and gyro" if self.gyro else "")
-            + f") to {self.output} ({self.format}, {self.chunks} chunk(s) of at most {self.largest_chunk})",
-        ]
-        if self.topic is not None and self.copied_channels:
-            out.append(
-                f"copied {self.copied_messages} messages on {self.copied_channels} channel(s) unchanged; "
-                f"added {self.topic}"
-            )
-        if self.nonfinite:
-            out.append(f"{self.nonfinite} IMU messages hold NaN or infinite values: kept, rotated to NaN")
-        out += [f"input file: {line}" for line in self.incomplete]
-        return out
 
 
 def output_format(path: str | os.PathLike[str], fmt: str | None = None) -> str:
@@ -310,7 +263,7 @@ def _rotate_stream(
     acc_to_vehicle(first.acc_s, cal, check_units=True, level_only=checked.level_only)  # g units refused before output
     flip, said = sign_for_calibration(first, cal.provenance.conventions)  # a phone app's sign (Sensor Logger)
     checked = replace(checked, warnings=(*checked.warnings, said)) if said else checked
-    tally = _Tally(gyro=first.gyro_s is not None, several=len(files) > 1, flip_sign=flip)
+    tally = _Tally(gyro=first.gyro_s is not None, several=len(files) > 1, flip_sign=flip, turns=TurnWatch.of(cal))
     with atomic_output(out) as f, ThreadPoolExecutor(max_workers=1) as encoder:
         writer = _writer(f, kind, tally.gyro, cal, files, frame_id, first.incomplete, checked)
         # Encoding and compressing chunk k (pyarrow releases the GIL) overlaps reading chunk k + 1;
@@ -350,6 +303,7 @@ def _rotate_stream(
         topic=_topic("/imu", cal) if kind == "mcap" else None,
         incomplete=tuple(tally.incomplete),
         warnings=checked.warnings,
+        turns=tally.turns.lines() if tally.turns else (),
     )
 
 
@@ -366,6 +320,7 @@ class _Tally:
     dropped: Counter[str] = field(default_factory=Counter)
     incomplete: list[str] = field(default_factory=list)
     gyro_unit: GyroUnitWatch = field(default_factory=GyroUnitWatch)  # deg/s read as rad/s: refused, not written
+    turns: TurnWatch | None = None  # the gyro's scale and the turns' sense against the calibration
 
     def rotate(
         self, chunk: Samples, cal: Calibration, level_only: bool
@@ -387,6 +342,8 @@ class _Tally:
         self.gyro_unit.look(chunk)
         # Units checked on the first chunk; yaw by rotate_log (level_only: its decision, passed on).
         acc_s = -chunk.acc_s if self.flip_sign else chunk.acc_s
+        if self.turns is not None:
+            self.turns.look(replace(chunk, acc_s=acc_s) if self.flip_sign else chunk)
         acc_v = acc_to_vehicle(acc_s, cal, check_units=False, level_only=level_only)
         gyro_v = rate_to_vehicle(chunk.gyro_s, cal, level_only=level_only) if chunk.gyro_s is not None else None
         self.samples, self.chunks, self.largest = self.samples + n, self.chunks + 1, max(self.largest, n)
@@ -453,14 +410,17 @@ def _rotate_mcap_copy(
 ) -> RotateReport:
     open_log(src, discover=False).file.close()  # a cut file is refused, or its cut recorded in `cuts`, before writing
     chunks = iter_log([src], opts, CHUNK_SAMPLES)  # a topic mountcal rotated, a gyro in deg/s: refused before writing
-    gyro_unit = GyroUnitWatch()
+    gyro_unit, turns = GyroUnitWatch(), TurnWatch.of(cal)
+    if not has_odometry(src):  # no speed, no heading: the turns cannot decide, and the log is not read through
+        turns = replace(turns, unable="the log holds no odometry topic (no speed, no heading)")
     try:
         first = chunk = next(chunks, None)
         refuse_rotated(None if first is None else first.rotated, str(src))
         if first is not None:
             refuse_gravity_free(first)
-        while chunk is not None and not gyro_unit.done:
+        while chunk is not None and not (gyro_unit.done and turns.done):  # a log without turns is read through
             gyro_unit.look(chunk)
+            turns.look(chunk)
             chunk = next(chunks, None)
     finally:
         getattr(chunks, "close", lambda: None)()
@@ -494,6 +454,7 @@ def _rotate_mcap_copy(
         copied_channels=stats.copied_channels,
         nonfinite=stats.nonfinite,
         incomplete=tuple(c.sentence for c in cuts),
+        turns=turns.lines(),
     )
 
 

@@ -61,8 +61,9 @@ class StampClocks:
     """Per topic, ``header.stamp`` against the record time, gathered a block at a time; which samples'
     keys (``"imu"``, ``Samples.channels``) each topic gave."""
 
-    def __init__(self, record_name: str) -> None:
+    def __init__(self, record_name: str, max_blocks: int | None = None) -> None:
         self.record_name = record_name  # "log_time", "the bag's record time"
+        self.max_blocks = max_blocks  # a stream's bound: each topic judged on its first blocks (a steady clock shows)
         self._topics: dict[str, _Topic] = {}
         self._keys: dict[str, str] = {}
 
@@ -71,6 +72,8 @@ class StampClocks:
         tally = self._topics.setdefault(topic, _Topic())
         for key in keys:
             self._keys.setdefault(key, topic)
+        if self.max_blocks is not None and len(tally.offsets) >= self.max_blocks:
+            return
         stamp = sec.astype(np.int64) * NS + nanosec.astype(np.int64)
         record = record_ns.astype(np.int64)
         unset = stamp == 0  # timed by the recorder (see the readers' stamp rule)

@@ -31,6 +31,7 @@ tested (with the reason), or refuse with the option that fixes the convention:
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -40,7 +41,7 @@ from mountcal.core.conventions import FloatArray
 from mountcal.core.errors import InputError
 from mountcal.core.findings import Finding
 from mountcal.core.option_names import option
-from mountcal.core.result import Check
+from mountcal.core.result import Calibration, Check
 from mountcal.io.input_conventions import negated
 from mountcal.io.samples import Samples
 from mountcal.stops.gyro_unit import DEG_PER_RAD, fix
@@ -175,7 +176,9 @@ def turn_handedness(samples: Samples, rot_vs: Rotation, cues: TurnCues) -> Check
 
 def _backwards(wrong: set[tuple[str, str]], tested: set[tuple[str, str]], cues: dict[str, FloatArray]) -> str | None:
     """Why only the lateral cue turns the wrong way, where the longitudinal one runs backwards too; else None."""
-    if _odd(wrong, tested) != {"lateral"} or "forward" not in cues:
+    # the lateral cue alone turns the wrong way, or it and the gyro disagree with no third cue to say which
+    lateral = _odd(wrong, tested) == {"lateral"} or wrong == tested == {("lateral", "gyro")}
+    if not lateral or "forward" not in cues:
         return None
     # the lateral cue already failed: this only chooses between two readings of it, so the correlation's
     # significance decides it without a floor on its size (grades and body pitch dilute a_x against dv/dt)
@@ -331,6 +334,82 @@ def turn_cues(samples: Samples, rot_vs: Rotation, yaw_known: bool) -> TurnCues:
     if len(available) < 2:
         return None
     return {k: np.where(moving, c, np.nan) for k, c in cues.items()}
+
+
+@dataclass
+class TurnWatch:
+    """:func:`turn_handedness` and :func:`gyro_scale` over a stream's chunks, with a calibration made elsewhere
+    (``mountcal rotate``): the chunks' 1 s cues are gathered until the turns decide, then the watch stops.
+
+    A log rotated with a calibration from another session has had none of the checks ``calibrate`` runs on it: a
+    gyro stated deg/s that logs rad/s (57.3 times too small once converted), a gyro axis reversed by a DBC sign,
+    a calibration whose yaw is half a turn off for this vehicle would each be written as vehicle-frame data. A
+    mismatch raises (the output is then dropped); ``checks`` says what was found or why nothing was tested.
+    """
+
+    rot_vs: Rotation
+    yaw_known: bool
+    scale: bool = True  # the gyro's unit checked too (a DataFrame's gyro may be in any unit)
+    unable: str = ""  # why the log's turns cannot be checked at all (it holds no speed and no heading)
+    checks: tuple[Check, ...] = ()
+    _parts: list[dict[str, FloatArray]] = field(default_factory=list)
+
+    @classmethod
+    def of(cls, cal: Calibration, scale: bool = True) -> TurnWatch:
+        """The watch for a log rotated with ``cal`` (the lateral cue needs its yaw)."""
+        return cls(cal.rot_vs, cal.yaw_determined, scale)
+
+    @property
+    def done(self) -> bool:
+        """Every check the gathered cues allow has decided (with no gyro, there is no scale to check)."""
+        return bool(self.unable) or (bool(self.checks) and all(c.passed is not None for c in self.checks))
+
+    def lines(self) -> tuple[str, ...]:
+        """What the turns showed, for a report (a mismatch was refused before)."""
+        if self.unable or not self.checks:
+            why = self.unable or "too little driving at speed beside a second cue"
+            return (f"gyro scale and turn handedness not checked: {why}",)
+        return tuple(f"{c.name}: {'checked' if c.passed else 'not checked'}, {c.reason}" for c in self.checks)
+
+    def look(self, samples: Samples) -> None:
+        """Gather ``samples``' cues and check all gathered so far.
+
+        Raises
+        ------
+        InputError
+            The turns show a gyro off by 57.3, cues that turn opposite ways, or a yaw half a turn off.
+        """
+        if self.done:
+            return
+        cues = turn_cues(samples, self.rot_vs, self.yaw_known)
+        if cues is None:
+            return
+        self._parts.append(cues)
+        keys = {k for part in self._parts for k in part}
+        gathered = {
+            k: np.concatenate([p.get(k, np.full(next(iter(p.values())).size, np.nan)) for p in self._parts])
+            for k in keys
+        }
+        try:
+            half = turn_handedness(samples, self.rot_vs, gathered)
+        except Mirrored as err:  # or the calibration is not this log's mounting: a sensor moved since
+            raise InputError(
+                err.where,
+                err.expected,
+                err.found,
+                f"The calibration was made from another log: if the sensor was moved or remounted since, calibrate "
+                f"this log. Otherwise: {err.todo}",
+            ) from err
+        self.checks = (half, gyro_scale(samples, gathered)) if self.scale and "gyro" in gathered else (half,)
+        if half.passed is False:
+            raise InputError(
+                samples.source or "log",
+                "a calibration whose vehicle frame points where this vehicle drives",
+                half.reason,
+                "The calibration was made from another log: if the sensor was moved or remounted since, calibrate "
+                "this log; otherwise calibrate the vehicle again (the stops' headings from uphill, or a drive in the "
+                "same log) and rotate with that calibration.",
+            )
 
 
 def _sign_test(a: FloatArray, b: FloatArray, reference: FloatArray, min_r: float = TURN_R) -> float | None:

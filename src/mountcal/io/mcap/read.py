@@ -39,7 +39,7 @@ import os
 from collections import Counter
 from collections.abc import Generator, Iterator, Sequence
 from contextlib import closing
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -474,9 +474,10 @@ def iter_mcap(
     Yields
     ------
     Samples
-        ``t_s`` (m,), ``acc_s`` and ``gyro_s`` (m, 3), m ≤ ``max_samples``, as in :func:`read_mcap`
-        but without aux channels; ``dropped`` counts the samples dropped from the chunks that fed
-        this batch.
+        ``t_s`` (m,), ``acc_s`` and ``gyro_s`` (m, 3), m ≤ ``max_samples``, as in :func:`read_mcap`,
+        with the auxiliary samples read since the batch before (the only temperature, fix and odometry
+        topic of each type; none of a type with several); ``dropped`` counts the samples dropped from
+        the chunks that fed this batch.
 
     Raises
     ------
@@ -489,44 +490,90 @@ def iter_mcap(
     log = open_log(path)
     try:
         selection = _select(log, "imu", topic)
+        aux = tuple(a for kind in ("temperature", "fix", "odom") if (a := _the_only(log, kind)) is not None)
     finally:
         log.file.close()
     assert selection is not None  # the IMU topic is never optional
-    return _iter_batches(path, selection, max_samples)
+    return _iter_batches(path, selection, aux, max_samples)
+
+
+def has_odometry(path: str | os.PathLike[str]) -> bool:
+    """Whether the log holds an odometry topic: an MCAP's only source of a speed and a heading."""
+    log = open_log(path)
+    try:
+        return any(log.kind(channels[0]) == "odom" for channels in log.topics().values())
+    finally:
+        log.file.close()
+
+
+STREAM_CLOCK_BLOCKS = 8  # blocks per topic a stream judges its clock on: bounded memory, and a steady clock shows
+
+
+def _the_only(log: Log, kind: str) -> _Selection | None:
+    """The auxiliary topic of ``kind`` a stream carries: the only one of its type; none where there are several
+    (:func:`read_mcap` asks which; a stream, which only rotates, goes on without)."""
+    try:
+        return _select(log, kind, None)
+    except InputError:
+        return None
 
 
 @budget.scoped_iter
-def _iter_batches(path: str | os.PathLike[str], selection: _Selection, max_samples: int) -> Iterator[Samples]:
+def _iter_batches(
+    path: str | os.PathLike[str], selection: _Selection, aux: tuple[_Selection, ...], max_samples: int
+) -> Iterator[Samples]:
     log = open_log(path, discover=False)  # the channels were chosen already
     try:
-        yield from _batches(log, selection, max_samples)
+        yield from _batches(log, selection, aux, max_samples)
     except Corrupt as err:
         raise damaged(log.where, str(err)) from err
     finally:
         log.file.close()
 
 
-def _batches(log: Log, selection: _Selection, max_samples: int) -> Iterator[Samples]:
+def _batches(log: Log, selection: _Selection, aux: tuple[_Selection, ...], max_samples: int) -> Iterator[Samples]:
+    """IMU batches, each with the auxiliary samples read since the batch before, every topic moved onto the
+    recorder's clock as :func:`read_mcap` moves it (judged on the blocks read so far: a steady clock shows in its
+    first)."""
     pending: list[Piece] = []
     count, total = 0, 0
     dropped: Counter[str] = Counter()
     frames: Counter[str] = Counter()
-    with closing(_decoded_units(log, [selection])) as units:
-        for pieces, drops, named, _ in units:
+    odom_frames: Counter[str] = Counter()
+    held: dict[str, list[Piece]] = {}
+    clocks = StampClocks("log_time", max_blocks=STREAM_CLOCK_BLOCKS)
+
+    def settled(batch: Samples) -> Samples:
+        channels = {}
+        for key, parts in held.items():
+            joined = concat(parts)
+            channels[key] = Channel(joined.t_s, joined.columns["value"])
+        held.clear()
+        conventions = _heading_frame(aux, channels, odom_frames, log.where)
+        return clocks.settle(replace(batch, channels=channels, conventions=conventions))
+
+    with closing(_decoded_units(log, [selection, *aux], clocks)) as units:
+        for pieces, drops, named, odom_named in units:
             dropped.update(drops)
             frames.update(named)
+            odom_frames.update(odom_named)
+            for key, piece in pieces.items():
+                if key != "imu" and piece.t_s.size:
+                    held.setdefault(key, []).append(piece)
             if "imu" in pieces and pieces["imu"].t_s.size:
                 pending.append(pieces["imu"])
                 count += pieces["imu"].t_s.size
             while count >= max_samples:
                 joined = join_unsorted(pending)
-                yield _batch(log, selection, joined, 0, max_samples, dropped, frames)
+                yield settled(_batch(log, selection, joined, 0, max_samples, dropped, frames))
                 pending = [_slice(joined, max_samples, count)]
                 count, total, dropped, frames = count - max_samples, total + max_samples, Counter(), Counter()
     if count:
-        yield _batch(log, selection, join_unsorted(pending), 0, count, dropped, frames)
+        yield settled(_batch(log, selection, join_unsorted(pending), 0, count, dropped, frames))
     elif not total:
         raise _no_samples(log, selection.topic, dropped)
+    elif held:  # auxiliary samples after the last IMU batch: carried by an empty one
+        yield settled(Samples(np.empty(0), np.empty((0, 3)), source=log.where, rotated=selection.rotated))
 
 
 def _slice(piece: Piece, start: int, stop: int) -> Piece:
