@@ -20,7 +20,7 @@ from rosbags.convert.converter import convert
 from mountcal.cli import main
 from mountcal.io.heading_frame import earth_aligned
 from mountcal.io.logs import read_log
-from mountcal.io.writers import write_mcap, write_protocol
+from mountcal.io.writers import START_TIME_S, write_mcap, write_protocol
 from mountcal.simulate.stops import simulate_parking_log
 
 OFFSET_DEG = 40.0  # the odometry frame's x axis, clockwise from east: its yaw reads 40° less than ENU
@@ -101,13 +101,52 @@ def test_every_container_states_the_odometry_frame(logs: dict[str, Path]) -> Non
         ("utm_local", True),
         ("odom", False),
         ("map", False),
-        ("odom_ned", False),
+        ("odom_ned", True),
+        ("/local_origin_ned", True),
+        ("ned", True),
+        ("planned", False),
         ("", False),
         ("menu", False),
     ],
 )
-def test_only_a_name_that_says_east_north_up_states_it(name: str, aligned: bool) -> None:
+def test_only_a_name_that_says_east_north_up_or_north_east_down_states_it(name: str, aligned: bool) -> None:
     assert earth_aligned(name) is aligned
+
+
+def test_a_heading_in_a_north_east_down_frame_is_the_compass_heading_in_every_container(
+    logs: dict[str, Path], tmp_path: Path
+) -> None:
+    """MAVROS and PX4 publish odometry in NED frames (``local_origin_ned``, ``odom_ned``): yaw about the down axis,
+    clockwise from north — the compass heading itself, not 90° − yaw. Before, it was taken as ENU: every heading
+    mirrored about north-east, the stops' headings running the wrong way round."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+    from scipy.spatial.transform import Rotation
+
+    park = simulate_parking_log(5.0, 6.0, 7.0, seed=9)
+    ned = tmp_path / "ned.mcap"
+    write_mcap(ned, park, odometry_frame="local_origin_ned")
+    with open(ned, "rb") as f:  # the writer, read independently: NED yaw (intrinsic Z of ZYX) = compass heading
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        odom = [m for _, _, _, m in reader.iter_decoded_messages(topics=["/odom"])]
+    q = odom[len(odom) // 2].pose.pose.orientation
+    stamp = odom[len(odom) // 2].header.stamp
+    t = stamp.sec + stamp.nanosec * 1e-9 - START_TIME_S
+    truth = float(park.heading_deg[np.searchsorted(park.t_s, t, side="right") - 1])
+    yaw = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_euler("ZYX", degrees=True)[0] % 360.0
+    assert abs((yaw - truth + 180.0) % 360.0 - 180.0) < 0.01
+    db3, bag = tmp_path / "ned_db3", tmp_path / "ned.bag"
+    convert([ned], db3, "sqlite3", 9, None, "file", None, None, [], [], [], [])
+    convert([db3], bag, None, None, None, "file", None, None, [], [], [], [])
+    compass = read_log(logs["enu"]).channels["heading_deg"].value
+    for log in (ned, db3, bag):
+        samples = read_log(log)
+        np.testing.assert_allclose(samples.channels["heading_deg"].value, compass, atol=1e-6)
+        (frame,) = [c for c in samples.conventions if c.name == "heading_frame"]
+        assert frame.how == "stated" and "north-east-down" in frame.value, log
+    doc = _calibrate(ned, tmp_path, "--uphill-azimuth-deg", "30")
+    assert doc["confident"] and "heading_frame" not in _failed(doc)
+    assert abs(doc["mounting"]["yaw_deg"] - 7.0) < 3.0 * doc["uncertainty"]["yaw_deg"]
 
 
 def test_a_stop_table_of_such_a_log_keeps_the_odometry_frame(logs: dict[str, Path], tmp_path: Path) -> None:

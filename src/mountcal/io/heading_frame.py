@@ -2,7 +2,9 @@
 messages whose ``pose.pose.orientation`` gives the log's heading channel.
 
 The readers (MCAP, ROS 1 bags, ROS 2 bag folders) turn that orientation into a compass heading by taking
-its frame as east-north-up (REP 103: yaw counter-clockwise from east). That holds for a frame aligned with
+its frame as east-north-up (REP 103: yaw counter-clockwise from east, heading = 90° − yaw), or, where every
+message's frame is named north-east-down (``ned``, ``…_ned``: MAVROS, PX4), as NED (yaw clockwise from north:
+the heading itself). That holds for a frame aligned with
 the earth, and for no other: REP 105's ``odom`` frame starts wherever the odometry started (wheel odometry
 reads yaw 0 at power-on, facing anywhere), and a ``map`` frame is as a map-maker laid it out (a SLAM map
 starts at the robot's first pose). The data cannot tell: an offset turns every heading by one angle, which
@@ -10,7 +12,8 @@ turns the stops' yaw by as much — exactly what an uphill azimuth in another no
 
 So :func:`heading_frame_convention` states the frame in every result made of such samples
 (``provenance.conventions``, name ``heading_frame``): ``stated`` where the frame's name says it is
-east-north-up (``enu``, ``…_enu``, ``utm``, ``utm_…``: robot_localization's navsat_transform), else
+east-north-up (``enu``, ``…_enu``, ``utm``, ``utm_…``: robot_localization's navsat_transform) or
+north-east-down, else
 ``default`` — taken as east-north-up because REP 103 asks it, by no statement of the log.
 :func:`heading_frame_check` fails (the result is then not confident) where β came from such a heading and
 an uphill azimuth: the yaw is then only as right as the assumption that the odometry frame faces east. A
@@ -33,9 +36,22 @@ HEADING_FRAME = "heading_frame"  # the Convention's name
 
 
 def earth_aligned(frame: str) -> bool:
-    """Whether a frame's name says it is east-north-up (not only that it is fixed in the world)."""
+    """Whether a frame's name says it is aligned with the earth: east-north-up, or north-east-down."""
     name = frame.strip().lstrip("/").lower()
-    return name in ("enu", "utm") or name.endswith("_enu") or name.startswith("utm_")
+    return name in ("enu", "utm") or name.endswith("_enu") or name.startswith("utm_") or north_east_down(frame)
+
+
+def north_east_down(frame: str) -> bool:
+    """Whether a frame's name says it is north-east-down (``ned``, ``…_ned``: MAVROS' ``local_origin_ned``, PX4's
+    ``odom_ned``), whose yaw about the down axis is clockwise from north: the compass heading itself."""
+    name = frame.strip().lstrip("/").lower()
+    return name == "ned" or name.endswith("_ned")
+
+
+def all_north_east_down(counts: Mapping[str, int]) -> bool:
+    """Whether the odometry messages counted by frame name are all in a north-east-down frame."""
+    named = [name for name, n in counts.items() if n]
+    return bool(named) and all(north_east_down(name) for name in named)
 
 
 def heading_frame_convention(topic: str, counts: Mapping[str, int], where: str) -> Convention | None:
@@ -49,7 +65,9 @@ def heading_frame_convention(topic: str, counts: Mapping[str, int], where: str) 
     several = len(named) > 1
     listing = ", ".join(f"{name or '(empty)'}" + (f" ({n} messages)" if several else "") for name, n in named.items())
     by = f"header.frame_id of {topic} in {source}"
-    if all(earth_aligned(name) for name in named):
+    if all_north_east_down(named):
+        return Convention(HEADING_FRAME, f"{listing} (north-east-down: yaw clockwise from north)", "stated", by)
+    if all(earth_aligned(name) and not north_east_down(name) for name in named):
         return Convention(HEADING_FRAME, f"{listing} (east-north-up: yaw counter-clockwise from east)", "stated", by)
     return Convention(
         HEADING_FRAME,
@@ -116,6 +134,7 @@ def heading_frame_check(conventions: Sequence[Convention]) -> Check | None:
 
 __all__ = [
     "HEADING_FRAME",
+    "all_north_east_down",
     "earth_aligned",
     "heading_frame_check",
     "heading_frame_convention",

@@ -53,6 +53,7 @@ from mountcal.io.can.write import (
     signal_unit,
     write_frames,
 )
+from mountcal.io.heading_frame import north_east_down
 from mountcal.io.ros2.definitions import ros2_definition
 from mountcal.io.samples import FloatArray, Samples
 
@@ -217,7 +218,8 @@ def write_mcap(
     stamp_offsets_s : mapping of topic to float, optional
         A driver's clock: the topic's ``header.stamp`` = log time + offset (s) (boot time: ``100 - start_time_s``).
     odometry_frame : str
-        The odometry's ``header.frame_id``: ``enu`` says its yaw is east-north-up (:mod:`mountcal.io.heading_frame`).
+        The odometry's ``header.frame_id``: ``enu`` says its yaw is east-north-up (:mod:`mountcal.io.heading_frame`);
+        a name ending ``_ned`` (or ``ned``) writes the yaw of a north-east-down frame (clockwise from north).
 
     Returns
     -------
@@ -339,8 +341,10 @@ def _odometry_messages(series: _Series, start_ns: int, frame_id: str) -> Iterato
     if "speed_mps" not in ch:
         return
     t, speed = ch["speed_mps"]
-    # ENU yaw (counter-clockwise from east) of the compass heading (clockwise from north)
-    yaw = np.radians(90.0 - _held(t, *ch["heading_deg"])) if "heading_deg" in ch else None
+    # the frame's yaw of the compass heading (clockwise from north): ENU counter-clockwise from east, NED the heading
+    ned = north_east_down(frame_id)
+    heading = _held(t, *ch["heading_deg"]) if "heading_deg" in ch else None
+    yaw = None if heading is None else np.radians(heading if ned else 90.0 - heading)
     for i, (t_ns, v) in enumerate(zip(_stamps(start_ns, t), speed.tolist(), strict=True)):
         if yaw is None:  # a zero quaternion is no rotation (readers drop it), rather than a false "east"
             quat = {"x": 0.0, "y": 0.0, "z": 0.0, "w": 0.0}

@@ -163,7 +163,7 @@ def _pieces(kind: str, decoded: Decoded, t: FloatArray, dropped: Counter[str]) -
         return {"speed_mps": keep(t, {"value": speed}, ok)}
     if kind == "nmea":
         return _nmea(t, columns, dropped)
-    return pieces_of(Decoded(decoded.sec, decoded.nanosec, columns), kind, dropped)
+    return pieces_of(Decoded(decoded.sec, decoded.nanosec, columns, decoded.frames), kind, dropped)
 
 
 def _nmea(t: FloatArray, columns: dict[str, FloatArray], dropped: Counter[str]) -> dict[str, Piece]:

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from mountcal.io.heading_frame import all_north_east_down
 from mountcal.io.ros2 import cdr
 from mountcal.io.samples import FloatArray
 
@@ -48,11 +49,12 @@ def _finite(*arrays: FloatArray) -> NDArray[np.bool_]:
     return ok
 
 
-def _heading_deg(quat: FloatArray) -> FloatArray:
-    """Compass heading (clockwise from north, [0, 360)) from an ENU orientation (x, y, z, w)."""
+def _heading_deg(quat: FloatArray, ned: bool = False) -> FloatArray:
+    """Compass heading (clockwise from north, [0, 360)) from an orientation (x, y, z, w) in an ENU frame (yaw
+    counter-clockwise from east), or in a NED one (``ned``: yaw clockwise from north, the heading itself)."""
     x, y, z, w = quat.T
-    yaw = np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))  # counter-clockwise from east
-    heading = np.mod(90.0 - np.degrees(yaw), 360.0)
+    yaw = np.degrees(np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))  # about the frame's z
+    heading = np.mod(yaw if ned else 90.0 - yaw, 360.0)
     return np.asarray(np.where(heading >= 360.0, heading - 360.0, heading), dtype=np.float64)
 
 
@@ -85,7 +87,7 @@ def pieces_of(decoded: cdr.Decoded, kind: str, dropped: Counter[str]) -> dict[st
     dropped["heading_deg_invalid_orientation"] += int((~heading_ok).sum())
     return {
         "speed_mps": keep(t, {"value": c["vx"]}, speed_ok),
-        "heading_deg": keep(t, {"value": _heading_deg(c["quat"])}, heading_ok),
+        "heading_deg": keep(t, {"value": _heading_deg(c["quat"], all_north_east_down(decoded.frames))}, heading_ok),
     }
 
 
