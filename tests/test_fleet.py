@@ -304,6 +304,19 @@ def test_a_manifest_names_vehicles_joins_split_logs_and_orders_by_start_time(tmp
     assert len(list(outputs_of(output)[2].glob("*.json"))) == 7  # the missing log is retried next time
 
 
+def test_a_manifest_saved_by_a_spreadsheet_in_a_semicolon_locale_is_read(tmp_path: Path) -> None:
+    """A German or French spreadsheet saves CSV with `;` between cells and a decimal comma: before, the fleet took
+    such a manifest for a log (its one column `vehicle_id;log`) and refused it as a table without accelerations."""
+    write_stop_tables(tmp_path / "stops", 2, seed=301)
+    manifest = tmp_path / "manifest.csv"
+    rows = ["vehicle_id;log;uphill_azimuth_deg"] + [f"van1;stops/log_{i:02d}.csv;30,5" for i in range(2)]
+    manifest.write_text("\n".join(rows) + "\n", encoding="utf-8")
+    jobs = collect_jobs([manifest], JobDefaults())
+    assert [j.vehicle_id for j in jobs] == ["van1", "van1"] and all(j.layout == "manifest" for j in jobs)
+    assert all(j.job.uphill_azimuth_deg == 30.5 for j in jobs)
+    assert [Path(j.log).name for j in jobs] == ["log_00.csv", "log_01.csv"]
+
+
 def test_bad_inputs_stop_with_a_clear_message_and_write_nothing(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

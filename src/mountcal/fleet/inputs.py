@@ -48,6 +48,7 @@ from mountcal.io.frame import written_by_mountcal
 from mountcal.io.inputs import csv_columns
 from mountcal.io.reader import LogOptions
 from mountcal.io.registry import is_log, log_suffixes
+from mountcal.io.table.mapped import dialect
 from mountcal.stops.detect import StopDetection
 from mountcal.stops.table import Headings
 
@@ -387,10 +388,18 @@ def _is_manifest(path: Path) -> bool:
     if path.is_file():  # a header of a million columns is refused before pandas reads it
         csv_columns(path, str(path), charge=False)
     try:
-        columns = pd.read_csv(path, nrows=0, comment="#", skipinitialspace=True).columns
+        columns = pd.read_csv(path, nrows=0, skipinitialspace=True, **_read_as(path)).columns
     except Exception:  # unreadable: not a manifest; the log reader will say what is wrong with it
         return False
     return all(c in {str(col).strip() for col in columns} for c in MANIFEST_REQUIRED)
+
+
+def _read_as(path: Path) -> dict[str, str]:
+    """How to read a manifest: the dialect every table is read in (``,``, ``;`` or tab; ``#`` lines above the
+    header; :func:`mountcal.io.table.mapped.dialect`). A spreadsheet saved in a German or French locale writes ``;``."""
+    with path.open("rb") as f:
+        head = f.read(1 << 16)
+    return {"comment": "#", **dialect(head, str(path))[1]}
 
 
 def read_manifest(path: str | Path, defaults: JobDefaults | None = None) -> list[FleetJob]:
@@ -405,7 +414,10 @@ def read_manifest(path: str | Path, defaults: JobDefaults | None = None) -> list
     path = input_file(path, "a manifest CSV")
     defaults = defaults or JobDefaults()
     try:
-        df = pd.read_csv(path, dtype=str, keep_default_na=False, comment="#", skipinitialspace=True)
+        read_as = _read_as(path)
+        df = pd.read_csv(path, dtype=str, keep_default_na=False, skipinitialspace=True, **read_as)
+    except InputError:
+        raise
     except Exception as err:  # pandas raises many types for malformed files
         raise InputError(str(path), "a manifest CSV", f"a file that does not parse ({err})", "Fix the CSV.") from err
     df = df.rename(columns=lambda c: str(c).strip())
@@ -436,6 +448,8 @@ def read_manifest(path: str | Path, defaults: JobDefaults | None = None) -> list
             channel=_int(cells["channel"], where, "channel") if cells.get("channel") else defaults.log.channel,
             topic=cells.get("topic") or defaults.log.topic,
         )
+        if "sep" in read_as:  # `;` or tab between cells: a comma in a number is a decimal comma (30,5)
+            cells["uphill_azimuth_deg"] = cells.get("uphill_azimuth_deg", "").replace(",", ".")
         azimuth = (
             _float(cells["uphill_azimuth_deg"], where, "uphill_azimuth_deg")
             if cells.get("uphill_azimuth_deg")
