@@ -74,6 +74,8 @@ from mountcal.io.stamp_clock import StampClocks
 if TYPE_CHECKING:
     from mountcal.core.result import Convention
 
+STREAM_CLOCK_BLOCKS = 8  # blocks per topic a stream judges its clock on: bounded memory, and a steady clock shows
+
 # --------------------------------------------------------------------------- choosing topics
 
 
@@ -460,7 +462,8 @@ def iter_mcap(
     The file is checked and the topic chosen (as in :func:`read_mcap`) before this returns; then
     one MCAP chunk at a time is decoded. Each batch is sorted by time; batches follow the file's
     chunk order, which is time order for recorders that write chunks as they go. Concatenated, the
-    batches equal :func:`read_mcap`'s IMU samples whenever chunks do not overlap in time.
+    batches equal :func:`read_mcap`'s IMU samples and channels whenever chunks do not overlap in time
+    (every topic's clock judged on its first :data:`STREAM_CLOCK_BLOCKS` blocks, not on the whole log).
 
     Parameters
     ----------
@@ -504,9 +507,6 @@ def has_odometry(path: str | os.PathLike[str]) -> bool:
         return any(log.kind(channels[0]) == "odom" for channels in log.topics().values())
     finally:
         log.file.close()
-
-
-STREAM_CLOCK_BLOCKS = 8  # blocks per topic a stream judges its clock on: bounded memory, and a steady clock shows
 
 
 def _the_only(log: Log, kind: str) -> _Selection | None:
