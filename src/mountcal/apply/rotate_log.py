@@ -7,7 +7,8 @@ only when complete, never over an input; every sample read is written; what a re
 
 An MCAP input rotated to MCAP keeps every record byte for byte and gains a channel ``<topic>/vehicle``: one
 vehicle-frame ``sensor_msgs/msg/Imu`` per IMU message (same stamps; ``frame_id`` ``base_link``, REP 103: x forward,
-y left, z up; orientation, when known, and the covariances turned to the vehicle's).
+y left, z up; orientation, when known, ``R_wv = R_ws · R_vsᵀ``, and all three covariances, the orientation's
+about the IMU's own axes as imu_transformer and robot_localization read it, turned to the vehicle's: ``R C Rᵀ``).
 
 Notebook use — read a log into a table, load a calibration, apply it:
 
@@ -475,7 +476,8 @@ def _to_vehicle(msgs: ImuMessages, cal: Calibration, check_units: bool, level_on
             sec=msgs.sec,
             nanosec=msgs.nanosec,
             orientation=orientation,
-            orientation_covariance=msgs.orientation_covariance,
+            # about the IMU's own axes (as ROS's consumers read it: imu_transformer, robot_localization)
+            orientation_covariance=_rotate_covariance(msgs.orientation_covariance, rot),
             angular_velocity=rate_to_vehicle(gyro, cal, level_only=level_only),
             angular_velocity_covariance=_rotate_covariance(msgs.angular_velocity_covariance, rot),
             linear_acceleration=acc_to_vehicle(acc, cal, check_units=False, level_only=level_only),
@@ -492,9 +494,10 @@ def _mapped(msgs: ImuMessages, axes: AxisMap) -> ImuMessages:
     orientation, orientation_cov = msgs.orientation.copy(), msgs.orientation_covariance.copy()
     if axes.reflection:
         orientation_cov[:, 0] = -1.0
-    else:  # R_w,sensor = R_w,device · Pᵀ
+    else:  # R_w,sensor = R_w,device · Pᵀ; its covariance, about the device's axes, turned to the sensor's
         known = np.isfinite(orientation).all(axis=1) & (np.linalg.norm(orientation, axis=1) > 0.5)
         orientation[known] = (Rotation.from_quat(orientation[known]) * Rotation.from_matrix(p).inv()).as_quat()
+        orientation_cov = _rotate_covariance(orientation_cov, p)
     return replace(
         msgs,
         orientation=orientation,
