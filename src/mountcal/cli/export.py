@@ -112,9 +112,9 @@ def run(args: argparse.Namespace) -> int:
     cal = Calibration.load(result)
     frames = None
     own = exporters.get(args.to).frames
-    if args.parent or args.child or args.translation or args.parent_pose:
+    if args.parent is not None or args.child is not None or args.translation or args.parent_pose:
         base = own or Frames()
-        parent = args.parent or base.parent
+        parent = base.parent if args.parent is None else args.parent
         read = args.parent_pose and own is not None  # export() refuses frames for the other formats
         frames = Frames(
             parent=parent,

@@ -49,7 +49,7 @@ def autoware_yaml(mount: Mounting, frames: Frames = DEFAULT_FRAMES) -> str:
     roll, pitch, yaw = angles_from_rot_vs(frames.in_parent(mount.rot_vs))
     x, y, z = frames.translation_m
     lines = frame_lines(mount, frames, "#")
-    lines += [f"{frames.parent}:", f"  {frames.child_name}:"]
+    lines += [f"{_key(frames.parent)}:", f"  {_key(frames.child_name)}:"]
     for key, value, digits in (
         ("x", x, 9),
         ("y", y, 9),
@@ -60,6 +60,17 @@ def autoware_yaml(mount: Mounting, frames: Frames = DEFAULT_FRAMES) -> str:
     ):
         lines.append(f"    {key}: {number(value, digits)}")
     return "\n".join(lines) + "\n"
+
+
+def _key(name: str) -> str:
+    """A frame name as a YAML key that reads back as that string: plain, or quoted where YAML would read another
+    type (``on``, ``null``, ``1``: a boolean, nothing, a number). The name's characters are checked before
+    (:func:`mountcal.outputs.exporters.child.check_name`)."""
+    import json
+
+    import yaml  # PyYAML, the parser of Autoware's xacro tools
+
+    return name if yaml.safe_load(name) == name else json.dumps(name)
 
 
 def read_parent_pose(path: str | Path, parent: str) -> ParentPose:

@@ -29,7 +29,20 @@ from mountcal.outputs.exporters.common import DEFAULT_CHILD, Frames, user_axes
 if TYPE_CHECKING:
     from mountcal.core.result import Calibration
 
-FRAME_NAME = re.compile(r"[A-Za-z0-9_/][A-Za-z0-9_/.-]*")  # a name taken from a log is written only if plain
+FRAME_NAME = re.compile(r"[A-Za-z0-9_/][A-Za-z0-9_/.-]*")  # what a command, XML and YAML all read as written
+
+
+def check_name(name: str, role: str) -> None:
+    """Refuse a frame name given for ``role`` (``child``, ``parent``) that would be written as something else:
+    a shell word split or taken for an option, an XML attribute broken, a YAML comment or mapping."""
+    if not FRAME_NAME.fullmatch(name):
+        raise InputError(
+            f"the {role} frame of the export ({option(role)})",
+            "a frame name of letters, digits, '_', '/', '.' and '-', not starting with '-' or '.' (written into "
+            "commands, XML and YAML as it is)",
+            repr(safe(name)),
+            f"Give the frame's name as ROS names it ({option(role)} NAME).",
+        )
 
 
 def with_child(cal: Calibration, frames: Frames) -> Frames:
@@ -40,13 +53,17 @@ def with_child(cal: Calibration, frames: Frames) -> Frames:
     Raises
     ------
     InputError
-        No child given for a calibration whose log named several IMU frames.
+        No child given for a calibration whose log named several IMU frames; a child or parent given whose
+        name a command, XML or YAML would misread (:func:`check_name`).
     """
     from mountcal.io.frame import FRAME_CONVENTION  # loads numpy: not when the formats are listed
 
     if frames.said:
         return frames
+    check_name(frames.parent, "parent")
     given = frames.child
+    if given is not None:
+        check_name(given, "child")
     conventions = cal.provenance.conventions
     if any(c.name == FRAME_CONVENTION for c in conventions):  # rotated samples: their frame is said elsewhere
         return replace(frames, child=given or DEFAULT_CHILD)
@@ -105,4 +122,4 @@ def with_child(cal: Calibration, frames: Frames) -> Frames:
     return replace(frames, said=(safe(said),), warn=True)
 
 
-__all__ = ["with_child"]
+__all__ = ["FRAME_NAME", "check_name", "with_child"]
