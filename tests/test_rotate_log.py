@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import doctest
 import hashlib
+import json
 import os
 import signal
 import subprocess
@@ -325,6 +326,11 @@ def test_chunks_are_bounded_and_every_sample_is_written(logs, cal: Calibration, 
     meta = pq.ParquetFile(out).metadata
     assert meta.num_rows == n and max(meta.row_group(i).num_rows for i in range(meta.num_row_groups)) <= 700
     assert b"vehicle" in meta.metadata[b"mountcal.frame"]
+    applied = json.loads(meta.metadata[b"mountcal.calibration"])  # every angle with its σ, as the result has them
+    for name in ("roll", "pitch", "yaw"):
+        sigma = cal.angles.sigma(name)  # type: ignore[arg-type]
+        assert sigma is not None and applied[f"{name}_sigma_deg"] == sigma
+        assert applied[f"{name}_deg"] == cal.angles.value(name)  # type: ignore[arg-type]
 
 
 def test_dropped_rows_are_counted_and_reported(cal: Calibration, tmp_path: Path, drive, capsys) -> None:  # type: ignore[no-untyped-def]

@@ -56,7 +56,6 @@ from mountcal.apply.rotate import (
     refuse_rotated,
 )
 from mountcal.apply.rotate_report import RotateReport
-from mountcal.core.angles import ANGLE_NAMES, Angles
 from mountcal.core.atomic import atomic_output
 from mountcal.core.conventions import CONVENTIONS, FloatArray
 from mountcal.core.errors import InputError
@@ -231,7 +230,7 @@ def _metadata(
         PREFIX + CALIBRATION_KEY: json.dumps(
             {
                 "quaternion_vs_xyzw": cal.rot_vs.as_quat().tolist(),
-                **{Angles.value_column(n): cal.angles.value(n) for n in ANGLE_NAMES[:3]},  # without σ: as ever
+                **cal.angles.columns(slope=False),  # each angle with its σ (and why a yaw is undetermined)
                 "bias_mps2": _offset(cal),
                 "method": cal.method,
                 "input": cal.provenance.input,
