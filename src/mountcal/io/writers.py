@@ -218,8 +218,7 @@ def write_mcap(
     stamp_offsets_s : mapping of topic to float, optional
         A driver's clock: the topic's ``header.stamp`` = log time + offset (s) (boot time: ``100 - start_time_s``).
     odometry_frame : str
-        The odometry's ``header.frame_id``: ``enu`` says its yaw is east-north-up (:mod:`mountcal.io.heading_frame`);
-        a name ending ``_ned`` (or ``ned``) writes the yaw of a north-east-down frame (clockwise from north).
+        The odometry's ``header.frame_id`` (:mod:`mountcal.io.heading_frame`): ``enu``, or ``…_ned`` (NED yaw).
 
     Returns
     -------
@@ -227,9 +226,8 @@ def write_mcap(
 
     Notes
     -----
-    The Imu orientation is unknown: ``orientation_covariance[0] = -1``, as the message definition
-    asks; without a gyro the same holds for ``angular_velocity``. Other covariances are zero
-    (unknown). mcap-ros2-support must be installed (it is in the ``test`` extra).
+    The Imu orientation is unknown: ``orientation_covariance[0] = -1``, as the message definition asks; without a
+    gyro the same holds for ``angular_velocity``. Other covariances are zero (unknown). Needs mcap-ros2-support.
     """
     try:
         from mcap_ros2.writer import Writer
@@ -237,8 +235,7 @@ def write_mcap(
         raise InputError(
             str(path), "mcap-ros2-support, to write ROS 2 MCAP", "it is not installed", "pip install mcap-ros2-support"
         ) from err
-    series = _series(log, with_fix)
-    start_ns = _to_ns(start_time_s)
+    series, start_ns = _series(log, with_fix), _to_ns(start_time_s)
     ok = np.asarray(np.isfinite(series.acc_s).all(axis=1), dtype=np.bool_)
     if series.gyro_s is not None:
         ok &= np.isfinite(series.gyro_s).all(axis=1)
@@ -341,10 +338,9 @@ def _odometry_messages(series: _Series, start_ns: int, frame_id: str) -> Iterato
     if "speed_mps" not in ch:
         return
     t, speed = ch["speed_mps"]
-    # the frame's yaw of the compass heading (clockwise from north): ENU counter-clockwise from east, NED the heading
-    ned = north_east_down(frame_id)
+    # the frame's yaw of the compass heading: ENU counter-clockwise from east (90° − heading), NED the heading
     heading = _held(t, *ch["heading_deg"]) if "heading_deg" in ch else None
-    yaw = None if heading is None else np.radians(heading if ned else 90.0 - heading)
+    yaw = None if heading is None else np.radians(heading if north_east_down(frame_id) else 90.0 - heading)
     for i, (t_ns, v) in enumerate(zip(_stamps(start_ns, t), speed.tolist(), strict=True)):
         if yaw is None:  # a zero quaternion is no rotation (readers drop it), rather than a false "east"
             quat = {"x": 0.0, "y": 0.0, "z": 0.0, "w": 0.0}
