@@ -287,6 +287,7 @@ def document(raw: bytes, where: str, what: str, *, toml: bool = False, charged: 
     """
     if not charged:
         charge("document", len(raw), where, f"bytes of JSON and TOML ({what})")
+    _text_or_refuse(raw, where, what)  # a log's binary bytes are neither brackets to count nor text to decode
     check_depth(nesting_depth(raw, strings=not toml), where, what)
     try:
         text = raw.decode("utf-8")
@@ -312,6 +313,36 @@ def document(raw: bytes, where: str, what: str, *, toml: bool = False, charged: 
         raise InputError(
             where, f"valid {kind} ({what})", f"invalid {kind} ({err})", "Fix or re-export the file."
         ) from err
+
+
+_CALIBRATE_IT = " (a log goes to mountcal calibrate, whose -o writes the calibration JSON)."
+_BINARY_LOOK = 4096  # bytes looked at for a NUL: text (JSON, TOML, in UTF-8) never holds one
+
+
+def _text_or_refuse(raw: bytes, where: str, what: str) -> None:
+    """Refuse a binary file given for a document — a log, a table, an archive (named by its signature), or
+    any file with a NUL byte — naming what it is: its bytes would otherwise be counted as brackets (a
+    "document nested 2678 levels deep") or be refused as text in another encoding."""
+    from mountcal.core.signatures import signature_of
+
+    found = signature_of(raw[:64])
+    if found is not None:
+        content, suffix, signature = found
+        raise InputError(
+            where,
+            what,
+            f"{content} (it starts with {signature!r}), not a text document",
+            f"Give {what} here; a {suffix} file is an input of its own"
+            + (_CALIBRATE_IT if "calibration" in what else "."),
+        )
+    nul = raw.find(b"\x00", 0, _BINARY_LOOK)
+    if nul >= 0 and not raw.startswith((b"\xff\xfe", b"\xfe\xff")):  # UTF-16 text: said by the UTF-8 check
+        raise InputError(
+            where,
+            what,
+            f"binary data (a NUL byte at byte {nul}), not a text document",
+            f"Give {what} here, a text file (JSON or TOML, as its tool writes it).",
+        )
 
 
 def _no_constant(name: str) -> float:
