@@ -126,3 +126,22 @@ def test_the_stop_table_still_calibrates_and_a_column_map_still_reads_it_as_samp
     assert main(["inspect", str(stop_table), "--columns", "time=t_s,ax=ax,ay=ay,az=az"]) == 0  # said: samples
     assert "12 msgs" in capsys.readouterr().err
     assert len(pd.read_csv(stop_table)) == 12
+
+
+@pytest.mark.invalid_results
+def test_a_result_cut_short_or_empty_is_said_to_be_so(result: Path, tmp_path: Path, refused: Refused) -> None:
+    """A JSON document that ends before its JSON does (an interrupted copy) was "invalid JSON (Expecting value:
+    line 10 column 16 (char 500)). Fix or re-export the file."; an empty one "Expecting value: line 1 column 1"."""
+    raw = result.read_bytes()
+    cut, empty = tmp_path / "cut.json", tmp_path / "empty.json"
+    cut.write_bytes(raw[: len(raw) // 2])
+    empty.write_bytes(b"")
+    out = tmp_path / "e.json"
+    err = refused(["export", str(cut), "--to", "json", "-o", str(out)], out)
+    assert f"ends at byte {len(raw) // 2}" in err and "cut short" in err, err
+    err = refused(["report", str(empty), "-o", str(tmp_path / "r.html")], tmp_path / "r.html")
+    assert "an empty file (0 bytes)" in err, err
+    broken = tmp_path / "broken.json"  # not cut: a mistake inside is still said as the parser says it
+    broken.write_bytes(raw.replace(b'"confident"', b'"confident', 1))
+    err = refused(["export", str(broken), "--to", "json", "-o", str(out)], out)
+    assert "invalid JSON" in err and "cut short" not in err, err

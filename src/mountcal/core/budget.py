@@ -310,6 +310,7 @@ def document(raw: bytes, where: str, what: str, *, toml: bool = False, charged: 
         raise InputError(where, what, "nesting too deep to parse", "Pass a file written by its tool.") from err
     except ValueError as err:  # JSONDecodeError and TOMLDecodeError are ValueErrors
         kind = "TOML" if toml else "JSON"
+        _empty_or_cut(raw, text, err, where, what, kind)
         raise InputError(
             where, f"valid {kind} ({what})", f"invalid {kind} ({err})", "Fix or re-export the file."
         ) from err
@@ -343,6 +344,37 @@ def _text_or_refuse(raw: bytes, where: str, what: str) -> None:
             f"binary data (a NUL byte at byte {nul}), not a text document",
             f"Give {what} here, a text file (JSON or TOML, as its tool writes it).",
         )
+
+
+def _empty_or_cut(raw: bytes, text: str, err: ValueError, where: str, what: str, kind: str) -> None:
+    """Refuse an empty document, or a JSON one whose parser ran out of text (an interrupted copy or write), as
+    such: the parser's own message ("Expecting value: line 1 column 1") says neither."""
+    if not text.strip():
+        raise InputError(
+            where, f"{what} ({kind})", f"an empty file ({len(raw)} bytes)", "Check the path, or write the file again."
+        ) from err
+    import json
+
+    if isinstance(err, json.JSONDecodeError) and _ran_out(text, err):
+        raise InputError(
+            where,
+            f"a complete {what} ({kind}): its document closed",
+            f"a file that ends at byte {len(raw)} inside the document ({err.msg}): cut short",
+            "Copy the file again if it was transferred, or write it again with the command that made it.",
+        ) from err
+
+
+def _ran_out(text: str, err: ValueError) -> bool:
+    """Whether the JSON parser failed for want of more text: it stopped at the text's end, or at a string that
+    runs to the end (no closing quote after it)."""
+    import json
+
+    assert isinstance(err, json.JSONDecodeError)
+    if err.pos >= len(text.rstrip()):
+        return True
+    if err.msg.startswith("Unterminated string"):  # the string runs to the end of the text
+        return '"' not in text[err.pos + 1 :].replace('\\"', "")
+    return False
 
 
 def _no_constant(name: str) -> float:
