@@ -358,7 +358,7 @@ def _empty_or_cut(raw: bytes, text: str, err: ValueError, where: str, what: str,
     if isinstance(err, json.JSONDecodeError) and _ran_out(text, err):
         raise InputError(
             where,
-            f"a complete {what} ({kind}): its document closed",
+            f"{what} ({kind}), whole: its document closed",
             f"a file that ends at byte {len(raw)} inside the document ({err.msg}): cut short",
             "Copy the file again if it was transferred, or write it again with the command that made it.",
         ) from err
