@@ -74,7 +74,10 @@ def _not_a_stop_table(path: Path) -> None:
     from mountcal.core.option_names import option
     from mountcal.io.kind import SAMPLE_COLUMNS, STOP_COLUMNS, table_columns
 
-    columns = table_columns(path)
+    try:
+        columns = table_columns(path)
+    except InputError:  # a table cut short or unreadable: its reader says so (and reads the part when allowed)
+        return
     stop = sorted(columns & STOP_COLUMNS)
     if not stop or columns & SAMPLE_COLUMNS:
         return
