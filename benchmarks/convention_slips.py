@@ -443,6 +443,51 @@ def seam_slips(rng: np.random.Generator, folder: Path) -> dict[str, Case]:
     return cases
 
 
+def command_slips(rng: np.random.Generator, folder: Path) -> dict[str, Case]:
+    """Slips at the seams of the newer commands (plan, stops, inspect, report, export, simulate, triad): a file
+    that is not what the command expects, a number in another unit than its option's. Each must be refused
+    naming what the file is or the unit; none of them has a right answer."""
+    cases: dict[str, Case] = {}
+    df, _ = _table(rng)
+    df["t_s"] = 1714557600.0 + 60.0 * np.arange(len(df))  # as `mountcal stops` writes a table
+    table, cal = _csv(df, folder, "cmd_stops.csv"), str(folder / "cmd_r.json")
+    _quiet(["calibrate", table, "-o", cal])
+    out = str(folder / "cmd_out")
+    fix = ("mountcal calibrate",)
+    cases["rotate: a stop table given as the log"] = Case(
+        ["rotate", table, "--calibration", cal, "-o", out + ".parquet"], None, fix, refuse=True
+    )
+    cases["stops: a stop table given as the log"] = Case(["stops", table, "-o", out + ".csv"], None, fix, refuse=True)
+    cases["inspect: a stop table given as the log"] = Case(["inspect", table], None, fix, refuse=True)
+    cases["plan: a stop table given as --from-log"] = Case(
+        ["plan", "--target", "roll=0.5", "--from-log", table, "-o", out + ".csv"], None, fix, refuse=True
+    )
+    s, _, _ = _parking(rng)
+    log = _log(s, folder, "cmd_log.parquet")
+    suffix = {"report": ".html", "export": ".json", "rotate": ".parquet"}
+    for command in (["report"], ["export", "--to", "json"], ["rotate", log, "--calibration"]):
+        cases[f"{command[0]}: a Parquet log given as the calibration"] = Case(
+            [*command, log, "-o", out + suffix[command[0]]],
+            None,
+            ("a Parquet table",),
+            refuse=True,
+        )
+    raw = Path(cal).read_bytes()
+    cut = folder / "cmd_cut.json"
+    cut.write_bytes(raw[: int(rng.integers(len(raw) // 4, len(raw) - 2))])
+    cases["export: a calibration cut short"] = Case(
+        ["export", str(cut), "--to", "json", "-o", out + ".json"], None, ("cut short",), refuse=True
+    )
+    mm = [str(int(v)) for v in rng.uniform(100, 2000, 3)]
+    cases["export: --translation in mm"] = Case(
+        ["export", cal, "--to", "urdf", "--translation", *mm, "-o", out + ".urdf"], None, ("mm is",), refuse=True
+    )
+    cases["simulate: --noise-g in mg"] = Case(
+        ["simulate", "--noise-g", str(int(rng.integers(1, 20))), "-o", out + ".csv"], None, ("1 mg is",), refuse=True
+    )
+    return cases
+
+
 # --------------------------------------------------------------------------- scoring
 
 
@@ -508,7 +553,12 @@ def main_cli(argv: list[str] | None = None) -> int:
         for k in range(args.cases):
             folder = Path(tmp) / f"case{k}"
             folder.mkdir()
-            for name, case in {**table_slips(rng, folder), **log_slips(rng, folder), **seam_slips(rng, folder)}.items():
+            for name, case in {
+                **table_slips(rng, folder),
+                **log_slips(rng, folder),
+                **seam_slips(rng, folder),
+                **command_slips(rng, folder),
+            }.items():
                 outcome, detail = run_case(case, folder)
                 tally = tallies.setdefault(name, Tally())
                 tally.counts[outcome] += 1

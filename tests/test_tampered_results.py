@@ -303,7 +303,9 @@ def test_a_200000_deep_array_is_refused_without_recursion(
 
 def test_an_untouched_result_still_rotates(made: dict[str, Path], capsys: pytest.CaptureFixture[str]) -> None:
     out = made["dir"] / "ok.csv"
-    code, _, err = run(["rotate", str(made["stops"]), "--calibration", str(made["bias"]), "-o", str(out)], capsys)
+    rows = ["--columns", "time=t_s,ax=ax,ay=ay,az=az"]  # a stop table's rows rotated as samples: said so
+    argv = ["rotate", str(made["stops"]), *rows, "--calibration", str(made["bias"]), "-o", str(out)]
+    code, _, err = run(argv, capsys)
     assert code == 0, err
     assert np.isfinite(pd.read_csv(out).select_dtypes("number").to_numpy()).all()
 

@@ -8,7 +8,14 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from mountcal.cli.options import STDOUT, add_axes_option, add_command, add_model_option, print_json
+from mountcal.cli.options import (
+    STDOUT,
+    add_axes_option,
+    add_command,
+    add_heading_unit_option,
+    add_model_option,
+    print_json,
+)
 from mountcal.cli.path_options import add_path
 from mountcal.cli.results import result_stream, say
 from mountcal.core.ranges import Number
@@ -45,6 +52,7 @@ def add_parser(sub: Any) -> None:
     p.add_argument(
         "--uphill-azimuth-deg", type=Number("angle_deg"), default=None, help="β from the bus's heading signal"
     )
+    add_heading_unit_option(p)
     p.add_argument(
         "--timeout", type=Number("timeout_s"), default=10.0, help="a bus silent this long ends the session (s)"
     )
@@ -112,7 +120,8 @@ def run(args: argparse.Namespace) -> int:
         )
     prefix = Path(args.output)
     recording = session_files(prefix)["recording"]
-    plan_beta = tuple(float(b) for b in read_protocol(args.plan)["beta_deg"]) if args.plan else None
+    plan = read_protocol(args.plan, args.heading_unit) if args.plan else None
+    plan_beta = None if plan is None else tuple(float(b) for b in plan["beta_deg"])
     stillness = {"max_acc_std_mps2": args.max_acc_std, "min_duration_s": args.min_stop_s}
     opts = LiveOptions(
         dbc=args.dbc,
@@ -125,6 +134,7 @@ def run(args: argparse.Namespace) -> int:
         plan_beta_deg=plan_beta,
         silence_s=args.timeout,
         axes=args.axes,
+        heading_unit=args.heading_unit,
     )
     try:
         bus = open_bus(args.interface, args.channel)

@@ -211,13 +211,7 @@ def add_log_options(
         help="the Imu or Vector3 inside the topic's message, e.g. imu or imu.linear_acceleration (MCAP, ROS bags)",
     )
     add_axes_option(g)
-    g.add_argument(
-        "--heading-unit",
-        choices=("deg", "rad"),
-        default=None,
-        help="unit of the headings (a heading channel, a protocol's or stop table's beta_deg); default degrees, "
-        "checked: headings that look like radians are refused",
-    )
+    add_heading_unit_option(g)
     if not stops:
         return
     if protocol:
@@ -234,6 +228,18 @@ def add_log_options(
         "local declination, which turns yaw by as much)",
     )
     add_detection_options(p)
+
+
+def add_heading_unit_option(g: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
+    """``--heading-unit``: for every command that reads headings (a heading channel, a protocol sheet, a stop
+    table's ``beta_deg``), whose check refuses radians naming this option."""
+    g.add_argument(
+        "--heading-unit",
+        choices=("deg", "rad"),
+        default=None,
+        help="unit of the headings (a heading channel, a protocol's or stop table's beta_deg); default degrees, "
+        "checked: headings that look like radians are refused",
+    )
 
 
 def add_detection_options(p: argparse.ArgumentParser) -> None:

@@ -287,6 +287,7 @@ def document(raw: bytes, where: str, what: str, *, toml: bool = False, charged: 
     """
     if not charged:
         charge("document", len(raw), where, f"bytes of JSON and TOML ({what})")
+    _text_or_refuse(raw, where, what)  # a log's binary bytes are neither brackets to count nor text to decode
     check_depth(nesting_depth(raw, strings=not toml), where, what)
     try:
         text = raw.decode("utf-8")
@@ -309,9 +310,71 @@ def document(raw: bytes, where: str, what: str, *, toml: bool = False, charged: 
         raise InputError(where, what, "nesting too deep to parse", "Pass a file written by its tool.") from err
     except ValueError as err:  # JSONDecodeError and TOMLDecodeError are ValueErrors
         kind = "TOML" if toml else "JSON"
+        _empty_or_cut(raw, text, err, where, what, kind)
         raise InputError(
             where, f"valid {kind} ({what})", f"invalid {kind} ({err})", "Fix or re-export the file."
         ) from err
+
+
+_CALIBRATE_IT = " (a log goes to mountcal calibrate, whose -o writes the calibration JSON)."
+_BINARY_LOOK = 4096  # bytes looked at for a NUL: text (JSON, TOML, in UTF-8) never holds one
+
+
+def _text_or_refuse(raw: bytes, where: str, what: str) -> None:
+    """Refuse a binary file given for a document — a log, a table, an archive (named by its signature), or
+    any file with a NUL byte — naming what it is: its bytes would otherwise be counted as brackets (a
+    "document nested 2678 levels deep") or be refused as text in another encoding."""
+    from mountcal.core.signatures import signature_of
+
+    found = signature_of(raw[:64])
+    if found is not None:
+        content, suffix, signature = found
+        raise InputError(
+            where,
+            what,
+            f"{content} (it starts with {signature!r}), not a text document",
+            f"Give {what} here; a {suffix} file is an input of its own"
+            + (_CALIBRATE_IT if "calibration" in what else "."),
+        )
+    nul = raw.find(b"\x00", 0, _BINARY_LOOK)
+    if nul >= 0 and not raw.startswith((b"\xff\xfe", b"\xfe\xff")):  # UTF-16 text: said by the UTF-8 check
+        raise InputError(
+            where,
+            what,
+            f"binary data (a NUL byte at byte {nul}), not a text document",
+            f"Give {what} here, a text file (JSON or TOML, as its tool writes it).",
+        )
+
+
+def _empty_or_cut(raw: bytes, text: str, err: ValueError, where: str, what: str, kind: str) -> None:
+    """Refuse an empty document, or a JSON one whose parser ran out of text (an interrupted copy or write), as
+    such: the parser's own message ("Expecting value: line 1 column 1") says neither."""
+    if not text.strip():
+        raise InputError(
+            where, f"{what} ({kind})", f"an empty file ({len(raw)} bytes)", "Check the path, or write the file again."
+        ) from err
+    import json
+
+    if isinstance(err, json.JSONDecodeError) and _ran_out(text, err):
+        raise InputError(
+            where,
+            f"{what} ({kind}), whole: its document closed",
+            f"a file that ends at byte {len(raw)} inside the document ({err.msg}): cut short",
+            "Copy the file again if it was transferred, or write it again with the command that made it.",
+        ) from err
+
+
+def _ran_out(text: str, err: ValueError) -> bool:
+    """Whether the JSON parser failed for want of more text: it stopped at the text's end, or at a string that
+    runs to the end (no closing quote after it)."""
+    import json
+
+    assert isinstance(err, json.JSONDecodeError)
+    if err.pos >= len(text.rstrip()):
+        return True
+    if err.msg.startswith("Unterminated string"):  # the string runs to the end of the text
+        return '"' not in text[err.pos + 1 :].replace('\\"', "")
+    return False
 
 
 def _no_constant(name: str) -> float:

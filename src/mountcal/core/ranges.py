@@ -39,6 +39,7 @@ class Quantity:
     open_lo: bool = False
     open_hi: bool = False
     whole: bool = False  # a count: whole numbers only
+    slip: str = ""  # past the range: the unit slip that puts a value there, said with the refusal
 
     def holds(self, value: float) -> bool:
         if not math.isfinite(value):
@@ -87,7 +88,9 @@ QUANTITIES: dict[str, Quantity] = {
     "sample_count": Quantity(1, 1e12, "", "samples averaged in a stop"),
     "correlation": Quantity(-1, 1, "", "a correlation between axes", open_lo=True, open_hi=True),
     "lsb_mps2": Quantity(0, 10, "m/s²", "a simulated quantisation step"),
-    "noise_g": Quantity(0, 1, "g", "the simulated noise of a stop mean"),
+    "noise_g": Quantity(
+        0, 0.1, "g", "the simulated noise of a stop mean", slip="The value is in g: 1 mg is 0.001 (plan --noise: mg)."
+    ),
     "noise_mg": Quantity(1e-6, 10_000, "mg", "an accelerometer's noise per sample"),
     "bias_mg": Quantity(-2_000, 2_000, "mg", "a simulated accelerometer bias"),
     # angular rates
@@ -110,7 +113,9 @@ QUANTITIES: dict[str, Quantity] = {
     "lat_deg": Quantity(-90, 90, "°", "a latitude"),
     "lon_deg": Quantity(-360, 360, "°", "a longitude"),
     "alt_m": Quantity(-1_000, 100_000, "m", "an altitude"),
-    "offset_m": Quantity(-1_000, 1_000, "m", "a lever arm"),
+    "offset_m": Quantity(
+        -50, 50, "m", "a lever arm on a vehicle", slip="The value is in metres: 350 mm is 0.35 m, 35 cm is 0.35 m."
+    ),
     "speed_mps": Quantity(-150, 150, "m/s", "a vehicle speed (negative: reversing)"),
     "speed_limit_mps": Quantity(0, 150, "m/s", "a stillness threshold on the speed"),
     "temperature_c": Quantity(-100, 200, "°C", "a sensor temperature"),
@@ -239,7 +244,8 @@ class Number:
         except ValueError:
             raise argparse.ArgumentTypeError(f"expected {q.expected()}, found {text!r}") from None
         if not q.holds(float(value)):
-            raise argparse.ArgumentTypeError(f"expected {q.what}: {q.expected()}, found {text}")
+            slip = f". {q.slip}" if q.slip and math.isfinite(value) else ""
+            raise argparse.ArgumentTypeError(f"expected {q.what}: {q.expected()}, found {text}{slip}")
         return value
 
 

@@ -170,14 +170,14 @@ def _stop_columns_given_dbc(path: Path) -> bool:
     """With a DBC a CSV is a CAN log, unless its header holds a stop table's columns (a fleet folder
     of CAN logs and the stop tables beside them): python-can's CSV columns are never those."""
     try:
-        return bool(_columns(path) & STOP_COLUMNS)
+        return bool(table_columns(path) & STOP_COLUMNS)
     except InputError:
         return False  # the CAN reader says what is wrong with it
 
 
 def _table_kind(path: Path, form: str) -> InputKind:
     """A stop table or a sample table, by the columns, else by the spacing of ``t_s``."""
-    columns = _columns(path)
+    columns = table_columns(path)
     stop, sample = sorted(columns & STOP_COLUMNS), sorted(columns & SAMPLE_COLUMNS)
     if stop and sample:
         raise InputError(
@@ -247,7 +247,8 @@ def _refuse_stops_or_samples(path: Path, rows: int, spacing: float) -> None:
     )
 
 
-def _columns(path: Path) -> frozenset[str]:
+def table_columns(path: Path) -> frozenset[str]:
+    """The column names of a CSV or Parquet table, read as every reader of a table reads its header."""
     return frozenset(_header(path)[0])
 
 
@@ -294,4 +295,4 @@ def _times(path: Path, form: str) -> np.ndarray:
     return first_seconds(path, "t_s", _header(path)[1] if form == "CSV" else None)
 
 
-__all__ = ["KIND_OPTION", "Declared", "InputKind", "input_kind"]
+__all__ = ["KIND_OPTION", "SAMPLE_COLUMNS", "STOP_COLUMNS", "Declared", "InputKind", "input_kind", "table_columns"]

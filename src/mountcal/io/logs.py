@@ -60,7 +60,34 @@ def _reader(path: Path, opts: LogOptions) -> LogReader:
                 f"a {reader.name} log, which {option(name)} does not apply to",
                 f"Drop {option(name)}.",
             )
+    if reader.name == "table" and opts.columns is None and opts.mapping is None:
+        _not_a_stop_table(path)
     return reader
+
+
+def _not_a_stop_table(path: Path) -> None:
+    """Refuse a stop table read as a log — ``rotate``, ``stops``, ``inspect``, ``plan --from-log``, the library
+    alike: its rows (one per parked stop, minutes apart) would be taken for a few samples, rotated or searched
+    for stops. Told by the stop table's own columns (:data:`mountcal.io.kind.STOP_COLUMNS`) without a sample
+    table's, as the one decision of what an input is (:mod:`mountcal.io.kind`) tells it; a column map
+    (``--columns``) says the table is samples and reads it so."""
+    from mountcal.core.option_names import option
+    from mountcal.io.kind import SAMPLE_COLUMNS, STOP_COLUMNS, table_columns
+
+    try:
+        columns = table_columns(path)
+    except InputError:  # a table cut short or unreadable: its reader says so (and reads the part when allowed)
+        return
+    stop = sorted(columns & STOP_COLUMNS)
+    if not stop or columns & SAMPLE_COLUMNS:
+        return
+    raise InputError(
+        str(path),
+        "a log: samples in time (t_s, ax, ay, az at the sensor's rate)",
+        f"a stop table (by its columns {', '.join(stop)}): one row per parked stop, not samples",
+        "A stop table is fitted as it is: mountcal calibrate (or triad; report --stops) takes it. Here, give the "
+        f"log the stops were found in; if these rows are samples, name the columns with {option('columns')}.",
+    )
 
 
 @scoped

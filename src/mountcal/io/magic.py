@@ -14,29 +14,14 @@ import stat
 from pathlib import Path
 
 from mountcal.core.errors import InputError
+from mountcal.core.signatures import LONGEST, SIGNATURES, signature_of
 
-# signature → (what the content is, the suffix that names it)
-SIGNATURES: tuple[tuple[bytes, str, str], ...] = (
-    (b"LOGG", "a BLF log", ".blf"),
-    (b"MDF     ", "an MF4 log", ".mf4"),
-    (b"UnFinMF ", "an MF4 log (unfinalised)", ".mf4"),
-    (b"\x89MCAP", "an MCAP log", ".mcap"),
-    (b"#ROSBAG", "a ROS 1 bag", ".bag"),
-    (b"PAR1", "a Parquet table", ".parquet"),
-    (b"SQLite format 3\x00", "an SQLite database (a ROS 2 bag's .db3)", ".db3"),
-    (b"\x1f\x8b", "a gzip archive", ".gz"),
-    (b"PK\x03\x04", "a ZIP archive", ".zip"),
-    (b"\xfd7zXZ\x00", "an XZ archive", ".xz"),
-    (b"BZh", "a bzip2 archive", ".bz2"),
-    (b"\x28\xb5\x2f\xfd", "a Zstandard archive", ".zst"),
-)
 # compressed content: the tool that writes the file inside to stdout (mountcal reads logs uncompressed)
 DECOMPRESS = {".gz": "gzip -dc", ".zip": "unzip -p", ".xz": "xz -dc", ".bz2": "bzip2 -dc", ".zst": "zstd -dc"}
 # the suffixes whose content starts with a signature above (the others name text formats)
 SIGNED_SUFFIXES = {".blf": ".blf", ".mf4": ".mf4", ".mdf": ".mf4", ".mcap": ".mcap", ".bag": ".bag"}
 SIGNED_SUFFIXES |= {".parquet": ".parquet", ".pq": ".parquet", ".db3": ".db3"}
 TEXT_SUFFIXES = (".csv", ".asc", ".log", ".trc")  # the built-in text formats: no signature at all
-_LONGEST = max(len(s) for s, _, _ in SIGNATURES)
 
 
 def content_format(path: Path) -> tuple[str, str, bytes] | None:
@@ -46,13 +31,10 @@ def content_format(path: Path) -> tuple[str, str, bytes] | None:
         if not stat.S_ISREG(path.stat().st_mode):
             return None
         with path.open("rb") as f:
-            head = f.read(_LONGEST)
+            head = f.read(LONGEST)
     except OSError:
         return None  # the reader reports what keeps it from the file
-    for signature, what, suffix in SIGNATURES:
-        if head.startswith(signature):
-            return what, suffix, signature
-    return None
+    return signature_of(head)
 
 
 def check_named_for_content(path: Path) -> None:

@@ -28,7 +28,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, Any, Literal
 
 import numpy as np
 import pandas as pd
@@ -72,6 +72,7 @@ class LiveOptions:
     plan_beta_deg: tuple[float, ...] | None = None  # headings in driving order (a plan's sheet)
     silence_s: float = 10.0  # a bus silent this long ends the session
     axes: str | None = None  # the device's axes onto the sensor frame (--axes), after the mapping's
+    heading_unit: Literal["deg", "rad"] | None = None  # the bus's heading signal (--heading-unit; unstated: checked)
     evaluate_every_s: float = 2.0  # bus time between evaluations
 
 
@@ -319,7 +320,7 @@ class Live:
     def _job(self) -> LogJob:
         """What ``calibrate`` is given for the session's recording (its sheet aside)."""
         o = self.opts
-        log = LogOptions(dbc=o.dbc, mapping=o.mapping, channel=o.can_channel, axes=o.axes)
+        log = LogOptions(dbc=o.dbc, mapping=o.mapping, channel=o.can_channel, axes=o.axes, heading_unit=o.heading_unit)
         return LogJob(
             paths=(str(self.recording),),
             log=log,
