@@ -41,6 +41,19 @@ def refused(capsys: pytest.CaptureFixture[str]) -> Refused:
     return run
 
 
+@pytest.fixture(scope="session")
+def result(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A calibration result made as a user makes one (``simulate``, then ``calibrate``); tests only read it.
+    A module that needs another result defines its own ``result``."""
+    from mountcal.cli import main
+
+    folder = tmp_path_factory.mktemp("result")
+    stops, path = folder / "s.csv", folder / "r.json"
+    assert main(["simulate", "-q", "-o", str(stops)]) == 0
+    assert main(["calibrate", "-q", str(stops), "-o", str(path)]) == 0
+    return path
+
+
 @pytest.fixture
 def real_data() -> Path:
     """The folder of real recordings beside the checkout; the test is skipped where it is absent."""

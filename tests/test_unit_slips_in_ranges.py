@@ -19,14 +19,6 @@ import pytest
 from mountcal.cli import main
 
 
-@pytest.fixture
-def result(tmp_path: Path) -> Path:
-    stops, path = tmp_path / "s.csv", tmp_path / "r.json"
-    assert main(["simulate", "-q", "-o", str(stops)]) == 0
-    assert main(["calibrate", "-q", str(stops), "-o", str(path)]) == 0
-    return path
-
-
 def _refused(argv: list[str], capsys: pytest.CaptureFixture[str]) -> str:
     capsys.readouterr()
     with pytest.raises(SystemExit) as stop:

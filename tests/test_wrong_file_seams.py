@@ -42,16 +42,8 @@ def binary_mcap(tmp_path: Path) -> Path:
     return path
 
 
-@pytest.fixture
-def result(tmp_path: Path) -> Path:
-    stops, path = tmp_path / "s.csv", tmp_path / "r.json"
-    assert main(["simulate", "-q", "-o", str(stops)]) == 0
-    assert main(["calibrate", "-q", str(stops), "-o", str(path)]) == 0
-    return path
-
-
 def _document_refusals(log: Path, result: Path, tmp: Path) -> list[tuple[list[str], Path]]:
-    stops = str(tmp / "s.csv")
+    stops = str(result.parent / "s.csv")  # the stop table the result was calibrated from
     html, js, veh, csv = (tmp / n for n in ("out.html", "out.json", "out.parquet", "out.csv"))
     return [
         (["report", str(log), "-o", str(html)], html),
