@@ -243,7 +243,8 @@ def decode(frames: CanFrames, message: Any, signal_names: Sequence[str] | None =
     -------
     dict of str to ndarray, shape (n,)
         ``raw * scale + offset`` in the DBC's unit. NaN where a frame is too short for the signal
-        or carries another multiplexer value.
+        or carries another multiplexer value, and for every signal of a frame whose multiplexer
+        value the DBC does not define (:func:`undefined_multiplexer`: cantools refuses such a frame).
 
     Raises
     ------
@@ -252,10 +253,11 @@ def decode(frames: CanFrames, message: Any, signal_names: Sequence[str] | None =
     """
     out: dict[str, FloatArray] = {}
     mux_values: dict[str, U64Array] = {}
+    refused = undefined_multiplexer(frames, message)
     for signal in _signals(message, signal_names):
         raw = raw_values(frames.data, signal)
         value = _physical(raw, signal)
-        value[frames.dlc < _last_byte(signal) + 1] = np.nan
+        value[(frames.dlc < _last_byte(signal) + 1) | refused] = np.nan
         if signal.multiplexer_ids:
             mux = message.get_signal_by_name(signal.multiplexer_signal)
             if mux.multiplexer_ids:
@@ -270,6 +272,25 @@ def decode(frames: CanFrames, message: Any, signal_names: Sequence[str] | None =
             other = ~np.isin(mux_values[mux.name], np.asarray(signal.multiplexer_ids, np.uint64))
             value[other | (frames.dlc < _last_byte(mux) + 1)] = np.nan
         out[signal.name] = value
+    return out
+
+
+def undefined_multiplexer(frames: CanFrames, message: Any) -> NDArray[np.bool_]:
+    """Frames whose multiplexer value the DBC does not define: a multiplexer of ``message`` that fits in
+    the frame holds a value no signal of the message is defined under.
+
+    cantools' ``decode_message`` refuses such a frame whole (``DecodeError``), its static signals too:
+    the DBC does not say what the frame is. A frame too short for the multiplexer is not refused
+    (its signals that fit decode, as cantools' ``allow_truncated`` decodes them).
+    """
+    out = np.zeros(len(frames), np.bool_)
+    for mux in message.signals:
+        if not mux.is_multiplexer or mux.multiplexer_ids:  # nested multiplexers: refused by decode
+            continue
+        defined = {i for s in message.signals if s.multiplexer_signal == mux.name for i in s.multiplexer_ids or ()}
+        if defined:
+            values = raw_values(frames.data, mux)
+            out |= ~np.isin(values, np.asarray(sorted(defined), np.uint64)) & (frames.dlc > _last_byte(mux))
     return out
 
 
@@ -350,7 +371,10 @@ def _physical(raw: U64Array, signal: Any) -> FloatArray:
         number = (raw ^ half).astype(np.int64) - np.int64(1 << (length - 1))
     else:
         number = raw
-    return np.asarray(number, np.float64) * float(signal.scale) + float(signal.offset)
+    # any bits are a value: a NaN payload (signalling ones too) stays NaN and a float beyond the range becomes
+    # inf, without a numpy warning (Python's floats in cantools give the same); the readers drop and count them
+    with np.errstate(over="ignore", invalid="ignore"):
+        return np.asarray(number, np.float64) * float(signal.scale) + float(signal.offset)
 
 
 def _signals(message: Any, signal_names: Sequence[str] | None) -> list[Any]:
@@ -381,4 +405,5 @@ __all__ = [
     "payload_bytes",
     "raw_values",
     "select_frames",
+    "undefined_multiplexer",
 ]

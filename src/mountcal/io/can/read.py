@@ -63,7 +63,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mountcal.core.errors import InputError
-from mountcal.io.can.dbc import decode, frame_id_text, payload_bytes, raw_values
+from mountcal.io.can.dbc import decode, frame_id_text, payload_bytes, raw_values, undefined_multiplexer
 from mountcal.io.can.files import iter_frames, log_format
 from mountcal.io.can.frames import CanFrames
 from mountcal.io.can.gravity_check import check_magnitude, noted
@@ -340,12 +340,18 @@ def _take(
 ) -> tuple[FloatArray, NDArray[np.float64]]:
     """Times (m,) and values (m, k) of one source's usable frames; the unusable ones counted."""
     chosen = _select(frames, source, plan)
+    name = source.message.name
     if source.mux is not None:
+        # its multiplexer values, and frames too short to carry the multiplexer (any branch's: counted short)
         signal = source.message.get_signal_by_name(source.signals[0])
         mux = source.message.get_signal_by_name(signal.multiplexer_signal)
-        chosen = chosen.take(np.isin(raw_values(chosen.data, mux), np.asarray(source.mux, np.uint64)))
+        cut = chosen.dlc < payload_bytes(source.message, [mux.name])
+        chosen = chosen.take(np.isin(raw_values(chosen.data, mux), np.asarray(source.mux, np.uint64)) | cut)
     seen[source.name] += len(chosen)
-    name = source.message.name
+    refused = undefined_multiplexer(chosen, source.message)  # what cantools refuses: no signal of it is read
+    _count(dropped, f"{name}: multiplexer value the DBC does not define", refused)
+    if refused.any():
+        chosen = chosen.take(~refused)
     short = chosen.dlc < payload_bytes(source.message, source.signals + source.valid)
     _count(dropped, f"{name}: frame shorter than the DBC layout", short)
     if short.any():
