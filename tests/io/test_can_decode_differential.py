@@ -237,11 +237,15 @@ def traffic(draw: st.DrawFn, msgs: list[Msg], imu: Msg) -> list[can.Message]:
             data, fd = draw(payloads(msg, gravity))
             brs, esi = (draw(st.booleans()), draw(st.booleans())) if fd else (False, False)
             ident = msg.send_ids[0]
+            # a DLC above the bytes: classic 9-15 (8 bytes on the wire), or an FD code beyond the bytes stored
+            longer = [d for d in FD_LENGTHS if d > len(data)] if fd else list(range(9, 16)) if len(data) == 8 else []
+            dlc = draw(st.sampled_from([len(data)] * 3 + longer[:1]))
             out.append(
                 can.Message(
                     arbitration_id=ident,
                     is_extended_id=msg.message.is_extended_frame,
                     data=data,
+                    dlc=dlc,
                     is_fd=fd,
                     bitrate_switch=brs,
                     error_state_indicator=esi,
@@ -534,3 +538,27 @@ def test_nan_and_huge_float_payloads_decode_quietly_to_what_cantools_gives() -> 
     theirs = [float(message.decode(p)["Big"]) for p in payloads]
     assert np.isnan(ours[0]) and math.isnan(theirs[0])
     assert ours[1] == theirs[1] == math.inf
+
+
+def test_a_blf_frame_carries_the_bytes_it_holds_not_its_dlc(tmp_path: Path) -> None:
+    """A classic frame with DLC 15 carries 8 bytes, a CAN FD object whose DLC says 12 may store 8: python-can
+    reads 8 bytes of each and cantools decodes no signal beyond them. mountcal's BLF reader took the DLC's length
+    as the bytes, and decoded the zero padding beyond byte 8 as values (B and C read 0 for no byte in the log)."""
+    db = cantools.database.load_string(
+        'VERSION ""\nNS_ :\nBS_:\nBU_:\nBO_ 256 M: 64 Vector__XXX\n SG_ A : 0|8@1+ (1,0) [0|0] "" Vector__XXX\n'
+        ' SG_ B : 64|8@1+ (1,0) [0|0] "" Vector__XXX\n SG_ C : 72|8@1+ (1,0) [0|0] "" Vector__XXX\n',
+        "dbc",
+        strict=False,
+    )
+    message = db.get_message_by_name("M")
+    classic = [can.Message(timestamp=T0 + k, arbitration_id=256, is_extended_id=False, dlc=15, data=bytes(8))
+               for k in range(3)]  # fmt: skip
+    fd = can.Message(timestamp=T0 + 3, arbitration_id=256, is_extended_id=False, is_fd=True, dlc=12, data=bytes(8))
+    for name, frames in (("uniform.blf", classic), ("mixed.blf", [*classic, fd])):  # BLF's fast path and its scan
+        log = _write(tmp_path / name, frames)
+        reference = _reference(log)
+        ours = decode(read_frames(log), message)
+        for k, m in enumerate(reference):
+            assert len(m.data) == 8 and "B" not in message.decode(bytes(m.data), allow_truncated=True)
+            assert np.isnan(ours["B"][k]) and np.isnan(ours["C"][k]) and ours["A"][k] == 0.0
+        assert read_frames(log).dlc.tolist() == [8] * len(frames)

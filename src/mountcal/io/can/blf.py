@@ -343,7 +343,8 @@ def _uniform_run(buf: memoryview, start: float, keep: Filter) -> tuple[CanFrames
     index = np.flatnonzero(data_frame if wanted is None else data_frame & wanted)
     chosen: IntArray | slice = slice(None) if index.shape[0] == run else index
     flags, ticks, raw_id = rec["flags"][chosen], rec["ticks"][chosen].astype(np.float64), rec["id"][chosen]
-    channel, dlc = rec["chan"][chosen].astype(np.int64) - 1, rec["dlc"][chosen].copy()
+    # the bytes the frame carries: a classic DLC of 9 to 15 means 8 (python-can's data holds 8)
+    channel, dlc = rec["chan"][chosen].astype(np.int64) - 1, np.minimum(rec["dlc"][chosen], 8).astype(np.uint8)
     frames = CanFrames(
         # ticks / 1e9 is the correctly rounded quotient, the float python-can gets through Decimal
         np.where(flags == 1, ticks / 1e5, ticks / 1e9) + start,
@@ -430,7 +431,8 @@ def _blf_frames(
         channel,
         (raw_id & 0x1FFFFFFF).astype(np.uint32),
         (raw_id & 0x80000000) != 0,
-        dlc,
+        # the bytes the frame carries: its DLC's length, or fewer where the object stores fewer (python-can's data)
+        np.minimum(dlc, np.minimum(length, DATA_WIDTH)).astype(np.uint8),
         pad_payload(_gather(arr, data_pos, DATA_WIDTH if length.max(initial=0) > 8 else 8), length),
     )
 

@@ -10,8 +10,11 @@ error frames carry no signal values and are not part of it). Conventions:
 - ``channel`` is the channel number as python-can reports it: Vector's 1-based ``CAN 1`` in BLF and
   ASC becomes 0, an MF4 ``BusChannel`` is kept as the file gives it (CANedge ``CAN 2`` is 2), ``can1`` in a
   candump log is 1. Formats without a channel (CSV) give -1.
-- ``dlc`` is the number of data bytes (python-can's ``Message.dlc``; for CAN FD the length, not the
-  4-bit code); ``data`` is zero-padded to 8 bytes, or to 64 when a frame is longer (CAN FD).
+- ``dlc`` is the number of data bytes the frame carries in the log (python-can's ``len(Message.data)``: its
+  ``Message.dlc`` where the two agree; for CAN FD the length, not the 4-bit code; a classic DLC of 9 to 15
+  carries 8, a BLF CAN FD object's DLC more than its stored bytes carries those); ``data`` is zero-padded
+  to 8 bytes, or to 64 when a frame is longer (CAN FD). A signal beyond ``dlc`` has no value (NaN), never
+  the padding's zeros.
 
 Speed: BLF is parsed here, not through python-can (whose ``BLFReader`` is kept only as the
 cross-check of the tests): containers are inflated with ISA-L (``isal``, zlib-compatible and 1.7×
@@ -58,7 +61,7 @@ class CanFrames:
     is_extended : ndarray, shape (n,), bool
         True for 29-bit identifiers.
     dlc : ndarray, shape (n,), uint8
-        Number of data bytes.
+        Number of data bytes the log holds for the frame (at most its DLC's length).
     data : ndarray, shape (n, w), uint8
         Payload, zero beyond ``dlc``; w is 8 when no frame is longer (classic CAN), up to 64 for
         CAN FD. Bytes past w read as zero.
