@@ -215,11 +215,13 @@ def payloads(draw: st.DrawFn, msg: Msg, gravity: bool) -> tuple[bytes, bool]:
                 values[s.name] = draw(st.sampled_from(msg.mux_ids))
             elif not s.multiplexer_ids or set(s.multiplexer_ids) <= set(msg.mux_ids):
                 if gravity and s.name in GRAVITY:
-                    values[s.name] = G / math.sqrt(3.0) / UNITS["accel"][str(s.unit)]
+                    low, high = _raw_range({"length": s.length, "is_signed": s.is_signed})
+                    raw_g = (G / math.sqrt(3.0) / UNITS["accel"][str(s.unit)] - s.offset) / s.scale
+                    values[s.name] = raw_g if s.is_float else min(max(round(raw_g), low), high)
                 else:
                     raw = draw(st.integers(*_raw_range({"length": s.length, "is_signed": s.is_signed})))
-                    values[s.name] = float(raw) if s.is_float else raw * s.scale + s.offset
-        data = msg.message.encode(values, scaling=True, strict=False)
+                    values[s.name] = float(raw) if s.is_float else raw
+        data = msg.message.encode(values, scaling=False, strict=False)  # raw values: no rounding at the range's ends
         return bytes(data), msg.message.is_fd
     fd = msg.message.is_fd and draw(st.booleans())
     length = draw(st.sampled_from((*range(9), *FD_LENGTHS))) if fd else draw(st.integers(0, 8))
@@ -424,7 +426,7 @@ def _check_roles(
             aux[role] = (message, _expected_rows(reference, message, [f"{role}_sig"], msg.mux, msg.mux_ids))
     if not rows or any(not e[0] and not e[2] for _, e in aux.values()):
         # no usable IMU row, or a mapped message without a frame: refused, saying so
-        with pytest.raises(InputError, match=r"expected (usable accelerometer samples|frames of)"):
+        with pytest.raises(InputError, match=r"expected (usable accelerometer samples|frames of|CAN frames)"):
             read_can(log, dbc, mapping=mapping)
         return
     kinds = ["accel"] * 3 + ["gyro"] * (len(roles) - 3)
@@ -538,6 +540,10 @@ def test_nan_and_huge_float_payloads_decode_quietly_to_what_cantools_gives() -> 
     theirs = [float(message.decode(p)["Big"]) for p in payloads]
     assert np.isnan(ours[0]) and math.isnan(theirs[0])
     assert ours[1] == theirs[1] == math.inf
+    single = message.signals[0]
+    single.length, single.conversion = 32, BaseConversion.factory(1, 0, None, True)  # a float32, signalling NaN
+    table.data[0, :4] = np.frombuffer(bytes.fromhex("0100a0ff"), np.uint8)
+    assert np.isnan(decode(table, message)["Big"][0])
 
 
 def test_a_blf_frame_carries_the_bytes_it_holds_not_its_dlc(tmp_path: Path) -> None:

@@ -357,23 +357,25 @@ def _last_byte(signal: Any) -> int:
 
 
 def _physical(raw: U64Array, signal: Any) -> FloatArray:
-    """Raw bits → physical value: float reinterpretation or two's complement, then scale/offset."""
+    """Raw bits → physical value: float reinterpretation or two's complement, then scale/offset.
+
+    Any bits are a value: a NaN payload (signalling ones too) stays NaN and a float beyond the range once
+    scaled becomes inf, without a numpy warning (cantools' Python floats give the same); the readers drop and
+    count them."""
     length = int(signal.length)
     number: NDArray[Any]
-    if signal.is_float and length == 32:
-        number = raw.astype(np.uint32).view(np.float32).astype(np.float64)
-    elif signal.is_float and length == 64:
-        number = raw.view(np.float64)
-    elif signal.is_signed and length == 64:
-        number = raw.view(np.int64)
-    elif signal.is_signed:
-        half = np.uint64(1 << (length - 1))
-        number = (raw ^ half).astype(np.int64) - np.int64(1 << (length - 1))
-    else:
-        number = raw
-    # any bits are a value: a NaN payload (signalling ones too) stays NaN and a float beyond the range becomes
-    # inf, without a numpy warning (Python's floats in cantools give the same); the readers drop and count them
     with np.errstate(over="ignore", invalid="ignore"):
+        if signal.is_float and length == 32:
+            number = raw.astype(np.uint32).view(np.float32).astype(np.float64)
+        elif signal.is_float and length == 64:
+            number = raw.view(np.float64)
+        elif signal.is_signed and length == 64:
+            number = raw.view(np.int64)
+        elif signal.is_signed:
+            half = np.uint64(1 << (length - 1))
+            number = (raw ^ half).astype(np.int64) - np.int64(1 << (length - 1))
+        else:
+            number = raw
         return np.asarray(number, np.float64) * float(signal.scale) + float(signal.offset)
 
 
