@@ -47,8 +47,9 @@ median interval of its first 1000 frames); rows without such a partner are dropp
 Output is float64 SI in the sensor frame, as :class:`~mountcal.io.samples.Samples` states; the
 auxiliary channels are ``temperature_c``, ``speed_mps``, ``heading_deg`` (compass, as the DBC
 gives it), ``lat_deg``, ``lon_deg``, ``alt_m``, each on its own message's clock. ``dropped`` counts
-frames of the selected messages that were unusable: too short, flagged invalid, non-finite, or
-without a partner in time. Frames of other messages or channels are simply not selected.
+frames of the selected messages that were unusable: too short, flagged invalid, non-finite, with a
+multiplexer value the DBC does not define (cantools refuses such a frame whole), or without a partner in
+time. Frames of other messages or channels are simply not selected.
 """
 
 from __future__ import annotations
