@@ -32,7 +32,7 @@ from hypothesis import strategies as st
 
 from mountcal.core.errors import InputError
 from mountcal.io.can.dbc import decode, load_dbc, select_frames
-from mountcal.io.can.files import read_frames
+from mountcal.io.can.files import iter_frames, read_frames
 from mountcal.io.can.frames import CanFrames
 from mountcal.io.can.read import read_can
 
@@ -395,19 +395,23 @@ def _errstate() -> Any:
 
 
 def _check_decode(log: Path, db: Any, msgs: list[Msg]) -> None:
-    """Every signal of every message, frame by frame: mountcal's decode against cantools'."""
+    """Every signal of every message, frame by frame: mountcal's decode against cantools', on the whole table
+    and on chunks of a few frames (a chunk of classic frames only is 8 bytes wide, one with CAN FD 64)."""
     ours_db = load_dbc(log.parent / "random.dbc")
     table = read_frames(log)
+    chunks = list(iter_frames(log, max_frames=5))
     reference = _reference(log)
     for msg in msgs:
         message = db.get_message_by_name(msg.message.name)
-        ours = decode(
-            select_frames(table, ours_db.get_message_by_name(message.name)), ours_db.get_message_by_name(message.name)
-        )
+        mine = ours_db.get_message_by_name(message.name)
+        ours = decode(select_frames(table, mine), mine)
+        parts = [decode(select_frames(chunk, mine), mine) for chunk in chunks]
         theirs = [_cantools(message, bytes(m.data)) for m in reference if _is_frame_of(m, message)]
         for signal in message.signals:
             expected = [math.nan if d is None else d.get(signal.name, math.nan) for d in theirs]
             _close(ours[signal.name], expected, f"{log.suffix} {message.name}.{signal.name}")
+            chunked = np.concatenate([p[signal.name] for p in parts]) if parts else np.empty(0)
+            _close(chunked, expected, f"{log.suffix} {message.name}.{signal.name}, in chunks of 5 frames")
 
 
 def _check_roles(
