@@ -507,12 +507,31 @@ def test_a_frame_whose_multiplexer_value_the_dbc_does_not_define_is_not_read(tmp
     assert samples.dropped == {"IMU: multiplexer value the DBC does not define": 1}
 
 
+def _branch_dbc(folder: Path) -> Path:
+    """The IMU above with its accelerometer on the multiplexer's page 1."""
+    dbc = folder / "branch.dbc"
+    text = MUX_DBC
+    for axis in "XYZ":
+        text = text.replace(f" SG_ Acc{axis} :", f" SG_ Acc{axis} m1 :")
+    dbc.write_text(text, encoding="ascii")
+    return dbc
+
+
+def test_a_log_of_other_multiplexer_branches_only_is_refused_saying_so(tmp_path: Path) -> None:
+    """The mapped branch (page 1) absent, the message present on page 2: refused as "found none ... IMU is on
+    channel 0 (3 frames)", which sent the user to the channel; now it names the branch and the values found."""
+    log = _write(tmp_path / "bus.blf", _imu_frames([2, 2, 2]))
+    mapping = {"signals": {"ax": "IMU.AccX", "ay": "IMU.AccY", "az": "IMU.AccZ"}}
+    with pytest.raises(
+        InputError, match=r"expected frames of IMU with Page = 1 .*found frames of IMU with Page = 2 only"
+    ):
+        read_can(log, _branch_dbc(tmp_path), mapping=mapping)
+
+
 def test_a_frame_too_short_for_its_multiplexer_is_counted_whatever_the_branch(tmp_path: Path) -> None:
     """A frame too short to carry the multiplexer may be of the mapped branch: it is counted as too short. It was
     counted only where the branch's value was 0 (the missing byte read as 0), else dropped without a word."""
-    dbc = tmp_path / "mux.dbc"
-    dbc.write_text(MUX_DBC.replace(" SG_ AccX :", " SG_ AccX m1 :").replace(" SG_ AccY :", " SG_ AccY m1 :")
-                   .replace(" SG_ AccZ :", " SG_ AccZ m1 :"), encoding="ascii")  # fmt: skip
+    dbc = _branch_dbc(tmp_path)
     frames = _imu_frames([1, 1, 1])
     frames.insert(1, can.Message(timestamp=T0 + 0.005, arbitration_id=256, is_extended_id=False, data=b""))
     log = _write(tmp_path / "bus.blf", frames)

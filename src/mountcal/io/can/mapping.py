@@ -83,6 +83,7 @@ class Source:
     valid: list[str] = field(default_factory=list)
     channels: set[int] = field(default_factory=set)
     ids: set[int] = field(default_factory=set)  # ids seen, for a message matched by J1939 PGN
+    mux_found: set[int] = field(default_factory=set)  # multiplexer values of its message's frames, for a branch
     # where its frames are: arbitration_id & mask == value, the id kind, the channel (None: any one)
     value: int = 0
     mask: int = 0x1FFFFFFF

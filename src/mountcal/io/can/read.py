@@ -347,7 +347,10 @@ def _take(
         signal = source.message.get_signal_by_name(source.signals[0])
         mux = source.message.get_signal_by_name(signal.multiplexer_signal)
         cut = chosen.dlc < payload_bytes(source.message, [mux.name])
-        chosen = chosen.take(np.isin(raw_values(chosen.data, mux), np.asarray(source.mux, np.uint64)) | cut)
+        page = raw_values(chosen.data, mux)
+        if len(source.mux_found) < SHOWN:
+            source.mux_found.update(np.unique(page[~cut]).tolist()[:SHOWN])
+        chosen = chosen.take(np.isin(page, np.asarray(source.mux, np.uint64)) | cut)
     seen[source.name] += len(chosen)
     refused = undefined_multiplexer(chosen, source.message)  # what cantools refuses: no signal of it is read
     _count(dropped, f"{name}: multiplexer value the DBC does not define", refused)
@@ -542,6 +545,18 @@ def _check_found(path: Path, plan: Plan, seen: Counter[str], total_rows: int, dr
     if not silent and not missing_aux and total_rows:
         return
     sources = silent + [plan.aux[k][0] for k in missing_aux]
+    branch = next((s for s in sources if s.mux is not None and s.mux_found), None)
+    if branch is not None:  # its message is in the log, on other branches only
+        signal = branch.message.get_signal_by_name(branch.signals[0])
+        values = "/".join(map(str, branch.mux or ()))
+        found = ", ".join(map(str, sorted(branch.mux_found)[:SHOWN]))
+        raise InputError(
+            plan.where,
+            f"frames of {branch.message.name} with {signal.multiplexer_signal} = {values} (the branch of "
+            f"{', '.join(branch.signals)})",
+            f"frames of {branch.message.name} with {signal.multiplexer_signal} = {found} only",
+            "Check the mapped signals' multiplexer branch in the DBC against the device's messages.",
+        )
     wanted = [Want(s.message.name, s.value, s.mask, s.extended, s.channel) for s in sources]
     mismatch = log_mismatch(path, plan.db, plan.where, plan.channel, wanted)
     if mismatch is not None:
