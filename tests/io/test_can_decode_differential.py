@@ -124,7 +124,7 @@ def messages(draw: st.DrawFn, name: str, frame_id: int, roles: dict[str, tuple[s
     Each signal (and the multiplexer) has bytes of its own, so that the frames cantools encodes carry every
     value; the accelerometer's signals (on gravity) get an offset that puts gravity (1 g split over three
     axes) on a raw value of their range, so that the log passes mountcal's gravity check."""
-    kind = draw(st.sampled_from(["standard", "extended", "j1939"]))
+    kind = draw(st.sampled_from(["standard", "extended", "extended_low", "j1939"]))  # low: a 29-bit id <= 0x7FF
     fd = draw(st.booleans())
     # a multiplexer: the mapped signals under some of its values (a decoy under others), or static beside it
     muxing = draw(st.sampled_from(["none", "branch", "static"]))
@@ -172,7 +172,7 @@ def messages(draw: st.DrawFn, name: str, frame_id: int, roles: dict[str, tuple[s
         da = draw(st.integers(0, 255)) if pdu_format < 240 else (frame >> 8) & 0xFF
         send = (draw(st.integers(0, 7)) << 26) | (pdu_format << 16) | (da << 8) | draw(st.integers(0, 255))
     else:
-        frame = frame_id if kind == "standard" else 0x1000000 | frame_id
+        frame = 0x1000000 | frame_id if kind == "extended" else frame_id
         send = frame
     message = Message(
         frame,
@@ -591,3 +591,18 @@ def test_a_blf_frame_carries_the_bytes_it_holds_not_its_dlc(tmp_path: Path) -> N
             assert len(m.data) == 8 and "B" not in message.decode(bytes(m.data), allow_truncated=True)
             assert np.isnan(ours["B"][k]) and np.isnan(ours["C"][k]) and ours["A"][k] == 0.0
         assert read_frames(log).dlc.tolist() == [8] * len(frames)
+
+
+def test_a_decoded_acceleration_near_the_float_range_is_checked_by_gravity_quietly(tmp_path: Path) -> None:
+    """A finite value whose square overflows (1e300: a float signal's bits, a huge factor) made the gravity check's
+    norm warn "overflow encountered in multiply" (an error under pytest, stderr on the CLI); it is a row like
+    any other, and gravity is judged on the median."""
+    dbc = tmp_path / "huge.dbc"
+    text = MUX_DBC.replace('"g"', '"m/s^2"').replace("AccZ : 40|16@1- (0.001,0)", "AccZ : 40|16@1- (1e+300,9.80665)")
+    dbc.write_text(text, encoding="ascii")
+    frames = _imu_frames([1, 1, 1, 1])
+    for k, frame in enumerate(frames):
+        frame.data[5:7] = b"\x01\x00" if k == 2 else b"\x00\x00"  # AccZ raw 0: 1 g, raw 1: 1e300 m/s²
+    log = _write(tmp_path / "bus.blf", frames)
+    samples = read_can(log, dbc, mapping={"signals": {"ax": "IMU.AccX", "ay": "IMU.AccY", "az": "IMU.AccZ"}})
+    np.testing.assert_allclose(samples.acc_s[:, 2], [9.80665, 9.80665, 1e300, 9.80665])

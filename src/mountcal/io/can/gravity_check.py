@@ -39,7 +39,8 @@ def check_magnitude(samples: Samples, plan: Plan) -> Samples:
     """
     if not len(samples) or not plan.acc_units:
         return samples
-    m = float(np.median(np.linalg.norm(samples.acc_s, axis=1)))  # m/s², as read
+    with np.errstate(over="ignore"):  # a decoded value near the float range (a float signal's bits): inf, quietly
+        m = float(np.median(np.linalg.norm(samples.acc_s, axis=1)))  # m/s², as read
     lo, hi = GRAVITY_BAND_G
     if lo * G_N <= m <= hi * G_N:
         return samples
@@ -47,7 +48,8 @@ def check_magnitude(samples: Samples, plan: Plan) -> Samples:
     true_scale = read_scale * G_N / m  # what the scale would be were the median magnitude 1 g
     fits = [u for u, (k, _) in UNITS["accel"].items() if abs(math.log(k / true_scale)) < math.log(1.25)]
     # gravity read 1000 times too small (g as mg) is as small as a gravity-free signal, but keeps its direction
-    steady = float(np.linalg.norm(np.mean(samples.acc_s, axis=0))) >= 0.5 * m
+    with np.errstate(over="ignore", invalid="ignore"):
+        steady = float(np.linalg.norm(np.mean(samples.acc_s, axis=0))) >= 0.5 * m
     if m < GRAVITY_FREE_MPS2 and not (fits and steady):
         reason = f"the acceleration's median magnitude is {m:.3g} m/s²: no gravity in it, as in a 'linear acceleration'"
         return replace(samples, gravity_free=reason)
