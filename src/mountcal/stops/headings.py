@@ -186,6 +186,36 @@ def protocol_sheet(
     return values
 
 
+def one_stop_per_row(stops: list[Stop], windows: list[tuple[float, float]], protocol: pd.DataFrame) -> None:
+    """Refuse a sheet two of whose rows took the same still period (rows that repeat or overlap another's times): its
+    data would be fitted twice, at two headings, and the stop between left out.
+
+    Raises
+    ------
+    InputError
+        Naming the rows, their β and the still period they share.
+    """
+    from mountcal.core.errors import InputError
+
+    spans = [(s.t_start_s, s.t_end_s) for s in stops]
+    for span in dict.fromkeys(spans):
+        if spans.count(span) < 2:
+            continue
+        rows = [i for i, (lo, hi) in enumerate(windows) if lo <= span[0] and span[1] <= hi]
+        beta = protocol["beta_deg"].to_numpy()
+        named = " and ".join(
+            f"{i + 1} ({lo:.10g}–{hi:.10g} s, β {beta[i]:g}°)" for i in rows for lo, hi in [windows[i]]
+        )
+        raise InputError(
+            str(protocol.attrs.get("path") or f"the protocol sheet ({option('protocol')})"),
+            "one still period per row: the vehicle stands at one heading at a time",
+            f"rows {named} on the same still period, {span[0]:.10g}–{span[1]:.10g} s: its data would be fitted "
+            "once at each of their headings",
+            "Correct the rows' times (each row's t_start_s–t_end_s around its own stop), or delete the row that "
+            "repeats another.",
+        )
+
+
 def tabulate(
     samples: Samples,
     cfg: StopDetection | None = None,
@@ -214,6 +244,7 @@ def tabulate(
                 + (f"But {gyro}" if gyro else f"Check that the sheet's times are on the log's clock, or {relax()}.")
                 + f" Used: {'; '.join(search.lines())}."
             )
+        one_stop_per_row(stops, windows, protocol)
         beta = protocol["beta_deg"].to_numpy()[kept]
         stated = (*samples.conventions, *protocol.attrs.get("conventions", ()), *([clock] if clock else []))
         return StopTableFromLog(
