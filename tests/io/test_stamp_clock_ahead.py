@@ -17,35 +17,45 @@ import pytest
 
 from mountcal.cli import main
 from mountcal.io.logs import read_log
-from mountcal.io.writers import IMU_TOPIC, write_mcap, write_protocol
+from mountcal.io.writers import IMU_TOPIC, ODOMETRY_TOPIC, write_mcap, write_protocol
 from mountcal.simulate.stops import simulate_parking_log
 
 GPS_AHEAD_S = 18.0  # GPS time − UTC since 2017
 
 
 @pytest.fixture(scope="module")
-def logs(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, Path]:
+def logs(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, Path, Path]:
     folder = tmp_path_factory.mktemp("gps")
     park = simulate_parking_log(5.0, 6.0, 7.0, seed=9)
-    gps, utc, sheet = folder / "gps.mcap", folder / "utc.mcap", folder / "protocol.csv"
+    gps, utc, sheet, every = folder / "gps.mcap", folder / "utc.mcap", folder / "protocol.csv", folder / "all.mcap"
     write_mcap(gps, park, stamp_offsets_s={IMU_TOPIC: GPS_AHEAD_S})  # header.stamp = log_time + 18 s
+    write_mcap(
+        every, park, with_temperature=False, stamp_offsets_s={IMU_TOPIC: GPS_AHEAD_S, ODOMETRY_TOPIC: GPS_AHEAD_S}
+    )
     write_mcap(utc, park)
     write_protocol(sheet, park)
-    return gps, utc, sheet
+    return gps, utc, sheet, every
 
 
-def test_an_imu_stamped_ahead_of_its_receipt_is_moved_onto_the_recorders_clock(logs: tuple[Path, Path, Path]) -> None:
-    gps, utc, _ = logs
-    moved, stamped = read_log(gps), read_log(utc)
+@pytest.mark.parametrize("which", ["imu", "every topic"])
+def test_topics_stamped_ahead_of_their_receipt_are_moved_onto_the_recorders_clock(
+    which: str, logs: tuple[Path, Path, Path, Path]
+) -> None:
+    """The IMU alone ahead (beside the odometry on log_time), or every topic (no topic on the recorder's clock: no
+    replay's stamps lie ahead of their receipt, so the recorder's clock is still the one to date them by)."""
+    gps, utc, _, every = logs
+    moved, stamped = read_log(gps if which == "imu" else every), read_log(utc)
     assert abs(float(moved.t_s[0] - stamped.t_s[0])) < 1e-6
+    speed, right = moved.channels["speed_mps"], stamped.channels["speed_mps"]
+    assert abs(float(speed.t_s[0] - right.t_s[0])) < 1e-6
     (clock,) = [c for c in moved.conventions if c.name == "stamp_clock"]
     assert "18.000 s ahead of the recorder's" in clock.value and clock.how == "inferred"
 
 
 def test_a_parking_session_stamped_in_gps_time_calibrates_as_in_utc(
-    logs: tuple[Path, Path, Path], tmp_path: Path
+    logs: tuple[Path, Path, Path, Path], tmp_path: Path
 ) -> None:
-    gps, utc, sheet = logs
+    gps, utc, sheet, _ = logs
     docs = []
     for log in (gps, utc):
         out = tmp_path / f"{log.stem}.json"

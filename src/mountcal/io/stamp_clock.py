@@ -125,8 +125,8 @@ class StampClocks:
                 if c.spread_s > STEADY_S:
                     notes.append(_unsteady(c, self.record_name))
                 continue
-            if not c.records_dated or (c.stamps_dated and not near):
-                continue  # which clock is right, the data cannot tell; said below if topics disagree
+            if not c.records_dated or (c.stamps_dated and not near and not _ahead(c)):
+                continue  # which clock is right, the data cannot tell (a replay's stamps); said below if topics disagree
             if c.spread_s > STEADY_S:
                 notes.append(_unsteady(c, self.record_name))
             elif c.unset:
@@ -171,9 +171,15 @@ def _on_recorder(c: _Clock) -> bool:
     return -AHEAD_S <= c.offset_s <= OTHER_CLOCK_S
 
 
+def _ahead(c: _Clock) -> bool:
+    """Whether a topic's stamps are steadily ahead of their receipt: never the recorder's clock, nor a replay's
+    (whose stamps lie in the past), so moved onto the recorder's also where no topic is on it."""
+    return -OTHER_CLOCK_S <= c.offset_s < -AHEAD_S
+
+
 def _moved(c: _Clock) -> str:
     clock = "a clock that dates nothing (boot or device time)" if not c.stamps_dated else "another clock"
-    if c.stamps_dated and -OTHER_CLOCK_S <= c.offset_s < -AHEAD_S:
+    if c.stamps_dated and _ahead(c):
         clock = (
             f"another clock, {-c.offset_s:.3f} s ahead of the recorder's (stamped after it was received: GPS time "
             "runs 18 s ahead of UTC)"
