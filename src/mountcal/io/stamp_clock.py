@@ -126,7 +126,7 @@ class StampClocks:
                     notes.append(_unsteady(c, self.record_name))
                 continue
             if not c.records_dated or (c.stamps_dated and not near and not _ahead(c)):
-                continue  # which clock is right, the data cannot tell (a replay's stamps); said below if topics disagree
+                continue  # which clock is right, the data cannot tell (a replay); said below if topics disagree
             if c.spread_s > STEADY_S:
                 notes.append(_unsteady(c, self.record_name))
             elif c.unset:
