@@ -87,9 +87,16 @@ def test_the_clock_offset_of_the_speed_channel_is_found(drive) -> None:  # type:
     assert fit.time_offset_s == pytest.approx(-drive.truth.speed_delay_s, abs=max(3 * fit.time_offset_sigma_s, 0.02))
 
 
-def test_a_big_offset_beyond_the_search_is_flagged() -> None:
+def test_a_big_offset_beyond_the_search_is_found_by_the_wider_search_and_said() -> None:
     drive = simulate_drive(duration_s=600.0, speed_delay_s=3.0, seed=4)
     fit = estimate_driving(drive.to_samples(), DrivingOptions(max_time_offset_s=1.0))
+    assert fit.time_offset_s == pytest.approx(-3.0, abs=0.05)
+    assert any("3.0 s apart, beyond the ±1 s searched first" in n for n in fit.notes)
+
+
+def test_an_offset_beyond_the_wider_search_is_flagged_at_its_limit() -> None:
+    drive = simulate_drive(duration_s=600.0, speed_delay_s=40.0, seed=4)
+    fit = estimate_driving(drive.to_samples())
     assert any("search limit" in n for n in fit.notes)
 
 

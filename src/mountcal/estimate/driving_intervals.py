@@ -22,6 +22,12 @@ if TYPE_CHECKING:
 IntArray = NDArray[np.int64]
 GAP_FACTOR = 3.0  # an IMU step longer than this × the median step is a gap
 MIN_INTERVALS = 20
+# Where the best lag lies at the edge of ±max_time_offset_s, the search is widened to ±WIDE_OFFSET_S on a grid
+# WIDE_STEP_S apart: a GNSS receiver's clock (GPS time) runs 18 s ahead of UTC, a gateway or a logger's clock may be
+# seconds off. Without the wider search such a lag sat at the edge, and the drive's tilt came out 14° wrong, confident.
+WIDE_OFFSET_S = 30.0
+WIDE_STEP_S = 0.25
+WIDE_GAIN = 2.0  # the wider search's lag is taken where it explains twice the share the nearer one does
 
 
 def speed_channel(samples: Samples) -> Channel:
@@ -375,15 +381,23 @@ def time_offset(
     t_a, t_b = layout.t_a[base.index], layout.t_b[base.index]
     cols = layout.cum[:, :2] + layout.g_mps2 * np.column_stack([layout.cum[:, 10], -layout.cum[:, 9]])
     n_seg = int(base.segment.max()) + 1
-    u0 = (interp_columns(t_b, layout.imu_t, cols) - interp_columns(t_a, layout.imu_t, cols)) / (t_b - t_a)[:, None]
-    c0 = u0.T @ a_ref
-    direction = c0 / max(float(np.linalg.norm(c0)), 1e-300)
+    dt = (t_b - t_a)[None, :]
+
+    def rates(lags: FloatArray) -> FloatArray:
+        """The IMU's horizontal specific force (two axes) averaged over each interval shifted by each lag."""
+        u = interp_columns(t_b[None, :] + lags[:, None], layout.imu_t, cols)
+        u -= interp_columns(t_a[None, :] + lags[:, None], layout.imu_t, cols)
+        return np.asarray(u / dt[..., None], dtype=np.float64)
+
+    def along_of(c: FloatArray) -> FloatArray:
+        return c / max(float(np.linalg.norm(c)), 1e-300)
+
+    direction = along_of(rates(np.zeros(1))[0].T @ a_ref)
 
     def sums(lags: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Per segment Σ along·a_ref and Σ along², along detrended; shape (lags, segments) each."""
-        along = interp_columns(t_b[None, :] + lags[:, None], layout.imu_t, cols)
-        along -= interp_columns(t_a[None, :] + lags[:, None], layout.imu_t, cols)
-        along = (along[..., 0] * direction[0] + along[..., 1] * direction[1]) / (t_b - t_a)[None, :]
+        u = rates(lags)
+        along = u[..., 0] * direction[0] + u[..., 1] * direction[1]
         cross, energy = np.empty((lags.size, n_seg)), np.empty((lags.size, n_seg))
         for k in range(lags.size):
             x = lines.residual(along[k])
@@ -394,11 +408,47 @@ def time_offset(
     def correlation(cross: FloatArray, energy: FloatArray) -> FloatArray:
         return cross / np.sqrt(np.maximum(energy, 1e-300))
 
+    def coarse_peak(limit: float, spacing: float) -> float:
+        coarse: FloatArray = np.arange(-limit, limit + 0.5 * spacing, spacing, dtype=np.float64)
+        cross, energy = sums(coarse)
+        return peak(coarse, correlation(cross.sum(axis=1), energy.sum(axis=1)))
+
+    def explained(lags: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Per lag, the share of d(speed)/dt both horizontal axes explain (no direction assumed: the one found
+        at lag 0 is noise where the clocks are seconds apart), and the direction that explains it."""
+        u = rates(lags)
+        share, best = np.zeros(lags.size), np.zeros((lags.size, 2))
+        total = max(float(a_ref @ a_ref), 1e-300)
+        for k in range(lags.size):
+            x = np.column_stack([lines.residual(u[k, :, 0]), lines.residual(u[k, :, 1])])
+            c, e = x.T @ a_ref, x.T @ x
+            if np.linalg.cond(e) < 1e12:
+                w = np.asarray(np.linalg.solve(e, c), dtype=np.float64)
+                share[k], best[k] = float(c @ w) / total, along_of(w)
+        return share, best
+
     limit, step = opts.max_time_offset_s, opts.time_offset_step_s
-    coarse: FloatArray = np.arange(-limit, limit + 0.5 * step * 5, step * 5, dtype=np.float64)
-    cross, energy = sums(coarse)
-    best = peak(coarse, correlation(cross.sum(axis=1), energy.sum(axis=1)))
-    fine: FloatArray = best + np.arange(-10, 11, dtype=np.float64) * step
+    spacing = step * 5
+    best = coarse_peak(limit, spacing)
+    if WIDE_OFFSET_S > limit:  # clocks further apart than the search: its peak would be a spurious one
+        wide: FloatArray = np.arange(-WIDE_OFFSET_S, WIDE_OFFSET_S + 0.5 * WIDE_STEP_S, WIDE_STEP_S)
+        share, axes = explained(wide)
+        k = int(np.argmax(share))
+        near = float(explained(np.array([best]))[0][0])
+        if abs(wide[k]) > limit + WIDE_STEP_S and share[k] > WIDE_GAIN * near:
+            at_edge = abs(wide[k]) >= WIDE_OFFSET_S - WIDE_STEP_S  # said below as the search's limit
+            notes += (
+                []
+                if at_edge
+                else [
+                    f"the speed and IMU clocks are {abs(wide[k]):.1f} s apart, beyond the ±{limit:g} s searched first "
+                    f"(d(speed)/dt explained {share[k]:.0%} there, {near:.0%} within it): a GNSS clock's 18 leap "
+                    "seconds, or a logger's clock off"
+                ]
+            )
+            best, direction, limit, spacing = float(wide[k]), axes[k], WIDE_OFFSET_S, WIDE_STEP_S
+    reach = max(10, round(spacing / step))  # the fine grid covers the coarse one's spacing around its peak
+    fine: FloatArray = best + np.arange(-reach, reach + 1, dtype=np.float64) * step
     cross, energy = sums(fine)
     best = peak(fine, correlation(cross.sum(axis=1), energy.sum(axis=1)))
     if abs(best) >= limit - step:

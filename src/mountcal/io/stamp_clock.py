@@ -6,8 +6,10 @@ topic stamped on another clock than the others does not overlap them (a speed lo
 parked) and dates nothing (a protocol sheet, the fleet's dates). Per topic, the offset ``record − stamp``
 of its stamped messages (a sample of each block, gathered with numpy) tells which clock it is on:
 
-- within ``OTHER_CLOCK_S`` (60 s) of the recorder's: the same clock. Transport and queueing latency is
-  milliseconds to a second or two; no boot clock is that close to Unix time. Left as stamped.
+- received within ``OTHER_CLOCK_S`` (60 s) after its stamp, and stamped no more than ``AHEAD_S`` (1 s) after its
+  receipt: the same clock. Transport and queueing latency is milliseconds to a second or two, never negative; no
+  boot clock is that close to Unix time. Left as stamped. Stamps steadily ahead of their receipt (a GNSS
+  receiver's GPS time, 18 s ahead of UTC) are on another clock: before, they were left 18 s off the other topics.
 - further, on a recorder dated in Unix time, and either undated (before 2000-01-01: a boot or hardware
   clock) or beside another topic on the recorder's clock: moved onto the recorder's clock by its median
   offset, one constant, so the stamps keep their own spacing; said as the convention ``stamp_clock``
@@ -33,6 +35,7 @@ I64Array = NDArray[np.int64]
 NS = 1_000_000_000
 DATED_S = 946_684_800.0  # 2000-01-01 UTC: stamps before it, beside a dated recorder, are on a boot clock
 OTHER_CLOCK_S = 60.0  # beyond any transport latency, far below any boot clock's distance from Unix time
+AHEAD_S = 1.0  # stamps later than their receipt by more than this are on another clock (no latency is negative)
 STEADY_S = 10.0  # a steady clock's offset spread (latency jitter, crystal drift over hours) stays below
 KEEP_PER_BLOCK = 64  # offsets kept of each block: enough for percentiles, bounded memory on long logs
 
@@ -114,16 +117,16 @@ class StampClocks:
         """``samples`` with the topics on another clock moved onto the recorder's and said (module doc);
         unchanged when every topic is on it."""
         clocks = self._clocks()
-        near = [c for c in clocks if abs(c.offset_s) <= OTHER_CLOCK_S]
+        near = [c for c in clocks if _on_recorder(c)]
         shifts: dict[str, float] = {}
         said, notes = [], []
         for c in clocks:
-            if abs(c.offset_s) <= OTHER_CLOCK_S:
+            if _on_recorder(c):
                 if c.spread_s > STEADY_S:
                     notes.append(_unsteady(c, self.record_name))
                 continue
-            if not c.records_dated or (c.stamps_dated and not near):
-                continue  # which clock is right, the data cannot tell; said below if topics disagree
+            if not c.records_dated or (c.stamps_dated and not near and not _ahead(c)):
+                continue  # which clock is right, the data cannot tell (a replay); said below if topics disagree
             if c.spread_s > STEADY_S:
                 notes.append(_unsteady(c, self.record_name))
             elif c.unset:
@@ -161,8 +164,26 @@ class StampClocks:
         return t_s + shift if shift else t_s
 
 
+def _on_recorder(c: _Clock) -> bool:
+    """Whether a topic's stamps are on the recorder's clock: received within OTHER_CLOCK_S after their stamp, and
+    not stamped more than AHEAD_S after their receipt (which no one clock does: a GNSS receiver's GPS time, 18 s
+    ahead of UTC, or a driver's computer whose clock is ahead)."""
+    return -AHEAD_S <= c.offset_s <= OTHER_CLOCK_S
+
+
+def _ahead(c: _Clock) -> bool:
+    """Whether a topic's stamps are steadily ahead of their receipt: never the recorder's clock, nor a replay's
+    (whose stamps lie in the past), so moved onto the recorder's also where no topic is on it."""
+    return -OTHER_CLOCK_S <= c.offset_s < -AHEAD_S
+
+
 def _moved(c: _Clock) -> str:
     clock = "a clock that dates nothing (boot or device time)" if not c.stamps_dated else "another clock"
+    if c.stamps_dated and _ahead(c):
+        clock = (
+            f"another clock, {-c.offset_s:.3f} s ahead of the recorder's (stamped after it was received: GPS time "
+            "runs 18 s ahead of UTC)"
+        )
     return (
         f"header.stamp of {c.topic} on {clock}, first stamp {c.first_stamp_s:.3f} s: moved onto the recorder's "
         f"clock (Unix time) by its median offset {c.offset_s:+.3f} s"
@@ -177,4 +198,4 @@ def _unsteady(c: _Clock, record_name: str) -> str:
     )
 
 
-__all__ = ["DATED_S", "OTHER_CLOCK_S", "STEADY_S", "StampClocks"]
+__all__ = ["AHEAD_S", "DATED_S", "OTHER_CLOCK_S", "STEADY_S", "StampClocks"]

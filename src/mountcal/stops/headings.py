@@ -3,6 +3,7 @@ from a protocol sheet (:func:`tabulate`, what ``mountcal stops`` and a log's cal
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 import numpy as np
@@ -112,6 +113,8 @@ def read_protocol(path: str, heading_unit: HeadingUnit | None = None) -> pd.Data
             "Check the path and the format.",
         ) from err
     missing = [c for c in ("t_start_s", "t_end_s", "beta_deg") if c not in df.columns]
+    if not missing:
+        df = sheet_times(df, path)
     values = None if missing else df[["t_start_s", "t_end_s", "beta_deg"]].apply(pd.to_numeric, errors="coerce")
     if missing or values is None or not np.all(np.isfinite(values.to_numpy())):
         raise InputError(
@@ -125,6 +128,44 @@ def read_protocol(path: str, heading_unit: HeadingUnit | None = None) -> pd.Data
     with open(path, encoding="utf-8", errors="replace") as f:
         values.attrs["planned"] = f.readline(len(PLAN_MARK)) == PLAN_MARK  # times from `mountcal plan`: placeholders
     return values
+
+
+ZONE = re.compile(r"(?:Z|[+-]\d{2}:?\d{2})\s*$", re.IGNORECASE)
+
+
+def sheet_times(df: pd.DataFrame, path: str) -> pd.DataFrame:
+    """``df`` with ISO-8601 date-times in ``t_start_s, t_end_s`` as Unix seconds, where each states its zone
+    (``Z``, ``+02:00``): an instant. A date-time without a zone is a wall clock's, a sheet's often local while the
+    log's is UTC: refused, naming the zone to write. Numbers are left as they are.
+
+    Raises
+    ------
+    InputError
+        Date-times without a zone.
+    """
+    from mountcal.core.errors import InputError
+    from mountcal.io.table.time_unit import iso_seconds
+
+    out = df.copy()
+    for column in ("t_start_s", "t_end_s"):
+        text = out[column].dropna().astype(str).str.strip()
+        if text.empty or pd.to_numeric(text, errors="coerce").notna().all():
+            continue
+        dated = pd.to_datetime(text, utc=True, errors="coerce", format="ISO8601").notna()
+        if not dated.any():
+            continue  # neither numbers nor date-times: refused below as non-numeric
+        naive = text[dated & ~text.str.contains(ZONE)]
+        if not naive.empty:
+            raise InputError(
+                path,
+                f"{column} in Unix seconds, or as ISO-8601 date-times with their zone (2024-05-01T10:00:00Z, "
+                "2024-05-01T12:00:00+02:00)",
+                f"date-times without a zone ({naive.iloc[0]!r}): a wall clock's, which the sheet does not name "
+                "(a sheet in local time against a log in UTC puts every stop hours off)",
+                "Add the zone the times were written in to each (Z for UTC, +02:00 for CEST), or write Unix seconds.",
+            )
+        out[column] = iso_seconds(out[column].astype(str))
+    return out
 
 
 def protocol_sheet(
@@ -143,6 +184,36 @@ def protocol_sheet(
         unit,
     )
     return values
+
+
+def one_stop_per_row(stops: list[Stop], windows: list[tuple[float, float]], protocol: pd.DataFrame) -> None:
+    """Refuse a sheet two of whose rows took the same still period (rows that repeat or overlap another's times): its
+    data would be fitted twice, at two headings, and the stop between left out.
+
+    Raises
+    ------
+    InputError
+        Naming the rows, their β and the still period they share.
+    """
+    from mountcal.core.errors import InputError
+
+    spans = [(s.t_start_s, s.t_end_s) for s in stops]
+    for span in dict.fromkeys(spans):
+        if spans.count(span) < 2:
+            continue
+        rows = [i for i, (lo, hi) in enumerate(windows) if lo <= span[0] and span[1] <= hi]
+        beta = protocol["beta_deg"].to_numpy()
+        named = " and ".join(
+            f"{i + 1} ({lo:.10g}–{hi:.10g} s, β {beta[i]:g}°)" for i in rows for lo, hi in [windows[i]]
+        )
+        raise InputError(
+            str(protocol.attrs.get("path") or f"the protocol sheet ({option('protocol')})"),
+            "one still period per row: the vehicle stands at one heading at a time",
+            f"rows {named} on the same still period, {span[0]:.10g}–{span[1]:.10g} s: its data would be fitted "
+            "once at each of their headings",
+            "Correct the rows' times (each row's t_start_s–t_end_s around its own stop), or delete the row that "
+            "repeats another.",
+        )
 
 
 def tabulate(
@@ -173,6 +244,7 @@ def tabulate(
                 + (f"But {gyro}" if gyro else f"Check that the sheet's times are on the log's clock, or {relax()}.")
                 + f" Used: {'; '.join(search.lines())}."
             )
+        one_stop_per_row(stops, windows, protocol)
         beta = protocol["beta_deg"].to_numpy()[kept]
         stated = (*samples.conventions, *protocol.attrs.get("conventions", ()), *([clock] if clock else []))
         return StopTableFromLog(

@@ -1,7 +1,8 @@
 """A protocol sheet's clock against the log's: the one place a sheet's times meet a log (:func:`on_log_clock`).
 
-A sheet's times must be on the log's clock. A sheet with an interval on the log is used as it is (a
-sheet at the wrong place on the log is the stop search's to refuse). Where none lies on the log, the two
+A sheet's times must be on the log's clock. A sheet with an interval on the log is used as it is, unless its rows
+sit on their neighbours' stops (:func:`misplaced`: refused, naming the offset); a sheet at the wrong place otherwise
+is the stop search's to refuse. Where none lies on the log, the two
 clocks are compared: a sheet counting from the log's start, on a log dated in Unix time, is shifted and
 said (``protocol_clock``, inferred); a sheet a time zone's offset from the log, a dated sheet on an
 undated log, or no relation at all are refused with the spans of both and the fix.
@@ -10,6 +11,7 @@ undated log, or no relation at all are refused with the spans of both and the fi
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from datetime import UTC, datetime
 
 import numpy as np
@@ -47,7 +49,10 @@ def on_log_clock(
     sheet, log_span, duration = (float(lo.min()), float(hi.max())), (t0, t1), t1 - t0
     where = str(protocol.attrs.get("path") or f"the protocol sheet ({option('protocol')})")
     expected = f"the sheet's times on the log's clock ({_clock(log_span, samples)})"
-    if np.any((hi >= t0) & (lo <= t1)):  # on the log: as stated
+    if np.any((hi >= t0) & (lo <= t1)):  # on the log: as stated, unless its rows sit on the wrong stops
+        shift = misplaced(lo, hi, samples, cfg)
+        if shift is not None:
+            raise InputError(where, *shift.refusal())
         return protocol, None
     margin = max(5.0, 0.01 * duration)  # a stopwatch stopped a little after the recording
     from_start = -margin <= sheet[0] and sheet[1] <= duration + margin
@@ -96,6 +101,81 @@ def on_log_clock(
         )
         + ".",
     )
+
+
+SHIFT_STEP_S = 1.0  # the grid of offsets a sheet's rows are tried at against the log's still periods
+SHIFT_REACH = 2.5  # … out to this many times the sheet's median row spacing (a row or two off)
+
+
+@dataclass(frozen=True)
+class Shift:
+    """A sheet on the log whose rows hold more of the log's still periods at another offset, where rows that
+    hold one as written would hold another: its β would be attached to other stops' data."""
+
+    offset_s: float  # to add to the sheet's times
+    rows: int
+    held: int  # rows holding a still period as written
+    held_shifted: int  # … at the offset
+    moved: list[int]  # rows (0-based) whose still period changes
+
+    def refusal(self) -> tuple[str, str, str]:
+        late = self.offset_s < 0
+        size = f"{abs(self.offset_s):.0f} s"
+        first = ", ".join(str(i + 1) for i in self.moved[:5]) + (" …" if len(self.moved) > 5 else "")
+        return (
+            "the sheet's rows on the log's stops, each row on the still period of its own heading",
+            f"its rows {size} {'late' if late else 'early'}: as written {self.held} of its {self.rows} rows hold one "
+            f"of the log's still periods, and the sheet {size} {'earlier' if late else 'later'} "
+            f"{self.held_shifted}, with rows {first} then on another still period than as written (each would take "
+            "a neighbour's β: the yaw turned by the headings' step, the fit as good)",
+            f"If the sheet's times are {size} {'late' if late else 'early'} (a stopwatch or a clock off), "
+            f"{'subtract' if late else 'add'} {size[:-2]} s {'from' if late else 'to'} t_start_s and t_end_s "
+            f"(df[['t_start_s', 't_end_s']] {'-' if late else '+'}= {abs(self.offset_s):.0f}); if they are right, "
+            "check its rows against the drive: a row missing or one too many shifts every heading after it.",
+        )
+
+
+def misplaced(lo: np.ndarray, hi: np.ndarray, samples: Samples, cfg: StopDetection | None = None) -> Shift | None:
+    """The offset at which a sheet's rows hold more of the log's still periods than as written, where rows that hold
+    one as written would hold another (None where the rows sit on the log's stops as well as any offset puts them).
+
+    Each row is taken to hold the still period it overlaps most, if by ``min_duration_s`` (what the stop search
+    keeps in a row). A sheet whose rows all hold a still period is never shifted; one with rows off the log or
+    between stops is, only where the shift fills more rows and moves the rows' still periods: a sheet a stop or part
+    of one late or early, whose headings would otherwise each fit a neighbour's data.
+    """
+    cfg = cfg or StopDetection()
+    if lo.size < 3:
+        return None
+    stops = find_stops(samples, cfg).stops
+    if len(stops) < 3:
+        return None
+    a = np.array([x.t_start_s for x in stops])
+    b = np.array([x.t_end_s for x in stops])
+
+    def picks(offset: float) -> tuple[np.ndarray, float]:
+        overlap = np.minimum(hi[:, None] + offset, b[None, :]) - np.maximum(lo[:, None] + offset, a[None, :])
+        best = overlap.argmax(axis=1)
+        most = overlap[np.arange(lo.size), best]
+        held = most >= cfg.min_duration_s
+        return np.where(held, best, -1), float(np.sum(most[held]))
+
+    written, _ = picks(0.0)
+    held = int(np.sum(written >= 0))
+    if held == lo.size:
+        return None
+    spacing = float(np.median(np.diff(np.sort(lo))))
+    reach = SHIFT_REACH * max(spacing, float(np.median(hi - lo)))
+    offsets = np.arange(-reach, reach + 0.5 * SHIFT_STEP_S, SHIFT_STEP_S)
+    tried = [(int(np.sum(p >= 0)), round(total, 3)) for d in offsets for p, total in [picks(d)]]
+    top = max(tried)
+    count = top[0]
+    offset = float(np.median(offsets[[k for k, x in enumerate(tried) if x == top]]))  # the middle of its plateau
+    shifted, _ = picks(offset)
+    moved = [i for i in range(lo.size) if written[i] >= 0 and shifted[i] >= 0 and written[i] != shifted[i]]
+    if count <= held or not moved:
+        return None
+    return Shift(offset, int(lo.size), held, count, moved)
 
 
 def zone_offsets(lo: np.ndarray, hi: np.ndarray, samples: Samples, cfg: StopDetection | None = None) -> list[float]:
@@ -162,4 +242,4 @@ def _hours(seconds: float) -> str:
     return f"{h} h" + (f" {m} min" if m else "")
 
 
-__all__ = ["DATED_S", "PLAN_MARK", "on_log_clock", "zone_offsets"]
+__all__ = ["DATED_S", "PLAN_MARK", "Shift", "misplaced", "on_log_clock", "zone_offsets"]

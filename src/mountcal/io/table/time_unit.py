@@ -238,6 +238,9 @@ def settle_time(layout: Layout, path: Path, read_as: dict[str, str]) -> tuple[La
         if explicit and explicit != "iso":
             raise _against_type(where, time, explicit, f"a {typed} type ({values.dtype})", by)
         what = "seconds since the Unix epoch (UTC)" if typed == "timestamp" else "seconds"
+        if typed == "timestamp" and not isinstance(values.dtype, pd.DatetimeTZDtype):
+            # Arrow's timestamp without a zone is a wall clock's in a zone it does not name: taken as UTC, and said
+            what += "; the type names no time zone: taken as UTC (a local clock's times are off by its offset)"
         return _with(layout, Column(time.name, typed)), Convention(
             "time_unit", typed, "stated", f"the column {time.name}'s type ({values.dtype}): read as {what}"
         )
