@@ -1,10 +1,12 @@
 """Metamorphic relations on the real recordings: a copy of the data with one convention changed.
 
 Each real recording mountcal answers (the comma2k19 RAV4 minute and CANedge drive 165 with ``calibrate``; the
-robot_localization bag and its ROS 2 MCAP with ``rotate``) is copied into ``tmp_path`` with one convention
-changed — the axes permuted or mirrored, the accelerations in g, the speed in km/h, the heading in radians or
-counter-clockwise, the time in ms, the gyro in deg/s, the data exported to CSV and Parquet, a file under another
-suffix — and run through the command line again.
+robot_localization bag and its ROS 2 MCAP with ``rotate``; imucal's Ferraris session with ``triad``) is copied
+into ``tmp_path`` with one convention changed — the axes permuted or mirrored, the accelerations in g, the speed
+in km/h, the heading in radians or counter-clockwise, the time in ms, the gyro in deg/s, the data exported to CSV
+and Parquet, a file under another suffix — and run through the command line again. Not covered: the CANedge boat
+and desk logs, which ``calibrate`` refuses (one orientation, no drive), and the IMU-TK session (MATLAB files,
+not a format mountcal reads).
 
 - **Stated** (the copy says what changed: ``--axes``, ``--unit g``, a column map's unit, ``--heading-unit``,
   a suffix that names the content): the answer is the same — every angle within a tenth of its σ, the same
@@ -13,8 +15,8 @@ suffix — and run through the command line again.
   or, where the docs say the data cannot tell, not confident with the reason. Never a confident different answer,
   never a file written from a misread log.
 
-The originals in ../shared/data/real are only read. (~45 s: the shortest recordings; drive 165 is read from its
-MF4 splits once and exported to Parquet for the copies.)
+The originals in ../shared/data/real are only read. (~20 s on an idle machine: the shortest recordings; drive 165
+is read from its MF4 splits once and exported to Parquet for the copies.)
 """
 
 from __future__ import annotations
@@ -393,5 +395,42 @@ def test_robot_bag_mcap_and_their_exports_rotate_to_the_same_samples(
         out = tmp_path / f"{bad.stem}_v.parquet"
         capsys.readouterr()
         assert main(["rotate", str(bad), "--calibration", str(result), "-o", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert fix in err and "Traceback" not in err and not out.exists()
+
+
+# --------------------------------------------------------------------------- imucal's Ferraris session: triad
+
+FERRARIS = "imucal-ferraris/example_ferraris_session.csv"
+FERRARIS_MAP = "time=n_samples:s/102.4,ax=acc_x{a},ay=acc_y{a},az=acc_z{a},gx=gyr_x{g},gy=gyr_y{g},gz=gyr_z{g}"
+
+
+def test_ferraris_session_in_g_stated_gives_the_same_triad_and_unstated_units_are_refused(
+    real_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The session (m/s², deg/s, its time a sample count at 102.4 Hz) with its column map; the same session with the
+    accelerations in g and the map saying so; and the map without a unit where one is needed."""
+    from mountcal.estimate.triad import load
+
+    session = real_data / FERRARIS
+    in_g = pd.read_csv(session)
+    in_g[["acc_x", "acc_y", "acc_z"]] /= G_N
+    copy = write(in_g, tmp_path / "session_g.csv")
+    fitted = []
+    for path, unit in ((session, ""), (copy, ":g")):
+        out = tmp_path / f"triad_{path.stem}.json"
+        assert main(["triad", str(path), "--columns", FERRARIS_MAP.format(a=unit, g=":deg/s"), "-o", str(out)]) == 0
+        fitted.append(load(out))
+    np.testing.assert_allclose(fitted[1].bias_mps2, fitted[0].bias_mps2, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(fitted[1].matrix, fitted[0].matrix, rtol=1e-9, atol=1e-12)
+    assert fitted[1].fitted == fitted[0].fitted
+    unstated = [
+        (copy, FERRARIS_MAP.format(a="", g=":deg/s"), "acc_x:g"),
+        (session, FERRARIS_MAP.format(a="", g=""), "deg/s"),
+    ]
+    for path, columns, fix in unstated:
+        out = tmp_path / "refused.json"
+        capsys.readouterr()
+        assert main(["triad", str(path), "--columns", columns, "-o", str(out)]) == 2
         err = capsys.readouterr().err
         assert fix in err and "Traceback" not in err and not out.exists()

@@ -20,7 +20,8 @@ tell deg/s apart from rad/s, measured on the blocks stop detection already compu
 - **Tilting** (any motion, with or without a speed). Between consecutive 1-s means, the gyro's rate about the
   horizontal axes (its bias, the median, taken out) turns gravity by an angle the accelerometer sees as the change
   of its direction, plus what linear accelerations add: on the real recordings the gyro predicts 0.26–0.36 times
-  the change the accelerometer sees (RMS). Read in deg/s as rad/s it predicts 15–21 times it. A prediction over
+  the change the accelerometer sees (RMS) in vehicles, 0.83 times in a session turned by hand. Read in deg/s as
+  rad/s it predicts 15–47 times it. A prediction over
   :data:`TILT_RATIO_MIN` times the accelerometer's, and over :data:`TILT_MIN_DEG` per second (at rest a gyro's
   noise predicts a tenth of a degree, which an accelerometer's quiet means can make a large ratio of), that is
   ordinary divided by 57.3, is deg/s — on a highway minute too, where neither sign above is seen.
@@ -53,7 +54,7 @@ MIN_FAST_S = 2.0
 ACC_STILL_MAX_MPS2 = 0.3  # the rest sign's accelerometer stillness, however far a user relaxed --max-acc-std
 TILT_BLOCK_S = 1.0  # the means whose change of direction the tilt sign compares
 TILT_MIN_PAIRS = 20  # consecutive means it needs
-TILT_RATIO_MIN = 3.0  # the gyro's predicted tilt change over the accelerometer's (rad/s gyros: 0.26–0.36; deg/s: 15–21)
+TILT_RATIO_MIN = 3.0  # the gyro's predicted tilt change over the accelerometer's (rad/s: 0.26–0.83; deg/s: 15–47)
 TILT_MIN_DEG = 5.0  # RMS predicted tilt change per mean: no vehicle's gyro shows it while its gravity stays put
 
 
@@ -120,7 +121,7 @@ class GyroLook:
                 f"rates that turn gravity by {self.tilt_gyro_deg:.3g}° from one second's mean to the next (RMS over "
                 f"{self.tilt_pairs} s, about the horizontal axes), where the accelerometer sees it turn "
                 f"{self.tilt_acc_deg:.3g}°: {self.tilt_gyro_deg / max(self.tilt_acc_deg, 1e-12):.3g} times further "
-                f"(a gyro in rad/s predicts less than it sees: 0.3 times on the real recordings), while "
+                f"(a gyro in rad/s predicts less than it sees: 0.3–0.8 times on the real recordings), while "
                 f"{self.tilt_gyro_deg / DEG_PER_RAD:.2g}° (the same numbers as deg/s) fits"
             )
         return "; and ".join(signs)
