@@ -192,7 +192,9 @@ def tilt_look(t_s: FloatArray, acc: FloatArray, gyro: FloatArray) -> tuple[float
     the accelerometer's direction between them, the number of pairs) of time-ordered samples.
 
     The gyro's bias is its median mean; its rate about the accelerometer's direction (the vertical) turns nothing
-    the accelerometer can see, so only the part about the horizontal axes counts."""
+    the accelerometer can see, so only the part about the horizontal axes counts, less what follows the vertical
+    rate (on simulated drives with the accelerometer's z reversed, 0.45–0.51 times what the accelerometer sees
+    once taken out, 0.62–1.47 before)."""
     if t_s.size < 2:
         return 0.0, 0.0, 0
     # the blocks that hold samples, numbered in order (times far apart leave no empty block to count)
@@ -211,7 +213,12 @@ def tilt_look(t_s: FloatArray, acc: FloatArray, gyro: FloatArray) -> tuple[float
     up = mean_acc / np.maximum(norm, 1e-300)[:, None]
     seen = np.arccos(np.clip(np.sum(up[1:] * up[:-1], axis=1), -1.0, 1.0))[pair]
     rate = 0.5 * (mean_gyro[1:] + mean_gyro[:-1])
-    horizontal = rate - np.sum(rate * up[:-1], axis=1)[:, None] * up[:-1]
+    about_up = np.sum(rate * up[:-1], axis=1)
+    horizontal = rate - about_up[:, None] * up[:-1]
+    # the part that follows the rate about the vertical is the vertical seen from axes the accelerometer's disagree
+    # with (one accelerometer axis reversed, a DBC sign: its "up" leans from the gyro's, and the turns leak into
+    # the horizontal): taken out, so that only a gyro scaled as a whole shows this sign
+    horizontal -= about_up[:, None] * (horizontal.T @ about_up) / max(float(about_up @ about_up), 1e-300)
     turned = np.linalg.norm(horizontal, axis=1)[pair] * TILT_BLOCK_S
     return _rms_deg(turned), _rms_deg(seen), int(pair.sum())
 
