@@ -361,8 +361,8 @@ def test_robot_bag_mcap_and_their_exports_rotate_to_the_same_samples(
     real_data: Path, result: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """The ROS 1 bag, its ROS 2 MCAP, and the MCAP exported to CSV and Parquet: one rotated output; in g with the
-    unit stated, the same. Left unstated (accelerations in g, time in ms, the gyro in deg/s), the export is refused
-    and nothing is written."""
+    unit stated, the same. Left unstated (accelerations in g, time in ms, the gyro in deg/s; the bag and the MCAP
+    each under the other's suffix), it is refused naming the fix and nothing is written."""
     mcap = real_data / ROBOT_MCAP
     df = table(read_log(mcap))
     inputs = {
@@ -391,6 +391,9 @@ def test_robot_bag_mcap_and_their_exports_rotate_to_the_same_samples(
         "ms": (write(df.assign(t_s=df["t_s"] * 1000.0), tmp_path / "ms.parquet"), ":ms"),
         "deg/s": (write(dps, tmp_path / "dps.parquet"), "gx=gx:deg/s"),
     }
+    for wrong, right in (("mcap_named.bag", "mcap_named.mcap"), ("bag_named.mcap", "bag_named.bag")):
+        source = inputs["mcap" if wrong.startswith("mcap") else "bag"]
+        unstated[wrong] = (Path(shutil.copy(source, tmp_path / wrong)), right)  # a container under the other's name
     for bad, fix in unstated.values():
         out = tmp_path / f"{bad.stem}_v.parquet"
         capsys.readouterr()
