@@ -156,3 +156,25 @@ def test_rotate_looks_at_the_gyro_unit_until_a_still_period_shows_it_not_at_ever
     assert watch.done == (watch.looked_s >= GYRO_LOOK_S)
     with pytest.raises(Exception, match="deg/s"):
         GyroUnitWatch().look(replace(parking, gyro_s=parking.gyro_s * DEG if parking.gyro_s is not None else None))
+
+
+def test_the_tilt_sign_tells_a_gyro_in_deg_per_s_from_one_accelerometer_axis_reversed() -> None:
+    """Between 1-s means a gyro in rad/s turns gravity less than the accelerometer sees it turn; in deg/s many times
+    further. One accelerometer axis reversed alone (a DBC sign) leans the accelerometer's vertical from the gyro's,
+    and the turns leak into the horizontal: before that part was taken out, the slips benchmark's `accelerometer z
+    negated alone` was refused as deg/s in 2 of 4 drives (the fix not named)."""
+    from mountcal.simulate.drive import simulate_drive
+    from mountcal.stops.gyro_unit import TILT_RATIO_MIN, tilt_look
+
+    for seed, (roll, pitch) in enumerate([(18.0, -15.0), (-12.0, 19.0)]):
+        d = simulate_drive(roll, pitch, 40.0, duration_s=600.0, seed=seed)
+        ratios = {}
+        for name, acc, gyro in (
+            ("rad/s", d.acc_s, d.gyro_s),
+            ("az reversed", d.acc_s * np.array([1.0, 1.0, -1.0]), d.gyro_s),
+            ("deg/s", d.acc_s, d.gyro_s * DEG),
+        ):
+            gyro_deg, acc_deg, pairs = tilt_look(d.t_s, acc, gyro)
+            assert pairs > 500
+            ratios[name] = gyro_deg / acc_deg
+        assert ratios["rad/s"] < 1.0 and ratios["az reversed"] < 1.0 < TILT_RATIO_MIN < 5.0 < ratios["deg/s"], ratios

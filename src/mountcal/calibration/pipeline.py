@@ -315,6 +315,9 @@ def checked(done: LogResult, uphill_azimuth_deg: float | None, protocol: bool) -
     if sign is not None:
         checks.append(sign[0])
         stated = merged(stated, (sign[1],))
+    axes = plausibility.axes_check(stated, (*cal.checks, *checks))  # axes only assumed: could anything test them?
+    if axes is not None:
+        checks.append(axes)
     cal = replace(cal, provenance=replace(cal.provenance, conventions=stated))
     if done.samples.rotated is not None:  # legitimate (checking a rotation), but the angles mean something else
         cal = replace(cal, notes=with_frame_note(cal.notes, stated))

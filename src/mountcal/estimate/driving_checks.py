@@ -99,7 +99,7 @@ from mountcal.estimate.driving_intervals import (
     turned_share,
     turned_tilt_removed,
 )
-from mountcal.estimate.speed_unit import scale_note
+from mountcal.estimate.speed_unit import scale_note, speed_factor
 from mountcal.io.samples import Channel
 
 if TYPE_CHECKING:
@@ -191,7 +191,10 @@ def run(inp: Inputs) -> Checks:
     whole = estimate(s_long, s_long.every(), longitudinal, inflate)
 
     first = half_mask(s_long)
-    tilt = _tilt_halves(inp, unit, first)
+    scale = _speed_scale(inp, unit)
+    # the distance the altitude's grade divides by, in metres: a unit slip the scale names is taken out of it
+    factor = speed_factor(scale.value, scale.sigma) if scale.noted else 1.0
+    tilt = _tilt_halves(inp, unit, first, factor)
     halves = Halves(
         compare(
             "driving_halves_yaw",
@@ -213,7 +216,6 @@ def run(inp: Inputs) -> Checks:
     )
     wide = _wide(inp)
     cues, left_right = _cues(whole, wide)
-    scale = _speed_scale(inp, unit)
     comparisons = [halves.yaw, halves.roll_about_vehicle_x, halves.pitch_about_vehicle_y, halves.clock_offset]
     comparisons += [accelerating_braking, cues.comparison, left_right]
     tests = (
@@ -226,7 +228,7 @@ def run(inp: Inputs) -> Checks:
     notes = [_note(f, cues.comparison) for f in findings]
     if scale.noted and scale.value is not None and scale.sigma is not None:
         notes.append(scale_note(scale.value, scale.sigma, scale.z or 0.0, inp.gyro))
-    grade = _grade(inp, unit)
+    grade = _grade(inp, unit, factor)
     effects = _effects(inp, wide, grade)
     document = DrivingConsistency(
         FAMILY_ALPHA,
@@ -330,7 +332,7 @@ def _offset(search: OffsetSearch, mask: np.ndarray) -> Estimate | None:
     return Estimate(value, float(np.sqrt((k - 1) / k * np.sum((loo - loo.mean()) ** 2))), k)
 
 
-def _tilt_halves(inp: Inputs, unit: IntArray, first: np.ndarray) -> tuple[Comparison, Comparison]:
+def _tilt_halves(inp: Inputs, unit: IntArray, first: np.ndarray, factor: float = 1.0) -> tuple[Comparison, Comparison]:
     """The tilt from the mean gravity of each half, as small rotations about the vehicle x and y axes (deg).
 
     The route's grade over half a drive is measured when the altitude is logged (and taken out), else assumed as
@@ -344,7 +346,7 @@ def _tilt_halves(inp: Inputs, unit: IntArray, first: np.ndarray) -> tuple[Compar
     about = {"x": np.degrees(np.arctan2(-f_v[:, 1], f_v[:, 2])), "y": np.degrees(np.arctan2(f_v[:, 0], f_v[:, 2]))}
     w = sum_units(unit, iv.width_s, n)
     t = mean_times(unit, iv.t_mid_s, n)
-    grades = _grades(inp, unit)
+    grades = _grades(inp, unit, factor)
     out = []
     for axis, name in (("x", "roll"), ("y", "pitch")):
         per = sum_units(unit, iv.width_s * about[axis], n) / np.maximum(w, 1e-300)
@@ -476,10 +478,11 @@ def _speed_scale(inp: Inputs, unit: IntArray) -> SpeedScale:
     )
 
 
-def _grades(inp: Inputs, unit: IntArray) -> FloatArray | None:
+def _grades(inp: Inputs, unit: IntArray, factor: float = 1.0) -> FloatArray | None:
     """The grade (deg, uphill positive) of each unit of the straight intervals, from the altitude and the distance
     driven: the altitude's change over the unit (its intervals follow each other) over the distance, so that the
-    altitude's noise enters once per unit, not once per interval. None without an altitude channel."""
+    altitude's noise enters once per unit, not once per interval. None without an altitude channel. ``factor``: m/s
+    per unit of the speed as read (:func:`~mountcal.estimate.speed_unit.speed_factor`; km/h read as m/s: 1/3.6)."""
     alt = inp.altitude
     if alt is None or alt.t_s.size < 3:
         return None
@@ -490,13 +493,13 @@ def _grades(inp: Inputs, unit: IntArray) -> FloatArray | None:
     np.maximum.at(end, unit, iv.t_mid_s + 0.5 * iv.width_s)
     dh = np.interp(end, alt.t_s, alt.value) - np.interp(start, alt.t_s, alt.value)
     v = np.interp(iv.t_mid_s, inp.speed.t_s + inp.offset_s, inp.speed.value)
-    distance = np.maximum(sum_units(unit, v * iv.width_s, n), 1e-3)
+    distance = np.maximum(sum_units(unit, factor * v * iv.width_s, n), 1e-3)
     return np.asarray(np.degrees(np.arcsin(np.clip(dh / distance, -1.0, 1.0))), dtype=float)
 
 
-def _grade(inp: Inputs, unit: IntArray) -> Estimate | None:
+def _grade(inp: Inputs, unit: IntArray, factor: float = 1.0) -> Estimate | None:
     """The route's mean grade (deg, uphill positive) over the straight intervals, from the altitude channel."""
-    per = _grades(inp, unit)
+    per = _grades(inp, unit, factor)
     if per is None:
         return None
     w = sum_units(unit, inp.iv.width_s, per.size)

@@ -25,6 +25,18 @@ def unit_of_scale(scale: float, sigma: float) -> str | None:
     return None
 
 
+def speed_factor(scale: float | None, sigma: float | None) -> float:
+    """m/s per unit of the speed as read: the factor of the unit slip the scale shows (1/3.6 for km/h read as m/s,
+    3.6 for m/s stated to be km/h), else 1. What reads a distance from the speed (the grade from the altitude)
+    multiplies by it, so that the angles do not depend on the speed's unit."""
+    unit = None if scale is None or sigma is None else unit_of_scale(scale, sigma)
+    if unit is None:
+        return 1.0
+    if unit.startswith("m/s as "):
+        return 1.0 / MPS_PER[unit.removeprefix("m/s as ")]
+    return MPS_PER[unit]
+
+
 def scale_note(scale: float, sigma: float, z: float, gyro: bool) -> str:
     """The result's note on a speed scale beyond its σ: the unit slip it shows, else the usual causes."""
     said = (
@@ -35,18 +47,19 @@ def scale_note(scale: float, sigma: float, z: float, gyro: bool) -> str:
     if unit is not None and not unit.startswith("m/s"):
         return (
             f"{said}: {MPS_PER[unit]:.4g}, a speed logged in {unit} and read as m/s. The angles do not depend on the "
-            f"speed's scale; state its unit for the rest: a table's column map (speed=COLUMN:{unit}), a CAN mapping's "
-            "[units] speed or the DBC signal's unit"
+            f"speed's scale (the grade from the altitude reads the distance in {unit}); state its unit for the rest: "
+            f"a table's column map (speed=COLUMN:{unit}), a CAN mapping's [units] speed or the DBC signal's unit"
         )
     if unit is not None:
         stated = unit.removeprefix("m/s as ")
         return (
             f"{said}: {1.0 / MPS_PER[stated]:.4g}, a speed in m/s stated to be in {stated}. The angles do not depend "
-            "on the speed's scale; correct the unit stated for the speed (column map, CAN mapping or DBC)"
+            "on the speed's scale (the grade from the altitude reads the distance in m/s); correct the unit stated "
+            "for the speed (column map, CAN mapping or DBC)"
         )
     return f"{said}: a speed scale error (tyre radius, a GNSS speed's filter), an accelerometer scale error" + (
         "" if gyro else ", or the body pitching on its suspension under load (no gyro to remove it)"
     )
 
 
-__all__ = ["MPS_PER", "scale_note", "unit_of_scale"]
+__all__ = ["MPS_PER", "scale_note", "speed_factor", "unit_of_scale"]

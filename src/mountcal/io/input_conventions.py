@@ -117,9 +117,10 @@ def negated(axis: int) -> AxisMap:
 
 
 def axes_convention(given: AxisMap | None, reader_map: str, by: str) -> Convention:
-    """How the sensor frame was made from the device's axes: ``--axes`` (after the reader's map), the
-    reader's own map (a CAN mapping's ``axes``, a format's documented frame), or the axes as logged."""
-    if given is not None and not given.identity:
+    """How the sensor frame was made from the device's axes: ``--axes`` (after the reader's map; ``x,y,z`` states
+    that the axes as logged are right-handed), the reader's own map (a CAN mapping's ``axes``, a format's documented
+    frame), or the axes as logged, assumed right-handed."""
+    if given is not None:
         before = "" if reader_map == IDENTITY_AXES else f", after the reader's {reader_map}"
         return Convention("axes", given.describe(), "stated", f"{option('axes')}{before}")
     if reader_map != IDENTITY_AXES:

@@ -46,6 +46,15 @@ def check_named_for_content(path: Path) -> None:
         return
     found = content_format(path)
     if found is None:
+        line = _text_table(path) if named in SIGNED_SUFFIXES else None
+        if line is not None:  # a CSV saved under a binary format's name: its signature is missing, say what is there
+            raise InputError(
+                str(path),
+                f"the format its name says ({named})",
+                f"a text table (CSV), no {named} signature: its first line reads {line!r}",
+                f"Rename it with the suffix of its content ({path.with_suffix('.csv').name}) — mountcal reads a "
+                "file as its name says — or export it again in the format you meant.",
+            )
         return
     what, suffix, signature = found
     if SIGNED_SUFFIXES.get(named) == suffix:
@@ -59,6 +68,36 @@ def check_named_for_content(path: Path) -> None:
         else f"Rename it with the suffix of its content ({path.with_suffix(suffix).name}) — mountcal reads a file "
         "as its name says — or export it again in the format you meant.",
     )
+
+
+TEXT_LOOK = 4096  # bytes read to tell a text table from a binary file without a signature
+
+
+def _text_table(path: Path) -> str | None:
+    """The first line of a file that reads as a delimited text table (UTF-8, no NUL, a header of four columns or
+    more and a row of as many), else None: a binary file that merely lacks its signature, or text, is not one."""
+    try:
+        with path.open("rb") as f:
+            head = f.read(TEXT_LOOK)
+    except OSError:
+        return None
+    if not head or b"\x00" in head:
+        return None
+    try:
+        text = head.decode("utf-8")
+    except UnicodeDecodeError as err:
+        if err.start < len(head) - 3:  # not merely a character cut at the end of the look
+            return None
+        text = head[: err.start].decode("utf-8")
+    lines = text.splitlines()
+    first = lines[0].strip() if lines else ""
+    if len(lines) < 2 or not first.isprintable():
+        return None
+    # a table mountcal reads has four columns at least (t_s, ax, ay, az; beta_deg, ax, ay, az), and rows like it
+    delimiter = max((",", ";", "\t"), key=first.count)
+    if first.count(delimiter) < 3 or lines[1].count(delimiter) != first.count(delimiter):
+        return None
+    return first[:80]
 
 
 # CANedge's own packed logs: an MF4 compressed, encrypted, or both, that CSS Electronics' tools unpack

@@ -16,6 +16,9 @@ handedness) run where the input is read or cross-checked (:mod:`mountcal.io.inpu
 - ``acceleration_sign``: an acceleration whose sign only an app's default gave (a Sensor Logger recording
   from iOS, :mod:`mountcal.io.sensor_logger`) must be confirmed by a handedness check (a sign reversed in
   all three axes mirrors the data): failed where none could test it (:func:`sign_check`).
+- ``axes``: a log's axes taken as logged (right-handed) by default, where no handedness check could test them
+  (no stops with headings, too little turning): failed (:func:`axes_check`), since a mirrored sensor reads as
+  well and gives another tilt.
 """
 
 from __future__ import annotations
@@ -148,6 +151,30 @@ def sign_check(conventions: Sequence[Convention], checks: Sequence[Check]) -> tu
         f"AccelerometerUncalibrated (its unit tells the sign), or give the stops' headings ({option('protocol')})"
     )
     return Check(SIGN, False, reason), sign
+
+
+AXES = "axes"
+
+
+def axes_check(conventions: Sequence[Convention], checks: Sequence[Check]) -> Check | None:
+    """A failed ``axes`` check where a log's axes were only assumed (the axes as logged, taken as right-handed)
+    and no handedness check passed; None where they were stated (``--axes``, a reader's documented map, a CAN
+    mapping), where a handedness check confirmed them, or where the input records no axes (a stop table).
+
+    A mirrored sensor (one axis reversed) reads as well as a right-handed one: only the stops' headings or the
+    turns tell them apart. Without either, the tilt rests on an assumption — a reversed y reverses roll, a reversed
+    x pitch — so the answer is not confident until the axes are stated."""
+    axes = next((c for c in conventions if c.name == AXES), None)
+    if axes is None or axes.how != "default" or any(c.name in HANDEDNESS and c.passed for c in checks):
+        return None
+    return Check(
+        AXES,
+        False,
+        f"assumed, not confirmed: {axes.value} is {axes.by}, and no handedness check could test it (no stops with "
+        "headings, too little turning): a mirrored sensor reads as well and gives another tilt (a reversed y "
+        f"reverses roll, a reversed x pitch). State the axes: {option('axes', 'x,y,z')} where the device is "
+        "right-handed as logged, else the map that makes it so",
+    )
 
 
 def with_checks(cal: Calibration, checks: Sequence[Check]) -> Calibration:

@@ -14,7 +14,7 @@ vibration, and quantisation sets a floor that depends on how much the noise dith
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -22,7 +22,7 @@ from mountcal.core.conventions import FloatArray
 from mountcal.core.option_names import option
 from mountcal.io.samples import Channel, Samples
 from mountcal.io.timestamps import increasing_times, time_ordered
-from mountcal.stops.gyro_unit import MIN_REST_S, GyroLook, look, refuse_degrees
+from mountcal.stops.gyro_unit import MIN_REST_S, GyroLook, look, refuse_degrees, tilt_look
 from mountcal.stops.near_misses import Criterion, NearMiss, near_misses
 
 BATCHES = 10  # batch means for the variance of a stop mean
@@ -289,7 +289,7 @@ def find_stops(
     samples = increasing_times(logged)  # equal stamps merged, for the moving windows and the runs
     counts = {k: v - before.get(k, 0) for k, v in samples.dropped.items() if v != before.get(k, 0)}
     still, thresholds, unjudged, blocks = _stillness(samples, cfg, acc_lsb, gyro_lsb)
-    gyro = _gyro_look(blocks, cfg)
+    gyro = _gyro_look(blocks, cfg, samples)
     refuse_degrees(gyro, samples.source or "log", tuple(samples.channels))  # deg/s read as rad/s: the true reason
     if unjudged:
         counts[
@@ -354,11 +354,17 @@ def find_stops(
     return StopSearch(stops, thresholds, counts, tuple(dropped), tuple(missed), gyro)
 
 
-def _gyro_look(blocks: Blocks | None, cfg: StopDetection) -> GyroLook | None:
-    if blocks is None:
+def _gyro_look(blocks: Blocks | None, cfg: StopDetection, samples: Samples) -> GyroLook | None:
+    """What the gyro read (:func:`mountcal.stops.gyro_unit.look`), with the tilt it predicts against the
+    accelerometer's (time-ordered ``samples``)."""
+    if blocks is None or samples.gyro_s is None:
         return None
     need_s = cfg.min_duration_s + 2.0 * cfg.trim_s
-    return look(blocks.t_start_s, blocks.t_end_s, blocks.criteria, blocks.judged, need_s)
+    found = look(blocks.t_start_s, blocks.t_end_s, blocks.criteria, blocks.judged, need_s)
+    if found is None:
+        return None
+    gyro_deg, acc_deg, pairs = tilt_look(samples.t_s, samples.acc_s, samples.gyro_s)
+    return replace(found, tilt_gyro_deg=gyro_deg, tilt_acc_deg=acc_deg, tilt_pairs=pairs)
 
 
 def checked_gyro(samples: Samples, cfg: StopDetection | None = None) -> FloatArray | None:
@@ -373,7 +379,7 @@ def _checked_look(samples: Samples, cfg: StopDetection) -> GyroLook | None:
     assert samples.gyro_s is not None
     merged = increasing_times(time_ordered(samples))
     _, _, _, blocks = _stillness(merged, cfg, _lsb(samples.acc_s), _lsb(samples.gyro_s))
-    found = _gyro_look(blocks, cfg)
+    found = _gyro_look(blocks, cfg, merged)
     refuse_degrees(found, samples.source or "log", tuple(samples.channels))
     return found
 
