@@ -132,6 +132,12 @@ def convention_checks(conventions: Sequence[Convention]) -> tuple[Check, ...]:
 HANDEDNESS = ("handedness_stops", "handedness_turns")
 
 
+def handedness_passed(checks: Sequence[Check]) -> list[str]:
+    """The handedness checks that passed: what confirms a sign or axes that were only assumed (the other would
+    have mirrored the data)."""
+    return [c.name for c in checks if c.name in HANDEDNESS and c.passed]
+
+
 def sign_check(conventions: Sequence[Convention], checks: Sequence[Check]) -> tuple[Check, Convention] | None:
     """The check of the acceleration's sign, and its convention as the handedness checks leave it; None where
     the input states no sign. A default is confirmed (now inferred) by a handedness check that passed — the
@@ -141,7 +147,7 @@ def sign_check(conventions: Sequence[Convention], checks: Sequence[Check]) -> tu
         return None
     if sign.how != "default":
         return Check(SIGN, True, f"{sign.value}: {sign.how} by {sign.by}"), sign
-    passed = [c.name for c in checks if c.name in HANDEDNESS and c.passed]
+    passed = handedness_passed(checks)
     if passed:
         by = f"{sign.by}, confirmed by {' and '.join(passed)} (the other sign would mirror the data)"
         return Check(SIGN, True, f"{sign.value}: {by}"), replace(sign, how="inferred", by=by)
@@ -165,7 +171,7 @@ def axes_check(conventions: Sequence[Convention], checks: Sequence[Check]) -> Ch
     turns tell them apart. Without either, the tilt rests on an assumption — a reversed y reverses roll, a reversed
     x pitch — so the answer is not confident until the axes are stated."""
     axes = next((c for c in conventions if c.name == AXES), None)
-    if axes is None or axes.how != "default" or any(c.name in HANDEDNESS and c.passed for c in checks):
+    if axes is None or axes.how != "default" or handedness_passed(checks):
         return None
     return Check(
         AXES,
