@@ -18,7 +18,7 @@ from mountcal.io.samples import Samples
 from mountcal.stops.detect import StillPeriod, Stop, StopDetection, find_stops
 from mountcal.stops.heading_at_rest import stop_headings
 from mountcal.stops.near_misses import NearMiss
-from mountcal.stops.protocol_clock import PLAN_MARK, on_log_clock
+from mountcal.stops.protocol_clock import PLAN_MARK, on_log_clock, rows_on_stops
 from mountcal.stops.table import Headings, StopTable, check_degrees, checked
 
 beta_from_heading = compass_to_beta  # β (counter-clockwise from uphill) from compass headings (clockwise from north)
@@ -236,6 +236,8 @@ def tabulate(
         stops = search.stops
         gyro = search.gyro_rejection(where, tuple(samples.channels))
         kept = [i for i, (lo, hi) in enumerate(windows) if any(lo <= s.t_start_s and s.t_end_s <= hi for s in stops)]
+        if clock is None and len(kept) < len(windows):  # rows without a stop: perhaps on their neighbours' stops
+            rows_on_stops(protocol, samples, cfg)
         if not stops:
             raise NotEnoughInformation(
                 f"{where}: no parked period found inside any protocol interval"

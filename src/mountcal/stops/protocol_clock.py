@@ -1,9 +1,9 @@
 """A protocol sheet's clock against the log's: the one place a sheet's times meet a log (:func:`on_log_clock`).
 
 A sheet's times must be on the log's clock. A sheet with an interval on the log is used as it is, unless its rows
-sit on their neighbours' stops (:func:`misplaced`: refused, naming the offset); a sheet at the wrong place otherwise
-is the stop search's to refuse. Where none lies on the log, the two
-clocks are compared: a sheet counting from the log's start, on a log dated in Unix time, is shifted and
+sit on their neighbours' stops (:func:`rows_on_stops`, once the stop search left rows without a stop: refused,
+naming the offset); a sheet at the wrong place otherwise is the stop search's to refuse. Where none lies on the
+log, the two clocks are compared: a sheet counting from the log's start, on a log dated in Unix time, is shifted and
 said (``protocol_clock``, inferred); a sheet a time zone's offset from the log, a dated sheet on an
 undated log, or no relation at all are refused with the spans of both and the fix.
 """
@@ -49,10 +49,7 @@ def on_log_clock(
     sheet, log_span, duration = (float(lo.min()), float(hi.max())), (t0, t1), t1 - t0
     where = str(protocol.attrs.get("path") or f"the protocol sheet ({option('protocol')})")
     expected = f"the sheet's times on the log's clock ({_clock(log_span, samples)})"
-    if np.any((hi >= t0) & (lo <= t1)):  # on the log: as stated, unless its rows sit on the wrong stops
-        shift = misplaced(lo, hi, samples, cfg)
-        if shift is not None:
-            raise InputError(where, *shift.refusal())
+    if np.any((hi >= t0) & (lo <= t1)):  # on the log: as stated (its rows on the wrong stops: rows_on_stops)
         return protocol, None
     margin = max(5.0, 0.01 * duration)  # a stopwatch stopped a little after the recording
     from_start = -margin <= sheet[0] and sheet[1] <= duration + margin
@@ -133,6 +130,23 @@ class Shift:
             f"(df[['t_start_s', 't_end_s']] {'-' if late else '+'}= {abs(self.offset_s):.0f}); if they are right, "
             "check its rows against the drive: a row missing or one too many shifts every heading after it.",
         )
+
+
+def rows_on_stops(protocol: pd.DataFrame, samples: Samples, cfg: StopDetection | None = None) -> None:
+    """Refuse a sheet on the log whose rows sit on their neighbours' stops (:func:`misplaced`). Called where some of
+    its rows found no stop in their interval: a sheet each of whose rows holds one is never shifted, so the common
+    case costs no second stop search.
+
+    Raises
+    ------
+    InputError
+        Naming the offset that puts the rows on the log's stops and the line that fixes the sheet.
+    """
+    lo, hi = (protocol[c].to_numpy(dtype=float) for c in COLUMNS)
+    shift = misplaced(lo, hi, samples, cfg)
+    if shift is not None:
+        where = str(protocol.attrs.get("path") or f"the protocol sheet ({option('protocol')})")
+        raise InputError(where, *shift.refusal())
 
 
 def misplaced(lo: np.ndarray, hi: np.ndarray, samples: Samples, cfg: StopDetection | None = None) -> Shift | None:
@@ -242,4 +256,4 @@ def _hours(seconds: float) -> str:
     return f"{h} h" + (f" {m} min" if m else "")
 
 
-__all__ = ["DATED_S", "PLAN_MARK", "Shift", "misplaced", "on_log_clock", "zone_offsets"]
+__all__ = ["DATED_S", "PLAN_MARK", "Shift", "misplaced", "on_log_clock", "rows_on_stops", "zone_offsets"]
